@@ -1,0 +1,1 @@
+"""Package data (installed as monitor.resources.dbc); see monitor/resources."""

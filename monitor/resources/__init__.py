@@ -1,0 +1,21 @@
+"""Package data: the DBC, the default configuration, shipped models and demo logs.
+
+In the repository they live at the top level (dbc/, config/, replay/); the build maps
+those folders to ``monitor.resources.<name>`` so an installed monitor finds them too.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+_KINDS = ("dbc", "config", "replay")
+
+
+def resource_path(kind: str, name: str) -> Path:
+    """Path of a shipped file, e.g. ``resource_path("dbc", "monitor.dbc")``."""
+    if kind not in _KINDS:
+        raise KeyError(f"unknown resource kind {kind!r}; expected one of {_KINDS}")
+    path = resources.files(f"monitor.resources.{kind}").joinpath(name)
+    # Installed as a wheel or editable, the files are plain files on disk.
+    return Path(str(path))

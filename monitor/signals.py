@@ -1,0 +1,51 @@
+"""The signal contract of DESIGN.md: names, units and the CSV columns other tools rely on."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Signal:
+    name: str
+    unit: str
+    description: str
+
+
+#: Signals every contract CSV and the DBC carry, in the sampler's row order (after ``t``).
+SIGNALS: tuple[Signal, ...] = (
+    Signal("SpoolCmd", "%", "boom spool command, -100..100, positive extends (P->A, B->T)"),
+    Signal("PumpDispCmd", "%", "pump displacement command, 0..100"),
+    Signal("EngineSpeed", "rpm", "engine (pump shaft) speed"),
+    Signal("OilTemp", "degC", "hydraulic oil temperature (1 Hz)"),
+    Signal("PP", "bar", "pump outlet pressure, gauge"),
+    Signal("PA", "bar", "valve port A (cap side) pressure, gauge"),
+    Signal("PB", "bar", "valve port B (rod side) pressure, gauge"),
+    Signal("QP", "L/min", "pump outlet flow"),
+)
+
+#: Optional signal: cylinder stroke from fully retracted.
+ROD_POS = Signal("RodPos", "mm", "cylinder stroke from fully retracted (optional)")
+
+COMMAND_NAMES: tuple[str, ...] = ("SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp")
+MEASURED_NAMES: tuple[str, ...] = ("PP", "PA", "PB", "QP")
+SIGNAL_NAMES: tuple[str, ...] = tuple(s.name for s in SIGNALS)
+#: Required CSV header columns (order free in files).
+CSV_COLUMNS: tuple[str, ...] = ("t", *SIGNAL_NAMES)
+UNITS: dict[str, str] = {s.name: s.unit for s in (*SIGNALS, ROD_POS)} | {"t": "s"}
+
+SAMPLE_PERIOD_S = 0.01
+SAMPLE_RATE_HZ = 100.0
+
+FAULT_NAMES: tuple[str, ...] = ("piston_wear", "spool_stroke", "spool_wear")
+EFFECT_NAMES: tuple[str, ...] = (
+    "entrained_air",
+    "oil_viscosity",
+    "cylinder_friction",
+    "spool_dynamics",
+    "valve_deadband",
+    "pump_control_dynamics",
+    "hose_compliance",
+    "sensor_lag",
+    "load_variation",
+)

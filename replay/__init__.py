@@ -1,0 +1,1 @@
+"""Package data (installed as monitor.resources.replay); see monitor/resources."""
