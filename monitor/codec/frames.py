@@ -1,0 +1,306 @@
+"""Per-frame work: physical signals <-> 8 data bytes with alive counter and CRC.
+
+The frame rules of DESIGN.md: every frame is 8 bytes, byte 6 low nibble is an alive
+counter (+1 mod 16 per frame of that message), byte 7 a CRC-8/SAE-J1850 over bytes 0-6.
+``FrameCodec`` precompiles what it needs per message once, so encode/decode only do
+the per-frame arithmetic.  It never raises for bad bus data: a decode returns either
+the physical values or a rejection reason.  Loading the DBC lives in ``monitor.codec.dbc``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import NamedTuple
+
+import can
+from cantools.database.can import Database
+from cantools.database.can import Message as DbcMessage
+
+from monitor.codec.crc import crc8_sae_j1850
+from monitor.codec.dbc import load_dbc
+from monitor.errors import ConfigError
+
+FRAME_LENGTH = 8
+COUNTER_SIGNAL = "AliveCounter"
+CRC_SIGNAL = "CRC8"
+COUNTER_BYTE = 6  # low nibble
+CRC_BYTE = 7
+COUNTER_MODULO = 16
+
+
+class Rejection(str, Enum):
+    """Why a frame was not accepted (the str value is what counts and logs show)."""
+
+    DLC = "dlc"  # data length is not 8
+    CRC = "crc"  # byte 7 does not match the CRC of bytes 0-6
+    RANGE = "range"  # a signal decodes outside its DBC [min, max]
+    UNKNOWN_ID = "unknown_id"  # the frame is not in the DBC (foreign traffic)
+
+
+@dataclass(frozen=True)
+class SignalInfo:
+    """Scaling and the raw range that maps onto the DBC's [min, max]."""
+
+    name: str
+    scale: float
+    offset: float
+    raw_min: int
+    raw_max: int
+    phys_min: float  # on the quantisation grid, so a clipped value always re-decodes in range
+    phys_max: float
+
+
+@dataclass(frozen=True)
+class MessageInfo:
+    """What the codec precompiles for one DBC message."""
+
+    name: str
+    frame_id: int
+    is_extended_id: bool
+    cycle_time_s: float | None  # GenMsgCycleTime, None when the DBC gives none (or 0)
+    signals: tuple[SignalInfo, ...]  # physical signals, without counter and CRC
+    dbc_message: DbcMessage
+
+    @property
+    def signal_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.signals)
+
+
+class Decoded(NamedTuple):
+    """Result of decoding one frame.
+
+    ``values`` holds physical values (DBC units) when ``rejection`` is None.  ``name`` is
+    the DBC message name (None for an unknown id).  ``counter_jump`` is set when the alive
+    counter was not the previous one + 1 mod 16; the frame is still accepted and the
+    counter resynchronises on it.
+    """
+
+    name: str | None
+    values: dict[str, float] | None
+    rejection: Rejection | None
+    counter_jump: bool = False
+
+    @property
+    def ok(self) -> bool:
+        return self.rejection is None
+
+
+@dataclass
+class DecodeCounts:
+    """Frame counters of a decoder (per log offline, per session live)."""
+
+    frames: int = 0
+    decoded: int = 0
+    ignored: int = 0  # unknown id: foreign traffic, not an error
+    rejected: dict[str, int] = field(default_factory=lambda: {r.value: 0 for r in Rejection
+                                                              if r is not Rejection.UNKNOWN_ID})
+    counter_jumps: int = 0
+    per_message: dict[str, int] = field(default_factory=dict)  # decoded frames per message
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(self.rejected.values())
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "frames": self.frames,
+            "decoded": self.decoded,
+            "ignored": self.ignored,
+            "rejected": dict(self.rejected),
+            "counter_jumps": self.counter_jumps,
+            "per_message": dict(self.per_message),
+        }
+
+
+def _signal_info(msg: DbcMessage, sig) -> SignalInfo:
+    conv = sig.conversion
+    scale = float(conv.scale)
+    offset = float(conv.offset)
+    if getattr(conv, "is_float", False) or scale == 0.0 or sig.multiplexer_ids:
+        raise ConfigError(f"message {msg.name}: signal {sig.name} must be a plain integer signal")
+    bit_min = -(1 << (sig.length - 1)) if sig.is_signed else 0
+    bit_max = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
+    lo_raw, hi_raw = bit_min, bit_max
+    if sig.minimum is not None and sig.maximum is not None:
+        a = (float(sig.minimum) - offset) / scale
+        b = (float(sig.maximum) - offset) / scale
+        lo, hi = min(a, b), max(a, b)
+        # 1e-9 absorbs float noise such as (400 - 0) / 0.01 = 40000.000000000004
+        lo_raw = max(bit_min, math.ceil(lo - 1e-9))
+        hi_raw = min(bit_max, math.floor(hi + 1e-9))
+    p1, p2 = lo_raw * scale + offset, hi_raw * scale + offset
+    return SignalInfo(sig.name, scale, offset, lo_raw, hi_raw, min(p1, p2), max(p1, p2))
+
+
+def _message_info(msg: DbcMessage) -> MessageInfo:
+    if msg.length != FRAME_LENGTH or msg.is_multiplexed():
+        raise ConfigError(f"message {msg.name}: must be a non-multiplexed 8-byte frame")
+    by_name = {s.name: s for s in msg.signals}
+    counter, crc_sig = by_name.get(COUNTER_SIGNAL), by_name.get(CRC_SIGNAL)
+    # Counter and CRC are read from fixed bytes (the contract), so the DBC must agree.
+    if (
+        counter is None
+        or crc_sig is None
+        or (counter.start, counter.length, counter.byte_order) != (48, 4, "little_endian")
+        or (crc_sig.start, crc_sig.length, crc_sig.byte_order) != (56, 8, "little_endian")
+    ):
+        raise ConfigError(
+            f"message {msg.name}: needs {COUNTER_SIGNAL} at bit 48 (4 bits) and "
+            f"{CRC_SIGNAL} at bit 56 (8 bits), little endian"
+        )
+    signals = tuple(
+        _signal_info(msg, s) for s in msg.signals if s.name not in (COUNTER_SIGNAL, CRC_SIGNAL)
+    )
+    cycle_ms = msg.cycle_time
+    return MessageInfo(
+        name=msg.name,
+        frame_id=msg.frame_id,
+        is_extended_id=bool(msg.is_extended_frame),
+        cycle_time_s=cycle_ms / 1000.0 if cycle_ms else None,
+        signals=signals,
+        dbc_message=msg,
+    )
+
+
+class FrameCodec:
+    """Encode and check frames of one DBC; keeps alive-counter state per message.
+
+    Transmit and receive counters are separate: ``encode`` numbers the frames it builds,
+    ``decode`` checks the continuity of the frames it sees.
+    """
+
+    def __init__(self, db: Database) -> None:
+        self.db = db
+        self.messages: dict[str, MessageInfo] = {}
+        self._by_id: dict[tuple[int, bool], MessageInfo] = {}
+        for msg in db.messages:
+            info = _message_info(msg)
+            self.messages[info.name] = info
+            self._by_id[(info.frame_id, info.is_extended_id)] = info
+        self._tx_counter: dict[str, int] = {}
+        self._rx_counter: dict[str, int] = {}
+        self.counts = DecodeCounts()
+
+    @classmethod
+    def from_dbc(cls, path: str | Path | None = None) -> FrameCodec:
+        """Codec of ``path`` (default: the shipped DBC)."""
+        return cls(load_dbc(path))
+
+    def message(self, name: str) -> MessageInfo:
+        try:
+            return self.messages[name]
+        except KeyError:
+            raise ConfigError(f"no message {name!r} in the DBC") from None
+
+    def message_for_id(self, frame_id: int, is_extended_id: bool = True) -> MessageInfo | None:
+        return self._by_id.get((frame_id, is_extended_id))
+
+    def signal_cycle_times(self) -> dict[str, float]:
+        """Cycle time (s) of the message carrying each physical signal."""
+        return {
+            s.name: info.cycle_time_s
+            for info in self.messages.values()
+            if info.cycle_time_s is not None
+            for s in info.signals
+        }
+
+    def reset_counters(self) -> None:
+        self._tx_counter.clear()
+        self._rx_counter.clear()
+        self.counts = DecodeCounts()
+
+    # -- encoding ---------------------------------------------------------------------
+
+    def encode(self, name: str, values: Mapping[str, float], counter: int | None = None) -> bytes:
+        """8 data bytes of message ``name`` from physical ``values`` (DBC units).
+
+        Values are clipped to the signal's DBC [min, max], as a saturated sensor reads,
+        then quantised by cantools.  The alive counter is the message's next one unless
+        ``counter`` is given.  A missing or NaN value is a ``ConfigError``: missing data
+        is represented by not sending the frame.
+        """
+        info = self.message(name)
+        phys: dict[str, float] = {}
+        for sig in info.signals:
+            try:
+                v = float(values[sig.name])
+            except KeyError:
+                raise ConfigError(f"message {name}: no value for signal {sig.name}") from None
+            if math.isnan(v):
+                raise ConfigError(f"message {name}: signal {sig.name} is NaN (skip the frame)")
+            phys[sig.name] = min(max(v, sig.phys_min), sig.phys_max)
+        if counter is None:
+            counter = self._tx_counter.get(name, -1) + 1
+        counter %= COUNTER_MODULO
+        self._tx_counter[name] = counter
+        phys[COUNTER_SIGNAL] = counter
+        phys[CRC_SIGNAL] = 0
+        data = bytearray(info.dbc_message.encode(phys, scaling=True, padding=False, strict=False))
+        data[CRC_BYTE] = crc8_sae_j1850(data[:CRC_BYTE])
+        return bytes(data)
+
+    def encode_message(
+        self, name: str, values: Mapping[str, float], timestamp: float, counter: int | None = None
+    ) -> can.Message:
+        """A python-can ``Message`` of ``encode`` at ``timestamp`` (s)."""
+        info = self.message(name)
+        return can.Message(
+            timestamp=timestamp,
+            arbitration_id=info.frame_id,
+            is_extended_id=info.is_extended_id,
+            data=self.encode(name, values, counter),
+            is_rx=False,
+        )
+
+    # -- decoding ---------------------------------------------------------------------
+
+    def decode(
+        self, frame_id: int, data: bytes | bytearray, is_extended_id: bool = True
+    ) -> Decoded:
+        """Check and decode one frame; never raises for bad bus data."""
+        counts = self.counts
+        counts.frames += 1
+        info = self._by_id.get((frame_id, is_extended_id))
+        if info is None:
+            counts.ignored += 1
+            return Decoded(None, None, Rejection.UNKNOWN_ID)
+        name = info.name
+        if len(data) != FRAME_LENGTH:
+            counts.rejected[Rejection.DLC.value] += 1
+            return Decoded(name, None, Rejection.DLC)
+        if crc8_sae_j1850(data[:CRC_BYTE]) != data[CRC_BYTE]:
+            counts.rejected[Rejection.CRC.value] += 1
+            return Decoded(name, None, Rejection.CRC)
+        # The CRC vouches for the counter, so it updates the state even if a value is out
+        # of range below; a corrupt frame (bad CRC) must not resynchronise it.
+        counter = data[COUNTER_BYTE] & 0x0F
+        last = self._rx_counter.get(name)
+        jump = last is not None and counter != (last + 1) % COUNTER_MODULO
+        self._rx_counter[name] = counter
+        if jump:
+            counts.counter_jumps += 1
+        raw = info.dbc_message.decode(bytes(data), decode_choices=False, scaling=False)
+        values: dict[str, float] = {}
+        for sig in info.signals:
+            r = raw[sig.name]
+            if r < sig.raw_min or r > sig.raw_max:
+                counts.rejected[Rejection.RANGE.value] += 1
+                return Decoded(name, None, Rejection.RANGE, jump)
+            values[sig.name] = r * sig.scale + sig.offset
+        counts.decoded += 1
+        counts.per_message[name] = counts.per_message.get(name, 0) + 1
+        return Decoded(name, values, None, jump)
+
+    def decode_message(self, msg: can.Message) -> Decoded:
+        """``decode`` for a python-can message; error and remote frames count as rejected
+        (dlc) when they carry a DBC id, and as ignored otherwise."""
+        if msg.is_error_frame:
+            self.counts.frames += 1
+            self.counts.ignored += 1
+            return Decoded(None, None, Rejection.UNKNOWN_ID)
+        data = b"" if msg.is_remote_frame else msg.data
+        return self.decode(msg.arbitration_id, data, msg.is_extended_id)
