@@ -1,0 +1,515 @@
+"""Specht's general regression neural network (He & He 2014, eq. 4), numba-compiled.
+
+    y_hat(x) = sum_i y_i exp(-d_i) / sum_i exp(-d_i),   d_i = |x - x_i|^2 / (2 sigma^2)
+
+Inputs are already z-scored (see ``monitor.dgrnn.Normalizer``); everything is float64.
+
+Numerical stability: every weight is computed as ``exp(d_min - d_i)`` with ``d_min`` the
+smallest distance of that query.  The common factor ``exp(-d_min)`` cancels between numerator
+and denominator, so the value is eq. 4 exactly, but the nearest pattern always weighs 1: the
+denominator is >= 1 and a query far from every pattern (where every plain ``exp(-d_i)``
+underflows to 0 and eq. 4 would be 0/0) returns the target of its nearest pattern(s).
+
+Layout (stumpy style): public functions validate and call a parallel ``@njit`` driver that
+loops over queries with ``prange``; the per-query work is a small serial kernel
+(``_kernel_row``) that the dynamic model (``monitor.dgrnn``) reuses.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from monitor._numba import get_num_threads, jit, pjit, prange
+from monitor.errors import ConfigError, InputFileError
+
+SIGMA_RULES = ("loo", "fixed")
+THINNING_RULES = ("none", "stride", "min_distance")
+
+# Cap on the LOO distance matrix (queries x patterns, float64): 16 M entries = 128 MB.
+_LOO_MAX_ENTRIES = 16_000_000
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+def n_chunks() -> int:
+    """Work chunks for the parallel drivers (a few per thread, for load balance)."""
+    return 4 * get_num_threads()
+
+
+@jit
+def _kernel_row(x, patterns, targets, inv2s2, dbuf, out):  # pragma: no cover - numba
+    """Eq. 4 for one query ``x`` into ``out`` (n_outputs,); ``dbuf`` is scratch (n_patterns,).
+
+    A query with no finite distance (NaN in ``x``) gives NaN outputs: missing data stays
+    visible instead of becoming a plausible-looking number.
+    """
+    n, nf = patterns.shape
+    nout = targets.shape[1]
+    dmin = np.inf
+    for i in range(n):
+        acc = 0.0
+        for f in range(nf):
+            diff = x[f] - patterns[i, f]
+            acc += diff * diff
+        d = acc * inv2s2
+        dbuf[i] = d
+        if d < dmin:
+            dmin = d
+    if not dmin < np.inf:
+        for k in range(nout):
+            out[k] = np.nan
+        return
+    for k in range(nout):
+        out[k] = 0.0
+    den = 0.0
+    for i in range(n):
+        w = math.exp(dmin - dbuf[i])  # <= 1, and exactly 1 for the nearest pattern
+        den += w
+        for k in range(nout):
+            out[k] += w * targets[i, k]
+    for k in range(nout):
+        out[k] /= den
+
+
+@pjit
+def _predict_batch(X, patterns, targets, inv2s2, nchunk):  # pragma: no cover - numba
+    nq = X.shape[0]
+    out = np.empty((nq, targets.shape[1]))
+    # Chunks rather than one prange step per query: one scratch buffer per chunk, not per row.
+    nchunk = max(1, min(nq, nchunk))
+    for c in prange(nchunk):
+        dbuf = np.empty(patterns.shape[0])
+        for q in range(c * nq // nchunk, (c + 1) * nq // nchunk):
+            _kernel_row(X[q], patterns, targets, inv2s2, dbuf, out[q])
+    return out
+
+
+@pjit
+def _masked_sqdist(Q, qidx, P, pidx, m):  # pragma: no cover - numba
+    """Squared distances query x pattern; +inf where the two are <= m samples apart in time.
+
+    Distances do not depend on sigma, so the LOO search computes them once and each sigma
+    evaluation costs one exp per entry.
+    """
+    nq, nf = Q.shape
+    n = P.shape[0]
+    D = np.empty((nq, n))
+    rowmin = np.empty(nq)
+    for q in prange(nq):
+        best = np.inf
+        for i in range(n):
+            if abs(qidx[q] - pidx[i]) <= m:
+                D[q, i] = np.inf
+                continue
+            acc = 0.0
+            for f in range(nf):
+                diff = Q[q, f] - P[i, f]
+                acc += diff * diff
+            D[q, i] = acc
+            if acc < best:
+                best = acc
+        rowmin[q] = best
+    return D, rowmin
+
+
+@pjit
+def _loo_errors(D, rowmin, Qy, Py, inv2s2):  # pragma: no cover - numba
+    """Per-query squared error (mean over outputs) of eq. 4 without the excluded patterns."""
+    nq, n = D.shape
+    nout = Py.shape[1]
+    err = np.empty(nq)
+    for q in prange(nq):
+        if not rowmin[q] < np.inf:
+            err[q] = np.nan  # no eligible pattern: this query cannot be scored
+            continue
+        num = np.zeros(nout)
+        den = 0.0
+        for i in range(n):
+            # (rowmin - inf) * s = -inf -> weight 0: excluded neighbours drop out.
+            w = math.exp((rowmin[q] - D[q, i]) * inv2s2)
+            den += w
+            for k in range(nout):
+                num[k] += w * Py[i, k]
+        acc = 0.0
+        for k in range(nout):
+            e = num[k] / den - Qy[q, k]
+            acc += e * e
+        err[q] = acc / nout
+    return err
+
+
+@jit
+def _greedy_min_distance(X, r2, max_keep):  # pragma: no cover - numba
+    """Indices (time order) kept by greedy thinning, and False if more than max_keep."""
+    n, nf = X.shape
+    keep = np.empty(min(n, max_keep + 1), dtype=np.int64)
+    k = 0
+    for i in range(n):
+        ok = True
+        # Newest kept first: consecutive 100 Hz rows are close, so this usually breaks early.
+        for j in range(k - 1, -1, -1):
+            kk = keep[j]
+            acc = 0.0
+            for f in range(nf):
+                diff = X[i, f] - X[kk, f]
+                acc += diff * diff
+            if acc <= r2:
+                ok = False
+                break
+        if ok:
+            if k == max_keep:
+                return keep[:0].copy(), False
+            keep[k] = i
+            k += 1
+    return keep[:k].copy(), True
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _as_matrix(a: Any, name: str, *, cls: type[Exception] = InputFileError) -> np.ndarray:
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2:
+        raise cls(f"{name} must be 2-D (rows, columns), got shape {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
+def _require_finite(arr: np.ndarray, name: str) -> None:
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        row = int(np.argwhere(bad)[0][0])
+        raise InputFileError(
+            f"{name} has a non-finite value (NaN or inf) in row {row}; training patterns "
+            "must be complete (drop rows with missing samples first)"
+        )
+
+
+def _check_sigma(sigma: float) -> float:
+    s = float(sigma)
+    if not (math.isfinite(s) and s > 0.0 and math.isfinite(0.5 / (s * s))):
+        raise ConfigError(f"sigma must be a positive finite number, got {sigma!r}")
+    return s
+
+
+def _check_time_index(time_index: Any, n: int) -> np.ndarray:
+    if time_index is None:
+        return np.arange(n, dtype=np.int64)
+    idx = np.asarray(time_index)
+    if idx.shape != (n,) or not np.issubdtype(idx.dtype, np.integer):
+        raise ConfigError(f"time_index must be {n} integers (one per pattern), got {idx.shape}")
+    idx = idx.astype(np.int64)
+    if n > 1 and np.any(np.diff(idx) <= 0):
+        raise ConfigError("time_index must be strictly increasing (patterns in time order)")
+    return idx
+
+
+# --------------------------------------------------------------------------- public functions
+
+
+def grnn_predict(X: Any, patterns: Any, targets: Any, sigma: float) -> np.ndarray:
+    """Eq. 4 for every row of ``X``; returns (n_queries, n_outputs).
+
+    ``patterns`` (n_patterns, n_features) must be finite; a query row with NaN gives NaN.
+    """
+    P = _as_matrix(patterns, "patterns")
+    Y = _as_matrix(targets, "targets")
+    Xq = _as_matrix(X, "X")
+    if P.shape[0] != Y.shape[0] or P.shape[0] == 0:
+        raise InputFileError(
+            f"patterns ({P.shape[0]} rows) and targets ({Y.shape[0]} rows) must match and be"
+            " non-empty"
+        )
+    if Xq.shape[1] != P.shape[1]:
+        raise InputFileError(f"X has {Xq.shape[1]} features, the patterns have {P.shape[1]}")
+    _require_finite(P, "patterns")
+    _require_finite(Y, "targets")
+    s = _check_sigma(sigma)
+    return _predict_batch(Xq, P, Y, 0.5 / (s * s), n_chunks())
+
+
+def loo_errors(
+    queries: Any,
+    query_targets: Any,
+    patterns: Any,
+    targets: Any,
+    sigma: float,
+    exclude_neighbours: int = 0,
+    query_index: Any = None,
+    pattern_index: Any = None,
+) -> np.ndarray:
+    """Squared error per query (mean over outputs) with patterns <= m samples away left out.
+
+    With ``queries is patterns`` and the same (default) time index this is leave-one-out
+    with temporal neighbours excluded.  A query with no eligible pattern gets NaN.
+    """
+    Q = _as_matrix(queries, "queries")
+    Qy = _as_matrix(query_targets, "query_targets")
+    P = _as_matrix(patterns, "patterns")
+    Py = _as_matrix(targets, "targets")
+    qidx = _check_time_index(query_index, Q.shape[0])
+    pidx = _check_time_index(pattern_index, P.shape[0])
+    D, rowmin = _masked_sqdist(Q, qidx, P, pidx, int(exclude_neighbours))
+    s = _check_sigma(sigma)
+    return _loo_errors(D, rowmin, Qy, Py, 0.5 / (s * s))
+
+
+def thin_min_distance(X: Any, radius: float, max_keep: int | None = None) -> np.ndarray | None:
+    """Greedy thinning in time order: keep a row only if farther than ``radius`` from every
+    row kept so far.  Returns kept indices, or None when more than ``max_keep`` would be kept.
+    """
+    A = _as_matrix(X, "X")
+    cap = A.shape[0] if max_keep is None else int(max_keep)
+    keep, ok = _greedy_min_distance(A, float(radius) ** 2, cap)
+    return keep if ok else None
+
+
+# --------------------------------------------------------------------------- estimator
+
+
+class GRNN:
+    """GRNN regressor, scikit-learn style: ``__init__`` stores parameters, ``fit`` learns.
+
+    Parameters
+    ----------
+    sigma : fixed bandwidth; when given it is used as is (``sigma_rule_ == "fixed"``).
+    sigma_rule : ``"loo"``: choose sigma by leave-one-out on the training rows, leaving out
+        every pattern within ``exclude_neighbours`` samples in time (at 100 Hz neighbouring
+        rows are nearly copies, and plain LOO would pick a sigma that only interpolates
+        between them).  ``"fixed"`` requires ``sigma``.
+    thinning : ``"none"``, ``"stride"`` (every ``stride``-th row) or ``"min_distance"``
+        (after the stride, greedy in time order: keep a row only if farther than
+        ``min_distance`` from all kept rows; the radius grows by 1.5x until at most
+        ``max_patterns`` remain).  Kept patterns carry their own targets, so predictions are
+        eq. 4 exactly over the kept set.
+    loo_max_queries : the LOO error is evaluated on at most this many training rows (evenly
+        spread in time), each predicted from the kept patterns.
+    sigma_bounds : (lo, hi) for the search; default from the data's distance scale.
+
+    Fitted attributes: ``patterns_``, ``targets_``, ``sigma_``, ``sigma_rule_``,
+    ``pattern_index_`` (time index of each kept pattern), ``thinning_`` (dict: rule, stride,
+    min_distance actually used, rows in, patterns kept), ``loo_error_`` (NaN when fixed),
+    ``exclude_neighbours_``, ``n_features_in_``, ``n_outputs_``.
+    """
+
+    def __init__(
+        self,
+        sigma: float | None = None,
+        sigma_rule: str = "loo",
+        exclude_neighbours: int = 50,
+        thinning: str = "min_distance",
+        min_distance: float = 0.05,
+        stride: int = 1,
+        max_patterns: int | None = 3000,
+        loo_max_queries: int = 2000,
+        sigma_bounds: tuple[float, float] | None = None,
+    ) -> None:
+        self.sigma = sigma
+        self.sigma_rule = sigma_rule
+        self.exclude_neighbours = exclude_neighbours
+        self.thinning = thinning
+        self.min_distance = min_distance
+        self.stride = stride
+        self.max_patterns = max_patterns
+        self.loo_max_queries = loo_max_queries
+        self.sigma_bounds = sigma_bounds
+
+    # -- parameters ---------------------------------------------------------------------
+
+    def _check_params(self) -> None:
+        if self.sigma is None and self.sigma_rule not in SIGMA_RULES:
+            raise ConfigError(f"sigma_rule must be one of {SIGMA_RULES}, got {self.sigma_rule!r}")
+        if self.sigma is None and self.sigma_rule == "fixed":
+            raise ConfigError("sigma_rule='fixed' needs a sigma")
+        if self.sigma is not None:
+            _check_sigma(self.sigma)
+        if self.thinning not in THINNING_RULES:
+            raise ConfigError(f"thinning must be one of {THINNING_RULES}, got {self.thinning!r}")
+        if int(self.exclude_neighbours) < 0:
+            raise ConfigError("exclude_neighbours must be >= 0")
+        if int(self.stride) < 1:
+            raise ConfigError("stride must be >= 1")
+        if self.max_patterns is not None and int(self.max_patterns) < 2:
+            raise ConfigError("max_patterns must be >= 2 (or None for no bound)")
+        if not (self.min_distance >= 0 and math.isfinite(self.min_distance)):
+            raise ConfigError("min_distance must be a finite number >= 0")
+        if int(self.loo_max_queries) < 1:
+            raise ConfigError("loo_max_queries must be >= 1")
+        if self.sigma_bounds is not None:
+            lo, hi = (float(v) for v in self.sigma_bounds)
+            if not (0 < lo < hi < math.inf):
+                raise ConfigError(f"sigma_bounds must be 0 < lo < hi, got {self.sigma_bounds}")
+
+    # -- fit ----------------------------------------------------------------------------
+
+    def fit(self, X: Any, Y: Any, time_index: Any = None) -> GRNN:
+        """Store (thinned) patterns and choose sigma.
+
+        ``time_index`` (strictly increasing integers, default 0..n-1) places each row in
+        time; to fit on several recordings, offset each recording's index by more than
+        ``exclude_neighbours`` so rows of different recordings are never neighbours.
+        """
+        self._check_params()
+        Xa = _as_matrix(X, "X")
+        y1d = np.asarray(Y).ndim == 1
+        Ya = _as_matrix(Y, "Y")
+        if Xa.shape[0] != Ya.shape[0]:
+            raise InputFileError(f"X has {Xa.shape[0]} rows but Y has {Ya.shape[0]}")
+        if Xa.shape[0] < 2:
+            raise InputFileError(f"a GRNN needs at least 2 training patterns, got {Xa.shape[0]}")
+        if Xa.shape[1] < 1 or Ya.shape[1] < 1:
+            raise InputFileError("X and Y need at least one column each")
+        _require_finite(Xa, "X")
+        _require_finite(Ya, "Y")
+        tidx = _check_time_index(time_index, Xa.shape[0])
+
+        keep, thinning = self._thin(Xa)
+        P, Py, pidx = Xa[keep], Ya[keep], tidx[keep]
+
+        if self.sigma is not None:
+            sigma, rule, loo = _check_sigma(self.sigma), "fixed", math.nan
+        else:
+            sigma, loo = self._loo_sigma(Xa, Ya, tidx, P, Py, pidx)
+            rule = "loo"
+
+        self.patterns_ = np.ascontiguousarray(P)
+        self.targets_ = np.ascontiguousarray(Py)
+        self.pattern_index_ = pidx
+        self.sigma_ = float(sigma)
+        self.sigma_rule_ = rule
+        self.loo_error_ = float(loo)
+        self.exclude_neighbours_ = int(self.exclude_neighbours)
+        self.thinning_ = thinning
+        self.n_features_in_ = Xa.shape[1]
+        self.n_outputs_ = Ya.shape[1]
+        self._y1d = y1d
+        return self
+
+    def _thin(self, X: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+        n = X.shape[0]
+        stride = int(self.stride) if self.thinning != "none" else 1
+        idx = np.arange(0, n, stride, dtype=np.int64)
+        radius = 0.0
+        if self.thinning == "min_distance":
+            radius = float(self.min_distance)
+            cap = len(idx) if self.max_patterns is None else int(self.max_patterns)
+            sub = np.ascontiguousarray(X[idx])
+            while True:
+                kept = thin_min_distance(sub, radius, cap)
+                if kept is not None:
+                    break
+                # Too many patterns: widen the radius; 1.5x keeps the count near the bound.
+                radius = radius * 1.5 if radius > 0 else 1e-3
+            idx = idx[kept]
+        elif self.max_patterns is not None and len(idx) > int(self.max_patterns):
+            raise ConfigError(
+                f"{len(idx)} patterns exceed max_patterns={self.max_patterns}: raise the stride"
+                " or use thinning='min_distance'"
+            )
+        info = {
+            "rule": self.thinning,
+            "stride": stride,
+            "min_distance": radius,
+            "max_patterns": self.max_patterns,
+            "n_rows": n,
+            "n_patterns": int(len(idx)),
+        }
+        return idx, info
+
+    def _loo_sigma(self, X, Y, tidx, P, Py, pidx) -> tuple[float, float]:
+        n = X.shape[0]
+        nq = min(n, int(self.loo_max_queries), max(1, _LOO_MAX_ENTRIES // P.shape[0]))
+        q = np.unique(np.linspace(0, n - 1, nq).round().astype(np.int64))
+        m = int(self.exclude_neighbours)
+        D, rowmin = _masked_sqdist(np.ascontiguousarray(X[q]), tidx[q], P, pidx, m)
+        Qy = np.ascontiguousarray(Y[q])
+        if not np.isfinite(rowmin).any():
+            raise ConfigError(
+                f"leave-one-out has nothing to compare: every pattern is within "
+                f"exclude_neighbours={m} samples of every query; record more data or lower it"
+            )
+
+        def loss(log_sigma: float) -> float:
+            s = math.exp(log_sigma)
+            return float(np.nanmean(_loo_errors(D, rowmin, Qy, Py, 0.5 / (s * s))))
+
+        if self.sigma_bounds is not None:
+            lo, hi = (float(v) for v in self.sigma_bounds)
+        else:
+            # Scale of the data: median distance between queries and eligible patterns.
+            finite = D[np.isfinite(D)]
+            scale = math.sqrt(float(np.median(finite))) if finite.size else 1.0
+            scale = scale if scale > 0 else 1.0
+            lo, hi = scale * 1e-3, scale * 3.0
+        # Coarse log grid first (the LOO curve can have shallow local minima), then Brent
+        # on the bracket around the best grid point.
+        grid = np.linspace(math.log(lo), math.log(hi), 29)
+        vals = np.array([loss(g) for g in grid])
+        k = int(np.nanargmin(vals))
+        a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        res = minimize_scalar(loss, bounds=(a, b), method="bounded", options={"xatol": 1e-3})
+        best_log, best_val = (res.x, res.fun) if res.fun <= vals[k] else (grid[k], vals[k])
+        return math.exp(best_log), float(best_val)
+
+    # -- predict ------------------------------------------------------------------------
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "patterns_"):
+            raise ConfigError("this GRNN is not fitted yet: call fit(X, Y) first")
+
+    def predict(self, X: Any) -> np.ndarray:
+        """Eq. 4 for each row of X; a row with NaN gives NaN.  Shape (n,) if fitted on 1-D Y."""
+        self._check_fitted()
+        Xa = np.asarray(X, dtype=np.float64)
+        single = Xa.ndim == 1
+        if single:
+            Xa = Xa[None, :]
+        if Xa.ndim != 2 or Xa.shape[1] != self.n_features_in_:
+            raise InputFileError(
+                f"X must have {self.n_features_in_} features per row, got shape {np.shape(X)}"
+            )
+        out = _predict_batch(
+            np.ascontiguousarray(Xa),
+            self.patterns_,
+            self.targets_,
+            0.5 / self.sigma_**2,
+            n_chunks(),
+        )
+        if self._y1d:
+            out = out[:, 0]
+        return out[0] if single else out
+
+    @classmethod
+    def from_arrays(cls, patterns: Any, targets: Any, sigma: float, **fitted: Any) -> GRNN:
+        """Rebuild a fitted GRNN (e.g. from a model file) without refitting.
+
+        ``fitted`` may carry the recorded attributes (``sigma_rule_``, ``thinning_``,
+        ``loo_error_``, ``pattern_index_``, ``exclude_neighbours_``).
+        """
+        P = _as_matrix(patterns, "patterns")
+        Y = _as_matrix(targets, "targets")
+        if P.shape[0] != Y.shape[0] or P.shape[0] < 1:
+            raise InputFileError("patterns and targets must have the same, non-zero row count")
+        _require_finite(P, "patterns")
+        _require_finite(Y, "targets")
+        model = cls(sigma=_check_sigma(sigma))
+        model.patterns_, model.targets_ = P, Y
+        model.sigma_ = float(sigma)
+        model.sigma_rule_ = str(fitted.pop("sigma_rule_", "fixed"))
+        model.loo_error_ = float(fitted.pop("loo_error_", math.nan))
+        model.exclude_neighbours_ = int(fitted.pop("exclude_neighbours_", 0))
+        model.thinning_ = dict(fitted.pop("thinning_", {"rule": "none"}))
+        model.pattern_index_ = np.asarray(
+            fitted.pop("pattern_index_", np.arange(P.shape[0])), dtype=np.int64
+        )
+        if fitted:
+            raise ConfigError(f"unknown fitted attribute(s): {', '.join(sorted(fitted))}")
+        model.n_features_in_, model.n_outputs_ = P.shape[1], Y.shape[1]
+        model._y1d = False
+        return model
