@@ -1,0 +1,229 @@
+"""The catalogue of effects the nominal model leaves out, each with physical parameters.
+
+Every effect is off in the nominal model.  An ``Effect`` is a name plus its parameter values
+in the units their names carry; the kernel converts them to SI.  The sim-to-real tool fits
+these parameters, so they are always passed in, never read from globals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from monitor.errors import ConfigError
+from monitor.signals import EFFECT_NAMES
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    name: str
+    unit: str
+    default: float
+    low: float
+    high: float
+    doc: str
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    name: str
+    doc: str
+    params: tuple[ParamSpec, ...]
+
+    def param(self, name: str) -> ParamSpec:
+        for p in self.params:
+            if p.name == name:
+                return p
+        known = ", ".join(p.name for p in self.params)
+        raise ConfigError(f"effect {self.name!r} has no parameter {name!r}; known: {known}")
+
+
+CATALOGUE: dict[str, EffectSpec] = {
+    spec.name: spec
+    for spec in (
+        EffectSpec(
+            "entrained_air",
+            "pressure-dependent effective bulk modulus of oil with entrained air "
+            "(Simscape hydraulic-fluid formula): soft at low pressure",
+            (
+                ParamSpec(
+                    "air_fraction",
+                    "-",
+                    0.01,
+                    0.0005,
+                    0.1,
+                    "air volume per liquid volume at atmospheric pressure",
+                ),
+                ParamSpec(
+                    "polytropic_index",
+                    "-",
+                    1.4,
+                    1.0,
+                    1.4,
+                    "gas compression exponent (1 isothermal, 1.4 adiabatic)",
+                ),
+            ),
+        ),
+        EffectSpec(
+            "oil_viscosity",
+            "pump leakage and part of the cylinder friction follow oil viscosity, "
+            "from OilTemp through the Walther equation (ASTM D341)",
+            (
+                ParamSpec("nu40_cst", "cSt", 46.0, 15.0, 150.0, "kinematic viscosity at 40 degC"),
+                ParamSpec("nu100_cst", "cSt", 6.8, 3.0, 20.0, "kinematic viscosity at 100 degC"),
+                ParamSpec(
+                    "pump_leak_lpm_per_100bar",
+                    "L/min",
+                    1.0,
+                    0.0,
+                    5.0,
+                    "pump internal leakage at 100 bar and 40 degC (laminar, ~p/nu)",
+                ),
+                ParamSpec(
+                    "friction_share",
+                    "-",
+                    0.5,
+                    0.0,
+                    1.0,
+                    "share of the viscous friction that scales with viscosity",
+                ),
+            ),
+        ),
+        EffectSpec(
+            "cylinder_friction",
+            "Coulomb and Stribeck friction of the cylinder seals (on top of viscous)",
+            (
+                ParamSpec("coulomb_n", "N", 500.0, 0.0, 3000.0, "Coulomb (sliding) friction"),
+                ParamSpec(
+                    "static_n", "N", 800.0, 0.0, 5000.0, "breakaway friction, at least coulomb_n"
+                ),
+                ParamSpec(
+                    "stribeck_velocity_mm_s",
+                    "mm/s",
+                    10.0,
+                    1.0,
+                    100.0,
+                    "velocity over which static friction decays to Coulomb",
+                ),
+            ),
+        ),
+        EffectSpec(
+            "spool_dynamics",
+            "second-order spool position response to SpoolCmd (mobile valves 5-20 Hz)",
+            (
+                ParamSpec("natural_freq_hz", "Hz", 10.0, 2.0, 40.0, "spool natural frequency"),
+                ParamSpec("damping_ratio", "-", 0.7, 0.3, 1.5, "spool damping ratio"),
+            ),
+        ),
+        EffectSpec(
+            "valve_deadband",
+            "spool overlap: no metering edge opens until the spool passes the overlap",
+            (ParamSpec("overlap_pct", "% stroke", 10.0, 0.0, 30.0, "overlap of each land"),),
+        ),
+        EffectSpec(
+            "pump_control_dynamics",
+            "pump displacement (and so the compensator) follows its target with a first-order lag",
+            (ParamSpec("time_constant_ms", "ms", 80.0, 5.0, 500.0, "displacement time constant"),),
+        ),
+        EffectSpec(
+            "hose_compliance",
+            "hose walls add compliance to the line and dead volumes (pressure-independent)",
+            (
+                ParamSpec(
+                    "wall_modulus_gpa",
+                    "GPa",
+                    0.5,
+                    0.1,
+                    3.0,
+                    "effective wall modulus of the hoses; 1/beta = 1/beta_oil + 1/E_wall",
+                ),
+            ),
+        ),
+        EffectSpec(
+            "sensor_lag",
+            "pressure and flow sensors report late: a transport delay and a first-order filter",
+            (
+                ParamSpec("delay_ms", "ms", 20.0, 0.0, 100.0, "pure delay of PP, PA, PB, QP"),
+                ParamSpec("time_constant_ms", "ms", 0.0, 0.0, 200.0, "first-order filter"),
+            ),
+        ),
+        EffectSpec(
+            "load_variation",
+            "gravity load on the rod changes with boom position (lever geometry)",
+            (
+                ParamSpec(
+                    "slope_n_per_mm",
+                    "N/mm",
+                    8.0,
+                    -20.0,
+                    20.0,
+                    "load change per mm of stroke about the reference position",
+                ),
+            ),
+        ),
+    )
+}
+assert tuple(CATALOGUE) == EFFECT_NAMES  # the contract's names, in its order
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One enabled effect with every parameter set (defaults filled in)."""
+
+    name: str
+    params: dict[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def make(cls, name: str, **values: float) -> Effect:
+        spec = CATALOGUE.get(name)
+        if spec is None:
+            raise ConfigError(f"unknown effect {name!r}; known: {', '.join(CATALOGUE)}")
+        params = {p.name: p.default for p in spec.params}
+        for key, value in values.items():
+            p = spec.param(key)
+            value = float(value)
+            if not p.low <= value <= p.high:
+                raise ConfigError(
+                    f"effect {name}: {key} = {value:g} {p.unit} is outside {p.low:g}..{p.high:g}"
+                )
+            params[key] = value
+        _check_relations(name, params)
+        return cls(name, params)
+
+
+def _check_relations(name: str, params: dict[str, float]) -> None:
+    if name == "cylinder_friction" and params["static_n"] < params["coulomb_n"]:
+        raise ConfigError(
+            f"effect cylinder_friction: static_n = {params['static_n']:g} N must be at least "
+            f"coulomb_n = {params['coulomb_n']:g} N"
+        )
+    if name == "oil_viscosity" and params["nu100_cst"] >= params["nu40_cst"]:
+        raise ConfigError("effect oil_viscosity: nu100_cst must be below nu40_cst")
+
+
+def parse_effect(text: str) -> Effect:
+    """Parse the CLI form ``NAME[:param=value,...]``."""
+    name, _, rest = text.partition(":")
+    values: dict[str, float] = {}
+    if rest:
+        for item in rest.split(","):
+            key, eq, raw = item.partition("=")
+            if not eq:
+                raise ConfigError(f"--effect {text!r}: expected param=value, got {item!r}")
+            try:
+                values[key.strip()] = float(raw)
+            except ValueError:
+                raise ConfigError(
+                    f"--effect {text!r}: {key.strip()} = {raw!r} is not a number"
+                ) from None
+    return Effect.make(name.strip(), **values)
+
+
+def describe_catalogue() -> str:
+    """Text for --help: every effect, its parameters with units, defaults and ranges."""
+    lines = []
+    for spec in CATALOGUE.values():
+        lines.append(f"  {spec.name}: {spec.doc}")
+        for p in spec.params:
+            rng = f"default {p.default:g}, range {p.low:g}..{p.high:g}"
+            lines.append(f"      {p.name} [{p.unit}] {rng}: {p.doc}")
+    return "\n".join(lines)

@@ -1,0 +1,246 @@
+"""The numba-compiled hydraulic loop: right-hand side and a fixed-step RK4 integrator.
+
+Everything here is SI (Pa, m^3/s, m, kg, N, s).  Parameters travel as one float64 vector
+(indices below; ``pack.py`` fills it) so the sim-to-real tool can vary any of them without
+recompiling.  States: pump line pressure, chamber pressures, rod position and velocity,
+spool position and velocity, pump displacement fraction.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from monitor._numba import jit
+
+# --- parameter vector layout -------------------------------------------------------------
+BETA, V_LINE, V0A, V0B, AA, AB, STROKE = 0, 1, 2, 3, 4, 5, 6
+MASS, FGRAV, CVISC, KV, DP_LAM, PTANK, DISP_MAX = 7, 8, 9, 10, 11, 12, 13
+COMP_ON, COMP_START, COMP_FULL, RELIEF_CRACK, RELIEF_GAIN, XREF = 14, 15, 16, 17, 18, 19
+AIR_ON, AIR_ALPHA, AIR_N = 20, 21, 22
+VISC_ON, LEAK_K, FRIC_SHARE = 23, 24, 25
+FRIC_ON, FC, FS, VS = 26, 27, 28, 29
+SPOOL_ON, WN, ZETA = 30, 31, 32
+OVERLAP = 33
+PUMPDYN_ON, TAU_PUMP = 34, 35
+HOSE_ON, E_WALL = 36, 37
+SLOPE = 38
+V_EPS = 39
+N_PARAMS = 40
+
+# --- input columns (per input sample, linearly interpolated inside a step) ----------------
+IN_SPOOL, IN_DISP, IN_SPEED_RPS, IN_VISC_RATIO, IN_LEAK, IN_STROKE_LIM, IN_UNDERLAP = range(7)
+N_INPUTS = 7
+
+# --- states ------------------------------------------------------------------------------
+S_PP, S_PA, S_PB, S_X, S_V, S_XS, S_VS, S_DISP = range(8)
+N_STATES = 8
+
+# --- recorded outputs ----------------------------------------------------------------------
+R_PP, R_PA, R_PB, R_QP, R_X, R_V, R_XS = range(7)
+N_RECORD = 7
+
+P_ATM = 101325.0
+
+
+@jit
+def _orifice(kv_open: float, dp: float, dp_lam: float) -> float:
+    """Turbulent orifice flow kv*sqrt(dp), turning smoothly laminar below ~dp_lam."""
+    return kv_open * dp / math.sqrt(math.sqrt(dp * dp + dp_lam * dp_lam))
+
+
+@jit
+def _clip(v: float, lo: float, hi: float) -> float:
+    return lo if v < lo else (hi if v > hi else v)
+
+
+@jit
+def _compliance(p: float, vol: float, hose_vol: float, prm: np.ndarray) -> float:
+    """Hydraulic capacitance dV/dp of a node (m^3/Pa) at gauge pressure p."""
+    beta = prm[BETA]
+    if prm[AIR_ON] > 0.0:
+        # Simscape's entrained-air modulus; p absolute, never below 1 kPa.
+        pabs = max(p + P_ATM, 1e3)
+        n = prm[AIR_N]
+        r = (P_ATM / pabs) ** (1.0 / n)
+        a = prm[AIR_ALPHA]
+        beta = beta * (1.0 + a * r) / (1.0 + a * r * beta / (n * pabs))
+    c = vol / beta
+    if prm[HOSE_ON] > 0.0:
+        c += hose_vol / prm[E_WALL]
+    return c
+
+
+@jit
+def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
+    """Write dy/dt into ``dy``; return the pump outlet flow QP in m^3/s."""
+    pp = max(y[S_PP], 0.0)
+    pa = max(y[S_PA], 0.0)
+    pb = max(y[S_PB], 0.0)
+    x = y[S_X]
+    v = y[S_V]
+    ptank = prm[PTANK]
+
+    # Spool: follows the command, or a second-order response; mechanically limited stroke.
+    if prm[SPOOL_ON] > 0.0:
+        xs = y[S_XS]
+        wn = prm[WN]
+        dy[S_XS] = y[S_VS]
+        dy[S_VS] = wn * wn * (u[IN_SPOOL] - xs) - 2.0 * prm[ZETA] * wn * y[S_VS]
+    else:
+        xs = u[IN_SPOOL]
+        dy[S_XS] = 0.0
+        dy[S_VS] = 0.0
+    lim = u[IN_STROKE_LIM]
+    xs = _clip(xs, -lim, lim)
+    ov = prm[OVERLAP]
+    mag = max(abs(xs) - ov, 0.0) / (1.0 - ov)
+    s = mag if xs >= 0.0 else -mag
+    ul = u[IN_UNDERLAP]
+    o_pos = _clip(s + ul, 0.0, 1.0)  # P->A and B->T
+    o_neg = _clip(-s + ul, 0.0, 1.0)  # P->B and A->T
+    kv = prm[KV]
+    dpl = prm[DP_LAM]
+    q_pa = _orifice(kv * o_pos, pp - pa, dpl)
+    q_bt = _orifice(kv * o_pos, pb - ptank, dpl)
+    q_pb = _orifice(kv * o_neg, pp - pb, dpl)
+    q_at = _orifice(kv * o_neg, pa - ptank, dpl)
+    q_il = u[IN_LEAK] * (pa - pb)
+
+    # Pump: displacement command times the compensator's destroke, optionally lagged.
+    comp = 1.0
+    if prm[COMP_ON] > 0.0:
+        comp = _clip((prm[COMP_FULL] - pp) / (prm[COMP_FULL] - prm[COMP_START]), 0.0, 1.0)
+    target = u[IN_DISP] * comp
+    if prm[PUMPDYN_ON] > 0.0:
+        disp = y[S_DISP]
+        dy[S_DISP] = (target - disp) / prm[TAU_PUMP]
+    else:
+        disp = target
+        dy[S_DISP] = 0.0
+    qp = disp * prm[DISP_MAX] * u[IN_SPEED_RPS]
+    visc_ratio = 1.0
+    if prm[VISC_ON] > 0.0:
+        visc_ratio = u[IN_VISC_RATIO]  # nu(OilTemp) / nu40, precomputed per sample
+        qp -= prm[LEAK_K] * pp / visc_ratio
+    q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
+    dy[S_PP] = (qp - q_relief - q_pa - q_pb) / _compliance(pp, prm[V_LINE], prm[V_LINE], prm)
+
+    # Rod: pressure force against gravity (optionally position dependent) and friction.
+    f_hyd = pa * prm[AA] - pb * prm[AB]
+    f_grav = prm[FGRAV] + prm[SLOPE] * (x - prm[XREF])
+    c = prm[CVISC]
+    if prm[VISC_ON] > 0.0:
+        c *= 1.0 - prm[FRIC_SHARE] + prm[FRIC_SHARE] * visc_ratio
+    f_fric = c * v
+    if prm[FRIC_ON] > 0.0:
+        r = v / prm[VS]
+        f_fric += (prm[FC] + (prm[FS] - prm[FC]) * math.exp(-r * r)) * math.tanh(v / prm[V_EPS])
+    drive = f_hyd - f_grav
+    stroke = prm[STROKE]
+    # End stops: the rod rests on a stop while the net drive presses it there.
+    if (x <= 0.0 and v <= 0.0 and drive <= 0.0) or (x >= stroke and v >= 0.0 and drive >= 0.0):
+        v = 0.0
+        dy[S_V] = 0.0
+    else:
+        dy[S_V] = (drive - f_fric) / prm[MASS]
+    dy[S_X] = v
+
+    vol_a = prm[V0A] + prm[AA] * x
+    vol_b = prm[V0B] + prm[AB] * (stroke - x)
+    dy[S_PA] = (q_pa - q_at - q_il - prm[AA] * v) / _compliance(pa, vol_a, prm[V0A], prm)
+    dy[S_PB] = (q_pb - q_bt + q_il + prm[AB] * v) / _compliance(pb, vol_b, prm[V0B], prm)
+    return qp
+
+
+@jit
+def _project(y: np.ndarray, stroke: float) -> None:
+    """Keep the state physical after a step: no negative pressure, rod within its stops."""
+    for i in (S_PP, S_PA, S_PB):
+        if y[i] < 0.0:
+            y[i] = 0.0
+    if y[S_X] < 0.0:
+        y[S_X] = 0.0
+        y[S_V] = max(y[S_V], 0.0)
+    elif y[S_X] > stroke:
+        y[S_X] = stroke
+        y[S_V] = min(y[S_V], 0.0)
+
+
+@jit
+def integrate(
+    y0: np.ndarray,
+    inputs: np.ndarray,
+    n_sub: int,
+    input_dt: float,
+    prm: np.ndarray,
+    record_every: int,
+) -> np.ndarray:
+    """Classic RK4 at h = input_dt / n_sub, inputs linear between their samples.
+
+    Returns the recorded outputs (rows every ``record_every`` steps, the first at t=0).
+    """
+    n_in = inputs.shape[0]
+    n_steps = (n_in - 1) * n_sub
+    n_rec = n_steps // record_every + 1
+    rec = np.empty((n_rec, N_RECORD))
+    y = y0.copy()
+    k1 = np.empty(N_STATES)
+    k2 = np.empty(N_STATES)
+    k3 = np.empty(N_STATES)
+    k4 = np.empty(N_STATES)
+    yt = np.empty(N_STATES)
+    u0 = np.empty(N_INPUTS)
+    um = np.empty(N_INPUTS)
+    u1 = np.empty(N_INPUTS)
+    h = input_dt / n_sub
+    stroke = prm[STROKE]
+    _record(rec, 0, y, inputs[0], prm, k1)
+    r = 1
+    step = 0
+    for k in range(n_in - 1):
+        a = inputs[k]
+        b = inputs[k + 1]
+        for j in range(n_sub):
+            f0 = j / n_sub
+            f1 = (j + 1) / n_sub
+            fm = 0.5 * (f0 + f1)
+            for i in range(N_INPUTS):
+                d = b[i] - a[i]
+                u0[i] = a[i] + f0 * d
+                um[i] = a[i] + fm * d
+                u1[i] = a[i] + f1 * d
+            rhs(y, u0, prm, k1)
+            for i in range(N_STATES):
+                yt[i] = y[i] + 0.5 * h * k1[i]
+            rhs(yt, um, prm, k2)
+            for i in range(N_STATES):
+                yt[i] = y[i] + 0.5 * h * k2[i]
+            rhs(yt, um, prm, k3)
+            for i in range(N_STATES):
+                yt[i] = y[i] + h * k3[i]
+            rhs(yt, u1, prm, k4)
+            for i in range(N_STATES):
+                y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            _project(y, stroke)
+            step += 1
+            if step % record_every == 0:
+                _record(rec, r, y, u1, prm, k1)
+                r += 1
+    return rec
+
+
+@jit
+def _record(
+    rec: np.ndarray, r: int, y: np.ndarray, u: np.ndarray, prm: np.ndarray, scratch: np.ndarray
+) -> None:
+    qp = rhs(y, u, prm, scratch)
+    rec[r, R_PP] = y[S_PP]
+    rec[r, R_PA] = y[S_PA]
+    rec[r, R_PB] = y[S_PB]
+    rec[r, R_QP] = qp
+    rec[r, R_X] = y[S_X]
+    rec[r, R_V] = y[S_V]
+    xs = y[S_XS] if prm[SPOOL_ON] > 0.0 else u[IN_SPOOL]
+    rec[r, R_XS] = _clip(xs, -u[IN_STROKE_LIM], u[IN_STROKE_LIM])

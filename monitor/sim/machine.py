@@ -1,0 +1,170 @@
+"""The reference machine's nominal parameters, SI inside, loaded from config/simulator.yaml.
+
+The YAML carries units in its key names (bar, L, mm, cc/rev); ``MachineParams`` holds SI
+values only (Pa, m^3, m, kg, N, s).  ``load_machine`` validates every key once, at the edge.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from monitor.errors import ConfigError
+from monitor.resources import resource_path
+
+BAR = 1e5  # Pa
+LPM = 1e-3 / 60.0  # m^3/s per L/min
+
+
+@dataclass(frozen=True)
+class MachineParams:
+    """Nominal lumped parameters of one boom loop, all SI."""
+
+    density_kg_m3: float = 870.0
+    bulk_modulus_pa: float = 1.5e9
+    pump_disp_m3_rev: float = 11e-6
+    compensator_enabled: bool = True
+    compensator_start_pa: float = 190 * BAR
+    compensator_full_pa: float = 200 * BAR
+    line_volume_m3: float = 0.5e-3
+    relief_crack_pa: float = 210 * BAR
+    relief_full_pa: float = 220 * BAR
+    valve_rated_flow_m3_s: float = 20 * LPM
+    valve_rated_dp_pa: float = 10 * BAR
+    laminar_dp_pa: float = 0.3 * BAR
+    tank_pa: float = 0.0
+    bore_m: float = 0.063
+    rod_m: float = 0.036
+    stroke_m: float = 0.5
+    dead_volume_a_m3: float = 0.3e-3
+    dead_volume_b_m3: float = 0.3e-3
+    mass_kg: float = 400.0
+    gravity_load_n: float = 6000.0
+    viscous_friction_n_s_m: float = 2000.0
+    reference_rod_pos_m: float = 0.25
+    nominal_speed_rpm: float = 2200.0
+    step_s: float = 2e-4
+
+    @property
+    def area_a_m2(self) -> float:
+        return math.pi / 4 * self.bore_m**2
+
+    @property
+    def area_b_m2(self) -> float:
+        return math.pi / 4 * (self.bore_m**2 - self.rod_m**2)
+
+    @property
+    def valve_kv(self) -> float:
+        """Orifice coefficient per metering edge at full stroke, m^3/s per sqrt(Pa)."""
+        return self.valve_rated_flow_m3_s / math.sqrt(self.valve_rated_dp_pa)
+
+    @property
+    def relief_gain_m3_s_pa(self) -> float:
+        """Relief flow per Pa above cracking: the pump's full flow at nominal speed."""
+        full_flow = self.pump_disp_m3_rev * self.nominal_speed_rpm / 60.0
+        return full_flow / (self.relief_full_pa - self.relief_crack_pa)
+
+    def with_changes(self, **changes: float) -> MachineParams:
+        return replace(self, **changes)
+
+
+# YAML key -> (MachineParams field, factor to SI, lower bound, upper bound) in YAML units.
+_KEYS: dict[str, dict[str, tuple[str, float, float, float]]] = {
+    "oil": {
+        "density_kg_m3": ("density_kg_m3", 1.0, 700, 1100),
+        "bulk_modulus_gpa": ("bulk_modulus_pa", 1e9, 0.1, 3.0),
+    },
+    "pump": {
+        "displacement_cc_rev": ("pump_disp_m3_rev", 1e-6, 0.5, 500),
+        "compensator_start_bar": ("compensator_start_pa", BAR, 10, 500),
+        "compensator_full_bar": ("compensator_full_pa", BAR, 10, 500),
+    },
+    "line": {
+        "volume_l": ("line_volume_m3", 1e-3, 0.01, 50),
+        "relief_crack_bar": ("relief_crack_pa", BAR, 10, 500),
+        "relief_full_bar": ("relief_full_pa", BAR, 10, 600),
+    },
+    "valve": {
+        "rated_flow_lpm": ("valve_rated_flow_m3_s", LPM, 0.1, 1000),
+        "rated_dp_bar": ("valve_rated_dp_pa", BAR, 0.5, 100),
+        "laminar_dp_bar": ("laminar_dp_pa", BAR, 0.01, 5),
+        "tank_bar": ("tank_pa", BAR, 0, 20),
+    },
+    "cylinder": {
+        "bore_mm": ("bore_m", 1e-3, 10, 500),
+        "rod_mm": ("rod_m", 1e-3, 5, 400),
+        "stroke_mm": ("stroke_m", 1e-3, 10, 5000),
+        "dead_volume_a_l": ("dead_volume_a_m3", 1e-3, 0.01, 50),
+        "dead_volume_b_l": ("dead_volume_b_m3", 1e-3, 0.01, 50),
+    },
+    "load": {
+        "mass_kg": ("mass_kg", 1.0, 1, 1e5),
+        "gravity_load_n": ("gravity_load_n", 1.0, -1e6, 1e6),
+        "viscous_friction_n_s_per_m": ("viscous_friction_n_s_m", 1.0, 0, 1e6),
+        "reference_rod_pos_mm": ("reference_rod_pos_m", 1e-3, 0, 5000),
+    },
+    "solver": {"step_us": ("step_s", 1e-6, 5, 1000)},
+}
+_BOOL_KEYS = {("pump", "compensator_enabled"): "compensator_enabled"}
+
+
+def machine_from_mapping(data: Any, source: str = "<config>") -> MachineParams:
+    """Validate a parsed simulator YAML and convert it to ``MachineParams``."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping of sections, got {type(data).__name__}")
+    values: dict[str, Any] = {}
+    for section, content in data.items():
+        if section not in _KEYS:
+            raise ConfigError(f"{source}: unknown section {section!r}; known: {', '.join(_KEYS)}")
+        if not isinstance(content, dict):
+            raise ConfigError(f"{source}: section {section!r} must be a mapping")
+        for key, raw in content.items():
+            if (section, key) in _BOOL_KEYS:
+                if not isinstance(raw, bool):
+                    raise ConfigError(
+                        f"{source}: {section}.{key} must be true or false, got {raw!r}"
+                    )
+                values[_BOOL_KEYS[section, key]] = raw
+                continue
+            if key not in _KEYS[section]:
+                known = ", ".join([*_KEYS[section], *(k for s, k in _BOOL_KEYS if s == section)])
+                raise ConfigError(f"{source}: unknown key {section}.{key}; known: {known}")
+            name, factor, low, high = _KEYS[section][key]
+            if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+                raise ConfigError(f"{source}: {section}.{key} must be a number, got {raw!r}")
+            if not low <= raw <= high:
+                raise ConfigError(f"{source}: {section}.{key} = {raw} is outside {low}..{high}")
+            values[name] = float(raw) * factor
+    params = MachineParams(**values)
+    _check_consistency(params, source)
+    return params
+
+
+def _check_consistency(p: MachineParams, source: str) -> None:
+    if p.rod_m >= p.bore_m:
+        raise ConfigError(f"{source}: cylinder.rod_mm must be smaller than cylinder.bore_mm")
+    if p.compensator_full_pa <= p.compensator_start_pa:
+        raise ConfigError(f"{source}: pump.compensator_full_bar must exceed compensator_start_bar")
+    if p.relief_full_pa <= p.relief_crack_pa:
+        raise ConfigError(f"{source}: line.relief_full_bar must exceed relief_crack_bar")
+
+
+def load_machine(path: str | Path | None = None) -> MachineParams:
+    """Load the simulator config (default: the shipped config/simulator.yaml)."""
+    path = Path(path) if path is not None else resource_path("config", "simulator.yaml")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read simulator config: {exc.strerror}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+    return machine_from_mapping(data or {}, str(path))
+
+
+MACHINE_FIELDS = tuple(f.name for f in fields(MachineParams))

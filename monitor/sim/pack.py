@@ -1,0 +1,151 @@
+"""Conversion at the kernel's boundary: machine, effects, commands and faults to SI arrays."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from monitor.sim import kernel as K
+from monitor.sim.effects import Effect
+from monitor.sim.faults import Fault, fault_inputs
+from monitor.sim.machine import BAR, LPM, MachineParams
+
+#: Smoothing velocity of the friction sign (m/s): well below any speed of interest.
+FRICTION_SMOOTHING_M_S = 5e-4
+
+
+def walther_constants(nu40_cst: float, nu100_cst: float) -> tuple[float, float]:
+    """A, B of log10(log10(nu + 0.7)) = A - B log10(T_K) through two reference points."""
+    t1, t2 = math.log10(313.15), math.log10(373.15)
+    w1 = math.log10(math.log10(nu40_cst + 0.7))
+    w2 = math.log10(math.log10(nu100_cst + 0.7))
+    b = (w1 - w2) / (t2 - t1)
+    return w1 + b * t1, b
+
+
+def viscosity_cst(temp_c: np.ndarray, nu40_cst: float, nu100_cst: float) -> np.ndarray:
+    """Kinematic viscosity (cSt) at ``temp_c`` from the Walther equation (ASTM D341)."""
+    a, b = walther_constants(nu40_cst, nu100_cst)
+    tk = np.maximum(np.asarray(temp_c, dtype=np.float64), -40.0) + 273.15
+    return 10.0 ** (10.0 ** (a - b * np.log10(tk))) - 0.7
+
+
+def pack_params(
+    machine: MachineParams, effects: list[Effect] | tuple[Effect, ...] = ()
+) -> np.ndarray:
+    """The kernel's parameter vector for a machine with the given effects switched on."""
+    m = machine
+    prm = np.zeros(K.N_PARAMS)
+    prm[K.BETA] = m.bulk_modulus_pa
+    prm[K.V_LINE] = m.line_volume_m3
+    prm[K.V0A] = m.dead_volume_a_m3
+    prm[K.V0B] = m.dead_volume_b_m3
+    prm[K.AA] = m.area_a_m2
+    prm[K.AB] = m.area_b_m2
+    prm[K.STROKE] = m.stroke_m
+    prm[K.MASS] = m.mass_kg
+    prm[K.FGRAV] = m.gravity_load_n
+    prm[K.CVISC] = m.viscous_friction_n_s_m
+    prm[K.KV] = m.valve_kv
+    prm[K.DP_LAM] = m.laminar_dp_pa
+    prm[K.PTANK] = m.tank_pa
+    prm[K.DISP_MAX] = m.pump_disp_m3_rev
+    prm[K.COMP_ON] = 1.0 if m.compensator_enabled else 0.0
+    prm[K.COMP_START] = m.compensator_start_pa
+    prm[K.COMP_FULL] = m.compensator_full_pa
+    prm[K.RELIEF_CRACK] = m.relief_crack_pa
+    prm[K.RELIEF_GAIN] = m.relief_gain_m3_s_pa
+    prm[K.XREF] = m.reference_rod_pos_m
+    prm[K.V_EPS] = FRICTION_SMOOTHING_M_S
+    prm[K.WN] = 1.0  # harmless values for switched-off effects
+    prm[K.TAU_PUMP] = 1.0
+    prm[K.E_WALL] = 1e9
+    prm[K.AIR_N] = 1.4
+    prm[K.VS] = 0.01
+    for effect in effects:
+        _pack_effect(prm, effect)
+    return prm
+
+
+def _pack_effect(prm: np.ndarray, effect: Effect) -> None:
+    p = effect.params
+    name = effect.name
+    if name == "entrained_air":
+        prm[K.AIR_ON] = 1.0
+        prm[K.AIR_ALPHA] = p["air_fraction"]
+        prm[K.AIR_N] = p["polytropic_index"]
+    elif name == "oil_viscosity":
+        prm[K.VISC_ON] = 1.0
+        prm[K.LEAK_K] = p["pump_leak_lpm_per_100bar"] * LPM / (100 * BAR)
+        prm[K.FRIC_SHARE] = p["friction_share"]
+    elif name == "cylinder_friction":
+        prm[K.FRIC_ON] = 1.0
+        prm[K.FC] = p["coulomb_n"]
+        prm[K.FS] = p["static_n"]
+        prm[K.VS] = p["stribeck_velocity_mm_s"] * 1e-3
+    elif name == "spool_dynamics":
+        prm[K.SPOOL_ON] = 1.0
+        prm[K.WN] = 2 * math.pi * p["natural_freq_hz"]
+        prm[K.ZETA] = p["damping_ratio"]
+    elif name == "valve_deadband":
+        prm[K.OVERLAP] = p["overlap_pct"] / 100.0
+    elif name == "pump_control_dynamics":
+        prm[K.PUMPDYN_ON] = 1.0
+        prm[K.TAU_PUMP] = p["time_constant_ms"] * 1e-3
+    elif name == "hose_compliance":
+        prm[K.HOSE_ON] = 1.0
+        prm[K.E_WALL] = p["wall_modulus_gpa"] * 1e9
+    elif name == "load_variation":
+        prm[K.SLOPE] = p["slope_n_per_mm"] * 1e3
+    elif name != "sensor_lag":  # sensor_lag acts on the sensor model, not the plant
+        raise ValueError(f"effect {name!r} has no kernel packing")
+
+
+def pack_inputs(
+    t_s: np.ndarray,
+    spool_pct: np.ndarray,
+    disp_pct: np.ndarray,
+    speed_rpm: np.ndarray,
+    oil_temp_c: np.ndarray,
+    faults: list[Fault] | tuple[Fault, ...] = (),
+    effects: list[Effect] | tuple[Effect, ...] = (),
+) -> np.ndarray:
+    """Kernel input rows (SI fractions and rev/s) on the command time axis.
+
+    The viscosity ratio nu(OilTemp)/nu40 depends only on the input, so it is computed here
+    once per sample rather than in every right-hand-side call.
+    """
+    n = len(t_s)
+    u = np.empty((n, K.N_INPUTS))
+    u[:, K.IN_SPOOL] = np.clip(spool_pct, -100.0, 100.0) / 100.0
+    u[:, K.IN_DISP] = np.clip(disp_pct, 0.0, 100.0) / 100.0
+    u[:, K.IN_SPEED_RPS] = np.maximum(speed_rpm, 0.0) / 60.0
+    u[:, K.IN_VISC_RATIO] = 1.0
+    for effect in effects:
+        if effect.name == "oil_viscosity":
+            nu40, nu100 = effect.params["nu40_cst"], effect.params["nu100_cst"]
+            u[:, K.IN_VISC_RATIO] = viscosity_cst(oil_temp_c, nu40, nu100) / nu40
+    f = fault_inputs(list(faults), t_s)
+    u[:, K.IN_LEAK] = f["piston_leak_m3_s_pa"]
+    u[:, K.IN_STROKE_LIM] = f["stroke_limit"]
+    u[:, K.IN_UNDERLAP] = f["underlap"]
+    return u
+
+
+def rest_state(
+    machine: MachineParams, prm: np.ndarray, rod_pos_m: float, spool: float = 0.0, disp: float = 1.0
+) -> np.ndarray:
+    """A state at rest: rod held at ``rod_pos_m``, pump line at its dead-head pressure."""
+    m = machine
+    y = np.zeros(K.N_STATES)
+    x = min(max(rod_pos_m, 0.0), m.stroke_m)
+    pb = 2 * BAR  # a little trapped rod-side pressure
+    f_grav = m.gravity_load_n + prm[K.SLOPE] * (x - m.reference_rod_pos_m)
+    y[K.S_PP] = m.compensator_full_pa if m.compensator_enabled else m.relief_crack_pa
+    y[K.S_PB] = pb
+    y[K.S_PA] = max((f_grav + pb * m.area_b_m2) / m.area_a_m2, 0.0)
+    y[K.S_X] = x
+    y[K.S_XS] = spool
+    y[K.S_DISP] = 0.0 if m.compensator_enabled else disp
+    return y
