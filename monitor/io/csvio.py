@@ -1,0 +1,172 @@
+"""The contract CSV of DESIGN.md: ``t`` (s) and the physical signals, one row per sample.
+
+Reading is strict about the file's shape (header, field count, numbers, increasing ``t``)
+and lenient about the data: an empty field is a missing sample (NaN), which downstream
+tools treat as a stale sensor, not a file error.  Every error names file, line and column.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from monitor.errors import InputFileError
+from monitor.io.recording import Recording
+from monitor.signals import CSV_COLUMNS
+
+_MISSING = ("", "nan", "NaN", "NAN")
+
+
+def _bad_value_error(
+    path: Path, name: str, values: list[str], lines: list[int]
+) -> InputFileError | None:
+    """Locate the first value of a column that is not a number (slow path, errors only)."""
+    for value, line in zip(values, lines, strict=True):
+        text = value.strip()
+        if text in _MISSING:
+            continue
+        try:
+            x = float(text)
+        except ValueError:
+            return InputFileError(f"{path}:{line}: column {name!r}: {value!r} is not a number")
+        if math.isinf(x):
+            return InputFileError(f"{path}:{line}: column {name!r}: {value!r} is not finite")
+    return None
+
+
+def _to_float(path: Path, name: str, values: list[str], lines: list[int]) -> np.ndarray:
+    # Fast path: numpy parses the whole column in C; only when it fails do we walk the
+    # column in Python to name the offending line.
+    cleaned = [v if v.strip() not in _MISSING else "nan" for v in values]
+    try:
+        arr = np.array(cleaned, dtype=np.float64)
+    except ValueError:
+        arr = None
+    if arr is None or np.isinf(arr).any():
+        err = _bad_value_error(path, name, values, lines)
+        if err is not None:
+            raise err
+        raise InputFileError(f"{path}: column {name!r}: unreadable numbers")  # pragma: no cover
+    return arr
+
+
+def read_csv(path: str | Path) -> Recording:
+    """Read a contract CSV into a ``Recording`` (``t`` in s, signals in contract units).
+
+    Required columns are ``monitor.signals.CSV_COLUMNS`` in any order; other numeric
+    columns (such as ``RodPos``) are kept; extra columns holding text (labels, notes)
+    are left out and listed in ``meta["dropped_columns"]``.  Blank lines are skipped.
+    Raises ``InputFileError`` naming file, line and column for missing required columns,
+    text where a number belongs, a wrong number of fields, a missing or non-increasing ``t``.
+    """
+    p = Path(path)
+    try:
+        with p.open(newline="", encoding="utf-8-sig") as fh:
+            reader = csv.reader(fh)
+            try:
+                header = next(reader)
+            except StopIteration:
+                raise InputFileError(f"{p}:1: empty file, expected a CSV header") from None
+            except csv.Error as exc:
+                raise InputFileError(f"{p}:1: {exc}") from None
+            header = [h.strip() for h in header]
+            header_line = reader.line_num
+            rows: list[list[str]] = []
+            lines: list[int] = []
+            ncol = len(header)
+            try:
+                for row in reader:
+                    if len(row) != ncol:
+                        if not row or (len(row) == 1 and not row[0].strip()):
+                            continue  # blank line
+                        raise InputFileError(
+                            f"{p}:{reader.line_num}: {len(row)} fields, the header has {ncol}"
+                        )
+                    rows.append(row)
+                    lines.append(reader.line_num)
+            except csv.Error as exc:
+                raise InputFileError(f"{p}:{reader.line_num}: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise InputFileError(f"{p}: not a UTF-8 text file ({exc.reason})") from None
+    except OSError as exc:
+        raise InputFileError(f"{p}: cannot read: {exc.strerror or exc}") from None
+
+    dupes = sorted({h for h in header if header.count(h) > 1})
+    if dupes:
+        raise InputFileError(f"{p}:{header_line}: duplicate column(s) {', '.join(dupes)}")
+    missing = [c for c in CSV_COLUMNS if c not in header]
+    if missing:
+        raise InputFileError(
+            f"{p}:{header_line}: missing required column(s) {', '.join(missing)}"
+            f" (header: {','.join(header)})"
+        )
+    if not rows:
+        raise InputFileError(f"{p}: no data rows after the header")
+
+    by_column = list(zip(*rows, strict=True))
+    columns: dict[str, np.ndarray] = {}
+    dropped: list[str] = []
+    required = set(CSV_COLUMNS)
+    for name, values in zip(header, by_column, strict=True):
+        values = list(values)
+        try:
+            columns[name] = _to_float(p, name, values, lines)
+        except InputFileError:
+            if name in required:
+                raise
+            dropped.append(name)  # an extra text column: tools ignore what they do not need
+    t = columns.pop("t")
+    if np.isnan(t).any():
+        i = int(np.flatnonzero(np.isnan(t))[0])
+        raise InputFileError(f"{p}:{lines[i]}: column 't': time is missing")
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        i = int(np.flatnonzero(steps <= 0)[0]) + 1
+        raise InputFileError(
+            f"{p}:{lines[i]}: column 't': {t[i]!r} s is not after the previous {t[i - 1]!r} s"
+        )
+    meta: dict[str, object] = {"format": "csv"}
+    if dropped:
+        meta["dropped_columns"] = dropped
+    return Recording(t=t, columns=columns, source=str(p), meta=meta)
+
+
+def _format_column(values: np.ndarray, fmt: str) -> list[str]:
+    out = [fmt % v for v in values.tolist()]
+    for i in np.flatnonzero(np.isnan(values)).tolist():
+        out[i] = ""  # a missing sample is an empty field
+    return out
+
+
+def write_csv(
+    path: str | Path, rec: Recording, extra_columns: Sequence[str] | None = None
+) -> None:
+    """Write ``rec`` as a contract CSV.
+
+    Columns: ``t`` and the contract signals first, then ``extra_columns`` (default: every
+    other column of the recording, in its order; ``()`` for the contract columns only).
+    ``t`` is written with 6 decimals (1 us) and signals with 10 significant digits, far
+    below the DBC resolution (0.01), so a write/read round trip is exact for our purposes.
+    NaN is written as an empty field.
+    """
+    rec.require()
+    if extra_columns is None:
+        extras = [n for n in rec.columns if n not in CSV_COLUMNS]
+    else:
+        extras = list(extra_columns)
+        for name in extras:
+            rec[name]  # raises InputFileError naming the missing column
+    names = [*CSV_COLUMNS, *[n for n in extras if n not in CSV_COLUMNS]]
+    formatted = [_format_column(rec.t, "%.6f")]
+    formatted += [_format_column(rec[n], "%.10g") for n in names[1:]]
+    p = Path(path)
+    try:
+        with p.open("w", newline="", encoding="utf-8") as fh:
+            fh.write(",".join(names) + "\n")
+            fh.writelines(",".join(row) + "\n" for row in zip(*formatted, strict=True))
+    except OSError as exc:
+        raise InputFileError(f"{p}: cannot write: {exc.strerror or exc}") from None
