@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from monitor.dgrnn import (
-    PRESETS,
     DGRNN,
+    PRESETS,
     DGRNNSpec,
     Normalizer,
     TickPredictor,
