@@ -1,0 +1,232 @@
+"""Sampler (frames -> 100 Hz rows with staleness) and recording_from_candump."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from monitor.codec import FrameCodec
+from monitor.errors import NoHydraulicDataError
+from monitor.io.candump import write_candump
+from monitor.io.csvio import read_csv, write_csv
+from monitor.io.recording import Recording
+from monitor.sampler import ROW_COLUMNS, Sampler, recording_from_candump
+from monitor.signals import SIGNAL_NAMES
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"  # the repo's sibling folder
+REAL_LOGS = SHARED / "data" / "can-logs-real"
+GOOD_LOGS = [
+    "Yaris_09_steering.log",
+    "camaro_candump-2021-04-18_191854.log",
+    "durango_dooropen.log",
+    "evox_only210.log",
+    "forte_testlog.log",
+    "genesis_candump-2021-05-28_164301.log",
+]
+# DBC resolution per signal: half a quantisation step is the largest round-trip error
+HALF_STEP = {"SpoolCmd": 0.005, "PumpDispCmd": 0.005, "EngineSpeed": 0.0625, "OilTemp": 0.015625,
+             "PP": 0.005, "PA": 0.005, "PB": 0.005, "QP": 0.005, "RodPos": 0.005}
+COL = {name: 1 + i for i, name in enumerate(ROW_COLUMNS)}  # row index of each signal
+
+
+def make_recording(n: int = 300, rod: bool = True) -> Recording:
+    t = np.arange(n) * 0.01
+    cols = {
+        "SpoolCmd": 80 * np.sin(t),
+        "PumpDispCmd": 60 + 30 * np.cos(2 * t),
+        "EngineSpeed": 2200 + 100 * np.sin(t),
+        "OilTemp": 40 + 0.5 * np.floor(t),  # changes only on the 1 s oil-frame grid
+        "PP": 150 + 20 * np.sin(3 * t),
+        "PA": 100 + 10 * np.cos(t),
+        "PB": 20 + t,
+        "QP": 24 + np.sin(5 * t),
+    }
+    if rod:
+        cols["RodPos"] = 250 + 100 * np.sin(t)
+    return Recording(t, cols)
+
+
+def sampler() -> Sampler:
+    return Sampler({"PP": 0.01, "QP": 0.01, "OilTemp": 1.0})
+
+
+def test_rows_hold_latest_value_and_go_stale_after_three_cycles() -> None:
+    s = sampler()
+    for k in range(5):  # PP at 0..40 ms
+        s.feed(100.0 + k * 0.01, "HYD_Pressures", {"PP": float(k)})
+        if k == 0:
+            s.feed(100.0, "HYD_OilTemp", {"OilTemp": 45.0})  # same time as the first frame
+    rows = s.advance(100.15)
+    assert rows.shape == (16, 1 + len(ROW_COLUMNS))
+    np.testing.assert_allclose(rows[:, 0], np.arange(16) * 0.01)
+    pp = rows[:, COL["PP"]]
+    # latest value through 40 ms, held for 3 cycles (50..70 ms), NaN from 80 ms on
+    assert pp[:8].tolist() == [0, 1, 2, 3, 4, 4, 4, 4]
+    assert np.isnan(pp[8:]).all()
+    assert (rows[:, COL["OilTemp"]] == 45.0).all()  # 1 s cycle: fresh for 3 s
+    assert np.isnan(rows[:, COL["QP"]]).all()  # never received
+    assert np.isnan(rows[:, COL["RodPos"]]).all()
+    assert s.seen == {"PP", "OilTemp"}
+    assert s.start_time_s == 100.0
+
+
+def test_incremental_feed_matches_batch() -> None:
+    frames = [(5.0 + k * 0.01 + 0.003, "HYD_Flow", {"QP": float(k)}) for k in range(50)]
+    a, b = sampler(), sampler()
+    for f in frames:
+        a.feed(*f)
+    batch = a.flush()
+    parts = []
+    for f in frames:
+        b.feed(*f)
+        parts.append(b.advance(f[0] - 0.002))  # ask as a live loop would, with latency
+    parts.append(b.flush())
+    np.testing.assert_array_equal(np.concatenate(parts), batch)
+    assert len(batch) == 50  # instants 0..490 ms
+
+
+def test_oil_temperature_goes_stale_after_three_seconds() -> None:
+    s = sampler()
+    s.feed(0.0, "HYD_OilTemp", {"OilTemp": 50.0})
+    s.feed(3.5, "HYD_Flow", {"QP": 1.0})
+    rows = s.flush()
+    oil = rows[:, COL["OilTemp"]]
+    assert (oil[:301] == 50.0).all() and np.isnan(oil[301:]).all()
+
+
+def test_time_backwards_jitter_stray_and_clock_reset() -> None:
+    s = sampler()
+    for k in range(10):
+        s.feed(10.0 + k * 0.01, "HYD_Flow", {"QP": float(k)})
+    s.feed(10.085, "HYD_Flow", {"QP": 100.0})  # 5 ms late: jitter, applied at 90 ms
+    s.feed(9.0, "HYD_Flow", {"QP": -1.0})  # one stray frame from the past: skipped
+    s.feed(10.10, "HYD_Flow", {"QP": 10.0})
+    for k in range(8):  # the logger's clock was reset to 0
+        s.feed(0.0 + k * 0.01, "HYD_Flow", {"QP": 20.0 + k})
+    rows = s.flush()
+    t = rows[:, 0]
+    assert (np.diff(t) > 0).all()
+    np.testing.assert_allclose(np.diff(t), 0.01)
+    qp = rows[:, COL["QP"]]
+    assert qp[9] == 100.0 and -1.0 not in qp
+    assert qp[-1] == 27.0 and t[-1] == pytest.approx(0.18)
+    assert s.counts.time_backwards == 1 + 1 + 5 and s.counts.time_skipped == 1
+    assert s.counts.time_resyncs == 1
+
+
+def test_long_forward_gap_is_shortened() -> None:
+    s = Sampler({"QP": 0.01}, max_gap_s=2.0)
+    s.feed(0.0, "HYD_Flow", {"QP": 1.0})
+    s.feed(86400.0, "HYD_Flow", {"QP": 2.0})  # a day later
+    rows = s.flush()
+    assert len(rows) == 201 and rows[-1, COL["QP"]] == 2.0
+    assert np.isnan(rows[4:-1, COL["QP"]]).all()
+    assert s.counts.gaps_shortened == 1
+
+
+def test_round_trip_csv_log_recording(tmp_path) -> None:
+    rec = make_recording(300)
+    csv_path, log = tmp_path / "in.csv", tmp_path / "in.log"
+    write_csv(csv_path, rec)
+    write_candump(log, read_csv(csv_path))
+    back = recording_from_candump(log)
+    assert len(back) == len(rec)
+    np.testing.assert_allclose(back.t, rec.t, atol=1e-9)
+    assert set(back.columns) == set(rec.columns)
+    for name, step in HALF_STEP.items():
+        np.testing.assert_allclose(back[name], rec[name], atol=step + 1e-9, rtol=0, err_msg=name)
+    counts = back.meta["counts"]
+    assert counts["frames"] == 4 * 300 + 3 and counts["decoded"] == counts["frames"]
+    assert counts["ignored"] == 0 and counts["counter_jumps"] == 0
+    assert counts["rejected"] == {"dlc": 0, "crc": 0, "range": 0}
+    assert back.meta["start_time_s"] == pytest.approx(1_700_000_000.0)
+
+
+def test_no_rodpos_column_when_log_has_none(tmp_path) -> None:
+    write_candump(tmp_path / "x.log", make_recording(50, rod=False))
+    back = recording_from_candump(tmp_path / "x.log")
+    assert set(back.columns) == set(SIGNAL_NAMES)
+
+
+def test_missing_samples_held_three_cycles_then_nan(tmp_path) -> None:
+    rec = make_recording(100)
+    rec.columns["PP"][10] = np.nan  # one missing sample: held
+    rec.columns["QP"][40:46] = np.nan  # six missing samples: the last three are stale
+    write_candump(tmp_path / "x.log", rec)
+    back = recording_from_candump(tmp_path / "x.log")
+    assert back["PP"][10] == pytest.approx(rec["PP"][9], abs=0.005)
+    assert back["PA"][10] == pytest.approx(rec["PA"][9], abs=0.005)  # same frame
+    qp = back["QP"]
+    assert np.isfinite(qp[40:43]).all() and np.isnan(qp[43:46]).all() and np.isfinite(qp[46])
+
+
+def _rewrite(log: Path, edit) -> None:
+    lines = log.read_text().splitlines(keepends=True)
+    log.write_text("".join(edit(lines)))
+
+
+def test_bad_crc_wrong_dlc_and_counter_jump_counted(tmp_path) -> None:
+    log = tmp_path / "x.log"
+    write_candump(log, make_recording(50, rod=False))
+
+    def edit(lines: list[str]) -> list[str]:
+        out = []
+        for i, line in enumerate(lines):
+            head, data = line.rstrip("\n").split("#")
+            if i == 10:  # flip a bit of byte 0: CRC mismatch
+                data = f"{int(data[:2], 16) ^ 1:02X}" + data[2:]
+            elif i == 20:  # drop the CRC byte: DLC 7
+                data = data[:14]
+            elif i == 30:  # a frame lost on the bus
+                continue
+            out.append(f"{head}#{data}\n")
+        out.append("(1700000001.000000) can0 123#0011\n")  # foreign traffic
+        return out
+
+    _rewrite(log, edit)
+    back = recording_from_candump(log)
+    c = back.meta["counts"]
+    assert c["rejected"] == {"dlc": 1, "crc": 1, "range": 0}
+    assert c["ignored"] == 1
+    # each rejected or lost frame breaks the counter sequence of its message once
+    assert c["counter_jumps"] == 3
+    assert c["frames"] == 50 * 3 + 1 - 1 + 1
+    assert c["decoded"] == c["frames"] - 3
+
+
+def test_only_foreign_frames_is_no_hydraulic_data(tmp_path) -> None:
+    log = tmp_path / "car.log"
+    log.write_text("(1.000000) can0 123#0011\n(1.010000) can0 456#00\n")
+    with pytest.raises(NoHydraulicDataError, match=r"car\.log: 2 frames read, none") as err:
+        recording_from_candump(log)
+    assert err.value.exit_code == 3
+
+
+def test_only_rejected_hydraulic_frames_is_no_hydraulic_data(tmp_path) -> None:
+    log = tmp_path / "bad.log"
+    log.write_text("(1.000000) can0 0CFF1021#0000000000000000\n")  # CRC wrong
+    with pytest.raises(NoHydraulicDataError, match="rejected: crc 1"):
+        recording_from_candump(log)
+
+
+@pytest.mark.skipif(not REAL_LOGS.is_dir(), reason=f"shared real CAN logs not at {REAL_LOGS}")
+@pytest.mark.parametrize("name", GOOD_LOGS)
+def test_real_car_logs_have_no_hydraulic_data(name: str) -> None:
+    path = REAL_LOGS / name
+    n = sum(1 for x in path.read_text().splitlines() if x.strip())
+    with pytest.raises(NoHydraulicDataError, match=rf"{n} frames read, none of them") as err:
+        recording_from_candump(path)
+    assert name in str(err.value)
+
+
+def test_codec_reused_between_logs_starts_fresh(tmp_path) -> None:
+    codec = FrameCodec.from_dbc()
+    write_candump(tmp_path / "a.log", make_recording(20))
+    a = recording_from_candump(tmp_path / "a.log", codec)
+    b = recording_from_candump(tmp_path / "a.log", codec)
+    assert a.meta["counts"] == b.meta["counts"]
+    assert b.meta["counts"]["counter_jumps"] == 0
+    assert not math.isnan(b["PP"][0])
