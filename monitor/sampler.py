@@ -30,6 +30,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -93,9 +94,10 @@ class Sampler:
         self._behind: list[tuple[float, str, Mapping[str, float]]] = []
 
     @classmethod
-    def for_codec(cls, codec: FrameCodec, **kwargs: float) -> Sampler:
-        """A sampler whose staleness follows the GenMsgCycleTime of ``codec``'s DBC."""
-        return cls(codec.signal_cycle_times(), **kwargs)  # type: ignore[arg-type]
+    def for_codec(cls, codec: FrameCodec, **kwargs: Any) -> Sampler:
+        """A sampler whose staleness follows the GenMsgCycleTime of ``codec``'s DBC;
+        ``kwargs`` as for ``Sampler``."""
+        return cls(codec.signal_cycle_times(), **kwargs)
 
     @property
     def started(self) -> bool:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from monitor.codec import FrameCodec
-from monitor.errors import NoHydraulicDataError
+from monitor.errors import InputFileError, NoHydraulicDataError
 from monitor.io.candump import write_candump
 from monitor.io.csvio import read_csv, write_csv
 from monitor.io.recording import Recording
@@ -230,3 +230,11 @@ def test_codec_reused_between_logs_starts_fresh(tmp_path) -> None:
     assert a.meta["counts"] == b.meta["counts"]
     assert b.meta["counts"]["counter_jumps"] == 0
     assert not math.isnan(b["PP"][0])
+
+
+@pytest.mark.skipif(not REAL_LOGS.is_dir(), reason=f"shared real CAN logs not at {REAL_LOGS}")
+@pytest.mark.parametrize(("name", "line"), [("civic8th_test.log", 1), ("evox_linklog2.log", 1096)])
+def test_malformed_real_logs_are_file_errors_not_missing_data(name: str, line: int) -> None:
+    with pytest.raises(InputFileError, match=rf"{name}:{line}: ") as err:
+        recording_from_candump(REAL_LOGS / name)
+    assert err.value.exit_code == 2

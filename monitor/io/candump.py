@@ -134,7 +134,8 @@ class _CheckedLines:
         self.line_no = 0
 
     def __iter__(self) -> Iterator[str]:
-        for self.line_no, line in enumerate(self._fh, start=1):  # noqa: B020 - kept on purpose
+        for line_no, line in enumerate(self._fh, start=1):
+            self.line_no = line_no  # read by _messages when python-can itself fails
             text = line.strip()
             if text and not _LINE.fullmatch(text):
                 shown = text if len(text) <= 60 else text[:57] + "..."
