@@ -400,12 +400,22 @@ class GRNN:
             radius = float(self.min_distance)
             cap = len(idx) if self.max_patterns is None else int(self.max_patterns)
             sub = np.ascontiguousarray(X[idx])
-            while True:
-                kept = thin_min_distance(sub, radius, cap)
-                if kept is not None:
-                    break
-                # Too many patterns: widen the radius; 1.5x keeps the count near the bound.
-                radius = radius * 1.5 if radius > 0 else 1e-3
+            kept = thin_min_distance(sub, radius, cap)
+            if kept is None:
+                # Too many patterns: double the radius until the bound holds, then bisect
+                # (log scale) so the count ends close to max_patterns, not far below it.
+                lo, hi = radius, max(radius, 1e-3)
+                while kept is None:
+                    lo, hi = hi, hi * 2.0
+                    kept = thin_min_distance(sub, hi, cap)
+                for _ in range(6):
+                    mid = math.sqrt(lo * hi) if lo > 0 else hi / 2.0
+                    trial = thin_min_distance(sub, mid, cap)
+                    if trial is None:
+                        lo = mid
+                    else:
+                        hi, kept = mid, trial
+                radius = hi
             idx = idx[kept]
         elif self.max_patterns is not None and len(idx) > int(self.max_patterns):
             raise ConfigError(

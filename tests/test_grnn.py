@@ -164,7 +164,7 @@ def test_thinning_matches_naive_and_respects_radius():
 def test_thinning_bounds_pattern_count_and_is_recorded():
     X, Y = _series(n=3000)
     g = GRNN(sigma=0.3, min_distance=0.001, max_patterns=200).fit(X, Y)
-    assert 2 <= g.patterns_.shape[0] <= 200
+    assert 150 <= g.patterns_.shape[0] <= 200  # the radius is bisected up to the bound
     info = g.thinning_
     assert info["rule"] == "min_distance" and info["min_distance"] > 0.001
     assert info["n_rows"] == 3000 and info["n_patterns"] == g.patterns_.shape[0]
