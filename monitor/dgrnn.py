@@ -415,7 +415,8 @@ class TickPredictor:
 
     ``predict(window)`` takes the last ``rows_needed`` z-scored rows (columns
     ``spec.variables``, the last row being the current sample t, whose outputs are not read)
-    and returns y_hat(t), or NaN when an input it reads is missing.
+    and returns y_hat(t), or NaN when an input it reads is missing.  Pass float64 C-contiguous
+    windows (e.g. a slice of the ring buffer): another layout compiles another kernel.
     """
 
     def __init__(self, model: DGRNN, horizon: int | None = None) -> None:

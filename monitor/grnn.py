@@ -285,9 +285,11 @@ class GRNN:
         between them).  ``"fixed"`` requires ``sigma``.
     thinning : ``"none"``, ``"stride"`` (every ``stride``-th row) or ``"min_distance"``
         (after the stride, greedy in time order: keep a row only if farther than
-        ``min_distance`` from all kept rows; the radius grows by 1.5x until at most
-        ``max_patterns`` remain).  Kept patterns carry their own targets, so predictions are
-        eq. 4 exactly over the kept set.
+        ``min_distance`` from all kept rows; if more than ``max_patterns`` would stay, the
+        radius is doubled until the bound holds and then bisected so the count ends close to
+        it; the radius used is recorded).  Kept patterns carry their own targets, so
+        predictions are eq. 4 exactly over the kept set.  The kept set covers the data
+        evenly rather than by density, so rare transients keep their patterns.
     loo_max_queries : the LOO error is evaluated on at most this many training rows (evenly
         spread in time), each predicted from the kept patterns.
     sigma_bounds : (lo, hi) for the search; default from the data's distance scale.
