@@ -16,6 +16,9 @@ def resource_path(kind: str, name: str) -> Path:
     """Path of a shipped file, e.g. ``resource_path("dbc", "monitor.dbc")``."""
     if kind not in _KINDS:
         raise KeyError(f"unknown resource kind {kind!r}; expected one of {_KINDS}")
-    path = resources.files(f"monitor.resources.{kind}").joinpath(name)
-    # Installed as a wheel or editable, the files are plain files on disk.
-    return Path(str(path))
+    try:
+        folder = Path(str(resources.files(f"monitor.resources.{kind}")))
+    except ModuleNotFoundError:
+        # Imported straight from a source checkout (not installed): the top-level folder.
+        folder = Path(__file__).resolve().parents[2] / kind
+    return folder / name
