@@ -4,15 +4,22 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import pkgutil
 import sys
 from collections.abc import Sequence
 
 from monitor import __version__
 from monitor.errors import MonitorError
 
-# Subcommand modules, in the order --help lists them.  Each defines
-# ``add_subparser(subparsers)`` which registers its parser and sets ``func``.
-_SUBCOMMANDS = ("simulate", "encode")
+# Every module of this package defines ``add_subparser(subparsers)``, which registers its
+# parser and sets ``func``.  --help lists these first, in this order, then any others.
+_ORDER = ("demo", "run", "detect", "train", "replay", "simulate", "encode", "gap", "eval_sim",
+          "eval_uci", "bench")
+
+
+def _subcommand_modules() -> list[str]:
+    found = {m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_")}
+    return [n for n in _ORDER if n in found] + sorted(found - set(_ORDER))
 
 
 class _Parser(argparse.ArgumentParser):
@@ -30,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"monitor {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for name in _SUBCOMMANDS:
+    for name in _subcommand_modules():
         importlib.import_module(f"monitor.cli.{name}").add_subparser(sub)
     return parser
 
