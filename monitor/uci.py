@@ -33,11 +33,19 @@ from typing import Any
 import numpy as np
 
 from monitor.dgrnn import DGRNN, DGRNNSpec, Normalizer, predict_series
-from monitor.errors import ConfigError, InputFileError
+from monitor.errors import ConfigError
 from monitor.grnn import GRNN
 from monitor.residual import window_j
 from monitor.threshold import ThresholdRule
-from monitor.uci_data import HEALTHY, SAMPLES_PER_CYCLE, RigCycles, load_rig
+from monitor.uci_data import (
+    HEALTHY,
+    J0_EVERY,
+    SAMPLES_PER_CYCLE,
+    RigCycles,
+    holdout,
+    load_rig,
+    split,
+)
 
 CYCLE_TIME = "CycleTime"  # derived signal: seconds since the start of the cycle, 0..59
 
@@ -99,8 +107,6 @@ DETECTION_KEYS: tuple[tuple[str, int], ...] = (
     ("cooler", 20), ("cooler", 3),
 )  # fmt: skip
 
-J0_EVERY = 3  # every 3rd healthy --train cycle (per cooler state) is held out for J0
-
 Progress = Callable[[str], None]
 
 
@@ -115,69 +121,6 @@ def sensors_needed(presets: Sequence[str]) -> list[str]:
 def _with_cycle_time(rc: RigCycles) -> RigCycles:
     rc.signals[CYCLE_TIME] = np.tile(np.arange(SAMPLES_PER_CYCLE, dtype=np.float64), (len(rc), 1))
     return rc
-
-
-def _even_spread(n: int, k: int | None) -> np.ndarray:
-    """``k`` indices spread evenly over 0..n-1 (all when k is None or >= n)."""
-    if k is None or k >= n:
-        return np.arange(n)
-    return np.unique(np.linspace(0, n - 1, k).round().astype(np.int64))
-
-
-def split(
-    train: RigCycles, test: RigCycles, same_folder: bool, max_cycles: int | None
-) -> tuple[RigCycles, RigCycles, dict[str, Any]]:
-    """The --train and --test cycle sets, never sharing a cycle.
-
-    Same folder: even original cycle numbers train, odd ones are scored.  Different
-    folders: a cycle number present in both (when both come from cycles.txt) is dropped from
-    the test set.  ``max_cycles`` keeps that many cycles of each side, evenly spread.
-    """
-    info: dict[str, Any] = {
-        "same_folder": same_folder,
-        "cycle_numbers_from": {"train": train.cycle_id_source, "test": test.cycle_id_source},
-    }
-    if same_folder:
-        train = train.subset(np.flatnonzero(train.cycle_id % 2 == 0))
-        test = test.subset(np.flatnonzero(test.cycle_id % 2 == 1))
-        info["rule"] = "same folder: even original cycle numbers train, odd ones are scored"
-    else:
-        info["rule"] = "separate folders: all --train cycles train, all --test cycles are scored"
-        if train.cycle_id_source == test.cycle_id_source == "cycles.txt":
-            overlap = np.isin(test.cycle_id, train.cycle_id)
-            info["test_cycles_dropped_as_also_in_train"] = int(overlap.sum())
-            test = test.subset(np.flatnonzero(~overlap))
-    if max_cycles is not None:
-        train = train.subset(_even_spread(len(train), max_cycles))
-        test = test.subset(_even_spread(len(test), max_cycles))
-        info["max_cycles"] = max_cycles
-    return train, test, info
-
-
-def holdout(train: RigCycles) -> tuple[np.ndarray, np.ndarray]:
-    """(pattern cycles, J0 cycles) among healthy --train cycles.
-
-    Every ``J0_EVERY``-th healthy cycle of each cooler state goes to J0, so both sets see
-    every cooler state (the cooler changes temperatures and viscosity a lot).
-    """
-    healthy = np.flatnonzero(train.healthy)
-    pat, j0 = [], []
-    for c in np.unique(train.profile["cooler"][healthy]):
-        h = healthy[train.profile["cooler"][healthy] == c]
-        take = np.zeros(len(h), dtype=bool)
-        take[1::J0_EVERY] = True
-        if len(h) >= 2 and not take.any():
-            take[-1] = True
-        pat.extend(h[~take])
-        j0.extend(h[take])
-    pat_a, j0_a = np.array(sorted(pat), dtype=np.int64), np.array(sorted(j0), dtype=np.int64)
-    if len(pat_a) < 2 or len(j0_a) < 1:
-        need = " and ".join(f"{k} {v}" for k, v in HEALTHY.items())
-        raise InputFileError(
-            f"{train.folder}: {len(healthy)} healthy cycles ({need}) to train on; need at "
-            "least 3 (2 for the patterns, 1 for J0)"
-        )
-    return pat_a, j0_a
 
 
 # --------------------------------------------------------------------------- model
@@ -213,9 +156,24 @@ def cycle_residuals(model: DGRNN, norm: Normalizer, rc: RigCycles) -> np.ndarray
     return y_hat - stack[:, pad:, :nout]
 
 
-def max_j(e: np.ndarray, N: int) -> np.ndarray:
-    """Largest eq. 9 J of each cycle (cycles,), the window restarting at each cycle."""
-    return np.array([np.nanmax(window_j(e[i], N)) for i in range(e.shape[0])])
+def cycle_j(e: np.ndarray, N: int) -> np.ndarray:
+    """Eq. 9 J of each cycle (cycles, 60), the window restarting at each cycle (NaN until
+    N + 1 residuals of that cycle exist)."""
+    out = np.full(e.shape[:2], np.nan)
+    for i in range(e.shape[0]):
+        out[i] = window_j(e[i], N)
+    return out
+
+
+def max_j(j: np.ndarray) -> np.ndarray:
+    """Largest J of each cycle (cycles,): the quantity the per-cycle alarm compares."""
+    return np.nanmax(j, axis=1) if j.shape[0] else np.zeros(0)
+
+
+def first_alarm_s(j: np.ndarray, eps0: float) -> np.ndarray:
+    """Second of the cycle at which J first exceeds eps0 (NaN for cycles never alarmed)."""
+    above = np.nan_to_num(j, nan=-np.inf) > eps0
+    return np.where(above.any(axis=1), np.argmax(above, axis=1).astype(float), np.nan)
 
 
 # --------------------------------------------------------------------------- scoring
@@ -317,7 +275,7 @@ def evaluate(
 
     results: dict[str, Any] = {}
     best: tuple[float, str, int] | None = None
-    jtests: dict[str, np.ndarray] = {}
+    jtests: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name in presets:
         t0 = time.perf_counter()
         spec = UCI_PRESETS[name]
@@ -326,11 +284,11 @@ def evaluate(
         e_test = cycle_residuals(model, norm, test)
         sel = {}
         for N in windows:
-            jm = max_j(e_train, N)
+            jm = max_j(cycle_j(e_train, N))
             sel[str(N)] = _selection(jm, train, j0_idx, rule)
             if best is None or sel[str(N)]["score"] > best[0] + 1e-12:
                 best = (sel[str(N)]["score"], name, N)
-            jtests[f"{name}/{N}"] = (jm, max_j(e_test, N))
+            jtests[f"{name}/{N}"] = (jm, cycle_j(e_test, N))
         g = model.grnn
         results[name] = {
             "spec": spec.to_dict(),
@@ -354,18 +312,27 @@ def evaluate(
         # Each preset is also scored with its own best N, so both are reported side by side.
         sel = results[name]["selection_on_train"]
         N = int(max(sel, key=lambda k: (sel[k]["score"], -int(k))))
-        jm_train, jm_test = jtests[f"{name}/{N}"]
+        jm_train, j_test = jtests[f"{name}/{N}"]
+        jm_test = max_j(j_test)
         j0, eps0 = rule.eps0(jm_train[j0_idx])
         results[name]["window_N"] = N
         results[name]["J0"], results[name]["eps0"] = j0, eps0
-        results[name]["test"] = score(test, jm_test > eps0)
-        results[name]["test"]["max_J_healthy"] = float(np.max(jm_test[test.healthy], initial=0))
+        t = results[name]["test"] = score(test, jm_test > eps0)
+        # How close the healthy test cycles came to the threshold (1.0 = at eps0).
+        t["max_J_healthy_over_eps0"] = float(np.max(jm_test[test.healthy], initial=0) / eps0)
+        # Detection delay within the cycle: J needs N + 1 residuals, so >= max_lag + N s.
+        fa = first_alarm_s(j_test, eps0)[~test.healthy]
+        t["median_first_alarm_s_in_cycle"] = (
+            float(np.nanmedian(fa)) if np.isfinite(fa).any() else None
+        )
 
     _, chosen, _ = best
     ch = results[chosen]
     return {
         "healthy_false_alarm_rate": ch["test"]["healthy_false_alarm_rate"],
         "detection": ch["test"]["detection"],
+        "any_fault_detection": ch["test"]["any_fault_detection"],
+        "by_condition": ch["test"]["by_condition"],
         "default_preset": chosen,
         "chosen_by": "largest (detection - cross-validated false-alarm rate) on --train: "
         "its faulty cycles and its J0 cycles; --test labels only score",

@@ -13,7 +13,8 @@ Folder layout (one folder = a set of work cycles):
   row number (0-based) stands in.
 
 Only the sensors asked for are read.  Every malformed file is an ``InputFileError`` naming
-the file and line.
+the file and line.  ``split`` and ``holdout`` decide which cycles train, set J0 and are
+scored, so that no scored cycle was ever used for patterns or J0.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,6 +42,8 @@ CONDITIONS: dict[str, tuple[int, ...]] = {
 #: Healthy (the issue's definition): valve 100 %, no pump leakage, accumulator 130 bar,
 #: whatever the cooler state and the stable flag.
 HEALTHY = {"valve": 100, "pump_leak": 0, "accumulator": 130}
+
+J0_EVERY = 3  # every 3rd healthy --train cycle (per cooler state) is held out for J0
 
 SENSOR_UNITS: dict[str, str] = {
     **{f"PS{i}": "bar" for i in range(1, 7)},
@@ -189,3 +193,69 @@ def load_rig(folder: Path | str, sensors: Iterable[str]) -> RigCycles:
         _check_rows(path, m.shape[0], n, prof_path)
         signals[name] = m
     return RigCycles(folder, signals, profile, cycle_id, source)
+
+
+# --------------------------------------------------------------------------- split
+
+
+def _even_spread(n: int, k: int | None) -> np.ndarray:
+    """``k`` indices spread evenly over 0..n-1 (all when k is None or >= n)."""
+    if k is None or k >= n:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, k).round().astype(np.int64))
+
+
+def split(
+    train: RigCycles, test: RigCycles, same_folder: bool, max_cycles: int | None
+) -> tuple[RigCycles, RigCycles, dict[str, Any]]:
+    """The --train and --test cycle sets, never sharing a cycle.
+
+    Same folder: even original cycle numbers train, odd ones are scored.  Different
+    folders: a cycle number present in both (when both come from cycles.txt) is dropped from
+    the test set.  ``max_cycles`` keeps that many cycles of each side, evenly spread.
+    """
+    info: dict[str, Any] = {
+        "same_folder": same_folder,
+        "cycle_numbers_from": {"train": train.cycle_id_source, "test": test.cycle_id_source},
+    }
+    if same_folder:
+        train = train.subset(np.flatnonzero(train.cycle_id % 2 == 0))
+        test = test.subset(np.flatnonzero(test.cycle_id % 2 == 1))
+        info["rule"] = "same folder: even original cycle numbers train, odd ones are scored"
+    else:
+        info["rule"] = "separate folders: all --train cycles train, all --test cycles are scored"
+        if train.cycle_id_source == test.cycle_id_source == "cycles.txt":
+            overlap = np.isin(test.cycle_id, train.cycle_id)
+            info["test_cycles_dropped_as_also_in_train"] = int(overlap.sum())
+            test = test.subset(np.flatnonzero(~overlap))
+    if max_cycles is not None:
+        train = train.subset(_even_spread(len(train), max_cycles))
+        test = test.subset(_even_spread(len(test), max_cycles))
+        info["max_cycles"] = max_cycles
+    return train, test, info
+
+
+def holdout(train: RigCycles) -> tuple[np.ndarray, np.ndarray]:
+    """(pattern cycles, J0 cycles) among healthy --train cycles.
+
+    Every ``J0_EVERY``-th healthy cycle of each cooler state goes to J0, so both sets see
+    every cooler state (the cooler changes temperatures and viscosity a lot).
+    """
+    healthy = np.flatnonzero(train.healthy)
+    pat, j0 = [], []
+    for c in np.unique(train.profile["cooler"][healthy]):
+        h = healthy[train.profile["cooler"][healthy] == c]
+        take = np.zeros(len(h), dtype=bool)
+        take[1::J0_EVERY] = True
+        if len(h) >= 2 and not take.any():
+            take[-1] = True
+        pat.extend(h[~take])
+        j0.extend(h[take])
+    pat_a, j0_a = np.array(sorted(pat), dtype=np.int64), np.array(sorted(j0), dtype=np.int64)
+    if len(pat_a) < 2 or len(j0_a) < 1:
+        need = " and ".join(f"{k} {v}" for k, v in HEALTHY.items())
+        raise InputFileError(
+            f"{train.folder}: {len(healthy)} healthy cycles ({need}) to train on; need at "
+            "least 3 (2 for the patterns, 1 for J0)"
+        )
+    return pat_a, j0_a
