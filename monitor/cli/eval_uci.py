@@ -17,7 +17,7 @@ Fit a DGRNN on the healthy cycles of a ZeMA hydraulic-rig folder (UCI "Condition
 monitoring of hydraulic systems": one tab-separated file per sensor, one row per 60 s
 cycle at 1 Hz, profile.txt, optional cycles.txt), hold every 3rd healthy cycle out for J0,
 choose the preset and J window on --train alone, then score every --test cycle: a cycle
-alarms when its largest J exceeds eps0 = 2 J0.  Healthy = valve 100 %, no pump leakage,
+alarms when its largest J exceeds eps0 = factor x J0 (2).  Healthy = valve 100 %, no pump leakage,
 accumulator 130 bar, any cooler state and stable flag.  When --train and --test are the same
 folder, even original cycle numbers train and odd ones are scored.
 """
