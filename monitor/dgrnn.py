@@ -44,6 +44,11 @@ class DGRNNSpec:
     exogenous: tuple[str, ...]
     lags: tuple[tuple[str, tuple[int, ...]], ...]
     horizon: int = 1
+    #: Predict each output's change from the previous sample instead of its level:
+    #: y_hat(t) = y(t-1) + GRNN(x(t)).  A GRNN only averages its training targets and cannot
+    #: extrapolate, so a level model fails on every trapped-pressure level the training runs
+    #: missed; increments are near zero at any held level.  Needs every output at lag 1.
+    delta: bool = False
 
     def __post_init__(self) -> None:
         lags = tuple(self.lags.items()) if isinstance(self.lags, Mapping) else tuple(self.lags)
@@ -52,6 +57,7 @@ class DGRNNSpec:
         object.__setattr__(self, "exogenous", tuple(self.exogenous))
         object.__setattr__(self, "lags", norm)
         object.__setattr__(self, "horizon", int(self.horizon))
+        object.__setattr__(self, "delta", bool(self.delta))
         self._validate()
 
     def _validate(self) -> None:
@@ -78,6 +84,11 @@ class DGRNNSpec:
             raise ConfigError("a DGRNN needs at least one lagged input")
         if self.horizon < 1:
             raise ConfigError(f"horizon must be >= 1, got {self.horizon}")
+        if self.delta:
+            lagmap = dict(self.lags)
+            lacking = [o for o in self.outputs if 1 not in lagmap.get(o, ())]
+            if lacking:
+                raise ConfigError(f"delta targets need lag 1 of every output: {lacking}")
 
     @property
     def variables(self) -> tuple[str, ...]:
@@ -112,14 +123,19 @@ class DGRNNSpec:
         return {
             "outputs": list(self.outputs),
             "exogenous": list(self.exogenous),
-            "lags": {name: list(ls) for name, ls in self.lags},
+            # A list of pairs, not a mapping: the order fixes the feature columns, and JSON
+            # writers may sort mapping keys.
+            "lags": [[name, list(ls)] for name, ls in self.lags],
             "horizon": self.horizon,
+            "delta": self.delta,
         }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> DGRNNSpec:
         try:
-            return cls(d["outputs"], d["exogenous"], tuple(d["lags"].items()), d["horizon"])
+            lags = d["lags"]
+            pairs = tuple(lags.items()) if isinstance(lags, Mapping) else tuple(map(tuple, lags))
+            return cls(d["outputs"], d["exogenous"], pairs, d["horizon"], d.get("delta", False))
         except (KeyError, AttributeError, TypeError) as exc:
             raise ConfigError(f"bad DGRNN spec {dict(d)!r}: {exc}") from None
 
@@ -131,7 +147,9 @@ class DGRNNSpec:
             raise ConfigError(
                 f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}"
             ) from None
-        return spec if horizon is None else cls(spec.outputs, spec.exogenous, spec.lags, horizon)
+        if horizon is None:
+            return spec
+        return cls(spec.outputs, spec.exogenous, spec.lags, horizon, spec.delta)
 
 
 PRESETS: dict[str, DGRNNSpec] = {
@@ -146,7 +164,9 @@ PRESETS: dict[str, DGRNNSpec] = {
     # pressure a level and a rate (what a second-order loop needs); the spool command at t
     # and t-1 gives the opening now and its rate (the nominal spool follows the command
     # instantly, so the current command drives the current flows); the pump command, engine
-    # speed and oil temperature change slowly, so their current value is enough.
+    # speed and oil temperature change slowly, so their current value is enough.  The GRNN
+    # predicts increments (``delta``): a held pressure at a level no training run visited
+    # is then still predicted to hold.
     "default": DGRNNSpec(
         outputs=("PP", "PA", "PB", "QP"),
         exogenous=("SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp"),
@@ -160,6 +180,7 @@ PRESETS: dict[str, DGRNNSpec] = {
             ("EngineSpeed", (0,)),
             ("OilTemp", (0,)),
         ),
+        delta=True,
     ),
 }
 
@@ -170,6 +191,11 @@ PRESETS: dict[str, DGRNNSpec] = {
 #: the F0 data, such as EngineSpeed at a fixed 2200 rpm, would otherwise be divided by ~0 and
 #: turn sensor noise into huge z-scores that dominate every distance.  Real signals have
 #: standard deviations far above these floors, where the scaling is the paper's z-score.
+#: OilTemp is the exception that matters: it is nearly constant within a run and differs by
+#: a few degrees between runs, so its F0 std (a few degC) would make a 5 degC difference
+#: as far apart as a change of operating point, and split the patterns into one island per
+#: run.  Its floor of 15 degC says what matters physically: viscosity moves visibly over
+#: tens of degrees, not over two or three.
 DEFAULT_MIN_STD: dict[str, float] = {
     "PP": 1.0,
     "PA": 1.0,
@@ -178,7 +204,7 @@ DEFAULT_MIN_STD: dict[str, float] = {
     "SpoolCmd": 1.0,
     "PumpDispCmd": 1.0,
     "EngineSpeed": 10.0,
-    "OilTemp": 1.0,
+    "OilTemp": 15.0,
 }
 
 
@@ -294,6 +320,8 @@ def build_training_pairs(spec: DGRNNSpec, Z: Any) -> tuple[np.ndarray, np.ndarra
     t = np.arange(L, n, dtype=np.int64)
     X = np.column_stack([A[L - lag : n - lag, v] for v, lag in zip(fvar, flag, strict=True)])
     Y = A[L:, : len(spec.outputs)]
+    if spec.delta:
+        Y = Y - A[L - 1 : n - 1, : len(spec.outputs)]
     ok = ~(np.isnan(X).any(axis=1) | np.isnan(Y).any(axis=1))
     return np.ascontiguousarray(X[ok]), np.ascontiguousarray(Y[ok]), t[ok]
 
@@ -346,7 +374,7 @@ class DGRNN:
 
 
 @jit
-def _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, xbuf, pred, dbuf, out):
+def _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbuf, out):
     """Eq. 7: y_hat(t) from the measured history up to k = t - p; False if not predictable.
 
     ``pred`` (p, nout) holds y_hat(k+1..t); an output needed at row r > k is taken from it,
@@ -369,13 +397,16 @@ def _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, xbuf, pred, dbuf, out)
                     return False  # missing sample: prediction pauses, never guesses
                 xbuf[f] = val
         _kernel_row(xbuf, P, PY, inv2s2, dbuf, pred[j])
+        if delta:  # the GRNN gave the change since s - 1; add the level it started from
+            for i in range(nout):
+                pred[j, i] += pred[j - 1, i] if j > 0 else Z[s - 1, i]
     for i in range(nout):
         out[i] = pred[p - 1, i]
     return True
 
 
 @pjit
-def _predict_series(Z, P, PY, inv2s2, fvar, flag, nout, p, nchunk):  # pragma: no cover
+def _predict_series(Z, P, PY, inv2s2, fvar, flag, nout, p, delta, nchunk):  # pragma: no cover
     n = Z.shape[0]
     out = np.full((n, nout), np.nan)
     nchunk = max(1, min(n, nchunk))
@@ -384,7 +415,7 @@ def _predict_series(Z, P, PY, inv2s2, fvar, flag, nout, p, nchunk):  # pragma: n
         pred = np.empty((p, nout))
         dbuf = np.empty(P.shape[0])
         for t in range(c * n // nchunk, (c + 1) * n // nchunk):
-            _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, xbuf, pred, dbuf, out[t])
+            _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbuf, out[t])
     return out
 
 
@@ -407,7 +438,8 @@ def predict_series(model: DGRNN, data: Any, horizon: int | None = None) -> np.nd
     p = _horizon(model, horizon)
     nout = len(model.spec.outputs)
     inv = 0.5 / g.sigma_**2
-    return _predict_series(Z, g.patterns_, g.targets_, inv, fvar, flag, nout, p, n_chunks())
+    return _predict_series(Z, g.patterns_, g.targets_, inv, fvar, flag, nout, p,
+                           model.spec.delta, n_chunks())
 
 
 class TickPredictor:
@@ -446,7 +478,7 @@ class TickPredictor:
             )
         ok = _predict_at(
             window, window.shape[0] - 1, self._P, self._PY, self._inv, self._fvar, self._flag,
-            self._nout, self.horizon, self._xbuf, self._pred, self._dbuf, o,
+            self._nout, self.horizon, self.model.spec.delta, self._xbuf, self._pred, self._dbuf, o,
         )  # fmt: skip
         if not ok:
             o[:] = np.nan

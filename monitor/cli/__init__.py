@@ -13,8 +13,19 @@ from monitor.errors import MonitorError
 
 # Every module of this package defines ``add_subparser(subparsers)``, which registers its
 # parser and sets ``func``.  --help lists these first, in this order, then any others.
-_ORDER = ("demo", "run", "detect", "train", "replay", "simulate", "encode", "gap", "eval_sim",
-          "eval_uci", "bench")
+_ORDER = (
+    "demo",
+    "run",
+    "detect",
+    "train",
+    "replay",
+    "simulate",
+    "encode",
+    "gap",
+    "eval_sim",
+    "eval_uci",
+    "bench",
+)
 
 
 def _subcommand_modules() -> list[str]:

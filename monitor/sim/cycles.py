@@ -14,6 +14,9 @@ from monitor.signals import SAMPLE_PERIOD_S
 
 CYCLES = ("boom", "ramp", "step")
 RATE_LIMIT_PCT_S = 200.0
+#: Share of boom-cycle moves that run into an end stop (normal operation; the detector must
+#: learn the stalled regime too).
+STOP_VISIT_PROBABILITY = 0.15
 ENGINE_RPM = 2200.0
 #: Rough rod speeds of the reference machine (m/s), used only to keep the boom cycle off
 #: its end stops: raising is pump-limited above ~35 % spool, lowering above ~55 %.
@@ -60,7 +63,7 @@ def boom_phases(duration_s: float, rng: np.random.Generator) -> list[tuple[float
     """Raise / hold / lower / hold, amplitudes 40-100 %, phases 1-4 s.
 
     The lengths aim the rod at a random target inside the stroke so a long run does not
-    sit on an end stop; an operator does the same by eye.
+    sit on an end stop; an operator does the same by eye, and now and then runs into a stop.
     """
     phases: list[tuple[float, float]] = [(rng.uniform(1.0, 2.0), 0.0)]
     pos = 0.1
@@ -68,7 +71,13 @@ def boom_phases(duration_s: float, rng: np.random.Generator) -> list[tuple[float
     while total < duration_s:
         for direction in (1.0, -1.0):
             amp = rng.uniform(40.0, 100.0)
-            target = rng.uniform(0.3, 0.45) if direction > 0 else rng.uniform(0.08, 0.2)
+            if rng.random() < STOP_VISIT_PROBABILITY:
+                # Now and then the operator drives into the stop and holds the lever a moment.
+                target = _STROKE_M + 0.05 if direction > 0 else -0.05
+            elif direction > 0:
+                target = rng.uniform(0.3, 0.45)
+            else:
+                target = rng.uniform(0.08, 0.2)
             if direction > 0:
                 speed = _RAISE_M_S * min(1.0, amp / _RAISE_SAT_PCT)
             else:

@@ -1,0 +1,31 @@
+"""Open any recording the tools accept: a contract CSV or a candump log."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from monitor.errors import InputFileError
+from monitor.io.recording import Recording
+
+
+def read_recording(path: str | Path) -> Recording:
+    """A contract CSV (``.csv``) or a candump log (anything else whose first line is one)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such file")
+    if path.suffix.lower() == ".csv":
+        from monitor.io.csvio import read_csv
+
+        return read_csv(path)
+    try:
+        with path.open("r", encoding="utf-8", errors="replace") as fh:
+            first = fh.readline()
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read: {exc.strerror}") from None
+    if first.startswith("t,") or ",PP" in first:
+        from monitor.io.csvio import read_csv
+
+        return read_csv(path)
+    from monitor.sampler import recording_from_candump
+
+    return recording_from_candump(path)
