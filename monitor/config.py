@@ -1,11 +1,18 @@
 """config/monitor.yaml: typed, validated once at the edge.
 
-Sections: ``dbc`` and ``model`` (paths, relative to the config file's folder), ``detector``
-(horizon), ``alarm`` (debounce and gating).  The live daemon's sections extend this file.
+Sections: ``dbc`` and ``model`` (input files, relative to the config file's folder),
+``detector`` (horizon), ``alarm`` (debounce and gating), and for the live daemon ``bus``
+(python-can interface, channel, bitrate), ``outputs`` (alarm/status frame rates),
+``event_log`` and ``black_box`` (output paths, relative to the working directory the daemon
+starts in, so a config shipped inside the installed package never writes into it).
+
+Every problem (unknown key, wrong type, missing input file, impossible value) is one
+``ConfigError`` naming the file and the key; the CLI turns it into exit 2.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -18,15 +25,59 @@ from monitor.resources import resource_path
 
 
 @dataclass(frozen=True)
+class BusConfig:
+    """The CAN bus: any python-can interface (``socketcan`` on the controller, ``virtual``
+    in tests and the demo)."""
+
+    interface: str = "socketcan"
+    channel: str = "can0"
+    bitrate: int = 500_000
+    queue_frames: int = 20_000  # bounded receive buffer (~5 s of a full 500 kbit/s bus)
+    kernel_filters: bool = True  # only the DBC's sensor IDs reach user space
+    silent_s: float = 0.5  # no frame this long (wall clock): the sample clock runs on, stale
+    # Extra keyword arguments for can.Bus (e.g. fd, receive_own_messages); scalars only.
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """Rates of the monitor's own frames (sample-clock seconds for alarms)."""
+
+    alarm_repeat_s: float = 1.0  # MON_Alarm repeated this often while in fault
+    alarm_max_per_s: float = 10.0  # hard cap on MON_Alarm frames, whatever the state does
+    status_period_s: float = 1.0  # MON_Status heartbeat (wall clock)
+
+
+@dataclass(frozen=True)
+class EventLogConfig:
+    path: Path = Path("monitor-events.jsonl")
+
+
+@dataclass(frozen=True)
+class BlackBoxConfig:
+    directory: Path = Path("monitor-blackbox")
+    pre_s: float = 30.0  # raw frames kept from before the alarm
+    post_s: float = 10.0  # and recorded after it
+    max_frames: int = 200_000  # memory bound of the pre-alarm buffer (~50 s at 4 kHz)
+    max_files: int = 50  # oldest files deleted beyond this
+
+
+@dataclass(frozen=True)
 class MonitorConfig:
     source: Path
     dbc: Path
     model: Path
     horizon: int | None = None
     alarm: AlarmConfig = field(default_factory=AlarmConfig)
+    bus: BusConfig = field(default_factory=BusConfig)
+    outputs: OutputConfig = field(default_factory=OutputConfig)
+    event_log: EventLogConfig = field(default_factory=EventLogConfig)
+    black_box: BlackBoxConfig = field(default_factory=BlackBoxConfig)
 
 
-_TOP_KEYS = {"dbc", "model", "detector", "alarm"}
+_TOP_KEYS = {
+    "dbc", "model", "detector", "alarm", "bus", "outputs", "event_log", "black_box",
+}  # fmt: skip
 
 
 def _path(value: Any, key: str, base: Path, source: Path) -> Path:
@@ -64,6 +115,81 @@ def _alarm(sec: dict[str, Any], source: Path) -> AlarmConfig:
         raise ConfigError(f"{source}: {exc}") from None
 
 
+# -- generic typed sections -----------------------------------------------------------------
+
+Check = Callable[[Any], bool]
+_POSITIVE: Check = lambda v: v > 0  # noqa: E731
+_NON_NEG: Check = lambda v: v >= 0  # noqa: E731
+# key -> (kind, check, what the check demands); kind: "str", "int", "float", "bool", "path",
+# "options"
+_BUS = {
+    "interface": ("str", None, ""),
+    "channel": ("str", None, ""),
+    "bitrate": ("int", lambda v: 10_000 <= v <= 1_000_000, "between 10000 and 1000000"),
+    "queue_frames": ("int", lambda v: v >= 100, ">= 100"),
+    "kernel_filters": ("bool", None, ""),
+    "silent_s": ("float", _POSITIVE, "> 0"),
+    "options": ("options", None, ""),
+}
+_OUTPUTS = {
+    "alarm_repeat_s": ("float", _POSITIVE, "> 0"),
+    "alarm_max_per_s": ("float", _POSITIVE, "> 0"),
+    "status_period_s": ("float", _POSITIVE, "> 0"),
+}
+_EVENT_LOG = {"path": ("path", None, "")}
+_BLACK_BOX = {
+    "directory": ("path", None, ""),
+    "pre_s": ("float", _NON_NEG, ">= 0"),
+    "post_s": ("float", _NON_NEG, ">= 0"),
+    "max_frames": ("int", _POSITIVE, ">= 1"),
+    "max_files": ("int", _POSITIVE, ">= 1"),
+}
+
+
+def _value(kind: str, raw: Any, where: str, source: Path) -> Any:
+    def bad(what: str) -> ConfigError:
+        return ConfigError(f"{source}: {where} must be {what}, got {raw!r}")
+
+    if kind == "str":
+        if not isinstance(raw, str) or not raw:
+            raise bad("a non-empty string")
+        return raw
+    if kind == "path":
+        if not isinstance(raw, str) or not raw:
+            raise bad("a path")
+        return Path(raw).expanduser()
+    if kind == "bool":
+        if not isinstance(raw, bool):
+            raise bad("true or false")
+        return raw
+    if kind == "options":
+        if not isinstance(raw, dict) or not all(
+            isinstance(k, str) and isinstance(v, (str, int, float, bool)) for k, v in raw.items()
+        ):
+            raise bad("a mapping of names to scalar values")
+        return dict(raw)
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        raise bad("a number")
+    if kind == "int":
+        if not float(raw).is_integer():
+            raise bad("a whole number")
+        return int(raw)
+    return float(raw)
+
+
+def _typed(cls: type, spec: dict, sec: dict[str, Any], name: str, source: Path) -> Any:
+    values: dict[str, Any] = {}
+    for key, raw in sec.items():
+        if key not in spec:
+            raise ConfigError(f"{source}: unknown key {name}.{key}; known: {', '.join(spec)}")
+        kind, check, demand = spec[key]
+        v = _value(kind, raw, f"{name}.{key}", source)
+        if check is not None and not check(v):
+            raise ConfigError(f"{source}: {name}.{key} must be {demand}, got {raw!r}")
+        values[key] = v
+    return cls(**values)
+
+
 def load_config(path: str | Path | None = None) -> MonitorConfig:
     """Load and validate a monitor config (default: the shipped config/monitor.yaml)."""
     source = Path(path) if path is not None else resource_path("config", "monitor.yaml")
@@ -78,7 +204,7 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
     unknown = set(data) - _TOP_KEYS
     if unknown:
         raise ConfigError(
-            f"{source}: unknown key(s) {', '.join(sorted(unknown))}; "
+            f"{source}: unknown key(s) {', '.join(sorted(map(str, unknown)))}; "
             f"known: {', '.join(sorted(_TOP_KEYS))}"
         )
     base = source.parent
@@ -94,10 +220,21 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
     for key in ("dbc", "model"):
         if key not in data:
             raise ConfigError(f"{source}: missing key {key!r}")
+    black_box = _typed(
+        BlackBoxConfig, _BLACK_BOX, _section(data, "black_box", source), "black_box", source
+    )
     return MonitorConfig(
         source=source,
         dbc=_path(data["dbc"], "dbc", base, source),
         model=_path(data["model"], "model", base, source),
         horizon=horizon,
         alarm=_alarm(_section(data, "alarm", source), source),
+        bus=_typed(BusConfig, _BUS, _section(data, "bus", source), "bus", source),
+        outputs=_typed(
+            OutputConfig, _OUTPUTS, _section(data, "outputs", source), "outputs", source
+        ),
+        event_log=_typed(
+            EventLogConfig, _EVENT_LOG, _section(data, "event_log", source), "event_log", source
+        ),
+        black_box=black_box,
     )
