@@ -161,7 +161,11 @@ class AlarmMachine:
             self._enter(State.NORMAL)
         if e is not None and self.isolator is not None:
             self._remember(e, regime)
-        above = j > self.eps0  # NaN (window warming up) is neither above nor below
+        if j != j:  # NaN: the window is warming up or paused; the debounce counts pause too
+            if self.state is State.FAULT and self.isolator is not None and e is not None:
+                self.isolator.add(e, regime)
+            return self.state
+        above = j > self.eps0
         if self.state is State.NORMAL:
             self._above = self._above + 1 if above else 0
             if self._above >= cfg.raise_samples:

@@ -63,6 +63,8 @@ def embed(spec, Z):
     for t in range(spec.max_lag, len(Z)):
         x = [Z[t - lag][cols[name]] for name, lag in spec.features]
         y = list(Z[t][:nout])
+        if getattr(spec, "delta", False):  # targets are changes since the previous sample
+            y = [a - b for a, b in zip(y, Z[t - 1][:nout], strict=True)]
         if any(math.isnan(v) for v in x + y):
             continue
         X.append(x)
@@ -94,6 +96,8 @@ def multistep(spec, Z, P, Y, sigma, p):
             if not ok:
                 break
             preds[s] = grnn_predict(np.array(x), P, Y, sigma)[0]
+            if getattr(spec, "delta", False):  # add the level the change starts from
+                preds[s] = preds[s] + (preds[s - 1] if s - 1 > k else np.asarray(Z[s - 1][:nout]))
         if ok:
             out[t] = preds[t]
     return out

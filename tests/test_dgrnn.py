@@ -267,3 +267,44 @@ def test_normalizer():
         Normalizer().fit(np.full((10, 1), np.nan), ["x"])
     with pytest.raises(ConfigError, match="no statistics"):
         norm.transform(A[:, :1], ["QP"])
+
+
+SMALL_DELTA = DGRNNSpec(SMALL.outputs, SMALL.exogenous, SMALL.lags, delta=True)
+
+
+def test_delta_targets_are_changes_and_round_trip():
+    Z = _loop(300, seed=2)
+    X, Y, t = build_training_pairs(SMALL_DELTA, Z)
+    np.testing.assert_allclose(Y, Z[t, :2] - Z[t - 1, :2])
+    nX, nY, nT = naive.embed(SMALL_DELTA, Z)
+    np.testing.assert_allclose(Y, nY)
+    assert DGRNNSpec.from_dict(SMALL_DELTA.to_dict()) == SMALL_DELTA
+    with pytest.raises(ConfigError, match="lag 1"):
+        DGRNNSpec(("y",), ("u",), (("y", (2,)), ("u", (0,))), delta=True)
+
+
+@pytest.mark.parametrize("p", [1, 2, 5])
+def test_delta_multistep_matches_naive(p):
+    Z = _loop(800, seed=0)
+    model = DGRNN(SMALL_DELTA, GRNN(sigma=0.3, thinning="none")).fit(Z)
+    Zt = _loop(250, seed=4, nan_every=53)
+    got = predict_series(model, Zt, horizon=p)
+    want = naive.multistep(SMALL_DELTA, Zt, model.grnn.patterns_, model.grnn.targets_, 0.3, p)
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12, equal_nan=True)
+    # The live path gives the same numbers.
+    tick = TickPredictor(model, horizon=p)
+    n = tick.rows_needed
+    for t in range(n, 250, 37):
+        window = np.ascontiguousarray(Zt[t - n + 1 : t + 1])
+        np.testing.assert_array_equal(tick.predict(window), got[t])
+
+
+def test_delta_model_holds_an_unseen_level():
+    """A level model can only return levels it saw; increments keep a held value held."""
+    spec_level = DGRNNSpec(("y",), ("u",), (("y", (1, 2)), ("u", (0,))))
+    spec_delta = DGRNNSpec(("y",), ("u",), (("y", (1, 2)), ("u", (0,))), delta=True)
+    train = np.column_stack([np.repeat([0.0, 1.0, 2.0], 200), np.zeros(600)])
+    test = np.column_stack([np.full(50, 5.0), np.zeros(50)])  # held at a level never seen
+    for spec, expect in ((spec_level, 2.0), (spec_delta, 5.0)):
+        model = DGRNN(spec, GRNN(sigma=0.5, thinning="none")).fit(train)
+        assert predict_series(model, test)[10, 0] == pytest.approx(expect, abs=1e-6)
