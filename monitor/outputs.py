@@ -1,0 +1,142 @@
+"""What the monitor puts out: MON_Alarm and MON_Status frames, and the event log.
+
+MON_Alarm goes out on every state change and is repeated every ``alarm_repeat_s`` while in
+fault, both timed on the sample clock so a replayed log gives the same frames at any speed.
+A token bucket caps the frames per second whatever the state does (a flapping sensor must
+not flood the bus); a state change held back by the cap is sent as soon as it allows, with
+the state current at that moment.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import can
+
+from monitor.alarm import State
+from monitor.codec.frames import FrameCodec
+from monitor.config import OutputConfig
+from monitor.errors import ConfigError
+
+ALARM = "MON_Alarm"
+STATUS = "MON_Status"
+
+
+def fault_codes(codec: FrameCodec) -> dict[str, int]:
+    """Fault name -> MON_Alarm.Fault code, from the DBC's value table."""
+    sig = codec.message(ALARM).dbc_message.get_signal_by_name("Fault")
+    return {str(name): int(code) for code, name in (sig.choices or {}).items()}
+
+
+class AlarmFrames:
+    """Builds the monitor's frames and decides when MON_Alarm is due."""
+
+    def __init__(self, codec: FrameCodec, cfg: OutputConfig) -> None:
+        self.codec = codec
+        self.cfg = cfg
+        self.codes = fault_codes(codec)
+        self.alarm_count = 0  # hydraulic alarms raised (wraps at 256 in the frame)
+        self.sent = 0
+        self.held_back = 0  # state changes delayed by the rate cap
+        self._last_sent_t = -float("inf")
+        self._tokens = cfg.alarm_max_per_s  # bucket holds one second's worth
+        self._bucket_t: float | None = None
+        self._pending = False
+
+    def _refill(self, t_s: float) -> None:
+        if self._bucket_t is not None and t_s > self._bucket_t:
+            rate = self.cfg.alarm_max_per_s
+            self._tokens = min(rate, self._tokens + (t_s - self._bucket_t) * rate)
+        self._bucket_t = t_s
+
+    def due(self, t_s: float, state: State, changed: bool) -> bool:
+        """Whether a MON_Alarm should go out at sample time ``t_s``."""
+        if changed and state is State.FAULT:
+            self.alarm_count += 1
+        self._refill(t_s)
+        want = (
+            changed
+            or self._pending
+            or (state is State.FAULT and t_s - self._last_sent_t >= self.cfg.alarm_repeat_s)
+        )
+        if not want:
+            return False
+        if self._tokens < 1.0:
+            if changed:
+                self.held_back += 1
+            self._pending = True
+            return False
+        self._tokens -= 1.0
+        self._pending = False
+        self._last_sent_t = t_s
+        self.sent += 1
+        return True
+
+    def alarm(
+        self, state: State, j: float, eps0: float, fault: str, bus_time_s: float
+    ) -> can.Message:
+        code = self.codes.get(fault, self.codes.get("unknown", 15)) if state is State.FAULT else 0
+        values = {
+            "State": int(state),
+            "Fault": code,
+            "J": j if j == j else 0.0,  # NaN (warm-up) goes out as 0; the state says why
+            "Threshold": eps0,
+            "AlarmCount": self.alarm_count % 256,
+        }
+        return self.codec.encode_message(ALARM, values, bus_time_s)
+
+    def status(
+        self, state: State, rx: int, rejected: int, dropped: int, bus_time_s: float
+    ) -> can.Message:
+        # Counters wrap (the DBC says so): a receiver looks at differences.
+        values = {
+            "State": int(state),
+            "RxFrames": rx % 65536,
+            "RejectedFrames": rejected % 65536,
+            "DroppedFrames": dropped % 256,
+        }
+        return self.codec.encode_message(STATUS, values, bus_time_s)
+
+
+class EventLog:
+    """Append-only JSON lines, flushed and fsynced per event so a power cut loses none."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            new = not self.path.exists()
+            self._fh = self.path.open("a", encoding="utf-8")
+            if new:  # the file's directory entry must survive a power cut too
+                _fsync_dir(self.path.parent)
+        except OSError as exc:
+            raise ConfigError(f"event_log.path: cannot open {self.path}: {exc.strerror}") from None
+        self.written = 0
+
+    def write(self, record: dict[str, Any]) -> None:
+        self._fh.write(json.dumps(record) + "\n")
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+        self.written += 1
+
+    def close(self) -> None:
+        if not self._fh.closed:
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+            self._fh.close()
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # not every filesystem lets a directory be fsynced
+    finally:
+        os.close(fd)

@@ -1,0 +1,135 @@
+"""The live detector: one ``tick`` per 100 Hz row of the sample clock.
+
+It reproduces ``monitor.detector.detect`` sample by sample, so a log gives the same events
+on the bus as at a desk: z-score with the model's F0 statistics; a row with the engine below
+``alarm.min_engine_rpm`` or any model signal missing is gated (NaN before prediction, so it
+never feeds one, and its residual is NaN); e = y_hat - y in z units, clipped to the model's
+residual bound; J by the incremental window (eq. 9); one ``AlarmMachine.step`` per row.
+Nothing is allocated per tick beyond numpy scalars.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from monitor.alarm import AlarmConfig, AlarmMachine, State, regime_of
+from monitor.detector import make_isolator
+from monitor.dgrnn import TickPredictor
+from monitor.errors import ModelFileError
+from monitor.model import MonitorModel
+from monitor.residual import WindowJ
+from monitor.ring import RowRing
+from monitor.sampler import ROW_COLUMNS
+
+
+@dataclass
+class Tick:
+    """What one row produced (the buffers behind ``e`` are reused by the next tick)."""
+
+    t_s: float  # sample-clock time of the row (s from the first frame)
+    state: State
+    j: float  # NaN while the window warms up or pauses
+    changed: bool  # the state differs from the previous tick's (always True on the first)
+
+
+class Ticker:
+    def __init__(
+        self,
+        model: MonitorModel,
+        alarm: AlarmConfig | None = None,
+        horizon: int | None = None,
+        columns: tuple[str, ...] = ROW_COLUMNS,
+    ) -> None:
+        self.model = model
+        self.alarm = alarm or AlarmConfig()
+        spec = model.spec
+        missing = [n for n in (*spec.variables, "EngineSpeed") if n not in columns]
+        if missing:
+            raise ModelFileError(f"the model needs signal(s) the rows lack: {missing}")
+        self.predictor = TickPredictor(model.dgrnn, horizon)
+        self.rows_needed = self.predictor.rows_needed
+        # Row layout is [t, *columns]: +1 skips t.
+        self._var_idx = np.array([1 + columns.index(v) for v in spec.variables], dtype=np.int64)
+        self._engine_col = 1 + columns.index("EngineSpeed")
+        self._spool_col = 1 + columns.index("SpoolCmd") if "SpoolCmd" in columns else -1
+        norm_cols = [model.normalizer.names_.index(v) for v in spec.variables]
+        self._mean = np.ascontiguousarray(model.normalizer.mean_[norm_cols])
+        self._std = np.ascontiguousarray(model.normalizer.std_[norm_cols])
+        nvar, nout = len(spec.variables), len(spec.outputs)
+        self._raw = np.empty(nvar)
+        self._z = np.empty(nvar)
+        self._z_out = self._z[:nout]  # a view made once, not per tick
+        self._yz = np.empty(nout)
+        self._e = np.empty(nout)
+        self._sq = np.empty((1, nout))  # e^2 as one row, reduced as the batch path does
+        self._v = np.empty(1)
+        clip = model.residual_clip
+        self._clip = None if clip is None else np.asarray(clip, dtype=np.float64)
+        self.ring = RowRing(self.rows_needed, nvar)
+        self.window = WindowJ(model.window_n)
+        self.machine = AlarmMachine(self.alarm, model.eps0, make_isolator(model), model.window_n)
+        self.eps0 = float(model.eps0)
+        self._prev: State | None = None
+        self.ticks = 0
+
+    @property
+    def state(self) -> State:
+        return self.machine.state
+
+    @property
+    def fault(self) -> str:
+        return self.machine.fault
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self._e
+
+    def tick(self, row: np.ndarray) -> Tick:
+        """Advance one sample: ``row`` is a sampler row ``[t, *columns]``."""
+        raw, z, e = self._raw, self._z, self._e
+        np.take(row, self._var_idx, out=raw)
+        engine = float(row[self._engine_col])
+        inactive = not engine >= self.alarm.min_engine_rpm  # NaN engine speed: off
+        # A sum is finite exactly when every term is (values are far from overflow).
+        inputs_ok = math.isfinite(float(np.add.reduce(raw)))
+        np.subtract(raw, self._mean, out=z)
+        np.divide(z, self._std, out=z)
+        gated = inactive or not inputs_ok
+        if gated:
+            z[:] = np.nan  # an engine-off or sensor-fault row must not seed a prediction
+        self.ring.push(z)
+        self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
+        np.subtract(self._yz, self._z_out, out=e)
+        if self._clip is not None:
+            np.clip(e, -self._clip, self._clip, out=e)
+        if gated:
+            e[:] = np.nan
+        np.multiply(e, e, out=self._sq[0])
+        np.mean(self._sq, axis=1, out=self._v)
+        j = self.window.push_squared(float(self._v[0]))
+        spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
+        state = self.machine.step(j, inputs_ok, engine, e, regime_of(spool))
+        changed = state is not self._prev
+        self._prev = state
+        self.ticks += 1
+        return Tick(float(row[0]), state, j, changed)
+
+
+def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:
+    """The JSON-lines event of a state change, schema shared with ``monitor detect``."""
+    wall = None
+    if start_time_s is not None:
+        wall = dt.datetime.fromtimestamp(start_time_s + tick.t_s, tz=dt.timezone.utc).isoformat()
+    return {
+        "t": round(tick.t_s, 6),
+        "time": wall,
+        "state": tick.state.label,
+        "J": float(tick.j) if np.isfinite(tick.j) else None,
+        "threshold": eps0,
+        "fault": fault if tick.state is State.FAULT else None,
+    }
