@@ -1,0 +1,275 @@
+"""The live monitor: bus -> decoder -> sampler -> ticker -> outputs, on its own threads.
+
+Threads: ``can-reader`` (``BusReader``: bus -> bounded queue, nothing else) and ``detector``
+(everything else, in arrival order: black box, decode, sampler, one tick per 100 Hz row,
+frames, event log).  Nothing runs in a python-can Notifier callback.  The sample clock is
+the frames' own timestamps, so a log replayed onto a bus gives the events ``monitor detect``
+gives for the file.  When no sensor frame is accepted for ``bus.silent_s`` (wall clock) the
+clock runs on by wall time: the rows go stale, the engine speed with them, and the monitor
+is inactive (a machine that is off is not faulty); when frames return, it resumes.
+
+``stop()`` shuts down in order: reader (no new frames), detector (drains the queue, ticks
+the last rows), outputs (black box and event log closed, fsynced), bus.  ``request_reload``
+makes the detector thread reload config and model between two frames, keeping the bus.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import can
+import numpy as np
+
+from monitor.alarm import State
+from monitor.blackbox import BlackBox
+from monitor.bus import BusReader, open_bus
+from monitor.codec.frames import FrameCodec
+from monitor.config import MonitorConfig, load_config
+from monitor.model import load_model
+from monitor.outputs import AlarmFrames, EventLog
+from monitor.sampler import Sampler, hydraulic_messages
+from monitor.ticker import Ticker, event
+
+log = logging.getLogger("monitor")
+
+EventHook = Callable[[dict[str, Any]], None]
+
+
+class Daemon:
+    def __init__(
+        self,
+        cfg: MonitorConfig,
+        bus: can.BusABC | None = None,
+        on_event: EventHook | None = None,
+    ) -> None:
+        """``bus`` (optional) is used instead of opening ``cfg.bus``; it is not shut down."""
+        self.cfg = cfg
+        self.on_event = on_event
+        self.codec = FrameCodec.from_dbc(cfg.dbc)
+        self._hydraulic = hydraulic_messages(self.codec)
+        self.model = load_model(cfg.model)
+        self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon)
+        self.sampler = Sampler.for_codec(self.codec)
+        self.frames = AlarmFrames(self.codec, cfg.outputs)
+        self.event_log = EventLog(cfg.event_log.path)
+        self.black_box = BlackBox(cfg.black_box, cfg.bus.channel)
+        self._own_bus = bus is None
+        self.bus = bus if bus is not None else open_bus(cfg.bus, self.codec)
+        self.reader = BusReader(self.bus, cfg.bus.queue_frames)
+        self.tx_errors = 0
+        self.reloads = 0
+        self.last_j = float("nan")
+        self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
+        self._last_ok_ts = 0.0  # its bus timestamp
+        self._last_status_mono = 0.0
+        self._last_tx_error_log = 0.0
+        self._stop = threading.Event()
+        self._reload = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="detector", daemon=True)
+        self.error: BaseException | None = None
+
+    # -- control (any thread) -------------------------------------------------------------
+
+    def start(self) -> None:
+        self._thread.start()
+        self.reader.start()
+        log.info(
+            "monitoring %s:%s, model %s (eps0 %.4g, window %d)",
+            self.cfg.bus.interface, self.cfg.bus.channel, self.cfg.model,
+            self.model.eps0, self.model.window_n,
+        )  # fmt: skip
+
+    def request_reload(self) -> None:
+        self._reload.set()
+
+    @property
+    def healthy(self) -> bool:
+        return self.error is None and self._thread.is_alive() and self.reader.alive
+
+    @property
+    def state(self) -> State:
+        return self.ticker.state
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Ordered shutdown; safe to call twice."""
+        self.reader.stop()
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+        self.black_box.close()
+        self.event_log.close()
+        if self._own_bus:
+            self.bus.shutdown()
+        log.info("stopped: %s", self.counts())
+
+    def counts(self) -> dict[str, Any]:
+        r = self.reader.counts
+        return {
+            "received": r.received,
+            "dropped": r.dropped,
+            "bus_errors": r.bus_errors,
+            **self.codec.counts.as_dict(),
+            **self.sampler.counts.as_dict(),
+            "ticks": self.ticker.ticks,
+            "alarm_frames": self.frames.sent,
+            "alarm_frames_held_back": self.frames.held_back,
+            "events": self.event_log.written,
+            "tx_errors": self.tx_errors,
+        }
+
+    # -- detector thread ------------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as exc:  # surfaced by ``healthy``; the supervisor exits
+            self.error = exc
+            log.exception("detector thread failed")
+
+    def _loop(self) -> None:
+        q = self.reader.queue
+        while True:
+            if self._reload.is_set():
+                self._reload.clear()
+                self._do_reload()
+            try:
+                msg = q.get(timeout=0.05)
+            except queue.Empty:
+                if self._stop.is_set():
+                    break  # the reader is stopped first, so the queue is drained
+                self._silence()
+            else:
+                self._frame(msg)
+                for _ in range(1000):  # drain a burst without a timeout per frame
+                    try:
+                        self._frame(q.get_nowait())
+                    except queue.Empty:
+                        break
+            self._status()
+        self._tick_rows(self.sampler.flush())  # the instant of the last frame, as offline
+
+    def _frame(self, msg: can.Message) -> None:
+        self.black_box.add(msg)
+        d = self.codec.decode_message(msg)
+        if d.rejection is not None:
+            log.debug("rejected frame %X: %s", msg.arbitration_id, d.rejection.value)
+            return
+        if d.name not in self._hydraulic:
+            return  # counted as decoded; e.g. another monitor's frames with filters off
+        self.sampler.feed(msg.timestamp, d.name, d.values)  # type: ignore[arg-type]
+        self._last_ok_mono = time.monotonic()
+        self._last_ok_ts = msg.timestamp
+        self._tick_rows(self.sampler.take())
+
+    def _silence(self) -> None:
+        if not self.sampler.started:
+            return
+        idle_s = time.monotonic() - self._last_ok_mono
+        if idle_s < self.cfg.bus.silent_s:
+            return
+        # Past the sampler's max gap the clock stops: the state is inactive by then, and a
+        # frame after a longer silence is mapped to the end of that gap (sampler rule).
+        idle_s = min(idle_s, self.sampler.max_gap_s - 2 * self.sampler.period_s)
+        self._tick_rows(self.sampler.advance(self._last_ok_ts + idle_s))
+
+    def _bus_time(self, t_s: float) -> float:
+        return (self.sampler.start_time_s or 0.0) + t_s
+
+    def _tick_rows(self, rows: np.ndarray) -> None:
+        ticker, frames = self.ticker, self.frames
+        for row in rows:
+            tick = ticker.tick(row)
+            self.last_j = tick.j
+            if tick.changed:
+                self._state_change(tick)
+            if frames.due(tick.t_s, tick.state, tick.changed):
+                bus_time = self._bus_time(tick.t_s)
+                self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
+
+    def _state_change(self, tick: Any) -> None:
+        ev = event(tick, self.ticker.fault, self.ticker.eps0, self.sampler.start_time_s)
+        self.event_log.write(ev)
+        level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
+        log.log(level, "t=%.2f s: %s (J %s, eps0 %.4g%s)", ev["t"], ev["state"],
+                "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
+                f", fault {ev['fault']}" if ev["fault"] else "")  # fmt: skip
+        if tick.state is State.FAULT:
+            path = self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
+            if path is not None:
+                log.info("black box: %s", path)
+        if self.on_event is not None:
+            self.on_event(ev)
+
+    def _send(self, msg: can.Message) -> None:
+        try:
+            self.bus.send(msg, timeout=0.05)
+        except (can.CanError, OSError) as exc:
+            self.tx_errors += 1
+            now = time.monotonic()
+            if now - self._last_tx_error_log > 5.0:
+                self._last_tx_error_log = now
+                log.error("cannot send %X (%s); %d send errors", msg.arbitration_id, exc,
+                          self.tx_errors)  # fmt: skip
+
+    def _status(self) -> None:
+        now = time.monotonic()
+        if now - self._last_status_mono < self.cfg.outputs.status_period_s:
+            return
+        self._last_status_mono = now
+        r = self.reader.counts
+        rejected = self.codec.counts.rejected_total
+        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time()))
+
+    def _do_reload(self) -> None:
+        """SIGHUP: new config and model, same bus; a bad file keeps the running ones."""
+        try:
+            cfg = load_config(self.cfg.source)
+            model = load_model(cfg.model)
+            ticker = Ticker(model, cfg.alarm, cfg.horizon)
+            event_log = (
+                EventLog(cfg.event_log.path)
+                if cfg.event_log.path != self.cfg.event_log.path
+                else None
+            )
+        except Exception as exc:  # any failure: keep monitoring with what we have
+            log.error("reload failed, keeping the running config and model: %s", exc)
+            return
+        if cfg.bus != self.cfg.bus or cfg.dbc != self.cfg.dbc:
+            log.warning("bus and dbc changes take effect at the next restart")
+            cfg = replace(cfg, bus=self.cfg.bus, dbc=self.cfg.dbc)
+        if event_log is not None:
+            self.event_log.close()
+            self.event_log = event_log
+        self.black_box.cfg = cfg.black_box
+        self.frames.cfg = cfg.outputs
+        self.cfg, self.model, self.ticker = cfg, model, ticker
+        self.reloads += 1
+        log.info("reloaded %s: model %s (eps0 %.4g); the J window starts again",
+                 cfg.source, cfg.model, model.eps0)  # fmt: skip
+
+
+class JournalFormatter(logging.Formatter):
+    """``<priority>message``: journald reads the syslog priority prefix from stderr and adds
+    its own timestamps, so none here."""
+
+    _PRIORITY = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4, logging.ERROR: 3,
+                 logging.CRITICAL: 2}  # fmt: skip
+
+    def format(self, record: logging.LogRecord) -> str:
+        prio = self._PRIORITY.get(record.levelno, 6)
+        text = super().format(record)
+        return "\n".join(f"<{prio}>{line}" for line in text.splitlines())
+
+
+def setup_logging(level: int = logging.INFO) -> None:
+    handler = logging.StreamHandler()
+    handler.setFormatter(JournalFormatter("%(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)
