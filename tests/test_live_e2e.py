@@ -138,3 +138,14 @@ def test_demo_runs_and_reports_the_alarm(capsys) -> None:
     out = capsys.readouterr().out
     assert "state -> FAULT" in out and "isolated: spool_wear" in out
     assert "hydraulic fault raised at" in out and "MON_Alarm frames read back" in out
+
+
+def test_status_heartbeat_carries_the_counters(run) -> None:
+    codec = FrameCodec.from_dbc()
+    status_id = codec.message("MON_Status").frame_id
+    values = [codec.decode_message(m).values for m in run["frames"]
+              if m.arbitration_id == status_id]  # fmt: skip
+    assert values, "no MON_Status frame"
+    rx = [v["RxFrames"] for v in values]
+    assert rx == sorted(rx) and rx[-1] > 0  # no wrap in a 36k-frame run
+    assert all(v["RejectedFrames"] == 0 and v["DroppedFrames"] == 0 for v in values)
