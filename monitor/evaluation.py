@@ -255,6 +255,10 @@ def run_all(
     say = progress or (lambda _msg: None)
     plan = normal_plan(cfg) + fault_plan(cfg)
     sim_s = 0.0
+    # Cost grows with signal length, and normal pieces are longer than fault runs: the ETA
+    # extrapolates by seconds of signal done, not by runs done.
+    total_signal = sum(r.duration_s for r in plan)
+    signal_done = 0.0
     started = last = time.perf_counter()
     for k, spec in enumerate(plan, 1):
         t0 = time.perf_counter()
@@ -265,10 +269,11 @@ def run_all(
             det = detect(m.model, rec, cfg.alarm, cfg.horizon)
             m.detect_s += time.perf_counter() - t0
             (m.normal if spec.fault is None else m.faults).append(score_run(det, spec))
+        signal_done += spec.duration_s
         now = time.perf_counter()
         if now - last >= 5.0 or k == len(plan):
             last = now
-            eta = (now - started) / k * (len(plan) - k)
+            eta = (now - started) / signal_done * (total_signal - signal_done)
             say(f"{k}/{len(plan)} runs, {now - started:.0f} s elapsed, ETA {_hms(eta)}")
     return {"simulate_s": sim_s, "runs_s": time.perf_counter() - started}
 
