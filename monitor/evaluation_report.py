@@ -161,7 +161,7 @@ def model_markdown(label: str, r: dict[str, Any], onsets: Sequence[str]) -> list
             f"{_pct(row[o]['isolation_accuracy'])} |"
             for o in onsets
         )
-        out.append(f"| {row['fault']} | {row['severity']:.1f} |{cells}")
+        out.append(f"| {row['fault']} | {row['severity']:g} |{cells}")
     cols = r["confusion"]["columns"]
     for name, matrix in r["confusion"].items():
         if name == "columns":
@@ -188,6 +188,32 @@ def markdown(result: dict[str, Any]) -> str:
         f"(simulation {rt['simulate']:.0f} s).",
         "",
     ]
+    lines += summary_markdown(result["models"])
     for label, r in result["models"].items():
         lines += model_markdown(label, r, cfg["onsets"])
     return "\n".join(lines)
+
+
+def summary_markdown(models: dict[str, dict[str, Any]]) -> list[str]:
+    """Table 1 of every model side by side: detection / median delay / isolation per fault."""
+    labels = list(models)
+    out = [
+        f"Table 1, all models (severity >= {TABLE1_MIN_SEVERITY}; detected / median delay / "
+        "isolation accuracy; false alarms per hour of normal operation):",
+        "",
+        "| fault | " + " | ".join(labels) + " |",
+        "|---|" + "---|" * len(labels),
+    ]
+    first = models[labels[0]]["table1"] if labels else {}
+    for fault in first:
+        cells = []
+        for label in labels:
+            c = models[label]["table1"][fault]
+            cells.append(
+                f"{_pct(c['detection_rate'])} / {_sec(c['median_delay_s'])} / "
+                f"{_pct(c['isolation_accuracy'])}"
+            )
+        out.append(f"| {fault} | " + " | ".join(cells) + " |")
+    fa = [_fa(models[label]["false_alarms_normal"]) for label in labels]
+    out += ["| normal: false alarms | " + " | ".join(fa) + " |", ""]
+    return out

@@ -169,7 +169,8 @@ def test_cli_trains_paper_preset(tmp_path: Path) -> None:
     assert result["models"]["paper"]["outputs"] == ["QP"]
     assert result["plan"]["train_seeds"] == [1, 2, 3]
     _check_invariants(result)
-    assert "### paper" in md.read_text()
+    text = md.read_text()
+    assert "### paper" in text and "Table 1, all models" in text
 
 
 @pytest.mark.parametrize(

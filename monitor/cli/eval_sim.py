@@ -213,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
     total = time.perf_counter() - started
     result = {
         "rerun": _rerun(args, cfg, presets, train_seeds),
-        "config": cfg.to_dict() | {"alarm": vars(cfg.alarm)},
+        "config": cfg.to_dict(),
         "plan": {
             "fault_runs": n_fault,
             "normal_runs": n_normal,
