@@ -71,6 +71,9 @@ class Ticker:
         clip = model.residual_clip
         self._clip = None if clip is None else np.asarray(clip, dtype=np.float64)
         self.ring = RowRing(self.rows_needed, nvar)
+        # Compile (or load from numba's cache) the kernel now, not on the first live frame:
+        # a first-call compile of seconds would back the bus queue up.
+        self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
         self.window = WindowJ(model.window_n)
         self.machine = AlarmMachine(self.alarm, model.eps0, make_isolator(model), model.window_n)
         self.eps0 = float(model.eps0)

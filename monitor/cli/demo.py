@@ -91,7 +91,8 @@ def _demo(log_path: Path, out: Path, speed: float) -> int:
     channel = f"monitor-demo-{os.getpid()}"
     cfg = dataclasses.replace(
         cfg,
-        bus=BusConfig(interface="virtual", channel=channel, silent_s=2.0),
+        # The queue holds the whole log: a slow first tick must not cost frames.
+        bus=BusConfig(interface="virtual", channel=channel, silent_s=2.0, queue_frames=100_000),
         event_log=dataclasses.replace(cfg.event_log, path=out / "events.jsonl"),
         black_box=dataclasses.replace(cfg.black_box, directory=out / "blackbox"),
     )
