@@ -44,11 +44,12 @@ class DGRNNSpec:
     exogenous: tuple[str, ...]
     lags: tuple[tuple[str, tuple[int, ...]], ...]
     horizon: int = 1
-    #: Predict each output's change from the previous sample instead of its level:
+    #: Outputs predicted as a change from the previous sample instead of a level:
     #: y_hat(t) = y(t-1) + GRNN(x(t)).  A GRNN only averages its training targets and cannot
     #: extrapolate, so a level model fails on every trapped-pressure level the training runs
-    #: missed; increments are near zero at any held level.  Needs every output at lag 1.
-    delta: bool = False
+    #: missed; increments are near zero at any held level.  Each needs its lag 1.  ``True``
+    #: means every output, ``False`` none.
+    delta: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         lags = tuple(self.lags.items()) if isinstance(self.lags, Mapping) else tuple(self.lags)
@@ -57,7 +58,9 @@ class DGRNNSpec:
         object.__setattr__(self, "exogenous", tuple(self.exogenous))
         object.__setattr__(self, "lags", norm)
         object.__setattr__(self, "horizon", int(self.horizon))
-        object.__setattr__(self, "delta", bool(self.delta))
+        if isinstance(self.delta, bool):
+            object.__setattr__(self, "delta", self.outputs if self.delta else ())
+        object.__setattr__(self, "delta", tuple(str(n) for n in self.delta))
         self._validate()
 
     def _validate(self) -> None:
@@ -86,9 +89,12 @@ class DGRNNSpec:
             raise ConfigError(f"horizon must be >= 1, got {self.horizon}")
         if self.delta:
             lagmap = dict(self.lags)
-            lacking = [o for o in self.outputs if 1 not in lagmap.get(o, ())]
+            strangers = [o for o in self.delta if o not in self.outputs]
+            if strangers:
+                raise ConfigError(f"delta targets must be outputs: {strangers}")
+            lacking = [o for o in self.delta if 1 not in lagmap.get(o, ())]
             if lacking:
-                raise ConfigError(f"delta targets need lag 1 of every output: {lacking}")
+                raise ConfigError(f"delta targets need lag 1 of each such output: {lacking}")
 
     @property
     def variables(self) -> tuple[str, ...]:
@@ -110,6 +116,10 @@ class DGRNNSpec:
         p = self.horizon if horizon is None else int(horizon)
         return p + self.max_lag
 
+    def delta_mask(self) -> np.ndarray:
+        """1 for each output predicted as an increment, 0 for a level (kernel argument)."""
+        return np.array([1 if o in self.delta else 0 for o in self.outputs], dtype=np.int64)
+
     def feature_columns(self) -> tuple[np.ndarray, np.ndarray]:
         """(column index into ``variables``, lag) per feature, as int64 arrays for numba."""
         col = {name: i for i, name in enumerate(self.variables)}
@@ -127,7 +137,7 @@ class DGRNNSpec:
             # writers may sort mapping keys.
             "lags": [[name, list(ls)] for name, ls in self.lags],
             "horizon": self.horizon,
-            "delta": self.delta,
+            "delta": list(self.delta),
         }
 
     @classmethod
@@ -135,7 +145,9 @@ class DGRNNSpec:
         try:
             lags = d["lags"]
             pairs = tuple(lags.items()) if isinstance(lags, Mapping) else tuple(map(tuple, lags))
-            return cls(d["outputs"], d["exogenous"], pairs, d["horizon"], d.get("delta", False))
+            delta = d.get("delta", ())
+            delta = delta if isinstance(delta, bool) else tuple(delta)
+            return cls(d["outputs"], d["exogenous"], pairs, d["horizon"], delta)
         except (KeyError, AttributeError, TypeError) as exc:
             raise ConfigError(f"bad DGRNN spec {dict(d)!r}: {exc}") from None
 
@@ -321,7 +333,9 @@ def build_training_pairs(spec: DGRNNSpec, Z: Any) -> tuple[np.ndarray, np.ndarra
     X = np.column_stack([A[L - lag : n - lag, v] for v, lag in zip(fvar, flag, strict=True)])
     Y = A[L:, : len(spec.outputs)]
     if spec.delta:
-        Y = Y - A[L - 1 : n - 1, : len(spec.outputs)]
+        mask = spec.delta_mask().astype(bool)
+        Y = Y.copy()
+        Y[:, mask] -= A[L - 1 : n - 1, : len(spec.outputs)][:, mask]
     ok = ~(np.isnan(X).any(axis=1) | np.isnan(Y).any(axis=1))
     return np.ascontiguousarray(X[ok]), np.ascontiguousarray(Y[ok]), t[ok]
 
@@ -397,8 +411,8 @@ def _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbu
                     return False  # missing sample: prediction pauses, never guesses
                 xbuf[f] = val
         _kernel_row(xbuf, P, PY, inv2s2, dbuf, pred[j])
-        if delta:  # the GRNN gave the change since s - 1; add the level it started from
-            for i in range(nout):
+        for i in range(nout):
+            if delta[i]:  # the GRNN gave the change since s - 1; add the level it started from
                 pred[j, i] += pred[j - 1, i] if j > 0 else Z[s - 1, i]
     for i in range(nout):
         out[i] = pred[p - 1, i]
@@ -438,8 +452,9 @@ def predict_series(model: DGRNN, data: Any, horizon: int | None = None) -> np.nd
     p = _horizon(model, horizon)
     nout = len(model.spec.outputs)
     inv = 0.5 / g.sigma_**2
-    return _predict_series(Z, g.patterns_, g.targets_, inv, fvar, flag, nout, p,
-                           model.spec.delta, n_chunks())
+    return _predict_series(
+        Z, g.patterns_, g.targets_, inv, fvar, flag, nout, p, model.spec.delta_mask(), n_chunks()
+    )
 
 
 class TickPredictor:
@@ -458,6 +473,7 @@ class TickPredictor:
         self.rows_needed = model.spec.rows_needed(self.horizon)
         self._fvar, self._flag = model.spec.feature_columns()
         self._nout = len(model.spec.outputs)
+        self._delta = model.spec.delta_mask()
         self._P, self._PY, self._inv = g.patterns_, g.targets_, 0.5 / g.sigma_**2
         self._xbuf = np.empty(self._fvar.shape[0])
         self._pred = np.empty((self.horizon, self._nout))
@@ -478,7 +494,7 @@ class TickPredictor:
             )
         ok = _predict_at(
             window, window.shape[0] - 1, self._P, self._PY, self._inv, self._fvar, self._flag,
-            self._nout, self.horizon, self.model.spec.delta, self._xbuf, self._pred, self._dbuf, o,
+            self._nout, self.horizon, self._delta, self._xbuf, self._pred, self._dbuf, o,
         )  # fmt: skip
         if not ok:
             o[:] = np.nan

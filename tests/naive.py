@@ -63,8 +63,9 @@ def embed(spec, Z):
     for t in range(spec.max_lag, len(Z)):
         x = [Z[t - lag][cols[name]] for name, lag in spec.features]
         y = list(Z[t][:nout])
-        if getattr(spec, "delta", False):  # targets are changes since the previous sample
-            y = [a - b for a, b in zip(y, Z[t - 1][:nout], strict=True)]
+        for i, name in enumerate(spec.outputs):  # delta outputs: changes since t - 1
+            if name in spec.delta:
+                y[i] = y[i] - Z[t - 1][i]
         if any(math.isnan(v) for v in x + y):
             continue
         X.append(x)
@@ -96,8 +97,9 @@ def multistep(spec, Z, P, Y, sigma, p):
             if not ok:
                 break
             preds[s] = grnn_predict(np.array(x), P, Y, sigma)[0]
-            if getattr(spec, "delta", False):  # add the level the change starts from
-                preds[s] = preds[s] + (preds[s - 1] if s - 1 > k else np.asarray(Z[s - 1][:nout]))
+            for i, name in enumerate(spec.outputs):  # delta outputs: add the level before
+                if name in spec.delta:
+                    preds[s][i] += preds[s - 1][i] if s - 1 > k else Z[s - 1][i]
         if ok:
             out[t] = preds[t]
     return out

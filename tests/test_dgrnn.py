@@ -308,3 +308,20 @@ def test_delta_model_holds_an_unseen_level():
     for spec, expect in ((spec_level, 2.0), (spec_delta, 5.0)):
         model = DGRNN(spec, GRNN(sigma=0.5, thinning="none")).fit(train)
         assert predict_series(model, test)[10, 0] == pytest.approx(expect, abs=1e-6)
+
+
+def test_delta_for_some_outputs_only_matches_naive():
+    spec = DGRNNSpec(SMALL.outputs, SMALL.exogenous, SMALL.lags, delta=("y1",))
+    assert list(spec.delta_mask()) == [1, 0]
+    Z = _loop(800, seed=0)
+    model = DGRNN(spec, GRNN(sigma=0.3, thinning="none")).fit(Z)
+    X, Y, t = build_training_pairs(spec, Z)
+    np.testing.assert_allclose(Y[:, 0], Z[t, 0] - Z[t - 1, 0])
+    np.testing.assert_allclose(Y[:, 1], Z[t, 1])
+    Zt = _loop(200, seed=5, nan_every=41)
+    for p in (1, 3):
+        got = predict_series(model, Zt, horizon=p)
+        want = naive.multistep(spec, Zt, model.grnn.patterns_, model.grnn.targets_, 0.3, p)
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12, equal_nan=True)
+    with pytest.raises(ConfigError, match="must be outputs"):
+        DGRNNSpec(SMALL.outputs, SMALL.exogenous, SMALL.lags, delta=("u",))
