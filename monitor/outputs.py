@@ -84,7 +84,7 @@ class AlarmFrames:
             "Fault": code,
             "J": j if j == j else 0.0,  # NaN (warm-up) goes out as 0; the state says why
             "Threshold": eps0,
-            "AlarmCount": self.alarm_count % 256,
+            "AlarmCount": self.alarm_count % 16,
         }
         return self.codec.encode_message(ALARM, values, bus_time_s)
 
