@@ -103,8 +103,10 @@ def detect(
     events: list[dict[str, Any]] = []
     start = rec.meta.get("start_time_s")
     prev: State | None = None
-    first_fault_label: str | None = None
     first_alarm_t: float | None = None
+    # Isolation votes over the first alarm episode: the label held longest names the fault
+    # (it firms up as evidence accumulates, and may waver on the way).
+    votes: dict[str, int] = {}
     in_first = False
     for i in range(len(rec)):
         state = machine.step(j[i], bool(inputs_ok[i]), engine[i], e[i], regime_of(spool[i]))
@@ -114,12 +116,14 @@ def detect(
             in_first = True
         if in_first:
             if state is State.FAULT:
-                first_fault_label = machine.fault
+                votes[machine.fault] = votes.get(machine.fault, 0) + 1
             else:
                 in_first = False
         if state is not prev:
             events.append(_event(rec, i, state, j[i], model.eps0, machine.fault, start))
             prev = state
+    known = {k: v for k, v in votes.items() if k != "unknown"}
+    first_fault_label = max(known or votes, key=(known or votes).get) if votes else None
     gated = np.isfinite(j)
     summary = {
         "alarm": first_alarm_t is not None,

@@ -176,9 +176,12 @@ PRESETS: dict[str, DGRNNSpec] = {
     # pressure a level and a rate (what a second-order loop needs); the spool command at t
     # and t-1 gives the opening now and its rate (the nominal spool follows the command
     # instantly, so the current command drives the current flows); the pump command, engine
-    # speed and oil temperature change slowly, so their current value is enough.  The GRNN
-    # predicts increments (``delta``): a held pressure at a level no training run visited
-    # is then still predicted to hold.
+    # speed and oil temperature change slowly, so their current value is enough.  PA and PB
+    # are predicted as increments (``delta``): trapped at a held spool, their level depends
+    # on history, and a level no training run visited is then still predicted to hold.  PP
+    # and QP keep level targets: the pump sets them (compensator, displacement x speed) and
+    # the valve opening, so their level is predictable, and a fault that shifts it (a
+    # stroke-limited spool raising PP) stays visible after the transient.
     "default": DGRNNSpec(
         outputs=("PP", "PA", "PB", "QP"),
         exogenous=("SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp"),
@@ -192,7 +195,7 @@ PRESETS: dict[str, DGRNNSpec] = {
             ("EngineSpeed", (0,)),
             ("OilTemp", (0,)),
         ),
-        delta=True,
+        delta=("PA", "PB"),
     ),
 }
 

@@ -33,7 +33,7 @@ Progress = Callable[[str], None]
 class TrainConfig:
     preset: str = "default"
     horizon: int | None = None  # None: the preset's own
-    window_n: int = 1000  # J window N (samples): 10 s spans a whole raise/hold/lower phase
+    window_n: int = 3000  # J window N (samples): 30 s spans several raise/hold/lower phases
     max_patterns: int = 3000
     exclude_neighbours: int = 50  # LOO leaves out +-0.5 s: 100 Hz rows are near copies
     threshold: ThresholdRule = field(default_factory=ThresholdRule)

@@ -15,9 +15,11 @@ from monitor.alarm import State
 from monitor.codec.frames import FrameCodec
 from monitor.daemon import Daemon
 from monitor.io.candump import read_candump
+from monitor.model import load_model
 from monitor.resources import resource_path
 
-SECONDS = 22.0  # the J window (N = 1000) is full after 10 s, so J is live for 12 s
+WINDOW_S = load_model(resource_path("config", "boom_default.model.npz")).window_n / 100.0
+SECONDS = WINDOW_S + 12.0  # the J window is full after WINDOW_S, so J is live for 12 s
 Edit = Callable[[float, str, dict[str, float]], list[tuple[float, dict[str, float]]]]
 
 
@@ -138,23 +140,26 @@ def test_time_jumping_backwards_is_followed(tmp_path) -> None:
 
 
 def test_engine_stopped_is_inactive_and_resumes(tmp_path) -> None:
+    stop_s = WINDOW_S + 3.0  # J is defined before the engine stops
+
     def engine_off(t: float, name: str, values: dict) -> list:
-        if name == "HYD_Commands" and 13.0 <= t < 16.0:
+        if name == "HYD_Commands" and stop_s <= t < stop_s + 3.0:
             values["EngineSpeed"] = 0.0
         return [(t, values)]
 
-    daemon, events = run_daemon(tmp_path, frames(engine_off))
+    daemon, events = run_daemon(tmp_path, frames(engine_off, seconds=stop_s + 9.0))
     assert states(events) == ["normal", "inactive", "normal"]
-    # The window was held, not restarted: J is defined within 6 s of the restart, less
-    # than the 10 s a fresh window needs.
+    # The window was held, not restarted: J is defined 6 s after the restart, far less than
+    # the window a fresh start needs.
     assert daemon.last_j == daemon.last_j
 
 
 def test_whole_bus_silent_is_inactive_and_resumes(tmp_path) -> None:
-    msgs = frames(seconds=20.0)
+    stop_s = WINDOW_S + 5.0  # J is defined before the bus goes silent
+    msgs = frames(seconds=stop_s + 5.0)
     t0 = msgs[0].timestamp
-    first = [m for m in msgs if m.timestamp - t0 < 15.0]
-    rest = [m for m in msgs if m.timestamp - t0 >= 15.0]
+    first = [m for m in msgs if m.timestamp - t0 < stop_s]
+    rest = [m for m in msgs if m.timestamp - t0 >= stop_s]
     for m in rest:
         m.timestamp += 5.0  # the machine was off 5 s
     cfg = live_config(tmp_path, silent_s=0.2)
@@ -170,5 +175,5 @@ def test_whole_bus_silent_is_inactive_and_resumes(tmp_path) -> None:
         daemon.stop()
         sender.shutdown()
     assert states(events) == ["normal", "inactive", "normal"]
-    assert 15.0 < events[1]["t"] < 15.1
+    assert stop_s < events[1]["t"] < stop_s + 0.1
     assert daemon.last_j == daemon.last_j  # window held: J defined 5 s after the restart

@@ -47,9 +47,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--window",
         type=int,
-        default=1000,
+        default=TrainConfig.window_n,
         metavar="N",
-        help="J window N in samples (eq. 9; default 1000 = 10 s)",
+        help=f"J window N in samples (eq. 9; default {TrainConfig.window_n} = "
+        f"{TrainConfig.window_n / 100:g} s)",
     )
     p.add_argument(
         "--max-patterns",
