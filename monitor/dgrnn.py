@@ -172,8 +172,8 @@ PRESETS: dict[str, DGRNNSpec] = {
         exogenous=("PP", "PA", "PB"),
         lags=(("QP", (1, 2)), ("PP", (1, 2)), ("PA", (1, 2)), ("PB", (1, 2))),
     ),
-    # All four measured signals predicted by one kernel pass.  Two output lags give each
-    # pressure a level and a rate (what a second-order loop needs); the spool command at t
+    # All four measured signals predicted by one kernel pass.  Two lags of PA, PB and QP
+    # give a level and a rate (what a second-order loop needs); the spool command at t
     # and t-1 gives the opening now and its rate (the nominal spool follows the command
     # instantly, so the current command drives the current flows); the pump command, engine
     # speed and oil temperature change slowly, so their current value is enough.  PA and PB
@@ -181,12 +181,14 @@ PRESETS: dict[str, DGRNNSpec] = {
     # on history, and a level no training run visited is then still predicted to hold.  PP
     # and QP keep level targets: the pump sets them (compensator, displacement x speed) and
     # the valve opening, so their level is predictable, and a fault that shifts it (a
-    # stroke-limited spool raising PP) stays visible after the transient.
+    # stroke-limited spool raising PP) stays visible after the transient.  PP has no lags
+    # of its own: the 0.5 L pump line settles within milliseconds, so PP is near-algebraic
+    # in the flows and the opening at 100 Hz, and its own past would only let the model
+    # copy a faulty level instead of checking it.
     "default": DGRNNSpec(
         outputs=("PP", "PA", "PB", "QP"),
         exogenous=("SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp"),
         lags=(
-            ("PP", (1, 2)),
             ("PA", (1, 2)),
             ("PB", (1, 2)),
             ("QP", (1, 2)),

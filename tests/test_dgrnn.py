@@ -68,7 +68,9 @@ def test_default_preset():
     spec = DGRNNSpec.preset("default")
     assert spec.outputs == ("PP", "PA", "PB", "QP")
     assert set(spec.exogenous) == {"SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp"}
-    assert ("SpoolCmd", 0) in spec.features and ("PP", 1) in spec.features
+    assert ("SpoolCmd", 0) in spec.features and ("PA", 1) in spec.features
+    assert not any(name == "PP" for name, _ in spec.features)  # PP is checked, not copied
+    assert spec.delta == ("PA", "PB")
     assert all(lag >= 1 for name, lag in spec.features if name in spec.outputs)
     assert DGRNNSpec.from_dict(spec.to_dict()) == spec
     hash(spec)  # frozen and hashable
