@@ -63,6 +63,19 @@ def residual_series(
     return y_hat, e
 
 
+def gated_residuals(
+    model: MonitorModel, rec: Recording, min_engine_rpm: float, horizon: int | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(y_hat, e, inactive, inputs_ok): residuals with engine-off and incomplete rows gated
+    out (NaN), as both the detector and the training's J0 see them."""
+    check_recording(model, rec, horizon)
+    inactive = ~(rec["EngineSpeed"] >= min_engine_rpm)
+    inputs_ok = np.all(np.isfinite(table(rec, model.spec.variables)), axis=1)
+    y_hat, e = residual_series(model, rec, inactive | ~inputs_ok, horizon)
+    e[inactive | ~inputs_ok] = np.nan
+    return y_hat, e, inactive, inputs_ok
+
+
 def check_recording(model: MonitorModel, rec: Recording, horizon: int | None = None) -> None:
     spec = model.spec
     needed = (*spec.variables, "EngineSpeed")
@@ -88,13 +101,9 @@ def detect(
 ) -> Detection:
     """Run the detector over a whole recording."""
     alarm = alarm or AlarmConfig()
-    check_recording(model, rec, horizon)
     spec = model.spec
     engine = rec["EngineSpeed"]
-    inactive = ~(engine >= alarm.min_engine_rpm)
-    inputs_ok = np.all(np.isfinite(table(rec, spec.variables)), axis=1)
-    y_hat, e = residual_series(model, rec, inactive | ~inputs_ok, horizon)
-    e[inactive | ~inputs_ok] = np.nan
+    y_hat, e, _, inputs_ok = gated_residuals(model, rec, alarm.min_engine_rpm, horizon)
     j = window_j(e, model.window_n)
     spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.alarm import N_REGIMES, Isolator, regime_of
+from monitor.alarm import N_REGIMES, AlarmConfig, Isolator, regime_of
 from monitor.dgrnn import DGRNN, PRESETS, DGRNNSpec, Normalizer, table
 from monitor.errors import ConfigError, InputFileError
 from monitor.grnn import GRNN
@@ -87,14 +87,9 @@ def data_hash(arrays: Sequence[np.ndarray]) -> str:
 
 def normal_residuals(model: MonitorModel, rec: Recording) -> np.ndarray:
     """Residuals e over a normal recording, gated exactly as the detector gates them."""
-    from monitor.detector import check_recording, residual_series
+    from monitor.detector import gated_residuals
 
-    check_recording(model, rec)
-    ok = np.all(np.isfinite(table(rec, model.spec.variables)), axis=1)
-    off = ~(rec["EngineSpeed"] >= 500.0)
-    _, e = residual_series(model, rec, off | ~ok)
-    e[off | ~ok] = np.nan
-    return e
+    return gated_residuals(model, rec, AlarmConfig().min_engine_rpm)[1]
 
 
 def train(
