@@ -3,36 +3,29 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 from can.io.canutils import CanutilsLogReader
+from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS
 
 from monitor.codec import load_dbc
 from monitor.errors import InputFileError
 from monitor.io.candump import read_candump, write_candump
 from monitor.io.recording import Recording
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"  # the repo's sibling folder
-REAL_LOGS = SHARED / "data" / "can-logs-real"
-GOOD_LOGS = [
-    "Yaris_09_steering.log",
-    "camaro_candump-2021-04-18_191854.log",
-    "durango_dooropen.log",
-    "evox_only210.log",
-    "forte_testlog.log",
-    "genesis_candump-2021-05-28_164301.log",
-]
-# file, line number of the first malformed line (found by reading the files)
-BAD_LOGS = [("civic8th_test.log", 1), ("evox_linklog2.log", 1096)]
 needs_real_logs = pytest.mark.skipif(
     not REAL_LOGS.is_dir(), reason=f"shared real CAN logs not found at {REAL_LOGS}"
 )
 
 CANDUMP_LINE = re.compile(r"\((\d+\.\d{6})\) can0 ([0-9A-F]{8})#([0-9A-F]{16})")
-IDS = {"HYD_Pressures": 0x0CFF1021, "HYD_Flow": 0x0CFF1121, "HYD_RodPos": 0x0CFF1421,
-       "HYD_Commands": 0x0CFF1203, "HYD_OilTemp": 0x18FF1300}
+IDS = {
+    "HYD_Pressures": 0x0CFF1021,
+    "HYD_Flow": 0x0CFF1121,
+    "HYD_RodPos": 0x0CFF1421,
+    "HYD_Commands": 0x0CFF1203,
+    "HYD_OilTemp": 0x18FF1300,
+}
 
 
 def make_recording(n: int = 250, rod: bool = True) -> Recording:
@@ -66,8 +59,13 @@ def test_log_format_counters_crc_and_frame_counts(tmp_path) -> None:
     log = tmp_path / "x.log"
     counts = write_candump(log, rec)
     # 250 rows of 2.49 s: 10 ms frames on every row, oil temperature at 0, 1 and 2 s
-    assert counts == {"HYD_Pressures": 250, "HYD_Flow": 250, "HYD_RodPos": 250,
-                      "HYD_Commands": 250, "HYD_OilTemp": 3}
+    assert counts == {
+        "HYD_Pressures": 250,
+        "HYD_Flow": 250,
+        "HYD_RodPos": 250,
+        "HYD_Commands": 250,
+        "HYD_OilTemp": 3,
+    }
     lines = log.read_text().splitlines()
     assert len(lines) == sum(counts.values())
     assert lines[0].startswith("(1700000000.000000) can0 0CFF1021#")
@@ -97,8 +95,11 @@ def test_python_can_and_cantools_read_our_log(tmp_path) -> None:
     msgs = list(CanutilsLogReader(log))
     assert len(msgs) == 4 * 120 + 2
     db = load_dbc()
-    pp = [db.decode_message(m.arbitration_id, m.data)["PP"] for m in msgs
-          if m.arbitration_id == IDS["HYD_Pressures"]]
+    pp = [
+        db.decode_message(m.arbitration_id, m.data)["PP"]
+        for m in msgs
+        if m.arbitration_id == IDS["HYD_Pressures"]
+    ]
     np.testing.assert_allclose(pp, rec["PP"], atol=0.005 + 1e-9)
     first = msgs[0]
     assert first.is_extended_id and first.dlc == 8
@@ -130,17 +131,31 @@ def test_values_are_clipped_to_dbc_range(tmp_path) -> None:
     write_candump(tmp_path / "x.log", rec)
     db = load_dbc()
     msgs = list(read_candump(tmp_path / "x.log"))
-    pp = {db.decode_message(m.arbitration_id, m.data)["PP"] for m in msgs
-          if m.arbitration_id == IDS["HYD_Pressures"]}
-    qp = {db.decode_message(m.arbitration_id, m.data)["QP"] for m in msgs
-          if m.arbitration_id == IDS["HYD_Flow"]}
+    pp = {
+        db.decode_message(m.arbitration_id, m.data)["PP"]
+        for m in msgs
+        if m.arbitration_id == IDS["HYD_Pressures"]
+    }
+    qp = {
+        db.decode_message(m.arbitration_id, m.data)["QP"]
+        for m in msgs
+        if m.arbitration_id == IDS["HYD_Flow"]
+    }
     assert pp == {400.0} and qp == {0.0}
 
 
 @pytest.mark.parametrize(
     "bad_line",
-    ["0x1dc", "(1606770", "(1.0) can0 123#ABC", "(1.0) can0 1234#00", "(1.0) can0 123#GG",
-     "(1.0) can0 123#001122334455667788", "1.0 can0 123#00", "(1.0) can0"],
+    [
+        "0x1dc",
+        "(1606770",
+        "(1.0) can0 123#ABC",
+        "(1.0) can0 1234#00",
+        "(1.0) can0 123#GG",
+        "(1.0) can0 123#001122334455667788",
+        "1.0 can0 123#00",
+        "(1.0) can0",
+    ],
 )
 def test_malformed_lines_name_file_and_line(tmp_path, bad_line: str) -> None:
     log = tmp_path / "bad.log"

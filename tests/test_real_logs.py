@@ -4,14 +4,14 @@ traceback; the two malformed logs are refused naming file and line (exit 2)."""
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
+from shared_data import BAD_LOGS
+from shared_data import REAL_LOGS as LOGS
 
 from monitor.cli import main
 
-LOGS = Path(__file__).resolve().parents[2] / "shared" / "data" / "can-logs-real"
-MALFORMED = {"civic8th_test.log", "evox_linklog2.log"}
+MALFORMED = {name for name, _ in BAD_LOGS}
 
 pytestmark = pytest.mark.skipif(
     not LOGS.is_dir(), reason=f"real CAN logs not available at {LOGS} (../shared is not cloned)"

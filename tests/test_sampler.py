@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import GOOD_LOGS, REAL_LOGS
 
 from monitor.codec import FrameCodec
 from monitor.errors import InputFileError, NoHydraulicDataError
@@ -16,19 +17,18 @@ from monitor.io.recording import Recording
 from monitor.sampler import ROW_COLUMNS, Sampler, recording_from_candump
 from monitor.signals import SIGNAL_NAMES
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"  # the repo's sibling folder
-REAL_LOGS = SHARED / "data" / "can-logs-real"
-GOOD_LOGS = [
-    "Yaris_09_steering.log",
-    "camaro_candump-2021-04-18_191854.log",
-    "durango_dooropen.log",
-    "evox_only210.log",
-    "forte_testlog.log",
-    "genesis_candump-2021-05-28_164301.log",
-]
 # DBC resolution per signal: half a quantisation step is the largest round-trip error
-HALF_STEP = {"SpoolCmd": 0.005, "PumpDispCmd": 0.005, "EngineSpeed": 0.0625, "OilTemp": 0.015625,
-             "PP": 0.005, "PA": 0.005, "PB": 0.005, "QP": 0.005, "RodPos": 0.005}
+HALF_STEP = {
+    "SpoolCmd": 0.005,
+    "PumpDispCmd": 0.005,
+    "EngineSpeed": 0.0625,
+    "OilTemp": 0.015625,
+    "PP": 0.005,
+    "PA": 0.005,
+    "PB": 0.005,
+    "QP": 0.005,
+    "RodPos": 0.005,
+}
 COL = {name: 1 + i for i, name in enumerate(ROW_COLUMNS)}  # row index of each signal
 
 
