@@ -118,12 +118,15 @@ def train(
         f"{cfg.exclude_neighbours} samples excluded) in {time.perf_counter() - started:.1f} s"
     )
     model = MonitorModel(dgrnn, normalizer, cfg.window_n, cfg.threshold, math.nan, math.nan)
+    # Held-out residuals once, unbounded; the bound (if any) is learnt from them and then
+    # applied exactly as the detector applies it.
+    e_val = [normal_residuals(model, r) for r in val_part]
     if cfg.residual_clip_quantile is not None:
-        e_val = np.concatenate([normal_residuals(model, r) for r in val_part])
-        clip = np.nanquantile(np.abs(e_val), cfg.residual_clip_quantile, axis=0)
+        clip = np.nanquantile(np.abs(np.concatenate(e_val)), cfg.residual_clip_quantile, axis=0)
         model.residual_clip = tuple(float(c) for c in clip)
         say(f"  residual bound |e| <= {', '.join(f'{c:.3g}' for c in clip)} (z, per output)")
-    j_val = np.concatenate([window_j(normal_residuals(model, r), cfg.window_n) for r in val_part])
+        e_val = [np.clip(e, -clip, clip) for e in e_val]
+    j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
     model.j0, model.eps0 = cfg.threshold.eps0(j_val)
     say(
         f"  J0 {model.j0:.4g} ({cfg.threshold.rule} of J on {len(val_part)} held-out part(s)),"

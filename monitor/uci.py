@@ -52,6 +52,15 @@ CYCLE_TIME = "CycleTime"  # derived signal: seconds since the start of the cycle
 #: The rig's sensors that play the paper's signal roles (DESIGN.md names).
 ROLES = {"PP": "PS1", "QP": "FS1", "PA": "PS2", "PB": "PS3"}
 
+_RIG_LAGS = (
+    ("PS1", (1, 2)),
+    ("PS2", (1, 2)),
+    ("PS3", (1, 2)),
+    ("FS1", (1, 2)),
+    ("EPS1", (0, 1)),
+    (CYCLE_TIME, (0,)),
+)
+
 UCI_PRESETS: dict[str, DGRNNSpec] = {
     "paper": DGRNNSpec(
         outputs=("FS1",),
@@ -61,28 +70,13 @@ UCI_PRESETS: dict[str, DGRNNSpec] = {
     "rig": DGRNNSpec(
         outputs=("PS1", "PS2", "PS3", "FS1"),
         exogenous=("EPS1", CYCLE_TIME),
-        lags=(
-            ("PS1", (1, 2)),
-            ("PS2", (1, 2)),
-            ("PS3", (1, 2)),
-            ("FS1", (1, 2)),
-            ("EPS1", (0, 1)),
-            (CYCLE_TIME, (0,)),
-        ),
-    ),  # fmt: skip
-    "rig_temp": DGRNNSpec(
+        lags=_RIG_LAGS,
+    ),
+    "rig_temp": DGRNNSpec(  # rig plus the oil temperature TS1
         outputs=("PS1", "PS2", "PS3", "FS1"),
         exogenous=("EPS1", "TS1", CYCLE_TIME),
-        lags=(
-            ("PS1", (1, 2)),
-            ("PS2", (1, 2)),
-            ("PS3", (1, 2)),
-            ("FS1", (1, 2)),
-            ("EPS1", (0, 1)),
-            ("TS1", (0,)),
-            (CYCLE_TIME, (0,)),
-        ),
-    ),  # fmt: skip
+        lags=(*_RIG_LAGS[:-1], ("TS1", (0,)), _RIG_LAGS[-1]),
+    ),
 }
 
 #: J windows tried (N; the window holds N + 1 samples): a load phase of the cycle is ~10 s.

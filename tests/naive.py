@@ -118,3 +118,13 @@ def window_j(s, N):
             window.pop(0)
         out.append(math.fsum(window) / (N + 1) if len(window) == N + 1 else math.nan)
     return np.array(out)
+
+
+def crc8_bitwise(data: bytes) -> int:
+    """Textbook bit-by-bit CRC-8/SAE-J1850, independent of the code under test."""
+    reg = 0xFF
+    for byte in data:
+        reg ^= byte
+        for _ in range(8):
+            reg = ((reg << 1) ^ 0x1D) & 0xFF if reg & 0x80 else (reg << 1) & 0xFF
+    return reg ^ 0xFF

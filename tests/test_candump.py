@@ -7,6 +7,7 @@ import re
 import numpy as np
 import pytest
 from can.io.canutils import CanutilsLogReader
+from naive import crc8_bitwise
 from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS
 
 from monitor.codec import load_dbc
@@ -43,15 +44,6 @@ def make_recording(n: int = 250, rod: bool = True) -> Recording:
     if rod:
         cols["RodPos"] = 250 + 100 * np.sin(t)
     return Recording(t, cols)
-
-
-def crc8_bitwise(data: bytes) -> int:
-    reg = 0xFF
-    for byte in data:
-        reg ^= byte
-        for _ in range(8):
-            reg = ((reg << 1) ^ 0x1D) & 0xFF if reg & 0x80 else (reg << 1) & 0xFF
-    return reg ^ 0xFF
 
 
 def test_log_format_counters_crc_and_frame_counts(tmp_path) -> None:

@@ -6,6 +6,7 @@ import os
 import random
 
 import pytest
+from naive import crc8_bitwise
 
 from monitor.codec import FrameCodec, Rejection, crc8_sae_j1850, load_dbc
 from monitor.codec.crc import CHECK_VALUE, reference_calculator
@@ -14,16 +15,6 @@ from monitor.errors import ConfigError
 PRESSURES_ID = 0x0CFF1021  # 2365526049 in the DBC, with the extended-frame bit 31 cleared
 COMMANDS_ID = 0x0CFF1203
 OILTEMP_ID = 0x18FF1300
-
-
-def crc8_bitwise(data: bytes) -> int:
-    """Textbook bit-by-bit CRC-8/SAE-J1850, independent of the code under test."""
-    reg = 0xFF
-    for byte in data:
-        reg ^= byte
-        for _ in range(8):
-            reg = ((reg << 1) ^ 0x1D) & 0xFF if reg & 0x80 else (reg << 1) & 0xFF
-    return reg ^ 0xFF
 
 
 @pytest.fixture
@@ -175,15 +166,24 @@ def test_load_dbc_errors_name_the_file(tmp_path) -> None:
     with pytest.raises(ConfigError, match="nope.dbc"):
         load_dbc(missing)
     broken = tmp_path / "broken.dbc"
-    broken.write_text('VERSION ""\nBO_ 1 X: 8 N\n SG_ A : 0|16@1+ (1,0) [0|1] "" N\n'
-                      ' SG_ B : 8|16@1+ (1,0) [0|1] "" N\n')  # overlapping signals
+    broken.write_text(
+        'VERSION ""\nBO_ 1 X: 8 N\n SG_ A : 0|16@1+ (1,0) [0|1] "" N\n'
+        ' SG_ B : 8|16@1+ (1,0) [0|1] "" N\n'
+    )  # overlapping signals
     with pytest.raises(ConfigError, match="broken.dbc"):
         load_dbc(broken)
 
 
 def test_shipped_dbc_messages(codec: FrameCodec) -> None:
     names = set(codec.messages)
-    assert {"HYD_Pressures", "HYD_Flow", "HYD_RodPos", "HYD_Commands", "HYD_OilTemp",
-            "MON_Alarm", "MON_Status"} <= names
+    assert {
+        "HYD_Pressures",
+        "HYD_Flow",
+        "HYD_RodPos",
+        "HYD_Commands",
+        "HYD_OilTemp",
+        "MON_Alarm",
+        "MON_Status",
+    } <= names
     cycles = codec.signal_cycle_times()
     assert cycles["PP"] == 0.01 and cycles["OilTemp"] == 1.0
