@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Rebuilds the shipped model config/boom_default.model.npz from simulated normal boom duty
 # cycles (8 x 300 s, seeds 1-8; the last two are held out for J0), default preset, p = 1,
-# N = 3000, eps0 = 2 x max normal J.  Takes about a minute.
+# at most 6000 patterns (clusters), N = 3000, eps0 = 2 x max normal J.  About a minute.
 #   bash config/train_default_model.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"

@@ -393,7 +393,7 @@ class DGRNN:
 
 
 @jit
-def _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbuf, out):
+def _predict_at(Z, t, P, PY, LW, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbuf, out):
     """Eq. 7: y_hat(t) from the measured history up to k = t - p; False if not predictable.
 
     ``pred`` (p, nout) holds y_hat(k+1..t); an output needed at row r > k is taken from it,
@@ -415,7 +415,7 @@ def _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbu
                 if np.isnan(val):
                     return False  # missing sample: prediction pauses, never guesses
                 xbuf[f] = val
-        _kernel_row(xbuf, P, PY, inv2s2, dbuf, pred[j])
+        _kernel_row(xbuf, P, PY, LW, inv2s2, dbuf, pred[j])
         for i in range(nout):
             if delta[i]:  # the GRNN gave the change since s - 1; add the level it started from
                 pred[j, i] += pred[j - 1, i] if j > 0 else Z[s - 1, i]
@@ -425,7 +425,7 @@ def _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbu
 
 
 @pjit
-def _predict_series(Z, P, PY, inv2s2, fvar, flag, nout, p, delta, nchunk):  # pragma: no cover
+def _predict_series(Z, P, PY, LW, inv2s2, fvar, flag, nout, p, delta, nchunk):  # pragma: no cover
     n = Z.shape[0]
     out = np.full((n, nout), np.nan)
     nchunk = max(1, min(n, nchunk))
@@ -434,7 +434,9 @@ def _predict_series(Z, P, PY, inv2s2, fvar, flag, nout, p, delta, nchunk):  # pr
         pred = np.empty((p, nout))
         dbuf = np.empty(P.shape[0])
         for t in range(c * n // nchunk, (c + 1) * n // nchunk):
-            _predict_at(Z, t, P, PY, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbuf, out[t])
+            _predict_at(
+                Z, t, P, PY, LW, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbuf, out[t]
+            )
     return out
 
 
@@ -457,8 +459,10 @@ def predict_series(model: DGRNN, data: Any, horizon: int | None = None) -> np.nd
     p = _horizon(model, horizon)
     nout = len(model.spec.outputs)
     inv = 0.5 / g.sigma_**2
+    lw = np.log(g.counts_)
+    delta = model.spec.delta_mask()
     return _predict_series(
-        Z, g.patterns_, g.targets_, inv, fvar, flag, nout, p, model.spec.delta_mask(), n_chunks()
+        Z, g.patterns_, g.targets_, lw, inv, fvar, flag, nout, p, delta, n_chunks()
     )
 
 
@@ -480,6 +484,7 @@ class TickPredictor:
         self._nout = len(model.spec.outputs)
         self._delta = model.spec.delta_mask()
         self._P, self._PY, self._inv = g.patterns_, g.targets_, 0.5 / g.sigma_**2
+        self._LW = np.log(g.counts_)
         self._xbuf = np.empty(self._fvar.shape[0])
         self._pred = np.empty((self.horizon, self._nout))
         self._dbuf = np.empty(self._P.shape[0])
@@ -498,7 +503,8 @@ class TickPredictor:
                 f"a tick row needs {len(self.model.spec.variables)} columns, got {window.shape[1]}"
             )
         ok = _predict_at(
-            window, window.shape[0] - 1, self._P, self._PY, self._inv, self._fvar, self._flag,
+            window, window.shape[0] - 1, self._P, self._PY, self._LW, self._inv, self._fvar,
+            self._flag,
             self._nout, self.horizon, self._delta, self._xbuf, self._pred, self._dbuf, o,
         )  # fmt: skip
         if not ok:

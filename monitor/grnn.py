@@ -4,9 +4,19 @@
 
 Inputs are already z-scored (see ``monitor.dgrnn.Normalizer``); everything is float64.
 
+Pattern selection keeps the count bounded (``thinning``).  With ``min_distance`` thinning the
+GRNN is Specht's (1991) clustered form: every training row joins its nearest kept row, and
+the cluster, placed at its members' mean input ``x_i`` with their mean target ``y_i``,
+weighs ``c_i exp(-d_i)`` for ``c_i`` members.  That is eq. 4 over the training rows with
+each row moved to its cluster's centroid, so the pattern set stays small but still knows
+how often the machine sat where: a hold (thousands of rows in one cluster) outweighs the few
+rows of a transient passing close by.
+Unthinned or strided patterns each count once, which is eq. 4 exactly.  Kernels take
+``logw = log(c)`` and fold it into the exponent.
+
 Numerical stability: every weight is computed as ``exp(d_min - d_i)`` with ``d_min`` the
-smallest distance of that query.  The common factor ``exp(-d_min)`` cancels between numerator
-and denominator, so the value is eq. 4 exactly, but the nearest pattern always weighs 1: the
+smallest (log-weighted) distance of that query.  The common factor cancels between numerator
+and denominator, so the value is eq. 4 exactly, but the dominant pattern always weighs 1: the
 denominator is >= 1 and a query far from every pattern (where every plain ``exp(-d_i)``
 underflows to 0 and eq. 4 would be 0/0) returns the target of its nearest pattern(s).
 
@@ -42,8 +52,10 @@ def n_chunks() -> int:
 
 
 @jit
-def _kernel_row(x, patterns, targets, inv2s2, dbuf, out):  # pragma: no cover - numba
+def _kernel_row(x, patterns, targets, logw, inv2s2, dbuf, out):  # pragma: no cover - numba
     """Eq. 4 for one query ``x`` into ``out`` (n_outputs,); ``dbuf`` is scratch (n_patterns,).
+
+    ``logw`` (n_patterns,) is log of each pattern's member count (all 0: plain eq. 4).
 
     A query with no finite distance (NaN in ``x``) gives NaN outputs: missing data stays
     visible instead of becoming a plausible-looking number.
@@ -56,7 +68,7 @@ def _kernel_row(x, patterns, targets, inv2s2, dbuf, out):  # pragma: no cover - 
         for f in range(nf):
             diff = x[f] - patterns[i, f]
             acc += diff * diff
-        d = acc * inv2s2
+        d = acc * inv2s2 - logw[i]
         dbuf[i] = d
         if d < dmin:
             dmin = d
@@ -77,7 +89,7 @@ def _kernel_row(x, patterns, targets, inv2s2, dbuf, out):  # pragma: no cover - 
 
 
 @pjit
-def _predict_batch(X, patterns, targets, inv2s2, nchunk):  # pragma: no cover - numba
+def _predict_batch(X, patterns, targets, logw, inv2s2, nchunk):  # pragma: no cover - numba
     nq = X.shape[0]
     out = np.empty((nq, targets.shape[1]))
     # Chunks rather than one prange step per query: one scratch buffer per chunk, not per row.
@@ -85,61 +97,117 @@ def _predict_batch(X, patterns, targets, inv2s2, nchunk):  # pragma: no cover - 
     for c in prange(nchunk):
         dbuf = np.empty(patterns.shape[0])
         for q in range(c * nq // nchunk, (c + 1) * nq // nchunk):
-            _kernel_row(X[q], patterns, targets, inv2s2, dbuf, out[q])
+            _kernel_row(X[q], patterns, targets, logw, inv2s2, dbuf, out[q])
     return out
 
 
 @pjit
-def _masked_sqdist(Q, qidx, P, pidx, m):  # pragma: no cover - numba
-    """Squared distances query x pattern; +inf where the two are <= m samples apart in time.
-
-    Distances do not depend on sigma, so the LOO search computes them once and each sigma
-    evaluation costs one exp per entry.
-    """
+def _sqdist(Q, P):  # pragma: no cover - numba
+    """Squared distances query x pattern (sigma-free, so the LOO search computes them once)."""
     nq, nf = Q.shape
     n = P.shape[0]
     D = np.empty((nq, n))
-    rowmin = np.empty(nq)
     for q in prange(nq):
-        best = np.inf
         for i in range(n):
-            if abs(qidx[q] - pidx[i]) <= m:
-                D[q, i] = np.inf
-                continue
             acc = 0.0
             for f in range(nf):
                 diff = Q[q, f] - P[i, f]
                 acc += diff * diff
             D[q, i] = acc
-            if acc < best:
-                best = acc
-        rowmin[q] = best
-    return D, rowmin
+    return D
 
 
 @pjit
-def _loo_errors(D, rowmin, Qy, Py, inv2s2):  # pragma: no cover - numba
-    """Per-query squared error (mean over outputs) of eq. 4 without the excluded patterns."""
+def _nearest(X, P):  # pragma: no cover - numba
+    """Index of the nearest pattern for every row of X (first one on ties)."""
+    out = np.empty(X.shape[0], dtype=np.int64)
+    for q in prange(X.shape[0]):
+        best = np.inf
+        k = 0
+        for i in range(P.shape[0]):
+            acc = 0.0
+            for f in range(P.shape[1]):
+                diff = X[q, f] - P[i, f]
+                acc += diff * diff
+            if acc < best:
+                best = acc
+                k = i
+        out[q] = k
+    return out
+
+
+@pjit
+def _loo_errors(D, Xq, qrow, lo, hi, assign, X, Y, counts, xsums, ysums, inv2s2, nchunk):
+    """Per-query squared error (mean over outputs) with the query's temporal neighbours
+    (rows lo[q]..hi[q]-1) taken out of the clusters they belong to.
+
+    ``D`` holds squared distances from the queries to the full clusters' centroids; a
+    cluster that loses members gets its centroid and distance recomputed.  Counts are
+    integers held in float64, so removing and restoring them is exact; sums are restored by
+    copying, never by adding back.
+    """  # pragma: no cover - numba
     nq, n = D.shape
-    nout = Py.shape[1]
+    nf, nout = X.shape[1], Y.shape[1]
     err = np.empty(nq)
-    for q in prange(nq):
-        if not rowmin[q] < np.inf:
-            err[q] = np.nan  # no eligible pattern: this query cannot be scored
-            continue
-        num = np.zeros(nout)
-        den = 0.0
-        for i in range(n):
-            # (rowmin - inf) * s = -inf -> weight 0: excluded neighbours drop out.
-            w = math.exp((rowmin[q] - D[q, i]) * inv2s2)
-            den += w
-            for k in range(nout):
-                num[k] += w * Py[i, k]
-        acc = 0.0
-        for k in range(nout):
-            e = num[k] / den - Qy[q, k]
-            acc += e * e
-        err[q] = acc / nout
+    nchunk = max(1, min(nq, nchunk))
+    for c in prange(nchunk):
+        cnt = counts.copy()
+        xs = xsums.copy()
+        ys = ysums.copy()
+        touched = np.zeros(n, dtype=np.bool_)
+        dbuf = np.empty(n)
+        num = np.empty(nout)
+        for q in range(c * nq // nchunk, (c + 1) * nq // nchunk):
+            for j in range(lo[q], hi[q]):
+                a = assign[j]
+                if a >= 0:
+                    touched[a] = True
+                    cnt[a] -= 1.0
+                    for f in range(nf):
+                        xs[a, f] -= X[j, f]
+                    for k in range(nout):
+                        ys[a, k] -= Y[j, k]
+            dmin = np.inf
+            for i in range(n):
+                d = np.inf
+                if cnt[i] > 0.5:
+                    d2 = D[q, i]
+                    if touched[i]:
+                        d2 = 0.0
+                        for f in range(nf):
+                            diff = Xq[q, f] - xs[i, f] / cnt[i]
+                            d2 += diff * diff
+                    d = d2 * inv2s2 - math.log(cnt[i])
+                    if d < dmin:
+                        dmin = d
+                dbuf[i] = d
+            if dmin < np.inf:
+                for k in range(nout):
+                    num[k] = 0.0
+                den = 0.0
+                for i in range(n):
+                    if dbuf[i] < np.inf:
+                        # Weight c_i exp(-d_i) times the member mean ys_i / c_i.
+                        w = math.exp(dmin - dbuf[i])
+                        den += w
+                        for k in range(nout):
+                            num[k] += w * ys[i, k] / cnt[i]
+                acc = 0.0
+                for k in range(nout):
+                    e = num[k] / den - Y[qrow[q], k]
+                    acc += e * e
+                err[q] = acc / nout
+            else:
+                err[q] = np.nan  # every cluster is a neighbour: this query cannot be scored
+            for j in range(lo[q], hi[q]):
+                a = assign[j]
+                if a >= 0 and touched[a]:
+                    touched[a] = False
+                    cnt[a] = counts[a]
+                    for f in range(nf):
+                        xs[a, f] = xsums[a, f]
+                    for k in range(nout):
+                        ys[a, k] = ysums[a, k]
     return err
 
 
@@ -213,10 +281,22 @@ def _check_time_index(time_index: Any, n: int) -> np.ndarray:
 # --------------------------------------------------------------------------- public functions
 
 
-def grnn_predict(X: Any, patterns: Any, targets: Any, sigma: float) -> np.ndarray:
+def _check_counts(counts: Any, n: int) -> np.ndarray:
+    if counts is None:
+        return np.ones(n)
+    c = np.asarray(counts, dtype=np.float64)
+    if c.shape != (n,) or not np.all(np.isfinite(c)) or np.any(c < 1) or np.any(c != np.round(c)):
+        raise InputFileError(f"counts must be {n} whole numbers >= 1 (one per pattern)")
+    return c
+
+
+def grnn_predict(
+    X: Any, patterns: Any, targets: Any, sigma: float, counts: Any = None
+) -> np.ndarray:
     """Eq. 4 for every row of ``X``; returns (n_queries, n_outputs).
 
     ``patterns`` (n_patterns, n_features) must be finite; a query row with NaN gives NaN.
+    ``counts`` (members per pattern, default 1 each) gives Specht's clustered form.
     """
     P = _as_matrix(patterns, "patterns")
     Y = _as_matrix(targets, "targets")
@@ -231,33 +311,82 @@ def grnn_predict(X: Any, patterns: Any, targets: Any, sigma: float) -> np.ndarra
     _require_finite(P, "patterns")
     _require_finite(Y, "targets")
     s = _check_sigma(sigma)
-    return _predict_batch(Xq, P, Y, 0.5 / (s * s), n_chunks())
+    logw = np.log(_check_counts(counts, P.shape[0]))
+    return _predict_batch(Xq, P, Y, logw, 0.5 / (s * s), n_chunks())
+
+
+def cluster(
+    X: Any, Y: Any, seeds: Any
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Specht's clusters: every row of X joins its nearest seed (a kept row).
+
+    Returns (assign, counts, centroids, mean targets): ``assign[j]`` is row j's cluster; a
+    cluster is represented by its members' mean input and mean target, so a locally linear
+    map keeps its value (the seed itself is the first row greedy thinning met, usually at
+    one end of its members).  A seed with no member (impossible when the seeds are rows of
+    X) would get count 0.
+    """
+    Xa, Ya, P = _as_matrix(X, "X"), _as_matrix(Y, "Y"), _as_matrix(seeds, "seeds")
+    assign = _nearest(Xa, P)
+    counts = np.bincount(assign, minlength=P.shape[0]).astype(np.float64)
+    xs = np.zeros(P.shape)
+    np.add.at(xs, assign, Xa)
+    ys = np.zeros((P.shape[0], Ya.shape[1]))
+    np.add.at(ys, assign, Ya)
+    with np.errstate(invalid="ignore"):
+        return assign, counts, xs / counts[:, None], ys / counts[:, None]
+
+
+def _neighbour_ranges(tidx: np.ndarray, rows: np.ndarray, m: int) -> tuple[np.ndarray, ...]:
+    lo = np.searchsorted(tidx, tidx[rows] - m, side="left").astype(np.int64)
+    hi = np.searchsorted(tidx, tidx[rows] + m, side="right").astype(np.int64)
+    return lo, hi
 
 
 def loo_errors(
-    queries: Any,
-    query_targets: Any,
-    patterns: Any,
-    targets: Any,
+    rows: Any,
+    X: Any,
+    Y: Any,
+    assign: Any,
     sigma: float,
     exclude_neighbours: int = 0,
-    query_index: Any = None,
-    pattern_index: Any = None,
+    time_index: Any = None,
 ) -> np.ndarray:
-    """Squared error per query (mean over outputs) with patterns <= m samples away left out.
+    """Leave-one-out squared error (mean over outputs) for the training rows ``rows``.
 
-    With ``queries is patterns`` and the same (default) time index this is leave-one-out
-    with temporal neighbours excluded.  A query with no eligible pattern gets NaN.
+    Row j of (X, Y) is a member of cluster ``assign[j]`` (-1: of none); a cluster sits at
+    its members' mean input, with their mean target and their count as weight.  For each
+    query row, every row within ``exclude_neighbours`` samples of it in time
+    (``time_index``, default 0..n-1) leaves its cluster first, so neither the query nor its
+    near copies predict it.  With one member per cluster this is plain LOO of eq. 4 over
+    the patterns more than m samples away.  A query whose every cluster empties gets NaN.
     """
-    Q = _as_matrix(queries, "queries")
-    Qy = _as_matrix(query_targets, "query_targets")
-    P = _as_matrix(patterns, "patterns")
-    Py = _as_matrix(targets, "targets")
-    qidx = _check_time_index(query_index, Q.shape[0])
-    pidx = _check_time_index(pattern_index, P.shape[0])
-    D, rowmin = _masked_sqdist(Q, qidx, P, pidx, int(exclude_neighbours))
+    Xa, Ya = _as_matrix(X, "X"), _as_matrix(Y, "Y")
+    tidx = _check_time_index(time_index, Xa.shape[0])
+    q = np.asarray(rows, dtype=np.int64)
+    a = np.asarray(assign, dtype=np.int64)
+    if a.shape != (Xa.shape[0],) or np.any(a < -1):
+        raise ConfigError(f"assign must hold a cluster index or -1 for each of {Xa.shape[0]} rows")
     s = _check_sigma(sigma)
-    return _loo_errors(D, rowmin, Qy, Py, 0.5 / (s * s))
+    args = _loo_setup(q, Xa, Ya, tidx, int(exclude_neighbours), a)
+    return _loo_errors(*args, 0.5 / (s * s), n_chunks())
+
+
+def _loo_setup(q, X, Y, tidx, m, assign) -> tuple:
+    """The sigma-free part of the LOO: cluster sums, neighbour ranges, distances."""
+    member = assign >= 0
+    n = int(assign.max()) + 1 if member.any() else 0
+    counts = np.bincount(assign[member], minlength=n).astype(np.float64)
+    xsums = np.zeros((n, X.shape[1]))
+    np.add.at(xsums, assign[member], X[member])
+    ysums = np.zeros((n, Y.shape[1]))
+    np.add.at(ysums, assign[member], Y[member])
+    lo, hi = _neighbour_ranges(tidx, q, m)
+    with np.errstate(invalid="ignore"):
+        centroids = np.ascontiguousarray(xsums / counts[:, None])
+    Xq = np.ascontiguousarray(X[q])
+    D = _sqdist(Xq, centroids)
+    return D, Xq, q, lo, hi, assign, X, Y, counts, xsums, ysums
 
 
 def thin_min_distance(X: Any, radius: float, max_keep: int | None = None) -> np.ndarray | None:
@@ -287,16 +416,21 @@ class GRNN:
         (after the stride, greedy in time order: keep a row only if farther than
         ``min_distance`` from all kept rows; if more than ``max_patterns`` would stay, the
         radius is doubled until the bound holds and then bisected so the count ends close to
-        it; the radius used is recorded).  Kept patterns carry their own targets, so
-        predictions are eq. 4 exactly over the kept set.  The kept set covers the data
-        evenly rather than by density, so rare transients keep their patterns.
+        it; the radius used is recorded).  The kept rows seed clusters: every training row
+        joins its nearest seed, and the pattern is the cluster's mean input and mean target,
+        weighted by its member count (Specht's clustered GRNN; see the module docstring).
+        The seeds cover the data evenly, so rare transients keep their own patterns; the
+        counts keep the density.  With ``none`` and ``stride`` each kept row is a pattern
+        that counts once (eq. 4 exactly).
     loo_max_queries : the LOO error is evaluated on at most this many training rows (evenly
-        spread in time), each predicted from the kept patterns.
+        spread in time), each predicted from the clusters with its temporal neighbours
+        taken out.
     sigma_bounds : (lo, hi) for the search; default from the data's distance scale.
 
-    Fitted attributes: ``patterns_``, ``targets_``, ``sigma_``, ``sigma_rule_``,
-    ``pattern_index_`` (time index of each kept pattern), ``thinning_`` (dict: rule, stride,
-    min_distance actually used, rows in, patterns kept), ``loo_error_`` (NaN when fixed),
+    Fitted attributes: ``patterns_``, ``targets_``, ``counts_`` (members per pattern),
+    ``sigma_``, ``sigma_rule_``, ``pattern_index_`` (time index of each pattern's seed row),
+    ``thinning_`` (dict: rule, stride, min_distance actually used, rows in, patterns kept,
+    weights), ``loo_error_`` (NaN when fixed),
     ``exclude_neighbours_``, ``n_features_in_``, ``n_outputs_``.
     """
 
@@ -372,16 +506,24 @@ class GRNN:
         tidx = _check_time_index(time_index, Xa.shape[0])
 
         keep, thinning = self._thin(Xa)
-        P, Py, pidx = Xa[keep], Ya[keep], tidx[keep]
+        P, pidx = np.ascontiguousarray(Xa[keep]), tidx[keep]
+        if thinning["rule"] == "min_distance":
+            assign, counts, P, Py = cluster(Xa, Ya, P)
+        else:  # each kept row is its own pattern; the rows between strides belong to none
+            assign = np.full(Xa.shape[0], -1, dtype=np.int64)
+            assign[keep] = np.arange(len(keep))
+            counts, Py = np.ones(len(keep)), Ya[keep]
+        thinning["weights"] = "cluster_counts" if thinning["rule"] == "min_distance" else "none"
 
         if self.sigma is not None:
             sigma, rule, loo = _check_sigma(self.sigma), "fixed", math.nan
         else:
-            sigma, loo = self._loo_sigma(Xa, Ya, tidx, P, Py, pidx)
+            sigma, loo = self._loo_sigma(Xa, Ya, tidx, assign)
             rule = "loo"
 
-        self.patterns_ = np.ascontiguousarray(P)
+        self.patterns_ = P
         self.targets_ = np.ascontiguousarray(Py)
+        self.counts_ = counts
         self.pattern_index_ = pidx
         self.sigma_ = float(sigma)
         self.sigma_rule_ = rule
@@ -434,14 +576,14 @@ class GRNN:
         }
         return idx, info
 
-    def _loo_sigma(self, X, Y, tidx, P, Py, pidx) -> tuple[float, float]:
+    def _loo_sigma(self, X, Y, tidx, assign) -> tuple[float, float]:
         n = X.shape[0]
-        nq = min(n, int(self.loo_max_queries), max(1, _LOO_MAX_ENTRIES // P.shape[0]))
+        n_clusters = int(assign.max()) + 1
+        nq = min(n, int(self.loo_max_queries), max(1, _LOO_MAX_ENTRIES // n_clusters))
         q = np.unique(np.linspace(0, n - 1, nq).round().astype(np.int64))
         m = int(self.exclude_neighbours)
-        D, rowmin = _masked_sqdist(np.ascontiguousarray(X[q]), tidx[q], P, pidx, m)
-        Qy = np.ascontiguousarray(Y[q])
-        if not np.isfinite(rowmin).any():
+        args = _loo_setup(q, X, Y, tidx, m, assign)
+        if np.isnan(_loo_errors(*args, 1.0, n_chunks())).all():
             raise ConfigError(
                 f"leave-one-out has nothing to compare: every pattern is within "
                 f"exclude_neighbours={m} samples of every query; record more data or lower it"
@@ -449,13 +591,13 @@ class GRNN:
 
         def loss(log_sigma: float) -> float:
             s = math.exp(log_sigma)
-            return float(np.nanmean(_loo_errors(D, rowmin, Qy, Py, 0.5 / (s * s))))
+            return float(np.nanmean(_loo_errors(*args, 0.5 / (s * s), n_chunks())))
 
         if self.sigma_bounds is not None:
             lo, hi = (float(v) for v in self.sigma_bounds)
         else:
-            # Scale of the data: median distance between queries and eligible patterns.
-            finite = D[np.isfinite(D)]
+            # Scale of the data: median distance between queries and patterns.
+            finite = args[0][np.isfinite(args[0])]
             scale = math.sqrt(float(np.median(finite))) if finite.size else 1.0
             scale = scale if scale > 0 else 1.0
             lo, hi = scale * 1e-3, scale * 3.0
@@ -490,6 +632,7 @@ class GRNN:
             np.ascontiguousarray(Xa),
             self.patterns_,
             self.targets_,
+            np.log(self.counts_),
             0.5 / self.sigma_**2,
             n_chunks(),
         )
@@ -501,8 +644,8 @@ class GRNN:
     def from_arrays(cls, patterns: Any, targets: Any, sigma: float, **fitted: Any) -> GRNN:
         """Rebuild a fitted GRNN (e.g. from a model file) without refitting.
 
-        ``fitted`` may carry the recorded attributes (``sigma_rule_``, ``thinning_``,
-        ``loo_error_``, ``pattern_index_``, ``exclude_neighbours_``).
+        ``fitted`` may carry the recorded attributes (``counts_``, ``sigma_rule_``,
+        ``thinning_``, ``loo_error_``, ``pattern_index_``, ``exclude_neighbours_``).
         """
         P = _as_matrix(patterns, "patterns")
         Y = _as_matrix(targets, "targets")
@@ -512,6 +655,7 @@ class GRNN:
         _require_finite(Y, "targets")
         model = cls(sigma=_check_sigma(sigma))
         model.patterns_, model.targets_ = P, Y
+        model.counts_ = _check_counts(fitted.pop("counts_", None), P.shape[0])
         model.sigma_ = float(sigma)
         model.sigma_rule_ = str(fitted.pop("sigma_rule_", "fixed"))
         model.loo_error_ = float(fitted.pop("loo_error_", math.nan))

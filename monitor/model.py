@@ -25,8 +25,9 @@ from monitor.signals import SIGNAL_NAMES
 from monitor.threshold import ThresholdRule
 
 MODEL_FORMAT = "hydraulic-monitor-dgrnn"
-MODEL_VERSION = 1
-_ARRAYS = ("patterns", "targets", "pattern_index", "isolation_centroids")
+# 2: patterns carry member counts (Specht's clustered GRNN).
+MODEL_VERSION = 2
+_ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
 
 
 @dataclass
@@ -88,6 +89,7 @@ def save_model(path: str | Path, model: MonitorModel) -> None:
     arrays = {
         "patterns": np.asarray(g.patterns_, dtype=np.float64),
         "targets": np.asarray(g.targets_, dtype=np.float64),
+        "counts": np.asarray(g.counts_, dtype=np.float64),
         "pattern_index": np.asarray(g.pattern_index_, dtype=np.int64),
         "isolation_centroids": np.asarray(model.isolation_centroids, dtype=np.float64),
     }
@@ -146,6 +148,7 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
         data["patterns"],
         data["targets"],
         header["sigma"],
+        counts_=data["counts"],
         sigma_rule_=header["sigma_rule"],
         loo_error_=header["loo_error"],
         exclude_neighbours_=header["exclude_neighbours"],

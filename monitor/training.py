@@ -34,7 +34,7 @@ class TrainConfig:
     preset: str = "default"
     horizon: int | None = None  # None: the preset's own
     window_n: int = 3000  # J window N (samples): 30 s spans several raise/hold/lower phases
-    max_patterns: int = 3000
+    max_patterns: int = 6000  # smaller clusters: less bias where PP is steep in SpoolCmd
     exclude_neighbours: int = 50  # LOO leaves out +-0.5 s: 100 Hz rows are near copies
     threshold: ThresholdRule = field(default_factory=ThresholdRule)
     validation_fraction: float = 0.25

@@ -46,6 +46,39 @@ def loo_errors(Q, Qy, qidx, P, Py, pidx, sigma, m):
     return out
 
 
+def grnn_predict_counts(X, P, Y, counts, sigma):
+    """Specht's clustered form: sum c_i y_i exp(-d_i) / sum c_i exp(-d_i), in log space."""
+    X = np.atleast_2d(np.asarray(X, float))
+    P = np.asarray(P, float)
+    Y = np.asarray(Y, float).reshape(len(P), -1)
+    D = ((X[:, None, :] - P[None, :, :]) ** 2).sum(axis=2) / (2.0 * sigma**2)
+    L = np.log(np.asarray(counts, float))[None, :] - D
+    W = np.exp(L - L.max(axis=1, keepdims=True))
+    return (W @ Y) / W.sum(axis=1, keepdims=True)
+
+
+def cluster_loo_errors(rows, X, Y, tidx, assign, sigma, m):
+    """Per query row: rebuild every cluster (mean input, mean target, count) from its
+    members more than m samples away in time, then predict with the clustered form (NaN
+    when no cluster is left)."""
+    X = np.asarray(X, float)
+    Y = np.asarray(Y, float).reshape(len(X), -1)
+    tidx, assign = np.asarray(tidx), np.asarray(assign)
+    out = np.full(len(rows), np.nan)
+    for n, r in enumerate(rows):
+        far = (np.abs(tidx - tidx[r]) > m) & (assign >= 0)
+        labels = np.unique(assign[far])
+        if not len(labels):
+            continue
+        members = [far & (assign == i) for i in labels]
+        P = np.array([X[k].mean(axis=0) for k in members])
+        means = np.array([Y[k].mean(axis=0) for k in members])
+        counts = np.array([k.sum() for k in members], float)
+        pred = grnn_predict_counts(X[r], P, means, counts, sigma)[0]
+        out[n] = np.mean((pred - Y[r]) ** 2)
+    return out
+
+
 def thin_min_distance(X, r):
     """Greedy: keep a row if its distance to every kept row is > r."""
     kept = []
@@ -74,8 +107,9 @@ def embed(spec, Z):
     return np.array(X), np.array(Y), np.array(T, dtype=int)
 
 
-def multistep(spec, Z, P, Y, sigma, p):
+def multistep(spec, Z, P, Y, sigma, p, counts=None):
     """Eq. 7 by hand: for each t, run p one-step predictions from k = t - p."""
+    counts = np.ones(len(P)) if counts is None else counts
     cols = {name: i for i, name in enumerate(spec.variables)}
     nout = len(spec.outputs)
     out = np.full((len(Z), nout), np.nan)
@@ -96,7 +130,7 @@ def multistep(spec, Z, P, Y, sigma, p):
                     x.append(Z[r][cols[name]])
             if not ok:
                 break
-            preds[s] = grnn_predict(np.array(x), P, Y, sigma)[0]
+            preds[s] = grnn_predict_counts(np.array(x), P, Y, counts, sigma)[0]
             for i, name in enumerate(spec.outputs):  # delta outputs: add the level before
                 if name in spec.delta:
                     preds[s][i] += preds[s - 1][i] if s - 1 > k else Z[s - 1][i]

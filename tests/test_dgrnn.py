@@ -156,6 +156,22 @@ def test_multistep_matches_naive(p):
     assert np.isfinite(got[p - 1 + SMALL.max_lag]).all()
 
 
+@pytest.mark.parametrize("p", [1, 4])
+def test_clustered_model_matches_naive(p):
+    model = _fitted(n=1500, thinning="min_distance", min_distance=0.3)
+    g = model.grnn
+    assert g.counts_.max() > 1  # the clusters really hold several rows
+    Z = _loop(200, seed=5, nan_every=37)
+    got = predict_series(model, Z, horizon=p)
+    want = naive.multistep(SMALL, Z, g.patterns_, g.targets_, 0.3, p, g.counts_)
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12, equal_nan=True)
+    ticks = TickPredictor(model, p)
+    rows = ticks.rows_needed
+    for t in range(rows - 1, 200, 23):
+        w = np.ascontiguousarray(Z[t - rows + 1 : t + 1])
+        np.testing.assert_allclose(ticks.predict(w), got[t], rtol=1e-12, equal_nan=True)
+
+
 def test_multistep_p2_hand_built():
     """y(t) = y(t-1) XOR u(t), learnt as a lookup table (sigma so small only exact hits count)."""
     spec = DGRNNSpec(outputs=("y",), exogenous=("u",), lags=(("y", (1,)), ("u", (0,))))

@@ -11,7 +11,7 @@ import pytest
 
 from monitor._numba import FASTMATH
 from monitor.errors import ConfigError, InputFileError
-from monitor.grnn import GRNN, grnn_predict, loo_errors, thin_min_distance
+from monitor.grnn import GRNN, cluster, grnn_predict, loo_errors, thin_min_distance
 
 
 def _data(seed=0, n=300, nf=4, nout=2):
@@ -106,7 +106,8 @@ def test_matches_pygrnn():
 def test_loo_errors_match_naive(m):
     X, Y = _series(n=400)
     idx = np.arange(400)
-    got = loo_errors(X, Y, X, Y, 0.2, m)
+    # Every row its own pattern: plain LOO of eq. 4.
+    got = loo_errors(idx, X, Y, idx, 0.2, m)
     want = naive.loo_errors(X, Y, idx, X, Y, idx, 0.2, m)
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-14)
 
@@ -117,14 +118,16 @@ def test_loo_errors_with_separate_queries_and_gaps():
     pidx = np.arange(0, 300, 3)
     pidx = pidx + (pidx >= 150) * 1000  # a second "recording" far away in time
     qidx2 = qidx + (qidx >= 150) * 1000
-    got = loo_errors(X[qidx], Y[qidx], X[::3], Y[::3], 0.3, 10, qidx2, pidx)
+    tidx = np.arange(300) + (np.arange(300) >= 150) * 1000
+    assign = np.where(np.arange(300) % 3 == 0, np.arange(300) // 3, -1)  # strided patterns
+    got = loo_errors(qidx, X, Y, assign, 0.3, 10, tidx)
     want = naive.loo_errors(X[qidx], Y[qidx], qidx2, X[::3], Y[::3], pidx, 0.3, 10)
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-14)
 
 
 def test_loo_with_no_eligible_pattern_is_nan():
     X, Y = _series(n=10)
-    got = loo_errors(X, Y, X, Y, 0.3, 100)
+    got = loo_errors(np.arange(10), X, Y, np.arange(10), 0.3, 100)
     assert np.isnan(got).all()
     with pytest.raises(ConfigError, match="exclude_neighbours"):
         GRNN(exclude_neighbours=100, thinning="none").fit(X, Y)
@@ -168,10 +171,18 @@ def test_thinning_bounds_pattern_count_and_is_recorded():
     info = g.thinning_
     assert info["rule"] == "min_distance" and info["min_distance"] > 0.001
     assert info["n_rows"] == 3000 and info["n_patterns"] == g.patterns_.shape[0]
-    np.testing.assert_array_equal(g.patterns_, X[g.pattern_index_])
-    np.testing.assert_array_equal(g.targets_[:, 0], Y[g.pattern_index_])
+    assert info["weights"] == "cluster_counts" and g.counts_.sum() == 3000
+    # Every row joins its nearest kept row; a cluster is its members' mean input and mean
+    # target (brute force here).
+    near = ((X[:, None] - X[g.pattern_index_][None]) ** 2).sum(2).argmin(1)
+    for i in range(len(g.patterns_)):
+        np.testing.assert_allclose(g.patterns_[i], X[near == i].mean(0), rtol=1e-12, atol=1e-15)
+        assert g.targets_[i, 0] == pytest.approx(Y[near == i].mean(), rel=1e-12, abs=1e-15)
+    np.testing.assert_array_equal(g.counts_, np.bincount(near))
     s = GRNN(sigma=0.3, thinning="stride", stride=7, max_patterns=None).fit(X, Y)
     np.testing.assert_array_equal(s.pattern_index_, np.arange(0, 3000, 7))
+    np.testing.assert_array_equal(s.targets_[:, 0], Y[::7])  # strided rows count once each
+    assert (s.counts_ == 1).all() and s.thinning_["weights"] == "none"
     with pytest.raises(ConfigError, match="max_patterns"):
         GRNN(sigma=0.3, thinning="stride", stride=2, max_patterns=100).fit(X, Y)
 
@@ -181,6 +192,51 @@ def test_duplicate_rows_are_thinned_away():
     Xd, Yd = np.vstack([X, X]), np.vstack([Y, Y])
     g = GRNN(sigma=0.5, min_distance=0.0).fit(Xd, Yd)
     assert g.patterns_.shape[0] == 30
+
+
+def test_clustered_prediction_is_eq4_over_rows_moved_to_their_centres():
+    X, Y = _series(n=1200)
+    g = GRNN(sigma=0.15, min_distance=0.1).fit(X, Y)
+    Q = np.vstack([X[::37] + 0.01, X[:3] + 50.0])  # near and far-away queries
+    want = naive.grnn_predict_counts(Q, g.patterns_, g.targets_, g.counts_, 0.15)
+    np.testing.assert_allclose(g.predict(Q), want[:, 0], rtol=1e-10, atol=1e-13)
+    reps = g.counts_.astype(int)
+    moved = naive.grnn_predict(
+        Q[:-3], np.repeat(g.patterns_, reps, 0), np.repeat(g.targets_, reps, 0), 0.15
+    )
+    np.testing.assert_allclose(g.predict(Q[:-3]), moved[:, 0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(
+        grnn_predict(Q, g.patterns_, g.targets_, 0.15, g.counts_), want, rtol=1e-10, atol=1e-13
+    )
+
+
+def test_a_hold_outweighs_a_transient_passing_close_by():
+    # 2000 rows of a hold at x = 0 (target 0) and a 20-row ramp through it (target 1).
+    ramp = np.linspace(-0.5, 0.5, 20)
+    X = np.concatenate([np.zeros(2000), ramp])[:, None]
+    Y = np.concatenate([np.zeros(2000), np.ones(20)])
+    g = GRNN(sigma=0.2, min_distance=0.04).fit(X, Y)
+    # By hand: the two ramp rows within 0.04 of 0 join the hold's centre (2002 members,
+    # mean 2/2002); the other 18 ramp rows are centres of their own with weight exp(-d).
+    far = ramp[np.abs(ramp) > 0.04]
+    s = np.exp(-(far**2) / (2 * 0.2**2)).sum()
+    assert len(g.patterns_) == 19
+    assert g.predict(np.zeros((1, 1)))[0] == pytest.approx((2 + s) / (2002 + s), rel=1e-12)
+    # The same centres counted once each would call the hold a ramp.
+    flat = GRNN.from_arrays(g.patterns_, g.targets_, 0.2)
+    assert flat.predict(np.zeros((1, 1)))[0, 0] > 0.8
+
+
+@pytest.mark.parametrize("m", [0, 5, 40])
+def test_cluster_loo_matches_naive(m):
+    X, Y = _series(n=500)
+    assign, counts, _, _ = cluster(X, Y[:, None], X[thin_min_distance(X, 0.15)])
+    tidx = np.arange(500) + (np.arange(500) >= 250) * 1000
+    rows = np.arange(0, 500, 9)
+    got = loo_errors(rows, X, Y, assign, 0.2, m, tidx)
+    want = naive.cluster_loo_errors(rows, X, Y, tidx, assign, 0.2, m)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-14)
+    assert counts.sum() == 500
 
 
 # --------------------------------------------------------------------------- estimator API
@@ -206,7 +262,8 @@ def test_from_arrays_round_trip():
     X, Y = _series(n=800)
     g = GRNN(min_distance=0.05).fit(X, Y)
     h = GRNN.from_arrays(
-        g.patterns_, g.targets_, g.sigma_, sigma_rule_=g.sigma_rule_, thinning_=g.thinning_,
+        g.patterns_, g.targets_, g.sigma_, counts_=g.counts_, sigma_rule_=g.sigma_rule_,
+        thinning_=g.thinning_,
         loo_error_=g.loo_error_, pattern_index_=g.pattern_index_, exclude_neighbours_=50,
     )  # fmt: skip
     np.testing.assert_array_equal(h.predict(X[:50]), g.predict(X[:50])[:, None])

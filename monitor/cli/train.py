@@ -55,9 +55,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--max-patterns",
         type=int,
-        default=3000,
+        default=TrainConfig.max_patterns,
         metavar="K",
-        help="bound on GRNN patterns after min-distance thinning (default 3000)",
+        help="bound on GRNN patterns (clusters of min-distance thinning; default "
+        f"{TrainConfig.max_patterns})",
     )
     p.add_argument(
         "--threshold-rule",
