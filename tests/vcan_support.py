@@ -14,6 +14,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import time
 from pathlib import Path
 
 import can
@@ -130,3 +131,17 @@ def stop(proc: subprocess.Popen, timeout_s: float = 120.0) -> int:
     if proc.poll() is None:
         proc.send_signal(signal.SIGTERM)
     return proc.wait(timeout_s)
+
+
+class Phases:
+    """Wall time of each phase of a session, printed (pytest -s shows it) and kept."""
+
+    def __init__(self) -> None:
+        self.last = time.monotonic()
+        self.took: dict[str, float] = {}
+
+    def __call__(self, name: str) -> None:
+        now = time.monotonic()
+        self.took[name] = now - self.last
+        self.last = now
+        print(f"[vcan] {name}: {self.took[name]:.1f} s wall", flush=True)

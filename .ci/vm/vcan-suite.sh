@@ -32,6 +32,6 @@ PY
 echo "vcan-suite: host preparation $(($(date +%s) - t0)) s" >&2
 MONITOR_VCAN_MODEL="$work/vcan.model.npz" MONITOR_VCAN_SLOWDOWN="${MONITOR_VCAN_SLOWDOWN:-4}" \
   MONITOR_VCAN_REQUIRED=1 \
-  bash .ci/vm/run-in-vm.sh "$py" -m pytest -q --color=no -p no:cacheprovider -m vcan \
+  bash .ci/vm/run-in-vm.sh "$py" -m pytest -q -s --color=no -p no:cacheprovider -m vcan \
   --durations=0 tests/test_vcan_socketcan.py "$@"
 echo "vcan-suite: total $(($(date +%s) - t0)) s" >&2
