@@ -157,6 +157,10 @@ class Daemon:
                         self._frame(q.get_nowait())
                     except queue.Empty:
                         break
+                    # A backlog (slow CPU, a flood) must not stall the heartbeat or make
+                    # the watchdog think the loop is stuck.
+                    self._status()
+                    self.loop_mono = time.monotonic()
             self._status()
         self._tick_rows(self.sampler.flush())  # the instant of the last frame, as offline
 
