@@ -9,6 +9,7 @@ expected times stay in log seconds.
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import signal
@@ -60,6 +61,12 @@ def vcan_config(tmp: Path, model: Path) -> str:
     )
 
 
+@functools.lru_cache(maxsize=4)
+def log_frames(src: Path) -> tuple[can.Message, ...]:
+    """The frames of a shipped log, read once (parsing is slow in the VM)."""
+    return tuple(read_candump(src))
+
+
 def slowed_copy(
     src: Path,
     dst: Path,
@@ -71,14 +78,15 @@ def slowed_copy(
     """Write the frames of ``src`` with log time in [t_from, t_to) to ``dst`` for canplayer
     on vcan0, ``slower`` times slower; ``drop_id_after`` = (frame id, log time) leaves that
     frame out from then on.  Returns the frames kept (with their original timestamps)."""
+    frames = log_frames(src)
+    t0 = frames[0].timestamp
     kept = []
     with dst.open("w") as fh:
-        t0 = None
-        for m in read_candump(src):
-            if t0 is None:
-                t0 = m.timestamp
+        for m in frames:
             t = m.timestamp - t0
-            if not t_from <= t < t_to:
+            if t >= t_to:
+                break  # the shipped logs are in time order
+            if t < t_from:
                 continue
             if drop_id_after and m.arbitration_id == drop_id_after[0] and t >= drop_id_after[1]:
                 continue

@@ -75,7 +75,7 @@ timeout --foreground "${VM_TIMEOUT_S:-900}" qemu-system-x86_64 \
   -append "console=ttyS0 panic=-1 quiet loglevel=3" \
   -virtfs local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap \
   -virtfs "local,path=$share,mount_tag=out,security_model=none" \
-  </dev/null 2>&1 | tr -d '\r'
+  </dev/null 2>&1 | sed -u 's/\r$//'
 vm_status=${PIPESTATUS[0]}
 set -e
 elapsed=$(echo "$(date +%s.%N) - $t0" | bc 2>/dev/null || echo "?")
