@@ -192,7 +192,9 @@ class Daemon:
     def _clock(self, bus_ts: float) -> float:
         """Sample-clock time of a bus timestamp (the first sensor frame is the origin)."""
         t0 = self.sampler.start_time_s
-        return bus_ts if t0 is None else t0 + (bus_ts - t0) / self._scale
+        if t0 is None or self._scale == 1.0:
+            return bus_ts  # exactly the bus time: same rows as ``monitor detect`` of a log
+        return t0 + (bus_ts - t0) / self._scale
 
     def _bus_time(self, t_s: float) -> float:
         return (self.sampler.start_time_s or 0.0) + t_s * self._scale

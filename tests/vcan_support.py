@@ -61,10 +61,16 @@ def vcan_config(tmp: Path, model: Path) -> str:
     )
 
 
-@functools.lru_cache(maxsize=4)
-def log_frames(src: Path) -> tuple[can.Message, ...]:
-    """The frames of a shipped log, read once (parsing is slow in the VM)."""
-    return tuple(read_candump(src))
+@functools.lru_cache(maxsize=8)
+def log_frames(src: Path, t_to: float = float("inf")) -> tuple[can.Message, ...]:
+    """The frames of a time-ordered log up to log time ``t_to``, read once (parsing is slow
+    in the VM)."""
+    out: list[can.Message] = []
+    for m in read_candump(src):
+        if out and m.timestamp - out[0].timestamp >= t_to:
+            break
+        out.append(m)
+    return tuple(out)
 
 
 def slowed_copy(
@@ -78,7 +84,7 @@ def slowed_copy(
     """Write the frames of ``src`` with log time in [t_from, t_to) to ``dst`` for canplayer
     on vcan0, ``slower`` times slower; ``drop_id_after`` = (frame id, log time) leaves that
     frame out from then on.  Returns the frames kept (with their original timestamps)."""
-    frames = log_frames(src)
+    frames = log_frames(src, t_to)
     t0 = frames[0].timestamp
     kept = []
     with dst.open("w") as fh:
