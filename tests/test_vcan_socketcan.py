@@ -330,5 +330,8 @@ def test_a_sensor_that_stops_is_a_sensor_fault_never_a_hydraulic_one(session) ->
     # Stale 30 ms after the last flow frame (3 cycle times), late by the daemon's lag.
     assert FLOW_STOP_S <= (t_sensor - t0) / SLOWER <= FLOW_STOP_S + LAG_WALL_S / SLOWER
     states = [e["state"] for e in session.events()[session.events_before_flow_stop :]]
-    assert "fault" not in states
-    assert states[-3:] == ["normal", "sensor_fault", "inactive"], states
+    # Normal until the flow stops, then a sensor fault; inactive once the replay has ended.
+    # (A VM stall longer than bus.silent_s may add an inactive spell in between: the
+    # daemon reports the silence it saw.)
+    assert "fault" not in states and states[-1] == "inactive", states
+    assert ("normal", "sensor_fault") in zip(states, states[1:], strict=False), states

@@ -55,7 +55,7 @@ def vcan_config(tmp: Path, model: Path) -> str:
     """YAML for the daemon on vcan0, outputs under ``tmp``."""
     return (
         f"bus:\n  interface: socketcan\n  channel: {CHANNEL}\n  time_scale: {SLOWER}\n"
-        "  queue_frames: 200000\n  silent_s: 2.0\n"
+        "  queue_frames: 200000\n  silent_s: 4.0\n"
         f"event_log:\n  path: {tmp / 'events.jsonl'}\n"
         f"black_box:\n  directory: {tmp / 'blackbox'}\n"
     )
