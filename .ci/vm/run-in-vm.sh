@@ -24,11 +24,10 @@ mkdir -p "$cache"
 
 # -- host tools (apt) ----------------------------------------------------------------------
 need=()
-command -v qemu-system-x86_64 >/dev/null || need+=(qemu-system-x86)
-command -v candump >/dev/null || need+=(can-utils)
-[[ -x /bin/busybox ]] && /bin/busybox --list | grep -qx insmod || need+=(busybox-static)
-command -v cpio >/dev/null || need+=(cpio)
-command -v modprobe >/dev/null || need+=(kmod)
+# busybox-static, not busybox: the initramfs has no libc.
+for pkg in qemu-system-x86 can-utils busybox-static cpio kmod; do
+  dpkg -s "$pkg" >/dev/null 2>&1 || need+=("$pkg")
+done
 if ((${#need[@]})); then
   echo "run-in-vm: installing ${need[*]}" >&2
   apt-get update -qq
@@ -66,7 +65,7 @@ trap 'rm -rf "$share"' EXIT
 } >"$share/cmd.sh"
 
 # -- boot ------------------------------------------------------------------------------------
-t0=$(date +%s.%N)
+SECONDS=0
 set +e
 timeout --foreground "${VM_TIMEOUT_S:-900}" qemu-system-x86_64 \
   -machine pc -accel tcg,thread=multi -cpu max -smp "${VM_CPUS:-2}" -m "${VM_MEM:-2G}" \
@@ -78,7 +77,7 @@ timeout --foreground "${VM_TIMEOUT_S:-900}" qemu-system-x86_64 \
   </dev/null 2>&1 | sed -u 's/\r$//'
 vm_status=${PIPESTATUS[0]}
 set -e
-elapsed=$(echo "$(date +%s.%N) - $t0" | bc 2>/dev/null || echo "?")
+elapsed=$SECONDS
 if [[ -f "$share/rc" ]]; then
   rc="$(cat "$share/rc")"
   echo "run-in-vm: command exited $rc; VM ran ${elapsed} s" >&2
