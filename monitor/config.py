@@ -35,6 +35,9 @@ class BusConfig:
     queue_frames: int = 20_000  # bounded receive buffer (~5 s of a full 500 kbit/s bus)
     kernel_filters: bool = True  # only the DBC's sensor IDs reach user space
     silent_s: float = 0.5  # no frame this long (wall clock): the sample clock runs on, stale
+    # Bus seconds per sample-clock second: 4 when a log is replayed 4x slower than real time
+    # onto the bus (a slow test bench or emulator); event times then read in log seconds.
+    time_scale: float = 1.0
     # Extra keyword arguments for can.Bus (e.g. fd, receive_own_messages); scalars only.
     options: dict[str, Any] = field(default_factory=dict)
 
@@ -129,6 +132,7 @@ _BUS = {
     "queue_frames": ("int", lambda v: v >= 100, ">= 100"),
     "kernel_filters": ("bool", None, ""),
     "silent_s": ("float", _POSITIVE, "> 0"),
+    "time_scale": ("float", lambda v: 0.01 <= v <= 100, "between 0.01 and 100"),
     "options": ("options", None, ""),
 }
 _OUTPUTS = {

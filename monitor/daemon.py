@@ -7,6 +7,8 @@ the frames' own timestamps, so a log replayed onto a bus gives the events ``moni
 gives for the file.  When no sensor frame is accepted for ``bus.silent_s`` (wall clock) the
 clock runs on by wall time: the rows go stale, the engine speed with them, and the monitor
 is inactive (a machine that is off is not faulty); when frames return, it resumes.
+With ``bus.time_scale`` k the sample clock runs k times slower than the frames' timestamps
+(a log replayed k times slower than real time keeps its own timing).
 
 ``stop()`` shuts down in order: reader (no new frames), detector (drains the queue, ticks
 the last rows), outputs (black box and event log closed, fsynced), bus.  ``request_reload``
@@ -66,7 +68,10 @@ class Daemon:
         self.reloads = 0
         self.last_j = float("nan")
         self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
-        self._last_ok_ts = 0.0  # its bus timestamp
+        self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
+        self._scale = cfg.bus.time_scale
+        self.loop_mono = time.monotonic()  # last pass of the detector loop (watchdog)
+        self.reload_attempts = 0  # reloads finished, successful or not
         self._last_status_mono = 0.0
         self._last_tx_error_log = 0.0
         self._stop = threading.Event()
@@ -135,6 +140,7 @@ class Daemon:
     def _loop(self) -> None:
         q = self.reader.queue
         while True:
+            self.loop_mono = time.monotonic()
             if self._reload.is_set():
                 self._reload.clear()
                 self._do_reload()
@@ -151,6 +157,10 @@ class Daemon:
                         self._frame(q.get_nowait())
                     except queue.Empty:
                         break
+                    # A backlog (slow CPU, a flood) must not stall the heartbeat or make
+                    # the watchdog think the loop is stuck.
+                    self._status()
+                    self.loop_mono = time.monotonic()
             self._status()
         self._tick_rows(self.sampler.flush())  # the instant of the last frame, as offline
 
@@ -162,9 +172,10 @@ class Daemon:
             return
         if d.name not in self._hydraulic:
             return  # counted as decoded; e.g. another monitor's frames with filters off
-        self.sampler.feed(msg.timestamp, d.name, d.values)  # type: ignore[arg-type]
+        ts = self._clock(msg.timestamp)
+        self.sampler.feed(ts, d.name, d.values)  # type: ignore[arg-type]
         self._last_ok_mono = time.monotonic()
-        self._last_ok_ts = msg.timestamp
+        self._last_ok_ts = ts
         self._tick_rows(self.sampler.take())
 
     def _silence(self) -> None:
@@ -175,11 +186,18 @@ class Daemon:
             return
         # Past the sampler's max gap the clock stops: the state is inactive by then, and a
         # frame after a longer silence is mapped to the end of that gap (sampler rule).
-        idle_s = min(idle_s, self.sampler.max_gap_s - 2 * self.sampler.period_s)
+        idle_s = min(idle_s / self._scale, self.sampler.max_gap_s - 2 * self.sampler.period_s)
         self._tick_rows(self.sampler.advance(self._last_ok_ts + idle_s))
 
+    def _clock(self, bus_ts: float) -> float:
+        """Sample-clock time of a bus timestamp (the first sensor frame is the origin)."""
+        t0 = self.sampler.start_time_s
+        if t0 is None or self._scale == 1.0:
+            return bus_ts  # exactly the bus time: same rows as ``monitor detect`` of a log
+        return t0 + (bus_ts - t0) / self._scale
+
     def _bus_time(self, t_s: float) -> float:
-        return (self.sampler.start_time_s or 0.0) + t_s
+        return (self.sampler.start_time_s or 0.0) + t_s * self._scale
 
     def _tick_rows(self, rows: np.ndarray) -> None:
         ticker, frames = self.ticker, self.frames
@@ -239,6 +257,7 @@ class Daemon:
             )
         except Exception as exc:  # any failure: keep monitoring with what we have
             log.error("reload failed, keeping the running config and model: %s", exc)
+            self.reload_attempts += 1
             return
         if cfg.bus != self.cfg.bus or cfg.dbc != self.cfg.dbc:
             log.warning("bus and dbc changes take effect at the next restart")
@@ -250,6 +269,7 @@ class Daemon:
         self.frames.cfg = cfg.outputs
         self.cfg, self.model, self.ticker = cfg, model, ticker
         self.reloads += 1
+        self.reload_attempts += 1
         log.info("reloaded %s: model %s (eps0 %.4g); the J window starts again",
                  cfg.source, cfg.model, model.eps0)  # fmt: skip
 

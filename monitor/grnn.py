@@ -31,7 +31,6 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from monitor._numba import get_num_threads, jit, pjit, prange
 from monitor.errors import ConfigError, InputFileError
@@ -607,6 +606,10 @@ class GRNN:
         vals = np.array([loss(g) for g in grid])
         k = int(np.nanargmin(vals))
         a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        # Imported here: scipy.optimize costs the daemon's start-up (predict only) ~1 s on
+        # the host and far more on a small controller; only fitting needs it.
+        from scipy.optimize import minimize_scalar
+
         res = minimize_scalar(loss, bounds=(a, b), method="bounded", options={"xatol": 1e-3})
         best_log, best_val = (res.x, res.fun) if res.fun <= vals[k] else (grid[k], vals[k])
         return math.exp(best_log), float(best_val)

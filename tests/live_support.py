@@ -1,9 +1,13 @@
-"""Helpers for the live-monitor tests: a daemon on a python-can virtual bus in-process."""
+"""Helpers for the live-monitor tests: a daemon on a python-can virtual bus in-process, or
+``monitor run`` as a process of its own (config file, log file, waiting on its output)."""
 
 from __future__ import annotations
 
 import dataclasses
 import itertools
+import os
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -16,10 +20,47 @@ from monitor.config import BusConfig, MonitorConfig, load_config
 from monitor.daemon import Daemon
 from monitor.detector import Detection
 from monitor.io.recording import Recording
+from monitor.resources import resource_path
 from monitor.sampler import ROW_COLUMNS
 from monitor.ticker import Ticker, event
 
 _channels = itertools.count()
+REPO = Path(__file__).resolve().parents[1]
+
+
+def write_config(tmp_path: Path, extra: str, base: bool = True, model: Path | None = None) -> Path:
+    """``tmp_path/monitor.yaml``: the shipped DBC and ``model`` (default: the shipped
+    model) unless ``base`` is False, then ``extra`` YAML."""
+    model = model or resource_path("config", "boom_default.model.npz")
+    text = f"dbc: {resource_path('dbc', 'monitor.dbc')}\nmodel: {model}\n" if base else ""
+    p = tmp_path / "monitor.yaml"
+    p.write_text(text + extra)
+    return p
+
+
+def start_daemon(
+    config: Path, cwd: Path, log_path: Path, env: dict[str, str] | None = None
+) -> subprocess.Popen:
+    """``monitor run --config CONFIG`` as a process of this tree, stderr to ``log_path``."""
+    full_env = {**os.environ, "PYTHONPATH": str(REPO), **(env or {})}
+    with log_path.open("ab") as err:
+        return subprocess.Popen(
+            [sys.executable, "-m", "monitor", "run", "--config", str(config)],
+            stdin=subprocess.DEVNULL, stderr=err, env=full_env, cwd=cwd,
+        )  # fmt: skip
+
+
+def wait_for_text(log_path: Path, text: str, proc: subprocess.Popen, timeout_s: float) -> None:
+    """Wait until ``text`` is in the daemon's log; fail early (with the log) if it exits."""
+    end = time.monotonic() + timeout_s
+    while True:
+        seen = log_path.read_text(errors="replace") if log_path.exists() else ""
+        if text in seen:
+            return
+        if proc.poll() is not None or time.monotonic() > end:
+            state = "timed out" if proc.poll() is None else f"exited {proc.returncode}"
+            raise AssertionError(f"{text!r} not in the daemon's log ({state}):\n{seen[-3000:]}")
+        time.sleep(0.1)
 
 
 def live_config(tmp: Path, **bus: Any) -> MonitorConfig:

@@ -7,9 +7,9 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
+from live_support import REPO, write_config
 
 from monitor.cli import main
 from monitor.config import load_config
@@ -17,18 +17,6 @@ from monitor.errors import ConfigError
 from monitor.resources import resource_path
 
 SHIPPED = resource_path("config", "monitor.yaml")
-
-
-def write_config(tmp_path: Path, extra: str, base: bool = True) -> Path:
-    text = (
-        f"dbc: {resource_path('dbc', 'monitor.dbc')}\n"
-        f"model: {resource_path('config', 'boom_default.model.npz')}\n"
-        if base
-        else ""
-    ) + extra
-    p = tmp_path / "monitor.yaml"
-    p.write_text(text)
-    return p
 
 
 def test_shipped_config_has_every_live_section() -> None:
@@ -101,7 +89,7 @@ def test_run_reloads_on_sighup_and_stops_cleanly_on_sigterm(tmp_path) -> None:
         f"event_log:\n  path: {tmp_path / 'ev.jsonl'}\n"
         f"black_box:\n  directory: {tmp_path / 'bb'}\n",
     )
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(
         [sys.executable, "-m", "monitor", "run", "--config", str(cfg)],
         stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,

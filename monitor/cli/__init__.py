@@ -40,7 +40,8 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser; with ``only`` (a subcommand's module name) just that subcommand."""
     parser = _Parser(
         prog="monitor",
         description="Hydraulic fault monitor for an excavator loop on CAN.",
@@ -48,13 +49,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"monitor {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for name in _subcommand_modules():
+    names = _subcommand_modules()
+    for name in [only] if only in names else names:
         importlib.import_module(f"monitor.cli.{name}").add_subparser(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # Import only the subcommand asked for: the others pull in the simulator, scipy and
+    # matplotlib, seconds of start-up on a controller (minutes in the SocketCAN test VM).
+    first = argv[0].replace("-", "_") if argv and not argv[0].startswith("-") else None
+    parser = build_parser(first)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

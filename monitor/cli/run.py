@@ -1,4 +1,9 @@
-"""``monitor run``: the daemon, until SIGTERM/SIGINT; SIGHUP reloads config and model."""
+"""``monitor run``: the daemon, until SIGTERM/SIGINT; SIGHUP reloads config and model.
+
+Under systemd (``Type=notify``) it reports READY=1 once the bus is open and the model
+loaded, WATCHDOG=1 every WatchdogSec/2 while the detector loop is alive and turning,
+RELOADING=1 then READY=1 around a SIGHUP reload, and STOPPING=1 before the ordered stop.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +16,7 @@ from types import FrameType
 
 from monitor.config import load_config
 from monitor.daemon import Daemon, setup_logging
+from monitor.sdnotify import Notifier
 
 log = logging.getLogger("monitor")
 
@@ -22,7 +28,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         description="Read the sensor frames from the bus of config/monitor.yaml, detect at "
         "100 Hz and send MON_Alarm / MON_Status frames; events go to the event log, raw "
         "frames around each alarm to the black box. SIGTERM/SIGINT stop it cleanly, SIGHUP "
-        "reloads config and model without closing the bus. Logs to stderr for journald.",
+        "reloads config and model without closing the bus. Logs to stderr for journald; "
+        "speaks the systemd notify protocol when NOTIFY_SOCKET is set (Type=notify, "
+        "WatchdogSec).",
     )
     p.add_argument("--config", type=Path, default=None, help="monitor YAML (default: shipped)")
     p.add_argument("--verbose", action="store_true", help="debug logging (every bad frame)")
@@ -52,16 +60,39 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGHUP, on_hup)
     daemon = Daemon(cfg)
     daemon.start()
+    notifier = Notifier()
+    where = f"monitoring {cfg.bus.interface}:{cfg.bus.channel}"
+    notifier.ready(where)
+    # Half the watchdog timeout between pings; a detector loop that has not turned for
+    # that long is stuck, and the missing ping lets systemd restart us.
+    ping_s = notifier.watchdog_s / 2 if notifier.watchdog_s else None
+    last_ping = -float("inf")
+    reload_seen: int | None = None  # reload_attempts before the pending reload
     try:
         while not flags.stop:
             if flags.reload:
                 flags.reload = False
                 log.info("SIGHUP: reloading %s", cfg.source)
+                notifier.reloading()
+                reload_seen = daemon.reload_attempts
                 daemon.request_reload()
+            if reload_seen is not None and daemon.reload_attempts > reload_seen:
+                reload_seen = None
+                notifier.ready(where)
             if not daemon.healthy:
                 log.error("a monitor thread died; stopping so the service manager restarts us")
                 return 1
-            time.sleep(0.1)
+            now = time.monotonic()
+            if ping_s is not None and now - last_ping >= ping_s:
+                last_ping = now
+                if now - daemon.loop_mono < ping_s:
+                    notifier.watchdog()
+                else:
+                    log.warning("detector loop stalled for %.1f s; no watchdog ping",
+                                now - daemon.loop_mono)  # fmt: skip
+            time.sleep(min(0.1, ping_s or 0.1))
     finally:
+        notifier.stopping()
         daemon.stop()  # ordered: reader, detector, outputs (fsynced), bus
+        notifier.close()
     return 0

@@ -1,0 +1,339 @@
+"""The daemon on a kernel SocketCAN bus (vcan0) as its own process, with can-utils
+(candump, canplayer, cansend, cangen) as independent peers.
+
+Runs where vcan0 exists: a Linux box (``ip link add dev vcan0 type vcan``) or the CI VM
+(``.ci/vm/vcan-suite.sh``); skips elsewhere.  Python in the VM is 25-40x slower than on the
+host and a daemon takes a minute or more to start there, so one session (one fixture) runs
+the scenarios in turn on one bus with two daemon processes, ``candump -L`` recording all
+of it, and the tests check its parts:
+
+1. ``monitor replay`` of a log slice while candump records (before any daemon);
+2. daemon 1 up, ``canplayer`` replays a fault log: MON_Alarm goes to fault after onset;
+3. SIGTERM to daemon 1 during the alarm; daemon 2 starts on the same event log;
+4. ``cansend``/``cangen`` traffic to daemon 2: wrong DLC, bad CRC, counter jump, a flood;
+5. ``canplayer`` replays a normal log whose flow sensor stops midway: sensor fault, never
+   a hydraulic fault; when the replay ends, inactive; SIGTERM to daemon 2.
+
+Logs go on the bus ``SLOWER`` times slower than real time and ``bus.time_scale`` maps them
+back (tests/vcan_support.py): times asserted are log seconds unless named wall.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from live_support import REPO, start_daemon, wait_for_text, wait_until, write_config
+from vcan_support import (
+    CHANNEL,
+    SLOWER,
+    Capture,
+    Phases,
+    decode,
+    frame_id,
+    log_frames,
+    slowed_copy,
+    stop,
+    vcan_config,
+    vcan_missing,
+)
+
+from monitor.config import load_config
+from monitor.detector import detect
+from monitor.model import load_model
+from monitor.resources import resource_path
+from monitor.sampler import recording_from_candump
+
+pytestmark = [pytest.mark.vcan, pytest.mark.skipif(vcan_missing() is not None,
+                                                   reason=str(vcan_missing()))]  # fmt: skip
+
+START_S = 600.0  # wall: a daemon's start (imports, model, numba cache) in a slow VM
+FAULT_LOG = resource_path("replay", "spool_wear.log")  # abrupt spool wear at 45 s
+NORMAL_LOG = resource_path("replay", "normal.log")
+ONSET_S = 45.0
+FAULT_SEGMENT = (43.5, 57.0)  # log s replayed: the 10 s J window fills before the alarm
+REPLAY_SLICE_S = 3.0  # of the normal log, through `monitor replay`
+FLOW_STOP_S, NORMAL_END_S = 2.5, 4.0  # the flow frames stop; the replay ends
+LAG_WALL_S = 30.0  # how far the daemon may fall behind the bus in a slow VM
+N_FLOOD = 20000
+STATE = {"normal": 0, "fault": 1, "sensor_fault": 2, "inactive": 3}
+SENSOR_IDS = ("HYD_Pressures", "HYD_Flow", "HYD_Commands")
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory) -> Path:
+    """The small model (tests/vcan_model.sh); CI trains it on the host before the VM."""
+    given = os.environ.get("MONITOR_VCAN_MODEL")
+    if given:
+        return Path(given)
+    out = tmp_path_factory.mktemp("model") / "vcan.model.npz"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    subprocess.run(["bash", str(REPO / "tests" / "vcan_model.sh"), str(out)], check=True,
+                   env=env, capture_output=True)  # fmt: skip
+    return out
+
+
+def _replay_wall_s(t_log_s: float) -> float:
+    """Wall seconds allowed to put ``t_log_s`` of log on the bus, with room for a slow VM."""
+    return t_log_s * SLOWER * 2.0 + 120.0
+
+
+class Session:
+    """Files and processes of the session; every result the tests look at."""
+
+    def __init__(self, tmp: Path, model: Path) -> None:
+        self.tmp = tmp
+        self.config = write_config(tmp, vcan_config(tmp, model), model=model)
+        self.phases = Phases()
+        self.wall: dict[str, float] = {}  # time.time() marks, comparable with candump's
+        self.rc: dict[str, int] = {}
+        self.procs: list[subprocess.Popen] = []
+
+    def events(self) -> list[dict[str, Any]]:
+        path = self.tmp / "events.jsonl"
+        return [json.loads(x) for x in path.read_text().splitlines()] if path.exists() else []
+
+    def start(self, name: str) -> tuple[subprocess.Popen, Path]:
+        log = self.tmp / f"{name}.log"
+        proc = start_daemon(self.config, self.tmp, log)
+        self.procs.append(proc)
+        return proc, log
+
+    def ready(self, proc: subprocess.Popen, log: Path) -> subprocess.Popen:
+        wait_for_text(log, f"monitoring socketcan:{CHANNEL}", proc, START_S)
+        return proc
+
+    def daemon(self, name: str) -> subprocess.Popen:
+        return self.ready(*self.start(name))
+
+    def play(self, log: Path) -> subprocess.Popen:
+        proc = subprocess.Popen(["canplayer", "-I", str(log)])
+        self.procs.append(proc)
+        return proc
+
+    def caught_up(self, cap: Capture) -> bool:
+        """Two heartbeats with the same counters: the daemon's queue is drained."""
+        last = [s for _, s in decode(cap.snapshot(), "MON_Status")][-2:]
+        return len(last) == 2 and all(last[0][k] == last[1][k]
+                                      for k in ("RxFrames", "RejectedFrames"))  # fmt: skip
+
+
+def _cansend(m, data: bytes) -> None:
+    ident = f"{m.arbitration_id:08X}" if m.is_extended_id else f"{m.arbitration_id:03X}"
+    subprocess.run(["cansend", CHANNEL, f"{ident}#{data.hex()}"], check=True, timeout=60)
+
+
+def _hostile(s: Session, cap: Capture) -> None:
+    pressures = frame_id("HYD_Pressures")
+    valid = [m for m in log_frames(NORMAL_LOG, 1.0) if m.arbitration_id == pressures][:20]
+    for m in valid[:2]:  # wrong DLC: 6 bytes
+        _cansend(m, bytes(m.data[:6]))
+    for m in valid[2:4]:  # bad checksum: byte 7 off by one
+        _cansend(m, bytes(m.data[:7]) + bytes([(m.data[7] + 1) % 256]))
+    for m in (valid[4], valid[10]):  # valid frames whose alive counter skips 5
+        _cansend(m, bytes(m.data))
+    s.phases("cansend: 2 wrong DLC, 2 bad CRC, 2 valid with a counter jump")
+    t = time.monotonic()
+    subprocess.run(["cangen", CHANNEL, "-e", "-I", f"{pressures:08X}", "-L", "8", "-D", "r",
+                    "-g", "0", "-p", "100", "-n", str(N_FLOOD)], check=True,
+                   timeout=600)  # fmt: skip
+    s.wall["flood_rate"] = N_FLOOD / (time.monotonic() - t)
+    s.phases(f"cangen flood of {N_FLOOD} frames ({s.wall['flood_rate']:.0f} frames/s)")
+    wait_until(lambda: s.caught_up(cap), 600.0)
+    s.phases("daemon 2 caught up with the flood")
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory, model) -> Session:
+    s = Session(tmp_path_factory.mktemp("vcan"), model)
+    tmp = s.tmp
+    slice_log = tmp / "slice.log"
+    s.replay_source = slowed_copy(NORMAL_LOG, slice_log, 0.0, REPLAY_SLICE_S, slower=1.0)
+    cap = Capture(tmp / "capture.log")
+    try:
+        # Python starts slowly in the VM: each wait below overlaps work that does not
+        # touch the bus (log copies, the offline reference).
+        time.sleep(0.5)  # candump's socket is bound before the first frame
+        s.wall["replay"] = time.time()
+        env = {**os.environ, "PYTHONPATH": str(REPO)}
+        replay = subprocess.Popen(
+            [sys.executable, "-m", "monitor", "replay", str(slice_log), "--bus", CHANNEL,
+             "--interface", "socketcan"],
+            env=env, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        s.procs.append(replay)
+        plain = tmp / "fault_segment.log"  # at its own speed, for the offline reference
+        slowed_copy(FAULT_LOG, plain, *FAULT_SEGMENT, slower=1.0)
+        slowed_copy(FAULT_LOG, tmp / "fault_slowed.log", *FAULT_SEGMENT)
+        slowed_copy(NORMAL_LOG, tmp / "flow_stops.log", 0.0, NORMAL_END_S,
+                    drop_id_after=(frame_id("HYD_Flow"), FLOW_STOP_S))  # fmt: skip
+        s.phases("slowed copies of the logs")
+        s.replay_stderr = replay.communicate(timeout=START_S)[1]
+        s.rc["replay"] = replay.returncode
+        time.sleep(0.5)
+        s.phases("monitor replay of a 3 s slice (with the copies)")
+        s.wall["daemon1"] = time.time()
+        first, first_log = s.start("daemon1")
+        cfg = load_config(s.config)
+        s.offline = detect(load_model(cfg.model), recording_from_candump(plain), cfg.alarm,
+                           cfg.horizon)  # fmt: skip
+        s.phases("offline reference (monitor detect) of the fault segment")
+        s.ready(first, first_log)
+        s.phases("daemon 1 start (with the reference)")
+        s.wall["fault_replay"] = time.time()
+        player = s.play(tmp / "fault_slowed.log")
+        span = FAULT_SEGMENT[1] - FAULT_SEGMENT[0]
+        wait_until(lambda: any(e["state"] == "fault" for e in s.events()), _replay_wall_s(span))
+        s.phases("fault segment until the alarm")
+        s.wall["sigterm"] = time.time()
+        s.rc["daemon1"] = stop(first)
+        s.events_at_stop = (tmp / "events.jsonl").read_text()
+        s.phases("daemon 1 SIGTERM to exit")
+        second = s.daemon("daemon2")
+        s.wall["restart"] = time.time()
+        s.phases("daemon 2 start")
+        player.wait(_replay_wall_s(span))
+        wait_until(lambda: s.caught_up(cap), 600.0)
+        s.wall["hostile"] = time.time()
+        s.status_before_hostile = decode(cap.snapshot(), "MON_Status")[-1][1]
+        s.phases("rest of the fault segment")
+        _hostile(s, cap)
+        s.status_after_hostile = decode(cap.snapshot(), "MON_Status")[-1][1]
+        s.events_before_flow_stop = len(s.events())
+        s.wall["flow_stops"] = time.time()
+        player = s.play(tmp / "flow_stops.log")
+        assert player.wait(_replay_wall_s(NORMAL_END_S)) == 0
+        s.phases("normal segment whose flow frames stop")
+        wait_until(lambda: s.events()[-1]["state"] == "inactive", 300.0)
+        s.phases("until inactive")
+        s.rc["daemon2"] = stop(second)
+        s.phases("daemon 2 SIGTERM to exit")
+    finally:
+        for p in s.procs:
+            if p.poll() is None:
+                p.kill()
+        s.frames = cap.stop()
+    s.logs = {n: (tmp / f"{n}.log").read_text() for n in ("daemon1", "daemon2")}
+    print(f"[vcan] phases: {json.dumps({k: round(v, 1) for k, v in s.phases.took.items()})}")
+    return s
+
+
+def _between(s: Session, start: str, end: str | None) -> list:
+    lo, hi = s.wall[start], s.wall[end] if end else float("inf")
+    return [m for m in s.frames if lo <= m.timestamp < hi]
+
+
+def _stopped_counts(log: str) -> dict[str, Any]:
+    line = next(x for x in log.splitlines() if "stopped:" in x)
+    return ast.literal_eval(line.split("stopped: ", 1)[1])  # the daemon logs a dict
+
+
+# -- the tests, one per scenario of the issue ------------------------------------------------
+
+
+def test_replay_onto_vcan0_equals_the_source_frame_for_frame(session) -> None:
+    assert session.rc["replay"] == 0, session.replay_stderr
+    captured = _between(session, "replay", "daemon1")
+    key = lambda m: (m.arbitration_id, m.is_extended_id, bytes(m.data))  # noqa: E731
+    assert [key(m) for m in captured] == [key(m) for m in session.replay_source]
+
+
+def test_alarm_frames_from_the_bus_decode_to_the_fault_after_onset(session) -> None:
+    off = session.offline
+    assert off.summary["alarm"] and off.summary["fault"] == "spool_wear"  # the reference
+    frames = _between(session, "fault_replay", "restart")
+    sensor_ids = {frame_id(n) for n in SENSOR_IDS}
+    t0 = next(m.timestamp for m in frames if m.arbitration_id in sensor_ids)
+    alarms = decode(frames, "MON_Alarm")
+    t_fault, sig = next((t, s) for t, s in alarms if s["State"] == STATE["fault"])
+    names = {1: "piston_wear", 2: "spool_stroke", 3: "spool_wear"}  # DBC value table
+    # The label isolated at the alarm's first instant (it firms up later; with kernel
+    # timestamps' jitter it may differ from the desk's first label, so the test holds the
+    # frame to the event log, and the desk to its episode label above).
+    assert sig["Fault"] in names
+    assert sig["J"] > sig["Threshold"] > 0
+    onset = ONSET_S - FAULT_SEGMENT[0]
+    t_alarm = (t_fault - t0) / SLOWER  # capture time in log seconds from the first frame
+    expected = off.summary["first_alarm_t"]
+    # Never before the data that shows it; late by at most the daemon's lag in a slow VM.
+    lag = LAG_WALL_S / SLOWER
+    assert onset < expected - 0.3 <= t_alarm <= expected + lag, (t_alarm, expected)
+    # Before it, no MON_Alarm said fault; after the onset of the data, not before.
+    assert all(s["State"] != STATE["fault"] for t, s in alarms if t < t_fault)
+    live = next(e for e in session.events() if e["state"] == "fault")
+    assert live["fault"] == names[sig["Fault"]]
+    assert abs(live["t"] - expected) <= 0.3, (live["t"], expected)  # sample clock, log s
+
+
+def test_status_heartbeat_at_1_hz(session) -> None:
+    status = [t for t, _ in decode(_between(session, "fault_replay", "sigterm"), "MON_Status")]
+    assert len(status) >= 5
+    gaps = np.diff(status)
+    assert 0.9 <= float(np.median(gaps)) <= 1.3, gaps  # wall clock
+
+
+def test_sigterm_during_alarm_keeps_every_event_and_a_restart_continues(session) -> None:
+    assert session.rc["daemon1"] == session.rc["daemon2"] == 0
+    first = session.logs["daemon1"]
+    assert "stopped:" in first
+    at_stop = session.events_at_stop.splitlines()
+    # Every state change the first daemon logged is in the file, flushed before it exited;
+    # the last is the alarm, still on when SIGTERM came.
+    assert len(at_stop) == first.count(" s: ") and len(at_stop) >= 2
+    assert json.loads(at_stop[-1])["state"] == "fault"
+    final = (session.tmp / "events.jsonl").read_text().splitlines()
+    assert final[: len(at_stop)] == at_stop and len(final) > len(at_stop)  # appended to
+    after = decode(_between(session, "restart", "hostile"), "MON_Status")
+    assert len(after) >= 2  # the restarted daemon is on the bus
+
+
+def test_malformed_and_flood_traffic_is_counted_and_survived(session) -> None:
+    counts = _stopped_counts(session.logs["daemon2"])
+    assert counts["rejected"]["dlc"] == 2  # only cansend's 6-byte frames; the flood is 8
+    before, after = session.status_before_hostile, session.status_after_hostile
+    received = (after["RxFrames"] - before["RxFrames"]) % 65536
+    rejected = (after["RejectedFrames"] - before["RejectedFrames"]) % 65536
+    flood_seen = received - 6
+    assert 0 < flood_seen <= N_FLOOD
+    # Random data passes the CRC 1 time in 256: nearly every flood frame is rejected.
+    dropped = counts["dropped"]
+    assert rejected - 4 >= 0.98 * (flood_seen - dropped) - 5
+    assert counts["counter_jumps"] >= 1
+    # The counters in MON_Status are the ones the daemon logs on exit (nothing after is bad).
+    last = decode(session.frames, "MON_Status")[-1][1]
+    assert last["RejectedFrames"] == sum(counts["rejected"].values()) % 65536
+    assert last["DroppedFrames"] == dropped % 256
+    hostile = decode(_between(session, "hostile", "flow_stops"), "MON_Alarm")
+    assert all(s["State"] != STATE["fault"] for _, s in hostile)
+    print(f"[vcan] flood: {session.wall['flood_rate']:.0f} frames/s, {flood_seen} received, "
+          f"{dropped} dropped")  # fmt: skip
+
+
+def test_a_sensor_that_stops_is_a_sensor_fault_never_a_hydraulic_one(session) -> None:
+    frames = _between(session, "flow_stops", None)
+    flow = frame_id("HYD_Flow")
+    t0 = next(m.timestamp for m in frames if m.arbitration_id == flow)
+    alarms = decode(frames, "MON_Alarm")
+    assert alarms and all(s["State"] != STATE["fault"] for _, s in alarms)
+    # The last change from normal to sensor fault (the replay's start may flicker too).
+    t_sensor = [
+        t
+        for (_, a), (t, b) in zip(alarms, alarms[1:], strict=False)
+        if (a["State"], b["State"]) == (STATE["normal"], STATE["sensor_fault"])
+    ][-1]
+    # Stale 30 ms after the last flow frame (3 cycle times), late by the daemon's lag.
+    assert FLOW_STOP_S <= (t_sensor - t0) / SLOWER <= FLOW_STOP_S + LAG_WALL_S / SLOWER
+    states = [e["state"] for e in session.events()[session.events_before_flow_stop :]]
+    # Normal until the flow stops, then a sensor fault; inactive once the replay has ended.
+    # (A VM stall longer than bus.silent_s may add an inactive spell in between: the
+    # daemon reports the silence it saw.)
+    assert "fault" not in states and states[-1] == "inactive", states
+    assert ("normal", "sensor_fault") in zip(states, states[1:], strict=False), states
