@@ -80,10 +80,18 @@ def _resample(rec: Recording) -> tuple[np.ndarray, dict[str, np.ndarray], np.nda
     return grid, cols, ~in_gap
 
 
+#: Samples this close to zero are left out of the noise estimate: the sensors clip at 0, which
+#: hides half of the noise there (QP of a dead-headed pump, a drained chamber).
+NOISE_CLIP_MARGIN = 1.0
+
+
 def noise_variance(x: np.ndarray) -> float:
     """White-noise variance from the second difference (var = 6 sigma^2), robust to motion."""
     d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
-    d2 = d2[np.isfinite(d2)]
+    away = (
+        (x[:-2] > NOISE_CLIP_MARGIN) & (x[1:-1] > NOISE_CLIP_MARGIN) & (x[2:] > NOISE_CLIP_MARGIN)
+    )
+    d2 = d2[np.isfinite(d2) & away]
     if d2.size < 10:
         return 0.0
     mad = np.median(np.abs(d2 - np.median(d2)))
