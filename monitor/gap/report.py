@@ -126,7 +126,7 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
             "calibration_s": round(sum(s.duration_s() for s in diag.calibration), 1),
             "heldout_s": round(sum(s.duration_s() for s in diag.heldout), 1),
         },
-        "timings_s": {k: round(v, 2) for k, v in diag.timings.items()},
+        "timings_s": {k: round(v, 2) for k, v in diag.timings_s.items()},
     }
 
 
