@@ -170,13 +170,13 @@ def diagnose(
     ratio = nominal.mse() / np.maximum(floor, 1e-12)
     within_noise = bool(np.all(ratio < NONE_RATIO))
     if not within_noise:
-        for i, c in enumerate(singles[:REFINE_TOP]):
+        for c in list(singles[:REFINE_TOP]):
             starts = [(c.factors, c.effects), ({}, c.effects)]
             kept = sums[c.name]
             r = scored(fit_candidate([c.effects[0].name], fit_ev.residual, factors, tol, starts))
             say(f"refit {r.name} with tolerances: held-out reduction {r.heldout_reduction:+.2f}")
             if r.criterion < c.criterion:
-                singles[i] = r
+                singles[singles.index(c)] = r
             else:
                 sums[c.name] = kept
         singles.sort(key=lambda c: c.criterion)
@@ -197,7 +197,7 @@ def diagnose(
 
     idx = resamples(len(held))
     verdict, also, chosen, confidence = _decide(
-        within_noise, ratio, singles, pairs, sums, nominal, idx, floor
+        within_noise, singles, pairs, sums, nominal, idx, floor
     )
     timings["total"] = time.perf_counter() - clock
     return Diagnosis(
@@ -223,7 +223,6 @@ def diagnose(
 
 def _decide(
     within_noise: bool,
-    ratio: np.ndarray,
     singles: list[Candidate],
     pairs: list[Candidate],
     sums: dict[str, S.SegmentSums],

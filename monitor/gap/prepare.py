@@ -51,6 +51,7 @@ class Prepared:
     scale: dict[str, float]
     noise_var: dict[str, float]
     source: str
+    stroke_mm: float
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -187,6 +188,7 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         scale=scale,
         noise_var={n: noise_variance(v) for n, v in meas.items()},
         source=src,
+        stroke_mm=machine.stroke_m * 1e3,
     )
 
 

@@ -2,8 +2,11 @@
 
 Driven open loop, a simulated cylinder drifts away from the real one, so the comparison
 restarts often.  Segments start where the state is known best: a moment after the spool
-has come back to centre (rod at rest, trapped pressures measured); a stretch without such a
-moment is cut at fixed lengths and started from the measured moving state.  Segments are
+has come back to centre (rod at rest, trapped pressures measured), or after the rod has
+arrived at an end stop (a simulated rod that arrives a little later would otherwise trap
+the load pressure the real one has already drained: tens of bar of residual from a
+fraction of a second of timing); a stretch without such a moment is cut at fixed lengths
+and started from the measured moving state.  Segments are
 then split into interleaved blocks: a calibration part (fits) and a held-out part (scores).
 """
 
@@ -18,6 +21,9 @@ from monitor.signals import SAMPLE_PERIOD_S
 
 #: The spool must have rested this long before a quiet start (s).
 QUIET_S = 0.2
+#: A rod within this of a stop for STOP_S has arrived there (mm, s).
+STOP_MARGIN_MM = 3.0
+STOP_S = 0.1
 MIN_SEGMENT_S = 2.0
 MAX_SEGMENT_S = 12.0
 #: Samples right after a start are not scored: the start state is an estimate.
@@ -47,16 +53,28 @@ class Segment:
         return (self.stop - self.start) * SAMPLE_PERIOD_S
 
 
-def _quiet_starts(prep: Prepared) -> np.ndarray:
-    """Rows where the spool has been centred for QUIET_S (one per resting spell)."""
-    centred = (np.abs(prep.cmd["SpoolCmd"]) < CENTRE_PCT) & prep.valid
-    need = int(round(QUIET_S / SAMPLE_PERIOD_S))
-    run = np.zeros(len(centred), dtype=np.int64)
+def _run_reaches(mask: np.ndarray, need: int) -> np.ndarray:
+    """Rows where a run of true values reaches ``need`` rows (one per run)."""
+    run = np.zeros(len(mask), dtype=np.int64)
     count = 0
-    for i, c in enumerate(centred):
+    for i, c in enumerate(mask):
         count = count + 1 if c else 0
         run[i] = count
     return np.flatnonzero(run == need)
+
+
+def _quiet_starts(prep: Prepared) -> np.ndarray:
+    """Rows where the spool has been centred for QUIET_S, or the rod has sat on an end stop
+    for STOP_S (one per resting spell)."""
+    rate = 1.0 / SAMPLE_PERIOD_S
+    centred = (np.abs(prep.cmd["SpoolCmd"]) < CENTRE_PCT) & prep.valid
+    rod = prep.rod_mm
+    at_stop = ((rod < STOP_MARGIN_MM) | (rod > prep.stroke_mm - STOP_MARGIN_MM)) & prep.valid
+    rows = np.union1d(
+        _run_reaches(centred, int(round(QUIET_S * rate))),
+        _run_reaches(at_stop, int(round(STOP_S * rate))),
+    )
+    return rows
 
 
 def _valid_runs(valid: np.ndarray) -> list[tuple[int, int]]:
