@@ -19,6 +19,7 @@ import subprocess
 import sys
 import time
 from collections import Counter, defaultdict
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -27,22 +28,37 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from generate import EFFECTS, cases, generate  # noqa: E402
 
 
-def diagnose_blind(data_dir: Path, results_dir: Path, progress=print) -> dict[str, float]:
-    """Run ``monitor gap`` on every recording; returns wall time per recording (s)."""
+def _diagnose_one(rec: Path, out: Path) -> tuple[float, str]:
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, "-m", "monitor", "gap", "--real", str(rec), "--json", str(out),
+         "--quiet"], capture_output=True, text=True, check=False
+    )  # fmt: skip
+    if proc.returncode != 0:
+        out.write_text(json.dumps({"error": proc.stderr.strip(), "verdict": "error"}))
+    said = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else proc.stderr.strip()
+    return time.perf_counter() - start, said
+
+
+def diagnose_blind(
+    data_dir: Path, results_dir: Path, progress=print, jobs: int = 1, reuse: bool = False
+) -> dict[str, float]:
+    """Run ``monitor gap`` on every recording (``jobs`` at a time); wall time per recording.
+
+    With ``reuse``, recordings that already have a result are skipped (a resumed run).
+    """
     results_dir.mkdir(parents=True, exist_ok=True)
+    todo = [
+        r for r in sorted(data_dir.glob("*.csv"))
+        if not (reuse and (results_dir / (r.stem + ".json")).exists())
+    ]  # fmt: skip
     times = {}
-    for rec in sorted(data_dir.glob("*.csv")):
-        out = results_dir / (rec.stem + ".json")
-        start = time.perf_counter()
-        proc = subprocess.run(
-            [sys.executable, "-m", "monitor", "gap", "--real", str(rec), "--json", str(out),
-             "--quiet"], capture_output=True, text=True, check=False
-        )  # fmt: skip
-        times[rec.name] = time.perf_counter() - start
-        if proc.returncode != 0:
-            out.write_text(json.dumps({"error": proc.stderr.strip(), "verdict": "error"}))
-        said = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else proc.stderr.strip()
-        progress(f"{rec.name}: {said} ({times[rec.name]:.0f} s)")
+    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+        futures = {pool.submit(_diagnose_one, r, results_dir / (r.stem + ".json")): r for r in todo}
+        for fut in as_completed(futures):
+            rec = futures[fut]
+            times[rec.name], said = fut.result()
+            progress(f"{rec.name}: {said} ({times[rec.name]:.0f} s)")
     return times
 
 
@@ -128,6 +144,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--pairs", type=int, default=3)
     p.add_argument("--duration", type=float, default=120.0, help="recording length (s)")
     p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--jobs", type=int, default=1, help="diagnoses run at once (default 1)")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the recordings and results already in OUT, diagnose the rest",
+    )
     p.add_argument("--score-only", action="store_true", help="rescore existing results")
     a = p.parse_args(argv)
     data, labels_path, results = (
@@ -137,10 +159,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     times = None
     if not a.score_only:
-        plan = cases(a.per_effect, a.none, a.unexplained, a.pairs)
-        generate(data, labels_path, plan, a.duration, a.seed)
-        times = diagnose_blind(data, results)
-        (a.out / "times.json").write_text(json.dumps(times, indent=1))
+        if not (a.resume and labels_path.exists()):
+            plan = cases(a.per_effect, a.none, a.unexplained, a.pairs)
+            generate(data, labels_path, plan, a.duration, a.seed)
+        times_path = a.out / "times.json"
+        times = json.loads(times_path.read_text()) if a.resume and times_path.exists() else {}
+        times.update(diagnose_blind(data, results, jobs=a.jobs, reuse=a.resume))
+        times_path.write_text(json.dumps(times, indent=1))
     elif (a.out / "times.json").exists():
         times = json.loads((a.out / "times.json").read_text())
     s = score(json.loads(labels_path.read_text()), results, times)
