@@ -65,7 +65,7 @@ def n_params(effects: Sequence[Effect]) -> int:
     return sum(len(KNOBS[e.name]) for e in effects)
 
 
-@dataclass
+@dataclass(eq=False)
 class Candidate:
     """One fitted hypothesis: its effects, the tolerance factors it was fitted with, and its
     held-out scores."""

@@ -170,13 +170,13 @@ def diagnose(
     ratio = nominal.mse() / np.maximum(floor, 1e-12)
     within_noise = bool(np.all(ratio < NONE_RATIO))
     if not within_noise:
-        for c in list(singles[:REFINE_TOP]):
+        for i, c in enumerate(singles[:REFINE_TOP]):
             starts = [(c.factors, c.effects), ({}, c.effects)]
             kept = sums[c.name]
             r = scored(fit_candidate([c.effects[0].name], fit_ev.residual, factors, tol, starts))
             say(f"refit {r.name} with tolerances: held-out reduction {r.heldout_reduction:+.2f}")
             if r.criterion < c.criterion:
-                singles[singles.index(c)] = r
+                singles[i] = r
             else:
                 sums[c.name] = kept
         singles.sort(key=lambda c: c.criterion)
