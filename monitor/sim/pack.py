@@ -149,3 +149,37 @@ def rest_state(
     y[K.S_XS] = spool
     y[K.S_DISP] = 0.0 if m.compensator_enabled else disp
     return y
+
+
+def measured_state(
+    machine: MachineParams,
+    prm: np.ndarray,
+    pp_pa: float,
+    pa_pa: float,
+    pb_pa: float,
+    rod_pos_m: float,
+    rod_vel_m_s: float = 0.0,
+    spool: float = 0.0,
+    disp: float | None = None,
+) -> np.ndarray:
+    """A state taken from measurements, to start a simulation mid-recording.
+
+    The spool (fraction of stroke) starts at rest at ``spool``.  ``disp`` (fraction) defaults
+    to what the compensator allows at ``pp_pa`` with full command: without pump dynamics the
+    kernel ignores it, with them it is the best guess a pressure reading gives.
+    """
+    m = machine
+    y = np.zeros(K.N_STATES)
+    y[K.S_PP] = max(pp_pa, 0.0)
+    y[K.S_PA] = max(pa_pa, 0.0)
+    y[K.S_PB] = max(pb_pa, 0.0)
+    y[K.S_X] = min(max(rod_pos_m, 0.0), m.stroke_m)
+    y[K.S_V] = rod_vel_m_s
+    y[K.S_XS] = spool
+    if disp is None:
+        disp = 1.0
+        if m.compensator_enabled:
+            span = m.compensator_full_pa - m.compensator_start_pa
+            disp = min(max((m.compensator_full_pa - pp_pa) / span, 0.0), 1.0)
+    y[K.S_DISP] = disp
+    return y

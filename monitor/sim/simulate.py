@@ -57,8 +57,14 @@ def run_plant(
     effects: list[Effect] | tuple[Effect, ...] = (),
     rod_pos0_m: float = 0.1,
     record_period_s: float | None = RECORD_PERIOD_S,
+    state0: np.ndarray | None = None,
 ) -> PlantTrace:
-    """Integrate the plant driven by ``commands``; ``record_period_s=None`` records every step."""
+    """Integrate the plant driven by ``commands``; ``record_period_s=None`` records every step.
+
+    The plant starts at rest at ``rod_pos0_m``, or from ``state0`` (a kernel state vector,
+    e.g. ``pack.measured_state``) to simulate a segment of a recording from its measured
+    state.
+    """
     _check_commands(commands)
     input_dt = float(commands.t[1] - commands.t[0])
     n_sub = max(1, int(round(input_dt / machine.step_s)))
@@ -74,7 +80,12 @@ def run_plant(
         faults,
         effects,
     )
-    y0 = rest_state(machine, prm, rod_pos0_m)
+    if state0 is None:
+        y0 = rest_state(machine, prm, rod_pos0_m)
+    else:
+        y0 = np.asarray(state0, dtype=np.float64)
+        if y0.shape != (K.N_STATES,):
+            raise ConfigError(f"state0 must have {K.N_STATES} values, got {y0.shape}")
     rec = K.integrate(y0, u, n_sub, input_dt, prm, every)
     t = commands.t[0] + np.arange(rec.shape[0]) * (h * every)
     return PlantTrace(

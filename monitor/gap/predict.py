@@ -1,0 +1,115 @@
+"""Simulate segments of a recording from their measured states; noise-free, unquantised.
+
+The output is what the sensors would read without noise, so the residual against the
+recording is the simulator's gap plus sensor noise.  Quantisation and noise are left out
+on purpose: they would make the fits' objective rough.  The plant runs once per set of
+plant parameters; the sensor model (``sensor_lag``) is applied afterwards, so fitting a
+sensor effect reuses the plant traces.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from monitor.gap.prepare import Prepared
+from monitor.gap.segments import Segment
+from monitor.io.recording import Recording
+from monitor.signals import MEASURED_NAMES
+from monitor.sim.effects import Effect
+from monitor.sim.machine import BAR, LPM, MachineParams
+from monitor.sim.pack import measured_state, pack_params
+from monitor.sim.sensors import lag
+from monitor.sim.simulate import PlantTrace, run_plant
+
+SENSOR_EFFECTS = ("sensor_lag",)
+#: Rows around a start whose median gives the start pressures (noise 0.3 bar rms).
+_START_ROWS = 2
+#: A rod measured this close to an end stop rests on it (m).  A rod started a fraction of a
+#: millimetre short of a stop it presses on would jump there and shake the trapped
+#: pressures by tens of bar.
+END_STOP_SNAP_M = 3e-3
+
+
+def plant_effects(effects: Sequence[Effect]) -> tuple[Effect, ...]:
+    return tuple(e for e in effects if e.name not in SENSOR_EFFECTS)
+
+
+def _start_state(prep: Prepared, seg: Segment, machine: MachineParams, prm: np.ndarray):
+    i = seg.start
+    lo, hi = max(i - _START_ROWS, 0), i + _START_ROWS + 1
+    p = {n: np.nanmedian(prep.meas[n][lo:hi]) for n in ("PP", "PA", "PB")}
+    p = {n: (v if np.isfinite(v) else 0.0) for n, v in p.items()}
+    x_m = prep.rod_mm[i] * 1e-3
+    if x_m < END_STOP_SNAP_M:
+        x_m = 0.0
+    elif x_m > machine.stroke_m - END_STOP_SNAP_M:
+        x_m = machine.stroke_m
+    if seg.quiet:
+        v_m_s = 0.0
+    else:
+        j0, j1 = max(i - 3, 0), min(i + 3, len(prep) - 1)
+        v_m_s = (prep.rod_mm[j1] - prep.rod_mm[j0]) * 1e-3 / (prep.t[j1] - prep.t[j0])
+    return measured_state(
+        machine,
+        prm,
+        p["PP"] * BAR,
+        p["PA"] * BAR,
+        p["PB"] * BAR,
+        x_m,
+        v_m_s,
+        spool=float(np.clip(prep.cmd["SpoolCmd"][i], -100, 100)) / 100.0,
+    )
+
+
+def plant_traces(
+    prep: Prepared, segments: Sequence[Segment], machine: MachineParams, effects: Sequence[Effect]
+) -> list[PlantTrace]:
+    """One plant run per segment (1 kHz record) with the plant effects of ``effects``."""
+    fx = plant_effects(effects)
+    prm = pack_params(machine, fx)
+    out = []
+    for seg in segments:
+        rows = slice(seg.start, seg.stop + 1)
+        cmds = Recording(prep.t[rows], {n: v[rows] for n, v in prep.cmd.items()})
+        y0 = _start_state(prep, seg, machine, prm)
+        out.append(run_plant(cmds, machine, effects=fx, state0=y0))
+    return out
+
+
+def sense(
+    prep: Prepared,
+    segments: Sequence[Segment],
+    traces: Sequence[PlantTrace],
+    effects: Sequence[Effect],
+) -> dict[str, np.ndarray]:
+    """Noise-free sensor readings on the recording's grid (NaN outside the segments)."""
+    delay_s = tau_s = 0.0
+    for e in effects:
+        if e.name == "sensor_lag":
+            delay_s = e.params["delay_ms"] * 1e-3
+            tau_s = e.params["time_constant_ms"] * 1e-3
+    out = {n: np.full(len(prep), np.nan) for n in MEASURED_NAMES}
+    for seg, tr in zip(segments, traces, strict=True):
+        rel = tr.t_s - tr.t_s[0]
+        n = seg.stop - seg.start + 1
+        idx = np.minimum(
+            np.round(np.arange(n) * (prep.t[1] - prep.t[0]) / rel[1]).astype(int), len(rel) - 1
+        )
+        rows = slice(seg.start, seg.stop + 1)
+        for name, values, unit in (
+            ("PP", tr.pp_pa, BAR),
+            ("PA", tr.pa_pa, BAR),
+            ("PB", tr.pb_pa, BAR),
+            ("QP", tr.qp_m3_s, LPM),
+        ):
+            out[name][rows] = lag(rel, values, delay_s, tau_s)[idx] / unit
+    return out
+
+
+def predict(
+    prep: Prepared, segments: Sequence[Segment], machine: MachineParams, effects: Sequence[Effect]
+) -> dict[str, np.ndarray]:
+    """Simulated sensor readings for ``segments`` with ``effects`` switched on."""
+    return sense(prep, segments, plant_traces(prep, segments, machine, effects), effects)

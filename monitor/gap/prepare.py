@@ -1,0 +1,213 @@
+"""Check that a recording can be diagnosed and put it on a uniform 100 Hz grid.
+
+The gap tool drives the simulator with the recording's own commands, so it refuses, with one
+clear line, what it cannot use: missing commands (exit 2), no or too little hydraulic data,
+no motion at all, or signals that this machine cannot produce (exit 3, a recording of
+another machine or another unit system).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.errors import InputFileError, NoHydraulicDataError
+from monitor.io.recording import Recording
+from monitor.signals import COMMAND_NAMES, MEASURED_NAMES, SAMPLE_PERIOD_S
+from monitor.sim.machine import BAR, LPM, MachineParams
+
+#: Shortest recording worth diagnosing: calibration and held-out parts need a few duty
+#: cycles each.
+MIN_DURATION_S = 40.0
+#: A row gap longer than this is missing data (DESIGN.md: more than 3 periods).
+MAX_GAP_S = 3.5 * SAMPLE_PERIOD_S
+#: Share of finite samples a measured signal needs.
+MIN_VALID_SHARE = 0.8
+#: Measured flow or pressure this far above what the configured machine can deliver means
+#: another machine (or other units): the simulator cannot be compared with it.
+PLAUSIBLE_MARGIN = 1.3
+#: Spool commands within this of centre count as closed (%).
+CENTRE_PCT = 1.0
+
+
+@dataclass
+class Prepared:
+    """A recording on a uniform grid, ready for segment-wise simulation.
+
+    ``meas`` holds PP, PA, PB (bar) and QP (L/min) with NaN for missing samples; ``cmd``
+    the four commands (finite everywhere ``valid`` is true); ``rod_mm`` the rod position
+    (measured RodPos, lightly smoothed, or integrated from pump flow when absent);
+    ``scale`` the measured standard deviation per signal and ``noise_var`` the sensor
+    noise variance per signal, both in the signal's units.
+    """
+
+    t: np.ndarray
+    cmd: dict[str, np.ndarray]
+    meas: dict[str, np.ndarray]
+    valid: np.ndarray
+    rod_mm: np.ndarray
+    has_rodpos: bool
+    scale: dict[str, float]
+    noise_var: dict[str, float]
+    source: str
+    stroke_mm: float
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+def _resample(rec: Recording) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+    """Columns on t0 + k * 10 ms; grid points inside a gap of missing rows become NaN."""
+    t = rec.t
+    n = int(np.floor((t[-1] - t[0]) / SAMPLE_PERIOD_S + 1e-6)) + 1
+    grid = t[0] + np.arange(n) * SAMPLE_PERIOD_S
+    if len(t) == n and np.allclose(t, grid, atol=1e-6):
+        return grid, {k: v.copy() for k, v in rec.columns.items()}, np.ones(n, bool)
+    right = np.clip(np.searchsorted(t, grid), 1, len(t) - 1)
+    in_gap = (t[right] - t[right - 1]) > MAX_GAP_S
+    cols = {}
+    for name, values in rec.columns.items():
+        ok = np.isfinite(values)
+        out = np.full(n, np.nan)
+        if ok.sum() >= 2:
+            out = np.interp(grid, t[ok], values[ok])
+            # A sample missing in the file stays missing on the grid.
+            near = np.abs(t[right] - grid) < np.abs(t[right - 1] - grid)
+            idx = np.where(near, right, right - 1)
+            out[~ok[idx]] = np.nan
+        out[in_gap] = np.nan
+        cols[name] = out
+    return grid, cols, ~in_gap
+
+
+#: Samples this close to zero are left out of the noise estimate: the sensors clip at 0, which
+#: hides half of the noise there (QP of a dead-headed pump, a drained chamber).
+NOISE_CLIP_MARGIN = 1.0
+
+
+def noise_variance(x: np.ndarray) -> float:
+    """White-noise variance from the second difference (var = 6 sigma^2), robust to motion."""
+    d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
+    away = (
+        (x[:-2] > NOISE_CLIP_MARGIN) & (x[1:-1] > NOISE_CLIP_MARGIN) & (x[2:] > NOISE_CLIP_MARGIN)
+    )
+    d2 = d2[np.isfinite(d2) & away]
+    if d2.size < 10:
+        return 0.0
+    mad = np.median(np.abs(d2 - np.median(d2)))
+    return float((1.4826 * mad) ** 2 / 6.0)
+
+
+def _rod_from_flow(
+    t: np.ndarray, spool: np.ndarray, qp_lpm: np.ndarray, machine: MachineParams
+) -> np.ndarray:
+    """Rod position (mm) from pump flow without RodPos: flow goes to the side the spool opens.
+
+    Clipping at the stroke re-anchors the estimate whenever the rod runs into an end stop
+    (flow continues into a stalled cylinder only through the compensator, which stops it).
+    """
+    q = np.nan_to_num(qp_lpm) * LPM
+    v = np.where(
+        spool > CENTRE_PCT,
+        q / machine.area_a_m2,
+        np.where(spool < -CENTRE_PCT, -q / machine.area_b_m2, 0.0),
+    )
+    x = np.empty_like(t)
+    pos = 0.0
+    dt = SAMPLE_PERIOD_S
+    stroke = machine.stroke_m
+    for i in range(len(t)):
+        x[i] = pos
+        pos = min(max(pos + v[i] * dt, 0.0), stroke)
+    return x * 1e3
+
+
+def prepare(rec: Recording, machine: MachineParams) -> Prepared:
+    """Validate ``rec`` for the gap tool and resample it; raises a ``MonitorError``."""
+    src = rec.source
+    missing_cmd = [n for n in COMMAND_NAMES if not rec.has(n)]
+    if missing_cmd:
+        raise InputFileError(
+            f"{src}: command signal(s) {', '.join(missing_cmd)} missing: the simulator is "
+            "driven by the recording's own commands"
+        )
+    present = [n for n in MEASURED_NAMES if rec.has(n)]
+    if len(present) < len(MEASURED_NAMES):
+        others = ", ".join(n for n in rec.columns if n not in COMMAND_NAMES) or "none"
+        raise NoHydraulicDataError(
+            f"{src}: no usable hydraulic data: needs {', '.join(MEASURED_NAMES)}, has {others}"
+        )
+    if len(rec) < 2 or rec.t[-1] - rec.t[0] < MIN_DURATION_S:
+        dur = 0.0 if len(rec) < 2 else rec.t[-1] - rec.t[0]
+        raise NoHydraulicDataError(
+            f"{src}: {dur:.1f} s is too short to diagnose: needs at least {MIN_DURATION_S:g} s "
+            "(a calibration and a held-out part of several duty cycles)"
+        )
+    t, cols, valid = _resample(rec)
+    for name in COMMAND_NAMES:
+        ok = np.isfinite(cols[name])
+        if ok.mean() < MIN_VALID_SHARE:
+            raise InputFileError(
+                f"{src}: command {name} is missing in {100 * (1 - ok.mean()):.0f} % of the "
+                "samples; the simulator needs the commands"
+            )
+        valid &= ok
+    for name in MEASURED_NAMES:
+        share = float(np.isfinite(cols[name]).mean())
+        if share < MIN_VALID_SHARE:
+            raise NoHydraulicDataError(
+                f"{src}: {name} is missing in {100 * (1 - share):.0f} % of the samples"
+            )
+    spool = np.nan_to_num(cols["SpoolCmd"])
+    if not (np.abs(spool) > 5.0).any():
+        raise NoHydraulicDataError(
+            f"{src}: SpoolCmd never leaves centre: nothing moves, no dynamics to compare"
+        )
+    _check_plausible(src, cols, machine)
+    meas = {n: cols[n] for n in MEASURED_NAMES}
+    has_rod = rec.has("RodPos") and np.isfinite(cols["RodPos"]).mean() >= MIN_VALID_SHARE
+    if has_rod:
+        rod = cols["RodPos"]
+        ok = np.isfinite(rod)
+        rod = np.interp(t, t[ok], rod[ok])
+        rod = np.convolve(np.pad(rod, 2, mode="edge"), np.ones(5) / 5, mode="valid")
+    else:
+        rod = _rod_from_flow(t, spool, meas["QP"], machine)
+    scale = {n: float(np.nanstd(v)) for n, v in meas.items()}
+    for name, s in scale.items():
+        if not s > 0:
+            raise NoHydraulicDataError(f"{src}: {name} is constant: no hydraulic activity")
+    return Prepared(
+        t=t,
+        cmd={n: np.nan_to_num(cols[n]) for n in COMMAND_NAMES},
+        meas=meas,
+        valid=valid,
+        rod_mm=rod,
+        has_rodpos=bool(has_rod),
+        scale=scale,
+        noise_var={n: noise_variance(v) for n, v in meas.items()},
+        source=src,
+        stroke_mm=machine.stroke_m * 1e3,
+    )
+
+
+def _check_plausible(src: str, cols: dict[str, np.ndarray], machine: MachineParams) -> None:
+    speed = np.nanpercentile(cols["EngineSpeed"], 99)
+    q_max = machine.pump_disp_m3_rev * max(speed, 1.0) / 60.0 / LPM
+    q99 = np.nanpercentile(cols["QP"], 99)
+    if q99 > PLAUSIBLE_MARGIN * q_max:
+        raise NoHydraulicDataError(
+            f"{src}: QP reaches {q99:.1f} L/min but the configured pump delivers at most "
+            f"{q_max:.1f} L/min at {speed:.0f} rpm: a recording of another machine? "
+            "(pass its simulator config with --config)"
+        )
+    p_max = machine.relief_full_pa / BAR
+    for name in ("PP", "PA", "PB"):
+        p99 = np.nanpercentile(cols[name], 99)
+        if p99 > PLAUSIBLE_MARGIN * p_max or np.nanpercentile(cols[name], 1) < -5.0:
+            raise NoHydraulicDataError(
+                f"{src}: {name} spans {np.nanpercentile(cols[name], 1):.1f}..{p99:.1f} bar, "
+                f"outside what a loop with relief at {p_max:.0f} bar can show: another "
+                "machine or other units? (pass its simulator config with --config)"
+            )

@@ -1,0 +1,211 @@
+"""The diagnosis as the contract JSON and a one-page text summary.
+
+JSON keys (issue 6, other tools read them): ``verdict``, ``also``, ``params``,
+``calibrated``, ``confidence``, ``where`` {signals, regimes, bands, windows}, ``ranking``,
+``shrink`` {before, after, heldout_reduction}; extra keys add detail without changing those.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.gap import calibrate as cal_mod
+from monitor.gap import where as W
+from monitor.gap.candidates import KNOBS, Candidate
+from monitor.gap.diagnose import Diagnosis
+from monitor.gap.predict import predict
+from monitor.gap.score import normalised
+from monitor.gap.shrink import shrink_report
+from monitor.signals import MEASURED_NAMES, UNITS
+from monitor.sim.effects import CATALOGUE, Effect
+from monitor.sim.machine import MachineParams
+
+
+@dataclass
+class Traces:
+    """Whole-recording simulations for the report: calibrated nominal and corrected."""
+
+    nominal: dict[str, np.ndarray]
+    corrected: dict[str, np.ndarray] | None
+
+
+def simulate_all(diag: Diagnosis, machine: MachineParams) -> Traces:
+    prep, segs = diag.prep, diag.segments
+    nominal = predict(prep, segs, diag.machine, ())
+    corrected = None
+    if diag.chosen is not None:
+        m = cal_mod.apply(machine, diag.chosen.factors)
+        corrected = predict(prep, segs, m, diag.chosen.effects)
+    return Traces(nominal, corrected)
+
+
+def effect_params(effect: Effect) -> dict[str, dict]:
+    """Values keyed by the effect's ``--effect`` parameter names, with units."""
+    fitted = {k.name for k in KNOBS[effect.name]}
+    if effect.name == "cylinder_friction":
+        fitted.add("static_n")
+    spec = CATALOGUE[effect.name]
+    return {
+        p.name: {
+            "value": round(float(effect.params[p.name]), 6),
+            "unit": p.unit,
+            "fitted": p.name in fitted,
+        }
+        for p in spec.params
+    }
+
+
+def _candidate_row(c: Candidate) -> dict:
+    return {
+        "effect": c.name,
+        "heldout_reduction": round(float(c.heldout_reduction), 4),
+        "criterion": round(float(c.criterion), 2),
+        "params": {e.name: {k: round(v, 6) for k, v in e.params.items()} for e in c.effects},
+    }
+
+
+def _regime_shrink(diag: Diagnosis, traces: Traces, held_mask: np.ndarray) -> list[dict]:
+    prep = diag.prep
+    r0 = normalised(prep, traces.nominal)
+    r1 = normalised(prep, traces.corrected) if traces.corrected is not None else r0
+    rows = []
+    for name, rmask in W.regimes(prep).items():
+        m = rmask & held_mask
+        if m.sum() < W.MIN_REGIME_SHARE * held_mask.sum():
+            continue
+
+        def nrmse(r: dict[str, np.ndarray], m: np.ndarray = m) -> float:
+            return float(np.sqrt(np.mean([np.nanmean(r[n][m] ** 2) for n in MEASURED_NAMES])))
+
+        rows.append({"regime": name, "before": round(nrmse(r0), 5), "after": round(nrmse(r1), 5)})
+    return rows
+
+
+def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dict:
+    """The JSON document (plain types only)."""
+    prep = diag.prep
+    all_mask = W.scored_mask(len(prep), diag.segments)
+    held_mask = W.scored_mask(len(prep), diag.heldout)
+    resid = normalised(prep, traces.nominal)
+    chosen = diag.chosen
+    after = diag.sums[chosen.name] if chosen is not None else diag.nominal
+    shrink = shrink_report(
+        diag.nominal, after, diag.boot_idx, diag.floor, _regime_shrink(diag, traces, held_mask)
+    )
+    params: dict[str, dict] = {}
+    also_params = None
+    if chosen is not None:
+        by_name = {e.name: e for e in chosen.effects}
+        params = effect_params(by_name[diag.verdict])
+        if diag.also is not None:
+            also_params = effect_params(by_name[diag.also])
+    duration = float(prep.t[-1] - prep.t[0])
+    return {
+        "verdict": diag.verdict,
+        "also": diag.also,
+        "params": params,
+        "also_params": also_params,
+        "calibrated": cal_mod.describe(machine, chosen.factors if chosen else diag.factors),
+        "confidence": round(float(diag.confidence), 3),
+        "where": {
+            "signals": W.by_signal(resid, all_mask),
+            "regimes": W.by_regime(prep, resid, all_mask),
+            "bands": W.by_band(prep, resid),
+            "windows": W.worst_windows(prep, resid, all_mask),
+        },
+        "ranking": [_candidate_row(c) for c in diag.singles],
+        "pairs": [_candidate_row(c) for c in diag.pairs],
+        "shrink": shrink,
+        "recording": {
+            "source": prep.source,
+            "duration_s": round(duration, 2),
+            "rodpos": "measured" if prep.has_rodpos else "integrated from QP",
+            "segments": len(diag.segments),
+            "calibration_s": round(sum(s.duration_s() for s in diag.calibration), 1),
+            "heldout_s": round(sum(s.duration_s() for s in diag.heldout), 1),
+        },
+        "timings_s": {k: round(v, 2) for k, v in diag.timings_s.items()},
+    }
+
+
+def _fmt_params(params: dict[str, dict]) -> str:
+    return ", ".join(
+        f"{k} = {v['value']:.4g} {v['unit']}" for k, v in params.items() if v["fitted"]
+    )
+
+
+def summary_text(report: dict) -> str:
+    """One page a service engineer reads first; the first line says where the gap lies."""
+    w = report["where"]
+    sig = w["signals"][0]
+    reg = w["regimes"][0] if w["regimes"] else None
+    band = w["bands"][0]
+    win = w["windows"][0] if w["windows"] else None
+    first = f"Gap mostly in {sig['name']} (NRMSE {sig['nrmse']:.3f})"
+    if reg:
+        first += f", concentrated in '{reg['regime']}' ({reg['concentration']:.1f}x its time share)"
+    first += f", {band['band_hz'][0]:g}-{band['band_hz'][1]:g} Hz ({100 * band['share']:.0f} %)"
+    if win:
+        first += f", worst at {win['t_start']:g}-{win['t_end']:g} s"
+    lines = [first + ".", ""]
+    v = report["verdict"]
+    sh = report["shrink"]
+    if v == "none":
+        lines.append(
+            "Verdict: none: after calibrating tolerances the simulator is within sensor noise."
+        )
+    elif v == "unexplained":
+        best = report["ranking"][0]
+        lines.append(
+            "Verdict: unexplained: no catalogue effect removes a clear share of the held-out "
+            f"gap (best: {best['effect']}, {100 * best['heldout_reduction']:.0f} %)."
+        )
+    else:
+        lines.append(f"Verdict: {v} ({_fmt_params(report['params'])})")
+        if report["also"]:
+            lines.append(f"Also:    {report['also']} ({_fmt_params(report['also_params'])})")
+        lo, hi = sh["heldout_reduction_ci90"]
+        lines.append(
+            f"Held-out gap removed: {100 * sh['heldout_reduction']:.0f} % "
+            f"(90 % bootstrap interval {100 * lo:.0f}..{100 * hi:.0f} %)"
+        )
+    lines.append(f"Confidence: {report['confidence']:.2f}")
+    lines += ["", "Held-out NRMSE per signal (before -> after; sensor noise alone):"]
+    for n in MEASURED_NAMES:
+        lines.append(
+            f"  {n:3s} [{UNITS[n]}]  {sh['before'][n]:.4f} -> {sh['after'][n]:.4f}"
+            f"   (noise {sh['noise_floor_nrmse'][n]:.4f})"
+        )
+    lines += ["", "Tolerances calibrated first:"]
+    for name, c in report["calibrated"].items():
+        lines.append(
+            f"  {name:17s} {c['value']:.5g} {c['unit']} "
+            f"({c['change_pct']:+.1f} %, band +-{c['band_pct']:g} %)"
+        )
+    lines += ["", "Candidates (held-out gap removed, best first):"]
+    for row in report["ranking"]:
+        lines.append(f"  {row['effect']:22s} {100 * row['heldout_reduction']:6.1f} %")
+    for row in report["pairs"]:
+        lines.append(f"  pair {row['effect']:17s} {100 * row['heldout_reduction']:6.1f} %")
+    lines += ["", "Where (calibrated nominal simulator, all segments):"]
+    for r in w["regimes"][:4]:
+        lines.append(
+            f"  {r['regime']:44s} {100 * r['share']:5.1f} % of residual in "
+            f"{100 * r['time_share']:5.1f} % of time"
+        )
+    for b in w["bands"][:3]:
+        lines.append(
+            f"  {b['band_hz'][0]:g}-{b['band_hz'][1]:g} Hz: "
+            f"{100 * b['share']:.0f} % of residual power, "
+            f"coherence with SpoolCmd {b['coherence_spool']:.2f}"
+        )
+    rec = report["recording"]
+    lines += [
+        "",
+        f"Recording {rec['source']}: {rec['duration_s']:g} s, {rec['segments']} segments, "
+        f"{rec['calibration_s']:g} s calibration / {rec['heldout_s']:g} s held out, "
+        f"RodPos {rec['rodpos']}; diagnosis took {report['timings_s']['total']:.0f} s.",
+    ]
+    return "\n".join(lines) + "\n"
