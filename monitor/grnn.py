@@ -25,6 +25,7 @@ from scipy.optimize import minimize_scalar
 
 from monitor._numba import get_num_threads, jit, pjit, prange
 from monitor.errors import ConfigError, InputFileError
+from monitor.grnn_index import CutoffIndex, build_index, exact_index, predict_cutoff
 
 SIGMA_RULES = ("loo", "fixed")
 THINNING_RULES = ("none", "stride", "min_distance")
@@ -475,8 +476,27 @@ class GRNN:
         if not hasattr(self, "patterns_"):
             raise ConfigError("this GRNN is not fitted yet: call fit(X, Y) first")
 
-    def predict(self, X: Any) -> np.ndarray:
-        """Eq. 4 for each row of X; a row with NaN gives NaN.  Shape (n,) if fitted on 1-D Y."""
+    def cutoff_index(self, exact: bool = False) -> CutoffIndex:
+        """The kd-tree and cut-off of ``monitor.grnn_index`` over the fitted patterns (error
+        <= 1e-6 of each target's std), or with ``exact`` a one-leaf brute-force "index".
+
+        Built on first use and kept until the patterns change (not stored in model files).
+        """
+        self._check_fitted()
+        key = (exact, id(self.patterns_), id(self.targets_), self.patterns_.shape)
+        cache = self.__dict__.setdefault("_indexes", {})
+        if key not in cache:
+            if len(cache) > 2:
+                cache.clear()
+            make = exact_index if exact else build_index
+            cache[key] = make(self.patterns_, self.targets_)
+        return cache[key]
+
+    def predict(self, X: Any, exact: bool = True) -> np.ndarray:
+        """Eq. 4 for each row of X; a row with NaN gives NaN.  Shape (n,) if fitted on 1-D Y.
+
+        ``exact=False`` sums only the patterns within the cut-off of ``cutoff_index``.
+        """
         self._check_fitted()
         Xa = np.asarray(X, dtype=np.float64)
         single = Xa.ndim == 1
@@ -486,13 +506,12 @@ class GRNN:
             raise InputFileError(
                 f"X must have {self.n_features_in_} features per row, got shape {np.shape(X)}"
             )
-        out = _predict_batch(
-            np.ascontiguousarray(Xa),
-            self.patterns_,
-            self.targets_,
-            0.5 / self.sigma_**2,
-            n_chunks(),
-        )
+        Xa = np.ascontiguousarray(Xa)
+        if exact:
+            inv = 0.5 / self.sigma_**2
+            out = _predict_batch(Xa, self.patterns_, self.targets_, inv, n_chunks())
+        else:
+            out = predict_cutoff(self.cutoff_index(), Xa, self.sigma_, n_chunks())
         if self._y1d:
             out = out[:, 0]
         return out[0] if single else out
