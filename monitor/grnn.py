@@ -12,7 +12,9 @@ underflows to 0 and eq. 4 would be 0/0) returns the target of its nearest patter
 
 Layout (stumpy style): public functions validate and call a parallel ``@njit`` driver that
 loops over queries with ``prange``; the per-query work is a small serial kernel
-(``_kernel_row``) that the dynamic model (``monitor.dgrnn``) reuses.
+(``monitor.grnn_index.cutoff_row``) that the dynamic model (``monitor.dgrnn``) reuses.
+Exact eq. 4 runs it over every pattern (``exact_index``); the detector by default sums only
+the patterns within a cut-off radius with a stated error bound (``build_index``).
 """
 
 from __future__ import annotations
@@ -40,54 +42,6 @@ _LOO_MAX_ENTRIES = 16_000_000
 def n_chunks() -> int:
     """Work chunks for the parallel drivers (a few per thread, for load balance)."""
     return 4 * get_num_threads()
-
-
-@jit
-def _kernel_row(x, patterns, targets, inv2s2, dbuf, out):  # pragma: no cover - numba
-    """Eq. 4 for one query ``x`` into ``out`` (n_outputs,); ``dbuf`` is scratch (n_patterns,).
-
-    A query with no finite distance (NaN in ``x``) gives NaN outputs: missing data stays
-    visible instead of becoming a plausible-looking number.
-    """
-    n, nf = patterns.shape
-    nout = targets.shape[1]
-    dmin = np.inf
-    for i in range(n):
-        acc = 0.0
-        for f in range(nf):
-            diff = x[f] - patterns[i, f]
-            acc += diff * diff
-        d = acc * inv2s2
-        dbuf[i] = d
-        if d < dmin:
-            dmin = d
-    if not dmin < np.inf:
-        for k in range(nout):
-            out[k] = np.nan
-        return
-    for k in range(nout):
-        out[k] = 0.0
-    den = 0.0
-    for i in range(n):
-        w = math.exp(dmin - dbuf[i])  # <= 1, and exactly 1 for the nearest pattern
-        den += w
-        for k in range(nout):
-            out[k] += w * targets[i, k]
-    for k in range(nout):
-        out[k] /= den
-
-
-@pjit
-def _predict_batch(X, patterns, targets, inv2s2, nchunk):  # pragma: no cover - numba
-    nq = X.shape[0]
-    out = np.empty((nq, targets.shape[1]))
-    # Chunks rather than one prange step per query: one scratch buffer per chunk, not per row.
-    nchunk = max(1, min(nq, nchunk))
-    for c in prange(nchunk):
-        dbuf = np.empty(patterns.shape[0])
-        for q in range(c * nq // nchunk, (c + 1) * nq // nchunk):
-            _kernel_row(X[q], patterns, targets, inv2s2, dbuf, out[q])
-    return out
 
 
 @pjit
@@ -232,7 +186,7 @@ def grnn_predict(X: Any, patterns: Any, targets: Any, sigma: float) -> np.ndarra
     _require_finite(P, "patterns")
     _require_finite(Y, "targets")
     s = _check_sigma(sigma)
-    return _predict_batch(Xq, P, Y, 0.5 / (s * s), n_chunks())
+    return predict_cutoff(exact_index(P, Y), Xq, s, n_chunks())
 
 
 def loo_errors(
@@ -507,11 +461,7 @@ class GRNN:
                 f"X must have {self.n_features_in_} features per row, got shape {np.shape(X)}"
             )
         Xa = np.ascontiguousarray(Xa)
-        if exact:
-            inv = 0.5 / self.sigma_**2
-            out = _predict_batch(Xa, self.patterns_, self.targets_, inv, n_chunks())
-        else:
-            out = predict_cutoff(self.cutoff_index(), Xa, self.sigma_, n_chunks())
+        out = predict_cutoff(self.cutoff_index(exact), Xa, self.sigma_, n_chunks())
         if self._y1d:
             out = out[:, 0]
         return out[0] if single else out

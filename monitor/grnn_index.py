@@ -1,6 +1,6 @@
 """Eq. 4 with a cut-off radius on a kd-tree: the GRNN the detector runs, live and offline.
 
-Brute force (``monitor.grnn._kernel_row``) visits every pattern with one exp each.  But with
+Brute force visits every pattern with one exp each.  But with
 the shift of ``monitor.grnn`` the nearest pattern weighs 1 and a pattern at scaled distance
 d_i (d_i = |x - x_i|^2 / (2 sigma^2)) weighs exp(d_min - d_i), so patterns far beyond the
 nearest one cannot move the output.  This module sums only the patterns with
@@ -35,7 +35,7 @@ few dozen patterns per query on the shipped model, so float32 would save little 
 need its own rounding term in the bound).
 
 The exact path is the same kernel on a one-leaf "tree" with c = inf: every pattern in file
-order, every weight, the sums of ``monitor.grnn._kernel_row``.
+order, every weight (what ``monitor.grnn.grnn_predict`` and ``exact=True`` run).
 """
 
 from __future__ import annotations

@@ -27,10 +27,9 @@ import numpy as np
 from monitor._numba import jit
 from monitor.codec.bulk import decode_frames
 from monitor.codec.frames import FrameCodec
-from monitor.errors import NoHydraulicDataError
 from monitor.io.candump_bulk import read_candump_frames
 from monitor.io.recording import Recording
-from monitor.sampler import _EPS_S, Sampler, TimeCounts, hydraulic_messages
+from monitor.sampler import _EPS_S, Sampler, TimeCounts, hydraulic_messages, no_hydraulic_data
 from monitor.signals import ROD_POS
 
 
@@ -106,13 +105,7 @@ def recording_from_candump_bulk(path: str | Path, codec: FrameCodec | None = Non
     parts = [decoded[name] for name in hydraulic if decoded[name].rows.size]
     counts = codec.counts.as_dict()
     if not parts:
-        rejected = ", ".join(f"{k} {v}" for k, v in counts["rejected"].items() if v)
-        raise NoHydraulicDataError(
-            f"{path}: {counts['frames']} frames read, none of them a valid hydraulic frame"
-            f" of the DBC ({counts['ignored']} with unknown ids"
-            + (f"; rejected: {rejected}" if rejected else "")
-            + ")"
-        )
+        raise no_hydraulic_data(path, counts)
     # The frames the sampler is fed, in log order, and per frame its message's slot.
     rows = np.concatenate([p.rows for p in parts])
     msg_of = np.concatenate([np.full(p.rows.size, k) for k, p in enumerate(parts)])
