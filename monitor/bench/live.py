@@ -93,8 +93,8 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
     daemon = Daemon(cfg, bus=_TimedBus(bus, arrivals))
     rss_loaded_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     alarm_id = daemon.codec.message("MON_Alarm").frame_id
-    latency, cpu, alarm_latency = [], [], []
-    current = {"arrival": 0.0, "changed": False}
+    latency, cpu, alarm_latency, row_t = [], [], [], []
+    current = {"arrival": 0.0, "changed": False, "stopping": False}
     frame, tick, send = daemon._frame, daemon.ticker.tick, daemon._send
 
     def timed_frame(msg: can.Message) -> None:
@@ -104,8 +104,11 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
     def timed_tick(row: np.ndarray):
         c0 = time.thread_time()
         out = tick(row)
+        if current["stopping"]:  # the last row, ticked at shutdown: no frame completed it
+            return out
         latency.append(time.perf_counter() - current["arrival"])
         cpu.append(time.thread_time() - c0)
+        row_t.append(out.t_s)
         current["changed"] = out.changed
         return out
 
@@ -130,6 +133,7 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
     deadline = time.monotonic() + 60.0
     while daemon.codec.counts.frames < len(plan) and time.monotonic() < deadline:
         time.sleep(0.05)
+    current["stopping"] = True
     daemon.stop()
     sender.shutdown()
     bus.shutdown()
@@ -150,6 +154,9 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
         "tick_cpu_median_ms": float(np.median(cpu) * 1e3),
         "tick_cpu_p99_ms": float(np.percentile(np.array(cpu) * 1e3, 99)),
         "alarm_frame_latency_ms": [float(v * 1e3) for v in alarm_latency],
+        # Where the slowest ticks were (row time s, latency ms): stalls cluster or not.
+        "slowest_ticks": [(float(row_t[i]), float(lat[i])) for i in np.argsort(lat)[-10:]],
+        "ticks_over_1ms": int(np.count_nonzero(lat > 1.0)),
         "state_changes": [e["state"] for e in events],
         "dropped": counts["dropped"],
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,

@@ -23,8 +23,9 @@ row to the detector's result, p50/p99/max, CPU per tick, and state change to MON
 sent; (3) `monitor detect` on a 1-hour log (p = 1, 20,000 patterns) in frames/s and times
 real time, against python-can LogReader + cantools + pyGRNN on a 3-minute slice, per
 frame; (4) the daemon's peak memory.  Medians throughout.  Writes JSON (--json), a
-markdown table (stdout and --markdown) and a PNG (--plot).  Takes 10-20 minutes the first
-time (the 1-hour log and the 20,000-pattern model are cached in --work-dir); --quick runs
+markdown table (stdout and --markdown) and a PNG (--plot).  Takes 20-30 minutes the first
+time (the 1-hour log and the 20,000-pattern model are cached in --work-dir; the live part
+replays 10 minutes in real time); --quick runs
 reduced sizes in about a minute (for CI: checks the pipeline, not the speed).
 """
 
@@ -56,7 +57,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
                    help="cache for the long log and the models (default: a folder in the "
                    "system's temp dir)")  # fmt: skip
     p.add_argument("--live-speed", type=float, default=None, metavar="X",
-                   help="replay speed of the live run (default 5)")  # fmt: skip
+                   help="replay speed of the live run (default 1: real time, 10 minutes; "
+                   "faster replays queue more ticks behind a stall)")  # fmt: skip
     p.set_defaults(func=run)
 
 
