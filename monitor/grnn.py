@@ -437,14 +437,14 @@ class GRNN:
         Built on first use and kept until the patterns change (not stored in model files).
         """
         self._check_fitted()
-        key = (exact, id(self.patterns_), id(self.targets_), self.patterns_.shape)
         cache = self.__dict__.setdefault("_indexes", {})
-        if key not in cache:
-            if len(cache) > 2:
-                cache.clear()
+        # The entry keeps the arrays it was built from: a refit (new arrays) rebuilds it.
+        built = cache.get(exact)
+        if built is None or built[0] is not self.patterns_ or built[1] is not self.targets_:
             make = exact_index if exact else build_index
-            cache[key] = make(self.patterns_, self.targets_)
-        return cache[key]
+            built = (self.patterns_, self.targets_, make(self.patterns_, self.targets_))
+            cache[exact] = built
+        return built[2]
 
     def predict(self, X: Any, exact: bool = True) -> np.ndarray:
         """Eq. 4 for each row of X; a row with NaN gives NaN.  Shape (n,) if fitted on 1-D Y.

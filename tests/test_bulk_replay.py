@@ -85,6 +85,17 @@ def test_line_variants_and_errors(tmp_path):
         read_candump_frames(tmp_path / "nope.log")
 
 
+def test_timestamps_bit_identical_to_float(tmp_path):
+    rng = np.random.default_rng(3)
+    stamps = [f"{rng.integers(0, 10 ** int(rng.integers(1, 11)))}."
+              f"{rng.integers(0, 10**6):0{int(rng.integers(1, 10))}d}" for _ in range(3000)]
+    stamps += ["9007199254.740993", "12345678901234567.5", "0.000001", "1700000000.000000"]
+    log = tmp_path / "ts.log"
+    log.write_text("".join(f"({s}) can0 123#00\n" for s in stamps))
+    got = read_candump_frames(log).timestamp
+    assert got.tolist() == [float(s) for s in stamps]
+
+
 def test_values_equal_cantools_decode():
     codec = FrameCodec.from_dbc()
     frames = read_candump_frames(SHIPPED[1])

@@ -34,6 +34,9 @@ for _i, _c in enumerate(b"0123456789abcdef"):
     _HEX[bytes([_c]).upper()[0]] = _i
 
 
+_POW10 = np.array([float(10**k) for k in range(23)])  # exact doubles up to 1e22
+
+
 @dataclass
 class Frames:
     """Frames of a log in file order (the fields of python-can's Message that decoding uses).
@@ -134,22 +137,31 @@ def _parse_fast(buf, starts, ends, pos) -> tuple[dict[str, np.ndarray], np.ndarr
     """Fields of plain lines; ``good`` is False for a line whose characters turn out not to
     fit (it is then read the slow way, which names it if it is malformed)."""
     width = int((pos["sp1"] - starts - 2).max()) if starts.size else 1
-    ts_chars, can_id, length, data, good = _fields(
-        buf, starts, ends, pos["sp1"], pos["sp2"], pos["hash"], _HEX, max(width, 1)
+    ts, exact, ts_chars, can_id, length, data, good = _fields(
+        buf, starts, ends, pos["sp1"], pos["sp2"], pos["hash"], _HEX, _POW10, max(width, 1)
     )
-    # numpy's bytes -> float64 is correctly rounded, as python-can's float(); the zero
-    # padding of shorter timestamps is not part of an "S" string.
-    ts = np.full(starts.size, np.nan)
-    ts[good] = ts_chars[good].view(f"S{ts_chars.shape[1]}").ravel().astype(np.float64)
+    # Timestamps of 2^53 and more digits: numpy's bytes -> float64, correctly rounded as
+    # python-can's float() (the zero padding of shorter ones is not part of an "S" string).
+    slow = good & ~exact
+    if slow.any():
+        ts[slow] = ts_chars[slow].view(f"S{ts_chars.shape[1]}").ravel().astype(np.float64)
     out = {"timestamp": ts, "can_id": can_id, "extended": (pos["hash"] - pos["sp2"] - 1) > 3,
            "length": length, "data": data}  # fmt: skip
     return out, good
 
 
-@jit
-def _fields(buf, starts, ends, sp1, sp2, hs, hexval, width):  # pragma: no cover - numba
+@jit(fastmath=False)  # the timestamp division must round as IEEE says, not reassociate
+def _fields(buf, starts, ends, sp1, sp2, hs, hexval, pow10, width):  # pragma: no cover
+    """Per plain line: timestamp, id, data, and whether its characters fit.
+
+    A timestamp whose digits N (the point dropped) are below 2^53 is N / 10^k with N and
+    10^k (k <= 22) exact doubles, and IEEE division rounds the exact quotient once: the
+    correctly rounded value of the decimal string, bit-identical to Python's float().
+    Longer ones (candump's 10 + 6 digits are far below) are flagged for numpy."""
     m = starts.shape[0]
     ts = np.zeros((m, width), np.uint8)
+    value = np.full(m, np.nan)
+    exact = np.zeros(m, np.bool_)
     can_id = np.zeros(m, np.int64)
     length = np.zeros(m, np.int64)
     data = np.zeros((m, 8), np.uint8)
@@ -158,6 +170,9 @@ def _fields(buf, starts, ends, sp1, sp2, hs, hexval, width):  # pragma: no cover
         # timestamp: digits, exactly one '.', neither first nor last
         a, b = starts[r] + 1, sp1[r] - 1
         dots = 0
+        digits = 0
+        frac = 0
+        num = 0
         for k in range(a, b):
             c = buf[k]
             if c == 46:
@@ -166,9 +181,17 @@ def _fields(buf, starts, ends, sp1, sp2, hs, hexval, width):  # pragma: no cover
                     good[r] = False
             elif c < 48 or c > 57:
                 good[r] = False
+            else:
+                digits += 1
+                frac += dots
+                if digits <= 18:  # fits int64
+                    num = num * 10 + (c - 48)
             ts[r, k - a] = c
         if dots != 1:
             good[r] = False
+        elif digits <= 18 and num < 9007199254740992 and frac < 23:  # N < 2^53
+            value[r] = num / pow10[frac]
+            exact[r] = True
         v = 0
         for k in range(sp2[r] + 1, hs[r]):
             d = hexval[buf[k]]
@@ -184,7 +207,7 @@ def _fields(buf, starts, ends, sp1, sp2, hs, hexval, width):  # pragma: no cover
             if hi < 0 or lo < 0:
                 good[r] = False
             data[r, j] = ((hi & 15) << 4) | (lo & 15)
-    return ts, can_id, length, data, good
+    return value, exact, ts, can_id, length, data, good
 
 
 def _parse_slow(raw: bytes, starts, ends, lines: np.ndarray, path: Path) -> list:
@@ -210,6 +233,11 @@ def _parse_slow(raw: bytes, starts, ends, lines: np.ndarray, path: Path) -> list
 
 def _merge(fast: dict[str, np.ndarray], fast_lines: np.ndarray, slow: list) -> Frames:
     nf, ns = fast_lines.size, len(slow)
+    if ns == 0:  # every line plain: already in file order
+        error = ((fast["can_id"] & CAN_ERR_FLAG) != 0) & ((fast["can_id"] & CAN_ERR_BUSERROR) != 0)
+        can_id = np.where(error, 0, fast["can_id"] & 0x1FFFFFFF)
+        return Frames(fast["timestamp"], can_id, fast["extended"] | error,
+                      np.zeros(nf, dtype=bool), error, fast["length"], fast["data"])  # fmt: skip
     width = max([8] + [len(m.data or b"") for _, m in slow])
     line = np.concatenate([fast_lines, np.array([i for i, _ in slow], dtype=np.int64)])
     order = np.argsort(line, kind="stable")
