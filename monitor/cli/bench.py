@@ -52,7 +52,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", type=Path, default=None, metavar="F.png",
                    help="growth curves (default: beside --json, .png)")  # fmt: skip
     p.add_argument("--quick", action="store_true",
-                   help="reduced sizes (2,000 patterns, 60 s log): checks, not speed")  # fmt: skip
+                   help="reduced sizes (2,000 patterns, 90 s log): checks, not speed")  # fmt: skip
     p.add_argument("--work-dir", type=Path, default=None, metavar="DIR",
                    help="cache for the long log and the models (default: a folder in the "
                    "system's temp dir)")  # fmt: skip
