@@ -177,7 +177,7 @@ def plot(result: dict[str, Any], path) -> None:
     a.set_ylabel("time per GRNN query (us)")
     a.set_title("query cost vs patterns (8 inputs)")
     a.grid(True, which="both", alpha=0.3)
-    a.legend()
+    a.legend(loc="upper left")
     for size in sorted({c["patterns"] for c in cells}):
         rows = [c for c in cells if c["patterns"] == size]
         ps = [c["p"] for c in rows]
