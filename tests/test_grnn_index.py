@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import naive
 import numpy as np
@@ -144,6 +145,11 @@ def test_same_decisions_on_reduced_eval_sim_runs(shipped):
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(
+    not os.environ.get("MONITOR_FULL_CHECK"),
+    reason="the full eval-sim plan takes about 40 min: MONITOR_FULL_CHECK=1 python -m pytest "
+    "-m slow tests/test_grnn_index.py",
+)
 def test_same_decisions_on_the_full_eval_sim_plan(shipped):
     """Every run of `monitor eval-sim` (600 fault runs, 10 h normal): about 40 min."""
     cfg = EvalConfig()

@@ -1,11 +1,12 @@
 """candump -L logs read in bulk: the whole file into numpy arrays of frames, no per-line Python.
 
 ``read_candump`` (python-can's CanutilsLogReader behind a line check) builds one
-``can.Message`` per line, about 10 us each.  Here the file is one byte array: line bounds,
-the two spaces and the ``#`` of each line are found with vectorised searches, lines are
-grouped by field widths, and each group is a fixed-width table whose hex digits turn into
-ids and data bytes by table lookup.  Timestamps are parsed by numpy's correctly rounded
-string-to-float, so they are bit-identical to python-can's ``float()``.
+``can.Message`` per line, about 10 us each.  Here the file is one byte array: a numba pass
+finds each line's bounds, its two spaces and its ``#``, a second one turns the fields of
+the plain lines into timestamp, id and data bytes (hex by table lookup).  Timestamps are
+N / 10^k with exact N and 10^k, so IEEE division gives the correctly rounded value that
+python-can's ``float()`` gives, bit for bit (numpy's string-to-float for the rare longer
+ones).
 
 Only the plain form ``(SECONDS) IFACE ID#HEXDATA`` (classic frame, 0-8 bytes, single spaces,
 optional ``\\r``) takes the fast path.  Any other line (remote, CAN FD, direction flag,
