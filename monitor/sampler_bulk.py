@@ -101,7 +101,8 @@ def recording_from_candump_bulk(path: str | Path, codec: FrameCodec | None = Non
     sampler = Sampler.for_codec(codec)  # its parameters and staleness, not its feed()
     frames = read_candump_frames(path)
     decoded = decode_frames(codec, frames)
-    hydraulic = [name for name in codec.messages if name in hydraulic_messages(codec)]
+    wanted = hydraulic_messages(codec)
+    hydraulic = [name for name in codec.messages if name in wanted]
     parts = [decoded[name] for name in hydraulic if decoded[name].rows.size]
     counts = codec.counts.as_dict()
     if not parts:
