@@ -59,6 +59,12 @@ def regime_of(spool_pct: float) -> int:
     return 0
 
 
+def regimes_of(spool_pct: np.ndarray) -> np.ndarray:
+    """``regime_of`` for a whole series (NaN counts as hold, as there)."""
+    s = np.asarray(spool_pct, dtype=np.float64)
+    return np.where(s > REGIME_SPOOL_PCT, 1, np.where(s < -REGIME_SPOOL_PCT, 2, 0))
+
+
 class Isolator:
     """Names the likely fault from the mean signed residual per output and spool regime.
 
@@ -178,6 +184,24 @@ class AlarmMachine:
             if self._below >= cfg.clear_samples:
                 self._enter(State.NORMAL)
         return self.state
+
+    def skip_quiet(self, e: np.ndarray, regimes: np.ndarray) -> None:
+        """``step`` over a run of quiet samples in ``NORMAL`` at once: engine on, inputs
+        complete, J finite and <= eps0.  There ``step`` only resets the raise debounce and
+        remembers each residual (rows of ``e``) and regime for isolation, so only the last
+        N of them matter.  ``monitor detect`` spends most of a recording in such runs."""
+        if self.state is not State.NORMAL:
+            raise ValueError("skip_quiet is only for runs in the NORMAL state")
+        self._above = 0
+        n = len(regimes)
+        if self.isolator is None or n == 0:
+            return
+        size = self._ring_e.shape[0]
+        take = min(n, size)  # earlier samples of the run would be overwritten anyway
+        idx = (self._ring_pos + n - take + np.arange(take)) % size
+        self._ring_e[idx] = e[n - take :]
+        self._ring_regime[idx] = regimes[n - take :]
+        self._ring_pos = (self._ring_pos + n) % size
 
     def _remember(self, e: np.ndarray, regime: int) -> None:
         self._ring_e[self._ring_pos] = e

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from monitor.alarm import AlarmConfig, AlarmMachine, Isolator, State, regime_of
+from monitor.alarm import AlarmConfig, AlarmMachine, Isolator, State, regimes_of
 from monitor.dgrnn import predict_series, table
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
@@ -45,13 +45,20 @@ def make_isolator(model: MonitorModel) -> Isolator | None:
 
 
 def residual_series(
-    model: MonitorModel, rec: Recording, gate: np.ndarray, horizon: int | None = None
+    model: MonitorModel,
+    rec: Recording,
+    gate: np.ndarray,
+    horizon: int | None = None,
+    exact: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(y_hat in physical units, e in z-units); gated rows never feed a prediction."""
+    """(y_hat in physical units, e in z-units); gated rows never feed a prediction.
+
+    ``exact`` sums every GRNN pattern instead of those within the cut-off (see
+    ``monitor.grnn_index``); tests use it to show both give the same decisions."""
     spec = model.spec
     z = model.normalizer.transform(table(rec, spec.variables), spec.variables)
     z[gate] = np.nan  # an engine-off or sensor-fault row must not seed a prediction
-    yz = predict_series(model.dgrnn, z, horizon)
+    yz = predict_series(model.dgrnn, z, horizon, exact)
     n_out = len(spec.outputs)
     e = yz - z[:, :n_out]
     if model.residual_clip is not None:
@@ -64,14 +71,18 @@ def residual_series(
 
 
 def gated_residuals(
-    model: MonitorModel, rec: Recording, min_engine_rpm: float, horizon: int | None = None
+    model: MonitorModel,
+    rec: Recording,
+    min_engine_rpm: float,
+    horizon: int | None = None,
+    exact: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(y_hat, e, inactive, inputs_ok): residuals with engine-off and incomplete rows gated
     out (NaN), as both the detector and the training's J0 see them."""
     check_recording(model, rec, horizon)
     inactive = ~(rec["EngineSpeed"] >= min_engine_rpm)
     inputs_ok = np.all(np.isfinite(table(rec, model.spec.variables)), axis=1)
-    y_hat, e = residual_series(model, rec, inactive | ~inputs_ok, horizon)
+    y_hat, e = residual_series(model, rec, inactive | ~inputs_ok, horizon, exact)
     e[inactive | ~inputs_ok] = np.nan
     return y_hat, e, inactive, inputs_ok
 
@@ -98,17 +109,25 @@ def detect(
     rec: Recording,
     alarm: AlarmConfig | None = None,
     horizon: int | None = None,
+    exact: bool = False,
 ) -> Detection:
-    """Run the detector over a whole recording."""
+    """Run the detector over a whole recording (``exact``: see ``residual_series``)."""
     alarm = alarm or AlarmConfig()
     spec = model.spec
     engine = rec["EngineSpeed"]
-    y_hat, e, _, inputs_ok = gated_residuals(model, rec, alarm.min_engine_rpm, horizon)
+    y_hat, e, _, inputs_ok = gated_residuals(model, rec, alarm.min_engine_rpm, horizon, exact)
     j = window_j(e, model.window_n)
     spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
 
     machine = AlarmMachine(alarm, model.eps0, make_isolator(model), model.window_n)
-    states = np.empty(len(rec), dtype=np.int8)
+    n = len(rec)
+    states = np.empty(n, dtype=np.int8)
+    regimes = regimes_of(spool)
+    # Quiet samples (engine on, inputs complete, J <= eps0) change nothing in NORMAL but the
+    # isolation ring: runs of them go to skip_quiet at once, the rest step one by one.
+    with np.errstate(invalid="ignore"):
+        quiet = (engine >= alarm.min_engine_rpm) & inputs_ok & (j <= machine.eps0)
+    stops = np.append(np.flatnonzero(~quiet), n)
     events: list[dict[str, Any]] = []
     start = rec.meta.get("start_time_s")
     prev: State | None = None
@@ -117,8 +136,15 @@ def detect(
     # (it firms up as evidence accumulates, and may waver on the way).
     votes: dict[str, int] = {}
     in_first = False
-    for i in range(len(rec)):
-        state = machine.step(j[i], bool(inputs_ok[i]), engine[i], e[i], regime_of(spool[i]))
+    i = 0
+    while i < n:
+        if quiet[i] and prev is State.NORMAL:
+            r = int(stops[np.searchsorted(stops, i)])
+            machine.skip_quiet(e[i:r], regimes[i:r])
+            states[i:r] = State.NORMAL
+            i = r
+            continue
+        state = machine.step(j[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]))
         states[i] = state
         if state is State.FAULT and first_alarm_t is None:
             first_alarm_t = float(rec.t[i] - rec.t[0])
@@ -131,6 +157,7 @@ def detect(
         if state is not prev:
             events.append(_event(rec, i, state, j[i], model.eps0, machine.fault, start))
             prev = state
+        i += 1
     known = {k: v for k, v in votes.items() if k != "unknown"}
     first_fault_label = max(known or votes, key=(known or votes).get) if votes else None
     gated = np.isfinite(j)

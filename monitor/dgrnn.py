@@ -25,7 +25,8 @@ import numpy as np
 
 from monitor._numba import jit, pjit, prange
 from monitor.errors import ConfigError, InputFileError
-from monitor.grnn import GRNN, _kernel_row, n_chunks
+from monitor.grnn import GRNN, n_chunks
+from monitor.grnn_index import CutoffIndex, cutoff_row
 
 # --------------------------------------------------------------------------- spec
 
@@ -393,11 +394,12 @@ class DGRNN:
 
 
 @jit
-def _predict_at(Z, t, P, PY, LW, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbuf, out):
+def _predict_at(Z, t, tree, inv2s2, cut, fvar, flag, nout, p, delta, xbuf, pred, scratch, out):
     """Eq. 7: y_hat(t) from the measured history up to k = t - p; False if not predictable.
 
     ``pred`` (p, nout) holds y_hat(k+1..t); an output needed at row r > k is taken from it,
-    every other input from the measured data.
+    every other input from the measured data.  Each step is one GRNN query on the index
+    ``tree`` with cut-off ``cut`` (``monitor.grnn_index``; c = inf is brute force).
     """  # pragma: no cover - numba
     k = t - p
     nf = fvar.shape[0]
@@ -415,7 +417,7 @@ def _predict_at(Z, t, P, PY, LW, inv2s2, fvar, flag, nout, p, delta, xbuf, pred,
                 if np.isnan(val):
                     return False  # missing sample: prediction pauses, never guesses
                 xbuf[f] = val
-        _kernel_row(xbuf, P, PY, LW, inv2s2, dbuf, pred[j])
+        cutoff_row(xbuf, tree, inv2s2, cut, scratch, pred[j])
         for i in range(nout):
             if delta[i]:  # the GRNN gave the change since s - 1; add the level it started from
                 pred[j, i] += pred[j - 1, i] if j > 0 else Z[s - 1, i]
@@ -425,17 +427,18 @@ def _predict_at(Z, t, P, PY, LW, inv2s2, fvar, flag, nout, p, delta, xbuf, pred,
 
 
 @pjit
-def _predict_series(Z, P, PY, LW, inv2s2, fvar, flag, nout, p, delta, nchunk):  # pragma: no cover
-    n = Z.shape[0]
+def _predict_series(Z, tree, inv2s2, cut, stack_len, fvar, flag, nout, p, delta, nchunk):
+    n = Z.shape[0]  # pragma: no cover - numba
+    npat = tree[0].shape[0]
     out = np.full((n, nout), np.nan)
     nchunk = max(1, min(n, nchunk))
     for c in prange(nchunk):
         xbuf = np.empty(fvar.shape[0])
         pred = np.empty((p, nout))
-        dbuf = np.empty(P.shape[0])
+        scratch = (np.empty(stack_len, np.int64), np.empty(npat), np.empty(npat, np.int64))
         for t in range(c * n // nchunk, (c + 1) * n // nchunk):
             _predict_at(
-                Z, t, P, PY, LW, inv2s2, fvar, flag, nout, p, delta, xbuf, pred, dbuf, out[t]
+                Z, t, tree, inv2s2, cut, fvar, flag, nout, p, delta, xbuf, pred, scratch, out[t]
             )
     return out
 
@@ -447,47 +450,55 @@ def _horizon(model: DGRNN, horizon: int | None) -> int:
     return p
 
 
-def predict_series(model: DGRNN, data: Any, horizon: int | None = None) -> np.ndarray:
+def _index(model: DGRNN, exact: bool) -> tuple[GRNN, CutoffIndex]:
+    g = model._fitted()
+    return g, g.cutoff_index(exact)
+
+
+def predict_series(
+    model: DGRNN, data: Any, horizon: int | None = None, exact: bool = False
+) -> np.ndarray:
     """Offline: y_hat(t) for every row t of z-scored ``data`` (columns ``spec.variables``).
 
     Returns (rows, n_outputs), NaN where t is not predictable (too early for the lags and
-    horizon, or a missing sample in the inputs it reads).  Parallel over t.
+    horizon, or a missing sample in the inputs it reads).  Parallel over t.  By default
+    each GRNN query sums only the patterns within the cut-off of ``monitor.grnn_index``
+    (error <= 1e-6 of each output's std per step); ``exact=True`` sums every pattern.
     """
-    g = model._fitted()
+    g, index = _index(model, exact)
     Z = _check_data(model.spec, data)
     fvar, flag = model.spec.feature_columns()
     p = _horizon(model, horizon)
     nout = len(model.spec.outputs)
     inv = 0.5 / g.sigma_**2
-    lw = np.log(g.counts_)
-    delta = model.spec.delta_mask()
     return _predict_series(
-        Z, g.patterns_, g.targets_, lw, inv, fvar, flag, nout, p, delta, n_chunks()
-    )
+        Z, index.tree, inv, index.cut, index.scratch()[0].shape[0], fvar, flag, nout, p,
+        model.spec.delta_mask(), n_chunks(),
+    )  # fmt: skip
 
 
 class TickPredictor:
     """Live path: predict the current sample from the last rows, with no allocation per tick.
 
+    Queries use the cut-off index of ``monitor.grnn_index`` unless ``exact``.
     ``predict(window)`` takes the last ``rows_needed`` z-scored rows (columns
     ``spec.variables``, the last row being the current sample t, whose outputs are not read)
     and returns y_hat(t), or NaN when an input it reads is missing.  Pass float64 C-contiguous
     windows (e.g. a slice of the ring buffer): another layout compiles another kernel.
     """
 
-    def __init__(self, model: DGRNN, horizon: int | None = None) -> None:
-        g = model._fitted()
+    def __init__(self, model: DGRNN, horizon: int | None = None, exact: bool = False) -> None:
+        g, self._index = _index(model, exact)
         self.model = model
         self.horizon = _horizon(model, horizon)
         self.rows_needed = model.spec.rows_needed(self.horizon)
         self._fvar, self._flag = model.spec.feature_columns()
         self._nout = len(model.spec.outputs)
         self._delta = model.spec.delta_mask()
-        self._P, self._PY, self._inv = g.patterns_, g.targets_, 0.5 / g.sigma_**2
-        self._LW = np.log(g.counts_)
+        self._inv = 0.5 / g.sigma_**2
         self._xbuf = np.empty(self._fvar.shape[0])
         self._pred = np.empty((self.horizon, self._nout))
-        self._dbuf = np.empty(self._P.shape[0])
+        self._scratch = self._index.scratch()
         self._out = np.empty(self._nout)
 
     def predict(self, window: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -503,9 +514,9 @@ class TickPredictor:
                 f"a tick row needs {len(self.model.spec.variables)} columns, got {window.shape[1]}"
             )
         ok = _predict_at(
-            window, window.shape[0] - 1, self._P, self._PY, self._LW, self._inv, self._fvar,
-            self._flag,
-            self._nout, self.horizon, self._delta, self._xbuf, self._pred, self._dbuf, o,
+            window, window.shape[0] - 1, self._index.tree, self._inv, self._index.cut,
+            self._fvar, self._flag, self._nout, self.horizon, self._delta, self._xbuf,
+            self._pred, self._scratch, o,
         )  # fmt: skip
         if not ok:
             o[:] = np.nan

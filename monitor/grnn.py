@@ -22,7 +22,9 @@ underflows to 0 and eq. 4 would be 0/0) returns the target of its nearest patter
 
 Layout (stumpy style): public functions validate and call a parallel ``@njit`` driver that
 loops over queries with ``prange``; the per-query work is a small serial kernel
-(``_kernel_row``) that the dynamic model (``monitor.dgrnn``) reuses.
+(``monitor.grnn_index.cutoff_row``) that the dynamic model (``monitor.dgrnn``) reuses.
+Exact eq. 4 runs it over every pattern (``exact_index``); the detector by default sums only
+the patterns within a cut-off radius with a stated error bound (``build_index``).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import numpy as np
 
 from monitor._numba import get_num_threads, jit, pjit, prange
 from monitor.errors import ConfigError, InputFileError
+from monitor.grnn_index import CutoffIndex, build_index, exact_index, predict_cutoff
 
 SIGMA_RULES = ("loo", "fixed")
 THINNING_RULES = ("none", "stride", "min_distance")
@@ -48,56 +51,6 @@ _LOO_MAX_ENTRIES = 16_000_000
 def n_chunks() -> int:
     """Work chunks for the parallel drivers (a few per thread, for load balance)."""
     return 4 * get_num_threads()
-
-
-@jit
-def _kernel_row(x, patterns, targets, logw, inv2s2, dbuf, out):  # pragma: no cover - numba
-    """Eq. 4 for one query ``x`` into ``out`` (n_outputs,); ``dbuf`` is scratch (n_patterns,).
-
-    ``logw`` (n_patterns,) is log of each pattern's member count (all 0: plain eq. 4).
-
-    A query with no finite distance (NaN in ``x``) gives NaN outputs: missing data stays
-    visible instead of becoming a plausible-looking number.
-    """
-    n, nf = patterns.shape
-    nout = targets.shape[1]
-    dmin = np.inf
-    for i in range(n):
-        acc = 0.0
-        for f in range(nf):
-            diff = x[f] - patterns[i, f]
-            acc += diff * diff
-        d = acc * inv2s2 - logw[i]
-        dbuf[i] = d
-        if d < dmin:
-            dmin = d
-    if not dmin < np.inf:
-        for k in range(nout):
-            out[k] = np.nan
-        return
-    for k in range(nout):
-        out[k] = 0.0
-    den = 0.0
-    for i in range(n):
-        w = math.exp(dmin - dbuf[i])  # <= 1, and exactly 1 for the nearest pattern
-        den += w
-        for k in range(nout):
-            out[k] += w * targets[i, k]
-    for k in range(nout):
-        out[k] /= den
-
-
-@pjit
-def _predict_batch(X, patterns, targets, logw, inv2s2, nchunk):  # pragma: no cover - numba
-    nq = X.shape[0]
-    out = np.empty((nq, targets.shape[1]))
-    # Chunks rather than one prange step per query: one scratch buffer per chunk, not per row.
-    nchunk = max(1, min(nq, nchunk))
-    for c in prange(nchunk):
-        dbuf = np.empty(patterns.shape[0])
-        for q in range(c * nq // nchunk, (c + 1) * nq // nchunk):
-            _kernel_row(X[q], patterns, targets, logw, inv2s2, dbuf, out[q])
-    return out
 
 
 @pjit
@@ -310,8 +263,8 @@ def grnn_predict(
     _require_finite(P, "patterns")
     _require_finite(Y, "targets")
     s = _check_sigma(sigma)
-    logw = np.log(_check_counts(counts, P.shape[0]))
-    return _predict_batch(Xq, P, Y, logw, 0.5 / (s * s), n_chunks())
+    counts = _check_counts(counts, P.shape[0])
+    return predict_cutoff(exact_index(P, Y, counts), Xq, s, n_chunks())
 
 
 def cluster(
@@ -620,8 +573,28 @@ class GRNN:
         if not hasattr(self, "patterns_"):
             raise ConfigError("this GRNN is not fitted yet: call fit(X, Y) first")
 
-    def predict(self, X: Any) -> np.ndarray:
-        """Eq. 4 for each row of X; a row with NaN gives NaN.  Shape (n,) if fitted on 1-D Y."""
+    def cutoff_index(self, exact: bool = False) -> CutoffIndex:
+        """The kd-tree and cut-off of ``monitor.grnn_index`` over the fitted patterns (error
+        <= 1e-6 of each target's std), or with ``exact`` a one-leaf brute-force "index".
+
+        Built on first use and kept until the patterns change (not stored in model files).
+        """
+        self._check_fitted()
+        cache = self.__dict__.setdefault("_indexes", {})
+        # The entry keeps the arrays it was built from: a refit (new arrays) rebuilds it.
+        built = cache.get(exact)
+        arrays = (self.patterns_, self.targets_, self.counts_)
+        if built is None or any(a is not b for a, b in zip(built[0], arrays, strict=True)):
+            make = exact_index if exact else build_index
+            built = (arrays, make(*arrays))
+            cache[exact] = built
+        return built[1]
+
+    def predict(self, X: Any, exact: bool = True) -> np.ndarray:
+        """Eq. 4 for each row of X; a row with NaN gives NaN.  Shape (n,) if fitted on 1-D Y.
+
+        ``exact=False`` sums only the patterns within the cut-off of ``cutoff_index``.
+        """
         self._check_fitted()
         Xa = np.asarray(X, dtype=np.float64)
         single = Xa.ndim == 1
@@ -631,14 +604,8 @@ class GRNN:
             raise InputFileError(
                 f"X must have {self.n_features_in_} features per row, got shape {np.shape(X)}"
             )
-        out = _predict_batch(
-            np.ascontiguousarray(Xa),
-            self.patterns_,
-            self.targets_,
-            np.log(self.counts_),
-            0.5 / self.sigma_**2,
-            n_chunks(),
-        )
+        Xa = np.ascontiguousarray(Xa)
+        out = predict_cutoff(self.cutoff_index(exact), Xa, self.sigma_, n_chunks())
         if self._y1d:
             out = out[:, 0]
         return out[0] if single else out

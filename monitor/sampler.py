@@ -223,6 +223,17 @@ def hydraulic_messages(codec: FrameCodec, columns: tuple[str, ...] = ROW_COLUMNS
     }
 
 
+def no_hydraulic_data(path: str | Path, counts: Mapping[str, Any]) -> NoHydraulicDataError:
+    """The error (exit 3) for a log without one valid hydraulic frame, with its counts."""
+    rejected = ", ".join(f"{k} {v}" for k, v in counts["rejected"].items() if v)
+    return NoHydraulicDataError(
+        f"{path}: {counts['frames']} frames read, none of them a valid hydraulic frame"
+        f" of the DBC ({counts['ignored']} with unknown ids"
+        + (f"; rejected: {rejected}" if rejected else "")
+        + ")"
+    )
+
+
 def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) -> Recording:
     """Decode a candump log into a 100 Hz ``Recording`` (RodPos only when the log has it).
 
@@ -245,13 +256,7 @@ def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) ->
                 chunks.append(sampler.take())
     counts = {**codec.counts.as_dict(), **sampler.counts.as_dict()}
     if not sampler.started:
-        rejected = ", ".join(f"{k} {v}" for k, v in counts["rejected"].items() if v)
-        raise NoHydraulicDataError(
-            f"{path}: {counts['frames']} frames read, none of them a valid hydraulic frame"
-            f" of the DBC ({counts['ignored']} with unknown ids"
-            + (f"; rejected: {rejected}" if rejected else "")
-            + ")"
-        )
+        raise no_hydraulic_data(path, counts)
     chunks.append(sampler.flush())
     rows = np.concatenate(chunks)
     columns = {

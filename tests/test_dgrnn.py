@@ -134,7 +134,7 @@ def test_too_few_rows_and_bad_columns():
 def test_one_step_equals_grnn_on_embedded_rows():
     model = _fitted()
     Z = _loop(600, seed=3, nan_every=41)
-    got = predict_series(model, Z, horizon=1)
+    got = predict_series(model, Z, horizon=1, exact=True)
     X, _, t = build_training_pairs(SMALL, Z)
     want = np.full_like(got, np.nan)
     want[t] = model.grnn.predict(X)
@@ -149,7 +149,7 @@ def test_one_step_equals_grnn_on_embedded_rows():
 def test_multistep_matches_naive(p):
     model = _fitted(n=800)
     Z = _loop(250, seed=4, nan_every=53)
-    got = predict_series(model, Z, horizon=p)
+    got = predict_series(model, Z, horizon=p, exact=True)
     want = naive.multistep(SMALL, Z, model.grnn.patterns_, model.grnn.targets_, 0.3, p)
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12, equal_nan=True)
     assert np.isnan(got[: p - 1 + SMALL.max_lag]).all()
@@ -162,10 +162,10 @@ def test_clustered_model_matches_naive(p):
     g = model.grnn
     assert g.counts_.max() > 1  # the clusters really hold several rows
     Z = _loop(200, seed=5, nan_every=37)
-    got = predict_series(model, Z, horizon=p)
+    got = predict_series(model, Z, horizon=p, exact=True)
     want = naive.multistep(SMALL, Z, g.patterns_, g.targets_, 0.3, p, g.counts_)
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12, equal_nan=True)
-    ticks = TickPredictor(model, p)
+    ticks = TickPredictor(model, p, exact=True)
     rows = ticks.rows_needed
     for t in range(rows - 1, 200, 23):
         w = np.ascontiguousarray(Z[t - rows + 1 : t + 1])
@@ -306,11 +306,11 @@ def test_delta_multistep_matches_naive(p):
     Z = _loop(800, seed=0)
     model = DGRNN(SMALL_DELTA, GRNN(sigma=0.3, thinning="none")).fit(Z)
     Zt = _loop(250, seed=4, nan_every=53)
-    got = predict_series(model, Zt, horizon=p)
+    got = predict_series(model, Zt, horizon=p, exact=True)
     want = naive.multistep(SMALL_DELTA, Zt, model.grnn.patterns_, model.grnn.targets_, 0.3, p)
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12, equal_nan=True)
     # The live path gives the same numbers.
-    tick = TickPredictor(model, horizon=p)
+    tick = TickPredictor(model, horizon=p, exact=True)
     n = tick.rows_needed
     for t in range(n, 250, 37):
         window = np.ascontiguousarray(Zt[t - n + 1 : t + 1])
@@ -338,7 +338,7 @@ def test_delta_for_some_outputs_only_matches_naive():
     np.testing.assert_allclose(Y[:, 1], Z[t, 1])
     Zt = _loop(200, seed=5, nan_every=41)
     for p in (1, 3):
-        got = predict_series(model, Zt, horizon=p)
+        got = predict_series(model, Zt, horizon=p, exact=True)
         want = naive.multistep(spec, Zt, model.grnn.patterns_, model.grnn.targets_, 0.3, p)
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12, equal_nan=True)
     with pytest.raises(ConfigError, match="must be outputs"):

@@ -1,0 +1,196 @@
+"""Benchmark 3: ``monitor detect`` throughput on a long log against the pipeline a user would
+write with the usual tools: python-can's LogReader, cantools decoding and pyGRNN.
+
+Ours is timed in-process and warm (numba's on-disk cache loaded, as after the first run):
+model load with its index build, the bulk candump path, prediction, J, the alarm machine
+and the events file.  The CLI's cold wall time (interpreter start and imports included) is
+reported beside it.  The reference runs on a slice of a few minutes (pyGRNN needs about a
+millisecond per query at 20,000 patterns) and is stated per frame; it does the same work:
+latest value per signal on the 10 ms grid, z-score, lag embedding, GRNN per output (batches
+of 1,000 queries), residual bound, J over the same window and the same debounced threshold.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import can
+import cantools
+import numpy as np
+
+from monitor.config import load_config
+from monitor.detector import detect
+from monitor.io.reader import read_recording
+from monitor.model import MonitorModel, load_model
+
+Progress = Callable[[str], None]
+
+
+def _ours(model_path: Path, log: Path, out: Path) -> tuple[float, dict[str, float], dict]:
+    cfg = load_config()
+    t0 = time.perf_counter()
+    model = load_model(model_path)
+    model.dgrnn.grnn.cutoff_index()  # built at load, as the CLI's first prediction does
+    t1 = time.perf_counter()
+    rec = read_recording(log)
+    t2 = time.perf_counter()
+    det = detect(model, rec, cfg.alarm, horizon=1)
+    t3 = time.perf_counter()
+    with out.open("w", encoding="utf-8") as fh:
+        fh.writelines(json.dumps(e) + "\n" for e in det.events)
+    t4 = time.perf_counter()
+    parts = {"load_model_s": t1 - t0, "read_log_s": t2 - t1, "detect_s": t3 - t2,
+             "write_s": t4 - t3}  # fmt: skip
+    return t4 - t0, parts, det.summary
+
+
+def reference_pipeline(model: MonitorModel, log: Path, dbc: Path) -> dict[str, Any]:
+    """python-can + cantools + pyGRNN over ``log``; returns what it found, for a check."""
+    from pyGRNN import GRNN as PyGRNN
+
+    db = cantools.database.load_file(str(dbc))
+    spec = model.spec
+    names = list(spec.variables)
+    latest = dict.fromkeys(names, np.nan)
+    rows, t0, k = [], None, 0
+    with can.LogReader(str(log)) as reader:
+        for msg in reader:
+            try:
+                values = db.decode_message(msg.arbitration_id, msg.data)
+            except KeyError:
+                continue
+            if t0 is None:
+                t0 = msg.timestamp
+            while t0 + k * 0.01 < msg.timestamp - 1e-6:  # rows before this frame
+                rows.append([latest[n] for n in names])
+                k += 1
+            for n in names:
+                if n in values:
+                    latest[n] = float(values[n])
+    rows.append([latest[n] for n in names])
+    norm = model.normalizer
+    Z = norm.transform(np.array(rows), names)
+    fvar, flag = spec.feature_columns()
+    L = spec.max_lag
+    X = np.column_stack([Z[L - lag : len(Z) - lag, v] for v, lag in zip(fvar, flag, strict=True)])
+    ok = np.isfinite(X).all(axis=1)
+    g = model.dgrnn.grnn
+    nout = len(spec.outputs)
+    y = np.full((len(Z), nout), np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for o in range(nout):
+            ref = PyGRNN(kernel="RBF", sigma=g.sigma_, calibration="None")
+            ref.fit(g.patterns_, g.targets_[:, o])
+            Xo = X[ok]
+            pred = np.concatenate([ref.predict(Xo[i : i + 1000]) for i in range(0, len(Xo), 1000)])
+            col = np.full(len(X), np.nan)
+            col[ok] = pred
+            y[L:, o] = col
+    delta = spec.delta_mask().astype(bool)
+    y[1:, delta] += Z[:-1, :nout][:, delta]
+    e = y - Z[:, :nout]
+    if model.residual_clip is not None:
+        e = np.clip(e, -np.asarray(model.residual_clip), np.asarray(model.residual_clip))
+    s = np.mean(e * e, axis=1)
+    n = model.window_n + 1
+    csum = np.concatenate([[0.0], np.cumsum(np.nan_to_num(s))])
+    j = np.full(len(s), np.nan)
+    j[n - 1 :] = (csum[n:] - csum[:-n]) / n
+    above = np.nan_to_num(j) > model.eps0
+    run = max((sum(1 for _ in grp) for v, grp in itertools.groupby(above) if v), default=0)
+    max_j = float(np.nanmax(j)) if np.isfinite(j).any() else None
+    return {"samples": len(Z), "y_hat_z": y, "alarm": run >= 50, "max_J": max_j}
+
+
+def _slice(log: Path, seconds: float, out: Path) -> int:
+    """The first ``seconds`` of ``log`` into ``out``; returns its frame count."""
+    n = 0
+    with log.open() as src, out.open("w") as dst:
+        first = None
+        for line in src:
+            ts = float(line[1 : line.index(")")])
+            first = ts if first is None else first
+            if ts - first > seconds:
+                break
+            dst.write(line)
+            n += 1
+    return n
+
+
+def measure(model_path: Path, log: Path, duration_s: float, reference_s: float,
+            say: Progress, repeats: int = 3) -> dict[str, Any]:  # fmt: skip
+    tmp = Path(tempfile.mkdtemp(prefix="monitor-bench-detect-"))
+    with log.open("rb") as fh:
+        frames = sum(1 for _ in fh)
+    say(f"detect: {frames} frames, {duration_s:.0f} s of log; warm-up run")
+    _ours(model_path, log, tmp / "events.jsonl")
+    runs = []
+    for _ in range(repeats):
+        total, parts, summary = _ours(model_path, log, tmp / "events.jsonl")
+        runs.append((total, parts))
+    total = float(np.median([r[0] for r in runs]))
+    parts = {k: float(np.median([r[1][k] for r in runs])) for k in runs[0][1]}
+    say(f"  ours: {total:.2f} s median of {repeats} ({duration_s / total:.0f}x real time)")
+    # What fault isolation costs: it runs per sample while in fault (numpy cosine similarity).
+    plain = dataclasses.replace(load_model(model_path), isolation_labels=())
+    rec = read_recording(log)
+    t0 = time.perf_counter()
+    detect(plain, rec, load_config().alarm, horizon=1)
+    no_isolation_s = time.perf_counter() - t0
+    cli_start = time.perf_counter()
+    subprocess.run(
+        [sys.executable, "-m", "monitor", "detect", str(log), "--model", str(model_path),
+         "--horizon", "1", "--j-every", "0", "--events", str(tmp / "cli.jsonl")],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    cli_s = time.perf_counter() - cli_start
+
+    piece = tmp / "slice.log"
+    ref_frames = _slice(log, reference_s, piece)
+    model = load_model(model_path)
+    say(f"  reference pipeline on the first {reference_s:.0f} s ({ref_frames} frames)")
+    t0 = time.perf_counter()
+    ref = reference_pipeline(model, piece, load_config().dbc)
+    ref_s = time.perf_counter() - t0
+    ours_slice_s, _, _ = _ours(model_path, piece, tmp / "slice.jsonl")
+    mine = detect(model, read_recording(piece), horizon=1)
+    n = min(len(mine.y_hat), ref["samples"])
+    outputs = list(model.spec.outputs)
+    z_mine = model.normalizer.transform(mine.y_hat[:n], outputs)
+    agree = np.nanmax(np.abs(z_mine - ref["y_hat_z"][:n]))
+    per_frame_ours = total / frames
+    per_frame_ref = ref_s / ref_frames
+    say(f"  reference {per_frame_ref * 1e6:.1f} us/frame vs ours {per_frame_ours * 1e6:.2f}")
+    return {
+        "log_frames": frames,
+        "log_s": duration_s,
+        "detect_s": total,
+        "detect_parts_s": parts,
+        "detect_s_without_isolation": no_isolation_s,
+        "fault_s_in_log": duration_s - summary["first_alarm_t"] if summary["alarm"] else 0.0,
+        "detect_frames_per_s": frames / total,
+        "detect_realtime_factor": duration_s / total,
+        "detect_cli_cold_wall_s": cli_s,
+        "alarm": summary["alarm"],
+        "first_alarm_t": summary["first_alarm_t"],
+        "reference_slice_s": reference_s,
+        "reference_frames": ref_frames,
+        "reference_s": ref_s,
+        "reference_us_per_frame": per_frame_ref * 1e6,
+        "reference_realtime_factor": reference_s / ref_s,
+        "ours_on_slice_s": ours_slice_s,
+        "ours_us_per_frame": per_frame_ours * 1e6,
+        "detect_speedup_vs_reference_pipeline": per_frame_ref / per_frame_ours,
+        "reference_max_abs_diff_z": float(agree),
+    }

@@ -1,0 +1,193 @@
+"""Benchmark 2 and 4: the live daemon on a python-can virtual bus, timed from the inside.
+
+Run as its own process (``python -m monitor.bench.live ...``, which ``monitor bench``
+does), so that its peak memory is the daemon's and no benchmark thread shares its GIL
+except the sender, which puts a simulated run on the bus with the log's timing at
+``--speed`` times real time (frames carry their log timestamps, so the sample clock is the
+machine's).
+
+Timing points, all ``time.perf_counter`` in this process:
+
+* arrival: the daemon's bus reader takes the frame off the bus (a wrapper around
+  ``recv``; the detector thread takes frames in the same order);
+* tick: the ticker returned its result for a row.  A row is complete when the first frame
+  of the next 10 ms instant arrives (the sampler cannot know earlier that no more frames of
+  its instant will come), so a tick's latency is measured from that frame's arrival;
+* alarm frame: ``bus.send`` of MON_Alarm for a tick whose state changed.
+
+CPU per tick is the detector thread's ``time.thread_time`` across ``Ticker.tick``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import dataclasses
+import json
+import resource
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+
+from monitor.bench.data import test_recording
+from monitor.codec.frames import FrameCodec
+from monitor.config import BusConfig, load_config
+from monitor.daemon import Daemon
+
+START_TIME_S = 1_700_000_000.0
+
+
+class _TimedBus:
+    """The daemon's bus, noting when each frame is taken off it."""
+
+    def __init__(self, bus: can.BusABC, arrivals: collections.deque) -> None:
+        self._bus = bus
+        self._arrivals = arrivals
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        msg = self._bus.recv(timeout)
+        if msg is not None:
+            self._arrivals.append(time.perf_counter())
+        return msg
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self._bus.send(msg, timeout)
+
+    def shutdown(self) -> None:
+        self._bus.shutdown()
+
+
+def _frames(codec: FrameCodec, rec) -> list[tuple[float, str, dict[str, float]]]:
+    """(time s, message, values) in send order: the three 10 ms frames, oil at 1 Hz."""
+    plan = []
+    cols = {n: rec[n].tolist() for n in ("PP", "PA", "PB", "QP", "SpoolCmd", "PumpDispCmd",
+                                         "EngineSpeed", "OilTemp")}  # fmt: skip
+    t = rec.t.tolist()
+    for i, ti in enumerate(t):
+        for name in ("HYD_Pressures", "HYD_Flow", "HYD_Commands"):
+            plan.append((ti, name, {s: cols[s][i] for s in codec.messages[name].signal_names}))
+        if i % 100 == 0:
+            plan.append((ti, "HYD_OilTemp", {"OilTemp": cols["OilTemp"][i]}))
+    return plan
+
+
+def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, Any]:
+    tmp = Path(tempfile.mkdtemp(prefix="monitor-bench-live-"))
+    rec = test_recording(seconds, fault_at_s=0.6 * seconds)
+    base = load_config()
+    channel = f"bench-{time.monotonic_ns()}"
+    cfg = dataclasses.replace(
+        base, model=model, horizon=horizon,
+        bus=BusConfig(interface="virtual", channel=channel, queue_frames=200_000),
+        event_log=dataclasses.replace(base.event_log, path=tmp / "events.jsonl"),
+        black_box=dataclasses.replace(base.black_box, directory=tmp / "blackbox"),
+    )  # fmt: skip
+    arrivals: collections.deque[float] = collections.deque()
+    bus = can.Bus(interface="virtual", channel=channel)
+    daemon = Daemon(cfg, bus=_TimedBus(bus, arrivals))
+    rss_loaded_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    alarm_id = daemon.codec.message("MON_Alarm").frame_id
+    latency, cpu, alarm_latency, row_t, change_t = [], [], [], [], []
+    current = {"arrival": 0.0, "changed": False, "stopping": False}
+    frame, tick, send = daemon._frame, daemon.ticker.tick, daemon._send
+
+    def timed_frame(msg: can.Message) -> None:
+        current["arrival"] = arrivals.popleft()
+        frame(msg)
+
+    def timed_tick(row: np.ndarray):
+        c0 = time.thread_time()
+        out = tick(row)
+        if current["stopping"]:  # the last row, ticked at shutdown: no frame completed it
+            return out
+        latency.append(time.perf_counter() - current["arrival"])
+        cpu.append(time.thread_time() - c0)
+        row_t.append(out.t_s)
+        current["changed"] = out.changed
+        if out.changed:
+            change_t.append(out.t_s)
+        return out
+
+    def timed_send(msg: can.Message) -> None:
+        if msg.arbitration_id == alarm_id and current["changed"]:
+            alarm_latency.append(time.perf_counter() - current["arrival"])
+        send(msg)
+
+    daemon._frame, daemon.ticker.tick, daemon._send = timed_frame, timed_tick, timed_send
+    codec = FrameCodec.from_dbc()
+    plan = _frames(codec, rec)
+    sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
+    daemon.start()
+    started = time.perf_counter()
+    for t_s, name, values in plan:
+        due = started + t_s / speed
+        wait = due - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        sender.send(codec.encode_message(name, values, START_TIME_S + t_s))
+    sent_s = time.perf_counter() - started
+    deadline = time.monotonic() + 60.0
+    while daemon.codec.counts.frames < len(plan) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    current["stopping"] = True
+    daemon.stop()
+    sender.shutdown()
+    bus.shutdown()
+    lat = np.array(latency) * 1e3
+    # Ticks queued behind a state change's synchronous work (event log fsync, black-box
+    # dump of the pre-alarm frames): those within 2 s of data after a change.
+    t_rows = np.array(row_t)
+    behind = np.zeros(lat.size, dtype=bool)
+    for tc in change_t:
+        behind |= (t_rows >= tc) & (t_rows < tc + 2.0)
+    steady = lat[~behind] if (~behind).any() else lat
+    counts = daemon.counts()
+    events = [json.loads(x) for x in (tmp / "events.jsonl").read_text().splitlines()]
+    return {
+        "model": str(model),
+        "horizon": horizon,
+        "seconds_of_data": seconds,
+        "speed": speed,
+        "wall_s": sent_s,
+        "frames": len(plan),
+        "ticks": int(lat.size),
+        "tick_p50_ms": float(np.percentile(lat, 50)),
+        "tick_p99_ms": float(np.percentile(lat, 99)),
+        "tick_max_ms": float(lat.max()),
+        "tick_p99_ms_away_from_state_changes": float(np.percentile(steady, 99)),
+        "ticks_near_state_changes": int(behind.sum()),
+        "tick_cpu_median_ms": float(np.median(cpu) * 1e3),
+        "tick_cpu_p99_ms": float(np.percentile(np.array(cpu) * 1e3, 99)),
+        "alarm_frame_latency_ms": [float(v * 1e3) for v in alarm_latency],
+        # Where the slowest ticks were (row time s, latency ms): stalls cluster or not.
+        "slowest_ticks": [(float(row_t[i]), float(lat[i])) for i in np.argsort(lat)[-10:]],
+        "ticks_over_1ms": int(np.count_nonzero(lat > 1.0)),
+        "state_changes": [e["state"] for e in events],
+        "dropped": counts["dropped"],
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "rss_after_load_mb": rss_loaded_kb / 1024.0,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m monitor.bench.live", description=__doc__)
+    ap.add_argument("--model", type=Path, required=True)
+    ap.add_argument("--horizon", type=int, default=10)
+    ap.add_argument("--seconds", type=float, default=600.0)
+    ap.add_argument("--speed", type=float, default=5.0)
+    ap.add_argument("--json", type=Path, required=True)
+    args = ap.parse_args(argv)
+    result = run(args.model, args.horizon, args.seconds, args.speed)
+    args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    threading.current_thread().name = "bench-sender"
+    sys.exit(main())

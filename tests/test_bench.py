@@ -1,0 +1,63 @@
+"""``monitor bench --quick``: the benchmark pipeline runs and reports sane numbers (not speed)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from monitor.cli import main
+
+KEYS = (
+    "grnn_us_per_query",
+    "grnn_speedup_vs_numba_loop",
+    "grnn_max_rel_error",
+    "tick_p99_ms",
+    "detect_realtime_factor",
+    "detect_speedup_vs_reference_pipeline",
+)
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    pytest.importorskip("pyGRNN")
+    out = tmp_path_factory.mktemp("bench")
+    code = main(["bench", "--quick", "--json", str(out / "b.json"), "--work-dir", str(out)])
+    assert code == 0
+    return out, json.loads((out / "b.json").read_text())
+
+
+def test_contract_keys_are_measured_numbers(quick):
+    _, r = quick
+    for key in KEYS:
+        assert isinstance(r[key], float) and math.isfinite(r[key]) and r[key] >= 0, key
+    assert r["quick"] is True
+    assert set(r["goals"]) <= set(r)
+
+
+def test_values_are_consistent_with_their_parts(quick):
+    out, r = quick
+    g, live, det = r["grnn"], r["live"], r["detect"]
+    assert r["grnn_max_rel_error"] <= 1e-6  # the stated bound, measured on real queries
+    assert r["grnn_speedup_vs_numba_loop"] == pytest.approx(
+        next(c["plain_us_per_query"] / c["cutoff_us_per_query"] for c in g["cells"]
+             if c["patterns"] == g["grnn_headline_patterns"] and c["p"] == 1)
+    )  # fmt: skip
+    assert {(c["patterns"] > 0, c["p"]) for c in g["cells"]} == {(True, 1), (True, 10)}
+    # Every frame put on the bus was processed, one tick per 10 ms row.
+    assert live["dropped"] == 0
+    assert live["ticks"] == pytest.approx(live["seconds_of_data"] * 100, abs=2)
+    assert live["tick_p50_ms"] <= live["tick_p99_ms"] <= live["tick_max_ms"]
+    assert live["peak_rss_mb"] > 0
+    assert det["detect_realtime_factor"] == pytest.approx(det["log_s"] / det["detect_s"])
+    assert det["alarm"] is True  # the log's fault is found: alarms are part of the timing
+    assert det["reference_max_abs_diff_z"] < 1e-6  # the reference did the same work
+    assert (out / "b.md").read_text().count("|") > 20
+    assert (out / "b.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_unwritable_output_is_a_clear_error(tmp_path, capsys):
+    code = main(["bench", "--quick", "--json", str(tmp_path / "no" / "b.json")])
+    assert code == 2
+    assert "does not exist" in capsys.readouterr().err

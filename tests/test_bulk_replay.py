@@ -1,0 +1,242 @@
+"""The bulk offline path (candump text -> frames -> decoded values -> 100 Hz rows) against
+python-can's reader, cantools' decoder and the frame-by-frame sampler."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import cantools
+import numpy as np
+import pytest
+from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS
+
+from monitor.codec import FrameCodec
+from monitor.codec.bulk import decode_frames, raw_values
+from monitor.codec.frames import MessageInfo, _message_info
+from monitor.detector import detect
+from monitor.errors import InputFileError, NoHydraulicDataError
+from monitor.io.candump import write_candump
+from monitor.io.candump_bulk import read_candump_frames
+from monitor.model import load_model
+from monitor.resources import resource_path
+from monitor.sampler import recording_from_candump
+from monitor.sampler_bulk import recording_from_candump_bulk
+from monitor.sim.cycles import make_cycle
+from monitor.sim.faults import Fault
+from monitor.sim.machine import load_machine
+from monitor.sim.simulate import simulate
+
+SHIPPED = [resource_path("replay", n) for n in ("normal.log", "spool_wear.log")]
+needs_real = pytest.mark.skipif(not REAL_LOGS.is_dir(), reason=f"no real logs at {REAL_LOGS}")
+
+
+def assert_same_frames(path: Path) -> None:
+    got = read_candump_frames(path)
+    with can.LogReader(str(path)) as reader:
+        ref = list(reader)
+    assert len(got) == len(ref)
+    for i, m in enumerate(ref):
+        assert got.timestamp[i] == m.timestamp  # bit for bit
+        assert got.error[i] == m.is_error_frame and got.remote[i] == m.is_remote_frame
+        if m.is_error_frame:
+            continue
+        assert (got.can_id[i], bool(got.extended[i])) == (m.arbitration_id, m.is_extended_id)
+        data = b"" if m.is_remote_frame else bytes(m.data)
+        assert bytes(got.data[i, : got.length[i]]) == data
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.name)
+def test_same_frames_as_python_can_on_shipped_logs(path):
+    assert_same_frames(path)
+
+
+@needs_real
+@pytest.mark.parametrize("name", GOOD_LOGS)
+def test_same_frames_as_python_can_on_real_logs(name):
+    assert_same_frames(REAL_LOGS / name)
+
+
+@needs_real
+@pytest.mark.parametrize(("name", "line"), BAD_LOGS)
+def test_malformed_real_logs_name_the_same_line(name, line):
+    with pytest.raises(InputFileError, match=rf"{name}:{line}: not a candump -L line"):
+        read_candump_frames(REAL_LOGS / name)
+
+
+def test_line_variants_and_errors(tmp_path):
+    log = tmp_path / "v.log"
+    log.write_text(
+        "(1.000000) can0 123#\n"  # no data
+        "(1.100000) vcan0 1ABCDEF0#R\n"  # remote
+        "(1.200000) can1 123#0011 T\n"  # direction flag
+        "(1.300000) can0 123##1001122\n"  # CAN FD
+        "\n"
+        "(1.400000) can0 20000080#0000000000000000\n"  # error frame (error + bus-error flags)
+        "(1.500000) can0 1aBcDeF0#a0B1\r\n"  # lower-case hex, CRLF
+        "(1.600000)\tcan0 7FF#01\n"  # tab
+    )
+    assert_same_frames(log)
+    bad = tmp_path / "bad.log"
+    bad.write_text("(1.000000) can0 123#00\n(1.0) can0 123#ABC\n")
+    with pytest.raises(InputFileError, match=r"bad\.log:2: not a candump -L line"):
+        read_candump_frames(bad)
+    with pytest.raises(InputFileError, match="nope.log"):
+        read_candump_frames(tmp_path / "nope.log")
+
+
+def test_timestamps_bit_identical_to_float(tmp_path):
+    rng = np.random.default_rng(3)
+    stamps = [f"{rng.integers(0, 10 ** int(rng.integers(1, 11)))}."
+              f"{rng.integers(0, 10**6):0{int(rng.integers(1, 10))}d}" for _ in range(3000)]
+    stamps += ["9007199254.740993", "12345678901234567.5", "0.000001", "1700000000.000000"]
+    log = tmp_path / "ts.log"
+    log.write_text("".join(f"({s}) can0 123#00\n" for s in stamps))
+    got = read_candump_frames(log).timestamp
+    assert got.tolist() == [float(s) for s in stamps]
+
+
+def test_values_equal_cantools_decode():
+    codec = FrameCodec.from_dbc()
+    frames = read_candump_frames(SHIPPED[1])
+    decoded = decode_frames(codec, frames)
+    db = codec.db
+    for name, dm in decoded.items():
+        if not dm.rows.size:
+            continue
+        for k in np.linspace(0, dm.rows.size - 1, 50).astype(int):
+            row = dm.rows[k]
+            ref = db.get_message_by_name(name).decode(bytes(frames.data[row, :8]))
+            for sig, vals in dm.values.items():
+                assert vals[k] == pytest.approx(ref[sig], rel=1e-12, abs=1e-12)
+
+
+def test_bit_layouts_from_cantools_incl_big_endian_and_signed():
+    msg = cantools.database.can.Message(
+        frame_id=0x123, name="M", length=8, signals=[
+            cantools.database.can.Signal("A", start=0, length=12, is_signed=True),
+            cantools.database.can.Signal("B", start=12, length=20),
+            cantools.database.can.Signal("C", start=39, length=10, byte_order="big_endian"),
+            cantools.database.can.Signal("D", start=45, length=6, byte_order="big_endian",
+                                         is_signed=True),
+            cantools.database.can.Signal("AliveCounter", start=48, length=4),
+            cantools.database.can.Signal("CRC8", start=56, length=8),
+        ],
+    )  # fmt: skip
+    info: MessageInfo = _message_info(msg)
+    data = np.random.default_rng(0).integers(0, 256, (500, 8), dtype=np.uint8)
+    raw = raw_values(info, data)
+    for i in range(500):
+        ref = msg.decode(bytes(data[i]), scaling=False, decode_choices=False)
+        assert {s: int(raw[s][i]) for s in "ABCD"} == {s: ref[s] for s in "ABCD"}
+
+
+# --------------------------------------------------------------------------- recordings
+
+
+def _rewrite(log: Path, edit) -> None:
+    lines = log.read_text().splitlines(keepends=True)
+    log.write_text("".join(edit(lines)))
+
+
+def _troubled_log(tmp_path: Path, seconds: float = 90.0) -> Path:
+    """A faulty simulated run with every kind of trouble a real log shows."""
+    rec = simulate(make_cycle("boom", seconds, 7), load_machine(),
+                   [Fault("spool_wear", 0.8, 40.0)], seed=7)  # fmt: skip
+    log = tmp_path / "trouble.log"
+    write_candump(log, rec)
+
+    def edit(lines):
+        out = []
+        for i, line in enumerate(lines):
+            head, data = line.rstrip("\n").split("#")
+            ts = float(head[1 : head.index(")")])
+            rest = head[head.index(")") :]
+            if i % 997 == 10:  # CRC mismatch
+                data = f"{int(data[:2], 16) ^ 1:02X}" + data[2:]
+            elif i % 1499 == 20:  # DLC 7
+                data = data[:14]
+            elif i % 1201 == 30 or (6000 <= i < 6040 and "0CFF1021" in head):
+                continue  # a lost frame (counter jump); pressures stale for a while
+            elif i == 9000:  # reordering jitter: 5 ms early
+                head = f"({ts - 0.005:.6f}" + rest
+            elif i == 12000:  # a stray frame from the past
+                head = f"({ts - 3.0:.6f}" + rest
+            elif 20000 <= i < 20010:  # the logger's clock was reset by an hour
+                head = f"({ts - 3600.0:.6f}" + rest
+            elif i == 24000:  # a forward gap of two minutes, then on
+                out.append(f"({ts + 120.0:.6f}{rest}#{data}\n")
+            elif i % 2111 == 40 and "0CFF1021" in head:  # PP raw 0xFFFF, CRC not updated
+                data = "FFFF" + data[4:]  # the CRC check rejects it first, as on a bus
+            out.append(f"{head}#{data}\n")
+            if i == 15000:
+                out.append("(1700000050.000000) can0 123#0011\n")  # foreign traffic
+                out.append("(1700000050.000000) can0 0CFF1021#R\n")  # remote with a DBC id
+                out.append("(1700000050.000000) can0 20000080#0000000000000000\n")  # error
+        return out
+
+    _rewrite(log, edit)
+    return log
+
+
+def _range_violation(log: Path) -> None:
+    """A frame with a valid CRC but PP raw 0xFFFF (655.35 bar > 400): range rejection."""
+    codec = FrameCodec.from_dbc()
+    frame = bytearray(codec.encode("HYD_Pressures", {"PP": 100, "PA": 50, "PB": 10}, counter=3))
+    frame[0] = frame[1] = 0xFF
+    from monitor.codec.crc import crc8_sae_j1850
+
+    frame[7] = crc8_sae_j1850(frame[:7])
+    with log.open("a") as fh:
+        fh.write(f"(1700000095.000000) can0 0CFF1021#{frame.hex().upper()}\n")
+
+
+def assert_same_recording(a, b) -> None:
+    assert a.columns.keys() == b.columns.keys()
+    np.testing.assert_array_equal(a.t, b.t)
+    for name in b.columns:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    assert a.meta == b.meta
+    assert a.source == b.source
+
+
+@pytest.fixture(scope="module")
+def troubled(tmp_path_factory):
+    log = _troubled_log(tmp_path_factory.mktemp("bulk"))
+    _range_violation(log)
+    return log
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.name)
+def test_same_recording_on_shipped_logs(path):
+    assert_same_recording(recording_from_candump_bulk(path), recording_from_candump(path))
+
+
+def test_same_recording_and_events_on_a_log_with_injected_trouble(troubled):
+    bulk, ref = recording_from_candump_bulk(troubled), recording_from_candump(troubled)
+    assert_same_recording(bulk, ref)
+    c = bulk.meta["counts"]
+    # The trouble is really there, so the equality above covers each rule.
+    assert all(c["rejected"][k] > 0 for k in ("dlc", "crc", "range"))
+    assert c["counter_jumps"] > 0 and c["ignored"] == 2
+    assert c["time_backwards"] > 0 and c["time_skipped"] >= 1
+    assert c["time_resyncs"] >= 1 and c["gaps_shortened"] >= 1
+    assert np.isnan(bulk["PP"]).any()
+    model = load_model(resource_path("config", "boom_default.model.npz"))
+    a, b = detect(model, bulk), detect(model, ref)
+    assert a.events == b.events and a.summary == b.summary
+    states = {e["state"] for e in a.events}
+    assert {"fault", "sensor_fault", "inactive"} <= states
+
+
+def test_no_hydraulic_data_and_rod_pos(tmp_path):
+    car = tmp_path / "car.log"
+    car.write_text("(1.000000) can0 123#0011\n(1.010000) can0 0CFF1021#0000000000000000\n")
+    for fn in (recording_from_candump, recording_from_candump_bulk):
+        with pytest.raises(NoHydraulicDataError, match=r"2 frames read, none.*crc 1"):
+            fn(car)
+    rec = simulate(make_cycle("boom", 5, 1), load_machine(), seed=1)
+    log = tmp_path / "rod.log"
+    write_candump(log, rec)
+    assert "RodPos" in recording_from_candump_bulk(log).columns
+    assert_same_recording(recording_from_candump_bulk(log), recording_from_candump(log))
