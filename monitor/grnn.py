@@ -378,6 +378,9 @@ class GRNN:
         spread in time), each predicted from the clusters with its temporal neighbours
         taken out.
     sigma_bounds : (lo, hi) for the search; default from the data's distance scale.
+    cluster_weights : with ``min_distance`` thinning, ``False`` keeps the seed rows as plain
+        patterns (own input and target, count 1: eq. 4 over the kept rows, as pyGRNN would
+        compute it); the default ``True`` is the clustered form.
 
     Fitted attributes: ``patterns_``, ``targets_``, ``counts_`` (members per pattern),
     ``sigma_``, ``sigma_rule_``, ``pattern_index_`` (time index of each pattern's seed row),
@@ -397,6 +400,7 @@ class GRNN:
         max_patterns: int | None = 3000,
         loo_max_queries: int = 2000,
         sigma_bounds: tuple[float, float] | None = None,
+        cluster_weights: bool = True,
     ) -> None:
         self.sigma = sigma
         self.sigma_rule = sigma_rule
@@ -407,6 +411,7 @@ class GRNN:
         self.max_patterns = max_patterns
         self.loo_max_queries = loo_max_queries
         self.sigma_bounds = sigma_bounds
+        self.cluster_weights = cluster_weights
 
     # -- parameters ---------------------------------------------------------------------
 
@@ -459,13 +464,14 @@ class GRNN:
 
         keep, thinning = self._thin(Xa)
         P, pidx = np.ascontiguousarray(Xa[keep]), tidx[keep]
-        if thinning["rule"] == "min_distance":
+        clustered = thinning["rule"] == "min_distance" and bool(self.cluster_weights)
+        if clustered:
             assign, counts, P, Py = cluster(Xa, Ya, P)
         else:  # each kept row is its own pattern; the rows between strides belong to none
             assign = np.full(Xa.shape[0], -1, dtype=np.int64)
             assign[keep] = np.arange(len(keep))
             counts, Py = np.ones(len(keep)), Ya[keep]
-        thinning["weights"] = "cluster_counts" if thinning["rule"] == "min_distance" else "none"
+        thinning["weights"] = "cluster_counts" if clustered else "none"
 
         if self.sigma is not None:
             sigma, rule, loo = _check_sigma(self.sigma), "fixed", math.nan

@@ -179,6 +179,12 @@ def test_thinning_bounds_pattern_count_and_is_recorded():
         np.testing.assert_allclose(g.patterns_[i], X[near == i].mean(0), rtol=1e-12, atol=1e-15)
         assert g.targets_[i, 0] == pytest.approx(Y[near == i].mean(), rel=1e-12, abs=1e-15)
     np.testing.assert_array_equal(g.counts_, np.bincount(near))
+    plain = GRNN(sigma=0.3, min_distance=0.001, max_patterns=200, cluster_weights=False)
+    plain.fit(X, Y)
+    np.testing.assert_array_equal(plain.pattern_index_, g.pattern_index_)  # same seeds
+    np.testing.assert_array_equal(plain.patterns_, X[plain.pattern_index_])
+    np.testing.assert_array_equal(plain.targets_[:, 0], Y[plain.pattern_index_])
+    assert (plain.counts_ == 1).all() and plain.thinning_["weights"] == "none"
     s = GRNN(sigma=0.3, thinning="stride", stride=7, max_patterns=None).fit(X, Y)
     np.testing.assert_array_equal(s.pattern_index_, np.arange(0, 3000, 7))
     np.testing.assert_array_equal(s.targets_[:, 0], Y[::7])  # strided rows count once each

@@ -70,16 +70,18 @@ def training_runs(duration_s: float) -> list[Recording]:
 
 def paper_grnn(recs: list[Recording], n_patterns: int) -> tuple[DGRNN, Normalizer]:
     """An eq. 11 (``paper``, 8 inputs) model with about ``n_patterns`` patterns, and its
-    normaliser.  Patterns are every k-th row (up to 20,000) or the first rows (beyond), each
-    counting once, so pyGRNN computes the same eq. 4 (it has no cluster counts); sigma is
-    LOO as in the product's fit."""
+    normaliser.  Up to 20,000 patterns the product's thinning (min-distance, radius bisected
+    to the bound) with the kept rows as plain patterns, each counting once, so pyGRNN
+    computes the same eq. 4 (it has no cluster counts; the kernel's cost is the same);
+    beyond, every row is a pattern (greedy thinning is quadratic in the kept count).  Sigma
+    is LOO."""
     spec = DGRNNSpec.preset("paper")
     tables = [table(r, spec.variables) for r in recs]
     norm = Normalizer().fit(np.concatenate(tables), spec.variables)
     zs = [norm.transform(t) for t in tables]
     rows = sum(len(z) for z in zs)
-    if n_patterns <= 20_000:
-        grnn = GRNN(thinning="stride", stride=max(1, rows // n_patterns), max_patterns=None)
+    if n_patterns <= 20_000:  # a small radius, so that the pattern bound binds
+        grnn = GRNN(max_patterns=n_patterns, min_distance=1e-3, cluster_weights=False)
     else:
         grnn = GRNN(thinning="stride", stride=1, max_patterns=None, loo_max_queries=200)
     model = DGRNN(spec, grnn)
@@ -98,10 +100,11 @@ def monitor_model(work: Path, n_patterns: int, train_s: float, say: Progress) ->
 
     ``monitor train`` thins patterns at a minimum distance of 0.05 (z units), which keeps
     about 7,600 of the default preset's rows however large ``max_patterns`` is.  So the model
-    is trained as usual without isolation, its GRNN refitted on every k-th row of the same
-    rows (each counting once, so the pyGRNN reference computes the same eq. 4; the kernel's
-    cost is the same with cluster counts), and J0, the residual bound and the fault
-    signatures learnt again for that GRNN with training's own steps.
+    is trained as usual without isolation, its GRNN refitted on the same rows with a radius
+    small enough for the pattern bound to bind and the kept rows as plain patterns (count 1,
+    so the pyGRNN reference computes the same eq. 4; the kernel's cost is the same as with
+    cluster counts), and J0, the residual bound and the fault signatures learnt again for
+    that GRNN with training's own steps.
     """
     path = work / f"default_{n_patterns}_{_key(n=n_patterns, s=train_s, v=3)}.model.npz"
     if path.exists():
@@ -114,9 +117,8 @@ def monitor_model(work: Path, n_patterns: int, train_s: float, say: Progress) ->
     fit_part, val_part = split_normal(recs, cfg.validation_fraction)
     spec = model.spec
     tables = [model.normalizer.transform(table(r, spec.variables)) for r in fit_part]
-    stride = max(1, sum(len(t) for t in tables) // n_patterns)
-    grnn = GRNN(exclude_neighbours=cfg.exclude_neighbours, thinning="stride", stride=stride,
-                max_patterns=None)  # fmt: skip
+    grnn = GRNN(exclude_neighbours=cfg.exclude_neighbours, max_patterns=n_patterns,
+                min_distance=1e-3, cluster_weights=False)  # fmt: skip
     model.dgrnn = DGRNN(spec, grnn).fit(tables)
     say(f"  refitted: {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g}")
     model.residual_clip = None
