@@ -240,10 +240,11 @@ def test_dm2_and_dm1_answer_requests() -> None:
 def test_token_bucket_caps_a_flapping_state() -> None:
     cfg = J1939Config(enabled=True, max_frames_per_s=10.0)
     diag = Diagnostics(cfg, SIGNALS)
-    flap: list[Segment] = []
-    for i in range(250):  # 5 s: fault and sensor fault (a 3-frame BAM) every 10 ms
-        flap += [(0.01, State.FAULT, "spool_wear", ()), (0.01, State.SENSOR_FAULT, "", ("PP",
-                 "PA"))]  # fmt: skip
+    # 5 s of fault and sensor fault (a 3-frame BAM) alternating every 10 ms.
+    flap: list[Segment] = [
+        (0.01, State.FAULT, "spool_wear", ()),
+        (0.01, State.SENSOR_FAULT, "", ("PP", "PA")),
+    ] * 250
     frames = _drive(diag, [*flap, (3.0, State.NORMAL, "", ())])
     t = np.array([m.timestamp for m in frames])
     # A bucket of one second's worth: at most rate * (T + 1) frames in any T seconds.
