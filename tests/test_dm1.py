@@ -183,6 +183,28 @@ def test_dm1_on_change_and_every_second_while_active() -> None:
     assert decode_dm(bytes(frames[0].data))[0]["amber"] == "off"
 
 
+def test_one_dtc_per_alarm_while_isolation_refines_its_answer() -> None:
+    diag = Diagnostics(J1939Config(enabled=True, repeat_when_clear=False), SIGNALS)
+    frames = _drive(
+        diag,
+        [
+            (0.5, State.NORMAL, "", ()),
+            (0.3, State.FAULT, "unknown", ()),  # not isolated yet
+            (0.3, State.FAULT, "spool_wear", ()),
+            (0.2, State.FAULT, "unknown", ()),  # a moment of doubt: keeps spool_wear
+            (0.9, State.FAULT, "spool_wear", ()),
+            (0.5, State.SENSOR_FAULT, "", ("QP",)),
+            (0.2, State.FAULT, "spool_wear", ()),  # the same episode: not counted again
+            (0.5, State.NORMAL, "", ()),
+            (0.2, State.FAULT, "unknown", ()),  # a new alarm starts unnamed again
+        ],
+    )
+    unknown, wear, qp = (520195, 11, 1), (*WEAR, 1), (520215, 9, 1)
+    assert _dm1s(frames) == [(0.0, NO_DTC), (0.5, [unknown]), (0.8, [wear]), (1.8, [wear]),
+                             (2.2, [qp]), (2.7, [wear]), (2.9, NO_DTC),
+                             (3.4, [(520195, 11, 2)])]  # fmt: skip
+
+
 def test_no_dtc_repeats_every_second_when_configured() -> None:
     diag = Diagnostics(J1939Config(enabled=True), SIGNALS)
     got = _dm1s(_drive(diag, [(2.5, State.NORMAL, "", ()), (1.2, State.FAULT, "x", ())]))

@@ -4,8 +4,11 @@ One ``tick`` per 100 Hz row, after the alarm state machine, on the sample clock 
 MON_Alarm, so a log replayed at any speed gives the same frames).  The active DTCs follow
 the alarm state: in ``fault`` one DTC for the isolated fault, in ``sensor_fault`` one per
 model signal that is stale (missing) in the row, kept through the recovery debounce; none
-otherwise.  A DTC that becomes active counts one more occurrence (since the start, at most
-126); one that goes inactive joins the previously active DTCs that DM2 reports.
+otherwise.  Isolation refines its answer while an alarm lasts and may fall back to
+``unknown`` for a moment: the DTC keeps the last fault it named, so a display sees one
+trouble code per alarm, not a flicker.  A DTC counts one occurrence per episode (a
+stretch with any DTC active) in which it becomes active, since the start, at most 126; one
+that goes inactive joins the previously active DTCs that DM2 reports.
 
 J1939-73: DM1 goes out when the set of active DTCs changes and every second while one is
 active; with none, once on the change and, with ``repeat_when_clear``, every second in the
@@ -74,6 +77,8 @@ class Diagnostics:
         self.occurrences: dict[Key, int] = {}
         self.previous: set[Key] = set()  # previously active, not active now (DM2)
         self._stale: tuple[str, ...] = ()
+        self._named: str | None = None  # the last fault isolation named in this alarm
+        self._counted: set[Key] = set()  # DTCs counted in this episode
         self._started = False
         self._want: set[int] = set()  # PGNs to send as soon as possible
         self._held = False
@@ -91,8 +96,11 @@ class Diagnostics:
     def _keys(self, state: State, fault: str, row: np.ndarray) -> dict[Key, Lamp]:
         cfg = self.cfg
         if state is State.FAULT:
-            name = fault if fault in cfg.fault_spn else "unknown"
+            if fault != "unknown" and fault in cfg.fault_spn:
+                self._named = fault
+            name = self._named or "unknown"
             return {(cfg.fault_spn[name], cfg.fault_fmi[name]): self._fault_lamp}
+        self._named = None
         if state is not State.SENSOR_FAULT:
             self._stale = ()
             return {}
@@ -103,8 +111,9 @@ class Diagnostics:
         return {(cfg.sensor_spn[n], cfg.sensor_fmi): self._sensor_lamp for n in names}
 
     def _update(self, keys: dict[Key, Lamp]) -> None:
-        for k in keys.keys() - self.active.keys():
+        for k in keys.keys() - self.active.keys() - self._counted:
             self.occurrences[k] = min(self.occurrences.get(k, 0) + 1, OC_MAX)
+        self._counted = self._counted | keys.keys() if keys else set()
         self.previous |= self.active.keys() - keys.keys()
         self.previous -= keys.keys()
         self.active = keys
