@@ -62,9 +62,9 @@ class Daemon:
         self.frames = AlarmFrames(self.codec, cfg.outputs)
         self.event_log = EventLog(cfg.event_log.path)
         self.black_box = BlackBox(cfg.black_box, cfg.bus.channel)
+        self.diag = Diagnostics(cfg.j1939, self.model.spec.variables) if cfg.j1939.enabled else None
         self._own_bus = bus is None
         self.bus = bus if bus is not None else open_bus(cfg.bus, self.codec)
-        self.diag = Diagnostics(cfg.j1939, self.model.spec.variables) if cfg.j1939.enabled else None
         if self.diag is not None and self._own_bus and cfg.bus.kernel_filters:
             self.bus.set_filters(sensor_filters(self.codec) + self.diag.rx_filters())
         self.reader = BusReader(self.bus, cfg.bus.queue_frames)

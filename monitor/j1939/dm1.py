@@ -27,7 +27,6 @@ import numpy as np
 
 from monitor.alarm import State
 from monitor.config import J1939Config
-from monitor.errors import ConfigError
 from monitor.j1939.dtc import OC_MAX, PGN_DM1, PGN_DM2, Dtc, Lamp, dm_payload, lamp_bytes
 from monitor.j1939.transport import REQUEST_FILTER, pgn_frames, requested_pgn
 from monitor.sampler import ROW_COLUMNS
@@ -60,14 +59,14 @@ class TokenBucket:
 
 
 class Diagnostics:
-    """Builds the DM1/DM2 frames of one monitor (source address ``cfg.source_address``)."""
+    """Builds the DM1/DM2 frames of one monitor (source address ``cfg.source_address``).
+
+    ``signals``: the model's signals, whose staleness makes a sensor fault (every signal
+    name has an SPN: the config merges its map into the defaults)."""
 
     def __init__(
         self, cfg: J1939Config, signals: tuple[str, ...], columns: tuple[str, ...] = ROW_COLUMNS
     ) -> None:
-        missing = [s for s in signals if s not in cfg.sensor_spn]
-        if missing:
-            raise ConfigError(f"j1939.sensor_spn: no SPN for model signal(s) {missing}")
         self.cfg = cfg
         self._signals = signals
         self._idx = np.array([1 + columns.index(s) for s in signals], dtype=np.int64)
@@ -113,7 +112,7 @@ class Diagnostics:
     def _update(self, keys: dict[Key, Lamp]) -> None:
         for k in keys.keys() - self.active.keys() - self._counted:
             self.occurrences[k] = min(self.occurrences.get(k, 0) + 1, OC_MAX)
-        self._counted = self._counted | keys.keys() if keys else set()
+        self._counted = (self._counted | keys.keys()) if keys else set()
         self.previous |= self.active.keys() - keys.keys()
         self.previous -= keys.keys()
         self.active = keys

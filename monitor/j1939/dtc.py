@@ -1,7 +1,7 @@
 """J1939-73 diagnostic message layout: DTCs, lamp bytes and the DM1/DM2 payload.
 
 A DM1 (PGN 65226) or DM2 (PGN 65227) payload is two lamp bytes followed by one 4-byte
-DTC per trouble code (J1939-73 5.7.1, conversion method 1 = the current one, CM bit 0):
+DTC per trouble code, in the current SPN layout (conversion method bit CM = 0):
 
     byte 0  lamp status, 2 bits each: MIL bits 8-7, red stop 6-5, amber warning 4-3,
             protect 2-1 (00 off, 01 on)
