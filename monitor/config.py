@@ -21,6 +21,7 @@ import yaml
 
 from monitor.alarm import AlarmConfig
 from monitor.errors import ConfigError
+from monitor.j1939 import dtc as j1939_dtc
 from monitor.resources import resource_path
 
 
@@ -66,6 +67,41 @@ class BlackBoxConfig:
 
 
 @dataclass(frozen=True)
+class J1939Config:
+    """J1939-73 diagnostics: DM1 of the active faults every second, DM2 on request
+    (layout and default numbers in monitor/j1939/dtc.py).  A hydraulic fault is one DTC
+    (SPN and FMI per fault name); a sensor fault one DTC per stale signal."""
+
+    enabled: bool = False
+    source_address: int = 0xA0  # the monitor's J1939 address, as in its MON_* frame IDs
+    priority: int = 6  # DM1 priority (J1939-73 default); BAM frames always go at 7
+    fault_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_SPN))
+    fault_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_FMI))
+    sensor_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_SENSOR_SPN))
+    sensor_fmi: int = j1939_dtc.DEFAULT_SENSOR_FMI
+    fault_lamp: str = "amber"  # none, protect, amber, red or mil; :slow / :fast to flash
+    sensor_lamp: str = "amber"
+    repeat_when_clear: bool = True  # the no-DTC DM1 every second (else only on the change)
+    bam_gap_s: float = 0.05  # between BAM data packets (J1939-21: 50 to 200 ms)
+    max_frames_per_s: float = 10.0  # token bucket over every J1939 frame we send
+
+    def __post_init__(self) -> None:
+        dtc = j1939_dtc
+        names = tuple(dtc.DEFAULT_FAULT_SPN)
+        signals = tuple(dtc.DEFAULT_SENSOR_SPN)
+        # Given maps replace single entries of the defaults, so one line can move one SPN.
+        for key, known, top, default in (
+            ("fault_spn", names, dtc.SPN_MAX, dtc.DEFAULT_FAULT_SPN),
+            ("fault_fmi", names, dtc.FMI_MAX, dtc.DEFAULT_FAULT_FMI),
+            ("sensor_spn", signals, dtc.SPN_MAX, dtc.DEFAULT_SENSOR_SPN),
+        ):
+            given = dtc.check_number_map(getattr(self, key), known, top, f"j1939.{key}")
+            object.__setattr__(self, key, default | given)
+        for key in ("fault_lamp", "sensor_lamp"):
+            dtc.Lamp.parse(getattr(self, key), f"j1939.{key}")
+
+
+@dataclass(frozen=True)
 class MonitorConfig:
     source: Path
     dbc: Path
@@ -76,10 +112,12 @@ class MonitorConfig:
     outputs: OutputConfig = field(default_factory=OutputConfig)
     event_log: EventLogConfig = field(default_factory=EventLogConfig)
     black_box: BlackBoxConfig = field(default_factory=BlackBoxConfig)
+    j1939: J1939Config = field(default_factory=J1939Config)
 
 
 _TOP_KEYS = {
     "dbc", "model", "detector", "alarm", "bus", "outputs", "event_log", "black_box",
+    "j1939",
 }  # fmt: skip
 
 
@@ -148,6 +186,29 @@ _BLACK_BOX = {
     "max_frames": ("int", _POSITIVE, ">= 1"),
     "max_files": ("int", _POSITIVE, ">= 1"),
 }
+
+_J1939 = {
+    "enabled": ("bool", None, ""),
+    "source_address": ("int", lambda v: 0 <= v <= 253, "0..253 (254 null, 255 global)"),
+    "priority": ("int", lambda v: 0 <= v <= 7, "0..7"),
+    "fault_spn": ("options", None, ""),
+    "fault_fmi": ("options", None, ""),
+    "sensor_spn": ("options", None, ""),
+    "sensor_fmi": ("int", lambda v: 0 <= v <= j1939_dtc.FMI_MAX, "0..31"),
+    "fault_lamp": ("str", None, ""),
+    "sensor_lamp": ("str", None, ""),
+    "repeat_when_clear": ("bool", None, ""),
+    "bam_gap_s": ("float", lambda v: 0.05 <= v <= 0.2, "between 0.05 and 0.2 (J1939-21)"),
+    "max_frames_per_s": ("float", lambda v: v >= 2, ">= 2"),
+}
+
+
+def _j1939(sec: dict[str, Any], source: Path) -> J1939Config:
+    try:
+        return _typed(J1939Config, _J1939, sec, "j1939", source)
+    except ConfigError as exc:
+        msg = str(exc)
+        raise ConfigError(msg if msg.startswith(str(source)) else f"{source}: {msg}") from None
 
 
 def _value(kind: str, raw: Any, where: str, source: Path) -> Any:
@@ -241,4 +302,5 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             EventLogConfig, _EVENT_LOG, _section(data, "event_log", source), "event_log", source
         ),
         black_box=black_box,
+        j1939=_j1939(_section(data, "j1939", source), source),
     )

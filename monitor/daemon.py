@@ -30,9 +30,10 @@ import numpy as np
 
 from monitor.alarm import State
 from monitor.blackbox import BlackBox
-from monitor.bus import BusReader, open_bus
+from monitor.bus import BusReader, open_bus, sensor_filters
 from monitor.codec.frames import FrameCodec
 from monitor.config import MonitorConfig, load_config
+from monitor.j1939.dm1 import Diagnostics
 from monitor.model import load_model
 from monitor.outputs import AlarmFrames, EventLog
 from monitor.sampler import Sampler, hydraulic_messages
@@ -61,8 +62,11 @@ class Daemon:
         self.frames = AlarmFrames(self.codec, cfg.outputs)
         self.event_log = EventLog(cfg.event_log.path)
         self.black_box = BlackBox(cfg.black_box, cfg.bus.channel)
+        self.diag = Diagnostics(cfg.j1939, self.model.spec.variables) if cfg.j1939.enabled else None
         self._own_bus = bus is None
         self.bus = bus if bus is not None else open_bus(cfg.bus, self.codec)
+        if self.diag is not None and self._own_bus and cfg.bus.kernel_filters:
+            self.bus.set_filters(sensor_filters(self.codec) + self.diag.rx_filters())
         self.reader = BusReader(self.bus, cfg.bus.queue_frames)
         self.tx_errors = 0
         self.reloads = 0
@@ -126,6 +130,7 @@ class Daemon:
             "alarm_frames_held_back": self.frames.held_back,
             "events": self.event_log.written,
             "tx_errors": self.tx_errors,
+            **(self.diag.counts() if self.diag is not None else {}),
         }
 
     # -- detector thread ------------------------------------------------------------------
@@ -166,6 +171,8 @@ class Daemon:
 
     def _frame(self, msg: can.Message) -> None:
         self.black_box.add(msg)
+        if self.diag is not None and self.diag.request(msg):
+            return  # a J1939 request for DM1/DM2: answered at the next tick
         d = self.codec.decode_message(msg)
         if d.rejection is not None:
             log.debug("rejected frame %X: %s", msg.arbitration_id, d.rejection.value)
@@ -209,6 +216,10 @@ class Daemon:
             if frames.due(tick.t_s, tick.state, tick.changed):
                 bus_time = self._bus_time(tick.t_s)
                 self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
+            if self.diag is not None:
+                bus_time = self._bus_time(tick.t_s)
+                for msg in self.diag.tick(tick.t_s, bus_time, tick.state, ticker.fault, row):
+                    self._send(msg)
 
     def _state_change(self, tick: Any) -> None:
         ev = event(tick, self.ticker.fault, self.ticker.eps0, self.sampler.start_time_s)
@@ -262,6 +273,9 @@ class Daemon:
         if cfg.bus != self.cfg.bus or cfg.dbc != self.cfg.dbc:
             log.warning("bus and dbc changes take effect at the next restart")
             cfg = replace(cfg, bus=self.cfg.bus, dbc=self.cfg.dbc)
+        if cfg.j1939 != self.cfg.j1939:
+            log.warning("j1939 changes take effect at the next restart")
+            cfg = replace(cfg, j1939=self.cfg.j1939)
         if event_log is not None:
             self.event_log.close()
             self.event_log = event_log
