@@ -5,6 +5,8 @@ Sections: ``dbc`` and ``model`` (input files, relative to the config file's fold
 (python-can interface, channel, bitrate), ``outputs`` (alarm/status frame rates),
 ``event_log`` and ``black_box`` (output paths, relative to the working directory the daemon
 starts in, so a config shipped inside the installed package never writes into it).
+``operating``, ``plausibility`` and ``validity`` (see ``monitor.gating``) say which samples
+the detector judges.
 
 Every problem (unknown key, wrong type, missing input file, impossible value) is one
 ``ConfigError`` naming the file and the key; the CLI turns it into exit 2.
@@ -21,7 +23,11 @@ import yaml
 
 from monitor.alarm import AlarmConfig
 from monitor.errors import ConfigError
+from monitor.gating import GatingConfig
+from monitor.opstate import OperatingConfig
+from monitor.plausibility import PlausibilityConfig
 from monitor.resources import resource_path
+from monitor.validity import ValidityConfig
 
 
 @dataclass(frozen=True)
@@ -76,10 +82,18 @@ class MonitorConfig:
     outputs: OutputConfig = field(default_factory=OutputConfig)
     event_log: EventLogConfig = field(default_factory=EventLogConfig)
     black_box: BlackBoxConfig = field(default_factory=BlackBoxConfig)
+    operating: OperatingConfig = field(default_factory=OperatingConfig)
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
+    validity: ValidityConfig = field(default_factory=ValidityConfig)
+
+    @property
+    def gating(self) -> GatingConfig:
+        return GatingConfig(self.operating, self.plausibility, self.validity)
 
 
 _TOP_KEYS = {
     "dbc", "model", "detector", "alarm", "bus", "outputs", "event_log", "black_box",
+    "operating", "plausibility", "validity",
 }  # fmt: skip
 
 
@@ -148,6 +162,33 @@ _BLACK_BOX = {
     "max_frames": ("int", _POSITIVE, ">= 1"),
     "max_files": ("int", _POSITIVE, ">= 1"),
 }
+
+_OPERATING = {
+    "warmup_oil_c": ("float", lambda v: -40 <= v <= 150, "within -40..150 (degC)"),
+    "warmup_hysteresis_c": ("float", _NON_NEG, ">= 0 (degC)"),
+}
+_PLAUSIBILITY = {f.name: ("float", _NON_NEG, ">= 0") for f in fields(PlausibilityConfig)} | {
+    "pressure_min_bar": ("float", None, ""),
+    "pressure_max_bar": ("float", _POSITIVE, "> 0 (bar)"),
+    "flow_max_lpm": ("float", _POSITIVE, "> 0 (L/min)"),
+}
+_VALIDITY = {
+    "gate": ("bool", None, ""),
+    "margin_fraction": ("float", _NON_NEG, ">= 0"),
+    "margin_pct": ("float", _NON_NEG, ">= 0 (%)"),
+    "margin_rpm": ("float", _NON_NEG, ">= 0 (rpm)"),
+    "margin_c": ("float", _NON_NEG, ">= 0 (degC)"),
+    "min_bin_share": ("float", lambda v: 0 <= v <= 1, "within 0..1"),
+}
+
+
+def _gating_section(cls: type, spec: dict, data: dict[str, Any], name: str, source: Path) -> Any:
+    """A typed section whose dataclass also checks values together (one ConfigError)."""
+    try:
+        return _typed(cls, spec, _section(data, name, source), name, source)
+    except ConfigError as exc:
+        text = str(exc)
+        raise ConfigError(text if text.startswith(f"{source}:") else f"{source}: {text}") from None
 
 
 def _value(kind: str, raw: Any, where: str, source: Path) -> Any:
@@ -241,4 +282,9 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             EventLogConfig, _EVENT_LOG, _section(data, "event_log", source), "event_log", source
         ),
         black_box=black_box,
+        operating=_gating_section(OperatingConfig, _OPERATING, data, "operating", source),
+        plausibility=_gating_section(
+            PlausibilityConfig, _PLAUSIBILITY, data, "plausibility", source
+        ),
+        validity=_gating_section(ValidityConfig, _VALIDITY, data, "validity", source),
     )

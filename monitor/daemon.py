@@ -56,7 +56,7 @@ class Daemon:
         self.codec = FrameCodec.from_dbc(cfg.dbc)
         self._hydraulic = hydraulic_messages(self.codec)
         self.model = load_model(cfg.model)
-        self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon)
+        self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon, gating=cfg.gating)
         self.sampler = Sampler.for_codec(self.codec)
         self.frames = AlarmFrames(self.codec, cfg.outputs)
         self.event_log = EventLog(cfg.event_log.path)
@@ -242,14 +242,16 @@ class Daemon:
         self._last_status_mono = now
         r = self.reader.counts
         rejected = self.codec.counts.rejected_total
-        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time()))
+        g = self.ticker.gate
+        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
+                                      int(g.op_state), g.oor >= 0, g.check != 0))  # fmt: skip
 
     def _do_reload(self) -> None:
         """SIGHUP: new config and model, same bus; a bad file keeps the running ones."""
         try:
             cfg = load_config(self.cfg.source)
             model = load_model(cfg.model)
-            ticker = Ticker(model, cfg.alarm, cfg.horizon)
+            ticker = Ticker(model, cfg.alarm, cfg.horizon, gating=cfg.gating)
             event_log = (
                 EventLog(cfg.event_log.path)
                 if cfg.event_log.path != self.cfg.event_log.path
