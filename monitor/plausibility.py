@@ -17,8 +17,11 @@ Checks (``plausibility:`` in config/monitor.yaml; times in seconds of 100 Hz sam
   but which no longer follows the loop.
 * ``pump_below_port``: while the spool is open (|SpoolCmd| >= ``relation_spool_pct``) the
   pump feeds the ports through the valve, so PP >= max(PA, PB) - ``relation_margin_bar``.
-  Violated for ``relation_s``: an offset or drift.  The sensor named is the port above PP,
-  or PP itself when both ports are above it (the common factor).
+  A port above PP for ``relation_s``: an offset or drift.  The sensor named is that port;
+  once both ports have been seen above PP (a low-reading PP shows against whichever port
+  is fed, a high-reading port only against itself) it is PP, the common factor.  Holding
+  proves little (an offset hides while the valve drop exceeds it), so the finding stays
+  until a rest (below) reads the port at tank.
 * ``rest_offset``: with the engine off and the spool centred for ``rest_settle_s``, the
   pump has stopped and the pressures have settled to tank: PP, PA or PB further than
   ``rest_max_bar`` from 0 bar gauge is an offset.  (A boom parked in the air keeps load
@@ -26,8 +29,8 @@ Checks (``plausibility:`` in config/monitor.yaml; times in seconds of 100 Hz sam
   machines, or raise ``rest_max_bar``.)
 
 A finding latches until its own check shows the sensor healthy again (range: back in range;
-frozen/stuck: the value moves; the relation: holds for ``relation_s``; rest: a later rest
-reads near tank), so an offset found at key-off is still named when the engine starts.
+frozen/stuck: the value moves; the relation and rest offsets: a later rest reads the
+sensor near tank), so an offset found at key-off is still named when the engine starts.
 While any finding is active the sample counts as a sensor fault (MON_Alarm.State 2, the
 residual not used); events name the first finding in check order, then signal order.
 
@@ -115,7 +118,7 @@ class PlausibilityConfig:
 
 
 # State arrays (per column): counters[0] range run, [1] identical run, [2] stuck moving
-# samples, [3] relation run (violated > 0 / held < 0 per column of the sensor named);
+# samples, [3] relation run per port (violating samples);
 # ref[c] stuck reference, last[c] previous value; active[check, column] latched findings;
 # misc[0] rest run (engine off, spool centred).
 @jit
@@ -164,30 +167,22 @@ def _run(x, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, ou
                 counters[2, c] += 1
                 if stuck_n > 0 and counters[2, c] >= stuck_n:
                     active[2, c] = True
-        # pump_below_port: PP >= max(PA, PB) - margin while the spool is open
-        pp, pa, pb = x[i, _PP], x[i, _PA], x[i, _PB]
-        if running and abs(spool) >= rel_spool and rel_n > 0 and not (
-            np.isnan(pp) or np.isnan(pa) or np.isnan(pb)
-        ):
-            a_high = pa > pp + rel_margin
-            b_high = pb > pp + rel_margin
-            if a_high or b_high:
-                named = _PP if (a_high and b_high) else (_PA if a_high else _PB)
-                if counters[3, named] < 0:
-                    counters[3, named] = 0
-                counters[3, named] += 1
-                for c in range(_PP, _PB + 1):
-                    if c != named and counters[3, c] > 0:
-                        counters[3, c] = 0
-                if counters[3, named] >= rel_n:
-                    active[3, named] = True
-            else:
-                for c in range(_PP, _PB + 1):
-                    if counters[3, c] > 0:
-                        counters[3, c] = 0
-                    counters[3, c] -= 1
-                    if -counters[3, c] >= rel_n:
-                        active[3, c] = False
+        # pump_below_port: PP >= max(PA, PB) - margin while the spool is open; a run of
+        # violating samples per port.  A healthy port never reads above the pump that feeds
+        # it, but a port reading high hides whenever the valve drop exceeds its offset, so
+        # holding proves little: the finding latches until a rest reads the port at tank.
+        pp = x[i, _PP]
+        if running and abs(spool) >= rel_spool and rel_n > 0 and not np.isnan(pp):
+            for c in (_PA, _PB):
+                v = x[i, c]
+                if v > pp + rel_margin:
+                    counters[3, c] += 1
+                    if counters[3, c] >= rel_n:
+                        active[3, c] = True
+                elif not np.isnan(v):
+                    counters[3, c] = 0
+        # Both ports above the pump: the common factor, PP reading low, is the one named.
+        active[3, _PP] = active[3, _PA] and active[3, _PB]
         # rest_offset: engine off, spool centred, settled -> pressures near tank
         if (not np.isnan(engine)) and (not running) and abs(spool) < move_spool and rest_n > 0:
             misc[0] += 1
@@ -196,6 +191,8 @@ def _run(x, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, ou
                     v = x[i, c]
                     if not np.isnan(v):
                         active[4, c] = abs(v) > rest_max
+                        if not active[4, c]:
+                            active[3, c] = False  # read at tank: no offset after all
         else:
             misc[0] = 0
         out_check[i] = 0
