@@ -3,7 +3,8 @@
 Format: a numpy ``.npz`` holding the GRNN's arrays plus ``header``, a UTF-8 JSON document
 (format name, version, signals, lags, normalisation, sigma, J0, eps0, window, isolation,
 training provenance, and since the operating envelope exists ``validity``: the trained
-range and occupancy of every signal, see ``monitor.validity``) and ``checksum``, a SHA-256 over the header and every array.  Floats
+range and occupancy of every signal, see ``monitor.validity``) and ``checksum``, a SHA-256
+over the header and every array.  Floats
 go through JSON's shortest round-trip repr and arrays are stored raw, so a model loads
 back bit-identically.
 """

@@ -54,8 +54,9 @@ CHECKS: tuple[str, ...] = ("signal_range", "frozen", "stuck", "pump_below_port",
 #: Kernel column order: the contract signals (SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp,
 #: PP, PA, PB, QP).
 COLUMNS: tuple[str, ...] = SIGNAL_NAMES
-_SPOOL, _ENGINE, _PP, _PA, _PB, _QP = (COLUMNS.index(n) for n in
-                                       ("SpoolCmd", "EngineSpeed", "PP", "PA", "PB", "QP"))  # fmt: skip
+_SPOOL, _ENGINE, _PP, _PA, _PB, _QP = (
+    COLUMNS.index(n) for n in ("SpoolCmd", "EngineSpeed", "PP", "PA", "PB", "QP")
+)
 #: Sensor ranges of the shipped DBC (dbc/monitor.dbc; tests hold them equal).
 DBC_RANGES: dict[str, tuple[float, float]] = {
     "SpoolCmd": (-100.0, 100.0),
@@ -122,7 +123,9 @@ class PlausibilityConfig:
 # ref[c] stuck reference, last[c] previous value; active[check, column] latched findings;
 # misc[0] rest run (engine off, spool centred).
 @jit
-def _run(x, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, out_sig):  # pragma: no cover - numba
+def _run(  # pragma: no cover - numba
+    x, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, out_sig
+):
     n, m = x.shape
     range_n, frozen_n, stuck_n = p[0], p[1], p[2]
     band_bar, band_lpm, move_spool, move_flow = p[3], p[4], p[5], p[6]

@@ -4,9 +4,9 @@ It reproduces ``monitor.detector.detect`` sample by sample, so a log gives the s
 on the bus as at a desk: z-score with the model's F0 statistics; a row outside normal
 operation (engine off, warm-up), with a model signal missing, a sensor finding active or an
 operating signal out of the trained range is gated (``monitor.gating``: NaN before
-prediction, so it never feeds one, and its residual is NaN); e = y_hat - y in z units, clipped to the model's
-residual bound; J by the incremental window (eq. 9); one ``AlarmMachine.step`` per row.
-Nothing is allocated per tick beyond numpy scalars.
+prediction, so it never feeds one, and its residual is NaN); e = y_hat - y in z units,
+clipped to the model's residual bound; J by the incremental window (eq. 9); one
+``AlarmMachine.step`` per row.  Nothing is allocated per tick beyond numpy scalars.
 """
 
 from __future__ import annotations

@@ -117,7 +117,8 @@ def _from_columns(columns: dict[str, tuple[np.ndarray, np.ndarray | None]], sour
     lo = tuple(float(np.min(columns[s][0])) for s in names)
     hi = tuple(float(np.max(columns[s][0])) for s in names)
     occ = tuple(
-        _occupancy(columns[s][0], a, b, columns[s][1]) for s, a, b in zip(names, lo, hi, strict=True)
+        _occupancy(columns[s][0], a, b, columns[s][1])
+        for s, a, b in zip(names, lo, hi, strict=True)
     )
     return Envelope(tuple(names), lo, hi, occ, source)
 

@@ -154,9 +154,7 @@ def rest_then_run(run: Recording, pa_rest_bar: float) -> Recording:
     return Recording(t, cols, "rest then run")
 
 
-def test_rest_offset_is_found_at_key_off_and_kept_when_the_engine_starts(
-    model, normal_run
-) -> None:
+def test_rest_offset_is_found_at_key_off_and_kept_when_the_engine_starts(model, normal_run) -> None:
     rec = rest_then_run(normal_run, 12.0)
     found, check, _ = findings_of(rec)
     assert found == {("PA", "rest_offset"): 30.0 - 0.01}  # 3000th sample of the rest
