@@ -230,7 +230,7 @@ def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:
         "out_of_range_signals": oor,
         "sensor_checks": checks,
         "envelope": None if env is None else env.source,
-        "sparse_coverage_fraction": gate.validity.sparse_share(gate.validity_values(rec), normal),
+        "sparse_coverage": gate.validity.sparse_shares(gate.validity_values(rec), normal),
     }
 
 

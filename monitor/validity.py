@@ -54,7 +54,8 @@ class ValidityConfig:
     margin_rpm: float = 100.0  # at least this for EngineSpeed (rpm)
     margin_c: float = 5.0  # at least this for OilTemp (degC)
     #: A histogram bin holding less than this share of the training rows is "sparsely
-    #: covered"; ``monitor detect`` reports the share of samples there (not gated).
+    #: covered"; ``monitor detect`` reports the share of samples there per signal (not
+    #: gated: the model may well generalise there, e.g. between trained oil temperatures).
     min_bin_share: float = 0.001
 
     def __post_init__(self) -> None:
@@ -196,24 +197,25 @@ class Validity:
                 return i
         return -1
 
-    def sparse_share(self, values: np.ndarray, mask: np.ndarray) -> float | None:
-        """Share of the ``mask``-ed samples that fall in a sparsely trained bin of any gated
-        signal (inside its range), for the summary; None when no sample is masked."""
+    def sparse_shares(self, values: np.ndarray, mask: np.ndarray) -> dict[str, float]:
+        """Per gated signal, the share of the ``mask``-ed samples that lie inside its trained
+        range but in a histogram bin holding less than ``min_bin_share`` of the training
+        rows (for the summary; only signals with such samples)."""
         env = self.envelope
-        if env is None or not self.signals or not mask.any():
-            return None
-        sparse = np.zeros(int(mask.sum()), dtype=bool)
+        out: dict[str, float] = {}
+        if env is None or not mask.any():
+            return out
         for k, s in enumerate(self.signals):
             a, b = env.range_of(s)
             occ = np.asarray(env.occupancy[env.signals.index(s)])
-            x = values[mask, k]
-            width = (b - a) / BINS if b > a else 1.0
-            idx = np.floor((x - a) / width)
-            inside = np.isfinite(idx) & (idx >= 0) & (idx < BINS)
-            low = np.zeros_like(inside)
-            low[inside] = occ[idx[inside].astype(np.int64)] < self.cfg.min_bin_share
-            sparse |= low
-        return float(np.mean(sparse))
+            width = (b - a if b > a else 1.0) / BINS  # the edges of ``_occupancy``
+            idx = np.floor((values[mask, k] - a) / width)
+            inside = np.isfinite(idx) & (idx >= 0) & (idx <= BINS)
+            bins = np.minimum(idx[inside], BINS - 1).astype(np.int64)  # max in the last bin
+            share = float(np.sum(occ[bins] < self.cfg.min_bin_share)) / int(mask.sum())
+            if share > 0:
+                out[s] = round(share, 6)
+        return out
 
 
 def model_envelope(model: MonitorModel) -> Envelope:

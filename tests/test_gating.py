@@ -113,8 +113,14 @@ def test_gating_leaves_decisions_on_in_envelope_data_unchanged(model, log: str) 
     assert all(e["op_state"] == "normal" and e["sensor"] is None for e in det.events)
 
 
+def run_at(seed: int, oil_c: float, duration_s: float = 60.0) -> Recording:
+    cmd = make_cycle("boom", duration_s, seed)
+    cmd.columns["OilTemp"][:] = oil_c
+    return simulate(cmd, MACHINE, seed=seed)
+
+
 def test_trained_model_keeps_its_envelope_and_old_files_derive_one(tmp_path, caplog) -> None:
-    recs = [simulate(make_cycle("boom", 60, s), MACHINE, seed=s) for s in (21, 22)]
+    recs = [run_at(s, oil) for s, oil in ((21, 40.0), (22, 60.0))]
     m = train(recs, TrainConfig(max_patterns=300, window_n=300, isolation="none"))
     env = m.envelope
     assert env is not None and env.source == "training"
@@ -123,6 +129,12 @@ def test_trained_model_keeps_its_envelope_and_old_files_derive_one(tmp_path, cap
         assert env.range_of(name) == (values.min(), values.max())
         occ = env.occupancy[env.signals.index(name)]
         assert sum(occ) == pytest.approx(1.0)
+    # Trained at 40 and 60 degC only: 50 degC is inside the range (judged, not out of
+    # range) but in a bin no training row fell into; 40 degC is covered.
+    mid = detect(m, run_at(21, 50.0), gating=GatingConfig()).summary
+    assert mid["out_of_range_samples"] == 0 and mid["sparse_coverage"] == {"OilTemp": 1.0}
+    edge = detect(m, run_at(21, 40.0), gating=GatingConfig()).summary
+    assert "OilTemp" not in edge["sparse_coverage"]
     path = tmp_path / "m.npz"
     save_model(path, m)
     assert load_model(path).envelope == env
