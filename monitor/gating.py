@@ -71,19 +71,16 @@ class Gate:
         self.plausibility = Plausibility(cfg.plausibility, min_engine_rpm)
         self.validity = Validity(model_envelope(model), cfg.validity)
         self.gate_oor = cfg.validity.gate
-        # Live rows: [t, *columns] copied into a buffer with one trailing NaN, so a signal
-        # the rows lack reads as missing without a branch per tick.
+        # Live rows: [t, *columns] copied into a (1, width + 1) buffer whose last entry is
+        # NaN, so a signal the rows lack reads as missing without a branch per tick.
         if columns is not None:
             width = 1 + len(columns)
             pos = {name: 1 + k for k, name in enumerate(columns)}
-            self._ext = np.full(width + 1, np.nan)
-            self._ext_head = self._ext[:width]
-            self._x1 = np.empty((1, len(COLUMNS)))
-            self._x1_row = self._x1[0]
+            self._ext = np.full((1, width + 1), np.nan)
+            self._ext_row = self._ext[0]
+            self._ext_head = self._ext[0, :width]
             self._plaus_idx = np.array([pos.get(n, width) for n in COLUMNS], dtype=np.int64)
-            self._val_idx = np.array([pos.get(n, width) for n in self.validity.signals],
-                                     dtype=np.int64)  # fmt: skip
-            self._val = np.empty(len(self.validity.signals))
+            self._val_idx = tuple(pos.get(n, width) for n in self.validity.signals)
             self._engine = pos.get("EngineSpeed", width)
             self._oil = pos.get("OilTemp", width)
         self.op_state = OpState.NORMAL
@@ -122,17 +119,12 @@ class Gate:
 
     def step(self, row: np.ndarray) -> None:
         """One row ``[t, *columns]``: sets ``op_state``, ``check``/``sensor`` and ``oor``."""
-        ext = self._ext
+        ext = self._ext_row
         np.copyto(self._ext_head, row)
         op = self.tracker.step(float(ext[self._engine]), float(ext[self._oil]))
-        np.take(ext, self._plaus_idx, out=self._x1_row)
-        self.check = self.plausibility.step(self._x1)
+        self.check = self.plausibility.step(self._ext, self._plaus_idx)
         self.sensor = self.plausibility.signal
-        if op is OpState.NORMAL:
-            np.take(ext, self._val_idx, out=self._val)
-            self.oor = self.validity.check(self._val)
-        else:
-            self.oor = -1
+        self.oor = self.validity.check(ext, self._val_idx) if op is OpState.NORMAL else -1
         self.op_state = op
 
     def gated_now(self, inputs_ok: bool) -> bool:

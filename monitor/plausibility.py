@@ -124,20 +124,21 @@ class PlausibilityConfig:
 # misc[0] rest run (engine off, spool centred).
 @jit
 def _run(  # pragma: no cover - numba
-    x, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, out_sig
+    x, cols, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, out_sig
 ):
-    n, m = x.shape
+    # x[i, cols[c]] is column c (COLUMNS order) of sample i.
+    n, m = x.shape[0], cols.shape[0]
     range_n, frozen_n, stuck_n = p[0], p[1], p[2]
     band_bar, band_lpm, move_spool, move_flow = p[3], p[4], p[5], p[6]
     rel_spool, rel_margin, rel_n, rest_n, rest_max = p[7], p[8], p[9], p[10], p[11]
     for i in range(n):
-        spool = x[i, _SPOOL]
-        engine = x[i, _ENGINE]
+        spool = x[i, cols[_SPOOL]]
+        engine = x[i, cols[_ENGINE]]
         running = engine >= min_rpm
-        qp = x[i, _QP]
+        qp = x[i, cols[_QP]]
         moving = running and (abs(spool) >= move_spool or qp >= move_flow)
         for c in range(m):
-            v = x[i, c]
+            v = x[i, cols[c]]
             if np.isnan(v):
                 continue  # staleness is the sampler's verdict; no evidence either way
             # signal_range
@@ -174,10 +175,10 @@ def _run(  # pragma: no cover - numba
         # violating samples per port.  A healthy port never reads above the pump that feeds
         # it, but a port reading high hides whenever the valve drop exceeds its offset, so
         # holding proves little: the finding latches until a rest reads the port at tank.
-        pp = x[i, _PP]
+        pp = x[i, cols[_PP]]
         if running and abs(spool) >= rel_spool and rel_n > 0 and not np.isnan(pp):
             for c in (_PA, _PB):
-                v = x[i, c]
+                v = x[i, cols[c]]
                 if v > pp + rel_margin:
                     counters[3, c] += 1
                     if counters[3, c] >= rel_n:
@@ -191,7 +192,7 @@ def _run(  # pragma: no cover - numba
             misc[0] += 1
             if misc[0] >= rest_n:
                 for c in range(_PP, _PB + 1):
-                    v = x[i, c]
+                    v = x[i, cols[c]]
                     if not np.isnan(v):
                         active[4, c] = abs(v) > rest_max
                         if not active[4, c]:
@@ -234,19 +235,20 @@ class Plausibility:
         x = np.ascontiguousarray(x, dtype=np.float64)
         check = np.zeros(x.shape[0], dtype=np.int8)
         sig = np.zeros(x.shape[0], dtype=np.int8)
-        self._kernel(x, check, sig)
+        self._kernel(x, np.arange(len(COLUMNS), dtype=np.int64), check, sig)
         if len(check):
             self.check, self.signal = int(check[-1]), int(sig[-1])
         return check, sig
 
-    def step(self, x1: np.ndarray) -> int:
-        """One sample: ``x1`` a (1, COLUMNS) buffer; returns the check code (0: none)."""
-        self._kernel(x1, self._check1, self._sig1)
+    def step(self, x1: np.ndarray, cols: np.ndarray) -> int:
+        """One sample: ``x1[0, cols[c]]`` is column c (int64 ``cols``); returns the check
+        code (0: none)."""
+        self._kernel(x1, cols, self._check1, self._sig1)
         self.check, self.signal = int(self._check1[0]), int(self._sig1[0])
         return self.check
 
-    def _kernel(self, x: np.ndarray, check: np.ndarray, sig: np.ndarray) -> None:
-        _run(x, self._lo, self._hi, self._p, self._counters, self._ref, self._last,
+    def _kernel(self, x: np.ndarray, cols: np.ndarray, check: np.ndarray, sig: np.ndarray) -> None:
+        _run(x, cols, self._lo, self._hi, self._p, self._counters, self._ref, self._last,
              self._active, self._misc, self.min_engine_rpm, check, sig)  # fmt: skip
 
 

@@ -189,12 +189,12 @@ class Validity:
         first[~bad.any(axis=1)] = -1
         return first
 
-    def check(self, values: np.ndarray) -> int:
-        """``series`` for one sample (a 1-D array of ``len(signals)`` values)."""
-        for i in range(len(self._lo)):
-            v = float(values[i])
-            if v < self._lo[i] or v > self._hi[i]:
-                return i
+    def check(self, row: np.ndarray, idx: tuple[int, ...]) -> int:
+        """``series`` for one sample: ``row[idx[k]]`` is the value of ``signals[k]``."""
+        for k in range(len(self._lo)):
+            v = float(row[idx[k]])
+            if v < self._lo[k] or v > self._hi[k]:
+                return k
         return -1
 
     def sparse_shares(self, values: np.ndarray, mask: np.ndarray) -> dict[str, float]:
