@@ -3,21 +3,27 @@ the same offline and per tick, and no change of decisions on data inside the env
 
 from __future__ import annotations
 
+import json
 import logging
+import time
 
+import can
 import numpy as np
 import pytest
-from live_support import tick_recording, write_config
+from live_support import live_config, settle, tick_recording, write_config
 
 from monitor.codec.frames import FrameCodec
 from monitor.config import OutputConfig, load_config
+from monitor.daemon import Daemon
 from monitor.detector import detect, gated_residuals
 from monitor.errors import ConfigError
 from monitor.gating import GatingConfig
+from monitor.io.candump import write_candump
 from monitor.io.recording import Recording
 from monitor.model import load_model, save_model
 from monitor.opstate import OperatingConfig, OpState, OpStateTracker, op_states
 from monitor.outputs import AlarmFrames
+from monitor.replayer import replay_log
 from monitor.residual import window_j
 from monitor.resources import resource_path
 from monitor.sampler import recording_from_candump
@@ -185,3 +191,43 @@ def test_mon_status_carries_operating_state_and_flags() -> None:
     assert str(values["SensorCheck"]) == "active"
     plain = dbc.decode(frames.status(0, 1, 0, 0, 0.0).data, decode_choices=False)
     assert (plain["OpState"], plain["OutOfRange"], plain["SensorCheck"]) == (0, 0, 0)
+
+
+def test_daemon_logs_and_announces_the_operating_state(tmp_path, model) -> None:
+    """On the bus: a cold stretch then a pump displacement the model never saw; the event
+    log equals ``monitor detect`` of the same log, and MON_Status says warm-up at the end."""
+    base = recording_from_candump(resource_path("replay", "normal.log"))
+    keep = base.t - base.t[0] < 40.0
+    cols = {k: v[keep].copy() for k, v in base.columns.items()}
+    t = base.t[keep] - base.t[0]
+    cols["PumpDispCmd"][(t >= 10.0) & (t < 20.0)] = 60.0
+    cols["OilTemp"][t >= 30.0] = 15.0
+    log = tmp_path / "cold.log"
+    write_candump(log, Recording(t, cols, "cold"))
+    offline = detect(model, recording_from_candump(log), CFG.alarm, CFG.horizon, gating=CFG.gating)
+    cfg = live_config(tmp_path)
+    listener = can.Bus(interface="virtual", channel=cfg.bus.channel)
+    sender = can.Bus(interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True)
+    daemon = Daemon(cfg)
+    daemon.start()
+    try:
+        counts = replay_log(log, sender, speed=None)
+        settle(daemon, counts.sent)
+        time.sleep(1.3)  # one more heartbeat with the last row's state
+    finally:
+        daemon.stop()
+        sender.shutdown()
+    frames = []
+    while (m := listener.recv(0)) is not None:
+        frames.append(m)
+    listener.shutdown()
+    lines = cfg.event_log.path.read_text().splitlines()
+    live = [json.loads(x) for x in lines]
+    strip = lambda evs: [{k: v for k, v in e.items() if k != "J"} for e in evs]  # noqa: E731
+    assert strip(live) == strip(offline.events)
+    assert {e["out_of_range_signal"] for e in live} == {None, "PumpDispCmd"}
+    assert live[-1]["op_state"] == "warm_up" and live[-1]["state"] == "inactive"
+    codec = FrameCodec.from_dbc(CFG.dbc)
+    status = [codec.decode_message(m).values for m in frames
+              if m.arbitration_id == codec.message("MON_Status").frame_id]  # fmt: skip
+    assert status[-1]["OpState"] == OpState.WARM_UP and status[-1]["State"] == 3
