@@ -206,7 +206,7 @@ class Daemon:
             self.last_j = tick.j
             if tick.changed:
                 self._state_change(tick)
-            if frames.due(tick.t_s, tick.state, tick.changed):
+            if frames.due(tick.t_s, tick.state, tick.state_changed):
                 bus_time = self._bus_time(tick.t_s)
                 self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
 
@@ -217,7 +217,11 @@ class Daemon:
         log.log(level, "t=%.2f s: %s (J %s, eps0 %.4g%s)", ev["t"], ev["state"],
                 "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
                 f", fault {ev['fault']}" if ev["fault"] else "")  # fmt: skip
-        if tick.state is State.FAULT:
+        if tick.op_state or tick.out_of_range or tick.check:  # gating news (monitor.gating)
+            log.info("t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
+                     ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
+                     ev["sensor_check"])  # fmt: skip
+        if tick.state is State.FAULT and tick.state_changed:
             path = self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
             if path is not None:
                 log.info("black box: %s", path)

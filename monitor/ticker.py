@@ -42,6 +42,7 @@ class Tick:
     out_of_range: str | None = None  # the operating signal beyond the trained range
     check: int = 0  # plausibility finding (monitor.plausibility), 0: none
     sensor: int = -1
+    state_changed: bool = True  # the alarm state itself changed (``changed`` also covers gating)
 
 
 class Ticker:
@@ -133,10 +134,11 @@ class Ticker:
         )
         status = (state, op, gate.oor, gate.check, gate.sensor)
         changed = status != self._prev
+        state_changed = self._prev is None or state is not self._prev[0]
         self._prev = status
         self.ticks += 1
         return Tick(float(row[0]), state, j, changed, op, gate.oor_name(gate.oor), gate.check,
-                    gate.sensor)  # fmt: skip
+                    gate.sensor, state_changed)  # fmt: skip
 
 
 def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:

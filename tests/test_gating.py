@@ -10,7 +10,7 @@ import time
 import can
 import numpy as np
 import pytest
-from live_support import live_config, settle, tick_recording, write_config
+from live_support import live_config, rows_of, settle, tick_recording, write_config
 
 from monitor.codec.frames import FrameCodec
 from monitor.config import OutputConfig, load_config
@@ -103,6 +103,10 @@ def test_operation_outside_the_envelope_is_out_of_range_not_a_fault(model) -> No
     assert [(e["t"], e["state"], e["out_of_range"]) for e in events] == [
         (e["t"], e["state"], e["out_of_range"]) for e in det.events
     ]
+    # The daemon sends MON_Alarm (and counts alarms) on state changes only, not on this one.
+    ticker = Ticker(model, CFG.alarm, 1, gating=GatingConfig())
+    changes = [(tk.t_s, tk.state_changed) for tk in map(ticker.tick, rows_of(rec)) if tk.changed]
+    assert changes == [(0.0, True), (60.0, False)]
 
 
 @pytest.mark.parametrize("log", LOGS)
