@@ -32,9 +32,9 @@ class Detection:
     residual: np.ndarray  # e = y_hat - y in z-units (eq. 8); NaN where gated or missing
     j: np.ndarray  # J(k+1), eq. 9
     state: np.ndarray  # State per sample
-    gates: GateSeries | None = None  # operating state, sensor findings, out of range
     events: list[dict[str, Any]] = field(default_factory=list)
     summary: dict[str, Any] = field(default_factory=dict)
+    gates: GateSeries | None = None  # operating state, sensor findings, out of range
 
 
 def make_isolator(model: MonitorModel) -> Isolator | None:
@@ -200,7 +200,7 @@ def detect(
         **gating_summary(rec, gate, g),
         "source": rec.source,
     }
-    return Detection(rec.t, y_hat, e, j, states, g, events, summary)
+    return Detection(rec.t, y_hat, e, j, states, events, summary, gates=g)
 
 
 def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:

@@ -136,6 +136,10 @@ def train(
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
     model.envelope = envelope_from_recordings(recordings, AlarmConfig().min_engine_rpm)
+    env = model.envelope
+    say("  trained envelope: " + ", ".join(
+        f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(env.signals, env.lo, env.hi, strict=True)
+    ))  # fmt: skip
     if cfg.isolation == "sim":
         labels, centroids = simulated_signatures(model, cfg, say)
         model.isolation_labels, model.isolation_centroids = labels, centroids
