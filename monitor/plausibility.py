@@ -22,7 +22,8 @@ Checks (``plausibility:`` in config/monitor.yaml; times in seconds of 100 Hz sam
   is fed, a high-reading port only against itself) it is PP, the common factor.  Holding
   proves little (an offset hides while the valve drop exceeds it), so the finding stays
   until a rest (below) reads the port at tank.
-* ``rest_offset``: with the engine off and the spool centred for ``rest_settle_s``, the
+* ``rest_offset``: with the engine off (a reading below ``alarm.min_engine_rpm``) and
+  |SpoolCmd| below ``move_spool_pct`` for ``rest_settle_s``, the
   pump has stopped and the pressures have settled to tank: PP, PA or PB further than
   ``rest_max_bar`` from 0 bar gauge is an offset.  (A boom parked in the air keeps load
   pressure trapped in a chamber; set ``rest_settle_s: 0`` to switch the check off on such
