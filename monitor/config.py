@@ -5,6 +5,8 @@ Sections: ``dbc`` and ``model`` (input files, relative to the config file's fold
 (python-can interface, channel, bitrate), ``outputs`` (alarm/status frame rates),
 ``event_log`` and ``black_box`` (output paths, relative to the working directory the daemon
 starts in, so a config shipped inside the installed package never writes into it).
+``operating``, ``plausibility`` and ``validity`` (see ``monitor.gating``) say which samples
+the detector judges.
 
 Every problem (unknown key, wrong type, missing input file, impossible value) is one
 ``ConfigError`` naming the file and the key; the CLI turns it into exit 2.
@@ -21,8 +23,12 @@ import yaml
 
 from monitor.alarm import AlarmConfig
 from monitor.errors import ConfigError
+from monitor.gating import GatingConfig
 from monitor.j1939 import dtc as j1939_dtc
+from monitor.opstate import OperatingConfig
+from monitor.plausibility import PlausibilityConfig
 from monitor.resources import resource_path
+from monitor.validity import ValidityConfig
 
 
 @dataclass(frozen=True)
@@ -113,11 +119,19 @@ class MonitorConfig:
     event_log: EventLogConfig = field(default_factory=EventLogConfig)
     black_box: BlackBoxConfig = field(default_factory=BlackBoxConfig)
     j1939: J1939Config = field(default_factory=J1939Config)
+    operating: OperatingConfig = field(default_factory=OperatingConfig)
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
+    validity: ValidityConfig = field(default_factory=ValidityConfig)
+
+    @property
+    def gating(self) -> GatingConfig:
+        return GatingConfig(self.operating, self.plausibility, self.validity)
 
 
 _TOP_KEYS = {
     "dbc", "model", "detector", "alarm", "bus", "outputs", "event_log", "black_box",
     "j1939",
+    "operating", "plausibility", "validity",
 }  # fmt: skip
 
 
@@ -201,14 +215,32 @@ _J1939 = {
     "bam_gap_s": ("float", lambda v: 0.05 <= v <= 0.2, "between 0.05 and 0.2 (J1939-21)"),
     "max_frames_per_s": ("float", lambda v: v >= 2, ">= 2"),
 }
+_OPERATING = {
+    "warmup_oil_c": ("float", lambda v: -40 <= v <= 150, "within -40..150 (degC)"),
+    "warmup_hysteresis_c": ("float", _NON_NEG, ">= 0 (degC)"),
+}
+_PLAUSIBILITY = {f.name: ("float", _NON_NEG, ">= 0") for f in fields(PlausibilityConfig)} | {
+    "pressure_min_bar": ("float", None, ""),
+    "pressure_max_bar": ("float", _POSITIVE, "> 0 (bar)"),
+    "flow_max_lpm": ("float", _POSITIVE, "> 0 (L/min)"),
+}
+_VALIDITY = {
+    "gate": ("bool", None, ""),
+    "margin_fraction": ("float", _NON_NEG, ">= 0"),
+    "margin_pct": ("float", _NON_NEG, ">= 0 (%)"),
+    "margin_rpm": ("float", _NON_NEG, ">= 0 (rpm)"),
+    "margin_c": ("float", _NON_NEG, ">= 0 (degC)"),
+    "min_bin_share": ("float", lambda v: 0 <= v <= 1, "within 0..1"),
+}
 
 
-def _j1939(sec: dict[str, Any], source: Path) -> J1939Config:
+def _checked_section(cls: type, spec: dict, data: dict[str, Any], name: str, source: Path) -> Any:
+    """A typed section whose dataclass also checks values together (one ConfigError)."""
     try:
-        return _typed(J1939Config, _J1939, sec, "j1939", source)
+        return _typed(cls, spec, _section(data, name, source), name, source)
     except ConfigError as exc:
-        msg = str(exc)
-        raise ConfigError(msg if msg.startswith(str(source)) else f"{source}: {msg}") from None
+        text = str(exc)
+        raise ConfigError(text if text.startswith(f"{source}:") else f"{source}: {text}") from None
 
 
 def _value(kind: str, raw: Any, where: str, source: Path) -> Any:
@@ -302,5 +334,10 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             EventLogConfig, _EVENT_LOG, _section(data, "event_log", source), "event_log", source
         ),
         black_box=black_box,
-        j1939=_j1939(_section(data, "j1939", source), source),
+        j1939=_checked_section(J1939Config, _J1939, data, "j1939", source),
+        operating=_checked_section(OperatingConfig, _OPERATING, data, "operating", source),
+        plausibility=_checked_section(
+            PlausibilityConfig, _PLAUSIBILITY, data, "plausibility", source
+        ),
+        validity=_checked_section(ValidityConfig, _VALIDITY, data, "validity", source),
     )

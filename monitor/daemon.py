@@ -57,7 +57,7 @@ class Daemon:
         self.codec = FrameCodec.from_dbc(cfg.dbc)
         self._hydraulic = hydraulic_messages(self.codec)
         self.model = load_model(cfg.model)
-        self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon)
+        self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon, gating=cfg.gating)
         self.sampler = Sampler.for_codec(self.codec)
         self.frames = AlarmFrames(self.codec, cfg.outputs)
         self.event_log = EventLog(cfg.event_log.path)
@@ -213,7 +213,7 @@ class Daemon:
             self.last_j = tick.j
             if tick.changed:
                 self._state_change(tick)
-            if frames.due(tick.t_s, tick.state, tick.changed):
+            if frames.due(tick.t_s, tick.state, tick.state_changed):
                 bus_time = self._bus_time(tick.t_s)
                 self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
             if self.diag is not None:
@@ -228,7 +228,11 @@ class Daemon:
         log.log(level, "t=%.2f s: %s (J %s, eps0 %.4g%s)", ev["t"], ev["state"],
                 "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
                 f", fault {ev['fault']}" if ev["fault"] else "")  # fmt: skip
-        if tick.state is State.FAULT:
+        if tick.op_state or tick.out_of_range or tick.check:  # gating news (monitor.gating)
+            log.info("t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
+                     ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
+                     ev["sensor_check"])  # fmt: skip
+        if tick.state is State.FAULT and tick.state_changed:
             path = self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
             if path is not None:
                 log.info("black box: %s", path)
@@ -253,14 +257,16 @@ class Daemon:
         self._last_status_mono = now
         r = self.reader.counts
         rejected = self.codec.counts.rejected_total
-        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time()))
+        g = self.ticker.gate
+        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
+                                      int(g.op_state), g.oor >= 0, g.check != 0))  # fmt: skip
 
     def _do_reload(self) -> None:
         """SIGHUP: new config and model, same bus; a bad file keeps the running ones."""
         try:
             cfg = load_config(self.cfg.source)
             model = load_model(cfg.model)
-            ticker = Ticker(model, cfg.alarm, cfg.horizon)
+            ticker = Ticker(model, cfg.alarm, cfg.horizon, gating=cfg.gating)
             event_log = (
                 EventLog(cfg.event_log.path)
                 if cfg.event_log.path != self.cfg.event_log.path
