@@ -85,6 +85,7 @@ class J1939Config:
     fault_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_FMI))
     sensor_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_SENSOR_SPN))
     sensor_fmi: int = j1939_dtc.DEFAULT_SENSOR_FMI
+    check_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_CHECK_FMI))
     fault_lamp: str = "amber"  # none, protect, amber, red or mil; :slow / :fast to flash
     sensor_lamp: str = "amber"
     repeat_when_clear: bool = True  # the no-DTC DM1 every second (else only on the change)
@@ -100,6 +101,7 @@ class J1939Config:
             ("fault_spn", names, dtc.SPN_MAX, dtc.DEFAULT_FAULT_SPN),
             ("fault_fmi", names, dtc.FMI_MAX, dtc.DEFAULT_FAULT_FMI),
             ("sensor_spn", signals, dtc.SPN_MAX, dtc.DEFAULT_SENSOR_SPN),
+            ("check_fmi", tuple(dtc.DEFAULT_CHECK_FMI), dtc.FMI_MAX, dtc.DEFAULT_CHECK_FMI),
         ):
             given = dtc.check_number_map(getattr(self, key), known, top, f"j1939.{key}")
             object.__setattr__(self, key, default | given)
@@ -209,6 +211,7 @@ _J1939 = {
     "fault_fmi": ("options", None, ""),
     "sensor_spn": ("options", None, ""),
     "sensor_fmi": ("int", lambda v: 0 <= v <= j1939_dtc.FMI_MAX, "0..31"),
+    "check_fmi": ("options", None, ""),
     "fault_lamp": ("str", None, ""),
     "sensor_lamp": ("str", None, ""),
     "repeat_when_clear": ("bool", None, ""),

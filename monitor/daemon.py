@@ -36,6 +36,7 @@ from monitor.config import MonitorConfig, load_config
 from monitor.j1939.dm1 import Diagnostics
 from monitor.model import load_model
 from monitor.outputs import AlarmFrames, EventLog
+from monitor.plausibility import finding
 from monitor.sampler import Sampler, hydraulic_messages
 from monitor.ticker import Ticker, event
 
@@ -218,7 +219,8 @@ class Daemon:
                 self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
             if self.diag is not None:
                 bus_time = self._bus_time(tick.t_s)
-                for msg in self.diag.tick(tick.t_s, bus_time, tick.state, ticker.fault, row):
+                named = finding(tick.check, tick.sensor)
+                for msg in self.diag.tick(tick.t_s, bus_time, tick.state, ticker.fault, row, named):
                     self._send(msg)
 
     def _state_change(self, tick: Any) -> None:

@@ -242,6 +242,25 @@ def test_sensor_fault_without_a_stale_signal_is_the_unknown_sensor_dtc() -> None
     assert dtcs == [(520223, 9, 1)] and lamps["red"] == "fast"
 
 
+def test_sensor_named_by_a_plausibility_check_gets_its_spn_and_the_check_fmi() -> None:
+    diag = Diagnostics(J1939Config(enabled=True, repeat_when_clear=False), SIGNALS)
+    frames: list[can.Message] = []
+    # PA reads above PP with the spool open (finite values, no stale signal): 0.5 s of the
+    # finding, then 0.2 s of recovery debounce (finding gone, state still sensor fault).
+    for k in range(100):
+        t = k * 0.01
+        state = State.NORMAL if k < 30 else State.SENSOR_FAULT if k < 100 else State.NORMAL
+        named = ("PA", "pump_below_port") if 30 <= k < 80 else (None, None)
+        frames += diag.tick(t, t, state, "", _row(t, ()), named)
+    frames += diag.tick(1.0, 1.0, State.NORMAL, "", _row(1.0, ()))
+    pa_offset = (520213, 13, 1)  # PA's SPN (520192 + 16 + 5), FMI 13 out of calibration
+    assert _dm1s(frames) == [(0.0, NO_DTC), (0.3, [pa_offset]), (1.0, NO_DTC)]
+    cfg = J1939Config(enabled=True, check_fmi={"pump_below_port": 3})
+    assert cfg.check_fmi["pump_below_port"] == 3 and cfg.check_fmi["frozen"] == 10
+    with pytest.raises(ConfigError, match="check_fmi.drift"):
+        J1939Config(enabled=True, check_fmi={"drift": 3})
+
+
 def test_dm2_and_dm1_answer_requests() -> None:
     diag = Diagnostics(J1939Config(enabled=True, repeat_when_clear=False), SIGNALS)
     before = _drive(diag, [(1.0, State.FAULT, "piston_wear", ()), (1.0, State.NORMAL, "", ())])

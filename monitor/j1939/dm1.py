@@ -75,7 +75,7 @@ class Diagnostics:
         self.active: dict[Key, Lamp] = {}
         self.occurrences: dict[Key, int] = {}
         self.previous: set[Key] = set()  # previously active, not active now (DM2)
-        self._stale: tuple[str, ...] = ()
+        self._sensor: dict[Key, Lamp] = {}  # DTCs of the current sensor fault
         self._named: str | None = None  # the last fault isolation named in this alarm
         self._counted: set[Key] = set()  # DTCs counted in this episode
         self._started = False
@@ -92,7 +92,9 @@ class Diagnostics:
 
     # -- inputs ---------------------------------------------------------------------------
 
-    def _keys(self, state: State, fault: str, row: np.ndarray) -> dict[Key, Lamp]:
+    def _keys(
+        self, state: State, fault: str, row: np.ndarray, finding: tuple[str | None, str | None]
+    ) -> dict[Key, Lamp]:
         cfg = self.cfg
         if state is State.FAULT:
             if fault != "unknown" and fault in cfg.fault_spn:
@@ -101,13 +103,19 @@ class Diagnostics:
             return {(cfg.fault_spn[name], cfg.fault_fmi[name]): self._fault_lamp}
         self._named = None
         if state is not State.SENSOR_FAULT:
-            self._stale = ()
+            self._sensor = {}
             return {}
+        # The DTCs of this sensor fault: one per stale signal (FMI ``sensor_fmi``), or the
+        # signal a plausibility check named (FMI per check); kept through the recovery
+        # debounce, when the row is whole again and the finding gone.
         stale = np.isnan(row[self._idx])
-        if stale.any():  # else: the recovery debounce, or a fault of plausibility
-            self._stale = tuple(s for s, bad in zip(self._signals, stale, strict=True) if bad)
-        names = self._stale or ("unknown",)
-        return {(cfg.sensor_spn[n], cfg.sensor_fmi): self._sensor_lamp for n in names}
+        signal, check = finding
+        if stale.any():
+            names = (s for s, bad in zip(self._signals, stale, strict=True) if bad)
+            self._sensor = {(cfg.sensor_spn[n], cfg.sensor_fmi): self._sensor_lamp for n in names}
+        elif signal is not None and check is not None:
+            self._sensor = {(cfg.sensor_spn[signal], cfg.check_fmi[check]): self._sensor_lamp}
+        return self._sensor or {(cfg.sensor_spn["unknown"], cfg.sensor_fmi): self._sensor_lamp}
 
     def _update(self, keys: dict[Key, Lamp]) -> None:
         for k in keys.keys() - self.active.keys() - self._counted:
@@ -143,10 +151,17 @@ class Diagnostics:
     # -- the tick ---------------------------------------------------------------------------
 
     def tick(
-        self, t_s: float, bus_time_s: float, state: State, fault: str, row: np.ndarray
+        self,
+        t_s: float,
+        bus_time_s: float,
+        state: State,
+        fault: str,
+        row: np.ndarray,
+        finding: tuple[str | None, str | None] = (None, None),
     ) -> list[can.Message]:
-        """Frames to send at sample time ``t_s`` (stamped ``bus_time_s``)."""
-        keys = self._keys(state, fault, row)
+        """Frames to send at sample time ``t_s`` (stamped ``bus_time_s``); ``finding`` is the
+        plausibility check's (signal, check name) behind a sensor fault, if any."""
+        keys = self._keys(state, fault, row, finding)
         if not self._started or keys.keys() != self.active.keys():
             self._update(keys)
             self._want.add(PGN_DM1)

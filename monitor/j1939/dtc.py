@@ -45,6 +45,17 @@ DEFAULT_SENSOR_SPN = {
     )
 } | {"unknown": PROPRIETARY_SPN_FIRST + 31}  # a sensor fault no stale signal explains
 DEFAULT_SENSOR_FMI = 9  # abnormal update rate: the signal's frames stopped or went stale
+# A sensor named by a plausibility check (monitor.plausibility) keeps its signal's SPN with
+# the FMI of what was found (J1939-73 FMI table): 2 data erratic or incorrect (outside the
+# sensor's range), 10 abnormal rate of change (frozen, or stuck while the loop moves),
+# 13 out of calibration (an offset against the pump/port relation or at rest).
+DEFAULT_CHECK_FMI = {
+    "signal_range": 2,
+    "frozen": 10,
+    "stuck": 10,
+    "pump_below_port": 13,
+    "rest_offset": 13,
+}
 
 LAMPS = ("protect", "amber", "red", "mil")  # bit pairs 1-2, 3-4, 5-6, 7-8 of bytes 0 and 1
 FLASH = {"slow": 0b00, "fast": 0b01}
