@@ -413,3 +413,26 @@ def test_alarms_resume_after_recovery_as_the_desk_sees_the_gap(outage) -> None:
     t_fault, sig = next((t, v) for t, v in alarms if v["State"] == State.FAULT)
     assert t_fault == pytest.approx(fault["t"], abs=1e-6)
     assert sig["Fault"] == fault_codes(codec)[fault["fault"]]
+
+
+def test_a_fault_on_before_an_outage_is_raised_again_within_the_debounce(tmp_path) -> None:
+    # The daemon gives `monitor detect`'s events for a log with the same gap (above), so the
+    # desk shows what an outage during an alarm does: inactive over the gap, then, with the
+    # window held, the fault again after the debounce, not after a fresh 30 s window.
+    cut_s, gap_s = 58.0, 5.0  # the alarm is on from 55.6 s
+    path = tmp_path / "gap_in_alarm.log"
+    with path.open("w") as fh:
+        t0 = None
+        for m in read_candump(LOG):
+            t0 = m.timestamp if t0 is None else t0
+            shift = gap_s if m.timestamp - t0 >= cut_s else 0.0
+            fh.write(format_line(m.timestamp + shift, "can0", m.arbitration_id,
+                                 m.is_extended_id, bytes(m.data)))  # fmt: skip
+    cfg = load_config()
+    det = detect(load_model(cfg.model), recording_from_candump(path), cfg.alarm, cfg.horizon)
+    states = [(e["state"], e["t"]) for e in det.events]
+    assert [s for s, _ in states] == ["normal", "fault", "inactive", "normal", "fault"], states
+    resumed, again = states[3][1], states[4][1]
+    assert cut_s + gap_s <= resumed < cut_s + gap_s + 0.05
+    debounce_s = cfg.alarm.raise_samples / 100.0
+    assert again - resumed <= debounce_s + 0.05  # a few rows refill the predictor's lags
