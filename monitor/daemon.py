@@ -20,6 +20,7 @@ makes the detector thread reload config and model between two frames, keeping th
 
 from __future__ import annotations
 
+import functools
 import logging
 import queue
 import threading
@@ -70,7 +71,7 @@ class Daemon:
         self.black_box = BlackBox(cfg.black_box, cfg.bus.channel)
         self._own_bus = bus is None
         if opener is None:
-            opener = lambda: open_bus(cfg.bus, self.codec)  # noqa: E731
+            opener = functools.partial(open_bus, cfg.bus, self.codec)
         backoff = Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s)
         self.reader = BusReader(bus if bus is not None else opener(), cfg.bus.queue_frames,
                                 opener=opener if self._own_bus else None,
