@@ -55,6 +55,10 @@ def open_bus(cfg: BusConfig, codec: FrameCodec | None = None) -> can.BusABC:
     With ``codec`` and ``cfg.kernel_filters`` only the DBC's sensor IDs are received
     (in the kernel on socketcan).  On the ``virtual`` interface the sender's timestamps are
     kept, so a log replayed at any speed keeps its own clock, as it does from a file.
+    Controller error frames (bus-off, error-passive) reach the reader on socketcan:
+    python-can sets CAN_RAW_ERR_FILTER to every error class unless the option
+    ``ignore_rx_error_frames`` is given, and CAN_RAW_FILTER (the ID filters) does not
+    apply to them (checked on vcan0 in the CI VM).
     """
     kwargs: dict[str, object] = {"interface": cfg.interface, "channel": cfg.channel}
     if cfg.interface != "virtual":
