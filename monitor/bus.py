@@ -238,7 +238,8 @@ class BusReader:
         while True:
             delay = self.backoff.next()
             self.recovery.reopen_attempts += 1
-            log.warning("CAN bus %s (%s); reopening in %.3g s", self.link, detail, delay)
+            log.warning("CAN bus %s (%s); reopening in %.3g s",
+                        "off" if self.link == BUS_OFF else "down", detail, delay)  # fmt: skip
             if self._sleep(delay) or self.opener is None:
                 return  # stopping, or a bus we cannot reopen: try it again as it is
             try:
