@@ -47,6 +47,10 @@ class BusConfig:
     time_scale: float = 1.0
     # Extra keyword arguments for can.Bus (e.g. fd, receive_own_messages); scalars only.
     options: dict[str, Any] = field(default_factory=dict)
+    # A bus that fails (link down, bus-off) is reopened after a delay that starts here and
+    # doubles per failed attempt up to reopen_max_s (monitor/bus_recovery.py).
+    reopen_initial_s: float = 0.1
+    reopen_max_s: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -188,6 +192,8 @@ _BUS = {
     "silent_s": ("float", _POSITIVE, "> 0"),
     "time_scale": ("float", lambda v: 0.01 <= v <= 100, "between 0.01 and 100"),
     "options": ("options", None, ""),
+    "reopen_initial_s": ("float", lambda v: 0.001 <= v <= 3600, "between 0.001 and 3600"),
+    "reopen_max_s": ("float", lambda v: 0.001 <= v <= 3600, "between 0.001 and 3600"),
 }
 _OUTPUTS = {
     "alarm_repeat_s": ("float", _POSITIVE, "> 0"),
@@ -323,13 +329,17 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
     black_box = _typed(
         BlackBoxConfig, _BLACK_BOX, _section(data, "black_box", source), "black_box", source
     )
+    bus = _typed(BusConfig, _BUS, _section(data, "bus", source), "bus", source)
+    if bus.reopen_max_s < bus.reopen_initial_s:
+        raise ConfigError(f"{source}: bus.reopen_max_s ({bus.reopen_max_s}) must be >= "
+                          f"bus.reopen_initial_s ({bus.reopen_initial_s})")  # fmt: skip
     return MonitorConfig(
         source=source,
         dbc=_path(data["dbc"], "dbc", base, source),
         model=_path(data["model"], "model", base, source),
         horizon=horizon,
         alarm=_alarm(_section(data, "alarm", source), source),
-        bus=_typed(BusConfig, _BUS, _section(data, "bus", source), "bus", source),
+        bus=bus,
         outputs=_typed(
             OutputConfig, _OUTPUTS, _section(data, "outputs", source), "outputs", source
         ),

@@ -8,7 +8,10 @@ gives for the file.  When no sensor frame is accepted for ``bus.silent_s`` (wall
 clock runs on by wall time: the rows go stale, the engine speed with them, and the monitor
 is inactive (a machine that is off is not faulty); when frames return, it resumes.
 With ``bus.time_scale`` k the sample clock runs k times slower than the frames' timestamps
-(a log replayed k times slower than real time keeps its own timing).
+(a log replayed k times slower than real time keeps its own timing).  A bus that fails
+(link down, bus-off) is reopened by the reader with backoff while the detector goes on (its
+silence is such a gap); bus events go to the event log as ``kind: "bus"`` lines
+(monitor/bus_recovery.py), and nothing is sent while the bus is down (counted as tx errors).
 
 ``stop()`` shuts down in order: reader (no new frames), detector (drains the queue, ticks
 the last rows), outputs (black box and event log closed, fsynced), bus.  ``request_reload``
@@ -17,6 +20,7 @@ makes the detector thread reload config and model between two frames, keeping th
 
 from __future__ import annotations
 
+import functools
 import logging
 import queue
 import threading
@@ -30,7 +34,8 @@ import numpy as np
 
 from monitor.alarm import State
 from monitor.blackbox import BlackBox
-from monitor.bus import BusReader, open_bus, sensor_filters
+from monitor.bus import BusReader, open_bus
+from monitor.bus_recovery import Backoff, bus_event_record
 from monitor.codec.frames import FrameCodec
 from monitor.config import MonitorConfig, load_config
 from monitor.j1939.dm1 import Diagnostics
@@ -51,8 +56,11 @@ class Daemon:
         cfg: MonitorConfig,
         bus: can.BusABC | None = None,
         on_event: EventHook | None = None,
+        opener: Callable[[], can.BusABC] | None = None,
     ) -> None:
-        """``bus`` (optional) is used instead of opening ``cfg.bus``; it is not shut down."""
+        """``bus`` (optional) is used instead of opening ``cfg.bus``; it is not shut down or
+        reopened.  ``opener`` (optional) opens the bus instead of ``cfg.bus``, at the start
+        and again after a failure."""
         self.cfg = cfg
         self.on_event = on_event
         self.codec = FrameCodec.from_dbc(cfg.dbc)
@@ -65,13 +73,17 @@ class Daemon:
         self.black_box = BlackBox(cfg.black_box, cfg.bus.channel)
         self.diag = Diagnostics(cfg.j1939, self.model.spec.variables) if cfg.j1939.enabled else None
         self._own_bus = bus is None
-        self.bus = bus if bus is not None else open_bus(cfg.bus, self.codec)
-        if self.diag is not None and self._own_bus and cfg.bus.kernel_filters:
-            self.bus.set_filters(sensor_filters(self.codec) + self.diag.rx_filters())
-        self.reader = BusReader(self.bus, cfg.bus.queue_frames)
+        if opener is None:
+            extra = self.diag.rx_filters() if self.diag is not None else None
+            opener = functools.partial(open_bus, cfg.bus, self.codec, extra)
+        backoff = Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s)
+        self.reader = BusReader(bus if bus is not None else opener(), cfg.bus.queue_frames,
+                                opener=opener if self._own_bus else None,
+                                backoff=backoff)  # fmt: skip
         self.tx_errors = 0
         self.reloads = 0
         self.last_j = float("nan")
+        self.last_t_s: float | None = None  # sample-clock time of the last row ticked
         self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
         self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
         self._scale = cfg.bus.time_scale
@@ -106,6 +118,11 @@ class Daemon:
     def state(self) -> State:
         return self.ticker.state
 
+    @property
+    def bus(self) -> can.BusABC:
+        """The bus in use (the reader replaces it when it reopens a failed one)."""
+        return self.reader.bus
+
     def stop(self, timeout_s: float = 10.0) -> None:
         """Ordered shutdown; safe to call twice."""
         self.reader.stop()
@@ -132,6 +149,8 @@ class Daemon:
             "events": self.event_log.written,
             "tx_errors": self.tx_errors,
             **(self.diag.counts() if self.diag is not None else {}),
+            "error_frames": r.error_frames,
+            **self.reader.recovery.as_dict(),
         }
 
     # -- detector thread ------------------------------------------------------------------
@@ -168,9 +187,13 @@ class Daemon:
                     self._status()
                     self.loop_mono = time.monotonic()
             self._status()
+            self._bus_events()
         self._tick_rows(self.sampler.flush())  # the instant of the last frame, as offline
+        self._bus_events()
 
     def _frame(self, msg: can.Message) -> None:
+        if not self.reader.events.empty():  # a bus event before this frame is logged first
+            self._bus_events()
         self.black_box.add(msg)
         if self.diag is not None and self.diag.request(msg):
             return  # a J1939 request for DM1/DM2: answered at the next tick
@@ -209,6 +232,8 @@ class Daemon:
 
     def _tick_rows(self, rows: np.ndarray) -> None:
         ticker, frames = self.ticker, self.frames
+        if len(rows):
+            self.last_t_s = float(rows[-1, 0])
         for row in rows:
             tick = ticker.tick(row)
             self.last_j = tick.j
@@ -242,10 +267,14 @@ class Daemon:
             self.on_event(ev)
 
     def _send(self, msg: can.Message) -> None:
+        if not self.reader.bus_up:  # down or bus-off: it would fail, or block for nothing
+            self.tx_errors += 1
+            return
         try:
             self.bus.send(msg, timeout=0.05)
         except (can.CanError, OSError) as exc:
             self.tx_errors += 1
+            self.reader.report_send_error(exc)  # perhaps the only sign the link went down
             now = time.monotonic()
             if now - self._last_tx_error_log > 5.0:
                 self._last_tx_error_log = now
@@ -262,6 +291,11 @@ class Daemon:
         g = self.ticker.gate
         self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
                                       int(g.op_state), g.oor >= 0, g.check != 0))  # fmt: skip
+
+    def _bus_events(self) -> None:
+        for ev in self.reader.take_events():
+            self.event_log.write(bus_event_record(ev, self.last_t_s, self.state, self.last_j,
+                                                  self.ticker.eps0, self.ticker.fault))  # fmt: skip
 
     def _do_reload(self) -> None:
         """SIGHUP: new config and model, same bus; a bad file keeps the running ones."""
