@@ -144,3 +144,17 @@ def test_dm2_answers_the_request_with_the_previously_active_dtcs(sensor) -> None
     assert dtcs == [(520212, 9, 1), (520213, 9, 1), (520214, 9, 1)]
     assert lamps["amber"] == "off"  # nothing is active now
     assert sensor["daemon"].counts()["j1939_requests"] == 1
+
+
+def test_a_reopened_bus_still_passes_j1939_requests(tmp_path) -> None:
+    """After a bus failure the reader opens a new bus: its kernel filters must still let
+    requests for our DM1/DM2 through, or service tools get no answer after an outage."""
+    daemon = Daemon(live_config(tmp_path))
+    try:
+        bus = daemon.reader.opener()
+        request = can.Message(arbitration_id=0x18EAA0F9, data=b"\xcb\xfe\x00")  # DM2 to 0xA0
+        other = can.Message(arbitration_id=0x18FEF100, data=bytes(8))  # CCVS: not ours
+        assert bus._matches_filters(request) and not bus._matches_filters(other)
+        bus.shutdown()
+    finally:
+        daemon.stop()
