@@ -289,8 +289,10 @@ class Daemon:
         r = self.reader.counts
         rejected = self.codec.counts.rejected_total
         g = self.ticker.gate
+        rc = self.reader.recovery
         self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
-                                      int(g.op_state), g.oor >= 0, g.check != 0))  # fmt: skip
+                                      int(g.op_state), g.oor >= 0, g.check != 0,
+                                      rc.bus_down + rc.bus_off + rc.error_passive))  # fmt: skip
 
     def _bus_events(self) -> None:
         for ev in self.reader.take_events():

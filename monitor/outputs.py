@@ -98,11 +98,13 @@ class AlarmFrames:
         op_state: int = 0,
         out_of_range: bool = False,
         sensor_check: bool = False,
+        bus_events: int = 0,
     ) -> can.Message:
         """``op_state`` (monitor.opstate.OpState), ``out_of_range`` (outside the model's
         training envelope) and ``sensor_check`` (a named plausibility finding active, even
         while the state shows inactive) go into MON_Status's OpState, OutOfRange and
-        SensorCheck."""
+        SensorCheck; ``bus_events`` (link down, bus-off, error-passive since the start) into
+        the wrapping BusEvents counter."""
         # Counters wrap (the DBC says so): a receiver looks at differences.
         values = {
             "State": int(state),
@@ -112,6 +114,7 @@ class AlarmFrames:
             "OpState": int(op_state),
             "OutOfRange": int(bool(out_of_range)),
             "SensorCheck": int(bool(sensor_check)),
+            "BusEvents": bus_events % 16,
         }
         return self.codec.encode_message(STATUS, values, bus_time_s)
 

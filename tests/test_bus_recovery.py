@@ -436,3 +436,17 @@ def test_a_fault_on_before_an_outage_is_raised_again_within_the_debounce(tmp_pat
     assert cut_s + gap_s <= resumed < cut_s + gap_s + 0.05
     debounce_s = cfg.alarm.raise_samples / 100.0
     assert again - resumed <= debounce_s + 0.05  # a few rows refill the predictor's lags
+
+
+def test_mon_status_counts_bus_events_wrapping_at_16(outage) -> None:
+    """MON_Status.BusEvents: link-down, bus-off and error-passive events since the start,
+    mod 16 (the daemon's counts give the number; the frame wraps like the other counters)."""
+    d = outage["daemon"]
+    rc = d.reader.recovery
+    assert rc.bus_down + rc.bus_off + rc.error_passive == 1  # the one outage
+    dbc = d.codec.message("MON_Status").dbc_message
+    for n in (1, 15, 17):
+        msg = d.frames.status(State.NORMAL, 0, 0, 0, 0.0, bus_events=n)
+        assert dbc.decode(msg.data)["BusEvents"] == n % 16
+    before = [m for m in outage["mon"] if m.arbitration_id == dbc.frame_id]
+    assert before and dbc.decode(before[0].data)["BusEvents"] == 0  # sent before the outage
