@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.gap.fit import Knob, fit
+from monitor.gap.fit import MAX_ITERATIONS, Knob, fit
 from monitor.sim.effects import CATALOGUE, Effect
 
 #: Fitted parameters per effect; the others keep their catalogue defaults (weakly
@@ -92,6 +92,7 @@ def fit_candidate(
     factors: dict[str, float],
     tolerances: Sequence[Knob] = (),
     starts: Sequence[tuple[dict[str, float], Sequence[Effect]]] | None = None,
+    max_iterations: int = MAX_ITERATIONS,
 ) -> Candidate:
     """Fit the knobs of the effects ``names`` (and the ``tolerances`` knobs, if given,
     jointly; otherwise at ``factors``).  ``starts`` are (factors, effects) to start from."""
@@ -113,7 +114,7 @@ def fit_candidate(
             point = {k.name: f0.get(k.name, 1.0) for k in tolerances}
             point.update({f"{e.name}.{k}": v for e in fx0 for k, v in knob_values(e).items()})
             start_points.append(point)
-    result = fit(lambda v: residual(*split(v)), knobs, starts=start_points)
+    result = fit(lambda v: residual(*split(v)), knobs, start_points, max_iterations)
     f, fx = split(result.values)
     return Candidate(fx, f, result.cost)
 
