@@ -62,6 +62,18 @@ def test_a_gain_carried_by_one_segment_is_not_an_effect():
     assert d.verdict == "unexplained" and d.chosen is None
 
 
+def test_a_marginal_gap_no_effect_explains_is_none_a_larger_one_unexplained():
+    # Residual 3x the noise floor (NRMSE 1.7x the noise) that the best effect only makes
+    # worse: what a calibration leaves on a healthy machine, not an unknown effect.  At
+    # 10x the noise the same candidate leaves the gap unexplained.
+    for level, verdict in ((0.03, "none"), (0.1, "unexplained")):
+        nominal = sums([level] * N_SEG)
+        worse = sums([level * 1.2] * N_SEG)
+        c = candidate(("load_variation",), worse, nominal, 1.0)
+        d = decide(False, [c], [], {"load_variation": worse}, nominal, IDX, FLOOR)
+        assert (d.verdict, d.chosen) == (verdict, None)
+
+
 def test_within_noise_is_none():
     nominal = sums([0.012] * N_SEG)
     d = decide(True, [], [], {}, nominal, IDX, FLOOR)

@@ -69,8 +69,13 @@ def score(labels: dict, results_dir: Path, times: dict[str, float] | None = None
     by_gen = defaultdict(lambda: [0, 0])
     pair_also = [0, 0]
     none_as_effect = 0
+    missing = []
     for name, lab in sorted(labels.items()):
-        res = json.loads((results_dir / (Path(name).stem + ".json")).read_text())
+        path = results_dir / (Path(name).stem + ".json")
+        if not path.exists():  # a run stopped early: score what finished, say what did not
+            missing.append(name)
+            continue
+        res = json.loads(path.read_text())
         verdict = res["verdict"]
         truth = lab["truth"]
         confusion[truth if lab["kind"] != "pair" else f"{truth}+{lab['second']}"][verdict] += 1
@@ -109,12 +114,16 @@ def score(labels: dict, results_dir: Path, times: dict[str, float] | None = None
         "median_heldout_reduction_correct": float(np.median(reductions)) if reductions else None,
         "median_diagnosis_s": float(np.median(list(times.values()))) if times else None,
         "confusion": {k: dict(v) for k, v in confusion.items()},
-        "n_recordings": len(labels),
+        "n_recordings": len(labels) - len(missing),
+        "not_diagnosed": missing,
     }
 
 
 def table(s: dict) -> str:
-    lines = ["| truth | n | top-1 | top-2 |", "|---|---|---|---|"]
+    lines = [f"{s['n_recordings']} recordings diagnosed"]
+    if s["not_diagnosed"]:
+        lines[0] += f"; not diagnosed (run stopped): {', '.join(s['not_diagnosed'])}"
+    lines += ["", "| truth | n | top-1 | top-2 |", "|---|---|---|---|"]
     for k, v in sorted(s["per_label"].items()):
         lines.append(f"| {k} | {v['n']} | {v['top1']}/{v['n']} | {v['top2']}/{v['n']} |")
     lines += [

@@ -41,6 +41,19 @@ KNOBS: dict[str, tuple[Knob, ...]] = {
 }
 assert set(KNOBS) == set(CATALOGUE)
 
+#: Tolerances an effect trades off against, fitted together with it: the calibration
+#: soaks up what it can of an effect (entrained air looks like larger volumes within
+#: their band, a deadband like a weaker valve), and an effect fitted on top of that
+#: calibration would be scored against a machine already bent towards it.
+CONFOUNDED: dict[str, tuple[str, ...]] = {
+    "entrained_air": ("volumes",),
+    "hose_compliance": ("volumes",),
+    "valve_deadband": ("valve_gain",),
+    "cylinder_friction": ("viscous_friction",),
+    "oil_viscosity": ("viscous_friction",),
+    "load_variation": ("gravity_load",),
+}
+
 
 def make_effect(name: str, values: dict[str, float]) -> Effect:
     """The catalogue effect for fitted knob values (knob names are the effect's, except

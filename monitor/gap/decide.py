@@ -1,6 +1,9 @@
 """The verdict: ``none``, an effect (with perhaps a second one in ``also``), or
 ``unexplained``, each with a block-bootstrap confidence.
 
+``none`` when the tolerance-calibrated simulator is within twice the sensor noise on every
+signal, or within four times and no effect explains the rest.
+
 An effect is named only when it removes a clear share of the held-out gap *and* its gain
 over the tolerance-calibrated simulator is significant under the block bootstrap: a gain
 that half of the resampled held-out parts do not show is tolerance or noise, not an effect.
@@ -21,6 +24,10 @@ from monitor.gap.shrink import boot_gap, boot_mse, boot_reduction
 #: ``none``: held-out mean squared residual below this multiple of the noise floor on
 #: every signal (a perfect simulator sits at 1).
 NONE_RATIO = 2.0
+#: Below this multiple on every signal, a gap that no effect explains significantly is
+#: still ``none`` (not ``unexplained``): it is what a tolerance calibration with one factor
+#: for three volumes leaves on a healthy machine of the type.
+MARGINAL_RATIO = 4.0
 #: An effect must remove at least this share of the held-out gap to be named ...
 EXPLAIN_MIN = 0.5
 #: ... and its gain must be positive in at least this share of bootstrap resamples.
@@ -44,9 +51,9 @@ class Decision:
     confidence: float
 
 
-def within_noise(sums: SegmentSums, floor: np.ndarray) -> bool:
-    """Every signal's held-out mean squared residual within ``NONE_RATIO`` x the noise."""
-    return bool(np.all(sums.mse() < NONE_RATIO * np.maximum(floor, 1e-12)))
+def within_noise(sums: SegmentSums, floor: np.ndarray, ratio: float = NONE_RATIO) -> bool:
+    """Every signal's held-out mean squared residual within ``ratio`` x the noise."""
+    return bool(np.all(sums.mse() < ratio * np.maximum(floor, 1e-12)))
 
 
 def gain_share(before: SegmentSums, after: SegmentSums, idx: np.ndarray, floor: np.ndarray):
@@ -82,6 +89,9 @@ def decide(
     red_b = boot_reduction(nominal, sums[best.name], idx, floor)
     gain_b = boot_gap(nominal, idx, floor) - boot_gap(sums[best.name], idx, floor)
     if best.heldout_reduction < EXPLAIN_MIN or np.mean(gain_b > 0) < SIGNIFICANT:
+        if within_noise(nominal, floor, MARGINAL_RATIO):
+            conf = np.all(boot_mse(nominal, idx) < MARGINAL_RATIO * floor, axis=1)
+            return Decision("none", None, None, float(np.mean(conf)))
         return Decision("unexplained", None, None, float(np.mean(red_b < EXPLAIN_MIN)))
     gap0 = best.heldout_gap / max(1.0 - best.heldout_reduction, 1e-12)
     good = [

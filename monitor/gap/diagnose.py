@@ -17,7 +17,14 @@ import numpy as np
 from monitor.errors import NoHydraulicDataError
 from monitor.gap import calibrate as cal_mod
 from monitor.gap import score as S
-from monitor.gap.candidates import KNOBS, Candidate, criterion, fit_candidate, n_params
+from monitor.gap.candidates import (
+    CONFOUNDED,
+    KNOBS,
+    Candidate,
+    criterion,
+    fit_candidate,
+    n_params,
+)
 from monitor.gap.decide import decide, pair_plan, within_noise
 from monitor.gap.predict import SENSOR_EFFECTS, plant_traces, predict, sense
 from monitor.gap.prepare import Prepared, prepare
@@ -140,13 +147,13 @@ def diagnose(
         _score(c, sums[c.name], floor, base.gap0, base.n_eff)
         return c
 
-    # 2. Every effect on the calibrated machine, then the best few with the tolerances
-    # refitted jointly (a calibration can soak up part of an effect: a deadband looks a
-    # little like a weaker valve).
+    # 2. Every effect on the calibrated machine (with the tolerances it trades off against
+    # refitted), then the best few with all the tolerances refitted jointly.
     singles = []
     for i, name in enumerate(effects):
         t0 = time.perf_counter()
-        c = scored(fit_candidate([name], fit_ev.residual, base.factors))
+        free = [k for k in tol if k.name in CONFOUNDED.get(name, ())]
+        c = scored(fit_candidate([name], fit_ev.residual, base.factors, free))
         singles.append(c)
         say(
             f"[{i + 1}/{len(effects)}] {name}: held-out reduction {c.heldout_reduction:+.2f} "
