@@ -69,6 +69,7 @@ def score(labels: dict, results_dir: Path, times: dict[str, float] | None = None
     by_gen = defaultdict(lambda: [0, 0])
     pair_also = [0, 0]
     none_as_effect = 0
+    spurious_also = 0  # a second effect named where there is at most one
     missing = []
     for name, lab in sorted(labels.items()):
         path = results_dir / (Path(name).stem + ".json")
@@ -88,6 +89,7 @@ def score(labels: dict, results_dir: Path, times: dict[str, float] | None = None
             pair_also[1] += 1
             key = "pair"
         else:
+            spurious_also += int(res.get("also") is not None)
             ok1 = verdict == truth
             ok2 = ok1 or truth in named or (lab["kind"] == "effect" and truth in ranked)
             key = truth
@@ -110,6 +112,7 @@ def score(labels: dict, results_dir: Path, times: dict[str, float] | None = None
         "none_mistaken_for_effect": none_as_effect,
         "unexplained_accuracy": per["unexplained"]["top1"] / max(per["unexplained"]["n"], 1),
         "pair_also_correct": f"{pair_also[0]}/{pair_also[1]}",
+        "spurious_also": spurious_also,
         "by_generator_top1": {g: f"{a}/{n}" for g, (a, n) in by_gen.items()},
         "median_heldout_reduction_correct": float(np.median(reductions)) if reductions else None,
         "median_diagnosis_s": float(np.median(list(times.values()))) if times else None,
@@ -131,7 +134,8 @@ def table(s: dict) -> str:
         f"effects top-1 {100 * s['top1_effects']:.0f} %, top-2 {100 * s['top2_effects']:.0f} %; "
         f"none {100 * s['none_accuracy']:.0f} % (mistaken for an effect: "
         f"{s['none_mistaken_for_effect']}); unexplained {100 * s['unexplained_accuracy']:.0f} %; "
-        f"pairs with the right second effect {s['pair_also_correct']}",
+        f"pairs with the right second effect {s['pair_also_correct']}; a second effect named "
+        f"without a pair: {s['spurious_also']}",
         f"top-1 by generator: {s['by_generator_top1']}",
         f"median held-out gap reduction (correct verdicts): "
         f"{s['median_heldout_reduction_correct']}; median diagnosis "
