@@ -175,6 +175,8 @@ def main(argv: list[str] | None = None) -> int:
         if not (a.resume and labels_path.exists()):
             plan = cases(a.per_effect, a.none, a.unexplained, a.pairs)
             generate(data, labels_path, plan, a.duration, a.seed)
+            run = {"date": time.strftime("%Y-%m-%d"), "seed": a.seed, "duration_s": a.duration}
+            (a.out / "run.json").write_text(json.dumps(run))
         times_path = a.out / "times.json"
         times = json.loads(times_path.read_text()) if a.resume and times_path.exists() else {}
         times.update(diagnose_blind(data, results, jobs=a.jobs, reuse=a.resume))
@@ -182,9 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     elif (a.out / "times.json").exists():
         times = json.loads((a.out / "times.json").read_text())
     s = score(json.loads(labels_path.read_text()), results, times)
-    s["date"] = time.strftime("%Y-%m-%d")
-    s["seed"] = a.seed
-    s["duration_s"] = a.duration
+    run_path = a.out / "run.json"  # the generating run's seed, not this call's default
+    run = {"date": time.strftime("%Y-%m-%d"), "seed": a.seed, "duration_s": a.duration}
+    s.update(json.loads(run_path.read_text()) if run_path.exists() else run)
     (a.out / "summary.json").write_text(json.dumps(s, indent=2))
     print(table(s))
     return 0
