@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from monitor.gap.calibrate import TOLERANCES
 from monitor.gap.fit import MAX_ITERATIONS, Knob, fit
 from monitor.sim.effects import CATALOGUE, Effect
 
@@ -53,6 +54,7 @@ CONFOUNDED: dict[str, tuple[str, ...]] = {
     "oil_viscosity": ("viscous_friction",),
     "load_variation": ("gravity_load",),
 }
+assert {t for ts in CONFOUNDED.values() for t in ts} <= {t.name for t in TOLERANCES}
 
 
 def make_effect(name: str, values: dict[str, float]) -> Effect:
