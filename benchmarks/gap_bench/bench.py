@@ -69,8 +69,14 @@ def score(labels: dict, results_dir: Path, times: dict[str, float] | None = None
     by_gen = defaultdict(lambda: [0, 0])
     pair_also = [0, 0]
     none_as_effect = 0
+    spurious_also = 0  # a second effect named where there is at most one
+    missing = []
     for name, lab in sorted(labels.items()):
-        res = json.loads((results_dir / (Path(name).stem + ".json")).read_text())
+        path = results_dir / (Path(name).stem + ".json")
+        if not path.exists():  # a run stopped early: score what finished, say what did not
+            missing.append(name)
+            continue
+        res = json.loads(path.read_text())
         verdict = res["verdict"]
         truth = lab["truth"]
         confusion[truth if lab["kind"] != "pair" else f"{truth}+{lab['second']}"][verdict] += 1
@@ -83,6 +89,7 @@ def score(labels: dict, results_dir: Path, times: dict[str, float] | None = None
             pair_also[1] += 1
             key = "pair"
         else:
+            spurious_also += int(res.get("also") is not None)
             ok1 = verdict == truth
             ok2 = ok1 or truth in named or (lab["kind"] == "effect" and truth in ranked)
             key = truth
@@ -105,16 +112,21 @@ def score(labels: dict, results_dir: Path, times: dict[str, float] | None = None
         "none_mistaken_for_effect": none_as_effect,
         "unexplained_accuracy": per["unexplained"]["top1"] / max(per["unexplained"]["n"], 1),
         "pair_also_correct": f"{pair_also[0]}/{pair_also[1]}",
+        "spurious_also": spurious_also,
         "by_generator_top1": {g: f"{a}/{n}" for g, (a, n) in by_gen.items()},
         "median_heldout_reduction_correct": float(np.median(reductions)) if reductions else None,
         "median_diagnosis_s": float(np.median(list(times.values()))) if times else None,
         "confusion": {k: dict(v) for k, v in confusion.items()},
-        "n_recordings": len(labels),
+        "n_recordings": len(labels) - len(missing),
+        "not_diagnosed": missing,
     }
 
 
 def table(s: dict) -> str:
-    lines = ["| truth | n | top-1 | top-2 |", "|---|---|---|---|"]
+    lines = [f"{s['n_recordings']} recordings diagnosed"]
+    if s["not_diagnosed"]:
+        lines[0] += f"; not diagnosed (run stopped): {', '.join(s['not_diagnosed'])}"
+    lines += ["", "| truth | n | top-1 | top-2 |", "|---|---|---|---|"]
     for k, v in sorted(s["per_label"].items()):
         lines.append(f"| {k} | {v['n']} | {v['top1']}/{v['n']} | {v['top2']}/{v['n']} |")
     lines += [
@@ -122,7 +134,8 @@ def table(s: dict) -> str:
         f"effects top-1 {100 * s['top1_effects']:.0f} %, top-2 {100 * s['top2_effects']:.0f} %; "
         f"none {100 * s['none_accuracy']:.0f} % (mistaken for an effect: "
         f"{s['none_mistaken_for_effect']}); unexplained {100 * s['unexplained_accuracy']:.0f} %; "
-        f"pairs with the right second effect {s['pair_also_correct']}",
+        f"pairs with the right second effect {s['pair_also_correct']}; a second effect named "
+        f"without a pair: {s['spurious_also']}",
         f"top-1 by generator: {s['by_generator_top1']}",
         f"median held-out gap reduction (correct verdicts): "
         f"{s['median_heldout_reduction_correct']}; median diagnosis "
@@ -162,6 +175,8 @@ def main(argv: list[str] | None = None) -> int:
         if not (a.resume and labels_path.exists()):
             plan = cases(a.per_effect, a.none, a.unexplained, a.pairs)
             generate(data, labels_path, plan, a.duration, a.seed)
+            run = {"date": time.strftime("%Y-%m-%d"), "seed": a.seed, "duration_s": a.duration}
+            (a.out / "run.json").write_text(json.dumps(run))
         times_path = a.out / "times.json"
         times = json.loads(times_path.read_text()) if a.resume and times_path.exists() else {}
         times.update(diagnose_blind(data, results, jobs=a.jobs, reuse=a.resume))
@@ -169,9 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     elif (a.out / "times.json").exists():
         times = json.loads((a.out / "times.json").read_text())
     s = score(json.loads(labels_path.read_text()), results, times)
-    s["date"] = time.strftime("%Y-%m-%d")
-    s["seed"] = a.seed
-    s["duration_s"] = a.duration
+    run_path = a.out / "run.json"  # the generating run's seed, not this call's default
+    run = {"date": time.strftime("%Y-%m-%d"), "seed": a.seed, "duration_s": a.duration}
+    s.update(json.loads(run_path.read_text()) if run_path.exists() else run)
     (a.out / "summary.json").write_text(json.dumps(s, indent=2))
     print(table(s))
     return 0

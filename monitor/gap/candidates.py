@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.gap.fit import Knob, fit
+from monitor.gap.calibrate import TOLERANCES
+from monitor.gap.fit import MAX_ITERATIONS, Knob, fit
 from monitor.sim.effects import CATALOGUE, Effect
 
 #: Fitted parameters per effect; the others keep their catalogue defaults (weakly
@@ -40,6 +41,20 @@ KNOBS: dict[str, tuple[Knob, ...]] = {
     "load_variation": (Knob("slope_n_per_mm", -20.0, 20.0),),
 }
 assert set(KNOBS) == set(CATALOGUE)
+
+#: Tolerances an effect trades off against, fitted together with it: the calibration
+#: soaks up what it can of an effect (entrained air looks like larger volumes within
+#: their band, a deadband like a weaker valve), and an effect fitted on top of that
+#: calibration would be scored against a machine already bent towards it.
+CONFOUNDED: dict[str, tuple[str, ...]] = {
+    "entrained_air": ("volumes",),
+    "hose_compliance": ("volumes",),
+    "valve_deadband": ("valve_gain",),
+    "cylinder_friction": ("viscous_friction",),
+    "oil_viscosity": ("viscous_friction",),
+    "load_variation": ("gravity_load",),
+}
+assert {t for ts in CONFOUNDED.values() for t in ts} <= {t.name for t in TOLERANCES}
 
 
 def make_effect(name: str, values: dict[str, float]) -> Effect:
@@ -92,6 +107,7 @@ def fit_candidate(
     factors: dict[str, float],
     tolerances: Sequence[Knob] = (),
     starts: Sequence[tuple[dict[str, float], Sequence[Effect]]] | None = None,
+    max_iterations: int = MAX_ITERATIONS,
 ) -> Candidate:
     """Fit the knobs of the effects ``names`` (and the ``tolerances`` knobs, if given,
     jointly; otherwise at ``factors``).  ``starts`` are (factors, effects) to start from."""
@@ -113,7 +129,7 @@ def fit_candidate(
             point = {k.name: f0.get(k.name, 1.0) for k in tolerances}
             point.update({f"{e.name}.{k}": v for e in fx0 for k, v in knob_values(e).items()})
             start_points.append(point)
-    result = fit(lambda v: residual(*split(v)), knobs, starts=start_points)
+    result = fit(lambda v: residual(*split(v)), knobs, start_points, max_iterations)
     f, fx = split(result.values)
     return Candidate(fx, f, result.cost)
 

@@ -1,0 +1,122 @@
+"""The verdict: ``none``, an effect (with perhaps a second one in ``also``), or
+``unexplained``, each with a block-bootstrap confidence.
+
+``none`` when the tolerance-calibrated simulator is within twice the sensor noise on every
+signal, or within four times and no effect explains the rest.
+
+An effect is named only when it removes a clear share of the held-out gap *and* its gain
+over the tolerance-calibrated simulator is significant under the block bootstrap: a gain
+that half of the resampled held-out parts do not show is tolerance or noise, not an effect.
+A second effect is named only when the pair's gain over the best single effect is
+significant in the same sense and removes a material share of the gap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.gap.candidates import Candidate
+from monitor.gap.score import SegmentSums
+from monitor.gap.shrink import boot_gap, boot_mse, boot_reduction
+
+#: ``none``: held-out mean squared residual below this multiple of the noise floor on
+#: every signal (a perfect simulator sits at 1).
+NONE_RATIO = 2.0
+#: Below this multiple on every signal, a gap that no effect explains significantly is
+#: still ``none`` (not ``unexplained``): it is what a tolerance calibration with one factor
+#: for three volumes leaves on a healthy machine of the type.
+MARGINAL_RATIO = 4.0
+#: An effect must remove at least this share of the held-out gap to be named ...
+EXPLAIN_MIN = 0.5
+#: ... and its gain must be positive in at least this share of bootstrap resamples.
+SIGNIFICANT = 0.95
+#: A pair is kept when it removes this share of what the best single effect leaves ...
+PAIR_GAIN = 0.3
+#: ... and at least this share of the whole gap (a formulation mismatch of the first
+#: effect leaves a small remainder that any second effect can nibble at).
+PAIR_MATERIAL = 0.05
+#: Singles (best first) among which pairs are tried.
+PAIR_POOL = 3
+#: ... each removing at least this share of the gap alone.
+PAIR_MIN_SINGLE = 0.05
+
+
+@dataclass
+class Decision:
+    verdict: str
+    also: str | None
+    chosen: Candidate | None
+    confidence: float
+
+
+def within_noise(sums: SegmentSums, floor: np.ndarray, ratio: float = NONE_RATIO) -> bool:
+    """Every signal's held-out mean squared residual within ``ratio`` x the noise."""
+    return bool(np.all(sums.mse() < ratio * np.maximum(floor, 1e-12)))
+
+
+def gain_share(before: SegmentSums, after: SegmentSums, idx: np.ndarray, floor: np.ndarray):
+    """Share of bootstrap resamples in which ``after`` has the smaller gap than ``before``."""
+    return float(np.mean(boot_gap(before, idx, floor) - boot_gap(after, idx, floor) > 0))
+
+
+def pair_plan(singles: list[Candidate], best_sums: SegmentSums, floor: np.ndarray):
+    """Name pairs worth fitting: the best single leaves a gap clearly above the noise, and
+    the pool is the best few singles that each remove something alone."""
+    if within_noise(best_sums, floor):
+        return []
+    pool = [c for c in singles[:PAIR_POOL] if c.heldout_reduction >= PAIR_MIN_SINGLE]
+    names = [c.effects[0].name for c in pool]
+    return [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
+
+
+def decide(
+    noise_only: bool,
+    singles: list[Candidate],
+    pairs: list[Candidate],
+    sums: dict[str, SegmentSums],
+    nominal: SegmentSums,
+    idx: np.ndarray,
+    floor: np.ndarray,
+) -> Decision:
+    """Verdict, second effect, the chosen candidate and a bootstrap confidence (0..1)."""
+    if noise_only:
+        # Share of resamples in which every signal stays within the noise band.
+        conf = float(np.mean(np.all(boot_mse(nominal, idx) < NONE_RATIO * floor, axis=1)))
+        return Decision("none", None, None, conf)
+    best = singles[0]
+    red_b = boot_reduction(nominal, sums[best.name], idx, floor)
+    gain_b = boot_gap(nominal, idx, floor) - boot_gap(sums[best.name], idx, floor)
+    if best.heldout_reduction < EXPLAIN_MIN or np.mean(gain_b > 0) < SIGNIFICANT:
+        if within_noise(nominal, floor, MARGINAL_RATIO):
+            conf = np.all(boot_mse(nominal, idx) < MARGINAL_RATIO * floor, axis=1)
+            return Decision("none", None, None, float(np.mean(conf)))
+        return Decision("unexplained", None, None, float(np.mean(red_b < EXPLAIN_MIN)))
+    gap0 = best.heldout_gap / max(1.0 - best.heldout_reduction, 1e-12)
+    good = [
+        p
+        for p in pairs
+        if p.heldout_gap <= (1 - PAIR_GAIN) * best.heldout_gap
+        and best.heldout_gap - p.heldout_gap >= PAIR_MATERIAL * gap0
+        and gain_share(sums[best.name], sums[p.name], idx, floor) >= SIGNIFICANT
+    ]
+    if good:
+        pair = min(good, key=lambda p: p.criterion)
+        # The larger effect: the one that removes more of the gap alone.
+        alone = {c.effects[0].name: c.heldout_reduction for c in singles}
+        first, second = sorted(
+            (e.name for e in pair.effects), key=lambda n: alone.get(n, -np.inf), reverse=True
+        )
+        red_p = boot_reduction(nominal, sums[pair.name], idx, floor)
+        wins = (red_p >= EXPLAIN_MIN) & (
+            boot_gap(sums[pair.name], idx, floor) < boot_gap(sums[best.name], idx, floor)
+        )
+        return Decision(first, second, pair, float(np.mean(wins)))
+    # Confidence: the effect explains the gap, gains over the calibrated simulator and beats
+    # the runner-up in the resample.
+    wins = (red_b >= EXPLAIN_MIN) & (gain_b > 0)
+    if len(singles) > 1:
+        runner = sums[singles[1].name]
+        wins &= boot_gap(sums[best.name], idx, floor) < boot_gap(runner, idx, floor)
+    return Decision(best.effects[0].name, None, best, float(np.mean(wins)))
