@@ -2,7 +2,7 @@
 
 Threads: ``can-reader`` (``BusReader``: bus -> bounded queue, nothing else) and ``detector``
 (everything else, in arrival order: black box, decode, sampler, one tick per 100 Hz row,
-frames, event log).  Nothing runs in a python-can Notifier callback.  The sample clock is
+frames, disk jobs).  Nothing runs in a python-can Notifier callback.  The sample clock is
 the frames' own timestamps, so a log replayed onto a bus gives the events ``monitor detect``
 gives for the file.  When no sensor frame is accepted for ``bus.silent_s`` (wall clock) the
 clock runs on by wall time: the rows go stale, the engine speed with them, and the monitor
@@ -11,8 +11,11 @@ With ``bus.time_scale`` k the sample clock runs k times slower than the frames' 
 (a log replayed k times slower than real time keeps its own timing).
 
 ``stop()`` shuts down in order: reader (no new frames), detector (drains the queue, ticks
-the last rows), outputs (black box and event log closed, fsynced), bus.  ``request_reload``
-makes the detector thread reload config and model between two frames, keeping the bus.
+the last rows), disk writer (drains its queue: events fsynced, black box and event log
+closed), bus.  ``request_reload`` makes the detector thread reload config and model between
+two frames, keeping the bus.  Disk jobs (event log, black-box files) go to the
+``disk-writer`` thread through a bounded queue (``monitor.writer``): no fsync or black-box
+dump stalls a tick.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from functools import partial
 from typing import Any
 
 import can
@@ -36,7 +40,9 @@ from monitor.config import MonitorConfig, load_config
 from monitor.model import load_model
 from monitor.outputs import AlarmFrames, EventLog
 from monitor.sampler import Sampler, hydraulic_messages
+from monitor.storage import Quota
 from monitor.ticker import Ticker, event
+from monitor.writer import DiskWriter
 
 log = logging.getLogger("monitor")
 
@@ -59,8 +65,13 @@ class Daemon:
         self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon)
         self.sampler = Sampler.for_codec(self.codec)
         self.frames = AlarmFrames(self.codec, cfg.outputs)
-        self.event_log = EventLog(cfg.event_log.path)
-        self.black_box = BlackBox(cfg.black_box, cfg.bus.channel)
+        # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.writer.
+        st = cfg.storage
+        self.quota = Quota(st.quota_bytes, cfg.black_box.directory, cfg.event_log.path)
+        self.event_log = EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
+        self.writer = DiskWriter(st.writer_queue, st.event_block_s)
+        self.black_box = BlackBox(cfg.black_box, cfg.bus.channel, self.writer, self.quota)
+        self.writer.start()
         self._own_bus = bus is None
         self.bus = bus if bus is not None else open_bus(cfg.bus, self.codec)
         self.reader = BusReader(self.bus, cfg.bus.queue_frames)
@@ -107,8 +118,11 @@ class Daemon:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout_s)
-        self.black_box.close()
-        self.event_log.close()
+        self.black_box.close()  # queues the last post-alarm frames and the file's close
+        self.writer.put_event(self.event_log.close)
+        self.writer.stop(timeout_s)  # drained: every event written and fsynced, files closed
+        if self.writer.counts.frames_dropped or self.writer.counts.events_over_bound:
+            log.warning("disk writer: %s", self.writer.counts.as_dict())
         if self._own_bus:
             self.bus.shutdown()
         log.info("stopped: %s", self.counts())
@@ -212,15 +226,15 @@ class Daemon:
 
     def _state_change(self, tick: Any) -> None:
         ev = event(tick, self.ticker.fault, self.ticker.eps0, self.sampler.start_time_s)
-        self.event_log.write(ev)
+        ev["mono"] = round(time.monotonic(), 6)  # this host's monotonic clock, s
+        self.event_log.stamp(ev)
+        self.writer.put_event(partial(self.event_log.write, ev))  # fsynced by the writer
         level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
         log.log(level, "t=%.2f s: %s (J %s, eps0 %.4g%s)", ev["t"], ev["state"],
                 "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
                 f", fault {ev['fault']}" if ev["fault"] else "")  # fmt: skip
         if tick.state is State.FAULT:
-            path = self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
-            if path is not None:
-                log.info("black box: %s", path)
+            self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
         if self.on_event is not None:
             self.on_event(ev)
 
@@ -251,7 +265,7 @@ class Daemon:
             model = load_model(cfg.model)
             ticker = Ticker(model, cfg.alarm, cfg.horizon)
             event_log = (
-                EventLog(cfg.event_log.path)
+                EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
                 if cfg.event_log.path != self.cfg.event_log.path
                 else None
             )
@@ -263,9 +277,11 @@ class Daemon:
             log.warning("bus and dbc changes take effect at the next restart")
             cfg = replace(cfg, bus=self.cfg.bus, dbc=self.cfg.dbc)
         if event_log is not None:
-            self.event_log.close()
+            self.writer.put_event(self.event_log.close)  # after its queued writes
+            self.quota.event_log_path = event_log.path
             self.event_log = event_log
         self.black_box.cfg = cfg.black_box
+        self.quota.quota_bytes = cfg.storage.quota_bytes
         self.frames.cfg = cfg.outputs
         self.cfg, self.model, self.ticker = cfg, model, ticker
         self.reloads += 1
