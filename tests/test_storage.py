@@ -211,38 +211,31 @@ def test_storage_config_in_bytes(tmp_path) -> None:
     assert (cfg.storage.quota_bytes, cfg.event_log.rotate_bytes) == (1_500_000, 250_000)
 
 
-def _run_daemon(tmp: Path, events_path: Path) -> list[dict]:
-    """The first 1,500 frames of the normal log through a daemon: one event (normal)."""
-    msgs = list(itertools.islice(read_candump(resource_path("replay", "normal.log")), 1500))
-    cfg = live_config(tmp)
-    cfg = dataclasses.replace(cfg, event_log=dataclasses.replace(cfg.event_log, path=events_path))
-    events: list[dict] = []
-    daemon = Daemon(cfg, on_event=events.append)
-    sender = can.Bus(interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True)
-    daemon.start()
-    try:
-        settle(daemon, send_all(sender, msgs))
-    finally:
-        daemon.stop()
-        sender.shutdown()
-    assert daemon.error is None
-    return events
-
-
 def test_daemon_events_carry_wall_and_monotonic_time_and_restart_appends(tmp_path) -> None:
+    """Two daemons in turn on one event log, each fed the first 1,500 frames of the normal
+    log: one event (normal) each."""
+    msgs = list(itertools.islice(read_candump(resource_path("replay", "normal.log")), 1500))
     path = tmp_path / "events.jsonl"
-    first = next(iter(read_candump(resource_path("replay", "normal.log")))).timestamp
-    before = time.monotonic()
-    ev1 = _run_daemon(tmp_path / "a", path)
-    middle = time.monotonic()
-    ev2 = _run_daemon(tmp_path / "b", path)
-    after = time.monotonic()
-    assert len(ev1) == len(ev2) == 1
+    hooked: list[dict] = []
+    marks = [time.monotonic()]
+    for run in ("a", "b"):
+        cfg = live_config(tmp_path / run)
+        cfg = dataclasses.replace(cfg, event_log=dataclasses.replace(cfg.event_log, path=path))
+        daemon = Daemon(cfg, on_event=hooked.append)
+        with can.Bus(interface="virtual", channel=cfg.bus.channel,
+                     preserve_timestamps=True) as sender:  # fmt: skip
+            daemon.start()
+            try:
+                settle(daemon, send_all(sender, msgs))
+            finally:
+                daemon.stop()
+        assert daemon.error is None
+        marks.append(time.monotonic())
     on_disk = [json.loads(x) for x in path.read_text().splitlines()]
-    assert on_disk == ev1 + ev2  # the second daemon appended
+    assert on_disk == hooked and len(on_disk) == 2  # the second daemon appended
     assert [e["seq"] for e in on_disk] == [1, 2]
-    for e, (lo, hi) in zip(on_disk, [(before, middle), (middle, after)], strict=True):
+    for e, lo, hi in zip(on_disk, marks[:-1], marks[1:], strict=True):
         assert lo <= e["mono"] <= hi
-        wall = dt.datetime.fromtimestamp(first + e["t"], tz=dt.timezone.utc)
+        wall = dt.datetime.fromtimestamp(msgs[0].timestamp + e["t"], tz=dt.timezone.utc)
         assert dt.datetime.fromisoformat(e["time"]) == wall
         assert {"t", "time", "state", "J", "threshold", "fault"} <= set(e)
