@@ -128,7 +128,18 @@ def run(
             alarm_latency.append(time.perf_counter() - current["arrival"])
         send(msg)
 
+    state_change = daemon._state_change
+    change_wall, change_cpu = [], []
+
+    def timed_state_change(t) -> None:
+        # What a state change costs the detector thread (event log, black box, hook).
+        w0, c0 = time.perf_counter(), time.thread_time()
+        state_change(t)
+        change_wall.append(time.perf_counter() - w0)
+        change_cpu.append(time.thread_time() - c0)
+
     daemon._frame, daemon.ticker.tick, daemon._send = timed_frame, timed_tick, timed_send
+    daemon._state_change = timed_state_change
     codec = FrameCodec.from_dbc()
     plan = _frames(codec, rec)
     sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
@@ -172,6 +183,11 @@ def run(
         "tick_max_ms": float(lat.max()),
         "tick_p99_ms_away_from_state_changes": float(np.percentile(steady, 99)),
         "ticks_near_state_changes": int(behind.sum()),
+        "tick_p99_ms_near_state_changes": float(np.percentile(lat[behind], 99))
+        if behind.any()
+        else None,
+        "state_change_detector_ms": [float(v * 1e3) for v in change_wall],
+        "state_change_detector_cpu_ms": [float(v * 1e3) for v in change_cpu],
         "tick_cpu_median_ms": float(np.median(cpu) * 1e3),
         "tick_cpu_p99_ms": float(np.percentile(np.array(cpu) * 1e3, 99)),
         "alarm_frame_latency_ms": [float(v * 1e3) for v in alarm_latency],
@@ -210,6 +226,8 @@ def compare(
         summary = {k: float(np.percentile(pooled[a], q)) for k, (a, q) in _SUMMARY.items()}
         summary["ticks"] = int(pooled["lat"].size)
         summary["ticks_over_1ms"] = int(np.count_nonzero(pooled["lat"] > 1.0))
+        for key in ("state_change_detector_ms", "state_change_detector_cpu_ms"):
+            summary[key + "_median"] = float(np.median([v for r in rs for v in r[key]]))
         out[mode] = {**summary, "rounds": rs}
     first = modes[0]
     result = {**out[first]["rounds"][0], **{k: v for k, v in out[first].items() if k != "rounds"}}
