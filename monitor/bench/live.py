@@ -227,7 +227,8 @@ def compare(
         summary["ticks"] = int(pooled["lat"].size)
         summary["ticks_over_1ms"] = int(np.count_nonzero(pooled["lat"] > 1.0))
         for key in ("state_change_detector_ms", "state_change_detector_cpu_ms"):
-            summary[key + "_median"] = float(np.median([v for r in rs for v in r[key]]))
+            values = [v for r in rs for v in r[key]]
+            summary[key + "_median"] = float(np.median(values)) if values else None
         out[mode] = {**summary, "rounds": rs}
     first = modes[0]
     result = {**out[first]["rounds"][0], **{k: v for k, v in out[first].items() if k != "rounds"}}
