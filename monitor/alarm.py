@@ -153,9 +153,12 @@ class AlarmMachine:
         engine_rpm: float,
         e: np.ndarray | None = None,
         regime: int = 0,
+        operating: bool = True,
     ) -> State:
+        """``operating`` False: the machine runs outside normal operation (warm-up, see
+        ``monitor.opstate``) and the monitor is inactive as with the engine off."""
         cfg = self.config
-        if not engine_rpm >= cfg.min_engine_rpm:  # NaN engine speed counts as off
+        if not (engine_rpm >= cfg.min_engine_rpm and operating):  # NaN engine speed: off
             return self._enter(State.INACTIVE)
         if not inputs_ok:
             self._valid = 0

@@ -6,6 +6,8 @@ Sections: ``dbc`` and ``model`` (input files, relative to the config file's fold
 ``event_log`` and ``black_box`` (output paths, relative to the working directory the daemon
 starts in, so a config shipped inside the installed package never writes into it), and
 ``storage`` (their disk quota and the disk-writer queue).
+``operating``, ``plausibility`` and ``validity`` (see ``monitor.gating``) say which samples
+the detector judges.
 
 Every problem (unknown key, wrong type, missing input file, impossible value) is one
 ``ConfigError`` naming the file and the key; the CLI turns it into exit 2.
@@ -22,7 +24,12 @@ import yaml
 
 from monitor.alarm import AlarmConfig
 from monitor.errors import ConfigError
+from monitor.gating import GatingConfig
+from monitor.j1939 import dtc as j1939_dtc
+from monitor.opstate import OperatingConfig
+from monitor.plausibility import PlausibilityConfig
 from monitor.resources import resource_path
+from monitor.validity import ValidityConfig
 
 
 @dataclass(frozen=True)
@@ -41,6 +48,10 @@ class BusConfig:
     time_scale: float = 1.0
     # Extra keyword arguments for can.Bus (e.g. fd, receive_own_messages); scalars only.
     options: dict[str, Any] = field(default_factory=dict)
+    # A bus that fails (link down, bus-off) is reopened after a delay that starts here and
+    # doubles per failed attempt up to reopen_max_s (monitor/bus_recovery.py).
+    reopen_initial_s: float = 0.1
+    reopen_max_s: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -86,6 +97,43 @@ class StorageConfig:
 
 
 @dataclass(frozen=True)
+class J1939Config:
+    """J1939-73 diagnostics: DM1 of the active faults every second, DM2 on request
+    (layout and default numbers in monitor/j1939/dtc.py).  A hydraulic fault is one DTC
+    (SPN and FMI per fault name); a sensor fault one DTC per stale signal."""
+
+    enabled: bool = False
+    source_address: int = 0xA0  # the monitor's J1939 address, as in its MON_* frame IDs
+    priority: int = 6  # DM1 priority (J1939-73 default); BAM frames always go at 7
+    fault_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_SPN))
+    fault_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_FMI))
+    sensor_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_SENSOR_SPN))
+    sensor_fmi: int = j1939_dtc.DEFAULT_SENSOR_FMI
+    check_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_CHECK_FMI))
+    fault_lamp: str = "amber"  # none, protect, amber, red or mil; :slow / :fast to flash
+    sensor_lamp: str = "amber"
+    repeat_when_clear: bool = True  # the no-DTC DM1 every second (else only on the change)
+    bam_gap_s: float = 0.05  # between BAM data packets (J1939-21: 50 to 200 ms)
+    max_frames_per_s: float = 10.0  # token bucket over every J1939 frame we send
+
+    def __post_init__(self) -> None:
+        dtc = j1939_dtc
+        names = tuple(dtc.DEFAULT_FAULT_SPN)
+        signals = tuple(dtc.DEFAULT_SENSOR_SPN)
+        # Given maps replace single entries of the defaults, so one line can move one SPN.
+        for key, known, top, default in (
+            ("fault_spn", names, dtc.SPN_MAX, dtc.DEFAULT_FAULT_SPN),
+            ("fault_fmi", names, dtc.FMI_MAX, dtc.DEFAULT_FAULT_FMI),
+            ("sensor_spn", signals, dtc.SPN_MAX, dtc.DEFAULT_SENSOR_SPN),
+            ("check_fmi", tuple(dtc.DEFAULT_CHECK_FMI), dtc.FMI_MAX, dtc.DEFAULT_CHECK_FMI),
+        ):
+            given = dtc.check_number_map(getattr(self, key), known, top, f"j1939.{key}")
+            object.__setattr__(self, key, default | given)
+        for key in ("fault_lamp", "sensor_lamp"):
+            dtc.Lamp.parse(getattr(self, key), f"j1939.{key}")
+
+
+@dataclass(frozen=True)
 class MonitorConfig:
     source: Path
     dbc: Path
@@ -97,11 +145,21 @@ class MonitorConfig:
     event_log: EventLogConfig = field(default_factory=EventLogConfig)
     black_box: BlackBoxConfig = field(default_factory=BlackBoxConfig)
     storage: StorageConfig = field(default_factory=StorageConfig)
+    j1939: J1939Config = field(default_factory=J1939Config)
+    operating: OperatingConfig = field(default_factory=OperatingConfig)
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
+    validity: ValidityConfig = field(default_factory=ValidityConfig)
+
+    @property
+    def gating(self) -> GatingConfig:
+        return GatingConfig(self.operating, self.plausibility, self.validity)
 
 
 _TOP_KEYS = {
     "dbc", "model", "detector", "alarm", "bus", "outputs", "event_log", "black_box",
     "storage",
+    "j1939",
+    "operating", "plausibility", "validity",
 }  # fmt: skip
 
 
@@ -156,6 +214,8 @@ _BUS = {
     "silent_s": ("float", _POSITIVE, "> 0"),
     "time_scale": ("float", lambda v: 0.01 <= v <= 100, "between 0.01 and 100"),
     "options": ("options", None, ""),
+    "reopen_initial_s": ("float", lambda v: 0.001 <= v <= 3600, "between 0.001 and 3600"),
+    "reopen_max_s": ("float", lambda v: 0.001 <= v <= 3600, "between 0.001 and 3600"),
 }
 _OUTPUTS = {
     "alarm_repeat_s": ("float", _POSITIVE, "> 0"),
@@ -178,6 +238,48 @@ _STORAGE = {
     "writer_queue": ("int", lambda v: v >= 10, ">= 10"),
     "event_block_s": ("float", lambda v: 0 <= v <= 5, "between 0 and 5"),
 }
+
+_J1939 = {
+    "enabled": ("bool", None, ""),
+    "source_address": ("int", lambda v: 0 <= v <= 253, "0..253 (254 null, 255 global)"),
+    "priority": ("int", lambda v: 0 <= v <= 7, "0..7"),
+    "fault_spn": ("options", None, ""),
+    "fault_fmi": ("options", None, ""),
+    "sensor_spn": ("options", None, ""),
+    "sensor_fmi": ("int", lambda v: 0 <= v <= j1939_dtc.FMI_MAX, "0..31"),
+    "check_fmi": ("options", None, ""),
+    "fault_lamp": ("str", None, ""),
+    "sensor_lamp": ("str", None, ""),
+    "repeat_when_clear": ("bool", None, ""),
+    "bam_gap_s": ("float", lambda v: 0.05 <= v <= 0.2, "between 0.05 and 0.2 (J1939-21)"),
+    "max_frames_per_s": ("float", lambda v: v >= 2, ">= 2"),
+}
+_OPERATING = {
+    "warmup_oil_c": ("float", lambda v: -40 <= v <= 150, "within -40..150 (degC)"),
+    "warmup_hysteresis_c": ("float", _NON_NEG, ">= 0 (degC)"),
+}
+_PLAUSIBILITY = {f.name: ("float", _NON_NEG, ">= 0") for f in fields(PlausibilityConfig)} | {
+    "pressure_min_bar": ("float", None, ""),
+    "pressure_max_bar": ("float", _POSITIVE, "> 0 (bar)"),
+    "flow_max_lpm": ("float", _POSITIVE, "> 0 (L/min)"),
+}
+_VALIDITY = {
+    "gate": ("bool", None, ""),
+    "margin_fraction": ("float", _NON_NEG, ">= 0"),
+    "margin_pct": ("float", _NON_NEG, ">= 0 (%)"),
+    "margin_rpm": ("float", _NON_NEG, ">= 0 (rpm)"),
+    "margin_c": ("float", _NON_NEG, ">= 0 (degC)"),
+    "min_bin_share": ("float", lambda v: 0 <= v <= 1, "within 0..1"),
+}
+
+
+def _checked_section(cls: type, spec: dict, data: dict[str, Any], name: str, source: Path) -> Any:
+    """A typed section whose dataclass also checks values together (one ConfigError)."""
+    try:
+        return _typed(cls, spec, _section(data, name, source), name, source)
+    except ConfigError as exc:
+        text = str(exc)
+        raise ConfigError(text if text.startswith(f"{source}:") else f"{source}: {text}") from None
 
 
 def _value(kind: str, raw: Any, where: str, source: Path) -> Any:
@@ -257,6 +359,10 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
     black_box = _typed(
         BlackBoxConfig, _BLACK_BOX, _section(data, "black_box", source), "black_box", source
     )
+    bus = _typed(BusConfig, _BUS, _section(data, "bus", source), "bus", source)
+    if bus.reopen_max_s < bus.reopen_initial_s:
+        raise ConfigError(f"{source}: bus.reopen_max_s ({bus.reopen_max_s}) must be >= "
+                          f"bus.reopen_initial_s ({bus.reopen_initial_s})")  # fmt: skip
     event_log = _typed(
         EventLogConfig, _EVENT_LOG, _section(data, "event_log", source), "event_log", source
     )
@@ -273,11 +379,17 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
         model=_path(data["model"], "model", base, source),
         horizon=horizon,
         alarm=_alarm(_section(data, "alarm", source), source),
-        bus=_typed(BusConfig, _BUS, _section(data, "bus", source), "bus", source),
+        bus=bus,
         outputs=_typed(
             OutputConfig, _OUTPUTS, _section(data, "outputs", source), "outputs", source
         ),
         event_log=event_log,
         black_box=black_box,
         storage=storage,
+        j1939=_checked_section(J1939Config, _J1939, data, "j1939", source),
+        operating=_checked_section(OperatingConfig, _OPERATING, data, "operating", source),
+        plausibility=_checked_section(
+            PlausibilityConfig, _PLAUSIBILITY, data, "plausibility", source
+        ),
+        validity=_checked_section(ValidityConfig, _VALIDITY, data, "validity", source),
     )

@@ -8,7 +8,10 @@ gives for the file.  When no sensor frame is accepted for ``bus.silent_s`` (wall
 clock runs on by wall time: the rows go stale, the engine speed with them, and the monitor
 is inactive (a machine that is off is not faulty); when frames return, it resumes.
 With ``bus.time_scale`` k the sample clock runs k times slower than the frames' timestamps
-(a log replayed k times slower than real time keeps its own timing).
+(a log replayed k times slower than real time keeps its own timing).  A bus that fails
+(link down, bus-off) is reopened by the reader with backoff while the detector goes on (its
+silence is such a gap); bus events go to the event log as ``kind: "bus"`` lines
+(monitor/bus_recovery.py), and nothing is sent while the bus is down (counted as tx errors).
 
 ``stop()`` shuts down in order: reader (no new frames), detector (drains the queue, ticks
 the last rows), disk writer (drains its queue: events fsynced, black box and event log
@@ -20,6 +23,7 @@ dump stalls a tick.
 
 from __future__ import annotations
 
+import functools
 import logging
 import queue
 import threading
@@ -35,10 +39,13 @@ import numpy as np
 from monitor.alarm import State
 from monitor.blackbox import BlackBox
 from monitor.bus import BusReader, open_bus
+from monitor.bus_recovery import Backoff, bus_event_record
 from monitor.codec.frames import FrameCodec
 from monitor.config import MonitorConfig, load_config
+from monitor.j1939.dm1 import Diagnostics
 from monitor.model import load_model
 from monitor.outputs import AlarmFrames, EventLog
+from monitor.plausibility import finding
 from monitor.sampler import Sampler, hydraulic_messages
 from monitor.storage import Quota
 from monitor.ticker import Ticker, event
@@ -55,14 +62,17 @@ class Daemon:
         cfg: MonitorConfig,
         bus: can.BusABC | None = None,
         on_event: EventHook | None = None,
+        opener: Callable[[], can.BusABC] | None = None,
     ) -> None:
-        """``bus`` (optional) is used instead of opening ``cfg.bus``; it is not shut down."""
+        """``bus`` (optional) is used instead of opening ``cfg.bus``; it is not shut down or
+        reopened.  ``opener`` (optional) opens the bus instead of ``cfg.bus``, at the start
+        and again after a failure."""
         self.cfg = cfg
         self.on_event = on_event
         self.codec = FrameCodec.from_dbc(cfg.dbc)
         self._hydraulic = hydraulic_messages(self.codec)
         self.model = load_model(cfg.model)
-        self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon)
+        self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon, gating=cfg.gating)
         self.sampler = Sampler.for_codec(self.codec)
         self.frames = AlarmFrames(self.codec, cfg.outputs)
         # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.writer.
@@ -72,12 +82,19 @@ class Daemon:
         self.writer = DiskWriter(st.writer_queue, st.event_block_s)
         self.black_box = BlackBox(cfg.black_box, cfg.bus.channel, self.writer, self.quota)
         self.writer.start()
+        self.diag = Diagnostics(cfg.j1939, self.model.spec.variables) if cfg.j1939.enabled else None
         self._own_bus = bus is None
-        self.bus = bus if bus is not None else open_bus(cfg.bus, self.codec)
-        self.reader = BusReader(self.bus, cfg.bus.queue_frames)
+        if opener is None:
+            extra = self.diag.rx_filters() if self.diag is not None else None
+            opener = functools.partial(open_bus, cfg.bus, self.codec, extra)
+        backoff = Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s)
+        self.reader = BusReader(bus if bus is not None else opener(), cfg.bus.queue_frames,
+                                opener=opener if self._own_bus else None,
+                                backoff=backoff)  # fmt: skip
         self.tx_errors = 0
         self.reloads = 0
         self.last_j = float("nan")
+        self.last_t_s: float | None = None  # sample-clock time of the last row ticked
         self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
         self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
         self._scale = cfg.bus.time_scale
@@ -112,6 +129,11 @@ class Daemon:
     def state(self) -> State:
         return self.ticker.state
 
+    @property
+    def bus(self) -> can.BusABC:
+        """The bus in use (the reader replaces it when it reopens a failed one)."""
+        return self.reader.bus
+
     def stop(self, timeout_s: float = 10.0) -> None:
         """Ordered shutdown; safe to call twice."""
         self.reader.stop()
@@ -140,6 +162,9 @@ class Daemon:
             "alarm_frames_held_back": self.frames.held_back,
             "events": self.event_log.written,
             "tx_errors": self.tx_errors,
+            **(self.diag.counts() if self.diag is not None else {}),
+            "error_frames": r.error_frames,
+            **self.reader.recovery.as_dict(),
         }
 
     # -- detector thread ------------------------------------------------------------------
@@ -176,10 +201,16 @@ class Daemon:
                     self._status()
                     self.loop_mono = time.monotonic()
             self._status()
+            self._bus_events()
         self._tick_rows(self.sampler.flush())  # the instant of the last frame, as offline
+        self._bus_events()
 
     def _frame(self, msg: can.Message) -> None:
+        if not self.reader.events.empty():  # a bus event before this frame is logged first
+            self._bus_events()
         self.black_box.add(msg)
+        if self.diag is not None and self.diag.request(msg):
+            return  # a J1939 request for DM1/DM2: answered at the next tick
         d = self.codec.decode_message(msg)
         if d.rejection is not None:
             log.debug("rejected frame %X: %s", msg.arbitration_id, d.rejection.value)
@@ -215,34 +246,47 @@ class Daemon:
 
     def _tick_rows(self, rows: np.ndarray) -> None:
         ticker, frames = self.ticker, self.frames
+        if len(rows):
+            self.last_t_s = float(rows[-1, 0])
         for row in rows:
             tick = ticker.tick(row)
             self.last_j = tick.j
             if tick.changed:
                 self._state_change(tick)
-            if frames.due(tick.t_s, tick.state, tick.changed):
+            if frames.due(tick.t_s, tick.state, tick.state_changed):
                 bus_time = self._bus_time(tick.t_s)
                 self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
+            if self.diag is not None:
+                bus_time = self._bus_time(tick.t_s)
+                named = finding(tick.check, tick.sensor)
+                for msg in self.diag.tick(tick.t_s, bus_time, tick.state, ticker.fault, row, named):
+                    self._send(msg)
 
     def _state_change(self, tick: Any) -> None:
         ev = event(tick, self.ticker.fault, self.ticker.eps0, self.sampler.start_time_s)
-        ev["mono"] = round(time.monotonic(), 6)  # this host's monotonic clock, s
-        self.event_log.stamp(ev)
-        self.writer.put_event(partial(self.event_log.write, ev))  # fsynced by the writer
+        self._log_event(ev)
         level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
         log.log(level, "t=%.2f s: %s (J %s, eps0 %.4g%s)", ev["t"], ev["state"],
                 "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
                 f", fault {ev['fault']}" if ev["fault"] else "")  # fmt: skip
-        if tick.state is State.FAULT:
+        if tick.op_state or tick.out_of_range or tick.check:  # gating news (monitor.gating)
+            log.info("t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
+                     ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
+                     ev["sensor_check"])  # fmt: skip
+        if tick.state is State.FAULT and tick.state_changed:
             self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
         if self.on_event is not None:
             self.on_event(ev)
 
     def _send(self, msg: can.Message) -> None:
+        if not self.reader.bus_up:  # down or bus-off: it would fail, or block for nothing
+            self.tx_errors += 1
+            return
         try:
             self.bus.send(msg, timeout=0.05)
         except (can.CanError, OSError) as exc:
             self.tx_errors += 1
+            self.reader.report_send_error(exc)  # perhaps the only sign the link went down
             now = time.monotonic()
             if now - self._last_tx_error_log > 5.0:
                 self._last_tx_error_log = now
@@ -256,14 +300,29 @@ class Daemon:
         self._last_status_mono = now
         r = self.reader.counts
         rejected = self.codec.counts.rejected_total
-        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time()))
+        g = self.ticker.gate
+        rc = self.reader.recovery
+        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
+                                      int(g.op_state), g.oor >= 0, g.check != 0,
+                                      rc.bus_down + rc.bus_off + rc.error_passive))  # fmt: skip
+
+    def _bus_events(self) -> None:
+        for ev in self.reader.take_events():
+            self._log_event(bus_event_record(ev, self.last_t_s, self.state, self.last_j,
+                                             self.ticker.eps0, self.ticker.fault))  # fmt: skip
+
+    def _log_event(self, ev: dict[str, Any]) -> None:
+        """Queue an event-log line for the disk writer (which writes and fsyncs it)."""
+        ev["mono"] = round(time.monotonic(), 6)  # this host's monotonic clock, s
+        self.event_log.stamp(ev)
+        self.writer.put_event(partial(self.event_log.write, ev))
 
     def _do_reload(self) -> None:
         """SIGHUP: new config and model, same bus; a bad file keeps the running ones."""
         try:
             cfg = load_config(self.cfg.source)
             model = load_model(cfg.model)
-            ticker = Ticker(model, cfg.alarm, cfg.horizon)
+            ticker = Ticker(model, cfg.alarm, cfg.horizon, gating=cfg.gating)
             event_log = (
                 EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
                 if cfg.event_log.path != self.cfg.event_log.path
@@ -276,6 +335,9 @@ class Daemon:
         if cfg.bus != self.cfg.bus or cfg.dbc != self.cfg.dbc:
             log.warning("bus and dbc changes take effect at the next restart")
             cfg = replace(cfg, bus=self.cfg.bus, dbc=self.cfg.dbc)
+        if cfg.j1939 != self.cfg.j1939:
+            log.warning("j1939 changes take effect at the next restart")
+            cfg = replace(cfg, j1939=self.cfg.j1939)
         if event_log is not None:
             self.writer.put_event(self.event_log.close)  # after its queued writes
             self.quota.event_log_path = event_log.path

@@ -15,8 +15,11 @@ import numpy as np
 from monitor.alarm import AlarmConfig, AlarmMachine, Isolator, State, regimes_of
 from monitor.dgrnn import predict_series, table
 from monitor.errors import InputFileError
+from monitor.gating import Gate, GateSeries, GatingConfig, status_keys
 from monitor.io.recording import Recording
 from monitor.model import MonitorModel
+from monitor.opstate import OpState
+from monitor.plausibility import finding
 from monitor.residual import window_j
 
 
@@ -31,6 +34,7 @@ class Detection:
     state: np.ndarray  # State per sample
     events: list[dict[str, Any]] = field(default_factory=list)
     summary: dict[str, Any] = field(default_factory=dict)
+    gates: GateSeries | None = None  # operating state, sensor findings, out of range
 
 
 def make_isolator(model: MonitorModel) -> Isolator | None:
@@ -110,12 +114,22 @@ def detect(
     alarm: AlarmConfig | None = None,
     horizon: int | None = None,
     exact: bool = False,
+    gating: GatingConfig | None = None,
 ) -> Detection:
-    """Run the detector over a whole recording (``exact``: see ``residual_series``)."""
+    """Run the detector over a whole recording (``exact``: see ``residual_series``;
+    ``gating``: operating state, plausibility and validity, see ``monitor.gating``)."""
     alarm = alarm or AlarmConfig()
     spec = model.spec
+    check_recording(model, rec, horizon)
     engine = rec["EngineSpeed"]
-    y_hat, e, _, inputs_ok = gated_residuals(model, rec, alarm.min_engine_rpm, horizon, exact)
+    gate = Gate(model, alarm.min_engine_rpm, gating)
+    g = gate.series(rec)
+    inputs_ok = np.all(np.isfinite(table(rec, spec.variables)), axis=1)
+    gated = gate.gated(g, inputs_ok)
+    y_hat, e = residual_series(model, rec, gated, horizon, exact)
+    e[gated] = np.nan
+    sensor_ok = inputs_ok & (g.check == 0)
+    operating = g.op_state != OpState.WARM_UP
     j = window_j(e, model.window_n)
     spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
 
@@ -123,14 +137,16 @@ def detect(
     n = len(rec)
     states = np.empty(n, dtype=np.int8)
     regimes = regimes_of(spool)
-    # Quiet samples (engine on, inputs complete, J <= eps0) change nothing in NORMAL but the
-    # isolation ring: runs of them go to skip_quiet at once, the rest step one by one.
+    # Quiet samples (normal operation, inputs complete and plausible, J <= eps0) change
+    # nothing in NORMAL but the isolation ring: runs of them go to skip_quiet at once, the
+    # rest step one by one.  J finite means the sample was not gated (nor out of range).
     with np.errstate(invalid="ignore"):
-        quiet = (engine >= alarm.min_engine_rpm) & inputs_ok & (j <= machine.eps0)
+        quiet = (g.op_state == OpState.NORMAL) & sensor_ok & (g.oor < 0) & (j <= machine.eps0)
+    quiet_status = (State.NORMAL, int(OpState.NORMAL), -1, 0, -1)
     stops = np.append(np.flatnonzero(~quiet), n)
     events: list[dict[str, Any]] = []
     start = rec.meta.get("start_time_s")
-    prev: State | None = None
+    prev: tuple | None = None
     first_alarm_t: float | None = None
     # Isolation votes over the first alarm episode: the label held longest names the fault
     # (it firms up as evidence accumulates, and may waver on the way).
@@ -138,13 +154,15 @@ def detect(
     in_first = False
     i = 0
     while i < n:
-        if quiet[i] and prev is State.NORMAL:
+        if quiet[i] and prev == quiet_status:
             r = int(stops[np.searchsorted(stops, i)])
             machine.skip_quiet(e[i:r], regimes[i:r])
             states[i:r] = State.NORMAL
             i = r
             continue
-        state = machine.step(j[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]))
+        state = machine.step(
+            j[i], bool(sensor_ok[i]), engine[i], e[i], int(regimes[i]), bool(operating[i])
+        )
         states[i] = state
         if state is State.FAULT and first_alarm_t is None:
             first_alarm_t = float(rec.t[i] - rec.t[0])
@@ -154,19 +172,23 @@ def detect(
                 votes[machine.fault] = votes.get(machine.fault, 0) + 1
             else:
                 in_first = False
-        if state is not prev:
-            events.append(_event(rec, i, state, j[i], model.eps0, machine.fault, start))
-            prev = state
+        status = (state, int(g.op_state[i]), int(g.oor[i]), int(g.check[i]), int(g.sensor[i]))
+        if status != prev:
+            ev = _event(rec, i, state, j[i], model.eps0, machine.fault, start)
+            oor = gate.validity.signals[g.oor[i]] if g.oor[i] >= 0 else None
+            ev.update(status_keys(int(g.op_state[i]), oor, int(g.check[i]), int(g.sensor[i])))
+            events.append(ev)
+            prev = status
         i += 1
     known = {k: v for k, v in votes.items() if k != "unknown"}
     first_fault_label = max(known or votes, key=(known or votes).get) if votes else None
-    gated = np.isfinite(j)
+    finite = np.isfinite(j)
     summary = {
         "alarm": first_alarm_t is not None,
         "first_alarm_t": first_alarm_t,
         "fault": first_fault_label,
         "sensor_fault": bool(np.any(states == State.SENSOR_FAULT)),
-        "max_J": float(np.max(j[gated])) if gated.any() else None,
+        "max_J": float(np.max(j[finite])) if finite.any() else None,
         "threshold": model.eps0,
         "J0": model.j0,
         "threshold_rule": model.threshold.rule,
@@ -175,9 +197,41 @@ def detect(
         "samples": len(rec),
         "inactive_fraction": float(np.mean(states == State.INACTIVE)),
         "sensor_fault_fraction": float(np.mean(states == State.SENSOR_FAULT)),
+        **gating_summary(rec, gate, g),
         "source": rec.source,
     }
-    return Detection(rec.t, y_hat, e, j, states, events, summary)
+    return Detection(rec.t, y_hat, e, j, states, events, summary, gates=g)
+
+
+def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:
+    """Summary keys of the gating: time per operating state, out-of-range samples per
+    signal, sensor findings with their first time, and the envelope's coverage."""
+    t = rec.t - rec.t[0]
+    period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
+    op_s = {s.label: round(float(np.sum(g.op_state == s)) * period, 3) for s in OpState}
+    oor = {
+        name: int(np.sum(g.oor == k)) for k, name in enumerate(gate.validity.signals)
+        if np.any(g.oor == k)
+    }  # fmt: skip
+    idx = np.flatnonzero(g.check != 0)
+    codes = g.check[idx].astype(np.int64) * 256 + g.sensor[idx]
+    uniq, first, count = np.unique(codes, return_index=True, return_counts=True)
+    checks = []
+    for code, k, c in sorted(zip(uniq, first, count, strict=True), key=lambda u: u[1]):
+        sensor, name = finding(int(code) // 256, int(code) % 256)
+        checks.append({"sensor": sensor, "check": name, "first_t": round(float(t[idx[k]]), 6),
+                       "samples": int(c)})  # fmt: skip
+    normal = g.op_state == OpState.NORMAL
+    env = gate.validity.envelope
+    return {
+        "op_state_s": op_s,
+        "out_of_range_samples": int(np.sum(g.oor >= 0)),
+        "out_of_range_s": round(float(np.sum(g.oor >= 0)) * period, 3),
+        "out_of_range_signals": oor,
+        "sensor_checks": checks,
+        "envelope": None if env is None else env.source,
+        "sparse_coverage": gate.validity.sparse_shares(gate.validity_values(rec), normal),
+    }
 
 
 def _event(

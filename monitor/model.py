@@ -2,7 +2,9 @@
 
 Format: a numpy ``.npz`` holding the GRNN's arrays plus ``header``, a UTF-8 JSON document
 (format name, version, signals, lags, normalisation, sigma, J0, eps0, window, isolation,
-training provenance) and ``checksum``, a SHA-256 over the header and every array.  Floats
+training provenance, and since the operating envelope exists ``validity``: the trained
+range and occupancy of every signal, see ``monitor.validity``) and ``checksum``, a SHA-256
+over the header and every array.  Floats
 go through JSON's shortest round-trip repr and arrays are stored raw, so a model loads
 back bit-identically.
 """
@@ -11,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,9 +26,14 @@ from monitor.errors import ModelFileError
 from monitor.grnn import GRNN
 from monitor.signals import SIGNAL_NAMES
 from monitor.threshold import ThresholdRule
+from monitor.validity import Envelope, envelope_from_patterns
+
+log = logging.getLogger("monitor")
 
 MODEL_FORMAT = "hydraulic-monitor-dgrnn"
-# 2: patterns carry member counts (Specht's clustered GRNN).
+# 2: patterns carry member counts (Specht's clustered GRNN).  The optional header key
+# ``validity`` (the training envelope) was added without a version bump: readers that do
+# not know it ignore it, and files without it get an envelope derived from their patterns.
 MODEL_VERSION = 2
 _ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
 
@@ -46,6 +54,8 @@ class MonitorModel:
     #: Per-output bound on |e| (z-units) before J; None keeps eq. 9 literal.  See training.
     residual_clip: tuple[float, ...] | None = None
     training: dict[str, Any] = field(default_factory=dict)
+    #: Trained range and occupancy per signal (None: not known; see ``monitor.validity``).
+    envelope: Envelope | None = None
 
     @property
     def spec(self) -> DGRNNSpec:
@@ -53,7 +63,7 @@ class MonitorModel:
 
     def header(self) -> dict[str, Any]:
         g = self.dgrnn.grnn
-        return {
+        head = {
             "format": MODEL_FORMAT,
             "version": MODEL_VERSION,
             "spec": self.spec.to_dict(),
@@ -74,6 +84,9 @@ class MonitorModel:
             },
             "training": self.training,
         }
+        if self.envelope is not None:
+            head["validity"] = self.envelope.to_dict()
+        return head
 
 
 def _checksum(header_bytes: bytes, arrays: dict[str, np.ndarray]) -> str:
@@ -133,9 +146,18 @@ def load_model(path: str | Path) -> MonitorModel:
     if _checksum(header_bytes, data) != data["checksum"].tobytes().decode("ascii", "replace"):
         raise ModelFileError(f"{path}: checksum mismatch, the model file is corrupt")
     try:
-        return _from_header(header, data)
+        model = _from_header(header, data)
     except (KeyError, TypeError, ValueError) as exc:
         raise ModelFileError(f"{path}: inconsistent model file ({exc})") from None
+    if model.envelope is None:
+        model.envelope = envelope_from_patterns(model)
+        log.info(
+            "%s: no stored training envelope (a model file from before it existed); validity "
+            "ranges derived from its patterns: %s", path,
+            ", ".join(f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(
+                model.envelope.signals, model.envelope.lo, model.envelope.hi, strict=True)),
+        )  # fmt: skip
+    return model
 
 
 def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> MonitorModel:
@@ -173,4 +195,5 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
         isolation_min_similarity=float(iso["min_similarity"]),
         residual_clip=None if header["residual_clip"] is None else tuple(header["residual_clip"]),
         training=header["training"],
+        envelope=Envelope.from_dict(header["validity"]) if "validity" in header else None,
     )

@@ -84,13 +84,31 @@ class AlarmFrames:
         return self.codec.encode_message(ALARM, values, bus_time_s)
 
     def status(
-        self, state: State, rx: int, rejected: int, dropped: int, bus_time_s: float
+        self,
+        state: State,
+        rx: int,
+        rejected: int,
+        dropped: int,
+        bus_time_s: float,
+        op_state: int = 0,
+        out_of_range: bool = False,
+        sensor_check: bool = False,
+        bus_events: int = 0,
     ) -> can.Message:
+        """``op_state`` (monitor.opstate.OpState), ``out_of_range`` (outside the model's
+        training envelope) and ``sensor_check`` (a named plausibility finding active, even
+        while the state shows inactive) go into MON_Status's OpState, OutOfRange and
+        SensorCheck; ``bus_events`` (link down, bus-off, error-passive since the start) into
+        the wrapping BusEvents counter."""
         # Counters wrap (the DBC says so): a receiver looks at differences.
         values = {
             "State": int(state),
             "RxFrames": rx % 65536,
             "RejectedFrames": rejected % 65536,
             "DroppedFrames": dropped % 256,
+            "OpState": int(op_state),
+            "OutOfRange": int(bool(out_of_range)),
+            "SensorCheck": int(bool(sensor_check)),
+            "BusEvents": bus_events % 16,
         }
         return self.codec.encode_message(STATUS, values, bus_time_s)

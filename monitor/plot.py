@@ -55,6 +55,13 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
                     alpha=0.15,
                     lw=0,
                 )
+    if det.gates is not None and np.any(det.gates.oor >= 0):
+        # Outside the training envelope: not judged (hatched, so it reads over a state colour).
+        oor = det.gates.oor >= 0
+        ax_j.fill_between(t, 0, 1, where=oor, transform=ax_j.get_xaxis_transform(),
+                          facecolor="none", edgecolor="tab:purple", hatch="//", lw=0,
+                          label="out of range")  # fmt: skip
+        ax_j.legend(loc="upper left", fontsize=7)
     s = det.summary
     verdict = (
         f"FAULT at {s['first_alarm_t']:.1f} s ({s['fault']})"

@@ -9,8 +9,9 @@ this order until they fit:
 2. rotated event-log files, oldest first, stopping at the first one that holds an *unsent
    alarm*.  The current event log is never deleted.
 
-An alarm is an event whose state is neither ``normal`` nor ``inactive`` (a fault or a sensor
-fault).  Every event carries ``seq`` (1, 2, ... per event log, continued across restarts).
+An alarm is an event of the detector (not a ``kind: "bus"`` line) whose state is neither
+``normal`` nor ``inactive`` (a fault or a sensor fault).  Every event carries ``seq`` (1,
+2, ... per event log, continued across restarts).
 *Unsent* means not yet acknowledged by whatever takes the events off the machine (a
 telematics uploader, a service tool): it acknowledges by writing the highest ``seq`` it has
 stored safely, as a decimal integer, to ``<event log>.acked`` (write a temporary file and
@@ -76,7 +77,7 @@ def last_alarm_seq(path: Path) -> int:
                 ev = json.loads(line)
             except ValueError:  # a line torn by a power cut
                 continue
-            if isinstance(ev, dict) and ev.get("state") not in NOT_ALARMS:
+            if isinstance(ev, dict) and "kind" not in ev and ev.get("state") not in NOT_ALARMS:
                 seq = ev.get("seq")
                 if isinstance(seq, int):
                     best = max(best, seq)

@@ -1,11 +1,12 @@
 """The live detector: one ``tick`` per 100 Hz row of the sample clock.
 
 It reproduces ``monitor.detector.detect`` sample by sample, so a log gives the same events
-on the bus as at a desk: z-score with the model's F0 statistics; a row with the engine below
-``alarm.min_engine_rpm`` or any model signal missing is gated (NaN before prediction, so it
-never feeds one, and its residual is NaN); e = y_hat - y in z units, clipped to the model's
-residual bound; J by the incremental window (eq. 9); one ``AlarmMachine.step`` per row.
-Nothing is allocated per tick beyond numpy scalars.
+on the bus as at a desk: z-score with the model's F0 statistics; a row outside normal
+operation (engine off, warm-up), with a model signal missing, a sensor finding active or an
+operating signal out of the trained range is gated (``monitor.gating``: NaN before
+prediction, so it never feeds one, and its residual is NaN); e = y_hat - y in z units,
+clipped to the model's residual bound; J by the incremental window (eq. 9); one
+``AlarmMachine.step`` per row.  Nothing is allocated per tick beyond numpy scalars.
 """
 
 from __future__ import annotations
@@ -21,7 +22,9 @@ from monitor.alarm import AlarmConfig, AlarmMachine, State, regime_of
 from monitor.detector import make_isolator
 from monitor.dgrnn import TickPredictor
 from monitor.errors import ModelFileError
+from monitor.gating import Gate, GatingConfig, status_keys
 from monitor.model import MonitorModel
+from monitor.opstate import OpState
 from monitor.residual import WindowJ
 from monitor.ring import RowRing
 from monitor.sampler import ROW_COLUMNS
@@ -34,7 +37,12 @@ class Tick:
     t_s: float  # sample-clock time of the row (s from the first frame)
     state: State
     j: float  # NaN while the window warms up or pauses
-    changed: bool  # the state differs from the previous tick's (always True on the first)
+    changed: bool  # state or gating status differs from the previous tick's (True on the first)
+    op_state: OpState = OpState.NORMAL
+    out_of_range: str | None = None  # the operating signal beyond the trained range
+    check: int = 0  # plausibility finding (monitor.plausibility), 0: none
+    sensor: int = -1
+    state_changed: bool = True  # the alarm state itself changed (``changed`` also covers gating)
 
 
 class Ticker:
@@ -44,6 +52,7 @@ class Ticker:
         alarm: AlarmConfig | None = None,
         horizon: int | None = None,
         columns: tuple[str, ...] = ROW_COLUMNS,
+        gating: GatingConfig | None = None,
     ) -> None:
         self.model = model
         self.alarm = alarm or AlarmConfig()
@@ -77,7 +86,8 @@ class Ticker:
         self.window = WindowJ(model.window_n)
         self.machine = AlarmMachine(self.alarm, model.eps0, make_isolator(model), model.window_n)
         self.eps0 = float(model.eps0)
-        self._prev: State | None = None
+        self.gate = Gate(model, self.alarm.min_engine_rpm, gating, columns)
+        self._prev: tuple | None = None
         self.ticks = 0
 
     @property
@@ -97,14 +107,15 @@ class Ticker:
         raw, z, e = self._raw, self._z, self._e
         np.take(row, self._var_idx, out=raw)
         engine = float(row[self._engine_col])
-        inactive = not engine >= self.alarm.min_engine_rpm  # NaN engine speed: off
+        gate = self.gate
+        gate.step(row)
         # A sum is finite exactly when every term is (values are far from overflow).
         inputs_ok = math.isfinite(float(np.add.reduce(raw)))
         np.subtract(raw, self._mean, out=z)
         np.divide(z, self._std, out=z)
-        gated = inactive or not inputs_ok
+        gated = gate.gated_now(inputs_ok)
         if gated:
-            z[:] = np.nan  # an engine-off or sensor-fault row must not seed a prediction
+            z[:] = np.nan  # a gated row (engine off, sensor fault...) must not seed a prediction
         self.ring.push(z)
         self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
         np.subtract(self._yz, self._z_out, out=e)
@@ -116,11 +127,18 @@ class Ticker:
         np.mean(self._sq, axis=1, out=self._v)
         j = self.window.push_squared(float(self._v[0]))
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
-        state = self.machine.step(j, inputs_ok, engine, e, regime_of(spool))
-        changed = state is not self._prev
-        self._prev = state
+        op = gate.op_state
+        sensor_ok = inputs_ok and gate.check == 0
+        state = self.machine.step(
+            j, sensor_ok, engine, e, regime_of(spool), op is not OpState.WARM_UP
+        )
+        status = (state, op, gate.oor, gate.check, gate.sensor)
+        changed = status != self._prev
+        state_changed = self._prev is None or state is not self._prev[0]
+        self._prev = status
         self.ticks += 1
-        return Tick(float(row[0]), state, j, changed)
+        return Tick(float(row[0]), state, j, changed, op, gate.oor_name(gate.oor), gate.check,
+                    gate.sensor, state_changed)  # fmt: skip
 
 
 def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:
@@ -135,4 +153,5 @@ def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> di
         "J": float(tick.j) if np.isfinite(tick.j) else None,
         "threshold": eps0,
         "fault": fault if tick.state is State.FAULT else None,
+        **status_keys(tick.op_state, tick.out_of_range, tick.check, tick.sensor),
     }

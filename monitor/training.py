@@ -25,6 +25,7 @@ from monitor.model import MonitorModel
 from monitor.residual import window_j
 from monitor.signals import FAULT_NAMES
 from monitor.threshold import ThresholdRule
+from monitor.validity import envelope_from_recordings
 
 Progress = Callable[[str], None]
 
@@ -132,6 +133,13 @@ def train(
         f"  J0 {model.j0:.4g} ({cfg.threshold.rule} of J on {len(val_part)} held-out part(s)),"
         f" eps0 {model.eps0:.4g}"
     )
+    # The operating envelope of every training recording (patterns and held-out part): the
+    # detector reports samples beyond it as out_of_range instead of judging them.
+    model.envelope = envelope_from_recordings(recordings, AlarmConfig().min_engine_rpm)
+    env = model.envelope
+    say("  trained envelope: " + ", ".join(
+        f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(env.signals, env.lo, env.hi, strict=True)
+    ))  # fmt: skip
     if cfg.isolation == "sim":
         labels, centroids = simulated_signatures(model, cfg, say)
         model.isolation_labels, model.isolation_centroids = labels, centroids

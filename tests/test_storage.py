@@ -88,13 +88,16 @@ def test_quota_keeps_unsent_alarms(store) -> None:
     assert _names(boxes, ev) == ["ev.jsonl", "ev.jsonl.acked"]
 
 
-def test_sensor_fault_is_an_alarm_inactive_is_not(tmp_path) -> None:
+def test_sensor_fault_is_an_alarm_inactive_and_bus_lines_are_not(tmp_path) -> None:
     ev = tmp_path / "ev.jsonl"
-    _padded(ev, {"seq": 3, "state": "normal"}, 100)
-    _padded(ev.with_name("ev.jsonl.1"), {"seq": 2, "state": "sensor_fault"}, 100)
-    _padded(ev.with_name("ev.jsonl.2"), {"seq": 1, "state": "inactive"}, 100)
+    _padded(ev, {"seq": 4, "state": "normal"}, 100)
+    _padded(ev.with_name("ev.jsonl.1"), {"seq": 3, "state": "sensor_fault"}, 100)
+    _padded(ev.with_name("ev.jsonl.2"), {"seq": 2, "state": "fault", "kind": "bus"}, 100)
+    _padded(ev.with_name("ev.jsonl.3"), {"seq": 1, "state": "inactive"}, 100)
     q = Quota(150, tmp_path / "bb", ev)
-    assert q.enforce() == 200  # .2 deleted, .1 (sensor fault, unsent) kept
+    # .3 and .2 deleted (a bus line in fault is not itself an alarm), .1 (sensor fault,
+    # unsent) kept.
+    assert q.enforce() == 200
     assert [p.name for p in rotated_logs(ev)] == ["ev.jsonl.1"]
 
 

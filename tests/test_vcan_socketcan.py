@@ -23,6 +23,7 @@ from __future__ import annotations
 import ast
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -48,6 +49,7 @@ from vcan_support import (
 
 from monitor.config import load_config
 from monitor.detector import detect
+from monitor.io.candump import format_line
 from monitor.model import load_model
 from monitor.resources import resource_path
 from monitor.sampler import recording_from_candump
@@ -120,10 +122,14 @@ class Session:
         return proc
 
     def caught_up(self, cap: Capture) -> bool:
-        """Two heartbeats with the same counters: the daemon's queue is drained."""
-        last = [s for _, s in decode(cap.snapshot(), "MON_Status")][-2:]
-        return len(last) == 2 and all(last[0][k] == last[1][k]
-                                      for k in ("RxFrames", "RejectedFrames"))  # fmt: skip
+        return _caught_up(cap)
+
+
+def _caught_up(cap: Capture) -> bool:
+    """Two heartbeats with the same counters: the daemon's queue is drained."""
+    last = [s for _, s in decode(cap.snapshot(), "MON_Status")][-2:]
+    return len(last) == 2 and all(last[0][k] == last[1][k]
+                                  for k in ("RxFrames", "RejectedFrames"))  # fmt: skip
 
 
 def _cansend(m, data: bytes) -> None:
@@ -337,3 +343,160 @@ def test_a_sensor_that_stops_is_a_sensor_fault_never_a_hydraulic_one(session) ->
     # daemon reports the silence it saw.)
     assert "fault" not in states and states[-1] == "inactive", states
     assert ("normal", "sensor_fault") in zip(states, states[1:], strict=False), states
+
+
+# -- bus recovery: vcan0 goes down and up under a third daemon --------------------------------
+# After the session above (the link going down would end its candump).  The daemon gets the
+# fault log until SPLIT_S, the link goes down until the silence has made the monitor
+# inactive (its reopens fail meanwhile: a socket bound to a link that is down raises
+# ENETDOWN at its first recv), comes up, and the rest of the log follows.  Then the kernel
+# error frames of a controller (error-passive, bus-off, restart) go on the bus by cansend.
+
+SPLIT_S = 50.0  # log s: the spool wear began at 45 s; J is held over the outage
+RECOVERY_SEGMENT = (FAULT_SEGMENT[0], SPLIT_S, FAULT_SEGMENT[1])
+GAP_REF_S = 5.0  # the gap in the offline reference (any gap under the sampler's 60 s)
+ERROR_FRAMES = (  # linux/can/error.h: class in the id, controller status in data[1]
+    ("20000004#0010000000000000", "error_passive"),  # CAN_ERR_CRTL, RX_PASSIVE
+    ("20000004#0040000000000000", "error_active"),  # CAN_ERR_CRTL, CAN_ERR_CRTL_ACTIVE
+    ("20000040#0000000000000000", "bus_off"),  # CAN_ERR_BUSOFF
+    ("20000100#0000000000000000", "up"),  # CAN_ERR_RESTARTED
+)
+
+
+def _ip_link(state: str) -> None:
+    subprocess.run(["ip", "link", "set", CHANNEL, state], check=True, timeout=60)
+
+
+def _resume_to_fault(events: list[dict[str, Any]], after_t: float) -> float:
+    """Sample-clock seconds from the first row of valid data after ``after_t`` (the first
+    ``normal`` then) to the first fault."""
+    later = [e for e in events if "kind" not in e and e["t"] > after_t]
+    resume = next(e["t"] for e in later if e["state"] == "normal")
+    return next(e["t"] for e in later if e["state"] == "fault") - resume
+
+
+@pytest.fixture(scope="module")
+def recovery(tmp_path_factory, model) -> dict[str, Any]:
+    tmp = tmp_path_factory.mktemp("recovery")
+    cfg = write_config(tmp, vcan_config(tmp, model, "  reopen_initial_s: 0.1\n"
+                                        "  reopen_max_s: 2.0\n"), model=model)  # fmt: skip
+    first, split, last = RECOVERY_SEGMENT
+    before = slowed_copy(FAULT_LOG, tmp / "before.log", first, split)
+    after = slowed_copy(FAULT_LOG, tmp / "after.log", split, last)
+    with (tmp / "gapped.log").open("w") as fh:  # the same data with a gap, for the desk
+        for part, shift in ((before, 0.0), (after, GAP_REF_S)):
+            for m in part:
+                fh.write(format_line(m.timestamp + shift, CHANNEL, m.arbitration_id,
+                                     m.is_extended_id, m.data))  # fmt: skip
+    r: dict[str, Any] = {"tmp": tmp, "wall": {}}
+    log = tmp / "daemon3.log"
+    events_path = tmp / "events.jsonl"
+
+    def events() -> list[dict[str, Any]]:
+        text = events_path.read_text() if events_path.exists() else ""
+        return [json.loads(x) for x in text.splitlines()]
+
+    phases = Phases()
+    daemon = start_daemon(cfg, tmp, log)
+    procs = [daemon]
+    cap = Capture(tmp / "capture_before.log")  # candump ends when the link goes down
+    try:
+        loaded = load_config(cfg)
+        r["offline"] = detect(load_model(loaded.model), recording_from_candump(tmp / "gapped.log"),
+                              loaded.alarm, loaded.horizon)  # fmt: skip
+        wait_for_text(log, f"monitoring socketcan:{CHANNEL}", daemon, START_S)
+        phases("daemon 3 start (with the reference)")
+        player = subprocess.Popen(["canplayer", "-I", str(tmp / "before.log")])
+        procs.append(player)
+        assert player.wait(_replay_wall_s(split - first)) == 0
+        wait_until(lambda: _caught_up(cap), 600.0)
+        cap.kill()
+        phases("fault log until the split")
+        r["wall"]["down"] = time.time()
+        _ip_link("down")
+        wait_for_text(log, "CAN bus down (", daemon, 300.0)
+        # Down until three reopens have failed (1.5 s of backoff: a heartbeat fell due) and
+        # the silence (bus.silent_s, wall) has made the monitor inactive.
+        wait_for_text(log, "reopening in 1.6 s", daemon, 300.0)
+        wait_until(lambda: events()[-1]["state"] == "inactive", 300.0)
+        phases("link down: three reopens failed, inactive")
+        _ip_link("up")
+        r["wall"]["up"] = time.time()
+        cap = Capture(tmp / "capture.log")
+        wait_for_text(log, "CAN bus up again", daemon, 300.0)
+        r["wall"]["seen_up"] = time.time()
+        phases("link up until the daemon is back")
+        time.sleep(0.5)  # candump's socket is bound before the first frame
+        player = subprocess.Popen(["canplayer", "-I", str(tmp / "after.log")])
+        procs.append(player)
+        wait_until(lambda: any(e["state"] == "fault" for e in events()), _replay_wall_s(
+            last - split))  # fmt: skip
+        player.kill()
+        phases("rest of the fault log until the alarm")
+        for frame, kind in ERROR_FRAMES:
+            before_n = log.read_text().count("CAN bus reopened")
+            subprocess.run(["cansend", CHANNEL, frame], check=True, timeout=60)
+            wait_until(lambda k=kind: [e["bus"] for e in events() if "bus" in e][-1] == k, 300.0)
+            if kind == "bus_off":  # the restart must reach the reopened socket
+                wait_until(lambda n=before_n: log.read_text().count("CAN bus reopened") > n,
+                           300.0)  # fmt: skip
+        phases("controller error frames by cansend")
+        r["running"] = daemon.poll() is None
+        r["rc"] = stop(daemon)
+        phases("daemon 3 SIGTERM to exit")
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+        r["frames"] = cap.stop()
+        subprocess.run(["ip", "link", "set", CHANNEL, "up"], check=False)
+    r["log"] = log.read_text()
+    r["events"] = events()
+    print(f"[vcan] recovery log:\n{r['log']}")
+    return r
+
+
+def test_link_down_and_up_is_survived_logged_and_counted(recovery) -> None:
+    assert recovery["running"] and recovery["rc"] == 0  # running until SIGTERM, exit 0
+    log = recovery["log"]
+    # What python-can raises on SocketCAN when vcan0 goes down: CanOperationError with
+    # errno ENETDOWN, on recv (or on a send, whichever takes the socket's report first).
+    assert re.search(r"CAN bus down \((receive: Error receiving|send: Failed to transmit): "
+                     r"Network is down \[Error Code 100\]\)", log), log  # fmt: skip
+    counts = _stopped_counts(log)
+    assert counts["bus_down"] == 1 and counts["bus_off"] == 1 and counts["error_passive"] == 1
+    # Opening works on a link that is down; those reopens failed at their first recv (at
+    # least four: 0.1 + 0.2 + 0.4 + 0.8 s of backoff), the next one worked; one more after
+    # the bus-off, which the restart frame ended.
+    assert counts["reopen_failures"] >= 4
+    assert counts["reopen_attempts"] == counts["reopens"] == counts["reopen_failures"] + 2
+    assert counts["tx_errors"] >= 1  # heartbeats due while down: counted, not sent
+    assert counts["error_frames"] == len(ERROR_FRAMES)
+    bus = [e for e in recovery["events"] if e.get("kind") == "bus"]
+    assert [e["bus"] for e in bus] == ["down", "up", *(k for _, k in ERROR_FRAMES)]
+    down, up = bus[0], bus[1]
+    assert "Network is down" in down["detail"] and up["state"] == "inactive"
+    wall = recovery["wall"]  # down_s runs from the failure seen to the reopen that worked
+    assert wall["up"] - wall["down"] - 3.0 <= up["down_s"] <= wall["seen_up"] - wall["down"]
+    assert up["reopens"] == counts["reopens"] - 1  # before the bus-off's reopen
+    assert bus[-1]["detail"] == "controller restarted"
+    assert bus[-1]["reopens"] == counts["reopens"]
+    keys = ("bus_down", "bus_off", "reopens", "reopen_failures", "reopen_attempts", "tx_errors")
+    print(f"[vcan] recovery: {json.dumps({k: counts[k] for k in keys})}, down {up['down_s']} s")
+
+
+def test_alarms_resume_after_the_link_comes_back(recovery) -> None:
+    frames = recovery["frames"]  # captured from the link coming up
+    alarms = decode(frames, "MON_Alarm")
+    assert any(s["State"] == STATE["fault"] for _, s in alarms)
+    assert len(decode(frames, "MON_Status")) >= 2  # the heartbeat is back too
+    events = recovery["events"]
+    up_t = next(e["t"] for e in events if e.get("bus") == "up")
+    live = _resume_to_fault(events, up_t)
+    off = recovery["offline"].events
+    ref = _resume_to_fault(off, next(e["t"] for e in off if e["state"] == "inactive"))
+    # J was held over the outage: the alarm comes as long after the data resumed as at the
+    # desk, well before a fresh window could have filled.
+    window_s = load_model(load_config(recovery["tmp"] / "monitor.yaml").model).window_n / 100
+    print(f"[vcan] recovery: data resumed to fault {live:.2f} s (desk {ref:.2f} s)")
+    assert ref - 0.3 <= live < window_s, (live, ref, window_s)

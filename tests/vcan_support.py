@@ -51,14 +51,17 @@ def _vcan_missing() -> str | None:
     return None
 
 
-def vcan_config(tmp: Path, model: Path) -> str:
-    """YAML for the daemon on vcan0, outputs under ``tmp``."""
-    return (
+def vcan_config(tmp: Path, model: Path, bus_extra: str = "") -> str:
+    """YAML for the daemon on vcan0, outputs under ``tmp``; ``bus_extra``: more lines of
+    the bus section."""
+    bus = (
         f"bus:\n  interface: socketcan\n  channel: {CHANNEL}\n  time_scale: {SLOWER}\n"
         "  queue_frames: 200000\n  silent_s: 4.0\n"
-        f"event_log:\n  path: {tmp / 'events.jsonl'}\n"
-        f"black_box:\n  directory: {tmp / 'blackbox'}\n"
     )
+    outputs = (
+        f"event_log:\n  path: {tmp / 'events.jsonl'}\nblack_box:\n  directory: {tmp / 'blackbox'}\n"
+    )
+    return bus + bus_extra + outputs
 
 
 @functools.lru_cache(maxsize=8)

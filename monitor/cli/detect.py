@@ -16,6 +16,7 @@ from monitor.detector import Detection, detect
 from monitor.errors import MonitorError
 from monitor.io.reader import read_recording
 from monitor.model import load_model
+from monitor.opstate import OpState
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -75,6 +76,7 @@ def _lines(det: Detection, j_every_s: float) -> list[dict[str, Any]]:
                     "t": round(float(t[i]), 6),
                     "time": None,
                     "state": State(int(det.state[i])).label,
+                    "op_state": None if det.gates is None else OpState(det.gates.op_state[i]).label,
                     "J": float(j) if np.isfinite(j) else None,
                     "threshold": eps0,
                     "fault": None,
@@ -94,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model or cfg.model)
     rec = read_recording(args.recording)
     horizon = args.horizon or cfg.horizon
-    det = detect(model, rec, cfg.alarm, horizon)
+    det = detect(model, rec, cfg.alarm, horizon, gating=cfg.gating)
     lines = _lines(det, args.j_every)
     try:
         if args.events:
@@ -117,6 +119,10 @@ def run(args: argparse.Namespace) -> int:
         else "no hydraulic fault"
     )
     extra = "; sensor fault seen" if s["sensor_fault"] else ""
+    for c in s["sensor_checks"]:
+        extra += f"; {c['sensor']} {c['check']} from {c['first_t']:.2f} s"
+    if s["out_of_range_samples"]:
+        extra += f"; {s['out_of_range_s']:.1f} s outside the trained range"
     max_j = "n/a" if s["max_J"] is None else f"{s['max_J']:.4g}"
     print(
         f"{args.recording}: {verdict}{extra} (max J {max_j}, eps0 {s['threshold']:.4g})",

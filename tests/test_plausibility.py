@@ -1,0 +1,188 @@
+"""Sensor plausibility: each check fires on its defect and names the right signal, stays
+quiet on healthy data, and ``monitor detect`` and the per-tick path agree."""
+
+from __future__ import annotations
+
+import cantools
+import numpy as np
+import pytest
+from live_support import tick_recording
+
+from monitor.config import load_config
+from monitor.detector import detect
+from monitor.gating import GatingConfig
+from monitor.io.recording import Recording
+from monitor.model import load_model
+from monitor.plausibility import COLUMNS, DBC_RANGES, Plausibility, PlausibilityConfig, finding
+from monitor.resources import resource_path
+from monitor.sampler import recording_from_candump
+from monitor.sim.cycles import make_cycle
+from monitor.sim.machine import load_machine
+from monitor.sim.simulate import simulate
+from monitor.ticker import Ticker
+
+CFG = load_config()
+MACHINE = load_machine()
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_model(CFG.model)
+
+
+@pytest.fixture(scope="module")
+def normal_run() -> Recording:
+    return simulate(make_cycle("boom", 90.0, 4242), MACHINE, seed=4242)
+
+
+def edited(rec: Recording, **cols: np.ndarray) -> Recording:
+    out = {k: v.copy() for k, v in rec.columns.items()}
+    out.update(cols)
+    return Recording(rec.t, out, "edited", dict(rec.meta))
+
+
+def findings_of(rec: Recording, cfg: PlausibilityConfig | None = None):
+    """(sensor, check) -> first time (s) of every finding over the recording."""
+    p = Plausibility(cfg or PlausibilityConfig(), CFG.alarm.min_engine_rpm)
+    n = len(rec)
+    x = np.column_stack([rec[c] if rec.has(c) else np.full(n, np.nan) for c in COLUMNS])
+    check, sig = p.series(x)
+    out: dict[tuple, float] = {}
+    for i in np.flatnonzero(check):
+        out.setdefault(finding(int(check[i]), int(sig[i])), round(float(rec.t[i]), 2))
+    return out, check, sig
+
+
+def idx(rec: Recording, t_s: float) -> int:
+    return int(round((t_s - rec.t[0]) / 0.01))
+
+
+def test_dbc_ranges_are_the_shipped_dbcs() -> None:
+    db = cantools.database.load_file(str(resource_path("dbc", "monitor.dbc")))
+    for name, (lo, hi) in DBC_RANGES.items():
+        sig = next(s for m in db.messages for s in m.signals if s.name == name)
+        assert (sig.minimum, sig.maximum) == (lo, hi), name
+
+
+def test_healthy_runs_and_shipped_logs_raise_no_finding(normal_run) -> None:
+    for log in ("normal.log", "piston_wear.log", "spool_stroke.log", "spool_wear.log"):
+        rec = recording_from_candump(resource_path("replay", log))
+        assert findings_of(rec)[0] == {}, log
+    assert findings_of(normal_run)[0] == {}
+    ramp = simulate(make_cycle("ramp", 80.0, 5), MACHINE, seed=5)
+    assert findings_of(ramp)[0] == {}
+
+
+def test_frozen_sensor_is_named_after_frozen_s(normal_run) -> None:
+    qp = normal_run["QP"].copy()
+    k = idx(normal_run, 30.0)
+    qp[k:] = 12.34  # the filter output hangs on one value
+    found, _, _ = findings_of(edited(normal_run, QP=qp))
+    # 100 repeats of the value after its first sample: the 101st sample, t = 31.00 s
+    assert found == {("QP", "frozen"): 31.0}
+
+
+def test_stuck_sensor_with_live_noise_is_named(normal_run) -> None:
+    rng = np.random.default_rng(1)
+    pa = normal_run["PA"].copy()
+    k = idx(normal_run, 10.0)
+    pa[k:] = 20.0 + rng.normal(0.0, 0.3, len(pa) - k)  # noise alive, no longer following
+    rec = edited(normal_run, PA=pa)
+    found, _, _ = findings_of(rec)
+    assert list(found) == [("PA", "stuck")]
+    # It fires once 20 s of moving samples (|SpoolCmd| >= 20 % or QP >= 2 L/min) passed in
+    # band: count them by hand from the injection on.
+    moving = (np.abs(rec["SpoolCmd"]) >= 20.0) | (rec["QP"] >= 2.0)
+    k_fire = k + int(np.flatnonzero(np.cumsum(moving[k + 1 :]) >= 2000)[0]) + 1
+    assert found[("PA", "stuck")] == pytest.approx(rec.t[k_fire], abs=0.02)
+    # The same noise band on a moving sensor: no finding (20 s of motion in band is rare).
+    assert findings_of(normal_run, PlausibilityConfig(stuck_s=20.0))[0] == {}
+
+
+def test_out_of_range_value_is_named_and_clears(normal_run) -> None:
+    pb = normal_run["PB"].copy()
+    k = idx(normal_run, 20.0)
+    pb[k : k + 50] = 450.0  # a CSV sample beyond the 0..400 bar sensor
+    found, check, sig = findings_of(edited(normal_run, PB=pb))
+    assert found == {("PB", "signal_range"): 20.09}  # range_s 0.1 = 10 samples
+    assert check[k + 60] == 0  # back in range: the finding clears
+    # Configured limits tighter than the DBC's: 250 bar on a 0..400 bar channel.
+    pp = normal_run["PP"].copy()
+    pp[k : k + 20] = 260.0
+    pp[k + 20 : k + 40] = 250.0  # at the limit is in range
+    found, _, _ = findings_of(edited(normal_run, PP=pp), PlausibilityConfig(pressure_max_bar=250))
+    assert found == {("PP", "signal_range"): 20.09}
+
+
+def test_port_reading_high_is_named_against_the_pump(normal_run) -> None:
+    pa = normal_run["PA"] + 30.0  # a +30 bar offset on port A
+    found, _, _ = findings_of(edited(normal_run, PA=pa))
+    assert set(found) == {("PA", "pump_below_port")}
+    # The first raise with the spool >= 20 % open, plus relation_s = 1 s of violation.
+    spool = normal_run["SpoolCmd"]
+    first_raise = int(np.flatnonzero(spool >= 20.0)[0])
+    assert found[("PA", "pump_below_port")] >= normal_run.t[first_raise] + 0.99
+
+
+def test_pump_reading_low_is_named_once_both_ports_show_it(normal_run) -> None:
+    pp = normal_run["PP"] - 40.0
+    found, check, sig = findings_of(edited(normal_run, PP=pp))
+    assert ("PP", "pump_below_port") in found
+    # First one port is seen above PP, later the other: from then on PP is named.
+    assert found[("PP", "pump_below_port")] > min(
+        found.get(("PA", "pump_below_port"), np.inf), found.get(("PB", "pump_below_port"), np.inf)
+    )
+    assert finding(int(check[-1]), int(sig[-1])) == ("PP", "pump_below_port")
+
+
+def rest_then_run(run: Recording, pa_rest_bar: float) -> Recording:
+    """40 s engine off, spool centred, PA at ``pa_rest_bar``, then ``run``."""
+    n_rest = 4000
+    rng = np.random.default_rng(3)
+    t = np.concatenate([np.arange(n_rest) * 0.01, run.t + n_rest * 0.01])
+    rest = {
+        "SpoolCmd": np.zeros(n_rest),
+        "PumpDispCmd": np.full(n_rest, 100.0),
+        "EngineSpeed": np.zeros(n_rest),
+        "OilTemp": np.full(n_rest, run["OilTemp"][0]),
+        "PP": np.abs(rng.normal(0.0, 0.3, n_rest)),
+        "PA": pa_rest_bar + rng.normal(0.0, 0.3, n_rest),
+        "PB": np.abs(rng.normal(0.0, 0.3, n_rest)),
+        "QP": np.abs(rng.normal(0.0, 0.1, n_rest)),
+    }
+    cols = {k: np.concatenate([rest[k], run[k]]) for k in rest}
+    return Recording(t, cols, "rest then run")
+
+
+def test_rest_offset_is_found_at_key_off_and_kept_when_the_engine_starts(model, normal_run) -> None:
+    rec = rest_then_run(normal_run, 12.0)
+    found, check, _ = findings_of(rec)
+    assert found == {("PA", "rest_offset"): 30.0 - 0.01}  # 3000th sample of the rest
+    assert check[-1] != 0  # latched: no later rest has shown PA near tank
+    det = detect(model, rec, CFG.alarm, CFG.horizon, gating=CFG.gating)
+    running = [e for e in det.events if e["op_state"] == "normal"]
+    assert running and all(e["state"] == "sensor_fault" for e in running)
+    assert {(e["sensor"], e["sensor_check"]) for e in running} == {("PA", "rest_offset")}
+    assert det.summary["alarm"] is False
+    # A sensor reading tank at rest: no finding; the check off (rest_settle_s 0): none either.
+    assert findings_of(rest_then_run(normal_run, 0.5))[0] == {}
+    assert findings_of(rec, PlausibilityConfig(rest_settle_s=0.0))[0] == {}
+
+
+def test_detect_and_ticks_give_the_same_sensor_events(model, normal_run) -> None:
+    """Frozen QP then an offset PA: states, findings and all event keys agree per sample."""
+    qp, pa = normal_run["QP"].copy(), normal_run["PA"].copy()
+    qp[idx(normal_run, 30.0) : idx(normal_run, 40.0)] = 7.5
+    pa[idx(normal_run, 60.0) :] += 30.0
+    rec = edited(normal_run, QP=qp, PA=pa)
+    gating = GatingConfig()
+    det = detect(model, rec, CFG.alarm, CFG.horizon, gating=gating)
+    _, events = tick_recording(Ticker(model, CFG.alarm, CFG.horizon, gating=gating), rec)
+    strip = lambda evs: [{k: v for k, v in e.items() if k != "J"} for e in evs]  # noqa: E731
+    assert strip(events) == strip(det.events)
+    named = {(e["sensor"], e["sensor_check"]) for e in det.events if e["sensor"]}
+    assert named == {("QP", "frozen"), ("PA", "pump_below_port")}
+    assert {e["state"] for e in det.events if e["sensor"]} == {"sensor_fault"}
+    checks = {(c["sensor"], c["check"]) for c in det.summary["sensor_checks"]}
+    assert checks == named
+    assert det.summary["alarm"] is False  # a sensor fault is never a hydraulic alarm
