@@ -4,7 +4,8 @@ Sections: ``dbc`` and ``model`` (input files, relative to the config file's fold
 ``detector`` (horizon), ``alarm`` (debounce and gating), and for the live daemon ``bus``
 (python-can interface, channel, bitrate), ``outputs`` (alarm/status frame rates),
 ``event_log`` and ``black_box`` (output paths, relative to the working directory the daemon
-starts in, so a config shipped inside the installed package never writes into it).
+starts in, so a config shipped inside the installed package never writes into it), and
+``storage`` (their disk quota and the disk-writer queue).
 ``operating``, ``plausibility`` and ``validity`` (see ``monitor.gating``) say which samples
 the detector judges.
 
@@ -65,6 +66,11 @@ class OutputConfig:
 @dataclass(frozen=True)
 class EventLogConfig:
     path: Path = Path("monitor-events.jsonl")
+    rotate_mb: float = 8.0  # MB (10^6 bytes): the file is renamed to .1 at this size
+
+    @property
+    def rotate_bytes(self) -> int:
+        return int(self.rotate_mb * 1e6)
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,20 @@ class BlackBoxConfig:
     post_s: float = 10.0  # and recorded after it
     max_frames: int = 200_000  # memory bound of the pre-alarm buffer (~50 s at 4 kHz)
     max_files: int = 50  # oldest files deleted beyond this
+
+
+@dataclass(frozen=True)
+class StorageConfig:
+    """Disk use of the daemon's files and the thread that writes them (``monitor.storage``,
+    ``monitor.writer``)."""
+
+    quota_mb: float = 256.0  # MB (10^6 bytes): black boxes + event log files together
+    writer_queue: int = 1000  # disk-writer jobs queued at most (black-box work beyond: dropped)
+    event_block_s: float = 0.1  # an event waits this long for room in a full queue
+
+    @property
+    def quota_bytes(self) -> int:
+        return int(self.quota_mb * 1e6)
 
 
 @dataclass(frozen=True)
@@ -124,6 +144,7 @@ class MonitorConfig:
     outputs: OutputConfig = field(default_factory=OutputConfig)
     event_log: EventLogConfig = field(default_factory=EventLogConfig)
     black_box: BlackBoxConfig = field(default_factory=BlackBoxConfig)
+    storage: StorageConfig = field(default_factory=StorageConfig)
     j1939: J1939Config = field(default_factory=J1939Config)
     operating: OperatingConfig = field(default_factory=OperatingConfig)
     plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
@@ -136,6 +157,7 @@ class MonitorConfig:
 
 _TOP_KEYS = {
     "dbc", "model", "detector", "alarm", "bus", "outputs", "event_log", "black_box",
+    "storage",
     "j1939",
     "operating", "plausibility", "validity",
 }  # fmt: skip
@@ -200,13 +222,21 @@ _OUTPUTS = {
     "alarm_max_per_s": ("float", _POSITIVE, "> 0"),
     "status_period_s": ("float", _POSITIVE, "> 0"),
 }
-_EVENT_LOG = {"path": ("path", None, "")}
+_EVENT_LOG = {
+    "path": ("path", None, ""),
+    "rotate_mb": ("float", lambda v: v >= 0.001, ">= 0.001 (1 kB)"),
+}
 _BLACK_BOX = {
     "directory": ("path", None, ""),
     "pre_s": ("float", _NON_NEG, ">= 0"),
     "post_s": ("float", _NON_NEG, ">= 0"),
     "max_frames": ("int", _POSITIVE, ">= 1"),
     "max_files": ("int", _POSITIVE, ">= 1"),
+}
+_STORAGE = {
+    "quota_mb": ("float", _POSITIVE, "> 0"),
+    "writer_queue": ("int", lambda v: v >= 10, ">= 10"),
+    "event_block_s": ("float", lambda v: 0 <= v <= 5, "between 0 and 5"),
 }
 
 _J1939 = {
@@ -333,6 +363,16 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
     if bus.reopen_max_s < bus.reopen_initial_s:
         raise ConfigError(f"{source}: bus.reopen_max_s ({bus.reopen_max_s}) must be >= "
                           f"bus.reopen_initial_s ({bus.reopen_initial_s})")  # fmt: skip
+    event_log = _typed(
+        EventLogConfig, _EVENT_LOG, _section(data, "event_log", source), "event_log", source
+    )
+    storage = _typed(StorageConfig, _STORAGE, _section(data, "storage", source), "storage", source)
+    if storage.quota_mb <= 2 * event_log.rotate_mb:
+        raise ConfigError(
+            f"{source}: storage.quota_mb ({storage.quota_mb:g}) must be more than twice "
+            f"event_log.rotate_mb ({event_log.rotate_mb:g}): the current event log and one "
+            "rotated file must fit"
+        )
     return MonitorConfig(
         source=source,
         dbc=_path(data["dbc"], "dbc", base, source),
@@ -343,10 +383,9 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
         outputs=_typed(
             OutputConfig, _OUTPUTS, _section(data, "outputs", source), "outputs", source
         ),
-        event_log=_typed(
-            EventLogConfig, _EVENT_LOG, _section(data, "event_log", source), "event_log", source
-        ),
+        event_log=event_log,
         black_box=black_box,
+        storage=storage,
         j1939=_checked_section(J1939Config, _J1939, data, "j1939", source),
         operating=_checked_section(OperatingConfig, _OPERATING, data, "operating", source),
         plausibility=_checked_section(

@@ -2,7 +2,7 @@
 
 Threads: ``can-reader`` (``BusReader``: bus -> bounded queue, nothing else) and ``detector``
 (everything else, in arrival order: black box, decode, sampler, one tick per 100 Hz row,
-frames, event log).  Nothing runs in a python-can Notifier callback.  The sample clock is
+frames, disk jobs).  Nothing runs in a python-can Notifier callback.  The sample clock is
 the frames' own timestamps, so a log replayed onto a bus gives the events ``monitor detect``
 gives for the file.  When no sensor frame is accepted for ``bus.silent_s`` (wall clock) the
 clock runs on by wall time: the rows go stale, the engine speed with them, and the monitor
@@ -14,8 +14,11 @@ silence is such a gap); bus events go to the event log as ``kind: "bus"`` lines
 (monitor/bus_recovery.py), and nothing is sent while the bus is down (counted as tx errors).
 
 ``stop()`` shuts down in order: reader (no new frames), detector (drains the queue, ticks
-the last rows), outputs (black box and event log closed, fsynced), bus.  ``request_reload``
-makes the detector thread reload config and model between two frames, keeping the bus.
+the last rows), disk writer (drains its queue: events fsynced, black box and event log
+closed), bus.  ``request_reload`` makes the detector thread reload config and model between
+two frames, keeping the bus.  Disk jobs (event log, black-box files) go to the
+``disk-writer`` thread through a bounded queue (``monitor.writer``): no fsync or black-box
+dump stalls a tick.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from functools import partial
 from typing import Any
 
 import can
@@ -43,7 +47,9 @@ from monitor.model import load_model
 from monitor.outputs import AlarmFrames, EventLog
 from monitor.plausibility import finding
 from monitor.sampler import Sampler, hydraulic_messages
+from monitor.storage import Quota
 from monitor.ticker import Ticker, event
+from monitor.writer import DiskWriter
 
 log = logging.getLogger("monitor")
 
@@ -69,8 +75,13 @@ class Daemon:
         self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon, gating=cfg.gating)
         self.sampler = Sampler.for_codec(self.codec)
         self.frames = AlarmFrames(self.codec, cfg.outputs)
-        self.event_log = EventLog(cfg.event_log.path)
-        self.black_box = BlackBox(cfg.black_box, cfg.bus.channel)
+        # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.writer.
+        st = cfg.storage
+        self.quota = Quota(st.quota_bytes, cfg.black_box.directory, cfg.event_log.path)
+        self.event_log = EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
+        self.writer = DiskWriter(st.writer_queue, st.event_block_s)
+        self.black_box = BlackBox(cfg.black_box, cfg.bus.channel, self.writer, self.quota)
+        self.writer.start()
         self.diag = Diagnostics(cfg.j1939, self.model.spec.variables) if cfg.j1939.enabled else None
         self._own_bus = bus is None
         if opener is None:
@@ -129,8 +140,11 @@ class Daemon:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout_s)
-        self.black_box.close()
-        self.event_log.close()
+        self.black_box.close()  # queues the last post-alarm frames and the file's close
+        self.writer.put_event(self.event_log.close)
+        self.writer.stop(timeout_s)  # drained: every event written and fsynced, files closed
+        if self.writer.counts.frames_dropped or self.writer.counts.events_over_bound:
+            log.warning("disk writer: %s", self.writer.counts.as_dict())
         if self._own_bus:
             self.bus.shutdown()
         log.info("stopped: %s", self.counts())
@@ -250,7 +264,7 @@ class Daemon:
 
     def _state_change(self, tick: Any) -> None:
         ev = event(tick, self.ticker.fault, self.ticker.eps0, self.sampler.start_time_s)
-        self.event_log.write(ev)
+        self._log_event(ev)
         level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
         log.log(level, "t=%.2f s: %s (J %s, eps0 %.4g%s)", ev["t"], ev["state"],
                 "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
@@ -260,9 +274,7 @@ class Daemon:
                      ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
                      ev["sensor_check"])  # fmt: skip
         if tick.state is State.FAULT and tick.state_changed:
-            path = self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
-            if path is not None:
-                log.info("black box: %s", path)
+            self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
         if self.on_event is not None:
             self.on_event(ev)
 
@@ -296,8 +308,14 @@ class Daemon:
 
     def _bus_events(self) -> None:
         for ev in self.reader.take_events():
-            self.event_log.write(bus_event_record(ev, self.last_t_s, self.state, self.last_j,
-                                                  self.ticker.eps0, self.ticker.fault))  # fmt: skip
+            self._log_event(bus_event_record(ev, self.last_t_s, self.state, self.last_j,
+                                             self.ticker.eps0, self.ticker.fault))  # fmt: skip
+
+    def _log_event(self, ev: dict[str, Any]) -> None:
+        """Queue an event-log line for the disk writer (which writes and fsyncs it)."""
+        ev["mono"] = round(time.monotonic(), 6)  # this host's monotonic clock, s
+        self.event_log.stamp(ev)
+        self.writer.put_event(partial(self.event_log.write, ev))
 
     def _do_reload(self) -> None:
         """SIGHUP: new config and model, same bus; a bad file keeps the running ones."""
@@ -306,7 +324,7 @@ class Daemon:
             model = load_model(cfg.model)
             ticker = Ticker(model, cfg.alarm, cfg.horizon, gating=cfg.gating)
             event_log = (
-                EventLog(cfg.event_log.path)
+                EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
                 if cfg.event_log.path != self.cfg.event_log.path
                 else None
             )
@@ -321,9 +339,11 @@ class Daemon:
             log.warning("j1939 changes take effect at the next restart")
             cfg = replace(cfg, j1939=self.cfg.j1939)
         if event_log is not None:
-            self.event_log.close()
+            self.writer.put_event(self.event_log.close)  # after its queued writes
+            self.quota.event_log_path = event_log.path
             self.event_log = event_log
         self.black_box.cfg = cfg.black_box
+        self.quota.quota_bytes = cfg.storage.quota_bytes
         self.frames.cfg = cfg.outputs
         self.cfg, self.model, self.ticker = cfg, model, ticker
         self.reloads += 1

@@ -9,17 +9,12 @@ the state current at that moment.
 
 from __future__ import annotations
 
-import json
-import os
-from pathlib import Path
-from typing import Any
-
 import can
 
 from monitor.alarm import State
 from monitor.codec.frames import FrameCodec
 from monitor.config import OutputConfig
-from monitor.errors import ConfigError
+from monitor.eventlog import EventLog  # noqa: F401  (the event log lives there now)
 
 ALARM = "MON_Alarm"
 STATUS = "MON_Status"
@@ -117,44 +112,3 @@ class AlarmFrames:
             "BusEvents": bus_events % 16,
         }
         return self.codec.encode_message(STATUS, values, bus_time_s)
-
-
-class EventLog:
-    """Append-only JSON lines, flushed and fsynced per event so a power cut loses none."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = Path(path)
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            new = not self.path.exists()
-            self._fh = self.path.open("a", encoding="utf-8")
-            if new:  # the file's directory entry must survive a power cut too
-                _fsync_dir(self.path.parent)
-        except OSError as exc:
-            raise ConfigError(f"event_log.path: cannot open {self.path}: {exc.strerror}") from None
-        self.written = 0
-
-    def write(self, record: dict[str, Any]) -> None:
-        self._fh.write(json.dumps(record) + "\n")
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
-        self.written += 1
-
-    def close(self) -> None:
-        if not self._fh.closed:
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
-            self._fh.close()
-
-
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass  # not every filesystem lets a directory be fsynced
-    finally:
-        os.close(fd)

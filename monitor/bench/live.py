@@ -16,6 +16,12 @@ Timing points, all ``time.perf_counter`` in this process:
 * alarm frame: ``bus.send`` of MON_Alarm for a tick whose state changed.
 
 CPU per tick is the detector thread's ``time.thread_time`` across ``Ticker.tick``.
+
+``--writes inline`` runs the event log's fsync and the black-box dumps in the detector thread
+(the path before the disk-writer thread, ``monitor.writer``); ``--writes thread,inline
+--rounds R`` alternates the two, R daemons each, in this one process and reports both and
+their ratios (the top-level keys are the first mode's; peak memory is taken after the first
+daemon, so it is one daemon's).
 """
 
 from __future__ import annotations
@@ -77,7 +83,9 @@ def _frames(codec: FrameCodec, rec) -> list[tuple[float, str, dict[str, float]]]
     return plan
 
 
-def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, Any]:
+def run(
+    model: Path, horizon: int, seconds: float, speed: float, writes: str = "thread"
+) -> dict[str, Any]:
     tmp = Path(tempfile.mkdtemp(prefix="monitor-bench-live-"))
     rec = test_recording(seconds, fault_at_s=0.6 * seconds)
     base = load_config()
@@ -91,6 +99,7 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
     arrivals: collections.deque[float] = collections.deque()
     bus = can.Bus(interface="virtual", channel=channel)
     daemon = Daemon(cfg, bus=_TimedBus(bus, arrivals))
+    daemon.writer.inline = writes == "inline"
     rss_loaded_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     alarm_id = daemon.codec.message("MON_Alarm").frame_id
     latency, cpu, alarm_latency, row_t, change_t = [], [], [], [], []
@@ -119,7 +128,18 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
             alarm_latency.append(time.perf_counter() - current["arrival"])
         send(msg)
 
+    state_change = daemon._state_change
+    change_wall, change_cpu = [], []
+
+    def timed_state_change(t) -> None:
+        # What a state change costs the detector thread (event log, black box, hook).
+        w0, c0 = time.perf_counter(), time.thread_time()
+        state_change(t)
+        change_wall.append(time.perf_counter() - w0)
+        change_cpu.append(time.thread_time() - c0)
+
     daemon._frame, daemon.ticker.tick, daemon._send = timed_frame, timed_tick, timed_send
+    daemon._state_change = timed_state_change
     codec = FrameCodec.from_dbc()
     plan = _frames(codec, rec)
     sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
@@ -140,8 +160,8 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
     sender.shutdown()
     bus.shutdown()
     lat = np.array(latency) * 1e3
-    # Ticks queued behind a state change's synchronous work (event log fsync, black-box
-    # dump of the pre-alarm frames): those within 2 s of data after a change.
+    # Ticks near a state change (its event log fsync and black-box dump of the pre-alarm
+    # frames ran in the detector thread before the disk writer): within 2 s of data after it.
     t_rows = np.array(row_t)
     behind = np.zeros(lat.size, dtype=bool)
     for tc in change_t:
@@ -151,6 +171,7 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
     events = [json.loads(x) for x in (tmp / "events.jsonl").read_text().splitlines()]
     return {
         "model": str(model),
+        "writes": writes,
         "horizon": horizon,
         "seconds_of_data": seconds,
         "speed": speed,
@@ -162,6 +183,11 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
         "tick_max_ms": float(lat.max()),
         "tick_p99_ms_away_from_state_changes": float(np.percentile(steady, 99)),
         "ticks_near_state_changes": int(behind.sum()),
+        "tick_p99_ms_near_state_changes": float(np.percentile(lat[behind], 99))
+        if behind.any()
+        else None,
+        "state_change_detector_ms": [float(v * 1e3) for v in change_wall],
+        "state_change_detector_cpu_ms": [float(v * 1e3) for v in change_cpu],
         "tick_cpu_median_ms": float(np.median(cpu) * 1e3),
         "tick_cpu_p99_ms": float(np.percentile(np.array(cpu) * 1e3, 99)),
         "alarm_frame_latency_ms": [float(v * 1e3) for v in alarm_latency],
@@ -170,9 +196,47 @@ def run(model: Path, horizon: int, seconds: float, speed: float) -> dict[str, An
         "ticks_over_1ms": int(np.count_nonzero(lat > 1.0)),
         "state_changes": [e["state"] for e in events],
         "dropped": counts["dropped"],
+        "disk_writer": daemon.writer.counts.as_dict(),
+        "black_box_files": len(list((tmp / "blackbox").glob("alarm-*.log"))),
+        "_latency_ms": lat,
+        "_cpu_ms": np.array(cpu) * 1e3,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "rss_after_load_mb": rss_loaded_kb / 1024.0,
     }
+
+
+_SUMMARY = {"tick_p50_ms": ("lat", 50), "tick_p99_ms": ("lat", 99), "tick_max_ms": ("lat", 100),
+            "tick_cpu_median_ms": ("cpu", 50), "tick_cpu_p99_ms": ("cpu", 99)}  # fmt: skip
+
+
+def compare(
+    model: Path, horizon: int, seconds: float, speed: float, modes: list[str], rounds: int
+) -> dict[str, Any]:
+    """``rounds`` daemons per write mode, alternating; latencies pooled per mode."""
+    runs: dict[str, list[dict[str, Any]]] = {m: [] for m in modes}
+    rss_mb = None
+    for _ in range(rounds):
+        for mode in modes:
+            runs[mode].append(run(model, horizon, seconds, speed, mode))
+            rss_mb = rss_mb or runs[mode][-1]["peak_rss_mb"]
+    out: dict[str, Any] = {}
+    for mode, rs in runs.items():
+        pooled = {"lat": np.concatenate([r.pop("_latency_ms") for r in rs]),
+                  "cpu": np.concatenate([r.pop("_cpu_ms") for r in rs])}  # fmt: skip
+        summary = {k: float(np.percentile(pooled[a], q)) for k, (a, q) in _SUMMARY.items()}
+        summary["ticks"] = int(pooled["lat"].size)
+        summary["ticks_over_1ms"] = int(np.count_nonzero(pooled["lat"] > 1.0))
+        for key in ("state_change_detector_ms", "state_change_detector_cpu_ms"):
+            values = [v for r in rs for v in r[key]]
+            summary[key + "_median"] = float(np.median(values)) if values else None
+        out[mode] = {**summary, "rounds": rs}
+    first = modes[0]
+    result = {**out[first]["rounds"][0], **{k: v for k, v in out[first].items() if k != "rounds"}}
+    result.update({"peak_rss_mb": rss_mb, "modes": out, "rounds": rounds})
+    if len(modes) == 2:
+        a, b = modes
+        result[f"ratio_{b}_over_{a}"] = {k: out[b][k] / out[a][k] for k in _SUMMARY}
+    return result
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -181,9 +245,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--horizon", type=int, default=10)
     ap.add_argument("--seconds", type=float, default=600.0)
     ap.add_argument("--speed", type=float, default=5.0)
+    ap.add_argument("--writes", default="thread",
+                    help="thread, inline, or both comma-separated (default thread)")  # fmt: skip
+    ap.add_argument("--rounds", type=int, default=1, help="daemons per write mode (default 1)")
     ap.add_argument("--json", type=Path, required=True)
     args = ap.parse_args(argv)
-    result = run(args.model, args.horizon, args.seconds, args.speed)
+    modes = args.writes.split(",")
+    if not set(modes) <= {"thread", "inline"} or args.rounds < 1:
+        ap.error("--writes takes thread and/or inline; --rounds >= 1")
+    result = compare(args.model, args.horizon, args.seconds, args.speed, modes, args.rounds)
     args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
     return 0
 
