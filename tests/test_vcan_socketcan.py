@@ -190,7 +190,7 @@ def session(tmp_path_factory, model) -> Session:
         first, first_log = s.start("daemon1")
         cfg = load_config(s.config)
         s.offline = detect(load_model(cfg.model), recording_from_candump(plain), cfg.alarm,
-                           cfg.horizon)  # fmt: skip
+                           cfg.horizon, gating=cfg.gating)  # fmt: skip
         s.phases("offline reference (monitor detect) of the fault segment")
         s.ready(first, first_log)
         s.phases("daemon 1 start (with the reference)")
@@ -403,7 +403,7 @@ def recovery(tmp_path_factory, model) -> dict[str, Any]:
     try:
         loaded = load_config(cfg)
         r["offline"] = detect(load_model(loaded.model), recording_from_candump(tmp / "gapped.log"),
-                              loaded.alarm, loaded.horizon)  # fmt: skip
+                              loaded.alarm, loaded.horizon, gating=loaded.gating)  # fmt: skip
         wait_for_text(log, f"monitoring socketcan:{CHANNEL}", daemon, START_S)
         phases("daemon 3 start (with the reference)")
         player = subprocess.Popen(["canplayer", "-I", str(tmp / "before.log")])
