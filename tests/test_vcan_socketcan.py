@@ -298,8 +298,10 @@ def test_sigterm_during_alarm_keeps_every_event_and_a_restart_continues(session)
     assert json.loads(at_stop[-1])["state"] == "fault"
     final = (session.tmp / "events.jsonl").read_text().splitlines()
     assert final[: len(at_stop)] == at_stop and len(final) > len(at_stop)  # appended to
-    after = decode(_between(session, "restart", "hostile"), "MON_Status")
-    assert len(after) >= 2  # the restarted daemon is on the bus
+    # The restarted daemon is on the bus: its heartbeat until the flow sensor stops (the
+    # rest of the fault segment alone can be under 3 s of wall time in the VM).
+    after = decode(_between(session, "restart", "flow_stops"), "MON_Status")
+    assert len(after) >= 2
 
 
 def test_malformed_and_flood_traffic_is_counted_and_survived(session) -> None:
