@@ -23,7 +23,6 @@ dump stalls a tick.
 
 from __future__ import annotations
 
-import functools
 import logging
 import queue
 import threading
@@ -86,7 +85,7 @@ class Daemon:
         self._own_bus = bus is None
         if opener is None:
             extra = self.diag.rx_filters() if self.diag is not None else None
-            opener = functools.partial(open_bus, cfg.bus, self.codec, extra)
+            opener = partial(open_bus, cfg.bus, self.codec, extra)
         backoff = Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s)
         self.reader = BusReader(bus if bus is not None else opener(), cfg.bus.queue_frames,
                                 opener=opener if self._own_bus else None,
@@ -253,11 +252,10 @@ class Daemon:
             self.last_j = tick.j
             if tick.changed:
                 self._state_change(tick)
+            bus_time = self._bus_time(tick.t_s)
             if frames.due(tick.t_s, tick.state, tick.state_changed):
-                bus_time = self._bus_time(tick.t_s)
                 self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
             if self.diag is not None:
-                bus_time = self._bus_time(tick.t_s)
                 named = finding(tick.check, tick.sensor)
                 for msg in self.diag.tick(tick.t_s, bus_time, tick.state, ticker.fault, row, named):
                     self._send(msg)
