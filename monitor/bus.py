@@ -31,7 +31,7 @@ from monitor.bus_recovery import (
 from monitor.codec.frames import FrameCodec
 from monitor.config import BusConfig
 from monitor.errors import BusError
-from monitor.sampler import hydraulic_messages
+from monitor.sampler import ROW_COLUMNS, hydraulic_messages
 
 log = logging.getLogger(__name__)
 
@@ -39,10 +39,13 @@ _ID_MASK_EXT = 0x1FFFFFFF
 _ID_MASK_STD = 0x7FF
 
 
-def sensor_filters(codec: FrameCodec) -> list[dict[str, int | bool]]:
-    """python-can filters passing exactly the DBC's sensor frames (not our own MON_*)."""
+def sensor_filters(
+    codec: FrameCodec, columns: tuple[str, ...] = ROW_COLUMNS
+) -> list[dict[str, int | bool]]:
+    """python-can filters passing exactly the DBC's frames of the row ``columns`` (sensor
+    and command frames, not our own MON_*)."""
     out: list[dict[str, int | bool]] = []
-    for name in sorted(hydraulic_messages(codec)):
+    for name in sorted(hydraulic_messages(codec, columns)):
         info = codec.messages[name]
         mask = _ID_MASK_EXT if info.is_extended_id else _ID_MASK_STD
         out.append({"can_id": info.frame_id, "can_mask": mask, "extended": info.is_extended_id})
@@ -53,6 +56,7 @@ def open_bus(
     cfg: BusConfig,
     codec: FrameCodec | None = None,
     extra_filters: list[dict[str, int | bool]] | None = None,
+    columns: tuple[str, ...] = ROW_COLUMNS,
 ) -> can.BusABC:
     """A thread-safe python-can bus (send and receive from different threads).
 
@@ -71,7 +75,7 @@ def open_bus(
     else:
         kwargs["preserve_timestamps"] = True
     if codec is not None and cfg.kernel_filters:
-        kwargs["can_filters"] = sensor_filters(codec) + list(extra_filters or ())
+        kwargs["can_filters"] = sensor_filters(codec, columns) + list(extra_filters or ())
     kwargs.update(cfg.options)
     try:
         return can.ThreadSafeBus(**kwargs)

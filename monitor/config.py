@@ -7,7 +7,7 @@ Sections: ``dbc`` and ``model`` (input files, relative to the config file's fold
 starts in, so a config shipped inside the installed package never writes into it), and
 ``storage`` (their disk quota and the disk-writer queue).
 ``operating``, ``plausibility`` and ``validity`` (see ``monitor.gating``) say which samples
-the detector judges.
+the detector judges; ``loops`` (optional, ``monitor.loop_config``) lists several loops.
 
 Every problem (unknown key, wrong type, missing input file, impossible value) is one
 ``ConfigError`` naming the file and the key; the CLI turns it into exit 2.
@@ -26,6 +26,7 @@ from monitor.alarm import AlarmConfig
 from monitor.errors import ConfigError
 from monitor.gating import GatingConfig
 from monitor.j1939 import dtc as j1939_dtc
+from monitor.loop_config import LoopConfig, default_loops, parse_loops
 from monitor.opstate import OperatingConfig
 from monitor.plausibility import PlausibilityConfig
 from monitor.resources import resource_path
@@ -149,10 +150,16 @@ class MonitorConfig:
     operating: OperatingConfig = field(default_factory=OperatingConfig)
     plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
     validity: ValidityConfig = field(default_factory=ValidityConfig)
+    loops: tuple[LoopConfig, ...] = ()  # as written in the file; empty: no ``loops`` section
 
     @property
     def gating(self) -> GatingConfig:
         return GatingConfig(self.operating, self.plausibility, self.validity)
+
+    @property
+    def monitored_loops(self) -> tuple[LoopConfig, ...]:
+        """The loops the daemon monitors: ``loops``, or the one ``boom`` loop of ``model``."""
+        return self.loops or default_loops(self.model, self.j1939.source_address)
 
 
 _TOP_KEYS = {
@@ -160,6 +167,7 @@ _TOP_KEYS = {
     "storage",
     "j1939",
     "operating", "plausibility", "validity",
+    "loops",
 }  # fmt: skip
 
 
@@ -373,6 +381,11 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             f"event_log.rotate_mb ({event_log.rotate_mb:g}): the current event log and one "
             "rotated file must fit"
         )
+    j1939 = _checked_section(J1939Config, _J1939, data, "j1939", source)
+    loops: tuple[LoopConfig, ...] = ()
+    if "loops" in data:
+        loops = parse_loops(data["loops"], source, lambda v, k: _path(v, k, base, source),
+                            j1939.source_address)  # fmt: skip
     return MonitorConfig(
         source=source,
         dbc=_path(data["dbc"], "dbc", base, source),
@@ -386,10 +399,11 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
         event_log=event_log,
         black_box=black_box,
         storage=storage,
-        j1939=_checked_section(J1939Config, _J1939, data, "j1939", source),
+        j1939=j1939,
         operating=_checked_section(OperatingConfig, _OPERATING, data, "operating", source),
         plausibility=_checked_section(
             PlausibilityConfig, _PLAUSIBILITY, data, "plausibility", source
         ),
         validity=_checked_section(ValidityConfig, _VALIDITY, data, "validity", source),
+        loops=loops,
     )

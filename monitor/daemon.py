@@ -1,17 +1,20 @@
 """The live monitor: bus -> decoder -> sampler -> ticker -> outputs, on its own threads.
 
 Threads: ``can-reader`` (``BusReader``: bus -> bounded queue, nothing else) and ``detector``
-(everything else, in arrival order: black box, decode, sampler, one tick per 100 Hz row,
-frames, disk jobs).  Nothing runs in a python-can Notifier callback.  The sample clock is
-the frames' own timestamps, so a log replayed onto a bus gives the events ``monitor detect``
-gives for the file.  When no sensor frame is accepted for ``bus.silent_s`` (wall clock) the
-clock runs on by wall time: the rows go stale, the engine speed with them, and the monitor
-is inactive (a machine that is off is not faulty); when frames return, it resumes.
-With ``bus.time_scale`` k the sample clock runs k times slower than the frames' timestamps
-(a log replayed k times slower than real time keeps its own timing).  A bus that fails
-(link down, bus-off) is reopened by the reader with backoff while the detector goes on (its
-silence is such a gap); bus events go to the event log as ``kind: "bus"`` lines
-(monitor/bus_recovery.py), and nothing is sent while the bus is down (counted as tx errors).
+(everything else, in arrival order: black box, decode, sampler, one tick per 100 Hz row and
+loop, frames, disk jobs).  Several loops (``loops:`` in the config, ``monitor.loops``) share
+the reader, the decoder and one sampler row; each ticks its own model on it and sends its
+own MON_Alarm and DM1; MON_Status shows the most pressing loop.  Nothing runs in a
+python-can Notifier callback.  The sample clock is the frames' own timestamps, so a log
+replayed onto a bus gives the events ``monitor detect`` gives for the file.  When no sensor
+frame is accepted for ``bus.silent_s`` (wall clock) the clock runs on by wall time: the rows
+go stale, the engine speed with them, and the monitor is inactive (a machine that is off is
+not faulty); when frames return, it resumes.  With ``bus.time_scale`` k the sample clock runs
+k times slower than the frames' timestamps (a log replayed k times slower than real time
+keeps its own timing).  A bus that fails (link down, bus-off) is reopened by the reader with
+backoff while the detector goes on (its silence is such a gap); bus events go to the event
+log as ``kind: "bus"`` lines (monitor/bus_recovery.py), and nothing is sent while the bus is
+down (counted as tx errors).
 
 ``stop()`` shuts down in order: reader (no new frames), detector (drains the queue, ticks
 the last rows), disk writer (drains its queue: events fsynced, black box and event log
@@ -42,12 +45,12 @@ from monitor.bus_recovery import Backoff, bus_event_record
 from monitor.codec.frames import FrameCodec
 from monitor.config import MonitorConfig, load_config
 from monitor.j1939.dm1 import Diagnostics
-from monitor.model import load_model
+from monitor.loops import Loop, row_layout, worst_state
+from monitor.model import MonitorModel
 from monitor.outputs import AlarmFrames, EventLog
-from monitor.plausibility import finding
 from monitor.sampler import Sampler, hydraulic_messages
 from monitor.storage import Quota
-from monitor.ticker import Ticker, event
+from monitor.ticker import Tick, Ticker
 from monitor.writer import DiskWriter
 
 log = logging.getLogger("monitor")
@@ -69,11 +72,12 @@ class Daemon:
         self.cfg = cfg
         self.on_event = on_event
         self.codec = FrameCodec.from_dbc(cfg.dbc)
-        self._hydraulic = hydraulic_messages(self.codec)
-        self.model = load_model(cfg.model)
-        self.ticker = Ticker(self.model, cfg.alarm, cfg.horizon, gating=cfg.gating)
-        self.sampler = Sampler.for_codec(self.codec)
-        self.frames = AlarmFrames(self.codec, cfg.outputs)
+        self.columns, views = row_layout(cfg, self.codec)
+        self._hydraulic = hydraulic_messages(self.codec, self.columns)
+        self.loops = [
+            Loop(lc, cfg, self.codec, v) for lc, v in zip(cfg.monitored_loops, views, strict=True)
+        ]
+        self.sampler = Sampler.for_codec(self.codec, columns=self.columns)
         # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.writer.
         st = cfg.storage
         self.quota = Quota(st.quota_bytes, cfg.black_box.directory, cfg.event_log.path)
@@ -81,18 +85,16 @@ class Daemon:
         self.writer = DiskWriter(st.writer_queue, st.event_block_s)
         self.black_box = BlackBox(cfg.black_box, cfg.bus.channel, self.writer, self.quota)
         self.writer.start()
-        self.diag = Diagnostics(cfg.j1939, self.model.spec.variables) if cfg.j1939.enabled else None
         self._own_bus = bus is None
         if opener is None:
-            extra = self.diag.rx_filters() if self.diag is not None else None
-            opener = partial(open_bus, cfg.bus, self.codec, extra)
+            extra = Diagnostics.rx_filters() if cfg.j1939.enabled else None
+            opener = partial(open_bus, cfg.bus, self.codec, extra, self.columns)
         backoff = Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s)
         self.reader = BusReader(bus if bus is not None else opener(), cfg.bus.queue_frames,
                                 opener=opener if self._own_bus else None,
                                 backoff=backoff)  # fmt: skip
         self.tx_errors = 0
         self.reloads = 0
-        self.last_j = float("nan")
         self.last_t_s: float | None = None  # sample-clock time of the last row ticked
         self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
         self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
@@ -111,11 +113,12 @@ class Daemon:
     def start(self) -> None:
         self._thread.start()
         self.reader.start()
-        log.info(
-            "monitoring %s:%s, model %s (eps0 %.4g, window %d)",
-            self.cfg.bus.interface, self.cfg.bus.channel, self.cfg.model,
-            self.model.eps0, self.model.window_n,
-        )  # fmt: skip
+        for lp in self.loops:
+            log.info(
+                "monitoring %s:%s, loop %s: model %s (eps0 %.4g, window %d)",
+                self.cfg.bus.interface, self.cfg.bus.channel, lp.name, lp.cfg.model,
+                lp.model.eps0, lp.model.window_n,
+            )  # fmt: skip
 
     def request_reload(self) -> None:
         self._reload.set()
@@ -126,7 +129,29 @@ class Daemon:
 
     @property
     def state(self) -> State:
-        return self.ticker.state
+        """The most pressing loop's state (fault, sensor fault, normal, inactive)."""
+        return worst_state([lp.state for lp in self.loops])
+
+    # The first loop's parts (the only loop's, without ``loops:`` in the config).
+    @property
+    def ticker(self) -> Ticker:
+        return self.loops[0].ticker
+
+    @property
+    def model(self) -> MonitorModel:
+        return self.loops[0].model
+
+    @property
+    def frames(self) -> AlarmFrames:
+        return self.loops[0].frames
+
+    @property
+    def diag(self) -> Diagnostics | None:
+        return self.loops[0].diag
+
+    @property
+    def last_j(self) -> float:
+        return self.loops[0].last_j
 
     @property
     def bus(self) -> can.BusABC:
@@ -150,18 +175,22 @@ class Daemon:
 
     def counts(self) -> dict[str, Any]:
         r = self.reader.counts
+        diag: dict[str, int] = {}
+        for lp in self.loops:  # summed over the loops
+            for k, v in (lp.diag.counts() if lp.diag is not None else {}).items():
+                diag[k] = diag.get(k, 0) + v
         return {
             "received": r.received,
             "dropped": r.dropped,
             "bus_errors": r.bus_errors,
             **self.codec.counts.as_dict(),
             **self.sampler.counts.as_dict(),
-            "ticks": self.ticker.ticks,
-            "alarm_frames": self.frames.sent,
-            "alarm_frames_held_back": self.frames.held_back,
+            "ticks": sum(lp.ticker.ticks for lp in self.loops),
+            "alarm_frames": sum(lp.frames.sent for lp in self.loops),
+            "alarm_frames_held_back": sum(lp.frames.held_back for lp in self.loops),
             "events": self.event_log.written,
             "tx_errors": self.tx_errors,
-            **(self.diag.counts() if self.diag is not None else {}),
+            **diag,
             "error_frames": r.error_frames,
             **self.reader.recovery.as_dict(),
         }
@@ -208,7 +237,8 @@ class Daemon:
         if not self.reader.events.empty():  # a bus event before this frame is logged first
             self._bus_events()
         self.black_box.add(msg)
-        if self.diag is not None and self.diag.request(msg):
+        # A request to all (DA 255) is for every loop's address: no short cut.
+        if sum(lp.diag.request(msg) for lp in self.loops if lp.diag is not None):
             return  # a J1939 request for DM1/DM2: answered at the next tick
         d = self.codec.decode_message(msg)
         if d.rejection is not None:
@@ -244,27 +274,30 @@ class Daemon:
         return (self.sampler.start_time_s or 0.0) + t_s * self._scale
 
     def _tick_rows(self, rows: np.ndarray) -> None:
-        ticker, frames = self.ticker, self.frames
         if len(rows):
             self.last_t_s = float(rows[-1, 0])
         for row in rows:
-            tick = ticker.tick(row)
-            self.last_j = tick.j
-            if tick.changed:
-                self._state_change(tick)
-            bus_time = self._bus_time(tick.t_s)
-            if frames.due(tick.t_s, tick.state, tick.state_changed):
-                self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
-            if self.diag is not None:
-                named = finding(tick.check, tick.sensor)
-                for msg in self.diag.tick(tick.t_s, bus_time, tick.state, ticker.fault, row, named):
-                    self._send(msg)
+            bus_time = self._bus_time(float(row[0]))
+            for lp in self.loops:
+                self._tick_loop(lp, row, bus_time)
 
-    def _state_change(self, tick: Any) -> None:
-        ev = event(tick, self.ticker.fault, self.ticker.eps0, self.sampler.start_time_s)
+    def _tick_loop(self, lp: Loop, row: np.ndarray, bus_time: float) -> None:
+        tick = lp.tick(row)
+        if tick.changed:
+            self._state_change(tick, lp)
+        ticker, frames = lp.ticker, lp.frames
+        if frames.due(tick.t_s, tick.state, tick.state_changed):
+            self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
+        for msg in lp.dm_frames(tick, bus_time, row):
+            self._send(msg)
+
+    def _state_change(self, tick: Tick, lp: Loop | None = None) -> None:
+        lp = lp or self.loops[0]
+        ev = lp.event(tick, self.sampler.start_time_s)
         self._log_event(ev)
         level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
-        log.log(level, "t=%.2f s: %s (J %s, eps0 %.4g%s)", ev["t"], ev["state"],
+        log.log(level, "t=%.2f s: %s%s (J %s, eps0 %.4g%s)", ev["t"],
+                f"{lp.name}: " if lp.tag else "", ev["state"],
                 "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
                 f", fault {ev['fault']}" if ev["fault"] else "")  # fmt: skip
         if tick.op_state or tick.out_of_range or tick.check:  # gating news (monitor.gating)
@@ -272,7 +305,7 @@ class Daemon:
                      ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
                      ev["sensor_check"])  # fmt: skip
         if tick.state is State.FAULT and tick.state_changed:
-            self.black_box.trigger(self._bus_time(tick.t_s), self.ticker.fault)
+            self.black_box.trigger(self._bus_time(tick.t_s), lp.alarm_label())
         if self.on_event is not None:
             self.on_event(ev)
 
@@ -298,16 +331,22 @@ class Daemon:
         self._last_status_mono = now
         r = self.reader.counts
         rejected = self.codec.counts.rejected_total
-        g = self.ticker.gate
+        gates = [lp.ticker.gate for lp in self.loops]  # the operating state is shared
+        oor, check = any(g.oor >= 0 for g in gates), any(g.check != 0 for g in gates)
         rc = self.reader.recovery
         self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
-                                      int(g.op_state), g.oor >= 0, g.check != 0,
+                                      int(gates[0].op_state), oor, check,
                                       rc.bus_down + rc.bus_off + rc.error_passive))  # fmt: skip
 
     def _bus_events(self) -> None:
-        for ev in self.reader.take_events():
-            self._log_event(bus_event_record(ev, self.last_t_s, self.state, self.last_j,
-                                             self.ticker.eps0, self.ticker.fault))  # fmt: skip
+        events = self.reader.take_events()
+        if not events:
+            return
+        state = self.state
+        lp = next(lp for lp in self.loops if lp.state is state)  # the loop the state is of
+        for ev in events:
+            self._log_event(bus_event_record(ev, self.last_t_s, state, lp.last_j,
+                                             lp.ticker.eps0, lp.ticker.fault) | lp.tag)  # fmt: skip
 
     def _log_event(self, ev: dict[str, Any]) -> None:
         """Queue an event-log line for the disk writer (which writes and fsyncs it)."""
@@ -319,8 +358,14 @@ class Daemon:
         """SIGHUP: new config and model, same bus; a bad file keeps the running ones."""
         try:
             cfg = load_config(self.cfg.source)
-            model = load_model(cfg.model)
-            ticker = Ticker(model, cfg.alarm, cfg.horizon, gating=cfg.gating)
+            if _loop_layout(cfg) != _loop_layout(self.cfg):
+                log.warning("loop changes other than their models take effect at the next "
+                            "restart")  # fmt: skip
+                cfg = replace(cfg, loops=self.cfg.loops, model=self.cfg.model)
+            loaded = [
+                Loop.load(lc, cfg, lp.view)
+                for lc, lp in zip(cfg.monitored_loops, self.loops, strict=True)
+            ]
             event_log = (
                 EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
                 if cfg.event_log.path != self.cfg.event_log.path
@@ -342,12 +387,19 @@ class Daemon:
             self.event_log = event_log
         self.black_box.cfg = cfg.black_box
         self.quota.quota_bytes = cfg.storage.quota_bytes
-        self.frames.cfg = cfg.outputs
-        self.cfg, self.model, self.ticker = cfg, model, ticker
+        for lp, lc, (model, ticker) in zip(self.loops, cfg.monitored_loops, loaded, strict=True):
+            lp.swap(model, ticker, cfg)
+            log.info("reloaded %s: loop %s, model %s (eps0 %.4g); the J window starts again",
+                     cfg.source, lp.name, lc.model, model.eps0)  # fmt: skip
+        self.cfg = cfg
         self.reloads += 1
         self.reload_attempts += 1
-        log.info("reloaded %s: model %s (eps0 %.4g); the J window starts again",
-                 cfg.source, cfg.model, model.eps0)  # fmt: skip
+
+
+def _loop_layout(cfg: MonitorConfig) -> list[tuple[Any, ...]]:
+    """What a reload cannot change: each loop's name, signals, alarm message and address."""
+    return [(lc.name, lc.signals, lc.alarm_message, lc.source_address)
+            for lc in cfg.monitored_loops]  # fmt: skip
 
 
 class JournalFormatter(logging.Formatter):

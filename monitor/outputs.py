@@ -20,19 +20,21 @@ ALARM = "MON_Alarm"
 STATUS = "MON_Status"
 
 
-def fault_codes(codec: FrameCodec) -> dict[str, int]:
+def fault_codes(codec: FrameCodec, message: str = ALARM) -> dict[str, int]:
     """Fault name -> MON_Alarm.Fault code, from the DBC's value table."""
-    sig = codec.message(ALARM).dbc_message.get_signal_by_name("Fault")
+    sig = codec.message(message).dbc_message.get_signal_by_name("Fault")
     return {str(name): int(code) for code, name in (sig.choices or {}).items()}
 
 
 class AlarmFrames:
-    """Builds the monitor's frames and decides when MON_Alarm is due."""
+    """Builds the monitor's frames and decides when MON_Alarm is due (``message``: the
+    alarm message of this loop, MON_Alarm's layout; ``monitor.loops``)."""
 
-    def __init__(self, codec: FrameCodec, cfg: OutputConfig) -> None:
+    def __init__(self, codec: FrameCodec, cfg: OutputConfig, message: str = ALARM) -> None:
         self.codec = codec
         self.cfg = cfg
-        self.codes = fault_codes(codec)
+        self.message = message
+        self.codes = fault_codes(codec, message)
         self.alarm_count = 0  # hydraulic alarms raised (wraps at 256 in the frame)
         self.sent = 0
         self.held_back = 0  # state changes delayed by the rate cap
@@ -81,7 +83,7 @@ class AlarmFrames:
             "Threshold": eps0,
             "AlarmCount": self.alarm_count % 16,
         }
-        return self.codec.encode_message(ALARM, values, bus_time_s)
+        return self.codec.encode_message(self.message, values, bus_time_s)
 
     def status(
         self,
