@@ -4,7 +4,8 @@ Each loop has its own model, its own sensor signals on the bus and its own MON_A
 and J1939 address; all share the bus, the clock and the signals a loop does not rename
 (EngineSpeed and OilTemp, typically).  ``signals`` maps a contract name (DESIGN.md: PP, PA,
 PB, QP, SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp, RodPos) to the DBC signal that carries
-it for this loop; a contract name not listed is read from the DBC signal of the same name.
+it for this loop; a contract name not listed is read from the DBC signal of the same name,
+and ``RodPos: null`` says the loop has no rod position (a swing motor).
 
 Without a ``loops`` section the daemon monitors one loop, ``boom``: the top-level ``model``,
 the contract names, MON_Alarm and ``j1939.source_address`` (the behaviour before loops).
@@ -22,6 +23,7 @@ from typing import Any
 
 from monitor.errors import ConfigError
 from monitor.sampler import ROW_COLUMNS
+from monitor.signals import ROD_POS
 
 DEFAULT_LOOP = "boom"
 ALARM_MESSAGE = "MON_Alarm"
@@ -33,11 +35,12 @@ _KEYS = ("name", "model", "signals", "alarm_message", "source_address")
 class LoopConfig:
     name: str
     model: Path
-    signals: dict[str, str] = field(default_factory=dict)  # contract name -> DBC signal
+    signals: dict[str, str | None] = field(default_factory=dict)  # contract -> DBC signal
     alarm_message: str = ALARM_MESSAGE  # this loop's MON_Alarm-layout message in the DBC
     source_address: int = 0xA0  # J1939 address of this loop's DM1/DM2 (one per loop)
 
-    def dbc_signal(self, contract: str) -> str:
+    def dbc_signal(self, contract: str) -> str | None:
+        """The DBC signal carrying ``contract`` for this loop (None: the loop has none)."""
         return self.signals.get(contract, contract)
 
 
@@ -90,11 +93,13 @@ def _loop(
         if contract not in ROW_COLUMNS:
             raise ConfigError(f"{source}: {where}.signals: unknown signal {contract!r}; "
                               f"known: {', '.join(ROW_COLUMNS)}")  # fmt: skip
+        if dbc_name is None and contract == ROD_POS.name:
+            continue  # optional: this loop has no rod position
         if not isinstance(dbc_name, str) or not dbc_name:
             raise ConfigError(f"{source}: {where}.signals.{contract} must be a DBC signal "
                               f"name, got {dbc_name!r}")  # fmt: skip
     targets = [LoopConfig(name, Path(), dict(signals)).dbc_signal(c) for c in ROW_COLUMNS]
-    doubled = sorted({t for t in targets if targets.count(t) > 1})
+    doubled = sorted({t for t in targets if t is not None and targets.count(t) > 1})
     if doubled:
         raise ConfigError(f"{source}: {where}.signals: DBC signal {doubled[0]!r} would carry "
                           "two of the loop's signals")  # fmt: skip

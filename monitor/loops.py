@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,13 +22,16 @@ import numpy as np
 from monitor.alarm import State
 from monitor.codec.frames import FrameCodec
 from monitor.config import MonitorConfig
-from monitor.errors import ConfigError
+from monitor.errors import ConfigError, InputFileError
+from monitor.io.reader import read_recording
+from monitor.io.recording import Recording
 from monitor.j1939.dm1 import Diagnostics
 from monitor.loop_config import LoopConfig
 from monitor.model import MonitorModel, load_model
 from monitor.outputs import AlarmFrames
 from monitor.plausibility import finding
 from monitor.sampler import ROW_COLUMNS
+from monitor.sampler_bulk import recording_from_candump_bulk
 from monitor.signals import ROD_POS
 from monitor.ticker import Tick, Ticker, event
 
@@ -56,6 +60,8 @@ def row_layout(
         where = f"{cfg.source}: loops[{i}]" if cfg.loops else f"{cfg.source}: dbc"
         for contract in ROW_COLUMNS:
             name = lp.dbc_signal(contract)
+            if name is None:
+                continue  # RodPos: null
             if name not in known and (contract in lp.signals or contract != ROD_POS.name):
                 key = f".signals.{contract}" if contract in lp.signals else f" ({contract})"
                 raise ConfigError(f"{where}{key}: no signal {name!r} in {cfg.dbc}")
@@ -134,3 +140,60 @@ class Loop:
             return []
         named = finding(tick.check, tick.sensor)
         return self.diag.tick(tick.t_s, bus_time_s, tick.state, self.ticker.fault, row, named)
+
+
+def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording:
+    """Loop ``name``'s signals of a candump log with several loops' frames, under the
+    contract names, on the daemon's sample clock (which starts at the first frame of any
+    loop, so the rows are the ones the daemon ticks)."""
+    names = [lc.name for lc in cfg.monitored_loops]
+    if name not in names:
+        raise ConfigError(f"{cfg.source}: no loop {name!r}; loops: {', '.join(names)}")
+    if Path(path).suffix.lower() == ".csv":
+        raise InputFileError(f"{path}: a contract CSV holds one loop; --loop reads a candump log")
+    codec = FrameCodec.from_dbc(cfg.dbc)
+    columns, views = row_layout(cfg, codec)
+    wide = recording_from_candump_bulk(path, codec, columns)
+    view = views[names.index(name)]
+    picked = {
+        contract: wide[col]
+        for col, contract in zip(columns, view, strict=True)
+        if not contract.startswith(_OTHER) and wide.has(col)
+    }
+    rod = picked.get(ROD_POS.name)
+    if rod is not None and not np.isfinite(rod).any():
+        del picked[ROD_POS.name]  # as without a rod sensor: the column is left out
+    meta = {**wide.meta, "loop": name}
+    return Recording(t=wide.t, columns=picked, source=f"{path} (loop {name})", meta=meta)
+
+
+def read_loop(path: str | Path, cfg: MonitorConfig, name: str | None) -> Recording:
+    """``monitor detect``/``train`` input: loop ``name`` of a log with several loops, or
+    (``name`` None) the recording itself."""
+    if name is None:
+        return read_recording(path)
+    if not Path(path).is_file():
+        raise InputFileError(f"{path}: no such file")
+    return loop_recording(path, cfg, name)
+
+
+def wide_recording(cfg: MonitorConfig, recordings: dict[str, Recording]) -> Recording:
+    """The inverse of ``loop_recording``: one recording per loop (contract names, one
+    time base) as one recording under the DBC's signal names, for ``write_candump`` with
+    the config's DBC.  A signal several loops share (EngineSpeed, OilTemp) comes from the
+    first loop's recording."""
+    loops = cfg.monitored_loops
+    missing = [lc.name for lc in loops if lc.name not in recordings]
+    if missing:
+        raise ValueError(f"no recording for loop(s) {', '.join(missing)}")
+    first = recordings[loops[0].name]
+    columns: dict[str, np.ndarray] = {}
+    for lc in loops:
+        rec = recordings[lc.name]
+        if len(rec) != len(first) or not np.allclose(rec.t, first.t):
+            raise ValueError(f"loop {lc.name}'s recording is not on the first loop's time base")
+        for contract in ROW_COLUMNS:
+            name = lc.dbc_signal(contract)
+            if name is not None and rec.has(contract) and name not in columns:
+                columns[name] = rec[contract]
+    return Recording(t=first.t, columns=columns, source="+".join(recordings), meta={})

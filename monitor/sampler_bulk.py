@@ -29,7 +29,14 @@ from monitor.codec.bulk import decode_frames
 from monitor.codec.frames import FrameCodec
 from monitor.io.candump_bulk import read_candump_frames
 from monitor.io.recording import Recording
-from monitor.sampler import _EPS_S, Sampler, TimeCounts, hydraulic_messages, no_hydraulic_data
+from monitor.sampler import (
+    _EPS_S,
+    ROW_COLUMNS,
+    Sampler,
+    TimeCounts,
+    hydraulic_messages,
+    no_hydraulic_data,
+)
 from monitor.signals import ROD_POS
 
 
@@ -95,13 +102,16 @@ def _clock(ts, period, max_gap, resync, eps):  # pragma: no cover - numba
     return st_out, order[:n_applied], counts, newest
 
 
-def recording_from_candump_bulk(path: str | Path, codec: FrameCodec | None = None) -> Recording:
+def recording_from_candump_bulk(
+    path: str | Path, codec: FrameCodec | None = None, columns: tuple[str, ...] = ROW_COLUMNS
+) -> Recording:
     """``recording_from_candump`` computed in bulk: same rows, columns, meta and errors."""
     codec = codec or FrameCodec.from_dbc()
-    sampler = Sampler.for_codec(codec)  # its parameters and staleness, not its feed()
+    # Its parameters and staleness, not its feed().
+    sampler = Sampler.for_codec(codec, columns=columns)
     frames = read_candump_frames(path)
     decoded = decode_frames(codec, frames)
-    wanted = hydraulic_messages(codec)
+    wanted = hydraulic_messages(codec, columns)
     hydraulic = [name for name in codec.messages if name in wanted]
     parts = [decoded[name] for name in hydraulic if decoded[name].rows.size]
     counts = codec.counts.as_dict()

@@ -63,9 +63,9 @@ def wait_for_text(log_path: Path, text: str, proc: subprocess.Popen, timeout_s: 
         time.sleep(0.1)
 
 
-def live_config(tmp: Path, **bus: Any) -> MonitorConfig:
-    """The shipped config on a fresh virtual channel, outputs under ``tmp``."""
-    cfg = load_config()
+def live_config(tmp: Path, config: Path | None = None, **bus: Any) -> MonitorConfig:
+    """The shipped config (or ``config``) on a fresh virtual channel, outputs under ``tmp``."""
+    cfg = load_config(config)
     opts = {"interface": "virtual", "channel": f"test-{next(_channels)}",
             "queue_frames": 200_000, "silent_s": 30.0, **bus}  # fmt: skip
     return dataclasses.replace(

@@ -14,7 +14,7 @@ from monitor.alarm import State
 from monitor.config import load_config
 from monitor.detector import Detection, detect
 from monitor.errors import MonitorError
-from monitor.io.reader import read_recording
+from monitor.loops import read_loop
 from monitor.model import load_model
 from monitor.opstate import OpState
 
@@ -36,6 +36,13 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="model file (default: the one config/monitor.yaml names)",
     )
     p.add_argument("--config", type=Path, default=None, help="monitor YAML (default: shipped)")
+    p.add_argument(
+        "--loop",
+        default=None,
+        metavar="NAME",
+        help="diagnose this loop of a candump log with several loops' frames (the config's "
+        "`loops:`; default model: the loop's)",
+    )
     p.add_argument(
         "--horizon",
         type=int,
@@ -62,8 +69,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _lines(det: Detection, j_every_s: float) -> list[dict[str, Any]]:
-    out = [dict(e, event="state") for e in det.events]
+def _lines(det: Detection, j_every_s: float, tag: dict[str, str]) -> list[dict[str, Any]]:
+    out = [dict(e, event="state") | tag for e in det.events]
     if j_every_s > 0:
         t = det.t - det.t[0]
         step = max(1, int(round(j_every_s / 0.01)))
@@ -81,6 +88,7 @@ def _lines(det: Detection, j_every_s: float) -> list[dict[str, Any]]:
                     "threshold": eps0,
                     "fault": None,
                 }
+                | tag
             )
         out.sort(key=lambda e: (e["t"], e["event"] != "state"))
     return out
@@ -93,11 +101,14 @@ def _write_lines(lines: list[dict[str, Any]], fh: TextIO) -> None:
 
 def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
-    model = load_model(args.model or cfg.model)
-    rec = read_recording(args.recording)
+    rec = read_loop(args.recording, cfg, args.loop)
+    tag = {} if args.loop is None else {"loop": args.loop}
+    loop_model = next((lc.model for lc in cfg.monitored_loops if lc.name == args.loop), None)
+    model = load_model(args.model or loop_model or cfg.model)
     horizon = args.horizon or cfg.horizon
     det = detect(model, rec, cfg.alarm, horizon, gating=cfg.gating)
-    lines = _lines(det, args.j_every)
+    det.summary.update(tag)
+    lines = _lines(det, args.j_every, tag)
     try:
         if args.events:
             with args.events.open("w", encoding="utf-8") as fh:

@@ -6,9 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from monitor.config import load_config
 from monitor.dgrnn import PRESETS
 from monitor.errors import MonitorError
-from monitor.io.reader import read_recording
+from monitor.loops import read_loop
 from monitor.model import save_model
 from monitor.threshold import THRESHOLD_RULES, ThresholdRule
 from monitor.training import TrainConfig, train
@@ -77,6 +78,14 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="share of the normal data held out for J0 (default 0.25)",
     )
     p.add_argument(
+        "--loop",
+        default=None,
+        metavar="NAME",
+        help="train on this loop of candump logs with several loops' frames (needs "
+        "--config with `loops:`); the fault signatures still come from the boom simulator",
+    )
+    p.add_argument("--config", type=Path, default=None, help="monitor YAML for --loop")
+    p.add_argument(
         "--isolation",
         choices=("sim", "none"),
         default="sim",
@@ -95,9 +104,10 @@ def run(args: argparse.Namespace) -> int:
         validation_fraction=args.validation_fraction,
         isolation=args.isolation,
     )
+    monitor_cfg = load_config(args.config)
     recordings = []
     for path in args.recordings:
-        rec = read_recording(path)
+        rec = read_loop(path, monitor_cfg, args.loop)
         print(f"read {path}: {len(rec)} samples ({len(rec) / 100:.0f} s)", file=sys.stderr)
         recordings.append(rec)
     model = train(recordings, cfg, progress=lambda msg: print(msg, file=sys.stderr))
