@@ -14,6 +14,7 @@ KEYS = (
     "grnn_speedup_vs_numba_loop",
     "grnn_max_rel_error",
     "tick_p99_ms",
+    "four_loop_tick_p99_ms",
     "detect_realtime_factor",
     "detect_speedup_vs_reference_pipeline",
 )
@@ -50,6 +51,12 @@ def test_values_are_consistent_with_their_parts(quick):
     assert live["ticks"] == pytest.approx(live["seconds_of_data"] * 100, abs=2)
     assert live["tick_p50_ms"] <= live["tick_p99_ms"] <= live["tick_max_ms"]
     assert live["peak_rss_mb"] > 0
+    # Four loops: every row ticked by each of the four, nothing dropped, CPU of four ticks.
+    four = r["four_loop"]
+    assert four["loops"] == 4 and four["dropped"] == 0
+    assert four["ticks"] == pytest.approx(four["seconds_of_data"] * 100, abs=2)
+    assert r["four_loop_tick_p99_ms"] == four["tick_p99_ms"] >= four["tick_p50_ms"]
+    assert four["frames"] > 3.9 * live["frames"] * four["seconds_of_data"] / live["seconds_of_data"]
     assert det["detect_realtime_factor"] == pytest.approx(det["log_s"] / det["detect_s"])
     assert det["alarm"] is True  # the log's fault is found: alarms are part of the timing
     assert det["reference_max_abs_diff_z"] < 1e-6  # the reference did the same work

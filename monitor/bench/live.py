@@ -17,6 +17,11 @@ Timing points, all ``time.perf_counter`` in this process:
 
 CPU per tick is the detector thread's ``time.thread_time`` across ``Ticker.tick``.
 
+``--loops 4`` runs the daemon with four loops (config/excavator4.yaml, every loop on the
+benchmark's model and the same simulated run, so every row costs four full ticks): then a
+tick's latency runs to the last loop's result for the row, and its CPU is the four ticks'
+sum: the per-row budget of a four-loop machine.
+
 ``--writes inline`` runs the event log's fsync and the black-box dumps in the detector thread
 (the path before the disk-writer thread, ``monitor.writer``); ``--writes thread,inline
 --rounds R`` alternates the two, R daemons each, in this one process and reports both and
@@ -43,8 +48,11 @@ import numpy as np
 
 from monitor.bench.data import test_recording
 from monitor.codec.frames import FrameCodec
-from monitor.config import BusConfig, load_config
+from monitor.config import BusConfig, MonitorConfig, load_config
 from monitor.daemon import Daemon
+from monitor.io.recording import Recording
+from monitor.loops import wide_recording
+from monitor.resources import resource_path
 
 START_TIME_S = 1_700_000_000.0
 
@@ -69,78 +77,110 @@ class _TimedBus:
         self._bus.shutdown()
 
 
-def _frames(codec: FrameCodec, rec) -> list[tuple[float, str, dict[str, float]]]:
-    """(time s, message, values) in send order: the three 10 ms frames, oil at 1 Hz."""
+def _frames(codec: FrameCodec, rec: Recording) -> list[tuple[float, str, dict[str, float]]]:
+    """(time s, message, values) in send order: per 10 ms sample, every DBC message whose
+    signals ``rec`` has, at its cycle time (the oil temperature at 1 Hz), in DBC order."""
+    msgs = [
+        (info.name, info.signal_names, max(1, round(info.cycle_time_s / 0.01)))
+        for info in codec.messages.values()
+        if info.cycle_time_s and info.signal_names and all(rec.has(n) for n in info.signal_names)
+    ]
+    cols = {n: rec[n].tolist() for _, names, _ in msgs for n in names}
     plan = []
-    cols = {n: rec[n].tolist() for n in ("PP", "PA", "PB", "QP", "SpoolCmd", "PumpDispCmd",
-                                         "EngineSpeed", "OilTemp")}  # fmt: skip
-    t = rec.t.tolist()
-    for i, ti in enumerate(t):
-        for name in ("HYD_Pressures", "HYD_Flow", "HYD_Commands"):
-            plan.append((ti, name, {s: cols[s][i] for s in codec.messages[name].signal_names}))
-        if i % 100 == 0:
-            plan.append((ti, "HYD_OilTemp", {"OilTemp": cols["OilTemp"][i]}))
+    for i, ti in enumerate(rec.t.tolist()):
+        for name, names, every in msgs:
+            if i % every == 0:
+                plan.append((ti, name, {s: cols[s][i] for s in names}))
     return plan
 
 
-def run(
-    model: Path, horizon: int, seconds: float, speed: float, writes: str = "thread"
-) -> dict[str, Any]:
-    tmp = Path(tempfile.mkdtemp(prefix="monitor-bench-live-"))
-    rec = test_recording(seconds, fault_at_s=0.6 * seconds)
-    base = load_config()
-    channel = f"bench-{time.monotonic_ns()}"
-    cfg = dataclasses.replace(
+def _config(model: Path, horizon: int, loops: int, channel: str, tmp: Path) -> MonitorConfig:
+    base = load_config(resource_path("config", "excavator4.yaml") if loops == 4 else None)
+    base = dataclasses.replace(
+        base, loops=tuple(dataclasses.replace(lc, model=model) for lc in base.loops)
+    )
+    return dataclasses.replace(
         base, model=model, horizon=horizon,
         bus=BusConfig(interface="virtual", channel=channel, queue_frames=200_000),
         event_log=dataclasses.replace(base.event_log, path=tmp / "events.jsonl"),
         black_box=dataclasses.replace(base.black_box, directory=tmp / "blackbox"),
     )  # fmt: skip
+
+
+def run(
+    model: Path,
+    horizon: int,
+    seconds: float,
+    speed: float,
+    writes: str = "thread",
+    loops: int = 1,
+) -> dict[str, Any]:
+    tmp = Path(tempfile.mkdtemp(prefix="monitor-bench-live-"))
+    rec = test_recording(seconds, fault_at_s=0.6 * seconds)
+    rec = Recording(rec.t, {k: v for k, v in rec.columns.items() if k != "RodPos"}, rec.source)
+    channel = f"bench-{time.monotonic_ns()}"
+    cfg = _config(model, horizon, loops, channel, tmp)
+    if cfg.loops:
+        rec = wide_recording(cfg, {lc.name: rec for lc in cfg.loops})
     arrivals: collections.deque[float] = collections.deque()
     bus = can.Bus(interface="virtual", channel=channel)
     daemon = Daemon(cfg, bus=_TimedBus(bus, arrivals))
     daemon.writer.inline = writes == "inline"
     rss_loaded_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    alarm_id = daemon.codec.message("MON_Alarm").frame_id
+    alarm_ids = {daemon.codec.message(lp.cfg.alarm_message).frame_id for lp in daemon.loops}
     latency, cpu, alarm_latency, row_t, change_t = [], [], [], [], []
-    current = {"arrival": 0.0, "changed": False, "stopping": False}
-    frame, tick, send = daemon._frame, daemon.ticker.tick, daemon._send
+    # changed: this loop's tick changed state (its MON_Alarm follows); row_changed: any loop's
+    current = {"arrival": 0.0, "changed": False, "row_changed": False, "stopping": False,
+               "cpu": 0.0}  # fmt: skip
+    frame, send = daemon._frame, daemon._send
+    last = len(daemon.loops) - 1
 
     def timed_frame(msg: can.Message) -> None:
         current["arrival"] = arrivals.popleft()
         frame(msg)
 
-    def timed_tick(row: np.ndarray):
-        c0 = time.thread_time()
-        out = tick(row)
-        if current["stopping"]:  # the last row, ticked at shutdown: no frame completed it
+    def timed(k: int, tick: Any) -> Any:
+        """Loop k's tick; the row's latency and CPU are taken at the last loop's."""
+
+        def timed_tick(row: np.ndarray):
+            c0 = time.thread_time()
+            out = tick(row)
+            if current["stopping"]:  # the last row, ticked at shutdown: no frame completed it
+                return out
+            current["cpu"] += time.thread_time() - c0
+            current["changed"] = out.changed
+            current["row_changed"] = out.changed or (k > 0 and current["row_changed"])
+            if k == last:
+                latency.append(time.perf_counter() - current["arrival"])
+                cpu.append(current["cpu"])
+                current["cpu"] = 0.0
+                row_t.append(out.t_s)
+                if current["row_changed"]:
+                    change_t.append(out.t_s)
             return out
-        latency.append(time.perf_counter() - current["arrival"])
-        cpu.append(time.thread_time() - c0)
-        row_t.append(out.t_s)
-        current["changed"] = out.changed
-        if out.changed:
-            change_t.append(out.t_s)
-        return out
+
+        return timed_tick
 
     def timed_send(msg: can.Message) -> None:
-        if msg.arbitration_id == alarm_id and current["changed"]:
+        if msg.arbitration_id in alarm_ids and current["changed"]:
             alarm_latency.append(time.perf_counter() - current["arrival"])
         send(msg)
 
     state_change = daemon._state_change
     change_wall, change_cpu = [], []
 
-    def timed_state_change(t) -> None:
+    def timed_state_change(t, lp=None) -> None:
         # What a state change costs the detector thread (event log, black box, hook).
         w0, c0 = time.perf_counter(), time.thread_time()
-        state_change(t)
+        state_change(t, lp)
         change_wall.append(time.perf_counter() - w0)
         change_cpu.append(time.thread_time() - c0)
 
-    daemon._frame, daemon.ticker.tick, daemon._send = timed_frame, timed_tick, timed_send
+    for k, lp in enumerate(daemon.loops):
+        lp.ticker.tick = timed(k, lp.ticker.tick)
+    daemon._frame, daemon._send = timed_frame, timed_send
     daemon._state_change = timed_state_change
-    codec = FrameCodec.from_dbc()
+    codec = FrameCodec.from_dbc(cfg.dbc)
     plan = _frames(codec, rec)
     sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
     daemon.start()
@@ -171,6 +211,7 @@ def run(
     events = [json.loads(x) for x in (tmp / "events.jsonl").read_text().splitlines()]
     return {
         "model": str(model),
+        "loops": len(daemon.loops),
         "writes": writes,
         "horizon": horizon,
         "seconds_of_data": seconds,
@@ -210,14 +251,20 @@ _SUMMARY = {"tick_p50_ms": ("lat", 50), "tick_p99_ms": ("lat", 99), "tick_max_ms
 
 
 def compare(
-    model: Path, horizon: int, seconds: float, speed: float, modes: list[str], rounds: int
+    model: Path,
+    horizon: int,
+    seconds: float,
+    speed: float,
+    modes: list[str],
+    rounds: int,
+    loops: int = 1,
 ) -> dict[str, Any]:
     """``rounds`` daemons per write mode, alternating; latencies pooled per mode."""
     runs: dict[str, list[dict[str, Any]]] = {m: [] for m in modes}
     rss_mb = None
     for _ in range(rounds):
         for mode in modes:
-            runs[mode].append(run(model, horizon, seconds, speed, mode))
+            runs[mode].append(run(model, horizon, seconds, speed, mode, loops))
             rss_mb = rss_mb or runs[mode][-1]["peak_rss_mb"]
     out: dict[str, Any] = {}
     for mode, rs in runs.items():
@@ -248,12 +295,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--writes", default="thread",
                     help="thread, inline, or both comma-separated (default thread)")  # fmt: skip
     ap.add_argument("--rounds", type=int, default=1, help="daemons per write mode (default 1)")
+    ap.add_argument("--loops", type=int, default=1, choices=(1, 4),
+                    help="loops in the daemon: 1 or 4 (config/excavator4.yaml)")  # fmt: skip
     ap.add_argument("--json", type=Path, required=True)
     args = ap.parse_args(argv)
     modes = args.writes.split(",")
     if not set(modes) <= {"thread", "inline"} or args.rounds < 1:
         ap.error("--writes takes thread and/or inline; --rounds >= 1")
-    result = compare(args.model, args.horizon, args.seconds, args.speed, modes, args.rounds)
+    result = compare(args.model, args.horizon, args.seconds, args.speed, modes, args.rounds,
+                     args.loops)  # fmt: skip
     args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
     return 0
 

@@ -59,6 +59,7 @@ def markdown(result: dict[str, Any]) -> str:
         ("grnn_speedup_vs_numba_loop", "x", 0),
         ("grnn_max_rel_error", "of std", 9),
         ("tick_p99_ms", "ms", 3),
+        ("four_loop_tick_p99_ms", "ms", 3),
         ("detect_realtime_factor", "x real time", 0),
         ("detect_speedup_vs_reference_pipeline", "x", 0),
     ):
@@ -100,6 +101,8 @@ def markdown(result: dict[str, Any]) -> str:
         + f"; peak RSS {live['peak_rss_mb']:.0f} MB ({live['rss_after_load_mb']:.0f} MB after "
         f"loading); {live['dropped']} frames dropped.",
         "",
+        _four_loops(result["four_loop"]),
+        "",
         f"`monitor detect` ({det['model_summary']['patterns']:,} patterns, p = 1) on a "
         f"{det['log_s']:.0f} s log of {det['log_frames']:,} frames: {det['detect_s']:.2f} s "
         f"in-process ({det['detect_frames_per_s']:,.0f} frames/s, "
@@ -114,3 +117,17 @@ def markdown(result: dict[str, Any]) -> str:
         f"agree to {det['reference_max_abs_diff_z']:.1e} z).",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _four_loops(four: dict[str, Any]) -> str:
+    return (
+        f"Four loops in one daemon (config/excavator4.yaml, each loop on the model above and "
+        f"the same run, {four['seconds_of_data']:.0f} s at {four['speed']:g}x, "
+        f"{four['frames']:,} frames, {four['ticks']:,} rows of four ticks): row latency "
+        f"(frame completing the row to the last loop's result) p50 "
+        f"{four['tick_p50_ms']:.3f} ms, p99 {four['tick_p99_ms']:.3f} ms, max "
+        f"{four['tick_max_ms']:.1f} ms; CPU per row (four ticks) median "
+        f"{four['tick_cpu_median_ms']:.3f} ms, p99 {four['tick_cpu_p99_ms']:.3f} ms, of a "
+        f"10 ms sample period; peak RSS {four['peak_rss_mb']:.0f} MB; {four['dropped']} "
+        "frames dropped."
+    )
