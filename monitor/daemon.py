@@ -388,7 +388,7 @@ class Daemon:
         self.black_box.cfg = cfg.black_box
         self.quota.quota_bytes = cfg.storage.quota_bytes
         for lp, lc, (model, ticker) in zip(self.loops, cfg.monitored_loops, loaded, strict=True):
-            lp.swap(model, ticker, cfg)
+            lp.swap(lc, model, ticker, cfg)
             log.info("reloaded %s: loop %s, model %s (eps0 %.4g); the J window starts again",
                      cfg.source, lp.name, lc.model, model.eps0)  # fmt: skip
         self.cfg = cfg

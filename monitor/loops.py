@@ -114,9 +114,9 @@ class Loop:
         model = load_model(lc.model)
         return model, Ticker(model, cfg.alarm, cfg.horizon, columns=view, gating=cfg.gating)
 
-    def swap(self, model: MonitorModel, ticker: Ticker, cfg: MonitorConfig) -> None:
+    def swap(self, lc: LoopConfig, model: MonitorModel, ticker: Ticker, cfg: MonitorConfig) -> None:
         """A reload: the new model and ticker; frames and DTC history go on."""
-        self.model, self.ticker = model, ticker
+        self.cfg, self.model, self.ticker = lc, model, ticker
         self.frames.cfg = cfg.outputs
 
     @property

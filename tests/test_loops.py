@@ -268,3 +268,57 @@ def test_daemon_without_loops_events_have_no_loop_key(tmp_path) -> None:
         assert [lp.name for lp in daemon.loops] == ["boom"] and daemon.loops[0].tag == {}
     finally:
         daemon.stop()
+
+
+def _two_loops(tmp_path: Path, stick_model: Path, stick_pp: str = "Stick_PP") -> Path:
+    p = tmp_path / "two.yaml"
+    p.write_text(
+        f"dbc: {resource_path('dbc', 'excavator4.dbc')}\nmodel: {MODEL}\n"
+        f"bus: {{interface: virtual, channel: reload-{id(p)}}}\n"
+        f"event_log: {{path: {tmp_path / 'ev.jsonl'}}}\n"
+        f"black_box: {{directory: {tmp_path / 'bb'}}}\n"
+        f"loops:\n  - {{name: boom, model: {MODEL}}}\n"
+        f"  - {{name: stick, model: {stick_model}, alarm_message: MON_Alarm_Stick,\n"
+        f"     signals: {{SpoolCmd: Stick_SpoolCmd, PumpDispCmd: Stick_PumpDispCmd,\n"
+        f"               PP: {stick_pp}, PA: Stick_PA, PB: Stick_PB, QP: Stick_QP}}}}\n"
+    )
+    return p
+
+
+def test_reload_swaps_each_loops_model_and_keeps_the_loop_layout(tmp_path, caplog) -> None:
+    other = tmp_path / "stick.model.npz"
+    other.write_bytes(MODEL.read_bytes())
+    path = _two_loops(tmp_path, MODEL)
+    daemon = Daemon(load_config(path))
+    try:
+        _two_loops(tmp_path, other)  # a new stick model only
+        daemon._do_reload()
+        assert [lp.cfg.model for lp in daemon.loops] == [MODEL, other]
+        assert daemon.reloads == 1
+        _two_loops(tmp_path, MODEL, stick_pp="Bucket_PP")  # a signal moved: needs a restart
+        with caplog.at_level("WARNING", logger="monitor"):
+            daemon._do_reload()
+        assert "take effect at the next restart" in caplog.text
+        assert daemon.loops[1].cfg.signals["PP"] == "Stick_PP"
+        assert daemon.loops[1].cfg.model == other  # the whole loops section kept
+        _two_loops(tmp_path, tmp_path / "gone.npz")  # a bad file keeps what runs
+        daemon._do_reload()
+        assert daemon.reloads == 2 and daemon.loops[1].cfg.model == other
+    finally:
+        daemon.stop()
+
+
+def _request(pgn: int, to: int) -> can.Message:
+    """A J1939 request (PGN 59904 = 0xEA00) from a service tool at 0xF9 (J1939-21)."""
+    return can.Message(arbitration_id=0x18EA0000 | to << 8 | 0xF9, is_extended_id=True,
+                       data=pgn.to_bytes(3, "little"))  # fmt: skip
+
+
+def test_a_request_to_all_reaches_every_loop_one_to_an_address_only_its_loop(tmp_path) -> None:
+    daemon = Daemon(live_config(tmp_path, CONFIG))
+    try:
+        daemon._frame(_request(65227, 0xFF))  # DM2 from everybody
+        daemon._frame(_request(65227, 0xA2))  # DM2 from the bucket loop only
+        assert [lp.diag.requests for lp in daemon.loops] == [1, 1, 2, 1]
+    finally:
+        daemon.stop()
