@@ -397,8 +397,9 @@ class Daemon:
 
 
 def _loop_layout(cfg: MonitorConfig) -> list[tuple[Any, ...]]:
-    """What a reload cannot change: each loop's name, signals, alarm message and address."""
-    return [(lc.name, lc.signals, lc.alarm_message, lc.source_address)
+    """What a reload cannot change: each loop's name, signals, alarm message and address
+    (the single loop's address is ``j1939.source_address``, whose changes wait anyway)."""
+    return [(lc.name, lc.signals, lc.alarm_message, lc.source_address if cfg.loops else None)
             for lc in cfg.monitored_loops]  # fmt: skip
 
 
