@@ -91,6 +91,15 @@ def settle(daemon: Daemon, sent: int, timeout_s: float = 60.0) -> None:
                timeout_s)  # fmt: skip
 
 
+def drain(bus: can.BusABC) -> list[can.Message]:
+    """Every frame waiting on ``bus`` (then shut down)."""
+    frames = []
+    while (m := bus.recv(0)) is not None:
+        frames.append(m)
+    bus.shutdown()
+    return frames
+
+
 def send_all(bus: can.BusABC, msgs: Iterable[can.Message]) -> int:
     n = 0
     for m in msgs:

@@ -15,7 +15,7 @@ from typing import Any
 import can
 import numpy as np
 import pytest
-from live_support import assert_same_events, live_config, settle
+from live_support import assert_same_events, drain, live_config, settle
 
 from monitor.alarm import State
 from monitor.cli import main
@@ -66,12 +66,8 @@ def run(tmp_path_factory, four_log) -> dict[str, Any]:
         settle(daemon, counts.sent)
     finally:
         daemon.stop()
-    frames = []
-    while (m := listener.recv(0)) is not None:
-        frames.append(m)
-    listener.shutdown()
     sender.shutdown()
-    return {"cfg": cfg, "daemon": daemon, "events": events, "frames": frames,
+    return {"cfg": cfg, "daemon": daemon, "events": events, "frames": drain(listener),
             "t0": counts.first_ts}  # fmt: skip
 
 
