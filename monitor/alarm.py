@@ -96,6 +96,14 @@ class Isolator:
             self.sums[regime] += e
             self.counts[regime] += 1.0
 
+    def add_many(self, e: np.ndarray, regimes: np.ndarray) -> None:
+        """``add`` for each row of ``e`` in order (the same sums to the bit: ``np.add.at``
+        adds row by row), without a Python loop: a raise seeds N rows at once."""
+        ok = np.isfinite(e).all(axis=1)
+        r = regimes[ok]
+        np.add.at(self.sums, r, e[ok])
+        self.counts += np.bincount(r, minlength=len(self.counts))
+
     def signature(self) -> np.ndarray:
         """Mean residual per regime and output, flattened; NaN for unseen regimes."""
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -218,8 +226,7 @@ class AlarmMachine:
                 self.fault = "unknown"
                 if self.isolator is not None:
                     self.isolator.reset()
-                    for e, regime in zip(self._ring_e, self._ring_regime, strict=True):
-                        self.isolator.add(e, int(regime))
+                    self.isolator.add_many(self._ring_e, self._ring_regime)
                     self.fault = self.isolator.label()
             else:
                 self.fault = "none"

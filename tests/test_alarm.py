@@ -97,3 +97,20 @@ def test_threshold_rules_by_hand():
     assert ThresholdRule("max", factor=3.0).eps0(j)[1] == pytest.approx(1.2)
     with pytest.raises(ConfigError):
         ThresholdRule("median")
+
+
+def test_isolator_add_many_is_add_row_by_row_to_the_bit() -> None:
+    """A raise seeds the isolation with the window's N residuals at once; the sums must be
+    those of adding them one by one (NaN rows skipped), so decisions do not change."""
+    rng = np.random.default_rng(3)
+    e = rng.normal(size=(1000, 4)) * rng.choice([1e-3, 1.0, 1e3], size=(1000, 1))
+    e[rng.random(1000) < 0.1, rng.integers(0, 4)] = np.nan  # stale rows are skipped
+    regimes = rng.integers(0, 3, size=1000)
+    one = Isolator(("a", "b"), np.eye(2, 12), 4)
+    for row, r in zip(e, regimes, strict=True):
+        one.add(row, int(r))
+    many = Isolator(("a", "b"), np.eye(2, 12), 4)
+    many.add_many(e, regimes)
+    np.testing.assert_array_equal(many.sums, one.sums)
+    np.testing.assert_array_equal(many.counts, one.counts)
+    assert many.counts.sum() == np.isfinite(e).all(axis=1).sum()
