@@ -34,18 +34,18 @@ def lagged():
 
 
 def test_rod_velocity_noise_gain_is_the_hand_derived_one():
-    # Moving average of 5 then (x[i+1] - x[i-1]) / 2 dt: the difference of two averages
-    # one step apart, (x[i+2] + x[i+3] - x[i-2] - x[i-3]) / 5 / 2 dt, taps +-0.1/dt on four
-    # samples, so var = 4 * (0.1 / 0.01 s)^2 = 400 (mm/s)^2 per mm^2 of RodPos noise.
+    # Moving average of 5, then (x[i+5] - x[i-5]) / (10 dt): the difference of two averages
+    # ten samples apart, which share no sample: taps +-0.2 / 0.1 s = +-2 /s on ten samples,
+    # so var = 10 * 2^2 = 40 (mm/s)^2 per mm^2 of RodPos noise.
     assert SAMPLE_PERIOD_S == 0.01
-    assert pytest.approx(400.0) == ROD_VEL_NOISE_GAIN
+    assert pytest.approx(40.0) == ROD_VEL_NOISE_GAIN
     rng = np.random.default_rng(1)
     noise = rng.normal(0.0, 0.5, 200_000)
     v = rod_velocity(smooth_rod(noise))[10:-10]
-    assert np.var(v) == pytest.approx(0.25 * 400.0, rel=0.03)
+    assert np.var(v) == pytest.approx(0.25 * 40.0, rel=0.03)
     # A ramp of 100 mm/s keeps its velocity through the smoothing.
     ramp = 100.0 * np.arange(500) * SAMPLE_PERIOD_S
-    np.testing.assert_allclose(rod_velocity(smooth_rod(ramp))[5:-5], 100.0)
+    np.testing.assert_allclose(rod_velocity(smooth_rod(ramp))[10:-10], 100.0)
 
 
 def test_rod_velocity_is_compared_only_when_rodpos_is_measured(lagged):

@@ -106,8 +106,11 @@ def sense(
         ):
             out[name][rows] = lag(rel, values, delay_s, tau_s)[idx] / unit
         if ROD_VEL in out:
-            # Processed as the measured RodPos is; the rod position sensor is not lagged.
-            out[ROD_VEL][rows] = rod_velocity(smooth_rod(tr.rod_pos_m[idx] * 1e3))
+            # The simulated and the measured rod position filtered alike within the segment
+            # (same edges), so the residual is the filtered difference of the two rods.  The
+            # rod position sensor is not lagged.
+            sim_v = rod_velocity(smooth_rod(tr.rod_pos_m[idx] * 1e3))
+            out[ROD_VEL][rows] = prep.meas[ROD_VEL][rows] + sim_v - rod_velocity(prep.rod_mm[rows])
     return out
 
 
