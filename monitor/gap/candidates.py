@@ -45,13 +45,14 @@ assert set(KNOBS) == set(CATALOGUE)
 
 #: Tolerances an effect trades off against, fitted together with it: the calibration
 #: soaks up what it can of an effect (entrained air looks like larger volumes within
-#: their band, a deadband like a weaker valve), and an effect fitted on top of that
+#: their band, a deadband like a weaker valve, Coulomb friction like more viscous friction
+#: and a weaker valve, both slowing the rod), and an effect fitted on top of that
 #: calibration would be scored against a machine already bent towards it.
 CONFOUNDED: dict[str, tuple[str, ...]] = {
     "entrained_air": ("volumes",),
     "hose_compliance": ("volumes",),
     "valve_deadband": ("valve_gain",),
-    "cylinder_friction": ("viscous_friction",),
+    "cylinder_friction": ("viscous_friction", "valve_gain"),
     "oil_viscosity": ("viscous_friction",),
     "load_variation": ("gravity_load",),
 }
