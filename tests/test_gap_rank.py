@@ -124,3 +124,30 @@ def test_a_fit_with_a_free_tolerance_starts_from_the_calibrated_and_nominal_valu
     assert {1.08, 1.0} <= seen
     assert c.factors["valve_gain"] == pytest.approx(1.0, abs=0.01)
     assert c.effects[0].params["overlap_pct"] == pytest.approx(10.0, abs=0.3)
+
+
+def test_friction_is_fitted_with_the_valve_gain_a_calibration_bent_to_mimic_it():
+    # Coulomb friction slows the rod as more viscous friction and a weaker valve do, so a
+    # calibration without the effect pushes viscous friction up and valve gain down (the
+    # benchmark saw +30 % and -7 % on a 1.2 kN friction).  Fitted from there with viscous
+    # friction alone free, the friction stays far too small; with the valve gain free too,
+    # the fit recovers it and the calibration's valve gain goes back to the machine's.
+    from monitor.gap.calibrate import knobs
+    from monitor.gap.candidates import CONFOUNDED
+    from monitor.gap.diagnose import _Evaluator
+
+    fx = [Effect.make("cylinder_friction", coulomb_n=1200.0, static_n=1500.0)]
+    rec = simulate(make_cycle("boom", 60.0, 5), M, effects=fx, seed=3)
+    prep = prepare(rec, M)
+    segs = make_segments(prep)
+    ev = _Evaluator(prep, segs, M)
+    bent = {"viscous_friction": 1.3, "valve_gain": 0.93}
+    assert CONFOUNDED["cylinder_friction"] == ("viscous_friction", "valve_gain")
+    fits = {}
+    for free_names in (("viscous_friction",), CONFOUNDED["cylinder_friction"]):
+        free = [k for k in knobs() if k.name in free_names]
+        fits[free_names] = fit_candidate(["cylinder_friction"], ev.residual, bent, free, None, 6, 2)
+    alone, both = fits[("viscous_friction",)], fits[CONFOUNDED["cylinder_friction"]]
+    assert both.fit_cost < 0.5 * alone.fit_cost
+    assert both.effects[0].params["coulomb_n"] == pytest.approx(1200.0, rel=0.2)
+    assert both.factors["valve_gain"] == pytest.approx(1.0, abs=0.03)
