@@ -72,7 +72,9 @@ def test_report_keeps_the_contract_keys(deadband_run):
     assert len(rep["ranking"]) == 9
     red = [r["heldout_reduction"] for r in rep["ranking"]]
     assert rep["ranking"][0]["effect"] == "valve_deadband" and red[0] == max(red)
-    assert set(rep["shrink"]["before"]) == set(SIGNALS) == set(rep["shrink"]["after"])
+    # The rod velocity is compared as well (the recording has RodPos).
+    compared = {*SIGNALS, "RodVel"}
+    assert set(rep["shrink"]["before"]) == compared == set(rep["shrink"]["after"])
     for s in SIGNALS:
         assert rep["shrink"]["after"][s] < rep["shrink"]["before"][s]
     assert set(rep["calibrated"]) == {"mass", "gravity_load", "viscous_friction", "valve_gain",

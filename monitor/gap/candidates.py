@@ -1,9 +1,10 @@
 """Which effect: add each catalogue effect in turn, fit it on the calibration part, score it
 on the held-out part, and rank with a penalty for the parameters it adds.
 
-The penalty is a Bayesian information criterion on the held-out residual with the sample
-size corrected for autocorrelation (residuals of a dynamic model are strongly correlated
-at 100 Hz, so the raw sample count would make any extra parameter look free).
+The penalty is a Bayesian information criterion on the held-out gap (plus the noise
+floor) with the sample size corrected for autocorrelation (residuals of a dynamic model
+are strongly correlated at 100 Hz, so the raw sample count would make any extra parameter
+look free).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.gap.calibrate import TOLERANCES
-from monitor.gap.fit import MAX_ITERATIONS, Knob, fit
+from monitor.gap.fit import MAX_ITERATIONS, Knob, default_starts, fit
 from monitor.sim.effects import CATALOGUE, Effect
 
 #: Fitted parameters per effect; the others keep their catalogue defaults (weakly
@@ -44,13 +45,14 @@ assert set(KNOBS) == set(CATALOGUE)
 
 #: Tolerances an effect trades off against, fitted together with it: the calibration
 #: soaks up what it can of an effect (entrained air looks like larger volumes within
-#: their band, a deadband like a weaker valve), and an effect fitted on top of that
+#: their band, a deadband like a weaker valve, Coulomb friction like more viscous friction
+#: and a weaker valve, both slowing the rod), and an effect fitted on top of that
 #: calibration would be scored against a machine already bent towards it.
 CONFOUNDED: dict[str, tuple[str, ...]] = {
     "entrained_air": ("volumes",),
     "hose_compliance": ("volumes",),
     "valve_deadband": ("valve_gain",),
-    "cylinder_friction": ("viscous_friction",),
+    "cylinder_friction": ("viscous_friction", "valve_gain"),
     "oil_viscosity": ("viscous_friction",),
     "load_variation": ("gravity_load",),
 }
@@ -108,9 +110,11 @@ def fit_candidate(
     tolerances: Sequence[Knob] = (),
     starts: Sequence[tuple[dict[str, float], Sequence[Effect]]] | None = None,
     max_iterations: int = MAX_ITERATIONS,
+    local_starts: int = 1,
 ) -> Candidate:
     """Fit the knobs of the effects ``names`` (and the ``tolerances`` knobs, if given,
-    jointly; otherwise at ``factors``).  ``starts`` are (factors, effects) to start from."""
+    jointly; otherwise at ``factors``).  ``starts`` are (factors, effects) to start from;
+    local fits run from the ``local_starts`` best of them."""
     eff_knobs = [Knob(f"{n}.{k.name}", k.low, k.high, k.log) for n in names for k in KNOBS[n]]
     knobs = [*tolerances, *eff_knobs]
 
@@ -123,17 +127,34 @@ def fit_candidate(
         return f, fx
 
     start_points = None
-    if starts is not None:
+    if starts is None and tolerances:
+        # The effect's default starts with the tolerances both where the calibration put
+        # them and at nominal: a calibration that pushed a tolerance to its bound to mimic
+        # the effect would otherwise start every fit in the effect's shadow.
+        start_points = [
+            {
+                **{k.name: (factors.get(k.name, 1.0) if at_cal else 1.0) for k in tolerances},
+                **{k.name: k.value(float(x)) for k, x in zip(eff_knobs, u, strict=True)},
+            }
+            for at_cal in (True, False)
+            for u in default_starts(len(eff_knobs))
+        ]
+    elif starts is not None:
         start_points = []
         for f0, fx0 in starts:
             point = {k.name: f0.get(k.name, 1.0) for k in tolerances}
             point.update({f"{e.name}.{k}": v for e in fx0 for k, v in knob_values(e).items()})
             start_points.append(point)
-    result = fit(lambda v: residual(*split(v)), knobs, start_points, max_iterations)
+    result = fit(lambda v: residual(*split(v)), knobs, start_points, max_iterations, local_starts)
     f, fx = split(result.values)
     return Candidate(fx, f, result.cost)
 
 
-def criterion(mse_total: float, n_eff: float, k: int) -> float:
-    """BIC with the effective sample size: n_eff ln(mse) + k ln(n_eff)."""
-    return n_eff * math.log(max(mse_total, 1e-300)) + k * math.log(n_eff)
+def criterion(gap: float, floor: np.ndarray, n_eff: float, k: int) -> float:
+    """BIC with the effective sample size on the held-out gap plus the noise a perfect
+    simulator leaves: n_eff ln(gap + sum(floor)) + k ln(n_eff).
+
+    The same quantity as the reduction and the bootstrap confidence (the gap above the
+    noise), so the ranking and the confidence cannot favour different effects except by
+    the penalty for parameters."""
+    return n_eff * math.log(max(gap + float(np.sum(floor)), 1e-300)) + k * math.log(n_eff)

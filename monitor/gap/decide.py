@@ -37,10 +37,8 @@ PAIR_GAIN = 0.3
 #: ... and at least this share of the whole gap (a formulation mismatch of the first
 #: effect leaves a small remainder that any second effect can nibble at).
 PAIR_MATERIAL = 0.05
-#: Singles (best first) among which pairs are tried.
+#: Runners-up (by rank) each tried as the best single effect's partner.
 PAIR_POOL = 3
-#: ... each removing at least this share of the gap alone.
-PAIR_MIN_SINGLE = 0.05
 
 
 @dataclass
@@ -62,13 +60,15 @@ def gain_share(before: SegmentSums, after: SegmentSums, idx: np.ndarray, floor: 
 
 
 def pair_plan(singles: list[Candidate], best_sums: SegmentSums, floor: np.ndarray):
-    """Name pairs worth fitting: the best single leaves a gap clearly above the noise, and
-    the pool is the best few singles that each remove something alone."""
-    if within_noise(best_sums, floor):
+    """Name pairs worth fitting when the best single leaves a gap clearly above the noise:
+    the best with each of the next few.  A pair's larger effect is the best single (a pair
+    without it would have to beat it from two weaker ones), and the partner need not remove
+    anything alone: friction under a lever load that the calibration's viscous friction
+    half absorbs does not."""
+    if within_noise(best_sums, floor) or not singles:
         return []
-    pool = [c for c in singles[:PAIR_POOL] if c.heldout_reduction >= PAIR_MIN_SINGLE]
-    names = [c.effects[0].name for c in pool]
-    return [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
+    best = singles[0].effects[0].name
+    return [(best, c.effects[0].name) for c in singles[1 : 1 + PAIR_POOL]]
 
 
 def decide(

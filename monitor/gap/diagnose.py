@@ -42,6 +42,10 @@ CAL_ITERATIONS = 15
 MIN_SEGMENTS = 3
 #: Best single effects refitted together with the tolerances.
 REFINE_TOP = 2
+#: Local fits of an effect fitted with the tolerance it trades off against (from the best
+#: starts, the calibrated and the nominal tolerance among them): friction fitted after a
+#: calibration that pushed viscous friction to its bound ended in a worse local minimum.
+CONFOUNDED_LOCAL_STARTS = 2
 
 Progress = Callable[[str], None]
 
@@ -99,7 +103,7 @@ def _score(c: Candidate, sums: S.SegmentSums, floor: np.ndarray, gap0: float, n_
     c.heldout_mse = sums.mse()
     c.heldout_gap = S.gap(c.heldout_mse, floor)
     c.heldout_reduction = S.reduction(gap0, c.heldout_gap)
-    c.criterion = criterion(float(np.mean(c.heldout_mse)), n_eff, n_params(c.effects))
+    c.criterion = criterion(c.heldout_gap, floor, n_eff, n_params(c.effects))
 
 
 def diagnose(
@@ -153,7 +157,10 @@ def diagnose(
     for i, name in enumerate(effects):
         t0 = time.perf_counter()
         free = [k for k in tol if k.name in CONFOUNDED.get(name, ())]
-        c = scored(fit_candidate([name], fit_ev.residual, base.factors, free))
+        local = CONFOUNDED_LOCAL_STARTS if free else 1
+        c = scored(
+            fit_candidate([name], fit_ev.residual, base.factors, free, None, local_starts=local)
+        )
         singles.append(c)
         say(
             f"[{i + 1}/{len(effects)}] {name}: held-out reduction {c.heldout_reduction:+.2f} "

@@ -2,8 +2,9 @@
 
 Each parameter is mapped to [0, 1] (logarithmically for ranges over a decade or more), so
 one finite-difference step and one trust region suit them all.  A few starting points are
-tried first, and the fit starts from the best: the objectives have local minima (a delay,
-a deadband) that a single local start can miss.
+tried first, and the fit starts from the best (or the best few): the objectives have
+local minima (a delay, a deadband, friction against viscous friction) that a single local
+start can miss.
 """
 
 from __future__ import annotations
@@ -68,8 +69,10 @@ def fit(
     knobs: Sequence[Knob],
     starts: Sequence[dict[str, float]] | None = None,
     max_iterations: int = MAX_ITERATIONS,
+    local_starts: int = 1,
 ) -> FitResult:
-    """Minimise ``sum(residual(values)**2)`` with every knob inside its bounds."""
+    """Minimise ``sum(residual(values)**2)`` with every knob inside its bounds, by local
+    fits from the ``local_starts`` best starting points (the best result kept)."""
     calls = 0
 
     def values_of(u: np.ndarray) -> dict[str, float]:
@@ -85,16 +88,18 @@ def fit(
     else:
         points = [np.array([k.unit(s[k.name]) for k in knobs]) for s in starts]
     costs = [float(np.mean(fun(p) ** 2)) for p in points]
-    u0 = points[int(np.argmin(costs))]
-    res = least_squares(
-        fun,
-        u0,
-        bounds=(np.zeros(len(knobs)), np.ones(len(knobs))),
-        diff_step=DIFF_STEP,
-        max_nfev=max_iterations,
-        xtol=1e-3,
-        ftol=1e-4,
-    )
-    cost = float(np.mean(res.fun**2))
-    best = res.x if cost <= min(costs) else u0
-    return FitResult(values_of(best), min(cost, min(costs)), calls)
+    best_u, best_cost = points[int(np.argmin(costs))], min(costs)
+    for i in np.argsort(costs, kind="stable")[: max(local_starts, 1)]:
+        res = least_squares(
+            fun,
+            points[i],
+            bounds=(np.zeros(len(knobs)), np.ones(len(knobs))),
+            diff_step=DIFF_STEP,
+            max_nfev=max_iterations,
+            xtol=1e-3,
+            ftol=1e-4,
+        )
+        cost = float(np.mean(res.fun**2))
+        if cost < best_cost:
+            best_u, best_cost = res.x, cost
+    return FitResult(values_of(best_u), best_cost, calls)

@@ -13,10 +13,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from monitor.gap.prepare import Prepared
+from monitor.gap.prepare import ROD_VEL, Prepared, rod_velocity, smooth_rod
+from monitor.gap.score import compared
 from monitor.gap.segments import Segment
 from monitor.io.recording import Recording
-from monitor.signals import MEASURED_NAMES
 from monitor.sim.effects import Effect
 from monitor.sim.machine import BAR, LPM, MachineParams
 from monitor.sim.pack import measured_state, pack_params
@@ -90,7 +90,7 @@ def sense(
         if e.name == "sensor_lag":
             delay_s = e.params["delay_ms"] * 1e-3
             tau_s = e.params["time_constant_ms"] * 1e-3
-    out = {n: np.full(len(prep), np.nan) for n in MEASURED_NAMES}
+    out = {n: np.full(len(prep), np.nan) for n in compared(prep)}
     for seg, tr in zip(segments, traces, strict=True):
         rel = tr.t_s - tr.t_s[0]
         n = seg.stop - seg.start + 1
@@ -105,6 +105,12 @@ def sense(
             ("QP", tr.qp_m3_s, LPM),
         ):
             out[name][rows] = lag(rel, values, delay_s, tau_s)[idx] / unit
+        if ROD_VEL in out:
+            # The simulated and the measured rod position filtered alike within the segment
+            # (same edges), so the residual is the filtered difference of the two rods.  The
+            # rod position sensor is not lagged.
+            sim_v = rod_velocity(smooth_rod(tr.rod_pos_m[idx] * 1e3))
+            out[ROD_VEL][rows] = prep.meas[ROD_VEL][rows] + sim_v - rod_velocity(prep.rod_mm[rows])
     return out
 
 

@@ -16,7 +16,7 @@ from monitor.gap import where as W
 from monitor.gap.candidates import KNOBS, Candidate
 from monitor.gap.diagnose import Diagnosis
 from monitor.gap.predict import predict
-from monitor.gap.score import normalised
+from monitor.gap.score import compared, normalised
 from monitor.gap.shrink import shrink_report
 from monitor.signals import MEASURED_NAMES, UNITS
 from monitor.sim.effects import CATALOGUE, Effect
@@ -92,7 +92,12 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
     chosen = diag.chosen
     after = diag.sums[chosen.name] if chosen is not None else diag.nominal
     shrink = shrink_report(
-        diag.nominal, after, diag.boot_idx, diag.floor, _regime_shrink(diag, traces, held_mask)
+        diag.nominal,
+        after,
+        diag.boot_idx,
+        diag.floor,
+        _regime_shrink(diag, traces, held_mask),
+        compared(prep),
     )
     params: dict[str, dict] = {}
     also_params = None
@@ -175,9 +180,9 @@ def summary_text(report: dict) -> str:
         )
     lines.append(f"Confidence: {report['confidence']:.2f}")
     lines += ["", "Held-out NRMSE per signal (before -> after; sensor noise alone):"]
-    for n in MEASURED_NAMES:
+    for n in sh["before"]:
         lines.append(
-            f"  {n:3s} [{UNITS[n]}]  {sh['before'][n]:.4f} -> {sh['after'][n]:.4f}"
+            f"  {n:3s} [{UNITS.get(n, 'mm/s')}]  {sh['before'][n]:.4f} -> {sh['after'][n]:.4f}"
             f"   (noise {sh['noise_floor_nrmse'][n]:.4f})"
         )
     lines += ["", "Tolerances calibrated first:"]

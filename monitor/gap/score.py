@@ -1,9 +1,11 @@
 """Residuals of a simulation against the recording, normalised per signal.
 
-Every signal's residual is divided by the measured signal's standard deviation over the
-recording (NRMSE).  The *gap* of a model is the part of the mean squared normalised
-residual above the sensor noise, summed over the signals: zero for a perfect simulator,
-whatever the noise.  Per-segment sums let the bootstrap resample segments cheaply.
+The compared signals are PP, PA, PB and QP, plus the rod velocity when RodPos is measured
+(``compared``).  Every signal's residual is divided by the measured signal's standard
+deviation over the recording (NRMSE).  The *gap* of a model is the part of the mean
+squared normalised residual above the sensor noise, summed over the signals: zero for a
+perfect simulator, whatever the noise.  Per-segment sums let the bootstrap resample
+segments cheaply.
 """
 
 from __future__ import annotations
@@ -13,25 +15,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.prepare import Prepared
+from monitor.gap.prepare import ROD_VEL, Prepared
 from monitor.gap.segments import Segment
 from monitor.signals import MEASURED_NAMES
 
 
+def compared(prep: Prepared) -> tuple[str, ...]:
+    """The signals a simulation is scored on: the four measured ones first."""
+    return (*MEASURED_NAMES, ROD_VEL) if ROD_VEL in prep.meas else MEASURED_NAMES
+
+
 def normalised(prep: Prepared, pred: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """(simulated - measured) / std(measured) per signal on the grid (NaN where unknown)."""
-    return {n: (pred[n] - prep.meas[n]) / prep.scale[n] for n in MEASURED_NAMES}
+    return {n: (pred[n] - prep.meas[n]) / prep.scale[n] for n in compared(prep)}
 
 
 def noise_floor(prep: Prepared) -> np.ndarray:
     """Mean squared normalised residual a perfect simulator leaves: the sensor noise."""
-    return np.array([prep.noise_var[n] / prep.scale[n] ** 2 for n in MEASURED_NAMES])
+    return np.array([prep.noise_var[n] / prep.scale[n] ** 2 for n in compared(prep)])
 
 
 def stacked(prep: Prepared, segments: Sequence[Segment], pred: dict[str, np.ndarray]) -> np.ndarray:
     """All scored normalised residuals of ``segments`` in one vector (missing -> 0)."""
     r = normalised(prep, pred)
-    parts = [r[n][seg.scored] for seg in segments for n in MEASURED_NAMES]
+    parts = [r[n][seg.scored] for seg in segments for n in r]
     return np.nan_to_num(np.concatenate(parts))
 
 
@@ -50,10 +57,10 @@ def segment_sums(
     prep: Prepared, segments: Sequence[Segment], pred: dict[str, np.ndarray]
 ) -> SegmentSums:
     r = normalised(prep, pred)
-    sq = np.zeros((len(segments), len(MEASURED_NAMES)))
+    sq = np.zeros((len(segments), len(r)))
     count = np.zeros_like(sq)
     for i, seg in enumerate(segments):
-        for j, n in enumerate(MEASURED_NAMES):
+        for j, n in enumerate(r):
             v = r[n][seg.scored]
             ok = np.isfinite(v)
             sq[i, j] = float(np.sum(v[ok] ** 2))
@@ -75,7 +82,7 @@ def effective_n(prep: Prepared, segments: Sequence[Segment], pred: dict[str, np.
     """Sample size corrected for autocorrelation: n (1 - rho) / (1 + rho), rho at lag 1."""
     r = normalised(prep, pred)
     total = 0.0
-    for n in MEASURED_NAMES:
+    for n in r:
         num = den = 0.0
         count = 0
         for seg in segments:

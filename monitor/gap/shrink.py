@@ -52,22 +52,23 @@ def shrink_report(
     idx: np.ndarray,
     floor: np.ndarray,
     regime_rows: Sequence[dict],
+    names: Sequence[str] = MEASURED_NAMES,
 ) -> dict:
-    """The JSON ``shrink`` block: NRMSE per signal before/after, reduction, 90 % intervals."""
+    """The JSON ``shrink`` block: NRMSE per signal before/after, reduction, 90 % intervals.
+
+    ``names`` are the columns of the sums (the compared signals)."""
     m0, m1 = before.mse(), after.mse()
     b0, b1 = np.sqrt(boot_mse(before, idx)), np.sqrt(boot_mse(after, idx))
     red = boot_reduction(before, after, idx, floor)
     return {
-        "before": {n: round(float(np.sqrt(m0[j])), 5) for j, n in enumerate(MEASURED_NAMES)},
-        "after": {n: round(float(np.sqrt(m1[j])), 5) for j, n in enumerate(MEASURED_NAMES)},
+        "before": {n: round(float(np.sqrt(m0[j])), 5) for j, n in enumerate(names)},
+        "after": {n: round(float(np.sqrt(m1[j])), 5) for j, n in enumerate(names)},
         "heldout_reduction": round(1.0 - gap(m1, floor) / gap(m0, floor), 4)
         if gap(m0, floor) > 0
         else 0.0,
-        "before_ci90": {n: _ci(b0[:, j]) for j, n in enumerate(MEASURED_NAMES)},
-        "after_ci90": {n: _ci(b1[:, j]) for j, n in enumerate(MEASURED_NAMES)},
+        "before_ci90": {n: _ci(b0[:, j]) for j, n in enumerate(names)},
+        "after_ci90": {n: _ci(b1[:, j]) for j, n in enumerate(names)},
         "heldout_reduction_ci90": _ci(red),
         "regimes": list(regime_rows),
-        "noise_floor_nrmse": {
-            n: round(float(np.sqrt(floor[j])), 5) for j, n in enumerate(MEASURED_NAMES)
-        },
+        "noise_floor_nrmse": {n: round(float(np.sqrt(floor[j])), 5) for j, n in enumerate(names)},
     }
