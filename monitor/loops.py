@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import can
 import numpy as np
 
 from monitor.alarm import State
@@ -135,7 +136,8 @@ class Loop:
         """The black-box file's label of this loop's alarm."""
         return f"{self.name}-{self.ticker.fault}" if self.tag else self.ticker.fault
 
-    def dm_frames(self, tick: Tick, bus_time_s: float, row: np.ndarray) -> list:
+    def dm_frames(self, tick: Tick, bus_time_s: float, row: np.ndarray) -> list[can.Message]:
+        """This row's DM1/DM2 frames of the loop (none with J1939 off)."""
         if self.diag is None:
             return []
         named = finding(tick.check, tick.sensor)
