@@ -23,7 +23,7 @@ import numpy as np
 from monitor.alarm import State
 from monitor.codec.frames import FrameCodec
 from monitor.config import MonitorConfig
-from monitor.errors import ConfigError, InputFileError
+from monitor.errors import ConfigError, InputFileError, NoHydraulicDataError
 from monitor.io.reader import read_recording
 from monitor.io.recording import Recording
 from monitor.j1939.dm1 import Diagnostics
@@ -162,6 +162,12 @@ def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording
         for col, contract in zip(columns, view, strict=True)
         if not contract.startswith(_OTHER) and wide.has(col)
     }
+    # The signals the loop renames are its own; a log without any of them is not its log.
+    own = [col for col, c in zip(columns, view, strict=True)
+           if not c.startswith(_OTHER) and col != c]  # fmt: skip
+    if own and not any(wide.has(c) and np.isfinite(wide[c]).any() for c in own):
+        raise NoHydraulicDataError(f"{path}: no frame carries loop {name}'s own signals "
+                                   f"({', '.join(own)}) in {cfg.dbc}")  # fmt: skip
     rod = picked.get(ROD_POS.name)
     if rod is not None and not np.isfinite(rod).any():
         del picked[ROD_POS.name]  # as without a rod sensor: the column is left out

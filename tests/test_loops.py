@@ -318,3 +318,11 @@ def test_a_request_to_all_reaches_every_loop_one_to_an_address_only_its_loop(tmp
         assert [lp.diag.requests for lp in daemon.loops] == [1, 1, 2, 1]
     finally:
         daemon.stop()
+
+
+def test_a_log_without_the_loops_frames_is_exit_3_naming_the_loop(capsys) -> None:
+    rc = main(["detect", str(resource_path("replay", "normal.log")), "--config", str(CONFIG),
+               "--loop", "stick"])  # fmt: skip
+    assert rc == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no frame carries loop stick's own signals (Stick_SpoolCmd" in err[0]
