@@ -20,6 +20,7 @@ from monitor.config import BusConfig, MonitorConfig, load_config
 from monitor.daemon import Daemon
 from monitor.detector import Detection
 from monitor.io.recording import Recording
+from monitor.replayer import ReplayCounts, replay_log
 from monitor.resources import resource_path
 from monitor.sampler import ROW_COLUMNS
 from monitor.ticker import Ticker, event
@@ -89,6 +90,37 @@ def settle(daemon: Daemon, sent: int, timeout_s: float = 60.0) -> None:
     wait_until(lambda: daemon.reader.counts.received + 0 >= sent, timeout_s)
     wait_until(lambda: daemon.codec.counts.frames >= sent - daemon.reader.counts.dropped,
                timeout_s)  # fmt: skip
+
+
+def run_daemon(
+    cfg: MonitorConfig, feed: Callable[[can.BusABC, Daemon], Any]
+) -> tuple[Daemon, list[dict[str, Any]], list[can.Message], Any]:
+    """A daemon on ``cfg``'s virtual channel with a sender and a listener beside it:
+    ``feed(sender, daemon)`` puts frames on the bus and waits until they are taken; then
+    the ordered stop.  Returns the daemon, its events, every frame the listener saw (ours
+    and theirs) and what ``feed`` returned."""
+    listener = can.Bus(interface="virtual", channel=cfg.bus.channel)
+    sender = can.Bus(interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True)
+    events: list[dict[str, Any]] = []
+    daemon = Daemon(cfg, on_event=events.append)
+    daemon.start()
+    try:
+        fed = feed(sender, daemon)
+    finally:
+        daemon.stop()  # what SIGTERM does: ordered stop, event log fsynced
+    sender.shutdown()
+    return daemon, events, drain(listener), fed
+
+
+def replay_settled(log: Path) -> Callable[[can.BusABC, Daemon], ReplayCounts]:
+    """A ``run_daemon`` feed: ``log`` as fast as it goes (log time rules), then settle."""
+
+    def feed(sender: can.BusABC, daemon: Daemon) -> ReplayCounts:
+        counts = replay_log(log, sender, speed=None)
+        settle(daemon, counts.sent)
+        return counts
+
+    return feed
 
 
 def drain(bus: can.BusABC) -> list[can.Message]:

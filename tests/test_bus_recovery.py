@@ -23,7 +23,7 @@ from typing import Any
 import can
 import pytest
 from can.interfaces.virtual import VirtualBus
-from live_support import assert_same_events, live_config, send_all, settle, wait_until
+from live_support import assert_same_events, drain, live_config, send_all, settle, wait_until
 
 from monitor.alarm import State
 from monitor.bus import BusReader
@@ -361,10 +361,7 @@ def outage(tmp_path_factory) -> dict[str, Any]:
         alive = daemon.healthy
     finally:
         daemon.stop()
-    mon = []
-    while (m := sender.recv(0)) is not None:
-        mon.append(m)
-    sender.shutdown()
+    mon = drain(sender)
     lines = [json.loads(x) for x in cfg.event_log.path.read_text().splitlines()]
     return {"daemon": daemon, "cfg": cfg, "events": events, "lines": lines, "mon": mon,
             "link": link, "alive": alive, "t0": before[0].timestamp,

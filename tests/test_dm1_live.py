@@ -10,7 +10,7 @@ import can
 import numpy as np
 import pytest
 from j1939_support import DM1_ID, TP_CM_ID, TP_DT_ID, decode_dm, dm_dbc, reassemble
-from live_support import live_config, send_all, wait_until
+from live_support import live_config, run_daemon, send_all, wait_until
 
 from monitor.codec.frames import FrameCodec
 from monitor.daemon import Daemon
@@ -27,23 +27,15 @@ PRESSURES = 0x0CFF1021  # HYD_Pressures: PP, PA, PB
 
 def _run(tmp, feed) -> dict[str, Any]:
     cfg = live_config(tmp)
-    listener = can.Bus(interface="virtual", channel=cfg.bus.channel)
-    sender = can.Bus(interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True)
-    events: list[dict[str, Any]] = []
-    daemon = Daemon(cfg, on_event=events.append)
-    daemon.start()
-    try:
+
+    def fed(sender: can.BusABC, daemon: Daemon) -> float:
         t0, sent, requests = feed(sender)
         wait_until(lambda: daemon.reader.counts.received >= sent)
         # Requests for us are answered, not decoded: the codec sees the other frames.
         wait_until(lambda: daemon.codec.counts.frames >= sent - requests)
-    finally:
-        daemon.stop()
-    frames = []
-    while (m := listener.recv(0)) is not None:
-        frames.append(m)
-    listener.shutdown()
-    sender.shutdown()
+        return t0
+
+    daemon, events, frames, t0 = run_daemon(cfg, fed)
     j1939_frames = [m for m in frames if m.arbitration_id in J1939_IDS]
     return {"cfg": cfg, "daemon": daemon, "t0": t0, "frames": frames, "events": events,
             "groups": reassemble(j1939_frames), "j1939": j1939_frames}  # fmt: skip

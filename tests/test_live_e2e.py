@@ -10,17 +10,15 @@ from typing import Any
 
 import can
 import pytest
-from live_support import assert_same_events, live_config, settle
+from live_support import assert_same_events, live_config, replay_settled, run_daemon
 
 from monitor.cli import main
 from monitor.codec.frames import FrameCodec
 from monitor.config import load_config
-from monitor.daemon import Daemon
 from monitor.detector import detect
 from monitor.io.candump import read_candump
 from monitor.model import load_model
 from monitor.outputs import ALARM, fault_codes
-from monitor.replayer import replay_log
 from monitor.resources import resource_path
 from monitor.sampler import recording_from_candump
 
@@ -32,21 +30,7 @@ ONSET_S = 45.0  # replay/regenerate.sh
 def run(tmp_path_factory) -> dict[str, Any]:
     tmp = tmp_path_factory.mktemp("e2e")
     cfg = live_config(tmp)
-    listener = can.Bus(interface="virtual", channel=cfg.bus.channel)
-    sender = can.Bus(interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True)
-    live_events: list[dict[str, Any]] = []
-    daemon = Daemon(cfg, on_event=live_events.append)
-    daemon.start()
-    try:
-        counts = replay_log(LOG, sender, speed=None)  # as fast as it goes: log time rules
-        settle(daemon, counts.sent)
-    finally:
-        daemon.stop()  # what SIGTERM does: ordered stop, event log fsynced
-    frames = []
-    while (m := listener.recv(0)) is not None:
-        frames.append(m)
-    listener.shutdown()
-    sender.shutdown()
+    daemon, live_events, frames, counts = run_daemon(cfg, replay_settled(LOG))
     return {"cfg": cfg, "daemon": daemon, "counts": counts, "frames": frames,
             "events": live_events}  # fmt: skip
 

@@ -15,7 +15,7 @@ from typing import Any
 import can
 import numpy as np
 import pytest
-from live_support import assert_same_events, drain, live_config, settle
+from live_support import assert_same_events, live_config, replay_settled, run_daemon
 
 from monitor.alarm import State
 from monitor.cli import main
@@ -27,7 +27,6 @@ from monitor.errors import ConfigError
 from monitor.io.candump import write_candump
 from monitor.loops import loop_recording, row_layout, wide_recording, worst_state
 from monitor.model import load_model
-from monitor.replayer import replay_log
 from monitor.resources import resource_path
 from monitor.sampler import ROW_COLUMNS
 from monitor.sampler_bulk import recording_from_candump_bulk
@@ -56,18 +55,8 @@ def four_log(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def run(tmp_path_factory, four_log) -> dict[str, Any]:
     cfg = live_config(tmp_path_factory.mktemp("loops-live"), CONFIG)
-    listener = can.Bus(interface="virtual", channel=cfg.bus.channel)
-    sender = can.Bus(interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True)
-    events: list[dict[str, Any]] = []
-    daemon = Daemon(cfg, on_event=events.append)
-    daemon.start()
-    try:
-        counts = replay_log(four_log, sender, speed=None)
-        settle(daemon, counts.sent)
-    finally:
-        daemon.stop()
-    sender.shutdown()
-    return {"cfg": cfg, "daemon": daemon, "events": events, "frames": drain(listener),
+    daemon, events, frames, counts = run_daemon(cfg, replay_settled(four_log))
+    return {"cfg": cfg, "daemon": daemon, "events": events, "frames": frames,
             "t0": counts.first_ts}  # fmt: skip
 
 
