@@ -78,6 +78,7 @@ class Daemon:
             Loop(lc, cfg, self.codec, v) for lc, v in zip(cfg.monitored_loops, views, strict=True)
         ]
         self.sampler = Sampler.for_codec(self.codec, columns=self.columns)
+        self._diags = [lp.diag for lp in self.loops if lp.diag is not None]  # kept on reload
         # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.writer.
         st = cfg.storage
         self.quota = Quota(st.quota_bytes, cfg.black_box.directory, cfg.event_log.path)
@@ -238,7 +239,7 @@ class Daemon:
             self._bus_events()
         self.black_box.add(msg)
         # A request to all (DA 255) is for every loop's address: no short cut.
-        if sum(lp.diag.request(msg) for lp in self.loops if lp.diag is not None):
+        if self._diags and sum([diag.request(msg) for diag in self._diags]):
             return  # a J1939 request for DM1/DM2: answered at the next tick
         d = self.codec.decode_message(msg)
         if d.rejection is not None:

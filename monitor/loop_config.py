@@ -98,7 +98,7 @@ def _loop(
         if not isinstance(dbc_name, str) or not dbc_name:
             raise ConfigError(f"{source}: {where}.signals.{contract} must be a DBC signal "
                               f"name, got {dbc_name!r}")  # fmt: skip
-    targets = [LoopConfig(name, Path(), dict(signals)).dbc_signal(c) for c in ROW_COLUMNS]
+    targets = [signals.get(c, c) for c in ROW_COLUMNS]
     doubled = sorted({t for t in targets if t is not None and targets.count(t) > 1})
     if doubled:
         raise ConfigError(f"{source}: {where}.signals: DBC signal {doubled[0]!r} would carry "
