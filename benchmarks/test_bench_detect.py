@@ -10,12 +10,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.detector import detect
-from monitor.dgrnn import TickPredictor
-from monitor.model import load_model
+from monitor.detection.offline import detect
+from monitor.model.dgrnn import TickPredictor
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampler import recording_from_candump
-from monitor.sampler_bulk import recording_from_candump_bulk
+from monitor.sampling.bulk import recording_from_candump_bulk
+from monitor.sampling.sampler import recording_from_candump
 
 MODEL = load_model(resource_path("config", "boom_default.model.npz"))
 LOG = resource_path("replay", "spool_wear.log")

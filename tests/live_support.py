@@ -16,14 +16,14 @@ from typing import Any
 import can
 import numpy as np
 
-from monitor.config import BusConfig, MonitorConfig, load_config
-from monitor.daemon import Daemon
-from monitor.detector import Detection
+from monitor.bus.replay import ReplayCounts, replay_log
+from monitor.config.settings import BusConfig, MonitorConfig, load_config
+from monitor.detection.offline import Detection
+from monitor.detection.ticker import Ticker, event
 from monitor.io.recording import Recording
-from monitor.replayer import ReplayCounts, replay_log
+from monitor.live.daemon import Daemon
 from monitor.resources import resource_path
-from monitor.sampler import ROW_COLUMNS
-from monitor.ticker import Ticker, event
+from monitor.sampling.sampler import ROW_COLUMNS
 
 _channels = itertools.count()
 REPO = Path(__file__).resolve().parents[1]

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.alarm import AlarmConfig, AlarmMachine, Isolator, State, classify, regime_of
+from monitor.detection.alarm import AlarmConfig, AlarmMachine, Isolator, State, classify, regime_of
 from monitor.errors import ConfigError
-from monitor.threshold import ThresholdRule
+from monitor.model.threshold import ThresholdRule
 
 CFG = AlarmConfig(
     raise_samples=3, clear_samples=4, clear_ratio=0.5, sensor_recover_samples=2, min_engine_rpm=500

@@ -14,14 +14,14 @@ from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS
 from monitor.codec import FrameCodec
 from monitor.codec.bulk import decode_frames, raw_values
 from monitor.codec.frames import MessageInfo, _message_info
-from monitor.detector import detect
+from monitor.codec.logwrite import write_candump
+from monitor.detection.offline import detect
 from monitor.errors import InputFileError, NoHydraulicDataError
-from monitor.io.candump import write_candump
 from monitor.io.candump_bulk import read_candump_frames
-from monitor.model import load_model
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampler import recording_from_candump
-from monitor.sampler_bulk import recording_from_candump_bulk
+from monitor.sampling.bulk import recording_from_candump_bulk
+from monitor.sampling.sampler import recording_from_candump
 from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine

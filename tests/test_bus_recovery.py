@@ -25,19 +25,19 @@ import pytest
 from can.interfaces.virtual import VirtualBus
 from live_support import assert_same_events, drain, live_config, send_all, settle, wait_until
 
-from monitor.alarm import State
-from monitor.bus import BusReader
-from monitor.bus_recovery import Backoff, error_frame_kind, is_link_error
+from monitor.bus.reader import BusReader
+from monitor.bus.recovery import Backoff, error_frame_kind, is_link_error
 from monitor.codec.frames import FrameCodec
-from monitor.config import load_config
-from monitor.daemon import Daemon
-from monitor.detector import detect
+from monitor.config.settings import load_config
+from monitor.detection.alarm import State
+from monitor.detection.offline import detect
 from monitor.errors import BusError, ConfigError
 from monitor.io.candump import format_line, read_candump
-from monitor.model import load_model
-from monitor.outputs import ALARM, fault_codes
+from monitor.live.daemon import Daemon
+from monitor.live.outputs import ALARM, fault_codes
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampler import recording_from_candump
+from monitor.sampling.sampler import recording_from_candump
 
 
 def enetdown(where: str = "receiving") -> can.CanOperationError:
@@ -54,7 +54,7 @@ def data_frame(n: int) -> can.Message:
     return can.Message(arbitration_id=0x100 + n, is_extended_id=False, data=bytes([n]))
 
 
-# linux/can/error.h, written out here independently of monitor.bus_recovery
+# linux/can/error.h, written out here independently of monitor.bus.recovery
 BUSOFF, RESTARTED, CRTL = 0x040, 0x100, 0x004
 RX_PASSIVE, TX_PASSIVE, ACTIVE, RX_WARNING = 0x10, 0x20, 0x40, 0x04
 

@@ -11,8 +11,9 @@ from naive import crc8_bitwise
 from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS
 
 from monitor.codec import load_dbc
+from monitor.codec.logwrite import write_candump
 from monitor.errors import InputFileError
-from monitor.io.candump import read_candump, write_candump
+from monitor.io.candump import read_candump
 from monitor.io.recording import Recording
 
 needs_real_logs = pytest.mark.skipif(

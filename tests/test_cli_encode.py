@@ -8,7 +8,7 @@ import pytest
 from monitor.cli import main
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
-from monitor.sampler import recording_from_candump
+from monitor.sampling.sampler import recording_from_candump
 from monitor.signals import CSV_COLUMNS, SIGNAL_NAMES
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from monitor.cli import main
 from monitor.io.csvio import read_csv
-from monitor.sampler import recording_from_candump
+from monitor.sampling.sampler import recording_from_candump
 
 
 def test_simulate_csv_has_the_contract_columns_and_rodpos(tmp_path, capsys):

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 
 from monitor.cli import main
-from monitor.detector import detect
+from monitor.detection.offline import detect
 from monitor.errors import InputFileError, ModelFileError
 from monitor.io.csvio import read_csv, write_csv
 from monitor.io.recording import Recording
-from monitor.model import load_model, save_model
+from monitor.model.modelfile import load_model, save_model
 from monitor.resources import resource_path
 from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
-from monitor.training import TrainConfig, train
+from monitor.training.train import TrainConfig, train
 
 MACHINE = load_machine()
 
@@ -177,7 +177,7 @@ def test_shipped_model_on_shipped_logs():
     """The packaged model against the packaged demo logs: no alarm on the normal log, the
     spool-wear log alarms after its onset at 45 s and names the fault."""
     model = load_model(resource_path("config", "boom_default.model.npz"))
-    from monitor.sampler import recording_from_candump
+    from monitor.sampling.sampler import recording_from_candump
 
     normal = detect(model, recording_from_candump(resource_path("replay", "normal.log")))
     assert normal.summary["alarm"] is False
@@ -193,7 +193,7 @@ def test_csv_and_candump_give_the_same_verdict(tmp_path):
     args = ["--duration", "90", "--seed", "9004", "--fault", "spool_wear:0.6@45"]
     assert main(["simulate", *args, "--out", str(csv)]) == 0
     assert main(["simulate", *args, "--out", str(log)]) == 0
-    from monitor.sampler import recording_from_candump
+    from monitor.sampling.sampler import recording_from_candump
 
     a = detect(model, read_csv(csv)).summary
     b = detect(model, recording_from_candump(log)).summary

@@ -6,7 +6,9 @@ import naive
 import numpy as np
 import pytest
 
-from monitor.dgrnn import (
+from monitor.errors import ConfigError, InputFileError
+from monitor.io.recording import Recording
+from monitor.model.dgrnn import (
     DGRNN,
     PRESETS,
     DGRNNSpec,
@@ -16,9 +18,7 @@ from monitor.dgrnn import (
     predict_series,
     predict_tick,
 )
-from monitor.errors import ConfigError, InputFileError
-from monitor.grnn import GRNN
-from monitor.io.recording import Recording
+from monitor.model.grnn import GRNN
 
 SMALL = DGRNNSpec(
     outputs=("y1", "y2"),

@@ -14,13 +14,13 @@ from cantools.j1939 import frame_id_unpack
 from j1939_support import DM1_ID, TP_CM_ID, TP_DT_ID, decode_dm, dm_dbc, pgn_of, reassemble
 from live_support import write_config
 
-from monitor.alarm import State
-from monitor.config import J1939Config, load_config
+from monitor.codec.j1939.dtc import PGN_DM1, PGN_DM2, Dtc, Lamp, dm_payload, lamp_bytes
+from monitor.codec.j1939.transport import frame_id, pgn_frames, requested_pgn
+from monitor.config.settings import J1939Config, load_config
+from monitor.detection.alarm import State
 from monitor.errors import ConfigError
-from monitor.j1939.dm1 import Diagnostics
-from monitor.j1939.dtc import PGN_DM1, PGN_DM2, Dtc, Lamp, dm_payload, lamp_bytes
-from monitor.j1939.transport import frame_id, pgn_frames, requested_pgn
-from monitor.sampler import ROW_COLUMNS
+from monitor.live.dm1 import Diagnostics
+from monitor.sampling.sampler import ROW_COLUMNS
 
 SIGNALS = ("QP", "PP", "PA", "PB")  # the paper preset's model signals
 

@@ -12,13 +12,13 @@ import pytest
 from j1939_support import DM1_ID, TP_CM_ID, TP_DT_ID, decode_dm, dm_dbc, reassemble
 from live_support import live_config, run_daemon, send_all, wait_until
 
+from monitor.bus.replay import replay_log
 from monitor.codec.frames import FrameCodec
-from monitor.daemon import Daemon
+from monitor.codec.j1939.dtc import PGN_DM1, PGN_DM2
+from monitor.codec.j1939.transport import frame_id
 from monitor.io.candump import read_candump
-from monitor.j1939.dtc import PGN_DM1, PGN_DM2
-from monitor.j1939.transport import frame_id
-from monitor.outputs import ALARM
-from monitor.replayer import replay_log
+from monitor.live.daemon import Daemon
+from monitor.live.outputs import ALARM
 from monitor.resources import resource_path
 
 J1939_IDS = {DM1_ID, TP_CM_ID, TP_DT_ID, 0x18FECBA0}

@@ -15,10 +15,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from monitor.alarm import State
 from monitor.cli import main
-from monitor.detector import Detection
-from monitor.evaluation import (
+from monitor.detection.alarm import State
+from monitor.detection.offline import Detection
+from monitor.evaluation.report import ISOLATION_LABELS
+from monitor.evaluation.sim_eval import (
     FAULT_SEED_BASE,
     NORMAL_SEED_BASE,
     EvalConfig,
@@ -29,7 +30,6 @@ from monitor.evaluation import (
     planned_seeds,
     score_run,
 )
-from monitor.evaluation_report import ISOLATION_LABELS
 from monitor.signals import FAULT_NAMES
 
 

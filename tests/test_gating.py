@@ -12,27 +12,27 @@ import numpy as np
 import pytest
 from live_support import live_config, rows_of, settle, tick_recording, write_config
 
+from monitor.bus.replay import replay_log
 from monitor.codec.frames import FrameCodec
-from monitor.config import OutputConfig, load_config
-from monitor.daemon import Daemon
-from monitor.detector import detect, gated_residuals
+from monitor.codec.logwrite import write_candump
+from monitor.config.settings import OutputConfig, load_config
+from monitor.detection.gating import GatingConfig
+from monitor.detection.offline import detect, gated_residuals
+from monitor.detection.opstate import OperatingConfig, OpState, OpStateTracker, op_states
+from monitor.detection.ticker import Ticker
 from monitor.errors import ConfigError
-from monitor.gating import GatingConfig
-from monitor.io.candump import write_candump
 from monitor.io.recording import Recording
-from monitor.model import load_model, save_model
-from monitor.opstate import OperatingConfig, OpState, OpStateTracker, op_states
-from monitor.outputs import AlarmFrames
-from monitor.replayer import replay_log
-from monitor.residual import window_j
+from monitor.live.daemon import Daemon
+from monitor.live.outputs import AlarmFrames
+from monitor.model.envelope import ValidityConfig, envelope_from_patterns
+from monitor.model.modelfile import load_model, save_model
+from monitor.model.residual import window_j
 from monitor.resources import resource_path
-from monitor.sampler import recording_from_candump
+from monitor.sampling.sampler import recording_from_candump
 from monitor.sim.cycles import make_cycle
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
-from monitor.ticker import Ticker
-from monitor.training import TrainConfig, train
-from monitor.validity import ValidityConfig, envelope_from_patterns
+from monitor.training.train import TrainConfig, train
 
 CFG = load_config()
 MACHINE = load_machine()

@@ -9,9 +9,9 @@ import naive
 import numpy as np
 import pytest
 
-from monitor._numba import FASTMATH
 from monitor.errors import ConfigError, InputFileError
-from monitor.grnn import GRNN, cluster, grnn_predict, loo_errors, thin_min_distance
+from monitor.jit import FASTMATH
+from monitor.model.grnn import GRNN, cluster, grnn_predict, loo_errors, thin_min_distance
 
 
 def _data(seed=0, n=300, nf=4, nout=2):

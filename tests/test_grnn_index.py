@@ -1,4 +1,4 @@
-"""The cut-off GRNN (monitor.grnn_index) against exact eq. 4: the error bound and decisions."""
+"""The cut-off GRNN (model.grnn_index) against exact eq. 4: the error bound and decisions."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import naive
 import numpy as np
 import pytest
 
-from monitor.alarm import AlarmConfig, AlarmMachine, State, regime_of
-from monitor.detector import detect, gated_residuals, make_isolator
-from monitor.evaluation import EvalConfig, fault_plan, normal_plan, simulate_run
-from monitor.grnn import GRNN, grnn_predict
-from monitor.grnn_index import build_index, cutoff_for, predict_cutoff
-from monitor.model import load_model
-from monitor.residual import window_j
+from monitor.detection.alarm import AlarmConfig, AlarmMachine, State, regime_of
+from monitor.detection.offline import detect, gated_residuals, make_isolator
+from monitor.evaluation.sim_eval import EvalConfig, fault_plan, normal_plan, simulate_run
+from monitor.model.grnn import GRNN, grnn_predict
+from monitor.model.grnn_index import build_index, cutoff_for, predict_cutoff
+from monitor.model.modelfile import load_model
+from monitor.model.residual import window_j
 from monitor.resources import resource_path
 
 

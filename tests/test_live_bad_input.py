@@ -11,11 +11,11 @@ import can
 import pytest
 from live_support import live_config, send_all, settle, wait_until
 
-from monitor.alarm import State
 from monitor.codec.frames import FrameCodec
-from monitor.daemon import Daemon
+from monitor.detection.alarm import State
 from monitor.io.candump import read_candump
-from monitor.model import load_model
+from monitor.live.daemon import Daemon
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
 
 WINDOW_S = load_model(resource_path("config", "boom_default.model.npz")).window_n / 100.0

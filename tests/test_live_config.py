@@ -12,7 +12,7 @@ import pytest
 from live_support import REPO, write_config
 
 from monitor.cli import main
-from monitor.config import load_config
+from monitor.config.settings import load_config
 from monitor.errors import ConfigError
 from monitor.resources import resource_path
 

@@ -14,13 +14,13 @@ from live_support import assert_same_events, live_config, replay_settled, run_da
 
 from monitor.cli import main
 from monitor.codec.frames import FrameCodec
-from monitor.config import load_config
-from monitor.detector import detect
+from monitor.config.settings import load_config
+from monitor.detection.offline import detect
 from monitor.io.candump import read_candump
-from monitor.model import load_model
-from monitor.outputs import ALARM, fault_codes
+from monitor.live.outputs import ALARM, fault_codes
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampler import recording_from_candump
+from monitor.sampling.sampler import recording_from_candump
 
 LOG = resource_path("replay", "spool_wear.log")
 ONSET_S = 45.0  # replay/regenerate.sh

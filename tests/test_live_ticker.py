@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 from live_support import assert_same_events, tick_recording
 
-from monitor.config import load_config
-from monitor.detector import detect
+from monitor.config.settings import load_config
+from monitor.detection.offline import detect
+from monitor.detection.ticker import Ticker
 from monitor.io.recording import Recording
-from monitor.model import load_model
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.ring import RowRing
-from monitor.sampler import recording_from_candump
-from monitor.ticker import Ticker
+from monitor.sampling.ring import RowRing
+from monitor.sampling.sampler import recording_from_candump
 
 CFG = load_config()
 

@@ -17,19 +17,19 @@ import numpy as np
 import pytest
 from live_support import assert_same_events, live_config, replay_settled, run_daemon
 
-from monitor.alarm import State
 from monitor.cli import main
 from monitor.codec.frames import FrameCodec
-from monitor.config import load_config
-from monitor.daemon import Daemon
-from monitor.detector import detect
+from monitor.codec.logwrite import write_candump
+from monitor.config.settings import load_config
+from monitor.detection.alarm import State
+from monitor.detection.offline import detect
 from monitor.errors import ConfigError
-from monitor.io.candump import write_candump
-from monitor.loops import loop_recording, row_layout, wide_recording, worst_state
-from monitor.model import load_model
+from monitor.live.daemon import Daemon
+from monitor.live.loops import loop_recording, row_layout, wide_recording, worst_state
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampler import ROW_COLUMNS
-from monitor.sampler_bulk import recording_from_candump_bulk
+from monitor.sampling.bulk import recording_from_candump_bulk
+from monitor.sampling.sampler import ROW_COLUMNS
 
 CONFIG = resource_path("config", "excavator4.yaml")
 ONSET_S = 45.0

@@ -8,18 +8,24 @@ import numpy as np
 import pytest
 from live_support import tick_recording
 
-from monitor.config import load_config
-from monitor.detector import detect
-from monitor.gating import GatingConfig
+from monitor.config.settings import load_config
+from monitor.detection.gating import GatingConfig
+from monitor.detection.offline import detect
+from monitor.detection.plausibility import (
+    COLUMNS,
+    DBC_RANGES,
+    Plausibility,
+    PlausibilityConfig,
+    finding,
+)
+from monitor.detection.ticker import Ticker
 from monitor.io.recording import Recording
-from monitor.model import load_model
-from monitor.plausibility import COLUMNS, DBC_RANGES, Plausibility, PlausibilityConfig, finding
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampler import recording_from_candump
+from monitor.sampling.sampler import recording_from_candump
 from monitor.sim.cycles import make_cycle
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
-from monitor.ticker import Ticker
 
 CFG = load_config()
 MACHINE = load_machine()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from monitor.errors import ConfigError, InputFileError
-from monitor.residual import WindowJ, residuals, squared_residual, window_j
+from monitor.model.residual import WindowJ, residuals, squared_residual, window_j
 
 
 def test_residual_sign_is_prediction_minus_measurement():

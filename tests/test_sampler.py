@@ -10,11 +10,11 @@ import pytest
 from shared_data import GOOD_LOGS, REAL_LOGS
 
 from monitor.codec import FrameCodec
+from monitor.codec.logwrite import write_candump
 from monitor.errors import InputFileError, NoHydraulicDataError
-from monitor.io.candump import write_candump
 from monitor.io.csvio import read_csv, write_csv
 from monitor.io.recording import Recording
-from monitor.sampler import ROW_COLUMNS, Sampler, recording_from_candump
+from monitor.sampling.sampler import ROW_COLUMNS, Sampler, recording_from_candump
 from monitor.signals import SIGNAL_NAMES
 
 # DBC resolution per signal: half a quantisation step is the largest round-trip error

@@ -11,7 +11,7 @@ import time
 import pytest
 from live_support import start_daemon, wait_for_text, write_config
 
-from monitor.sdnotify import Notifier
+from monitor.live.sdnotify import Notifier
 
 pytestmark = pytest.mark.skipif(not hasattr(socket, "AF_UNIX"), reason="unix sockets")
 

@@ -16,14 +16,14 @@ import can
 import pytest
 from live_support import live_config, send_all, settle, write_config
 
-from monitor.blackbox import BlackBox
-from monitor.config import BlackBoxConfig, load_config
-from monitor.daemon import Daemon
+from monitor.config.settings import BlackBoxConfig, load_config
 from monitor.errors import ConfigError
-from monitor.eventlog import EventLog
 from monitor.io.candump import read_candump
+from monitor.live.blackbox import BlackBox
+from monitor.live.daemon import Daemon
+from monitor.live.eventlog import EventLog
+from monitor.live.storage import Quota, rotated_logs
 from monitor.resources import resource_path
-from monitor.storage import Quota, rotated_logs
 
 T0 = 1_700_000_000.0
 DT = 1 / 64  # exact in binary, so window edges are exact comparisons

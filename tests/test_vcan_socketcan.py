@@ -47,12 +47,12 @@ from vcan_support import (
     vcan_missing,
 )
 
-from monitor.config import load_config
-from monitor.detector import detect
+from monitor.config.settings import load_config
+from monitor.detection.offline import detect
 from monitor.io.candump import format_line
-from monitor.model import load_model
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampler import recording_from_candump
+from monitor.sampling.sampler import recording_from_candump
 
 pytestmark = [pytest.mark.vcan, pytest.mark.skipif(vcan_missing() is not None,
                                                    reason=str(vcan_missing()))]  # fmt: skip

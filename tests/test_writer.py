@@ -10,10 +10,10 @@ from pathlib import Path
 import can
 import pytest
 
-from monitor.blackbox import BATCH_FRAMES, BlackBox
-from monitor.config import BlackBoxConfig
+from monitor.config.settings import BlackBoxConfig
 from monitor.io.candump import read_candump
-from monitor.writer import DiskWriter
+from monitor.live.blackbox import BATCH_FRAMES, BlackBox
+from monitor.live.writer import DiskWriter
 
 T0 = 1_700_000_000.0
 DT = 1 / 64  # exact in binary: the window edges are exact comparisons

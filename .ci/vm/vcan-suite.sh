@@ -20,11 +20,11 @@ PYTHON="$py" bash tests/vcan_model.sh "$work/vcan.model.npz" >"$work/train.log" 
 import sys
 from pathlib import Path
 
-from monitor.detector import detect
-from monitor.model import load_model
+from monitor.detection.offline import detect
+from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampler import recording_from_candump
-from monitor.ticker import Ticker
+from monitor.sampling.sampler import recording_from_candump
+from monitor.detection.ticker import Ticker
 
 model = load_model(Path(sys.argv[1]))
 Ticker(model)  # the daemon's per-tick kernel

@@ -15,17 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.dgrnn import DGRNN, DGRNNSpec, Normalizer, table
-from monitor.grnn import GRNN
-from monitor.io.candump import write_candump
+from monitor.codec.logwrite import write_candump
 from monitor.io.recording import Recording
-from monitor.model import MonitorModel, load_model, save_model
-from monitor.residual import window_j
+from monitor.model.dgrnn import DGRNN, DGRNNSpec, Normalizer, table
+from monitor.model.grnn import GRNN
+from monitor.model.modelfile import MonitorModel, load_model, save_model
+from monitor.model.residual import window_j
 from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
-from monitor.training import (
+from monitor.training.train import (
     TrainConfig,
     normal_residuals,
     simulated_signatures,

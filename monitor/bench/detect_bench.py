@@ -28,10 +28,10 @@ import can
 import cantools
 import numpy as np
 
-from monitor.config import load_config
-from monitor.detector import detect
-from monitor.io.reader import read_recording
-from monitor.model import MonitorModel, load_model
+from monitor.config.settings import load_config
+from monitor.detection.offline import detect
+from monitor.model.modelfile import MonitorModel, load_model
+from monitor.sampling.read import read_recording
 
 Progress = Callable[[str], None]
 

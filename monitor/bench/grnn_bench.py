@@ -2,7 +2,7 @@
 
 Three GRNNs on the same patterns, targets and sigma (eq. 11 ``paper`` preset: 8 inputs):
 
-* ``cutoff``: the detector's kernel (``monitor.grnn_index``, kd-tree and cut-off);
+* ``cutoff``: the detector's kernel (``monitor.model.grnn_index``, kd-tree and cut-off);
 * ``plain``: the same kernel on a one-leaf index with no cut-off, i.e. the brute-force
   numba loop (every pattern, one exp each) that the detector used before;
 * ``pygrnn``: pyGRNN's ``predict`` (scikit-learn's RBF kernel + numpy), one query per call
@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from monitor._numba import jit
 from monitor.bench.data import Sizes, paper_grnn, test_recording, training_runs
-from monitor.dgrnn import TickPredictor, build_training_pairs, table
-from monitor.grnn_index import cutoff_row
+from monitor.jit import jit
+from monitor.model.dgrnn import TickPredictor, build_training_pairs, table
+from monitor.model.grnn_index import cutoff_row
 
 Progress = Callable[[str], None]
 

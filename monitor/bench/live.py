@@ -23,7 +23,7 @@ tick's latency runs to the last loop's result for the row, and its CPU is the fo
 sum: the per-row budget of a four-loop machine.
 
 ``--writes inline`` runs the event log's fsync and the black-box dumps in the detector thread
-(the path before the disk-writer thread, ``monitor.writer``); ``--writes thread,inline
+(the path before the disk-writer thread, ``monitor.live.writer``); ``--writes thread,inline
 --rounds R`` alternates the two, R daemons each, in this one process and reports both and
 their ratios (the top-level keys are the first mode's; peak memory is taken after the first
 daemon, so it is one daemon's).
@@ -48,10 +48,10 @@ import numpy as np
 
 from monitor.bench.data import test_recording
 from monitor.codec.frames import FrameCodec
-from monitor.config import BusConfig, MonitorConfig, load_config
-from monitor.daemon import Daemon
+from monitor.config.settings import BusConfig, MonitorConfig, load_config
 from monitor.io.recording import Recording
-from monitor.loops import wide_recording
+from monitor.live.daemon import Daemon
+from monitor.live.loops import wide_recording
 from monitor.resources import resource_path
 
 START_TIME_S = 1_700_000_000.0

@@ -84,7 +84,7 @@ def _live(model: Path, seconds: float, speed: float, tmp: Path, loops: int) -> d
 
 def run(args: argparse.Namespace) -> int:
     from monitor.bench import data, detect_bench, grnn_bench, report
-    from monitor.model import load_model
+    from monitor.model.modelfile import load_model
 
     sizes = data.QUICK if args.quick else data.FULL
     work = args.work_dir or Path(tempfile.gettempdir()) / "monitor-bench"

@@ -22,11 +22,11 @@ from typing import Any
 
 import can
 
+from monitor.bus.replay import ReplayCounts, replay_log
 from monitor.codec.frames import FrameCodec
-from monitor.config import BusConfig, load_config
-from monitor.daemon import Daemon
-from monitor.outputs import ALARM, fault_codes
-from monitor.replayer import ReplayCounts, replay_log
+from monitor.config.settings import BusConfig, load_config
+from monitor.live.daemon import Daemon
+from monitor.live.outputs import ALARM, fault_codes
 from monitor.resources import resource_path
 
 DEMO_LOG = "spool_wear.log"

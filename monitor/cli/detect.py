@@ -10,13 +10,13 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from monitor.alarm import State
-from monitor.config import load_config
-from monitor.detector import Detection, detect
+from monitor.config.settings import load_config
+from monitor.detection.alarm import State
+from monitor.detection.offline import Detection, detect
+from monitor.detection.opstate import OpState
 from monitor.errors import MonitorError
-from monitor.loops import read_loop
-from monitor.model import load_model
-from monitor.opstate import OpState
+from monitor.live.loops import read_loop
+from monitor.model.modelfile import load_model
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         if args.summary:
             args.summary.write_text(json.dumps(det.summary, indent=2) + "\n", encoding="utf-8")
         if args.plot:
-            from monitor.plot import plot_detection
+            from monitor.detection.plot import plot_detection
 
             plot_detection(rec, det, model.spec.outputs, args.plot)
     except OSError as exc:

@@ -6,8 +6,9 @@ import argparse
 from pathlib import Path
 
 from monitor.codec.frames import FrameCodec
+from monitor.codec.logwrite import write_candump
 from monitor.errors import ConfigError
-from monitor.io.candump import DEFAULT_START_TIME_S, write_candump
+from monitor.io.candump import DEFAULT_START_TIME_S
 from monitor.io.csvio import read_csv
 
 _DESCRIPTION = """\

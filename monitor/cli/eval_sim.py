@@ -9,10 +9,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from monitor.config import load_config
-from monitor.dgrnn import PRESETS
+from monitor.config.settings import load_config
 from monitor.errors import ConfigError
-from monitor.evaluation import (
+from monitor.evaluation.report import aggregate, markdown
+from monitor.evaluation.sim_eval import (
     DEFAULT_SEVERITIES,
     ONSETS,
     EvalConfig,
@@ -23,8 +23,8 @@ from monitor.evaluation import (
     run_all,
     train_presets,
 )
-from monitor.evaluation_report import aggregate, markdown
-from monitor.model import load_model
+from monitor.model.dgrnn import PRESETS
+from monitor.model.modelfile import load_model
 
 _DESCRIPTION = """\
 Train DGRNN models afresh on normal simulated boom cycles (--presets, default

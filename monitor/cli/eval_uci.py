@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from monitor.errors import ConfigError
-from monitor.threshold import THRESHOLD_RULES, ThresholdRule
-from monitor.uci import DETECTION_KEYS, UCI_PRESETS, WINDOWS, evaluate
+from monitor.evaluation.uci import DETECTION_KEYS, UCI_PRESETS, WINDOWS, evaluate
+from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule
 
 _DESCRIPTION = """\
 Fit a DGRNN on the healthy cycles of a ZeMA hydraulic-rig folder (UCI "Condition

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from monitor.errors import ConfigError, MonitorError
-from monitor.io.reader import read_recording
+from monitor.sampling.read import read_recording
 from monitor.sim.machine import load_machine
 
 _EPILOG = """\

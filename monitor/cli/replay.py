@@ -7,10 +7,10 @@ import sys
 import time
 from pathlib import Path
 
-from monitor.bus import open_bus
-from monitor.config import BusConfig
+from monitor.bus.reader import open_bus
+from monitor.bus.replay import replay_log
+from monitor.config.settings import BusConfig
 from monitor.errors import ConfigError
-from monitor.replayer import replay_log
 
 
 def _speed(text: str) -> float:

@@ -14,9 +14,9 @@ import time
 from pathlib import Path
 from types import FrameType
 
-from monitor.config import load_config
-from monitor.daemon import Daemon, setup_logging
-from monitor.sdnotify import Notifier
+from monitor.config.settings import load_config
+from monitor.live.daemon import Daemon, setup_logging
+from monitor.live.sdnotify import Notifier
 
 log = logging.getLogger("monitor")
 

@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
             write_csv(args.out, rec)
             what = f"{len(rec)} rows"
         else:
-            from monitor.io.candump import write_candump
+            from monitor.codec.logwrite import write_candump
 
             counts = write_candump(args.out, rec)
             what = f"{sum(counts.values())} frames"

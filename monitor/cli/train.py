@@ -6,13 +6,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from monitor.config import load_config
-from monitor.dgrnn import PRESETS
+from monitor.config.settings import load_config
 from monitor.errors import MonitorError
-from monitor.loops import read_loop
-from monitor.model import save_model
-from monitor.threshold import THRESHOLD_RULES, ThresholdRule
-from monitor.training import TrainConfig, train
+from monitor.live.loops import read_loop
+from monitor.model.dgrnn import PRESETS
+from monitor.model.modelfile import save_model
+from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule
+from monitor.training.train import TrainConfig, train
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:

@@ -25,9 +25,9 @@ import can
 import numpy as np
 from can.io.canutils import CAN_ERR_BUSERROR, CAN_ERR_FLAG, CanutilsLogReader
 
-from monitor._numba import jit
 from monitor.errors import InputFileError
 from monitor.io.candump import _LINE
+from monitor.jit import jit
 
 _HEX = np.full(256, -1, dtype=np.int16)
 for _i, _c in enumerate(b"0123456789abcdef"):

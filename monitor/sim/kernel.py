@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from monitor._numba import jit
+from monitor.jit import jit
 
 # --- parameter vector layout -------------------------------------------------------------
 BETA, V_LINE, V0A, V0B, AA, AB, STROKE = 0, 1, 2, 3, 4, 5, 6

@@ -1,0 +1,274 @@
+"""The bus side: opening a python-can bus for the monitor, and the receive thread.
+
+The receive thread does one thing: move frames from the bus into a bounded queue, counting
+them (and when the bus fails, open it again: monitor/bus_recovery.py).  Decoding, sampling
+and detection run on the daemon's own thread, so a slow tick can never block reception; if
+that thread falls behind long enough for the queue to fill, the newest frames are dropped
+and counted (the sampler then sees stale data, a sensor fault), never lost silently.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+
+from monitor.bus.recovery import (
+    BUS_OFF,
+    DOWN,
+    UP,
+    Backoff,
+    BusEvent,
+    RecoveryCounts,
+    error_frame_kind,
+    is_link_error,
+)
+from monitor.errors import BusError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """The CAN bus: any python-can interface (``socketcan`` on the controller, ``virtual``
+    in tests and the demo)."""
+
+    interface: str = "socketcan"
+    channel: str = "can0"
+    bitrate: int = 500_000
+    queue_frames: int = 20_000  # bounded receive buffer (~5 s of a full 500 kbit/s bus)
+    kernel_filters: bool = True  # only the DBC's sensor IDs reach user space
+    silent_s: float = 0.5  # no frame this long (wall clock): the sample clock runs on, stale
+    # Bus seconds per sample-clock second: 4 when a log is replayed 4x slower than real time
+    # onto the bus (a slow test bench or emulator); event times then read in log seconds.
+    time_scale: float = 1.0
+    # Extra keyword arguments for can.Bus (e.g. fd, receive_own_messages); scalars only.
+    options: dict[str, Any] = field(default_factory=dict)
+    # A bus that fails (link down, bus-off) is reopened after a delay that starts here and
+    # doubles per failed attempt up to reopen_max_s (monitor/bus/recovery.py).
+    reopen_initial_s: float = 0.1
+    reopen_max_s: float = 10.0
+
+
+
+def open_bus(cfg: BusConfig, can_filters: list[dict[str, int | bool]] | None = None) -> can.BusABC:
+    """A thread-safe python-can bus (send and receive from different threads).
+
+    With ``can_filters`` and ``cfg.kernel_filters`` only those IDs are received (in the
+    kernel on socketcan): the daemon passes the DBC's sensor IDs plus J1939 requests.  On the
+    ``virtual`` interface the sender's timestamps are kept, so a log replayed at any speed
+    keeps its own clock, as it does from a file.
+    Controller error frames (bus-off, error-passive) reach the reader on socketcan:
+    python-can sets CAN_RAW_ERR_FILTER to every error class unless the option
+    ``ignore_rx_error_frames`` is given, and CAN_RAW_FILTER (the ID filters) does not
+    apply to them (checked on vcan0 in the CI VM).
+    """
+    kwargs: dict[str, object] = {"interface": cfg.interface, "channel": cfg.channel}
+    if cfg.interface != "virtual":
+        kwargs["bitrate"] = cfg.bitrate
+    else:
+        kwargs["preserve_timestamps"] = True
+    if can_filters is not None and cfg.kernel_filters:
+        kwargs["can_filters"] = list(can_filters)
+    kwargs.update(cfg.options)
+    try:
+        return can.ThreadSafeBus(**kwargs)
+    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
+        raise BusError(
+            f"cannot open CAN bus {cfg.interface}:{cfg.channel}: {exc}"
+            + (
+                " (is the interface up? `ip link set can0 up type can bitrate 500000`)"
+                if cfg.interface == "socketcan"
+                else ""
+            )
+        ) from None
+
+
+@dataclass
+class ReaderCounts:
+    received: int = 0  # frames taken off the bus
+    dropped: int = 0  # frames lost because the queue was full
+    bus_errors: int = 0  # exceptions from recv (the thread keeps going)
+    error_frames: int = 0  # CAN error frames reported by the controller
+
+
+class BusReader:
+    """Receive thread: bus -> bounded queue of ``can.Message``; reopens a failed bus.
+
+    With ``opener`` (a function that opens the bus again) a link failure or bus-off closes
+    the bus and opens a new one after a backoff delay (monitor/bus_recovery.py); without
+    one (a bus the caller owns) the same bus is tried again after the delay.  The thread
+    never ends on a bus error; it ends on ``stop``.  Bus events (down, up, bus-off,
+    error-passive) wait in ``events`` for the detector thread, which logs them.
+    ``sleep`` (returns True when stopping) and ``clock`` are injectable for tests.
+    """
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        queue_frames: int,
+        poll_s: float = 0.05,
+        opener: Callable[[], can.BusABC] | None = None,
+        backoff: Backoff | None = None,
+        sleep: Callable[[float], bool] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.bus = bus
+        self.queue: queue.Queue[can.Message] = queue.Queue(maxsize=queue_frames)
+        self.counts = ReaderCounts()
+        self.recovery = RecoveryCounts()
+        self.link = UP  # UP, DOWN or BUS_OFF
+        self.error_passive = False
+        self.events: queue.SimpleQueue[BusEvent] = queue.SimpleQueue()
+        self.poll_s = poll_s
+        self.opener = opener
+        self.backoff = backoff or Backoff(0.1, 10.0)
+        self._stop = threading.Event()
+        self._sleep = sleep or self._stop.wait
+        self._clock = clock
+        self._reports: queue.SimpleQueue[str] = queue.SimpleQueue()  # from the sender
+        self._down_since = 0.0
+        self._proven = True  # a data frame came through since the last reopen
+        self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
+        self._last_drop_log = 0.0
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    @property
+    def bus_up(self) -> bool:
+        """Whether sending can work: the bus is neither down nor bus-off."""
+        return self.link == UP
+
+    def report_send_error(self, exc: BaseException) -> None:
+        """From the sending thread: a send failed.  A link error (ENETDOWN, ENODEV) may be
+        the only report of the link going down, so the reader treats it as its own."""
+        if is_link_error(exc):
+            self._reports.put(f"send: {exc}")
+
+    def take_events(self) -> list[BusEvent]:
+        out = []
+        while True:
+            try:
+                out.append(self.events.get_nowait())
+            except queue.Empty:
+                return out
+
+    def _run(self) -> None:
+        counts, put = self.counts, self.queue.put_nowait
+        while not self._stop.is_set():
+            try:
+                report = self._reports.get_nowait()
+            except queue.Empty:
+                pass
+            else:
+                self._fail(DOWN, report)
+                continue
+            try:
+                msg = self.bus.recv(timeout=self.poll_s)
+            except (can.CanError, OSError, ValueError) as exc:
+                counts.bus_errors += 1
+                self._fail(DOWN, f"receive: {exc}")
+                continue
+            if msg is None:
+                if self.link == DOWN:  # the reopened bus works (bus-off needs more)
+                    self._up("receive works again")
+                continue
+            counts.received += 1
+            try:
+                put(msg)
+            except queue.Full:
+                counts.dropped += 1
+                now = time.monotonic()
+                if now - self._last_drop_log > 5.0:  # a flood must not flood the journal too
+                    self._last_drop_log = now
+                    log.warning("receive queue full: %d frames dropped so far", counts.dropped)
+            if msg.is_error_frame:
+                counts.error_frames += 1
+                self._error_frame(msg)
+            else:
+                if self.link != UP:
+                    self._up("frames again")
+                if not self._proven:  # the reopened bus carries traffic: next failure
+                    self._proven = True  # starts again from the initial delay
+                    self.backoff.reset()
+
+    def _error_frame(self, msg: can.Message) -> None:
+        kind = error_frame_kind(msg)
+        if kind == "bus_off":
+            self._fail(BUS_OFF, "controller bus-off (error frame)")
+        elif kind == "restarted":
+            self.error_passive = False  # a restart clears the error counters
+            if self.link == BUS_OFF:
+                self._up("controller restarted")
+        elif kind == "error_passive" and not self.error_passive:
+            self.error_passive = True
+            self.recovery.error_passive += 1
+            self._event("error_passive", f"controller error-passive (status 0x{msg.data[1]:02X})")
+            log.warning("CAN controller error-passive (status 0x%02X)", msg.data[1])
+        elif kind == "error_active" and self.error_passive:
+            self.error_passive = False
+            self._event("error_active", "controller back to error-active")
+            log.info("CAN controller back to error-active")
+
+    def _event(self, kind: str, detail: str, down_s: float | None = None) -> None:
+        self.events.put(BusEvent(kind, detail, time.time(), self.recovery.reopens, down_s))
+
+    def _fail(self, kind: str, detail: str) -> None:
+        """The bus failed (``kind`` DOWN or BUS_OFF): log it once, then reopen it."""
+        if self.link == UP:
+            if kind == DOWN:
+                self.recovery.bus_down += 1
+            else:
+                self.recovery.bus_off += 1
+            self._down_since = self._clock()
+            self._event(kind, detail)
+        else:  # the reopened bus failed before it worked: one more failed attempt
+            self.recovery.reopen_failures += 1
+        self.link = kind
+        self._reopen(detail)
+
+    def _reopen(self, detail: str) -> None:
+        while True:
+            delay = self.backoff.next()
+            self.recovery.reopen_attempts += 1
+            log.warning("CAN bus %s (%s); reopening in %.3g s",
+                        "off" if self.link == BUS_OFF else "down", detail, delay)  # fmt: skip
+            if self._sleep(delay) or self.opener is None:
+                return  # stopping, or a bus we cannot reopen: try it again as it is
+            try:
+                self.bus.shutdown()
+            except (can.CanError, OSError) as exc:
+                log.debug("closing the failed bus: %s", exc)
+            try:
+                self.bus = self.opener()
+            except (can.CanError, OSError, ValueError) as exc:  # BusError is an OSError
+                self.recovery.reopen_failures += 1
+                detail = f"open: {exc}"
+                continue
+            self.recovery.reopens += 1
+            self._proven = False
+            log.info("CAN bus reopened (%d reopens so far)", self.recovery.reopens)
+            return
+
+    def _up(self, detail: str) -> None:
+        down_s = self._clock() - self._down_since
+        self.link = UP
+        self._event("up", detail, down_s)
+        log.info("CAN bus up again after %.1f s (%s; %d reopens so far)", down_s, detail,
+                 self.recovery.reopens)  # fmt: skip

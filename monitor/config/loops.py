@@ -1,0 +1,114 @@
+"""The ``loops:`` section: several hydraulic loops (boom, stick, bucket, swing) in one daemon.
+
+Each loop has its own model, its own sensor signals on the bus and its own MON_Alarm frame
+and J1939 address; all share the bus, the clock and the signals a loop does not rename
+(EngineSpeed and OilTemp, typically).  ``signals`` maps a contract name (DESIGN.md: PP, PA,
+PB, QP, SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp, RodPos) to the DBC signal that carries
+it for this loop; a contract name not listed is read from the DBC signal of the same name,
+and ``RodPos: null`` says the loop has no rod position (a swing motor).
+
+Without a ``loops`` section the daemon monitors one loop, ``boom``: the top-level ``model``,
+the contract names, MON_Alarm and ``j1939.source_address`` (the behaviour before loops).
+Checks against the DBC (do the signals and messages exist) happen where the DBC is loaded
+(``monitor.live.loops``); here only the section's own shape is checked.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from monitor.errors import ConfigError
+from monitor.sampling.sampler import ROW_COLUMNS
+from monitor.signals import ROD_POS
+
+DEFAULT_LOOP = "boom"
+ALARM_MESSAGE = "MON_Alarm"
+_NAME = re.compile(r"^[a-z][a-z0-9_]{0,31}$")  # goes into file names and event lines
+_KEYS = ("name", "model", "signals", "alarm_message", "source_address")
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    name: str
+    model: Path
+    signals: dict[str, str | None] = field(default_factory=dict)  # contract -> DBC signal
+    alarm_message: str = ALARM_MESSAGE  # this loop's MON_Alarm-layout message in the DBC
+    source_address: int = 0xA0  # J1939 address of this loop's DM1/DM2 (one per loop)
+
+    def dbc_signal(self, contract: str) -> str | None:
+        """The DBC signal carrying ``contract`` for this loop (None: the loop has none)."""
+        return self.signals.get(contract, contract)
+
+
+def default_loops(model: Path, source_address: int) -> tuple[LoopConfig, ...]:
+    """The single loop of a config without ``loops``."""
+    return (LoopConfig(DEFAULT_LOOP, model, source_address=source_address),)
+
+
+def parse_loops(
+    raw: Any, source: Path, path_of: Callable[[Any, str], Path], first_address: int
+) -> tuple[LoopConfig, ...]:
+    """The ``loops`` list; ``path_of(value, key)`` resolves and checks a model path, and
+    loop i's default J1939 address is ``first_address + i``."""
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(f"{source}: loops must be a non-empty list of loops")
+    loops = [_loop(item, i, source, path_of, first_address + i) for i, item in enumerate(raw)]
+    for key in ("name", "alarm_message", "source_address"):
+        seen: dict[Any, int] = {}
+        for i, lp in enumerate(loops):
+            value = getattr(lp, key)
+            if value in seen:
+                raise ConfigError(f"{source}: loops[{i}].{key} {value!r} is also loops"
+                                  f"[{seen[value]}]'s; each loop needs its own")  # fmt: skip
+            seen[value] = i
+    return tuple(loops)
+
+
+def _loop(
+    item: Any, i: int, source: Path, path_of: Callable[[Any, str], Path], address: int
+) -> LoopConfig:
+    where = f"loops[{i}]"
+    if not isinstance(item, dict):
+        raise ConfigError(f"{source}: {where} must be a mapping with name and model")
+    unknown = set(item) - set(_KEYS)
+    if unknown:
+        raise ConfigError(f"{source}: unknown key {where}.{sorted(map(str, unknown))[0]}; "
+                          f"known: {', '.join(_KEYS)}")  # fmt: skip
+    for key in ("name", "model"):
+        if key not in item:
+            raise ConfigError(f"{source}: {where} misses key {key!r}")
+    name = item["name"]
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ConfigError(f"{source}: {where}.name must be lower case letters, digits and _ "
+                          f"(starting with a letter, at most 32), got {name!r}")  # fmt: skip
+    signals = item.get("signals") or {}
+    if not isinstance(signals, dict):
+        raise ConfigError(f"{source}: {where}.signals must be a mapping of contract names to "
+                          "DBC signal names")  # fmt: skip
+    for contract, dbc_name in signals.items():
+        if contract not in ROW_COLUMNS:
+            raise ConfigError(f"{source}: {where}.signals: unknown signal {contract!r}; "
+                              f"known: {', '.join(ROW_COLUMNS)}")  # fmt: skip
+        if dbc_name is None and contract == ROD_POS.name:
+            continue  # optional: this loop has no rod position
+        if not isinstance(dbc_name, str) or not dbc_name:
+            raise ConfigError(f"{source}: {where}.signals.{contract} must be a DBC signal "
+                              f"name, got {dbc_name!r}")  # fmt: skip
+    targets = [signals.get(c, c) for c in ROW_COLUMNS]
+    doubled = sorted({t for t in targets if t is not None and targets.count(t) > 1})
+    if doubled:
+        raise ConfigError(f"{source}: {where}.signals: DBC signal {doubled[0]!r} would carry "
+                          "two of the loop's signals")  # fmt: skip
+    alarm = item.get("alarm_message", ALARM_MESSAGE)
+    if not isinstance(alarm, str) or not alarm:
+        raise ConfigError(f"{source}: {where}.alarm_message must be a DBC message name, "
+                          f"got {alarm!r}")  # fmt: skip
+    sa = item.get("source_address", address)
+    if isinstance(sa, bool) or not isinstance(sa, int) or not 0 <= sa <= 253:
+        raise ConfigError(f"{source}: {where}.source_address must be a whole number 0..253, "
+                          f"got {sa!r}")  # fmt: skip
+    return LoopConfig(name, path_of(item["model"], f"{where}.model"), dict(signals), alarm, sa)

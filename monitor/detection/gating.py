@@ -1,0 +1,139 @@
+"""Which samples the detector may judge: operating state, sensor plausibility, model validity.
+
+One ``Gate`` per detector run holds the three parts (``monitor.detection.opstate``,
+``detection.plausibility``, ``model.envelope``) and gives, per sample, the operating state,
+the active sensor finding and the out-of-range signal, either for a whole recording
+(``series``, ``monitor detect``) or one row at a time (``step``, the daemon's ticker) with
+the same numbers.  A sample is *gated* (no prediction is seeded from it and its residual
+does not feed J) when the machine is not in normal operation, a model input is missing, a
+sensor finding is active, or (with ``validity.gate``) an operating signal is out of range.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from monitor.detection.opstate import OperatingConfig, OpState, OpStateTracker, op_states
+from monitor.detection.plausibility import COLUMNS, Plausibility, PlausibilityConfig, finding
+from monitor.io.recording import Recording
+from monitor.model.envelope import Validity, ValidityConfig, model_envelope
+from monitor.model.modelfile import MonitorModel
+
+
+@dataclass(frozen=True)
+class GatingConfig:
+    """The ``operating``, ``plausibility`` and ``validity`` sections together."""
+
+    operating: OperatingConfig = field(default_factory=OperatingConfig)
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
+    validity: ValidityConfig = field(default_factory=ValidityConfig)
+
+
+@dataclass
+class GateSeries:
+    """Per sample: ``op_state`` (OpState), ``check``/``sensor`` (plausibility finding code
+    and column, 0/-1 for none), ``oor`` (index into ``Validity.signals`` of the signal out
+    of the trained range in normal operation, -1 for none)."""
+
+    op_state: np.ndarray
+    check: np.ndarray
+    sensor: np.ndarray
+    oor: np.ndarray
+
+
+def status_keys(op_state: int, oor_signal: str | None, check: int, sensor: int) -> dict[str, Any]:
+    """The event-log keys this module adds (shared by ``monitor detect`` and the daemon)."""
+    name, check_name = finding(check, sensor)
+    return {
+        "op_state": OpState(op_state).label,
+        "out_of_range": oor_signal is not None,
+        "out_of_range_signal": oor_signal,
+        "sensor": name,
+        "sensor_check": check_name,
+    }
+
+
+class Gate:
+    def __init__(
+        self,
+        model: MonitorModel,
+        min_engine_rpm: float,
+        cfg: GatingConfig | None = None,
+        columns: tuple[str, ...] | None = None,
+    ) -> None:
+        cfg = cfg or GatingConfig()
+        self.cfg = cfg
+        self.min_engine_rpm = float(min_engine_rpm)
+        self.tracker = OpStateTracker(min_engine_rpm, cfg.operating)
+        self.plausibility = Plausibility(cfg.plausibility, min_engine_rpm)
+        self.validity = Validity(model_envelope(model), cfg.validity)
+        self.gate_oor = cfg.validity.gate
+        # Live rows: [t, *columns] copied into a (1, width + 1) buffer whose last entry is
+        # NaN, so a signal the rows lack reads as missing without a branch per tick.
+        if columns is not None:
+            width = 1 + len(columns)
+            pos = {name: 1 + k for k, name in enumerate(columns)}
+            self._ext = np.full((1, width + 1), np.nan)
+            self._ext_row = self._ext[0]
+            self._ext_head = self._ext[0, :width]
+            self._plaus_idx = np.array([pos.get(n, width) for n in COLUMNS], dtype=np.int64)
+            self._val_idx = tuple(pos.get(n, width) for n in self.validity.signals)
+            self._engine = pos.get("EngineSpeed", width)
+            self._oil = pos.get("OilTemp", width)
+        self.op_state = OpState.NORMAL
+        self.check = 0
+        self.sensor = -1
+        self.oor = -1
+
+    # -- offline --------------------------------------------------------------------------
+
+    def series(self, rec: Recording) -> GateSeries:
+        n = len(rec)
+
+        def col(name: str) -> np.ndarray:
+            return rec[name] if rec.has(name) else np.full(n, np.nan)
+
+        ops = op_states(col("EngineSpeed"), col("OilTemp"), self.min_engine_rpm,
+                        self.cfg.operating)  # fmt: skip
+        check, sensor = self.plausibility.series(np.column_stack([col(c) for c in COLUMNS]))
+        oor = self.validity.series(self.validity_values(rec))
+        oor[ops != OpState.NORMAL] = -1
+        return GateSeries(ops, check, sensor, oor)
+
+    def validity_values(self, rec: Recording) -> np.ndarray:
+        n = len(rec)
+        cols = [rec[s] if rec.has(s) else np.full(n, np.nan) for s in self.validity.signals]
+        return np.column_stack(cols) if cols else np.empty((n, 0))
+
+    def gated(self, g: GateSeries, inputs_ok: np.ndarray) -> np.ndarray:
+        """Samples that neither seed a prediction nor feed J."""
+        mask = (g.op_state != OpState.NORMAL) | ~inputs_ok | (g.check != 0)
+        if self.gate_oor:
+            mask |= g.oor >= 0
+        return mask
+
+    # -- live -----------------------------------------------------------------------------
+
+    def step(self, row: np.ndarray) -> None:
+        """One row ``[t, *columns]``: sets ``op_state``, ``check``/``sensor`` and ``oor``."""
+        ext = self._ext_row
+        np.copyto(self._ext_head, row)
+        op = self.tracker.step(float(ext[self._engine]), float(ext[self._oil]))
+        self.check = self.plausibility.step(self._ext, self._plaus_idx)
+        self.sensor = self.plausibility.signal
+        self.oor = self.validity.check(ext, self._val_idx) if op is OpState.NORMAL else -1
+        self.op_state = op
+
+    def gated_now(self, inputs_ok: bool) -> bool:
+        return (
+            self.op_state is not OpState.NORMAL
+            or not inputs_ok
+            or self.check != 0
+            or (self.gate_oor and self.oor >= 0)
+        )
+
+    def oor_name(self, oor: int) -> str | None:
+        return self.validity.signals[oor] if oor >= 0 else None

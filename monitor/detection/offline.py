@@ -1,0 +1,251 @@
+"""Offline detection: a recording through the DGRNN, J(k+1), the threshold and the alarm machine.
+
+The per-sample decisions are those of ``AlarmMachine``, the same object the live daemon
+steps once per 100 Hz tick, so a recording gives the same events at a desk as on the bus.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from monitor.detection.alarm import AlarmConfig, AlarmMachine, Isolator, State, regimes_of
+from monitor.detection.gating import Gate, GateSeries, GatingConfig, status_keys
+from monitor.detection.opstate import OpState
+from monitor.detection.plausibility import finding
+from monitor.errors import InputFileError
+from monitor.io.recording import Recording
+from monitor.model.dgrnn import predict_series, table
+from monitor.model.modelfile import MonitorModel
+from monitor.model.residual import window_j
+
+
+@dataclass
+class Detection:
+    """Everything ``monitor detect`` reports for one recording."""
+
+    t: np.ndarray
+    y_hat: np.ndarray  # predicted outputs, physical units, columns = model outputs
+    residual: np.ndarray  # e = y_hat - y in z-units (eq. 8); NaN where gated or missing
+    j: np.ndarray  # J(k+1), eq. 9
+    state: np.ndarray  # State per sample
+    events: list[dict[str, Any]] = field(default_factory=list)
+    summary: dict[str, Any] = field(default_factory=dict)
+    gates: GateSeries | None = None  # operating state, sensor findings, out of range
+
+
+def make_isolator(model: MonitorModel) -> Isolator | None:
+    if not model.isolation_labels:
+        return None
+    return Isolator(
+        model.isolation_labels,
+        model.isolation_centroids,
+        len(model.spec.outputs),
+        model.isolation_min_similarity,
+    )
+
+
+def residual_series(
+    model: MonitorModel,
+    rec: Recording,
+    gate: np.ndarray,
+    horizon: int | None = None,
+    exact: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(y_hat in physical units, e in z-units); gated rows never feed a prediction.
+
+    ``exact`` sums every GRNN pattern instead of those within the cut-off (see
+    ``monitor.model.grnn_index``); tests use it to show both give the same decisions."""
+    spec = model.spec
+    z = model.normalizer.transform(table(rec, spec.variables), spec.variables)
+    z[gate] = np.nan  # an engine-off or sensor-fault row must not seed a prediction
+    yz = predict_series(model.dgrnn, z, horizon, exact)
+    n_out = len(spec.outputs)
+    e = yz - z[:, :n_out]
+    if model.residual_clip is not None:
+        # One-sample events the 100 Hz model cannot foresee (an end-stop impact) would
+        # otherwise set J0 on their own; faults show as sustained residuals below the bound.
+        bound = np.asarray(model.residual_clip)
+        e = np.clip(e, -bound, bound)
+    y_hat = model.normalizer.inverse_transform(yz, spec.outputs)
+    return y_hat, e
+
+
+def gated_residuals(
+    model: MonitorModel,
+    rec: Recording,
+    min_engine_rpm: float,
+    horizon: int | None = None,
+    exact: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(y_hat, e, inactive, inputs_ok): residuals with engine-off and incomplete rows gated
+    out (NaN), as both the detector and the training's J0 see them."""
+    check_recording(model, rec, horizon)
+    inactive = ~(rec["EngineSpeed"] >= min_engine_rpm)
+    inputs_ok = np.all(np.isfinite(table(rec, model.spec.variables)), axis=1)
+    y_hat, e = residual_series(model, rec, inactive | ~inputs_ok, horizon, exact)
+    e[inactive | ~inputs_ok] = np.nan
+    return y_hat, e, inactive, inputs_ok
+
+
+def check_recording(model: MonitorModel, rec: Recording, horizon: int | None = None) -> None:
+    spec = model.spec
+    needed = (*spec.variables, "EngineSpeed")
+    missing = [n for n in dict.fromkeys(needed) if not rec.has(n)]
+    if missing:
+        raise InputFileError(
+            f"{rec.source}: the model needs signal(s) {', '.join(missing)}, which the "
+            f"recording does not have (model signals: {', '.join(spec.variables)})"
+        )
+    rows = spec.rows_needed(horizon or spec.horizon)
+    if len(rec) < rows:
+        raise InputFileError(
+            f"{rec.source}: {len(rec)} sample(s) are too few; the model's lags and horizon "
+            f"need at least {rows} consecutive samples"
+        )
+
+
+def detect(
+    model: MonitorModel,
+    rec: Recording,
+    alarm: AlarmConfig | None = None,
+    horizon: int | None = None,
+    exact: bool = False,
+    gating: GatingConfig | None = None,
+) -> Detection:
+    """Run the detector over a whole recording (``exact``: see ``residual_series``;
+    ``gating``: operating state, plausibility and validity, see ``monitor.detection.gating``)."""
+    alarm = alarm or AlarmConfig()
+    spec = model.spec
+    check_recording(model, rec, horizon)
+    engine = rec["EngineSpeed"]
+    gate = Gate(model, alarm.min_engine_rpm, gating)
+    g = gate.series(rec)
+    inputs_ok = np.all(np.isfinite(table(rec, spec.variables)), axis=1)
+    gated = gate.gated(g, inputs_ok)
+    y_hat, e = residual_series(model, rec, gated, horizon, exact)
+    e[gated] = np.nan
+    sensor_ok = inputs_ok & (g.check == 0)
+    operating = g.op_state != OpState.WARM_UP
+    j = window_j(e, model.window_n)
+    spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
+
+    machine = AlarmMachine(alarm, model.eps0, make_isolator(model), model.window_n)
+    n = len(rec)
+    states = np.empty(n, dtype=np.int8)
+    regimes = regimes_of(spool)
+    # Quiet samples (normal operation, inputs complete and plausible, J <= eps0) change
+    # nothing in NORMAL but the isolation ring: runs of them go to skip_quiet at once, the
+    # rest step one by one.  J finite means the sample was not gated (nor out of range).
+    with np.errstate(invalid="ignore"):
+        quiet = (g.op_state == OpState.NORMAL) & sensor_ok & (g.oor < 0) & (j <= machine.eps0)
+    quiet_status = (State.NORMAL, int(OpState.NORMAL), -1, 0, -1)
+    stops = np.append(np.flatnonzero(~quiet), n)
+    events: list[dict[str, Any]] = []
+    start = rec.meta.get("start_time_s")
+    prev: tuple | None = None
+    first_alarm_t: float | None = None
+    # Isolation votes over the first alarm episode: the label held longest names the fault
+    # (it firms up as evidence accumulates, and may waver on the way).
+    votes: dict[str, int] = {}
+    in_first = False
+    i = 0
+    while i < n:
+        if quiet[i] and prev == quiet_status:
+            r = int(stops[np.searchsorted(stops, i)])
+            machine.skip_quiet(e[i:r], regimes[i:r])
+            states[i:r] = State.NORMAL
+            i = r
+            continue
+        state = machine.step(
+            j[i], bool(sensor_ok[i]), engine[i], e[i], int(regimes[i]), bool(operating[i])
+        )
+        states[i] = state
+        if state is State.FAULT and first_alarm_t is None:
+            first_alarm_t = float(rec.t[i] - rec.t[0])
+            in_first = True
+        if in_first:
+            if state is State.FAULT:
+                votes[machine.fault] = votes.get(machine.fault, 0) + 1
+            else:
+                in_first = False
+        status = (state, int(g.op_state[i]), int(g.oor[i]), int(g.check[i]), int(g.sensor[i]))
+        if status != prev:
+            ev = _event(rec, i, state, j[i], model.eps0, machine.fault, start)
+            oor = gate.validity.signals[g.oor[i]] if g.oor[i] >= 0 else None
+            ev.update(status_keys(int(g.op_state[i]), oor, int(g.check[i]), int(g.sensor[i])))
+            events.append(ev)
+            prev = status
+        i += 1
+    known = {k: v for k, v in votes.items() if k != "unknown"}
+    first_fault_label = max(known or votes, key=(known or votes).get) if votes else None
+    finite = np.isfinite(j)
+    summary = {
+        "alarm": first_alarm_t is not None,
+        "first_alarm_t": first_alarm_t,
+        "fault": first_fault_label,
+        "sensor_fault": bool(np.any(states == State.SENSOR_FAULT)),
+        "max_J": float(np.max(j[finite])) if finite.any() else None,
+        "threshold": model.eps0,
+        "J0": model.j0,
+        "threshold_rule": model.threshold.rule,
+        "window_n": model.window_n,
+        "horizon": horizon or spec.horizon,
+        "samples": len(rec),
+        "inactive_fraction": float(np.mean(states == State.INACTIVE)),
+        "sensor_fault_fraction": float(np.mean(states == State.SENSOR_FAULT)),
+        **gating_summary(rec, gate, g),
+        "source": rec.source,
+    }
+    return Detection(rec.t, y_hat, e, j, states, events, summary, gates=g)
+
+
+def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:
+    """Summary keys of the gating: time per operating state, out-of-range samples per
+    signal, sensor findings with their first time, and the envelope's coverage."""
+    t = rec.t - rec.t[0]
+    period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
+    op_s = {s.label: round(float(np.sum(g.op_state == s)) * period, 3) for s in OpState}
+    oor = {
+        name: int(np.sum(g.oor == k)) for k, name in enumerate(gate.validity.signals)
+        if np.any(g.oor == k)
+    }  # fmt: skip
+    idx = np.flatnonzero(g.check != 0)
+    codes = g.check[idx].astype(np.int64) * 256 + g.sensor[idx]
+    uniq, first, count = np.unique(codes, return_index=True, return_counts=True)
+    checks = []
+    for code, k, c in sorted(zip(uniq, first, count, strict=True), key=lambda u: u[1]):
+        sensor, name = finding(int(code) // 256, int(code) % 256)
+        checks.append({"sensor": sensor, "check": name, "first_t": round(float(t[idx[k]]), 6),
+                       "samples": int(c)})  # fmt: skip
+    normal = g.op_state == OpState.NORMAL
+    env = gate.validity.envelope
+    return {
+        "op_state_s": op_s,
+        "out_of_range_samples": int(np.sum(g.oor >= 0)),
+        "out_of_range_s": round(float(np.sum(g.oor >= 0)) * period, 3),
+        "out_of_range_signals": oor,
+        "sensor_checks": checks,
+        "envelope": None if env is None else env.source,
+        "sparse_coverage": gate.validity.sparse_shares(gate.validity_values(rec), normal),
+    }
+
+
+def _event(
+    rec: Recording, i: int, state: State, j: float, eps0: float, fault: str, start: object
+) -> dict[str, Any]:
+    t = float(rec.t[i] - rec.t[0])
+    wall = None
+    if isinstance(start, (int, float)):
+        wall = dt.datetime.fromtimestamp(float(start) + t, tz=dt.timezone.utc).isoformat()
+    return {
+        "t": round(t, 6),
+        "time": wall,
+        "state": state.label,
+        "J": float(j) if np.isfinite(j) else None,
+        "threshold": eps0,
+        "fault": fault if state is State.FAULT else None,
+    }

@@ -1,0 +1,260 @@
+"""Sensor plausibility beyond staleness: named sensor faults, each with the signal it concerns.
+
+Checks (``plausibility:`` in config/monitor.yaml; times in seconds of 100 Hz samples):
+
+* ``signal_range``: a signal outside the sensor's range (the DBC ranges by default; the
+  pressure and flow limits are configurable) for ``range_s``.  On the bus the decoder already
+  rejects a frame whose value lies outside the DBC range (the signal then goes stale); this
+  names the signal for CSV input and for configured limits tighter than the DBC's.
+* ``frozen``: PP, PA, PB or QP repeat the very same value for ``frozen_s`` while the engine
+  runs: a live sensor always shows noise (0.3 bar / 0.1 L/min rms on the reference machine,
+  far above the 0.01 resolution), so a variance of exactly zero is a frozen filter or a
+  hung sensor node that still sends frames.  A reading at its range limit is saturated and
+  may legitimately repeat, so it does not count.
+* ``stuck``: PP, PA, PB or QP stay within +-``stuck_band_bar`` (``stuck_band_lpm``) of one
+  value while the machine moves (|SpoolCmd| >= ``move_spool_pct`` or QP >=
+  ``move_flow_lpm``) for ``stuck_s`` of moving time in total: a sensor whose noise is alive
+  but which no longer follows the loop.
+* ``pump_below_port``: while the spool is open (|SpoolCmd| >= ``relation_spool_pct``) the
+  pump feeds the ports through the valve, so PP >= max(PA, PB) - ``relation_margin_bar``.
+  A port above PP for ``relation_s``: an offset or drift.  The sensor named is that port;
+  once both ports have been seen above PP (a low-reading PP shows against whichever port
+  is fed, a high-reading port only against itself) it is PP, the common factor.  Holding
+  proves little (an offset hides while the valve drop exceeds it), so the finding stays
+  until a rest (below) reads the port at tank.
+* ``rest_offset``: with the engine off (a reading below ``alarm.min_engine_rpm``) and
+  |SpoolCmd| below ``move_spool_pct`` for ``rest_settle_s``, the
+  pump has stopped and the pressures have settled to tank: PP, PA or PB further than
+  ``rest_max_bar`` from 0 bar gauge is an offset.  (A boom parked in the air keeps load
+  pressure trapped in a chamber; set ``rest_settle_s: 0`` to switch the check off on such
+  machines, or raise ``rest_max_bar``.)
+
+A finding latches until its own check shows the sensor healthy again (range: back in range;
+frozen/stuck: the value moves; the relation and rest offsets: a later rest reads the
+sensor near tank), so an offset found at key-off is still named when the engine starts.
+While any finding is active the sample counts as a sensor fault (MON_Alarm.State 2, the
+residual not used); events name the first finding in check order, then signal order.
+
+One numba kernel runs the checks over any number of rows with its state in arrays: offline
+over a whole recording in one call, live over one row per tick, so both give the same
+findings sample by sample, and a tick allocates nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from monitor.errors import ConfigError
+from monitor.jit import jit
+from monitor.signals import SAMPLE_PERIOD_S, SIGNAL_NAMES
+
+#: Check names by code (code 0 = no finding); the order is the reporting priority.
+CHECKS: tuple[str, ...] = ("signal_range", "frozen", "stuck", "pump_below_port", "rest_offset")
+#: Kernel column order: the contract signals (SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp,
+#: PP, PA, PB, QP).
+COLUMNS: tuple[str, ...] = SIGNAL_NAMES
+_SPOOL, _ENGINE, _PP, _PA, _PB, _QP = (
+    COLUMNS.index(n) for n in ("SpoolCmd", "EngineSpeed", "PP", "PA", "PB", "QP")
+)
+#: Sensor ranges of the shipped DBC (dbc/monitor.dbc; tests hold them equal).
+DBC_RANGES: dict[str, tuple[float, float]] = {
+    "SpoolCmd": (-100.0, 100.0),
+    "PumpDispCmd": (0.0, 100.0),
+    "EngineSpeed": (0.0, 3000.0),
+    "OilTemp": (-40.0, 150.0),
+    "PP": (0.0, 400.0),
+    "PA": (0.0, 400.0),
+    "PB": (0.0, 400.0),
+    "QP": (0.0, 60.0),
+}
+
+
+@dataclass(frozen=True)
+class PlausibilityConfig:
+    """``plausibility:`` section (units in the names; a time of 0 switches its check off)."""
+
+    pressure_min_bar: float = 0.0  # PP, PA, PB sensor range (default: the DBC's)
+    pressure_max_bar: float = 400.0
+    flow_max_lpm: float = 60.0  # QP sensor range upper end (lower end 0)
+    range_s: float = 0.1
+    frozen_s: float = 1.0
+    stuck_s: float = 20.0
+    stuck_band_bar: float = 1.5
+    stuck_band_lpm: float = 0.5
+    move_spool_pct: float = 20.0
+    move_flow_lpm: float = 2.0
+    relation_spool_pct: float = 20.0
+    relation_margin_bar: float = 10.0
+    relation_s: float = 1.0
+    rest_settle_s: float = 30.0
+    rest_max_bar: float = 5.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.name != "pressure_min_bar" and not getattr(self, f.name) >= 0:
+                raise ConfigError(f"plausibility.{f.name} must be >= 0")
+        if not self.pressure_max_bar > self.pressure_min_bar:
+            raise ConfigError("plausibility.pressure_max_bar must be above pressure_min_bar")
+        if self.flow_max_lpm <= 0:
+            raise ConfigError("plausibility.flow_max_lpm must be > 0")
+
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        lo = np.array([DBC_RANGES[n][0] for n in COLUMNS])
+        hi = np.array([DBC_RANGES[n][1] for n in COLUMNS])
+        for c in (_PP, _PA, _PB):
+            lo[c], hi[c] = self.pressure_min_bar, self.pressure_max_bar
+        hi[_QP] = self.flow_max_lpm
+        return lo, hi
+
+    def params(self) -> np.ndarray:
+        """Kernel parameters; times as sample counts (0: the check is off)."""
+        n = lambda s: float(round(s / SAMPLE_PERIOD_S))  # noqa: E731
+        return np.array([
+            n(self.range_s), n(self.frozen_s), n(self.stuck_s), self.stuck_band_bar,
+            self.stuck_band_lpm, self.move_spool_pct, self.move_flow_lpm,
+            self.relation_spool_pct, self.relation_margin_bar, n(self.relation_s),
+            n(self.rest_settle_s), self.rest_max_bar,
+        ])  # fmt: skip
+
+
+# State arrays (per column): counters[0] range run, [1] identical run, [2] stuck moving
+# samples, [3] relation run per port (violating samples);
+# ref[c] stuck reference, last[c] previous value; active[check, column] latched findings;
+# misc[0] rest run (engine off, spool centred).
+@jit
+def _run(  # pragma: no cover - numba
+    x, cols, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, out_sig
+):
+    # x[i, cols[c]] is column c (COLUMNS order) of sample i.
+    n, m = x.shape[0], cols.shape[0]
+    range_n, frozen_n, stuck_n = p[0], p[1], p[2]
+    band_bar, band_lpm, move_spool, move_flow = p[3], p[4], p[5], p[6]
+    rel_spool, rel_margin, rel_n, rest_n, rest_max = p[7], p[8], p[9], p[10], p[11]
+    for i in range(n):
+        spool = x[i, cols[_SPOOL]]
+        engine = x[i, cols[_ENGINE]]
+        running = engine >= min_rpm
+        qp = x[i, cols[_QP]]
+        moving = running and (abs(spool) >= move_spool or qp >= move_flow)
+        for c in range(m):
+            v = x[i, cols[c]]
+            if np.isnan(v):
+                continue  # staleness is the sampler's verdict; no evidence either way
+            # signal_range
+            if v < lo[c] or v > hi[c]:
+                counters[0, c] += 1
+                if range_n > 0 and counters[0, c] >= range_n:
+                    active[0, c] = True
+            else:
+                counters[0, c] = 0
+                active[0, c] = False
+            if c < _PP:
+                last[c] = v
+                continue  # commands and oil temperature: range only
+            # frozen
+            if v == last[c] and running and lo[c] < v < hi[c]:
+                counters[1, c] += 1
+                if frozen_n > 0 and counters[1, c] >= frozen_n:
+                    active[1, c] = True
+            elif v != last[c]:
+                counters[1, c] = 0
+                active[1, c] = False
+            last[c] = v
+            # stuck
+            band = band_lpm if c == _QP else band_bar
+            if abs(v - ref[c]) > band or np.isnan(ref[c]):
+                ref[c] = v
+                counters[2, c] = 0
+                active[2, c] = False
+            elif moving:
+                counters[2, c] += 1
+                if stuck_n > 0 and counters[2, c] >= stuck_n:
+                    active[2, c] = True
+        # pump_below_port: PP >= max(PA, PB) - margin while the spool is open; a run of
+        # violating samples per port.  A healthy port never reads above the pump that feeds
+        # it, but a port reading high hides whenever the valve drop exceeds its offset, so
+        # holding proves little: the finding latches until a rest reads the port at tank.
+        pp = x[i, cols[_PP]]
+        if running and abs(spool) >= rel_spool and rel_n > 0 and not np.isnan(pp):
+            for c in (_PA, _PB):
+                v = x[i, cols[c]]
+                if v > pp + rel_margin:
+                    counters[3, c] += 1
+                    if counters[3, c] >= rel_n:
+                        active[3, c] = True
+                elif not np.isnan(v):
+                    counters[3, c] = 0
+        # Both ports above the pump: the common factor, PP reading low, is the one named.
+        active[3, _PP] = active[3, _PA] and active[3, _PB]
+        # rest_offset: engine off, spool centred, settled -> pressures near tank
+        if (not np.isnan(engine)) and (not running) and abs(spool) < move_spool and rest_n > 0:
+            misc[0] += 1
+            if misc[0] >= rest_n:
+                for c in range(_PP, _PB + 1):
+                    v = x[i, cols[c]]
+                    if not np.isnan(v):
+                        active[4, c] = abs(v) > rest_max
+                        if not active[4, c]:
+                            active[3, c] = False  # read at tank: no offset after all
+        else:
+            misc[0] = 0
+        out_check[i] = 0
+        out_sig[i] = -1
+        for k in range(active.shape[0]):
+            for c in range(m):
+                if active[k, c]:
+                    out_check[i] = k + 1
+                    out_sig[i] = c
+                    break
+            if out_check[i] != 0:
+                break
+
+
+class Plausibility:
+    """The checks with their state; ``series`` and ``step`` continue the same state."""
+
+    def __init__(self, cfg: PlausibilityConfig, min_engine_rpm: float) -> None:
+        self.cfg = cfg
+        self.min_engine_rpm = float(min_engine_rpm)
+        self._lo, self._hi = cfg.limits()
+        self._p = cfg.params()
+        m = len(COLUMNS)
+        self._counters = np.zeros((4, m), dtype=np.int64)
+        self._ref = np.full(m, np.nan)
+        self._last = np.full(m, np.nan)
+        self._active = np.zeros((len(CHECKS), m), dtype=np.bool_)
+        self._misc = np.zeros(1, dtype=np.int64)
+        self._check1 = np.zeros(1, dtype=np.int8)
+        self._sig1 = np.zeros(1, dtype=np.int8)
+        self.check = 0  # last sample's finding: check code (0 none) and column index
+        self.signal = -1
+
+    def series(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(samples, COLUMNS) -> (check code, column index) per sample."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        check = np.zeros(x.shape[0], dtype=np.int8)
+        sig = np.zeros(x.shape[0], dtype=np.int8)
+        self._kernel(x, np.arange(len(COLUMNS), dtype=np.int64), check, sig)
+        if len(check):
+            self.check, self.signal = int(check[-1]), int(sig[-1])
+        return check, sig
+
+    def step(self, x1: np.ndarray, cols: np.ndarray) -> int:
+        """One sample: ``x1[0, cols[c]]`` is column c (int64 ``cols``); returns the check
+        code (0: none)."""
+        self._kernel(x1, cols, self._check1, self._sig1)
+        self.check, self.signal = int(self._check1[0]), int(self._sig1[0])
+        return self.check
+
+    def _kernel(self, x: np.ndarray, cols: np.ndarray, check: np.ndarray, sig: np.ndarray) -> None:
+        _run(x, cols, self._lo, self._hi, self._p, self._counters, self._ref, self._last,
+             self._active, self._misc, self.min_engine_rpm, check, sig)  # fmt: skip
+
+
+def finding(check: int, signal: int) -> tuple[str | None, str | None]:
+    """(sensor, check name) of a finding code, (None, None) for none."""
+    if check <= 0:
+        return None, None
+    return COLUMNS[signal], CHECKS[check - 1]

@@ -1,0 +1,77 @@
+"""The picture of a detection run: signals and predictions, residuals, J against eps0."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from monitor.detection.alarm import State
+from monitor.detection.offline import Detection
+from monitor.io.recording import Recording
+from monitor.signals import UNITS
+
+_STATE_COLOURS = {State.FAULT: "tab:red", State.SENSOR_FAULT: "tab:orange", State.INACTIVE: "0.8"}
+
+
+def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = det.t - det.t[0]
+    n_sig = len(outputs)
+    fig, axes = plt.subplots(n_sig + 2, 1, figsize=(12, 2.0 * (n_sig + 2) + 1), sharex=True)
+    for ax, name, k in zip(axes[:n_sig], outputs, range(n_sig), strict=True):
+        ax.plot(t, rec[name], lw=0.6, color="0.2", label=f"{name} measured")
+        ax.plot(t, det.y_hat[:, k], lw=0.6, color="tab:blue", alpha=0.8, label="DGRNN")
+        ax.set_ylabel(f"{name} [{UNITS[name]}]")
+        ax.legend(loc="upper right", fontsize=7)
+    ax_e = axes[n_sig]
+    for k, name in enumerate(outputs):
+        ax_e.plot(t, det.residual[:, k], lw=0.5, label=name)
+    ax_e.set_ylabel("residual e [z]")
+    ax_e.legend(loc="upper right", fontsize=7, ncol=len(outputs))
+    ax_j = axes[-1]
+    j = np.where(det.j > 0, det.j, np.nan)
+    ax_j.semilogy(t, j, lw=0.8, color="k", label="J(k+1)")
+    eps0 = det.summary["threshold"]
+    ax_j.axhline(eps0, color="tab:red", ls="--", lw=1, label=f"eps0 = {eps0:.3g}")
+    ax_j.set_ylabel("J [z^2]")
+    ax_j.set_xlabel("time from first sample [s]")
+    ax_j.legend(loc="upper left", fontsize=7)
+    for state, colour in _STATE_COLOURS.items():
+        mask = det.state == state
+        if mask.any():
+            for ax in axes:
+                ax.fill_between(
+                    t,
+                    0,
+                    1,
+                    where=mask,
+                    transform=ax.get_xaxis_transform(),
+                    color=colour,
+                    alpha=0.15,
+                    lw=0,
+                )
+    if det.gates is not None and np.any(det.gates.oor >= 0):
+        # Outside the training envelope: not judged (hatched, so it reads over a state colour).
+        oor = det.gates.oor >= 0
+        ax_j.fill_between(t, 0, 1, where=oor, transform=ax_j.get_xaxis_transform(),
+                          facecolor="none", edgecolor="tab:purple", hatch="//", lw=0,
+                          label="out of range")  # fmt: skip
+        ax_j.legend(loc="upper left", fontsize=7)
+    s = det.summary
+    verdict = (
+        f"FAULT at {s['first_alarm_t']:.1f} s ({s['fault']})"
+        if s["alarm"]
+        else "no hydraulic fault"
+    )
+    max_j = "n/a" if s["max_J"] is None else f"{s['max_J']:.3g}"
+    fig.suptitle(
+        f"{Path(str(s['source'])).name}: {verdict}; max J {max_j}, eps0 {eps0:.3g}", fontsize=10
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

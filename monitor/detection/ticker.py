@@ -1,0 +1,157 @@
+"""The live detector: one ``tick`` per 100 Hz row of the sample clock.
+
+It reproduces ``monitor.detection.offline.detect`` sample by sample, so a log gives the same events
+on the bus as at a desk: z-score with the model's F0 statistics; a row outside normal
+operation (engine off, warm-up), with a model signal missing, a sensor finding active or an
+operating signal out of the trained range is gated (``monitor.detection.gating``: NaN before
+prediction, so it never feeds one, and its residual is NaN); e = y_hat - y in z units,
+clipped to the model's residual bound; J by the incremental window (eq. 9); one
+``AlarmMachine.step`` per row.  Nothing is allocated per tick beyond numpy scalars.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from monitor.detection.alarm import AlarmConfig, AlarmMachine, State, regime_of
+from monitor.detection.gating import Gate, GatingConfig, status_keys
+from monitor.detection.offline import make_isolator
+from monitor.detection.opstate import OpState
+from monitor.errors import ModelFileError
+from monitor.model.dgrnn import TickPredictor
+from monitor.model.modelfile import MonitorModel
+from monitor.model.residual import WindowJ
+from monitor.sampling.ring import RowRing
+from monitor.sampling.sampler import ROW_COLUMNS
+
+
+@dataclass
+class Tick:
+    """What one row produced (the buffers behind ``e`` are reused by the next tick)."""
+
+    t_s: float  # sample-clock time of the row (s from the first frame)
+    state: State
+    j: float  # NaN while the window warms up or pauses
+    changed: bool  # state or gating status differs from the previous tick's (True on the first)
+    op_state: OpState = OpState.NORMAL
+    out_of_range: str | None = None  # the operating signal beyond the trained range
+    check: int = 0  # plausibility finding (monitor.detection.plausibility), 0: none
+    sensor: int = -1
+    state_changed: bool = True  # the alarm state itself changed (``changed`` also covers gating)
+
+
+class Ticker:
+    def __init__(
+        self,
+        model: MonitorModel,
+        alarm: AlarmConfig | None = None,
+        horizon: int | None = None,
+        columns: tuple[str, ...] = ROW_COLUMNS,
+        gating: GatingConfig | None = None,
+    ) -> None:
+        self.model = model
+        self.alarm = alarm or AlarmConfig()
+        spec = model.spec
+        missing = [n for n in (*spec.variables, "EngineSpeed") if n not in columns]
+        if missing:
+            raise ModelFileError(f"the model needs signal(s) the rows lack: {missing}")
+        self.predictor = TickPredictor(model.dgrnn, horizon)
+        self.rows_needed = self.predictor.rows_needed
+        # Row layout is [t, *columns]: +1 skips t.
+        self._var_idx = np.array([1 + columns.index(v) for v in spec.variables], dtype=np.int64)
+        self._engine_col = 1 + columns.index("EngineSpeed")
+        self._spool_col = 1 + columns.index("SpoolCmd") if "SpoolCmd" in columns else -1
+        norm_cols = [model.normalizer.names_.index(v) for v in spec.variables]
+        self._mean = np.ascontiguousarray(model.normalizer.mean_[norm_cols])
+        self._std = np.ascontiguousarray(model.normalizer.std_[norm_cols])
+        nvar, nout = len(spec.variables), len(spec.outputs)
+        self._raw = np.empty(nvar)
+        self._z = np.empty(nvar)
+        self._z_out = self._z[:nout]  # a view made once, not per tick
+        self._yz = np.empty(nout)
+        self._e = np.empty(nout)
+        self._sq = np.empty((1, nout))  # e^2 as one row, reduced as the batch path does
+        self._v = np.empty(1)
+        clip = model.residual_clip
+        self._clip = None if clip is None else np.asarray(clip, dtype=np.float64)
+        self.ring = RowRing(self.rows_needed, nvar)
+        # Compile (or load from numba's cache) the kernel now, not on the first live frame:
+        # a first-call compile of seconds would back the bus queue up.
+        self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
+        self.window = WindowJ(model.window_n)
+        self.machine = AlarmMachine(self.alarm, model.eps0, make_isolator(model), model.window_n)
+        self.eps0 = float(model.eps0)
+        self.gate = Gate(model, self.alarm.min_engine_rpm, gating, columns)
+        self._prev: tuple | None = None
+        self.ticks = 0
+
+    @property
+    def state(self) -> State:
+        return self.machine.state
+
+    @property
+    def fault(self) -> str:
+        return self.machine.fault
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self._e
+
+    def tick(self, row: np.ndarray) -> Tick:
+        """Advance one sample: ``row`` is a sampler row ``[t, *columns]``."""
+        raw, z, e = self._raw, self._z, self._e
+        np.take(row, self._var_idx, out=raw)
+        engine = float(row[self._engine_col])
+        gate = self.gate
+        gate.step(row)
+        # A sum is finite exactly when every term is (values are far from overflow).
+        inputs_ok = math.isfinite(float(np.add.reduce(raw)))
+        np.subtract(raw, self._mean, out=z)
+        np.divide(z, self._std, out=z)
+        gated = gate.gated_now(inputs_ok)
+        if gated:
+            z[:] = np.nan  # a gated row (engine off, sensor fault...) must not seed a prediction
+        self.ring.push(z)
+        self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
+        np.subtract(self._yz, self._z_out, out=e)
+        if self._clip is not None:
+            np.clip(e, -self._clip, self._clip, out=e)
+        if gated:
+            e[:] = np.nan
+        np.multiply(e, e, out=self._sq[0])
+        np.mean(self._sq, axis=1, out=self._v)
+        j = self.window.push_squared(float(self._v[0]))
+        spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
+        op = gate.op_state
+        sensor_ok = inputs_ok and gate.check == 0
+        state = self.machine.step(
+            j, sensor_ok, engine, e, regime_of(spool), op is not OpState.WARM_UP
+        )
+        status = (state, op, gate.oor, gate.check, gate.sensor)
+        changed = status != self._prev
+        state_changed = self._prev is None or state is not self._prev[0]
+        self._prev = status
+        self.ticks += 1
+        return Tick(float(row[0]), state, j, changed, op, gate.oor_name(gate.oor), gate.check,
+                    gate.sensor, state_changed)  # fmt: skip
+
+
+def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:
+    """The JSON-lines event of a state change, schema shared with ``monitor detect``."""
+    wall = None
+    if start_time_s is not None:
+        wall = dt.datetime.fromtimestamp(start_time_s + tick.t_s, tz=dt.timezone.utc).isoformat()
+    return {
+        "t": round(tick.t_s, 6),
+        "time": wall,
+        "state": tick.state.label,
+        "J": float(tick.j) if np.isfinite(tick.j) else None,
+        "threshold": eps0,
+        "fault": fault if tick.state is State.FAULT else None,
+        **status_keys(tick.op_state, tick.out_of_range, tick.check, tick.sensor),
+    }

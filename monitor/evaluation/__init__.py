@@ -1,0 +1,3 @@
+"""Evaluations: simulated fault runs (`monitor eval-sim`) and the real test rig (`monitor eval-
+uci`).
+"""

@@ -1,0 +1,426 @@
+"""The live monitor: bus -> decoder -> sampler -> ticker -> outputs, on its own threads.
+
+Threads: ``can-reader`` (``BusReader``: bus -> bounded queue, nothing else) and ``detector``
+(everything else, in arrival order: black box, decode, sampler, one tick per 100 Hz row and
+loop, frames, disk jobs).  Several loops (``loops:`` in the config, ``monitor.live.loops``) share
+the reader, the decoder and one sampler row; each ticks its own model on it and sends its
+own MON_Alarm and DM1; MON_Status shows the most pressing loop.  Nothing runs in a
+python-can Notifier callback.  The sample clock is the frames' own timestamps, so a log
+replayed onto a bus gives the events ``monitor detect`` gives for the file.  When no sensor
+frame is accepted for ``bus.silent_s`` (wall clock) the clock runs on by wall time: the rows
+go stale, the engine speed with them, and the monitor is inactive (a machine that is off is
+not faulty); when frames return, it resumes.  With ``bus.time_scale`` k the sample clock runs
+k times slower than the frames' timestamps (a log replayed k times slower than real time
+keeps its own timing).  A bus that fails (link down, bus-off) is reopened by the reader with
+backoff while the detector goes on (its silence is such a gap); bus events go to the event
+log as ``kind: "bus"`` lines (monitor/bus_recovery.py), and nothing is sent while the bus is
+down (counted as tx errors).
+
+``stop()`` shuts down in order: reader (no new frames), detector (drains the queue, ticks
+the last rows), disk writer (drains its queue: events fsynced, black box and event log
+closed), bus.  ``request_reload`` makes the detector thread reload config and model between
+two frames, keeping the bus.  Disk jobs (event log, black-box files) go to the
+``disk-writer`` thread through a bounded queue (``monitor.live.writer``): no fsync or black-box
+dump stalls a tick.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from functools import partial
+from typing import Any
+
+import can
+import numpy as np
+
+from monitor.bus.reader import BusReader, open_bus
+from monitor.bus.recovery import Backoff
+from monitor.codec.frames import FrameCodec
+from monitor.config.settings import MonitorConfig, load_config
+from monitor.detection.alarm import State
+from monitor.detection.ticker import Tick, Ticker
+from monitor.live.blackbox import BlackBox
+from monitor.live.dm1 import Diagnostics
+from monitor.live.eventlog import bus_event_record
+from monitor.live.loops import Loop, row_layout, worst_state
+from monitor.live.outputs import AlarmFrames, EventLog
+from monitor.live.storage import Quota
+from monitor.live.writer import DiskWriter
+from monitor.model.modelfile import MonitorModel
+from monitor.sampling.sampler import Sampler, hydraulic_messages, sensor_filters
+
+log = logging.getLogger("monitor")
+
+EventHook = Callable[[dict[str, Any]], None]
+
+
+class Daemon:
+    def __init__(
+        self,
+        cfg: MonitorConfig,
+        bus: can.BusABC | None = None,
+        on_event: EventHook | None = None,
+        opener: Callable[[], can.BusABC] | None = None,
+    ) -> None:
+        """``bus`` (optional) is used instead of opening ``cfg.bus``; it is not shut down or
+        reopened.  ``opener`` (optional) opens the bus instead of ``cfg.bus``, at the start
+        and again after a failure."""
+        self.cfg = cfg
+        self.on_event = on_event
+        self.codec = FrameCodec.from_dbc(cfg.dbc)
+        self.columns, views = row_layout(cfg, self.codec)
+        self._hydraulic = hydraulic_messages(self.codec, self.columns)
+        self.loops = [
+            Loop(lc, cfg, self.codec, v) for lc, v in zip(cfg.monitored_loops, views, strict=True)
+        ]
+        self.sampler = Sampler.for_codec(self.codec, columns=self.columns)
+        self._diags = [lp.diag for lp in self.loops if lp.diag is not None]  # kept on reload
+        # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.live.writer.
+        st = cfg.storage
+        self.quota = Quota(st.quota_bytes, cfg.black_box.directory, cfg.event_log.path)
+        self.event_log = EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
+        self.writer = DiskWriter(st.writer_queue, st.event_block_s)
+        self.black_box = BlackBox(cfg.black_box, cfg.bus.channel, self.writer, self.quota)
+        self.writer.start()
+        self._own_bus = bus is None
+        if opener is None:
+            extra = Diagnostics.rx_filters() if cfg.j1939.enabled else []
+            opener = partial(open_bus, cfg.bus, sensor_filters(self.codec, self.columns) + extra)
+        backoff = Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s)
+        self.reader = BusReader(bus if bus is not None else opener(), cfg.bus.queue_frames,
+                                opener=opener if self._own_bus else None,
+                                backoff=backoff)  # fmt: skip
+        self.tx_errors = 0
+        self.reloads = 0
+        self.last_t_s: float | None = None  # sample-clock time of the last row ticked
+        self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
+        self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
+        self._scale = cfg.bus.time_scale
+        self.loop_mono = time.monotonic()  # last pass of the detector loop (watchdog)
+        self.reload_attempts = 0  # reloads finished, successful or not
+        self._last_status_mono = 0.0
+        self._last_tx_error_log = 0.0
+        self._stop = threading.Event()
+        self._reload = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="detector", daemon=True)
+        self.error: BaseException | None = None
+
+    # -- control (any thread) -------------------------------------------------------------
+
+    def start(self) -> None:
+        self._thread.start()
+        self.reader.start()
+        for lp in self.loops:
+            log.info(
+                "monitoring %s:%s, loop %s: model %s (eps0 %.4g, window %d)",
+                self.cfg.bus.interface, self.cfg.bus.channel, lp.name, lp.cfg.model,
+                lp.model.eps0, lp.model.window_n,
+            )  # fmt: skip
+
+    def request_reload(self) -> None:
+        self._reload.set()
+
+    @property
+    def healthy(self) -> bool:
+        return self.error is None and self._thread.is_alive() and self.reader.alive
+
+    @property
+    def state(self) -> State:
+        """The most pressing loop's state (fault, sensor fault, normal, inactive)."""
+        return worst_state([lp.state for lp in self.loops])
+
+    # The first loop's parts (the only loop's, without ``loops:`` in the config).
+    @property
+    def ticker(self) -> Ticker:
+        return self.loops[0].ticker
+
+    @property
+    def model(self) -> MonitorModel:
+        return self.loops[0].model
+
+    @property
+    def frames(self) -> AlarmFrames:
+        return self.loops[0].frames
+
+    @property
+    def diag(self) -> Diagnostics | None:
+        return self.loops[0].diag
+
+    @property
+    def last_j(self) -> float:
+        return self.loops[0].last_j
+
+    @property
+    def bus(self) -> can.BusABC:
+        """The bus in use (the reader replaces it when it reopens a failed one)."""
+        return self.reader.bus
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Ordered shutdown; safe to call twice."""
+        self.reader.stop()
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+        self.black_box.close()  # queues the last post-alarm frames and the file's close
+        self.writer.put_event(self.event_log.close)
+        self.writer.stop(timeout_s)  # drained: every event written and fsynced, files closed
+        if self.writer.counts.frames_dropped or self.writer.counts.events_over_bound:
+            log.warning("disk writer: %s", self.writer.counts.as_dict())
+        if self._own_bus:
+            self.bus.shutdown()
+        log.info("stopped: %s", self.counts())
+
+    def counts(self) -> dict[str, Any]:
+        r = self.reader.counts
+        diag: dict[str, int] = {}
+        for lp in self.loops:  # summed over the loops
+            for k, v in (lp.diag.counts() if lp.diag is not None else {}).items():
+                diag[k] = diag.get(k, 0) + v
+        return {
+            "received": r.received,
+            "dropped": r.dropped,
+            "bus_errors": r.bus_errors,
+            **self.codec.counts.as_dict(),
+            **self.sampler.counts.as_dict(),
+            "ticks": sum(lp.ticker.ticks for lp in self.loops),
+            "alarm_frames": sum(lp.frames.sent for lp in self.loops),
+            "alarm_frames_held_back": sum(lp.frames.held_back for lp in self.loops),
+            "events": self.event_log.written,
+            "tx_errors": self.tx_errors,
+            **diag,
+            "error_frames": r.error_frames,
+            **self.reader.recovery.as_dict(),
+        }
+
+    # -- detector thread ------------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as exc:  # surfaced by ``healthy``; the supervisor exits
+            self.error = exc
+            log.exception("detector thread failed")
+
+    def _loop(self) -> None:
+        q = self.reader.queue
+        while True:
+            self.loop_mono = time.monotonic()
+            if self._reload.is_set():
+                self._reload.clear()
+                self._do_reload()
+            try:
+                msg = q.get(timeout=0.05)
+            except queue.Empty:
+                if self._stop.is_set():
+                    break  # the reader is stopped first, so the queue is drained
+                self._silence()
+            else:
+                self._frame(msg)
+                for _ in range(1000):  # drain a burst without a timeout per frame
+                    try:
+                        self._frame(q.get_nowait())
+                    except queue.Empty:
+                        break
+                    # A backlog (slow CPU, a flood) must not stall the heartbeat or make
+                    # the watchdog think the loop is stuck.
+                    self._status()
+                    self.loop_mono = time.monotonic()
+            self._status()
+            self._bus_events()
+        self._tick_rows(self.sampler.flush())  # the instant of the last frame, as offline
+        self._bus_events()
+
+    def _frame(self, msg: can.Message) -> None:
+        if not self.reader.events.empty():  # a bus event before this frame is logged first
+            self._bus_events()
+        self.black_box.add(msg)
+        # A request to all (DA 255) is for every loop's address: no short cut.
+        if self._diags and sum([diag.request(msg) for diag in self._diags]):
+            return  # a J1939 request for DM1/DM2: answered at the next tick
+        d = self.codec.decode_message(msg)
+        if d.rejection is not None:
+            log.debug("rejected frame %X: %s", msg.arbitration_id, d.rejection.value)
+            return
+        if d.name not in self._hydraulic:
+            return  # counted as decoded; e.g. another monitor's frames with filters off
+        ts = self._clock(msg.timestamp)
+        self.sampler.feed(ts, d.name, d.values)  # type: ignore[arg-type]
+        self._last_ok_mono = time.monotonic()
+        self._last_ok_ts = ts
+        self._tick_rows(self.sampler.take())
+
+    def _silence(self) -> None:
+        if not self.sampler.started:
+            return
+        idle_s = time.monotonic() - self._last_ok_mono
+        if idle_s < self.cfg.bus.silent_s:
+            return
+        # Past the sampler's max gap the clock stops: the state is inactive by then, and a
+        # frame after a longer silence is mapped to the end of that gap (sampler rule).
+        idle_s = min(idle_s / self._scale, self.sampler.max_gap_s - 2 * self.sampler.period_s)
+        self._tick_rows(self.sampler.advance(self._last_ok_ts + idle_s))
+
+    def _clock(self, bus_ts: float) -> float:
+        """Sample-clock time of a bus timestamp (the first sensor frame is the origin)."""
+        t0 = self.sampler.start_time_s
+        if t0 is None or self._scale == 1.0:
+            return bus_ts  # exactly the bus time: same rows as ``monitor detect`` of a log
+        return t0 + (bus_ts - t0) / self._scale
+
+    def _bus_time(self, t_s: float) -> float:
+        return (self.sampler.start_time_s or 0.0) + t_s * self._scale
+
+    def _tick_rows(self, rows: np.ndarray) -> None:
+        if len(rows):
+            self.last_t_s = float(rows[-1, 0])
+        for row in rows:
+            bus_time = self._bus_time(float(row[0]))
+            for lp in self.loops:
+                self._tick_loop(lp, row, bus_time)
+
+    def _tick_loop(self, lp: Loop, row: np.ndarray, bus_time: float) -> None:
+        tick = lp.tick(row)
+        if tick.changed:
+            self._state_change(tick, lp)
+        ticker, frames = lp.ticker, lp.frames
+        if frames.due(tick.t_s, tick.state, tick.state_changed):
+            self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
+        for msg in lp.dm_frames(tick, bus_time, row):
+            self._send(msg)
+
+    def _state_change(self, tick: Tick, lp: Loop | None = None) -> None:
+        lp = lp or self.loops[0]
+        ev = lp.event(tick, self.sampler.start_time_s)
+        self._log_event(ev)
+        level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
+        log.log(level, "t=%.2f s: %s%s (J %s, eps0 %.4g%s)", ev["t"],
+                f"{lp.name}: " if lp.tag else "", ev["state"],
+                "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
+                f", fault {ev['fault']}" if ev["fault"] else "")  # fmt: skip
+        if tick.op_state or tick.out_of_range or tick.check:  # gating news (detection.gating)
+            log.info("t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
+                     ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
+                     ev["sensor_check"])  # fmt: skip
+        if tick.state is State.FAULT and tick.state_changed:
+            self.black_box.trigger(self._bus_time(tick.t_s), lp.alarm_label())
+        if self.on_event is not None:
+            self.on_event(ev)
+
+    def _send(self, msg: can.Message) -> None:
+        if not self.reader.bus_up:  # down or bus-off: it would fail, or block for nothing
+            self.tx_errors += 1
+            return
+        try:
+            self.bus.send(msg, timeout=0.05)
+        except (can.CanError, OSError) as exc:
+            self.tx_errors += 1
+            self.reader.report_send_error(exc)  # perhaps the only sign the link went down
+            now = time.monotonic()
+            if now - self._last_tx_error_log > 5.0:
+                self._last_tx_error_log = now
+                log.error("cannot send %X (%s); %d send errors", msg.arbitration_id, exc,
+                          self.tx_errors)  # fmt: skip
+
+    def _status(self) -> None:
+        now = time.monotonic()
+        if now - self._last_status_mono < self.cfg.outputs.status_period_s:
+            return
+        self._last_status_mono = now
+        r = self.reader.counts
+        rejected = self.codec.counts.rejected_total
+        gates = [lp.ticker.gate for lp in self.loops]  # the operating state is shared
+        oor, check = any(g.oor >= 0 for g in gates), any(g.check != 0 for g in gates)
+        rc = self.reader.recovery
+        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
+                                      int(gates[0].op_state), oor, check,
+                                      rc.bus_down + rc.bus_off + rc.error_passive))  # fmt: skip
+
+    def _bus_events(self) -> None:
+        events = self.reader.take_events()
+        if not events:
+            return
+        state = self.state
+        lp = next(lp for lp in self.loops if lp.state is state)  # the loop the state is of
+        for ev in events:
+            self._log_event(bus_event_record(ev, self.last_t_s, state, lp.last_j,
+                                             lp.ticker.eps0, lp.ticker.fault) | lp.tag)  # fmt: skip
+
+    def _log_event(self, ev: dict[str, Any]) -> None:
+        """Queue an event-log line for the disk writer (which writes and fsyncs it)."""
+        ev["mono"] = round(time.monotonic(), 6)  # this host's monotonic clock, s
+        self.event_log.stamp(ev)
+        self.writer.put_event(partial(self.event_log.write, ev))
+
+    def _do_reload(self) -> None:
+        """SIGHUP: new config and model, same bus; a bad file keeps the running ones."""
+        try:
+            cfg = load_config(self.cfg.source)
+            if _loop_layout(cfg) != _loop_layout(self.cfg):
+                log.warning("loop changes other than their models take effect at the next "
+                            "restart")  # fmt: skip
+                cfg = replace(cfg, loops=self.cfg.loops, model=self.cfg.model)
+            loaded = [
+                Loop.load(lc, cfg, lp.view)
+                for lc, lp in zip(cfg.monitored_loops, self.loops, strict=True)
+            ]
+            event_log = (
+                EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
+                if cfg.event_log.path != self.cfg.event_log.path
+                else None
+            )
+        except Exception as exc:  # any failure: keep monitoring with what we have
+            log.error("reload failed, keeping the running config and model: %s", exc)
+            self.reload_attempts += 1
+            return
+        if cfg.bus != self.cfg.bus or cfg.dbc != self.cfg.dbc:
+            log.warning("bus and dbc changes take effect at the next restart")
+            cfg = replace(cfg, bus=self.cfg.bus, dbc=self.cfg.dbc)
+        if cfg.j1939 != self.cfg.j1939:
+            log.warning("j1939 changes take effect at the next restart")
+            cfg = replace(cfg, j1939=self.cfg.j1939)
+        if event_log is not None:
+            self.writer.put_event(self.event_log.close)  # after its queued writes
+            self.quota.event_log_path = event_log.path
+            self.event_log = event_log
+        self.black_box.cfg = cfg.black_box
+        self.quota.quota_bytes = cfg.storage.quota_bytes
+        for lp, lc, (model, ticker) in zip(self.loops, cfg.monitored_loops, loaded, strict=True):
+            lp.swap(lc, model, ticker, cfg)
+            log.info("reloaded %s: loop %s, model %s (eps0 %.4g); the J window starts again",
+                     cfg.source, lp.name, lc.model, model.eps0)  # fmt: skip
+        self.cfg = cfg
+        self.reloads += 1
+        self.reload_attempts += 1
+
+
+def _loop_layout(cfg: MonitorConfig) -> list[tuple[Any, ...]]:
+    """What a reload cannot change: each loop's name, signals, alarm message and address
+    (the single loop's address is ``j1939.source_address``, whose changes wait anyway)."""
+    return [(lc.name, lc.signals, lc.alarm_message, lc.source_address if cfg.loops else None)
+            for lc in cfg.monitored_loops]  # fmt: skip
+
+
+class JournalFormatter(logging.Formatter):
+    """``<priority>message``: journald reads the syslog priority prefix from stderr and adds
+    its own timestamps, so none here."""
+
+    _PRIORITY = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4, logging.ERROR: 3,
+                 logging.CRITICAL: 2}  # fmt: skip
+
+    def format(self, record: logging.LogRecord) -> str:
+        prio = self._PRIORITY.get(record.levelno, 6)
+        text = super().format(record)
+        return "\n".join(f"<{prio}>{line}" for line in text.splitlines())
+
+
+def setup_logging(level: int = logging.INFO) -> None:
+    handler = logging.StreamHandler()
+    handler.setFormatter(JournalFormatter("%(name)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)

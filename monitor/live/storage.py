@@ -1,0 +1,170 @@
+"""Disk quota for the daemon's files: the black boxes and the event log, together.
+
+What counts: every ``alarm-*.log`` in the black-box directory, the event log
+(``monitor-events.jsonl``) and its rotated files (``monitor-events.jsonl.1``, ``.2``, ...,
+the highest number the oldest).  When they take more than the quota, files are deleted in
+this order until they fit:
+
+1. black boxes, oldest first (by name: the alarm's UTC time), except the one being recorded;
+2. rotated event-log files, oldest first, stopping at the first one that holds an *unsent
+   alarm*.  The current event log is never deleted.
+
+An alarm is an event of the detector (not a ``kind: "bus"`` line) whose state is neither
+``normal`` nor ``inactive`` (a fault or a sensor fault).  Every event carries ``seq`` (1,
+2, ... per event log, continued across restarts).
+*Unsent* means not yet acknowledged by whatever takes the events off the machine (a
+telematics uploader, a service tool): it acknowledges by writing the highest ``seq`` it has
+stored safely, as a decimal integer, to ``<event log>.acked`` (write a temporary file and
+rename it).  Without that file nothing is acknowledged, so no rotated file with an alarm is
+ever deleted.  If the files still do not fit, the quota is exceeded rather than an alarm
+lost: counted in ``over_quota`` and logged.  The quota is checked after every event, and
+when a black box starts and ends, so it can be overshot by one black box's post-alarm frames.
+
+Lines without ``seq`` (event logs written before it existed) count as acknowledged.
+Runs in the disk-writer thread (``monitor.live.writer``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+NOT_ALARMS = frozenset({"normal", "inactive"})
+
+
+def rotated_logs(path: Path) -> list[Path]:
+    """Rotated files of event log ``path``, oldest (highest number) first."""
+    pattern = re.compile(re.escape(path.name) + r"\.(\d+)")
+    found = []
+    for p in path.parent.glob(path.name + ".*"):
+        m = pattern.fullmatch(p.name)
+        if m:
+            found.append((int(m.group(1)), p))
+    return [p for _, p in sorted(found, reverse=True)]
+
+
+def ack_path(path: Path) -> Path:
+    return path.with_name(path.name + ".acked")
+
+
+def acked_seq(path: Path) -> int:
+    """The highest ``seq`` acknowledged for event log ``path`` (0: none)."""
+    try:
+        text = ack_path(path).read_text(encoding="ascii").strip()
+    except FileNotFoundError:
+        return 0
+    except (OSError, UnicodeDecodeError) as exc:
+        log.warning("cannot read %s (%s): treating every event as unsent", ack_path(path), exc)
+        return 0
+    try:
+        return int(text)
+    except ValueError:
+        log.warning("%s holds %r, not a whole number: treating every event as unsent",
+                    ack_path(path), text[:40])  # fmt: skip
+        return 0
+
+
+def last_alarm_seq(path: Path) -> int:
+    """The highest ``seq`` of an alarm in event-log file ``path`` (0: none)."""
+    best = 0
+    with path.open("rb") as fh:
+        for line in fh:
+            try:
+                ev = json.loads(line)
+            except ValueError:  # a line torn by a power cut
+                continue
+            if isinstance(ev, dict) and "kind" not in ev and ev.get("state") not in NOT_ALARMS:
+                seq = ev.get("seq")
+                if isinstance(seq, int):
+                    best = max(best, seq)
+    return best
+
+
+class Quota:
+    """Keeps ``black_box_dir``'s black boxes and the event log at ``event_log_path`` (with
+    its rotated files) within ``quota_bytes`` together."""
+
+    def __init__(self, quota_bytes: int, black_box_dir: Path, event_log_path: Path) -> None:
+        self.quota_bytes = quota_bytes
+        self.black_box_dir = Path(black_box_dir)
+        self.event_log_path = Path(event_log_path)
+        self.deleted_black_boxes = 0
+        self.deleted_event_logs = 0
+        self.over_quota = 0  # checks that ended over the quota (unsent alarms kept)
+        self._over = False
+        # (inode, size, mtime) of a rotated file -> its last alarm seq: rotated files do
+        # not change, and the check runs after every event.
+        self._alarm_seq: dict[tuple[int, int, int], int] = {}
+
+    def black_boxes(self) -> list[Path]:
+        """Black-box files, oldest first."""
+        return sorted(self.black_box_dir.glob("alarm-*.log"))
+
+    def _unsent_alarm(self, path: Path, acked: int) -> bool:
+        st = path.stat()
+        key = (st.st_ino, st.st_size, st.st_mtime_ns)
+        if key not in self._alarm_seq:
+            self._alarm_seq[key] = last_alarm_seq(path)
+        return self._alarm_seq[key] > acked
+
+    def enforce(self, recording: Path | None = None) -> int:
+        """Delete files as the module says until they fit; return the bytes in use.
+
+        ``recording``: the black box being written, never deleted.
+        """
+        boxes = [(p, _size(p)) for p in self.black_boxes()]
+        rotated = [(p, _size(p)) for p in rotated_logs(self.event_log_path)]
+        used = sum(s for _, s in boxes) + sum(s for _, s in rotated)
+        used += _size(self.event_log_path)
+        for p, size in boxes:
+            if used <= self.quota_bytes:
+                break
+            if p == recording:
+                continue
+            if _unlink(p):
+                used -= size
+                self.deleted_black_boxes += 1
+                log.info("storage quota: deleted black box %s (%d bytes)", p.name, size)
+        acked = None
+        for p, size in rotated:
+            if used <= self.quota_bytes:
+                break
+            acked = acked_seq(self.event_log_path) if acked is None else acked
+            if self._unsent_alarm(p, acked):
+                break
+            if _unlink(p):
+                used -= size
+                self.deleted_event_logs += 1
+                log.info("storage quota: deleted event log %s (%d bytes)", p.name, size)
+        over = used > self.quota_bytes
+        if over:
+            self.over_quota += 1
+            if not self._over:  # once per excursion, not at every event
+                log.warning("storage quota exceeded: %d of %d bytes; the rest holds unsent "
+                            "alarms (acknowledged up to seq %s in %s) or the current files",
+                            used, self.quota_bytes, acked_seq(self.event_log_path),
+                            ack_path(self.event_log_path))  # fmt: skip
+        self._over = over
+        return used
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except FileNotFoundError:
+        return 0
+
+
+def _unlink(path: Path) -> bool:
+    try:
+        path.unlink()
+    except FileNotFoundError:
+        return False
+    except OSError as exc:
+        log.warning("storage quota: cannot delete %s: %s", path, exc.strerror)
+        return False
+    return True

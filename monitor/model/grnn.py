@@ -1,0 +1,647 @@
+"""Specht's general regression neural network (He & He 2014, eq. 4), numba-compiled.
+
+    y_hat(x) = sum_i y_i exp(-d_i) / sum_i exp(-d_i),   d_i = |x - x_i|^2 / (2 sigma^2)
+
+Inputs are already z-scored (see ``monitor.model.dgrnn.Normalizer``); everything is float64.
+
+Pattern selection keeps the count bounded (``thinning``).  With ``min_distance`` thinning the
+GRNN is Specht's (1991) clustered form: every training row joins its nearest kept row, and
+the cluster, placed at its members' mean input ``x_i`` with their mean target ``y_i``,
+weighs ``c_i exp(-d_i)`` for ``c_i`` members.  That is eq. 4 over the training rows with
+each row moved to its cluster's centroid, so the pattern set stays small but still knows
+how often the machine sat where: a hold (thousands of rows in one cluster) outweighs the few
+rows of a transient passing close by.
+Unthinned or strided patterns each count once, which is eq. 4 exactly.  Kernels take
+``logw = log(c)`` and fold it into the exponent.
+
+Numerical stability: every weight is computed as ``exp(d_min - d_i)`` with ``d_min`` the
+smallest (log-weighted) distance of that query.  The common factor cancels between numerator
+and denominator, so the value is eq. 4 exactly, but the dominant pattern always weighs 1: the
+denominator is >= 1 and a query far from every pattern (where every plain ``exp(-d_i)``
+underflows to 0 and eq. 4 would be 0/0) returns the target of its nearest pattern(s).
+
+Layout (stumpy style): public functions validate and call a parallel ``@njit`` driver that
+loops over queries with ``prange``; the per-query work is a small serial kernel
+(``monitor.model.grnn_index.cutoff_row``) that the dynamic model (``monitor.model.dgrnn``) reuses.
+Exact eq. 4 runs it over every pattern (``exact_index``); the detector by default sums only
+the patterns within a cut-off radius with a stated error bound (``build_index``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from monitor.errors import ConfigError, InputFileError
+from monitor.jit import get_num_threads, jit, pjit, prange
+from monitor.model.grnn_index import CutoffIndex, build_index, exact_index, predict_cutoff
+
+SIGMA_RULES = ("loo", "fixed")
+THINNING_RULES = ("none", "stride", "min_distance")
+
+# Cap on the LOO distance matrix (queries x patterns, float64): 16 M entries = 128 MB.
+_LOO_MAX_ENTRIES = 16_000_000
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+def n_chunks() -> int:
+    """Work chunks for the parallel drivers (a few per thread, for load balance)."""
+    return 4 * get_num_threads()
+
+
+@pjit
+def _sqdist(Q, P):  # pragma: no cover - numba
+    """Squared distances query x pattern (sigma-free, so the LOO search computes them once)."""
+    nq, nf = Q.shape
+    n = P.shape[0]
+    D = np.empty((nq, n))
+    for q in prange(nq):
+        for i in range(n):
+            acc = 0.0
+            for f in range(nf):
+                diff = Q[q, f] - P[i, f]
+                acc += diff * diff
+            D[q, i] = acc
+    return D
+
+
+@pjit
+def _nearest(X, P):  # pragma: no cover - numba
+    """Index of the nearest pattern for every row of X (first one on ties)."""
+    out = np.empty(X.shape[0], dtype=np.int64)
+    for q in prange(X.shape[0]):
+        best = np.inf
+        k = 0
+        for i in range(P.shape[0]):
+            acc = 0.0
+            for f in range(P.shape[1]):
+                diff = X[q, f] - P[i, f]
+                acc += diff * diff
+            if acc < best:
+                best = acc
+                k = i
+        out[q] = k
+    return out
+
+
+@pjit
+def _loo_errors(D, Xq, qrow, lo, hi, assign, X, Y, counts, xsums, ysums, inv2s2, nchunk):
+    """Per-query squared error (mean over outputs) with the query's temporal neighbours
+    (rows lo[q]..hi[q]-1) taken out of the clusters they belong to.
+
+    ``D`` holds squared distances from the queries to the full clusters' centroids; a
+    cluster that loses members gets its centroid and distance recomputed.  Counts are
+    integers held in float64, so removing and restoring them is exact; sums are restored by
+    copying, never by adding back.
+    """  # pragma: no cover - numba
+    nq, n = D.shape
+    nf, nout = X.shape[1], Y.shape[1]
+    err = np.empty(nq)
+    nchunk = max(1, min(nq, nchunk))
+    for c in prange(nchunk):
+        cnt = counts.copy()
+        xs = xsums.copy()
+        ys = ysums.copy()
+        touched = np.zeros(n, dtype=np.bool_)
+        dbuf = np.empty(n)
+        num = np.empty(nout)
+        for q in range(c * nq // nchunk, (c + 1) * nq // nchunk):
+            for j in range(lo[q], hi[q]):
+                a = assign[j]
+                if a >= 0:
+                    touched[a] = True
+                    cnt[a] -= 1.0
+                    for f in range(nf):
+                        xs[a, f] -= X[j, f]
+                    for k in range(nout):
+                        ys[a, k] -= Y[j, k]
+            dmin = np.inf
+            for i in range(n):
+                d = np.inf
+                if cnt[i] > 0.5:
+                    d2 = D[q, i]
+                    if touched[i]:
+                        d2 = 0.0
+                        for f in range(nf):
+                            diff = Xq[q, f] - xs[i, f] / cnt[i]
+                            d2 += diff * diff
+                    d = d2 * inv2s2 - math.log(cnt[i])
+                    if d < dmin:
+                        dmin = d
+                dbuf[i] = d
+            if dmin < np.inf:
+                for k in range(nout):
+                    num[k] = 0.0
+                den = 0.0
+                for i in range(n):
+                    if dbuf[i] < np.inf:
+                        # Weight c_i exp(-d_i) times the member mean ys_i / c_i.
+                        w = math.exp(dmin - dbuf[i])
+                        den += w
+                        for k in range(nout):
+                            num[k] += w * ys[i, k] / cnt[i]
+                acc = 0.0
+                for k in range(nout):
+                    e = num[k] / den - Y[qrow[q], k]
+                    acc += e * e
+                err[q] = acc / nout
+            else:
+                err[q] = np.nan  # every cluster is a neighbour: this query cannot be scored
+            for j in range(lo[q], hi[q]):
+                a = assign[j]
+                if a >= 0 and touched[a]:
+                    touched[a] = False
+                    cnt[a] = counts[a]
+                    for f in range(nf):
+                        xs[a, f] = xsums[a, f]
+                    for k in range(nout):
+                        ys[a, k] = ysums[a, k]
+    return err
+
+
+@jit
+def _greedy_min_distance(X, r2, max_keep):  # pragma: no cover - numba
+    """Indices (time order) kept by greedy thinning, and False if more than max_keep."""
+    n, nf = X.shape
+    keep = np.empty(min(n, max_keep + 1), dtype=np.int64)
+    k = 0
+    for i in range(n):
+        ok = True
+        # Newest kept first: consecutive 100 Hz rows are close, so this usually breaks early.
+        for j in range(k - 1, -1, -1):
+            kk = keep[j]
+            acc = 0.0
+            for f in range(nf):
+                diff = X[i, f] - X[kk, f]
+                acc += diff * diff
+            if acc <= r2:
+                ok = False
+                break
+        if ok:
+            if k == max_keep:
+                return keep[:0].copy(), False
+            keep[k] = i
+            k += 1
+    return keep[:k].copy(), True
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _as_matrix(a: Any, name: str, *, cls: type[Exception] = InputFileError) -> np.ndarray:
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2:
+        raise cls(f"{name} must be 2-D (rows, columns), got shape {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
+def _require_finite(arr: np.ndarray, name: str) -> None:
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        row = int(np.argwhere(bad)[0][0])
+        raise InputFileError(
+            f"{name} has a non-finite value (NaN or inf) in row {row}; training patterns "
+            "must be complete (drop rows with missing samples first)"
+        )
+
+
+def _check_sigma(sigma: float) -> float:
+    s = float(sigma)
+    if not (math.isfinite(s) and s > 0.0 and math.isfinite(0.5 / (s * s))):
+        raise ConfigError(f"sigma must be a positive finite number, got {sigma!r}")
+    return s
+
+
+def _check_time_index(time_index: Any, n: int) -> np.ndarray:
+    if time_index is None:
+        return np.arange(n, dtype=np.int64)
+    idx = np.asarray(time_index)
+    if idx.shape != (n,) or not np.issubdtype(idx.dtype, np.integer):
+        raise ConfigError(f"time_index must be {n} integers (one per pattern), got {idx.shape}")
+    idx = idx.astype(np.int64)
+    if n > 1 and np.any(np.diff(idx) <= 0):
+        raise ConfigError("time_index must be strictly increasing (patterns in time order)")
+    return idx
+
+
+# --------------------------------------------------------------------------- public functions
+
+
+def _check_counts(counts: Any, n: int) -> np.ndarray:
+    if counts is None:
+        return np.ones(n)
+    c = np.asarray(counts, dtype=np.float64)
+    if c.shape != (n,) or not np.all(np.isfinite(c)) or np.any(c < 1) or np.any(c != np.round(c)):
+        raise InputFileError(f"counts must be {n} whole numbers >= 1 (one per pattern)")
+    return c
+
+
+def grnn_predict(
+    X: Any, patterns: Any, targets: Any, sigma: float, counts: Any = None
+) -> np.ndarray:
+    """Eq. 4 for every row of ``X``; returns (n_queries, n_outputs).
+
+    ``patterns`` (n_patterns, n_features) must be finite; a query row with NaN gives NaN.
+    ``counts`` (members per pattern, default 1 each) gives Specht's clustered form.
+    """
+    P = _as_matrix(patterns, "patterns")
+    Y = _as_matrix(targets, "targets")
+    Xq = _as_matrix(X, "X")
+    if P.shape[0] != Y.shape[0] or P.shape[0] == 0:
+        raise InputFileError(
+            f"patterns ({P.shape[0]} rows) and targets ({Y.shape[0]} rows) must match and be"
+            " non-empty"
+        )
+    if Xq.shape[1] != P.shape[1]:
+        raise InputFileError(f"X has {Xq.shape[1]} features, the patterns have {P.shape[1]}")
+    _require_finite(P, "patterns")
+    _require_finite(Y, "targets")
+    s = _check_sigma(sigma)
+    counts = _check_counts(counts, P.shape[0])
+    return predict_cutoff(exact_index(P, Y, counts), Xq, s, n_chunks())
+
+
+def cluster(
+    X: Any, Y: Any, seeds: Any
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Specht's clusters: every row of X joins its nearest seed (a kept row).
+
+    Returns (assign, counts, centroids, mean targets): ``assign[j]`` is row j's cluster; a
+    cluster is represented by its members' mean input and mean target, so a locally linear
+    map keeps its value (the seed itself is the first row greedy thinning met, usually at
+    one end of its members).  A seed with no member (impossible when the seeds are rows of
+    X) would get count 0.
+    """
+    Xa, Ya, P = _as_matrix(X, "X"), _as_matrix(Y, "Y"), _as_matrix(seeds, "seeds")
+    assign = _nearest(Xa, P)
+    counts = np.bincount(assign, minlength=P.shape[0]).astype(np.float64)
+    xs = np.zeros(P.shape)
+    np.add.at(xs, assign, Xa)
+    ys = np.zeros((P.shape[0], Ya.shape[1]))
+    np.add.at(ys, assign, Ya)
+    with np.errstate(invalid="ignore"):
+        return assign, counts, xs / counts[:, None], ys / counts[:, None]
+
+
+def _neighbour_ranges(tidx: np.ndarray, rows: np.ndarray, m: int) -> tuple[np.ndarray, ...]:
+    lo = np.searchsorted(tidx, tidx[rows] - m, side="left").astype(np.int64)
+    hi = np.searchsorted(tidx, tidx[rows] + m, side="right").astype(np.int64)
+    return lo, hi
+
+
+def loo_errors(
+    rows: Any,
+    X: Any,
+    Y: Any,
+    assign: Any,
+    sigma: float,
+    exclude_neighbours: int = 0,
+    time_index: Any = None,
+) -> np.ndarray:
+    """Leave-one-out squared error (mean over outputs) for the training rows ``rows``.
+
+    Row j of (X, Y) is a member of cluster ``assign[j]`` (-1: of none); a cluster sits at
+    its members' mean input, with their mean target and their count as weight.  For each
+    query row, every row within ``exclude_neighbours`` samples of it in time
+    (``time_index``, default 0..n-1) leaves its cluster first, so neither the query nor its
+    near copies predict it.  With one member per cluster this is plain LOO of eq. 4 over
+    the patterns more than m samples away.  A query whose every cluster empties gets NaN.
+    """
+    Xa, Ya = _as_matrix(X, "X"), _as_matrix(Y, "Y")
+    tidx = _check_time_index(time_index, Xa.shape[0])
+    q = np.asarray(rows, dtype=np.int64)
+    a = np.asarray(assign, dtype=np.int64)
+    if a.shape != (Xa.shape[0],) or np.any(a < -1):
+        raise ConfigError(f"assign must hold a cluster index or -1 for each of {Xa.shape[0]} rows")
+    s = _check_sigma(sigma)
+    args = _loo_setup(q, Xa, Ya, tidx, int(exclude_neighbours), a)
+    return _loo_errors(*args, 0.5 / (s * s), n_chunks())
+
+
+def _loo_setup(q, X, Y, tidx, m, assign) -> tuple:
+    """The sigma-free part of the LOO: cluster sums, neighbour ranges, distances."""
+    member = assign >= 0
+    n = int(assign.max()) + 1 if member.any() else 0
+    counts = np.bincount(assign[member], minlength=n).astype(np.float64)
+    xsums = np.zeros((n, X.shape[1]))
+    np.add.at(xsums, assign[member], X[member])
+    ysums = np.zeros((n, Y.shape[1]))
+    np.add.at(ysums, assign[member], Y[member])
+    lo, hi = _neighbour_ranges(tidx, q, m)
+    with np.errstate(invalid="ignore"):
+        centroids = np.ascontiguousarray(xsums / counts[:, None])
+    Xq = np.ascontiguousarray(X[q])
+    D = _sqdist(Xq, centroids)
+    return D, Xq, q, lo, hi, assign, X, Y, counts, xsums, ysums
+
+
+def thin_min_distance(X: Any, radius: float, max_keep: int | None = None) -> np.ndarray | None:
+    """Greedy thinning in time order: keep a row only if farther than ``radius`` from every
+    row kept so far.  Returns kept indices, or None when more than ``max_keep`` would be kept.
+    """
+    A = _as_matrix(X, "X")
+    cap = A.shape[0] if max_keep is None else int(max_keep)
+    keep, ok = _greedy_min_distance(A, float(radius) ** 2, cap)
+    return keep if ok else None
+
+
+# --------------------------------------------------------------------------- estimator
+
+
+class GRNN:
+    """GRNN regressor, scikit-learn style: ``__init__`` stores parameters, ``fit`` learns.
+
+    Parameters
+    ----------
+    sigma : fixed bandwidth; when given it is used as is (``sigma_rule_ == "fixed"``).
+    sigma_rule : ``"loo"``: choose sigma by leave-one-out on the training rows, leaving out
+        every pattern within ``exclude_neighbours`` samples in time (at 100 Hz neighbouring
+        rows are nearly copies, and plain LOO would pick a sigma that only interpolates
+        between them).  ``"fixed"`` requires ``sigma``.
+    thinning : ``"none"``, ``"stride"`` (every ``stride``-th row) or ``"min_distance"``
+        (after the stride, greedy in time order: keep a row only if farther than
+        ``min_distance`` from all kept rows; if more than ``max_patterns`` would stay, the
+        radius is doubled until the bound holds and then bisected so the count ends close to
+        it; the radius used is recorded).  The kept rows seed clusters: every training row
+        joins its nearest seed, and the pattern is the cluster's mean input and mean target,
+        weighted by its member count (Specht's clustered GRNN; see the module docstring).
+        The seeds cover the data evenly, so rare transients keep their own patterns; the
+        counts keep the density.  With ``none`` and ``stride`` each kept row is a pattern
+        that counts once (eq. 4 exactly).
+    loo_max_queries : the LOO error is evaluated on at most this many training rows (evenly
+        spread in time), each predicted from the clusters with its temporal neighbours
+        taken out.
+    sigma_bounds : (lo, hi) for the search; default from the data's distance scale.
+    cluster_weights : with ``min_distance`` thinning, ``False`` keeps the seed rows as plain
+        patterns (own input and target, count 1: eq. 4 over the kept rows, as pyGRNN would
+        compute it); the default ``True`` is the clustered form.
+
+    Fitted attributes: ``patterns_``, ``targets_``, ``counts_`` (members per pattern),
+    ``sigma_``, ``sigma_rule_``, ``pattern_index_`` (time index of each pattern's seed row),
+    ``thinning_`` (dict: rule, stride, min_distance actually used, rows in, patterns kept,
+    weights), ``loo_error_`` (NaN when fixed),
+    ``exclude_neighbours_``, ``n_features_in_``, ``n_outputs_``.
+    """
+
+    def __init__(
+        self,
+        sigma: float | None = None,
+        sigma_rule: str = "loo",
+        exclude_neighbours: int = 50,
+        thinning: str = "min_distance",
+        min_distance: float = 0.05,
+        stride: int = 1,
+        max_patterns: int | None = 3000,
+        loo_max_queries: int = 2000,
+        sigma_bounds: tuple[float, float] | None = None,
+        cluster_weights: bool = True,
+    ) -> None:
+        self.sigma = sigma
+        self.sigma_rule = sigma_rule
+        self.exclude_neighbours = exclude_neighbours
+        self.thinning = thinning
+        self.min_distance = min_distance
+        self.stride = stride
+        self.max_patterns = max_patterns
+        self.loo_max_queries = loo_max_queries
+        self.sigma_bounds = sigma_bounds
+        self.cluster_weights = cluster_weights
+
+    # -- parameters ---------------------------------------------------------------------
+
+    def _check_params(self) -> None:
+        if self.sigma is None and self.sigma_rule not in SIGMA_RULES:
+            raise ConfigError(f"sigma_rule must be one of {SIGMA_RULES}, got {self.sigma_rule!r}")
+        if self.sigma is None and self.sigma_rule == "fixed":
+            raise ConfigError("sigma_rule='fixed' needs a sigma")
+        if self.sigma is not None:
+            _check_sigma(self.sigma)
+        if self.thinning not in THINNING_RULES:
+            raise ConfigError(f"thinning must be one of {THINNING_RULES}, got {self.thinning!r}")
+        if int(self.exclude_neighbours) < 0:
+            raise ConfigError("exclude_neighbours must be >= 0")
+        if int(self.stride) < 1:
+            raise ConfigError("stride must be >= 1")
+        if self.max_patterns is not None and int(self.max_patterns) < 2:
+            raise ConfigError("max_patterns must be >= 2 (or None for no bound)")
+        if not (self.min_distance >= 0 and math.isfinite(self.min_distance)):
+            raise ConfigError("min_distance must be a finite number >= 0")
+        if int(self.loo_max_queries) < 1:
+            raise ConfigError("loo_max_queries must be >= 1")
+        if self.sigma_bounds is not None:
+            lo, hi = (float(v) for v in self.sigma_bounds)
+            if not (0 < lo < hi < math.inf):
+                raise ConfigError(f"sigma_bounds must be 0 < lo < hi, got {self.sigma_bounds}")
+
+    # -- fit ----------------------------------------------------------------------------
+
+    def fit(self, X: Any, Y: Any, time_index: Any = None) -> GRNN:
+        """Store (thinned) patterns and choose sigma.
+
+        ``time_index`` (strictly increasing integers, default 0..n-1) places each row in
+        time; to fit on several recordings, offset each recording's index by more than
+        ``exclude_neighbours`` so rows of different recordings are never neighbours.
+        """
+        self._check_params()
+        Xa = _as_matrix(X, "X")
+        y1d = np.asarray(Y).ndim == 1
+        Ya = _as_matrix(Y, "Y")
+        if Xa.shape[0] != Ya.shape[0]:
+            raise InputFileError(f"X has {Xa.shape[0]} rows but Y has {Ya.shape[0]}")
+        if Xa.shape[0] < 2:
+            raise InputFileError(f"a GRNN needs at least 2 training patterns, got {Xa.shape[0]}")
+        if Xa.shape[1] < 1 or Ya.shape[1] < 1:
+            raise InputFileError("X and Y need at least one column each")
+        _require_finite(Xa, "X")
+        _require_finite(Ya, "Y")
+        tidx = _check_time_index(time_index, Xa.shape[0])
+
+        keep, thinning = self._thin(Xa)
+        P, pidx = np.ascontiguousarray(Xa[keep]), tidx[keep]
+        clustered = thinning["rule"] == "min_distance" and bool(self.cluster_weights)
+        if clustered:
+            assign, counts, P, Py = cluster(Xa, Ya, P)
+        else:  # each kept row is its own pattern; the rows between strides belong to none
+            assign = np.full(Xa.shape[0], -1, dtype=np.int64)
+            assign[keep] = np.arange(len(keep))
+            counts, Py = np.ones(len(keep)), Ya[keep]
+        thinning["weights"] = "cluster_counts" if clustered else "none"
+
+        if self.sigma is not None:
+            sigma, rule, loo = _check_sigma(self.sigma), "fixed", math.nan
+        else:
+            sigma, loo = self._loo_sigma(Xa, Ya, tidx, assign)
+            rule = "loo"
+
+        self.patterns_ = P
+        self.targets_ = np.ascontiguousarray(Py)
+        self.counts_ = counts
+        self.pattern_index_ = pidx
+        self.sigma_ = float(sigma)
+        self.sigma_rule_ = rule
+        self.loo_error_ = float(loo)
+        self.exclude_neighbours_ = int(self.exclude_neighbours)
+        self.thinning_ = thinning
+        self.n_features_in_ = Xa.shape[1]
+        self.n_outputs_ = Ya.shape[1]
+        self._y1d = y1d
+        return self
+
+    def _thin(self, X: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+        n = X.shape[0]
+        stride = int(self.stride) if self.thinning != "none" else 1
+        idx = np.arange(0, n, stride, dtype=np.int64)
+        radius = 0.0
+        if self.thinning == "min_distance":
+            radius = float(self.min_distance)
+            cap = len(idx) if self.max_patterns is None else int(self.max_patterns)
+            sub = np.ascontiguousarray(X[idx])
+            kept = thin_min_distance(sub, radius, cap)
+            if kept is None:
+                # Too many patterns: double the radius until the bound holds, then bisect
+                # (log scale) so the count ends close to max_patterns, not far below it.
+                lo, hi = radius, max(radius, 1e-3)
+                while kept is None:
+                    lo, hi = hi, hi * 2.0
+                    kept = thin_min_distance(sub, hi, cap)
+                for _ in range(6):
+                    mid = math.sqrt(lo * hi) if lo > 0 else hi / 2.0
+                    trial = thin_min_distance(sub, mid, cap)
+                    if trial is None:
+                        lo = mid
+                    else:
+                        hi, kept = mid, trial
+                radius = hi
+            idx = idx[kept]
+        elif self.max_patterns is not None and len(idx) > int(self.max_patterns):
+            raise ConfigError(
+                f"{len(idx)} patterns exceed max_patterns={self.max_patterns}: raise the stride"
+                " or use thinning='min_distance'"
+            )
+        info = {
+            "rule": self.thinning,
+            "stride": stride,
+            "min_distance": radius,
+            "max_patterns": self.max_patterns,
+            "n_rows": n,
+            "n_patterns": int(len(idx)),
+        }
+        return idx, info
+
+    def _loo_sigma(self, X, Y, tidx, assign) -> tuple[float, float]:
+        n = X.shape[0]
+        n_clusters = int(assign.max()) + 1
+        nq = min(n, int(self.loo_max_queries), max(1, _LOO_MAX_ENTRIES // n_clusters))
+        q = np.unique(np.linspace(0, n - 1, nq).round().astype(np.int64))
+        m = int(self.exclude_neighbours)
+        args = _loo_setup(q, X, Y, tidx, m, assign)
+        if np.isnan(_loo_errors(*args, 1.0, n_chunks())).all():
+            raise ConfigError(
+                f"leave-one-out has nothing to compare: every pattern is within "
+                f"exclude_neighbours={m} samples of every query; record more data or lower it"
+            )
+
+        def loss(log_sigma: float) -> float:
+            s = math.exp(log_sigma)
+            return float(np.nanmean(_loo_errors(*args, 0.5 / (s * s), n_chunks())))
+
+        if self.sigma_bounds is not None:
+            lo, hi = (float(v) for v in self.sigma_bounds)
+        else:
+            # Scale of the data: median distance between queries and patterns.
+            finite = args[0][np.isfinite(args[0])]
+            scale = math.sqrt(float(np.median(finite))) if finite.size else 1.0
+            scale = scale if scale > 0 else 1.0
+            lo, hi = scale * 1e-3, scale * 3.0
+        # Coarse log grid first (the LOO curve can have shallow local minima), then Brent
+        # on the bracket around the best grid point.
+        grid = np.linspace(math.log(lo), math.log(hi), 29)
+        vals = np.array([loss(g) for g in grid])
+        k = int(np.nanargmin(vals))
+        a, b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        # Imported here: scipy.optimize costs the daemon's start-up (predict only) ~1 s on
+        # the host and far more on a small controller; only fitting needs it.
+        from scipy.optimize import minimize_scalar
+
+        res = minimize_scalar(loss, bounds=(a, b), method="bounded", options={"xatol": 1e-3})
+        best_log, best_val = (res.x, res.fun) if res.fun <= vals[k] else (grid[k], vals[k])
+        return math.exp(best_log), float(best_val)
+
+    # -- predict ------------------------------------------------------------------------
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "patterns_"):
+            raise ConfigError("this GRNN is not fitted yet: call fit(X, Y) first")
+
+    def cutoff_index(self, exact: bool = False) -> CutoffIndex:
+        """The kd-tree and cut-off of ``monitor.model.grnn_index`` over the fitted patterns (error
+        <= 1e-6 of each target's std), or with ``exact`` a one-leaf brute-force "index".
+
+        Built on first use and kept until the patterns change (not stored in model files).
+        """
+        self._check_fitted()
+        cache = self.__dict__.setdefault("_indexes", {})
+        # The entry keeps the arrays it was built from: a refit (new arrays) rebuilds it.
+        built = cache.get(exact)
+        arrays = (self.patterns_, self.targets_, self.counts_)
+        if built is None or any(a is not b for a, b in zip(built[0], arrays, strict=True)):
+            make = exact_index if exact else build_index
+            built = (arrays, make(*arrays))
+            cache[exact] = built
+        return built[1]
+
+    def predict(self, X: Any, exact: bool = True) -> np.ndarray:
+        """Eq. 4 for each row of X; a row with NaN gives NaN.  Shape (n,) if fitted on 1-D Y.
+
+        ``exact=False`` sums only the patterns within the cut-off of ``cutoff_index``.
+        """
+        self._check_fitted()
+        Xa = np.asarray(X, dtype=np.float64)
+        single = Xa.ndim == 1
+        if single:
+            Xa = Xa[None, :]
+        if Xa.ndim != 2 or Xa.shape[1] != self.n_features_in_:
+            raise InputFileError(
+                f"X must have {self.n_features_in_} features per row, got shape {np.shape(X)}"
+            )
+        Xa = np.ascontiguousarray(Xa)
+        out = predict_cutoff(self.cutoff_index(exact), Xa, self.sigma_, n_chunks())
+        if self._y1d:
+            out = out[:, 0]
+        return out[0] if single else out
+
+    @classmethod
+    def from_arrays(cls, patterns: Any, targets: Any, sigma: float, **fitted: Any) -> GRNN:
+        """Rebuild a fitted GRNN (e.g. from a model file) without refitting.
+
+        ``fitted`` may carry the recorded attributes (``counts_``, ``sigma_rule_``,
+        ``thinning_``, ``loo_error_``, ``pattern_index_``, ``exclude_neighbours_``).
+        """
+        P = _as_matrix(patterns, "patterns")
+        Y = _as_matrix(targets, "targets")
+        if P.shape[0] != Y.shape[0] or P.shape[0] < 1:
+            raise InputFileError("patterns and targets must have the same, non-zero row count")
+        _require_finite(P, "patterns")
+        _require_finite(Y, "targets")
+        model = cls(sigma=_check_sigma(sigma))
+        model.patterns_, model.targets_ = P, Y
+        model.counts_ = _check_counts(fitted.pop("counts_", None), P.shape[0])
+        model.sigma_ = float(sigma)
+        model.sigma_rule_ = str(fitted.pop("sigma_rule_", "fixed"))
+        model.loo_error_ = float(fitted.pop("loo_error_", math.nan))
+        model.exclude_neighbours_ = int(fitted.pop("exclude_neighbours_", 0))
+        model.thinning_ = dict(fitted.pop("thinning_", {"rule": "none"}))
+        model.pattern_index_ = np.asarray(
+            fitted.pop("pattern_index_", np.arange(P.shape[0])), dtype=np.int64
+        )
+        if fitted:
+            raise ConfigError(f"unknown fitted attribute(s): {', '.join(sorted(fitted))}")
+        model.n_features_in_, model.n_outputs_ = P.shape[1], Y.shape[1]
+        model._y1d = False
+        return model

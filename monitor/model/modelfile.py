@@ -1,0 +1,199 @@
+"""The model file: everything the detector needs, versioned, self-describing, checksummed.
+
+Format: a numpy ``.npz`` holding the GRNN's arrays plus ``header``, a UTF-8 JSON document
+(format name, version, signals, lags, normalisation, sigma, J0, eps0, window, isolation,
+training provenance, and since the operating envelope exists ``validity``: the trained
+range and occupancy of every signal, see ``monitor.model.envelope``) and ``checksum``, a SHA-256
+over the header and every array.  Floats
+go through JSON's shortest round-trip repr and arrays are stored raw, so a model loads
+back bit-identically.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from monitor.errors import ModelFileError
+from monitor.model.dgrnn import DGRNN, DGRNNSpec, Normalizer
+from monitor.model.envelope import Envelope, envelope_from_patterns
+from monitor.model.grnn import GRNN
+from monitor.model.threshold import ThresholdRule
+from monitor.signals import SIGNAL_NAMES
+
+log = logging.getLogger("monitor")
+
+MODEL_FORMAT = "hydraulic-monitor-dgrnn"
+# 2: patterns carry member counts (Specht's clustered GRNN).  The optional header key
+# ``validity`` (the training envelope) was added without a version bump: readers that do
+# not know it ignore it, and files without it get an envelope derived from their patterns.
+MODEL_VERSION = 2
+_ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
+
+
+@dataclass
+class MonitorModel:
+    """A trained detector: DGRNN, normalisation, window N, threshold and fault isolation."""
+
+    dgrnn: DGRNN
+    normalizer: Normalizer
+    window_n: int
+    threshold: ThresholdRule
+    j0: float
+    eps0: float
+    isolation_labels: tuple[str, ...] = ()
+    isolation_centroids: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    isolation_min_similarity: float = 0.5
+    #: Per-output bound on |e| (z-units) before J; None keeps eq. 9 literal.  See training.
+    residual_clip: tuple[float, ...] | None = None
+    training: dict[str, Any] = field(default_factory=dict)
+    #: Trained range and occupancy per signal (None: not known; see ``monitor.model.envelope``).
+    envelope: Envelope | None = None
+
+    @property
+    def spec(self) -> DGRNNSpec:
+        return self.dgrnn.spec
+
+    def header(self) -> dict[str, Any]:
+        g = self.dgrnn.grnn
+        head = {
+            "format": MODEL_FORMAT,
+            "version": MODEL_VERSION,
+            "spec": self.spec.to_dict(),
+            "normalizer": self.normalizer.to_dict(),
+            "sigma": float(g.sigma_),
+            "sigma_rule": g.sigma_rule_,
+            "loo_error": float(g.loo_error_),
+            "exclude_neighbours": int(g.exclude_neighbours_),
+            "thinning": g.thinning_,
+            "window_n": int(self.window_n),
+            "residual_clip": None if self.residual_clip is None else list(self.residual_clip),
+            "threshold": self.threshold.to_dict(),
+            "j0": float(self.j0),
+            "eps0": float(self.eps0),
+            "isolation": {
+                "labels": list(self.isolation_labels),
+                "min_similarity": float(self.isolation_min_similarity),
+            },
+            "training": self.training,
+        }
+        if self.envelope is not None:
+            head["validity"] = self.envelope.to_dict()
+        return head
+
+
+def _checksum(header_bytes: bytes, arrays: dict[str, np.ndarray]) -> str:
+    h = hashlib.sha256(header_bytes)
+    for name in _ARRAYS:
+        a = np.ascontiguousarray(arrays[name])
+        h.update(name.encode() + str(a.dtype).encode() + str(a.shape).encode() + a.tobytes())
+    return h.hexdigest()
+
+
+def save_model(path: str | Path, model: MonitorModel) -> None:
+    g = model.dgrnn.grnn
+    arrays = {
+        "patterns": np.asarray(g.patterns_, dtype=np.float64),
+        "targets": np.asarray(g.targets_, dtype=np.float64),
+        "counts": np.asarray(g.counts_, dtype=np.float64),
+        "pattern_index": np.asarray(g.pattern_index_, dtype=np.int64),
+        "isolation_centroids": np.asarray(model.isolation_centroids, dtype=np.float64),
+    }
+    header = json.dumps(model.header()).encode("utf-8")
+    checksum = _checksum(header, arrays).encode("ascii")
+    path = Path(path)
+    with path.open("wb") as fh:
+        np.savez(
+            fh,
+            header=np.frombuffer(header, dtype=np.uint8),
+            checksum=np.frombuffer(checksum, dtype=np.uint8),
+            **arrays,
+        )
+
+
+def load_model(path: str | Path) -> MonitorModel:
+    """Load and verify a model file; any problem is a ``ModelFileError`` naming the file."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {k: npz[k] for k in npz.files}
+    except FileNotFoundError:
+        raise ModelFileError(f"{path}: no such model file") from None
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise ModelFileError(f"{path}: not a monitor model file ({exc})") from None
+    missing = [k for k in ("header", "checksum", *_ARRAYS) if k not in data]
+    if missing:
+        raise ModelFileError(f"{path}: not a monitor model file (missing {', '.join(missing)})")
+    header_bytes = data["header"].tobytes()
+    try:
+        header = json.loads(header_bytes.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise ModelFileError(f"{path}: corrupt model header") from None
+    if header.get("format") != MODEL_FORMAT:
+        raise ModelFileError(f"{path}: not a monitor model file (format {header.get('format')!r})")
+    if header.get("version") != MODEL_VERSION:
+        raise ModelFileError(
+            f"{path}: model file version {header.get('version')!r}; this monitor reads version "
+            f"{MODEL_VERSION} (retrain with `monitor train`)"
+        )
+    if _checksum(header_bytes, data) != data["checksum"].tobytes().decode("ascii", "replace"):
+        raise ModelFileError(f"{path}: checksum mismatch, the model file is corrupt")
+    try:
+        model = _from_header(header, data)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelFileError(f"{path}: inconsistent model file ({exc})") from None
+    if model.envelope is None:
+        model.envelope = envelope_from_patterns(model)
+        log.info(
+            "%s: no stored training envelope (a model file from before it existed); validity "
+            "ranges derived from its patterns: %s", path,
+            ", ".join(f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(
+                model.envelope.signals, model.envelope.lo, model.envelope.hi, strict=True)),
+        )  # fmt: skip
+    return model
+
+
+def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> MonitorModel:
+    spec = DGRNNSpec.from_dict(header["spec"])
+    unknown = [v for v in spec.variables if v not in SIGNAL_NAMES]
+    if unknown:
+        raise ValueError(f"the model uses signals this monitor does not know: {unknown}")
+    normalizer = Normalizer.from_dict(header["normalizer"])
+    grnn = GRNN.from_arrays(
+        data["patterns"],
+        data["targets"],
+        header["sigma"],
+        counts_=data["counts"],
+        sigma_rule_=header["sigma_rule"],
+        loo_error_=header["loo_error"],
+        exclude_neighbours_=header["exclude_neighbours"],
+        thinning_=header["thinning"],
+        pattern_index_=data["pattern_index"],
+    )
+    dgrnn = DGRNN(spec, grnn)
+    dgrnn._fitted()  # shape check against the spec
+    iso = header["isolation"]
+    centroids = data["isolation_centroids"]
+    if len(iso["labels"]) != centroids.shape[0]:
+        raise ValueError("isolation labels and centroids disagree")
+    return MonitorModel(
+        dgrnn=dgrnn,
+        normalizer=normalizer,
+        window_n=int(header["window_n"]),
+        threshold=ThresholdRule(**header["threshold"]),
+        j0=float(header["j0"]),
+        eps0=float(header["eps0"]),
+        isolation_labels=tuple(iso["labels"]),
+        isolation_centroids=centroids,
+        isolation_min_similarity=float(iso["min_similarity"]),
+        residual_clip=None if header["residual_clip"] is None else tuple(header["residual_clip"]),
+        training=header["training"],
+        envelope=Envelope.from_dict(header["validity"]) if "validity" in header else None,
+    )

@@ -1,0 +1,165 @@
+"""Residuals and the windowed mean squared residual J (He & He 2014, eqs. 8-9).
+
+    e = y_hat - y                                                  (eq. 8)
+    J(k+1) = 1/(N+1) * sum_{i=k+1-N}^{k+1} e^2(i)                  (eq. 9)
+
+The window holds N + 1 samples (i runs from k+1-N to k+1 inclusive).
+
+Several outputs: e^2(i) is the mean of the squared residuals of the outputs at sample i
+(all in z-score units), so with one output this is eq. 9 exactly and with several J keeps
+the same scale as a single output's J.
+
+Missing data: a sample whose residual has a NaN in any output is not pushed into the window
+(the window *pauses*): J is reported as NaN at that sample (no verdict without data; the
+detector marks a sensor fault), and when data returns the window continues with the N + 1
+most recent valid samples.  Before N + 1 valid samples have been seen, J is NaN (warm-up).
+Call :meth:`WindowJ.reset` to forget the window (e.g. after a long gap).
+
+The incremental form keeps a running sum, O(1) per tick; every ``resum_every`` pushes the
+sum is recomputed exactly from the ring so float drift cannot accumulate.  The batch form
+runs the same algorithm in numba, so both give the same numbers (to rounding).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from monitor.errors import ConfigError, InputFileError
+from monitor.jit import jit
+
+
+def residuals(y_hat: Any, y: Any) -> np.ndarray:
+    """Eq. 8: e = y_hat - y, elementwise (NaN where either is missing)."""
+    a = np.asarray(y_hat, dtype=np.float64)
+    b = np.asarray(y, dtype=np.float64)
+    if a.shape != b.shape:
+        raise InputFileError(f"predictions {a.shape} and measurements {b.shape} differ in shape")
+    return a - b
+
+
+def squared_residual(e: Any) -> np.ndarray:
+    """e^2 per sample, averaged over outputs (columns); NaN if any output is NaN."""
+    a = np.asarray(e, dtype=np.float64)
+    if a.ndim == 1:
+        return a * a
+    if a.ndim != 2:
+        raise InputFileError(f"residuals must be 1-D or (samples, outputs), got {a.shape}")
+    return np.mean(a * a, axis=1)
+
+
+def _check_window(N: int) -> int:
+    n = int(N)
+    if n < 0:
+        raise ConfigError(f"the J window length N must be >= 0, got {N}")
+    return n
+
+
+def _default_resum(N: int) -> int:
+    return max(1000, 10 * (N + 1))
+
+
+@jit
+def _j_series(s, size, resum_every):  # pragma: no cover - numba
+    n = s.shape[0]
+    out = np.full(n, np.nan)
+    ring = np.zeros(size)
+    pos = 0
+    count = 0
+    pushes = 0
+    total = 0.0
+    for i in range(n):
+        v = s[i]
+        if np.isnan(v):
+            continue
+        total += v - ring[pos]
+        ring[pos] = v
+        pos += 1
+        if pos == size:
+            pos = 0
+        if count < size:
+            count += 1
+        pushes += 1
+        if pushes == resum_every:
+            pushes = 0
+            total = 0.0
+            for j in range(size):
+                total += ring[j]
+        if count == size:
+            out[i] = total / size
+    return out
+
+
+def window_j(e: Any, N: int, resum_every: int | None = None) -> np.ndarray:
+    """Eq. 9 for a whole series: J at every sample (NaN during warm-up and at missing samples).
+
+    ``e`` is (samples,) or (samples, outputs) residuals.
+    """
+    n = _check_window(N)
+    s = np.ascontiguousarray(squared_residual(e))
+    every = _default_resum(n) if resum_every is None else int(resum_every)
+    if every < 1:
+        raise ConfigError("resum_every must be >= 1")
+    return _j_series(s, n + 1, every)
+
+
+class WindowJ:
+    """Eq. 9 kept up to date one tick at a time (fixed ring, no allocation per tick)."""
+
+    def __init__(self, N: int, resum_every: int | None = None) -> None:
+        self.N = _check_window(N)
+        self.size = self.N + 1
+        self.resum_every = _default_resum(self.N) if resum_every is None else int(resum_every)
+        if self.resum_every < 1:
+            raise ConfigError("resum_every must be >= 1")
+        self._ring = np.zeros(self.size)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every sample: J is NaN until N + 1 new valid samples have arrived."""
+        self._ring[:] = 0.0
+        self._pos = 0
+        self._count = 0
+        self._pushes = 0
+        self._total = 0.0
+        self.value = float("nan")  # last J computed (held through missing samples)
+
+    @property
+    def ready(self) -> bool:
+        """True once the window is full (J is defined)."""
+        return self._count == self.size
+
+    def update(self, e: Any) -> float:
+        """Push one sample's residual (a float or the outputs' residuals); return J.
+
+        NaN (a missing sample) pauses the window and returns NaN; ``value`` keeps the last J.
+        """
+        if isinstance(e, float):
+            v = e * e
+        else:
+            a = np.asarray(e, dtype=np.float64)
+            v = float(np.dot(a.ravel(), a.ravel())) / a.size
+        return self.push_squared(v)
+
+    def push_squared(self, v: float) -> float:
+        """Push an already squared (and output-averaged) residual e^2; see :meth:`update`."""
+        if v != v:  # NaN
+            return float("nan")
+        ring = self._ring
+        self._total += v - ring[self._pos]
+        ring[self._pos] = v
+        self._pos += 1
+        if self._pos == self.size:
+            self._pos = 0
+        if self._count < self.size:
+            self._count += 1
+        self._pushes += 1
+        if self._pushes == self.resum_every:
+            # Exact re-summation: the running add/subtract would otherwise drift.
+            self._pushes = 0
+            self._total = float(ring.sum())
+        if self._count < self.size:
+            return float("nan")
+        self.value = self._total / self.size
+        return self.value

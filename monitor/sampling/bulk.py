@@ -1,0 +1,161 @@
+"""A candump log to a 100 Hz ``Recording`` in bulk: the offline path of ``monitor detect``.
+
+Same result as ``monitor.sampling.sampler.recording_from_candump`` (python-can reader -> FrameCodec
+-> Sampler, frame by frame), computed in three array passes:
+
+1. ``read_candump_frames``: the log as arrays of frames (``monitor.io.candump_bulk``);
+2. ``decode_frames``: checks and physical values per message ID (``monitor.codec.bulk``);
+3. the sample clock.  The sampler's time rules (reordering jitter, skipped strays, clock
+   resync after ``resync_frames`` older frames, forward gaps shortened to ``max_gap_s``)
+   depend on every frame before, so a small serial numba kernel replays them and gives each
+   applied frame its sampler time st.  Applied times never decrease, and a frame is
+   visible from row ``K = max over frames so far of ceil((st - eps) / period)`` on (the rows
+   the sampler emits before applying it), so each signal's value in row k is that of its
+   last frame with K <= k (one ``searchsorted``), or NaN when older than its staleness.
+
+The kernel uses plain IEEE arithmetic (no fast-math), so every time is the float the
+frame-by-frame sampler computes.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from monitor.codec.bulk import decode_frames
+from monitor.codec.frames import FrameCodec
+from monitor.io.candump_bulk import read_candump_frames
+from monitor.io.recording import Recording
+from monitor.jit import jit
+from monitor.sampling.sampler import (
+    _EPS_S,
+    ROW_COLUMNS,
+    Sampler,
+    TimeCounts,
+    hydraulic_messages,
+    no_hydraulic_data,
+)
+from monitor.signals import ROD_POS
+
+
+@jit(fastmath=False)
+def _clock(ts, period, max_gap, resync, eps):  # pragma: no cover - numba
+    """Sampler time of every frame (NaN: skipped) and the counts, as ``Sampler.feed``.
+
+    Frames held back as possibly older are replayed through a stack in the order the
+    recursive ``feed`` replays them.
+    """
+    n = ts.shape[0]
+    st_out = np.full(n, np.nan)
+    order = np.empty(n + 1, np.int64)  # applied frames in application order
+    n_applied = 0
+    behind = np.empty(resync, np.int64)
+    nb = 0
+    stack = np.empty(2 * resync + 2, np.int64)
+    counts = np.zeros(4, np.int64)  # backwards, skipped, resyncs, gaps
+    offset = -ts[0]
+    newest = -np.inf
+    for f0 in range(n):
+        sp = 1
+        stack[0] = f0
+        while sp > 0:
+            sp -= 1
+            f = stack[sp]
+            st = ts[f] + offset
+            if st < newest - eps:
+                counts[0] += 1
+                if newest - st <= period:
+                    st = newest  # reordering jitter
+                else:
+                    behind[nb] = f
+                    nb += 1
+                    if nb < resync:
+                        continue
+                    offset = newest + period - ts[behind[0]]
+                    counts[2] += 1
+                    if sp + nb > stack.shape[0]:
+                        grown = np.empty(stack.shape[0] * 2, np.int64)
+                        grown[:sp] = stack[:sp]
+                        stack = grown
+                    for k in range(nb - 1, -1, -1):  # replay in order
+                        stack[sp] = behind[k]
+                        sp += 1
+                    nb = 0
+                    continue
+            elif nb > 0:
+                counts[1] += nb  # the older ones were strays, not a clock reset
+                nb = 0
+            if newest > -np.inf and st - newest > max_gap:
+                offset -= st - newest - max_gap
+                st = newest + max_gap
+                counts[3] += 1
+            st_out[f] = st
+            if n_applied == order.shape[0]:
+                grown = np.empty(order.shape[0] * 2, np.int64)
+                grown[:n_applied] = order
+                order = grown
+            order[n_applied] = f
+            n_applied += 1
+            newest = st
+    return st_out, order[:n_applied], counts, newest
+
+
+def recording_from_candump_bulk(
+    path: str | Path, codec: FrameCodec | None = None, columns: tuple[str, ...] = ROW_COLUMNS
+) -> Recording:
+    """``recording_from_candump`` computed in bulk: same rows, columns, meta and errors."""
+    codec = codec or FrameCodec.from_dbc()
+    # Its parameters and staleness, not its feed().
+    sampler = Sampler.for_codec(codec, columns=columns)
+    frames = read_candump_frames(path)
+    decoded = decode_frames(codec, frames)
+    wanted = hydraulic_messages(codec, columns)
+    hydraulic = [name for name in codec.messages if name in wanted]
+    parts = [decoded[name] for name in hydraulic if decoded[name].rows.size]
+    counts = codec.counts.as_dict()
+    if not parts:
+        raise no_hydraulic_data(path, counts)
+    # The frames the sampler is fed, in log order, and per frame its message's slot.
+    rows = np.concatenate([p.rows for p in parts])
+    msg_of = np.concatenate([np.full(p.rows.size, k) for k, p in enumerate(parts)])
+    pos_in_msg = np.concatenate([np.arange(p.rows.size) for p in parts])
+    by_time = np.argsort(rows, kind="stable")
+    rows, msg_of, pos_in_msg = rows[by_time], msg_of[by_time], pos_in_msg[by_time]
+    ts = np.ascontiguousarray(frames.timestamp[rows])
+    period = sampler.period_s
+    st, applied, tc, newest = _clock(ts, period, sampler.max_gap_s, sampler.resync_frames, _EPS_S)
+    # Rows emitted before each applied frame: a running maximum over application order.
+    first_row = np.maximum.accumulate(np.ceil((st[applied] - _EPS_S) / period)).astype(np.int64)
+    n_rows = max(int(first_row[-1]), math.floor((newest + _EPS_S) / period) + 1)
+    inst = np.arange(n_rows) * period
+
+    seen: set[str] = set()
+    columns: dict[str, np.ndarray] = {}
+    stale = dict(zip(sampler.columns, sampler._stale_s, strict=True))
+    for name in sampler.columns:
+        carriers = [k for k, p in enumerate(parts) if name in p.values]
+        sel = np.flatnonzero(np.isin(msg_of[applied], carriers))
+        col = np.full(n_rows, np.nan)
+        if sel.size:
+            seen.add(name)
+            f = applied[sel]
+            vals = np.empty(sel.size)
+            for k in carriers:
+                mine = msg_of[f] == k
+                vals[mine] = parts[k].values[name][pos_in_msg[f[mine]]]
+            last = np.searchsorted(first_row[sel], np.arange(n_rows), side="right") - 1
+            have = last >= 0
+            li = last[have]
+            fresh = inst[have] - st[f[li]] <= stale[name]
+            col[np.flatnonzero(have)[fresh]] = vals[li[fresh]]
+        if name != ROD_POS.name or name in seen:
+            columns[name] = col
+    time_counts = TimeCounts(*(int(v) for v in tc))
+    meta: dict[str, object] = {
+        "format": "candump",
+        "start_time_s": float(ts[0]),
+        "counts": {**counts, **time_counts.as_dict()},
+    }
+    return Recording(t=inst, columns=columns, source=str(path), meta=meta)

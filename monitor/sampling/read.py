@@ -1,0 +1,33 @@
+"""Open any recording the tools accept: a contract CSV or a candump log."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from monitor.errors import InputFileError
+from monitor.io.recording import Recording
+
+
+def read_recording(path: str | Path) -> Recording:
+    """A contract CSV (``.csv``) or a candump log (anything else whose first line is one)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such file")
+    if path.suffix.lower() == ".csv":
+        from monitor.io.csvio import read_csv
+
+        return read_csv(path)
+    try:
+        with path.open("r", encoding="utf-8", errors="replace") as fh:
+            first = fh.readline()
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read: {exc.strerror}") from None
+    if first.startswith("t,") or ",PP" in first:
+        from monitor.io.csvio import read_csv
+
+        return read_csv(path)
+    # The bulk path gives the Recording of monitor.sampling.sampler.recording_from_candump (the
+    # daemon's frame-by-frame path), tested equal, some 20x faster.
+    from monitor.sampling.bulk import recording_from_candump_bulk
+
+    return recording_from_candump_bulk(path)

@@ -1,0 +1,289 @@
+"""Decoded frames -> 100 Hz rows ``[t, SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp, PP, PA,
+PB, QP, RodPos]`` on a sample clock, with staleness per signal.
+
+The clock starts at the first frame fed and ticks every ``period_s`` (10 ms).  The row of
+instant k holds, per signal, the latest value received at or before that instant, or NaN
+when the signal is stale: its last value is older than ``stale_cycles`` (3) cycle times of
+its message's GenMsgCycleTime (30 ms for 10 ms frames, 3 s for the 1 Hz oil temperature),
+or it never arrived.  Stale data is a sensor fault downstream, never a hydraulic one.
+Row ``t`` is seconds from the first frame (``start_time_s`` keeps the absolute time).
+
+Time that goes backwards (merged interfaces, a clock reset in the logger) must not break
+the clock.  The rule:
+
+* a frame at most one sample period older than the newest frame is reordering jitter and
+  is applied at the newest frame's time;
+* an older frame is skipped, unless ``resync_frames`` (5) consecutive frames are all
+  older: then the logger's clock was reset, and the time base shifts so that those frames
+  continue right after the newest one (they are replayed, counted as a resync);
+* a forward gap longer than ``max_gap_s`` (60 s) is shortened to ``max_gap_s`` of stale
+  (NaN) rows and counted, so a clock jump of days cannot allocate millions of rows.
+
+Rows always stay on one increasing 10 ms grid.  The sampler is fed incrementally
+(``feed``) and hands out the rows that are complete (``advance``/``flush``), so the live
+daemon and the offline replay share it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from monitor.codec.frames import FrameCodec
+from monitor.errors import NoHydraulicDataError
+from monitor.io.candump import read_candump
+from monitor.io.recording import Recording
+from monitor.signals import ROD_POS, SAMPLE_PERIOD_S, SIGNAL_NAMES
+
+#: Row columns after ``t``: the contract signals, then the optional RodPos.
+ROW_COLUMNS: tuple[str, ...] = (*SIGNAL_NAMES, ROD_POS.name)
+
+_EPS_S = 1e-6  # log timestamps have 1 us resolution; absorbs float noise of t0 + k * period
+_NAN = math.nan
+
+
+@dataclass
+class TimeCounts:
+    """How often the sampler had to deal with a misbehaving clock."""
+
+    time_backwards: int = 0  # frames older than the newest one (jitter or skipped)
+    time_skipped: int = 0  # of those, frames dropped
+    time_resyncs: int = 0  # clock resets followed
+    gaps_shortened: int = 0  # forward gaps longer than max_gap_s
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(vars(self))
+
+
+class Sampler:
+    """Turns (timestamp, message, physical values) into rows on a fixed sample clock."""
+
+    def __init__(
+        self,
+        cycle_times_s: Mapping[str, float],
+        columns: tuple[str, ...] = ROW_COLUMNS,
+        period_s: float = SAMPLE_PERIOD_S,
+        stale_cycles: float = 3.0,
+        max_gap_s: float = 60.0,
+        resync_frames: int = 5,
+    ) -> None:
+        """``cycle_times_s`` maps a signal to its message's cycle time (s); a signal not
+        in it is stale after ``stale_cycles`` sample periods."""
+        self.columns = tuple(columns)
+        self.period_s = float(period_s)
+        self.max_gap_s = float(max_gap_s)
+        self.resync_frames = int(resync_frames)
+        self._index = {name: i for i, name in enumerate(self.columns)}
+        self._stale_s = [
+            stale_cycles * cycle_times_s.get(name, self.period_s) + _EPS_S for name in self.columns
+        ]
+        self._values = [_NAN] * len(self.columns)
+        self._last_t = [-math.inf] * len(self.columns)  # sampler time of each latest value
+        self.seen: set[str] = set()
+        self.start_time_s: float | None = None  # log time of row t = 0
+        self.counts = TimeCounts()
+        self._offset = 0.0  # sampler time = log time + offset (changes on resync/gap)
+        self._newest = -math.inf  # sampler time of the newest frame applied
+        self._k = 0  # next instant to emit
+        self._pending: list[list[float]] = []
+        self._behind: list[tuple[float, str, Mapping[str, float]]] = []
+
+    @classmethod
+    def for_codec(cls, codec: FrameCodec, **kwargs: Any) -> Sampler:
+        """A sampler whose staleness follows the GenMsgCycleTime of ``codec``'s DBC;
+        ``kwargs`` as for ``Sampler``."""
+        return cls(codec.signal_cycle_times(), **kwargs)
+
+    @property
+    def started(self) -> bool:
+        return self.start_time_s is not None
+
+    @property
+    def pending(self) -> int:
+        """Number of completed rows waiting in ``take``."""
+        return len(self._pending)
+
+    @property
+    def width(self) -> int:
+        return 1 + len(self.columns)
+
+    # -- feeding --------------------------------------------------------------------------
+
+    def feed(self, timestamp_s: float, message_name: str, values: Mapping[str, float]) -> None:
+        """Apply one decoded frame (log/bus time in s).  Signals not in ``columns`` are
+        ignored; ``message_name`` is only used for bookkeeping."""
+        if self.start_time_s is None:
+            self.start_time_s = float(timestamp_s)
+            self._offset = -float(timestamp_s)  # sampler time 0 = first frame
+        st = timestamp_s + self._offset
+        newest = self._newest
+        if st < newest - _EPS_S:
+            self.counts.time_backwards += 1
+            if newest - st <= self.period_s:
+                st = newest  # reordering jitter
+            else:
+                self._behind_frame(timestamp_s, message_name, values)
+                return
+        elif self._behind:
+            # A frame on time again: the older ones were strays, not a clock reset.
+            self.counts.time_skipped += len(self._behind)
+            self._behind.clear()
+        if newest > -math.inf and st - newest > self.max_gap_s:
+            self._offset -= st - newest - self.max_gap_s
+            st = newest + self.max_gap_s
+            self.counts.gaps_shortened += 1
+        self._emit_before(st)
+        self._apply(st, values)
+
+    def _behind_frame(self, timestamp_s: float, name: str, values: Mapping[str, float]) -> None:
+        self._behind.append((timestamp_s, name, values))
+        if len(self._behind) < self.resync_frames:
+            return
+        # Clock reset: map the first older frame to just after the newest one and replay.
+        frames, self._behind = self._behind, []
+        self._offset = self._newest + self.period_s - frames[0][0]
+        self.counts.time_resyncs += 1
+        for ts, name_, vals in frames:
+            self.feed(ts, name_, vals)
+
+    def _apply(self, st: float, values: Mapping[str, float]) -> None:
+        index = self._index
+        for name, value in values.items():
+            i = index.get(name)
+            if i is not None:
+                self._values[i] = float(value)
+                self._last_t[i] = st
+                self.seen.add(name)
+        self._newest = st
+
+    # -- rows -----------------------------------------------------------------------------
+
+    def _row(self, k: int) -> list[float]:
+        inst = k * self.period_s
+        return [
+            inst,
+            *[
+                v if inst - tl <= stale else _NAN
+                for v, tl, stale in zip(self._values, self._last_t, self._stale_s, strict=True)
+            ],
+        ]
+
+    def _emit_before(self, st: float) -> None:
+        """Queue the rows of instants strictly before sampler time ``st``."""
+        end = math.ceil((st - _EPS_S) / self.period_s)  # first instant >= st - eps
+        self._emit_to(end)
+
+    def _emit_to(self, end: int) -> None:
+        k0 = self._k
+        if end <= k0:
+            return
+        if end - k0 <= 64:
+            self._pending.extend(self._row(k) for k in range(k0, end))
+        else:  # a long gap: same state throughout, vectorised
+            inst = np.arange(k0, end) * self.period_s
+            vals = np.array(self._values)
+            fresh = (inst[:, None] - np.array(self._last_t)[None, :]) <= np.array(self._stale_s)
+            block = np.column_stack([inst, np.where(fresh, vals[None, :], np.nan)])
+            self._pending.extend(block.tolist())
+        self._k = end
+
+    def take(self) -> np.ndarray:
+        """Rows completed so far (instants before the newest frame), not handed out yet."""
+        rows, self._pending = self._pending, []
+        if not rows:
+            return np.empty((0, self.width))
+        return np.array(rows, dtype=np.float64)
+
+    def advance(self, until_s: float) -> np.ndarray:
+        """Rows (n x (1 + len(columns))) of every instant up to log/bus time ``until_s``
+        not handed out yet.  Call it with a time no frame of an earlier instant can still
+        arrive before (the live daemon allows for bus latency)."""
+        if self.start_time_s is not None:
+            st = until_s + self._offset
+            self._emit_to(math.floor((st + _EPS_S) / self.period_s) + 1)
+        return self.take()
+
+    def flush(self) -> np.ndarray:
+        """Rows up to and including the instant of the newest frame (end of a log)."""
+        if self.start_time_s is not None:
+            self._emit_to(math.floor((self._newest + _EPS_S) / self.period_s) + 1)
+        return self.take()
+
+
+def hydraulic_messages(codec: FrameCodec, columns: tuple[str, ...] = ROW_COLUMNS) -> set[str]:
+    """Names of the DBC messages that carry at least one row signal."""
+    wanted = set(columns)
+    return {
+        info.name for info in codec.messages.values() if wanted.intersection(info.signal_names)
+    }
+
+
+def no_hydraulic_data(path: str | Path, counts: Mapping[str, Any]) -> NoHydraulicDataError:
+    """The error (exit 3) for a log without one valid hydraulic frame, with its counts."""
+    rejected = ", ".join(f"{k} {v}" for k, v in counts["rejected"].items() if v)
+    return NoHydraulicDataError(
+        f"{path}: {counts['frames']} frames read, none of them a valid hydraulic frame"
+        f" of the DBC ({counts['ignored']} with unknown ids"
+        + (f"; rejected: {rejected}" if rejected else "")
+        + ")"
+    )
+
+
+def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) -> Recording:
+    """Decode a candump log into a 100 Hz ``Recording`` (RodPos only when the log has it).
+
+    ``meta["counts"]`` holds the log's frame counts: frames read, decoded, ignored
+    (unknown id), rejected by reason, counter jumps, and the sampler's time counts.
+    Raises ``InputFileError`` for a malformed line and ``NoHydraulicDataError`` (exit 3)
+    when no valid hydraulic frame of the DBC is in the log.
+    """
+    codec = codec or FrameCodec.from_dbc()
+    codec.reset_counters()
+    sampler = Sampler.for_codec(codec)
+    hydraulic = hydraulic_messages(codec)
+    chunks: list[np.ndarray] = []
+    decode, feed = codec.decode_message, sampler.feed
+    for msg in read_candump(path):
+        d = decode(msg)
+        if d.rejection is None and d.name in hydraulic:
+            feed(msg.timestamp, d.name, d.values)  # type: ignore[arg-type]
+            if sampler.pending >= 8192:  # lists of floats cost more memory than arrays
+                chunks.append(sampler.take())
+    counts = {**codec.counts.as_dict(), **sampler.counts.as_dict()}
+    if not sampler.started:
+        raise no_hydraulic_data(path, counts)
+    chunks.append(sampler.flush())
+    rows = np.concatenate(chunks)
+    columns = {
+        name: rows[:, 1 + i]
+        for i, name in enumerate(sampler.columns)
+        if name != ROD_POS.name or ROD_POS.name in sampler.seen
+    }
+    meta: dict[str, object] = {
+        "format": "candump",
+        "start_time_s": sampler.start_time_s,
+        "counts": counts,
+    }
+    return Recording(t=rows[:, 0], columns=columns, source=str(path), meta=meta)
+
+
+_ID_MASK_EXT = 0x1FFFFFFF
+_ID_MASK_STD = 0x7FF
+
+
+def sensor_filters(
+    codec: FrameCodec, columns: tuple[str, ...] = ROW_COLUMNS
+) -> list[dict[str, int | bool]]:
+    """python-can filters passing exactly the DBC's frames of the row ``columns`` (sensor
+    and command frames, not our own MON_*)."""
+    out: list[dict[str, int | bool]] = []
+    for name in sorted(hydraulic_messages(codec, columns)):
+        info = codec.messages[name]
+        mask = _ID_MASK_EXT if info.is_extended_id else _ID_MASK_STD
+        out.append({"can_id": info.frame_id, "can_mask": mask, "extended": info.is_extended_id})
+    return out

@@ -1,0 +1,3 @@
+"""Building a model from normal recordings (`monitor train`), with fault signatures from the
+simulator.
+"""

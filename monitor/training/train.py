@@ -1,0 +1,195 @@
+"""``monitor train``: normal recordings -> a verified model file.
+
+Normal data is split in two: the patterns (and the z-score statistics, F0) come from the
+first part, J0 from the held-out rest, so the threshold is set on data the GRNN never saw.
+Fault isolation learns one residual signature per fault from the simulator (the product's
+own physics model), driven through the freshly trained DGRNN.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from monitor.detection.alarm import N_REGIMES, AlarmConfig, Isolator, regime_of
+from monitor.errors import ConfigError, InputFileError
+from monitor.io.recording import Recording
+from monitor.model.dgrnn import DGRNN, PRESETS, DGRNNSpec, Normalizer, table
+from monitor.model.envelope import envelope_from_recordings
+from monitor.model.grnn import GRNN
+from monitor.model.modelfile import MonitorModel
+from monitor.model.residual import window_j
+from monitor.model.threshold import ThresholdRule
+from monitor.signals import FAULT_NAMES
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    preset: str = "default"
+    horizon: int | None = None  # None: the preset's own
+    window_n: int = 3000  # J window N (samples): 30 s spans several raise/hold/lower phases
+    max_patterns: int = 6000  # smaller clusters: less bias where PP is steep in SpoolCmd
+    exclude_neighbours: int = 50  # LOO leaves out +-0.5 s: 100 Hz rows are near copies
+    threshold: ThresholdRule = field(default_factory=ThresholdRule)
+    validation_fraction: float = 0.25
+    #: Bound |e| per output at this quantile of held-out normal |e| before J (None: eq. 9
+    #: literal).  0.999 leaves sustained fault residuals alone and caps the rare one-sample
+    #: events (end-stop impacts) that would otherwise set J0 by themselves.
+    residual_clip_quantile: float | None = 0.999
+    isolation: str = "sim"  # "sim": signatures from simulated faults; "none"
+    isolation_runs: int = 2  # simulated runs per fault and severity
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            raise ConfigError(f"unknown preset {self.preset!r}; known: {', '.join(PRESETS)}")
+        if self.window_n < 1:
+            raise ConfigError(f"window N must be at least 1 sample, got {self.window_n}")
+        if not 0.05 <= self.validation_fraction <= 0.5:
+            raise ConfigError("validation fraction must be within 0.05..0.5")
+        q = self.residual_clip_quantile
+        if q is not None and not 0.9 <= q <= 1.0:
+            raise ConfigError(f"residual clip quantile must be within 0.9..1, got {q}")
+        if self.isolation not in ("sim", "none"):
+            raise ConfigError(f"isolation must be 'sim' or 'none', got {self.isolation!r}")
+
+    def spec(self) -> DGRNNSpec:
+        return DGRNNSpec.preset(self.preset, self.horizon)
+
+
+def split_normal(
+    recordings: Sequence[Recording], fraction: float
+) -> tuple[list[Recording], list[Recording]]:
+    """Patterns part and validation part: whole recordings when there are several."""
+    recs = list(recordings)
+    if len(recs) >= 2:
+        n_val = max(1, math.ceil(fraction * len(recs)))
+        return recs[:-n_val], recs[-n_val:]
+    rec = recs[0]
+    cut = int(round(len(rec) * (1 - fraction)))
+    head = Recording(rec.t[:cut], {k: v[:cut] for k, v in rec.columns.items()}, rec.source)
+    tail = Recording(rec.t[cut:], {k: v[cut:] for k, v in rec.columns.items()}, rec.source)
+    return [head], [tail]
+
+
+def data_hash(arrays: Sequence[np.ndarray]) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
+def normal_residuals(model: MonitorModel, rec: Recording) -> np.ndarray:
+    """Residuals e over a normal recording, gated exactly as the detector gates them."""
+    from monitor.detection.offline import gated_residuals
+
+    return gated_residuals(model, rec, AlarmConfig().min_engine_rpm)[1]
+
+
+def train(
+    recordings: Sequence[Recording], cfg: TrainConfig, progress: Progress | None = None
+) -> MonitorModel:
+    say = progress or (lambda _msg: None)
+    if not recordings:
+        raise InputFileError("no normal recordings to train on")
+    spec = cfg.spec()
+    for rec in recordings:
+        missing = [n for n in spec.variables if not rec.has(n)]
+        if missing:
+            raise InputFileError(f"{rec.source}: missing signal(s) {', '.join(missing)}")
+    fit_part, val_part = split_normal(recordings, cfg.validation_fraction)
+    tables = [table(r, spec.variables) for r in fit_part]
+    normalizer = Normalizer().fit(np.concatenate(tables), spec.variables)
+    started = time.perf_counter()
+    say(
+        f"fitting the {cfg.preset} DGRNN on {sum(len(t) for t in tables)} samples "
+        f"from {len(fit_part)} part(s)"
+    )
+    grnn = GRNN(exclude_neighbours=cfg.exclude_neighbours, max_patterns=cfg.max_patterns)
+    dgrnn = DGRNN(spec, grnn).fit([normalizer.transform(t) for t in tables])
+    say(
+        f"  {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g} (LOO, +-"
+        f"{cfg.exclude_neighbours} samples excluded) in {time.perf_counter() - started:.1f} s"
+    )
+    model = MonitorModel(dgrnn, normalizer, cfg.window_n, cfg.threshold, math.nan, math.nan)
+    # Held-out residuals once, unbounded; the bound (if any) is learnt from them and then
+    # applied exactly as the detector applies it.
+    e_val = [normal_residuals(model, r) for r in val_part]
+    if cfg.residual_clip_quantile is not None:
+        clip = np.nanquantile(np.abs(np.concatenate(e_val)), cfg.residual_clip_quantile, axis=0)
+        model.residual_clip = tuple(float(c) for c in clip)
+        say(f"  residual bound |e| <= {', '.join(f'{c:.3g}' for c in clip)} (z, per output)")
+        e_val = [np.clip(e, -clip, clip) for e in e_val]
+    j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
+    model.j0, model.eps0 = cfg.threshold.eps0(j_val)
+    say(
+        f"  J0 {model.j0:.4g} ({cfg.threshold.rule} of J on {len(val_part)} held-out part(s)),"
+        f" eps0 {model.eps0:.4g}"
+    )
+    # The operating envelope of every training recording (patterns and held-out part): the
+    # detector reports samples beyond it as out_of_range instead of judging them.
+    model.envelope = envelope_from_recordings(recordings, AlarmConfig().min_engine_rpm)
+    env = model.envelope
+    say("  trained envelope: " + ", ".join(
+        f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(env.signals, env.lo, env.hi, strict=True)
+    ))  # fmt: skip
+    if cfg.isolation == "sim":
+        labels, centroids = simulated_signatures(model, cfg, say)
+        model.isolation_labels, model.isolation_centroids = labels, centroids
+    model.training = {
+        "sources": [r.source for r in recordings],
+        "patterns_from": [r.source for r in fit_part],
+        "validation_from": [r.source for r in val_part],
+        "samples": int(sum(len(r) for r in recordings)),
+        "data_sha256": data_hash([table(r, spec.variables) for r in recordings]),
+        "preset": cfg.preset,
+        "max_patterns": cfg.max_patterns,
+        "residual_clip_quantile": cfg.residual_clip_quantile,
+        "isolation": cfg.isolation,
+        "trained_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+    return model
+
+
+def simulated_signatures(
+    model: MonitorModel, cfg: TrainConfig, say: Progress
+) -> tuple[tuple[str, ...], np.ndarray]:
+    """One unit-length mean-residual signature per fault, from simulated faulty boom cycles."""
+    from monitor.detection.offline import residual_series
+    from monitor.sim.cycles import make_cycle
+    from monitor.sim.faults import Fault
+    from monitor.sim.machine import load_machine
+    from monitor.sim.simulate import simulate
+
+    machine = load_machine()
+    n_out = len(model.spec.outputs)
+    centroids = []
+    say(
+        f"  learning fault signatures from {len(FAULT_NAMES) * 3 * cfg.isolation_runs} "
+        "simulated runs"
+    )
+    for k, fault in enumerate(FAULT_NAMES):
+        acc = Isolator((), np.zeros((0, N_REGIMES * n_out)), n_out)
+        for sev in (0.4, 0.7, 1.0):
+            for r in range(cfg.isolation_runs):
+                seed = 70_000 + 1000 * k + 100 * r + int(sev * 10) + cfg.seed
+                rec = simulate(
+                    make_cycle("boom", 90.0, seed),
+                    machine,
+                    faults=[Fault(fault, sev, 20.0)],
+                    seed=seed,
+                )
+                _, e = residual_series(model, rec, np.zeros(len(rec), dtype=bool))
+                for i in range(2000, len(rec)):
+                    acc.add(e[i], regime_of(rec["SpoolCmd"][i]))
+        sig = np.nan_to_num(acc.signature())
+        norm = np.linalg.norm(sig)
+        centroids.append(sig / norm if norm > 0 else sig)
+    return FAULT_NAMES, np.array(centroids)
