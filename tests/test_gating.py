@@ -39,11 +39,6 @@ MACHINE = load_machine()
 LOGS = ("normal.log", "piston_wear.log", "spool_stroke.log", "spool_wear.log")
 
 
-@pytest.fixture(scope="module")
-def model():
-    return load_model(CFG.model)
-
-
 def edited(rec: Recording, **cols: np.ndarray) -> Recording:
     out = {k: v.copy() for k, v in rec.columns.items()}
     out.update(cols)

@@ -64,6 +64,7 @@ def test_installed_package_is_the_one_used(installed):
     out = subprocess.run(
         [str(py), "-c", "import monitor; print(monitor.__file__)"],
         cwd=work,
+        env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"},
         capture_output=True,
         text=True,
         check=True,
@@ -82,3 +83,18 @@ def test_installed_demo_and_detect_run_from_any_directory(installed):
     det = _run(py, work, "detect", str(log), "--summary", "s.json", "--j-every", "0")
     assert det.returncode == 0, det.stderr
     assert (work / "s.json").is_file()
+
+
+def test_every_package_of_the_tree_is_in_the_wheel_list():
+    """A package missing from pyproject's list works in a checkout and fails once installed."""
+    import tomllib
+
+    listed = set(tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "packages"
+    ])
+    found = {
+        ".".join(p.parent.relative_to(REPO).parts)
+        for p in (REPO / "monitor").rglob("__init__.py")
+        if "__pycache__" not in p.parts
+    }
+    assert found - listed == set(), "add these to [tool.setuptools] packages in pyproject.toml"

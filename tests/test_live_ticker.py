@@ -10,17 +10,11 @@ from monitor.config.settings import load_config
 from monitor.detection.offline import detect
 from monitor.detection.ticker import Ticker
 from monitor.io.recording import Recording
-from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
 from monitor.sampling.ring import RowRing
 from monitor.sampling.sampler import recording_from_candump
 
 CFG = load_config()
-
-
-@pytest.fixture(scope="module")
-def model():
-    return load_model(CFG.model)
 
 
 def test_ring_last_rows_are_contiguous_and_ordered() -> None:

@@ -20,7 +20,6 @@ from monitor.detection.plausibility import (
 )
 from monitor.detection.ticker import Ticker
 from monitor.io.recording import Recording
-from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
 from monitor.sampling.sampler import recording_from_candump
 from monitor.sim.cycles import make_cycle
@@ -29,11 +28,6 @@ from monitor.sim.simulate import simulate
 
 CFG = load_config()
 MACHINE = load_machine()
-
-
-@pytest.fixture(scope="module")
-def model():
-    return load_model(CFG.model)
 
 
 @pytest.fixture(scope="module")
