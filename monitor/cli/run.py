@@ -15,7 +15,8 @@ from pathlib import Path
 from types import FrameType
 
 from monitor.config.settings import load_config
-from monitor.live.daemon import Daemon, setup_logging
+from monitor.live.daemon import Daemon
+from monitor.live.journal import setup_logging
 from monitor.live.sdnotify import Notifier
 
 log = logging.getLogger("monitor")

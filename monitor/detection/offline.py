@@ -6,14 +6,14 @@ steps once per 100 Hz tick, so a recording gives the same events at a desk as on
 
 from __future__ import annotations
 
-import datetime as dt
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from monitor.detection.alarm import AlarmConfig, AlarmMachine, Isolator, State, regimes_of
-from monitor.detection.gating import Gate, GateSeries, GatingConfig, status_keys
+from monitor.detection.alarm import AlarmConfig, Isolator, State, regimes_of
+from monitor.detection.decision import Decider, event_record
+from monitor.detection.gating import Gate, GateSeries, GatingConfig
 from monitor.detection.opstate import OpState
 from monitor.detection.plausibility import finding
 from monitor.errors import InputFileError
@@ -129,24 +129,23 @@ def detect(
     y_hat, e = residual_series(model, rec, gated, horizon, exact)
     e[gated] = np.nan
     sensor_ok = inputs_ok & (g.check == 0)
-    operating = g.op_state != OpState.WARM_UP
     j = window_j(e, model.window_n)
     spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
 
-    machine = AlarmMachine(alarm, model.eps0, make_isolator(model), model.window_n)
+    decider = Decider(alarm, model.eps0, make_isolator(model), model.window_n)
     n = len(rec)
     states = np.empty(n, dtype=np.int8)
     regimes = regimes_of(spool)
     # Quiet samples (normal operation, inputs complete and plausible, J <= eps0) change
     # nothing in NORMAL but the isolation ring: runs of them go to skip_quiet at once, the
-    # rest step one by one.  J finite means the sample was not gated (nor out of range).
+    # rest are decided one by one.  J finite means the sample was not gated (nor out of range).
     with np.errstate(invalid="ignore"):
-        quiet = (g.op_state == OpState.NORMAL) & sensor_ok & (g.oor < 0) & (j <= machine.eps0)
-    quiet_status = (State.NORMAL, int(OpState.NORMAL), -1, 0, -1)
+        quiet = (g.op_state == OpState.NORMAL) & sensor_ok & (g.oor < 0) & (j <= model.eps0)
     stops = np.append(np.flatnonzero(~quiet), n)
     events: list[dict[str, Any]] = []
     start = rec.meta.get("start_time_s")
-    prev: tuple | None = None
+    start_s = float(start) if isinstance(start, (int, float)) else None
+    t_rel = rec.t - rec.t[0]
     first_alarm_t: float | None = None
     # Isolation votes over the first alarm episode: the label held longest names the fault
     # (it firms up as evidence accumulates, and may waver on the way).
@@ -154,31 +153,30 @@ def detect(
     in_first = False
     i = 0
     while i < n:
-        if quiet[i] and prev == quiet_status:
+        if quiet[i] and decider.quiet():
             r = int(stops[np.searchsorted(stops, i)])
-            machine.skip_quiet(e[i:r], regimes[i:r])
+            decider.skip_quiet(e[i:r], regimes[i:r])
             states[i:r] = State.NORMAL
             i = r
             continue
-        state = machine.step(
-            j[i], bool(sensor_ok[i]), engine[i], e[i], int(regimes[i]), bool(operating[i])
-        )
-        states[i] = state
-        if state is State.FAULT and first_alarm_t is None:
-            first_alarm_t = float(rec.t[i] - rec.t[0])
+        oor, check, sensor = int(g.oor[i]), int(g.check[i]), int(g.sensor[i])
+        d = decider.decide(j[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]),
+                           int(g.op_state[i]), oor, check, sensor)  # fmt: skip
+        states[i] = d.state
+        if d.state is State.FAULT and first_alarm_t is None:
+            first_alarm_t = float(t_rel[i])
             in_first = True
         if in_first:
-            if state is State.FAULT:
-                votes[machine.fault] = votes.get(machine.fault, 0) + 1
+            if d.state is State.FAULT:
+                votes[decider.fault] = votes.get(decider.fault, 0) + 1
             else:
                 in_first = False
-        status = (state, int(g.op_state[i]), int(g.oor[i]), int(g.check[i]), int(g.sensor[i]))
-        if status != prev:
-            ev = _event(rec, i, state, j[i], model.eps0, machine.fault, start)
-            oor = gate.validity.signals[g.oor[i]] if g.oor[i] >= 0 else None
-            ev.update(status_keys(int(g.op_state[i]), oor, int(g.check[i]), int(g.sensor[i])))
-            events.append(ev)
-            prev = status
+        if d.changed:
+            events.append(event_record(
+                float(t_rel[i]), d.state, float(j[i]), model.eps0, decider.fault, start_s,
+                int(g.op_state[i]), gate.validity.signals[oor] if oor >= 0 else None, check,
+                sensor,
+            ))  # fmt: skip
         i += 1
     known = {k: v for k, v in votes.items() if k != "unknown"}
     first_fault_label = max(known or votes, key=(known or votes).get) if votes else None
@@ -233,19 +231,3 @@ def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:
         "sparse_coverage": gate.validity.sparse_shares(gate.validity_values(rec), normal),
     }
 
-
-def _event(
-    rec: Recording, i: int, state: State, j: float, eps0: float, fault: str, start: object
-) -> dict[str, Any]:
-    t = float(rec.t[i] - rec.t[0])
-    wall = None
-    if isinstance(start, (int, float)):
-        wall = dt.datetime.fromtimestamp(float(start) + t, tz=dt.timezone.utc).isoformat()
-    return {
-        "t": round(t, 6),
-        "time": wall,
-        "state": state.label,
-        "J": float(j) if np.isfinite(j) else None,
-        "threshold": eps0,
-        "fault": fault if state is State.FAULT else None,
-    }

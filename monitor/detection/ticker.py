@@ -11,15 +11,15 @@ clipped to the model's residual bound; J by the incremental window (eq. 9); one
 
 from __future__ import annotations
 
-import datetime as dt
 import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from monitor.detection.alarm import AlarmConfig, AlarmMachine, State, regime_of
-from monitor.detection.gating import Gate, GatingConfig, status_keys
+from monitor.detection.alarm import AlarmConfig, State, regime_of
+from monitor.detection.decision import Decider, event_record
+from monitor.detection.gating import Gate, GatingConfig
 from monitor.detection.offline import make_isolator
 from monitor.detection.opstate import OpState
 from monitor.errors import ModelFileError
@@ -84,10 +84,10 @@ class Ticker:
         # a first-call compile of seconds would back the bus queue up.
         self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
         self.window = WindowJ(model.window_n)
-        self.machine = AlarmMachine(self.alarm, model.eps0, make_isolator(model), model.window_n)
+        self.decider = Decider(self.alarm, model.eps0, make_isolator(model), model.window_n)
+        self.machine = self.decider.machine
         self.eps0 = float(model.eps0)
         self.gate = Gate(model, self.alarm.min_engine_rpm, gating, columns)
-        self._prev: tuple | None = None
         self.ticks = 0
 
     @property
@@ -127,31 +127,14 @@ class Ticker:
         np.mean(self._sq, axis=1, out=self._v)
         j = self.window.push_squared(float(self._v[0]))
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
-        op = gate.op_state
-        sensor_ok = inputs_ok and gate.check == 0
-        state = self.machine.step(
-            j, sensor_ok, engine, e, regime_of(spool), op is not OpState.WARM_UP
-        )
-        status = (state, op, gate.oor, gate.check, gate.sensor)
-        changed = status != self._prev
-        state_changed = self._prev is None or state is not self._prev[0]
-        self._prev = status
+        d = self.decider.decide(j, inputs_ok, engine, e, regime_of(spool), gate.op_state,
+                                gate.oor, gate.check, gate.sensor)  # fmt: skip
         self.ticks += 1
-        return Tick(float(row[0]), state, j, changed, op, gate.oor_name(gate.oor), gate.check,
-                    gate.sensor, state_changed)  # fmt: skip
+        return Tick(float(row[0]), d.state, j, d.changed, gate.op_state, gate.oor_name(gate.oor),
+                    gate.check, gate.sensor, d.state_changed)  # fmt: skip
 
 
 def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:
     """The JSON-lines event of a state change, schema shared with ``monitor detect``."""
-    wall = None
-    if start_time_s is not None:
-        wall = dt.datetime.fromtimestamp(start_time_s + tick.t_s, tz=dt.timezone.utc).isoformat()
-    return {
-        "t": round(tick.t_s, 6),
-        "time": wall,
-        "state": tick.state.label,
-        "J": float(tick.j) if np.isfinite(tick.j) else None,
-        "threshold": eps0,
-        "fault": fault if tick.state is State.FAULT else None,
-        **status_keys(tick.op_state, tick.out_of_range, tick.check, tick.sensor),
-    }
+    return event_record(tick.t_s, tick.state, tick.j, eps0, fault, start_time_s,
+                        tick.op_state, tick.out_of_range, tick.check, tick.sensor)  # fmt: skip

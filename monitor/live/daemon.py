@@ -36,7 +36,6 @@ from functools import partial
 from typing import Any
 
 import can
-import numpy as np
 
 from monitor.bus.reader import BusReader, open_bus
 from monitor.bus.recovery import Backoff
@@ -49,10 +48,11 @@ from monitor.live.dm1 import Diagnostics
 from monitor.live.eventlog import bus_event_record
 from monitor.live.loops import Loop, row_layout, worst_state
 from monitor.live.outputs import AlarmFrames, EventLog
+from monitor.live.pipeline import FramePipeline
 from monitor.live.storage import Quota
 from monitor.live.writer import DiskWriter
 from monitor.model.modelfile import MonitorModel
-from monitor.sampling.sampler import Sampler, hydraulic_messages, sensor_filters
+from monitor.sampling.sampler import Sampler, sensor_filters
 
 log = logging.getLogger("monitor")
 
@@ -74,12 +74,12 @@ class Daemon:
         self.on_event = on_event
         self.codec = FrameCodec.from_dbc(cfg.dbc)
         self.columns, views = row_layout(cfg, self.codec)
-        self._hydraulic = hydraulic_messages(self.codec, self.columns)
         self.loops = [
             Loop(lc, cfg, self.codec, v) for lc, v in zip(cfg.monitored_loops, views, strict=True)
         ]
-        self.sampler = Sampler.for_codec(self.codec, columns=self.columns)
-        self._diags = [lp.diag for lp in self.loops if lp.diag is not None]  # kept on reload
+        self.pipeline = FramePipeline(self.codec, self.columns, self.loops, self._send,
+                                      self._state_change, cfg.bus.silent_s,
+                                      cfg.bus.time_scale)  # fmt: skip
         # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.live.writer.
         st = cfg.storage
         self.quota = Quota(st.quota_bytes, cfg.black_box.directory, cfg.event_log.path)
@@ -97,10 +97,6 @@ class Daemon:
                                 backoff=backoff)  # fmt: skip
         self.tx_errors = 0
         self.reloads = 0
-        self.last_t_s: float | None = None  # sample-clock time of the last row ticked
-        self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
-        self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
-        self._scale = cfg.bus.time_scale
         self.loop_mono = time.monotonic()  # last pass of the detector loop (watchdog)
         self.reload_attempts = 0  # reloads finished, successful or not
         self._last_status_mono = 0.0
@@ -154,6 +150,15 @@ class Daemon:
     @property
     def last_j(self) -> float:
         return self.loops[0].last_j
+
+    @property
+    def sampler(self) -> Sampler:
+        return self.pipeline.sampler
+
+    @property
+    def last_t_s(self) -> float | None:
+        """Sample-clock time of the last row ticked."""
+        return self.pipeline.last_t_s
 
     @property
     def bus(self) -> can.BusABC:
@@ -218,7 +223,7 @@ class Daemon:
             except queue.Empty:
                 if self._stop.is_set():
                     break  # the reader is stopped first, so the queue is drained
-                self._silence()
+                self.pipeline.silence()
             else:
                 self._frame(msg)
                 for _ in range(1000):  # drain a burst without a timeout per frame
@@ -232,70 +237,17 @@ class Daemon:
                     self.loop_mono = time.monotonic()
             self._status()
             self._bus_events()
-        self._tick_rows(self.sampler.flush())  # the instant of the last frame, as offline
+        self.pipeline.flush()  # the instant of the last frame, as offline
         self._bus_events()
 
     def _frame(self, msg: can.Message) -> None:
         if not self.reader.events.empty():  # a bus event before this frame is logged first
             self._bus_events()
         self.black_box.add(msg)
-        # A request to all (DA 255) is for every loop's address: no short cut.
-        if self._diags and sum([diag.request(msg) for diag in self._diags]):
-            return  # a J1939 request for DM1/DM2: answered at the next tick
-        d = self.codec.decode_message(msg)
-        if d.rejection is not None:
-            log.debug("rejected frame %X: %s", msg.arbitration_id, d.rejection.value)
-            return
-        if d.name not in self._hydraulic:
-            return  # counted as decoded; e.g. another monitor's frames with filters off
-        ts = self._clock(msg.timestamp)
-        self.sampler.feed(ts, d.name, d.values)  # type: ignore[arg-type]
-        self._last_ok_mono = time.monotonic()
-        self._last_ok_ts = ts
-        self._tick_rows(self.sampler.take())
+        self.pipeline.feed(msg)
 
-    def _silence(self) -> None:
-        if not self.sampler.started:
-            return
-        idle_s = time.monotonic() - self._last_ok_mono
-        if idle_s < self.cfg.bus.silent_s:
-            return
-        # Past the sampler's max gap the clock stops: the state is inactive by then, and a
-        # frame after a longer silence is mapped to the end of that gap (sampler rule).
-        idle_s = min(idle_s / self._scale, self.sampler.max_gap_s - 2 * self.sampler.period_s)
-        self._tick_rows(self.sampler.advance(self._last_ok_ts + idle_s))
-
-    def _clock(self, bus_ts: float) -> float:
-        """Sample-clock time of a bus timestamp (the first sensor frame is the origin)."""
-        t0 = self.sampler.start_time_s
-        if t0 is None or self._scale == 1.0:
-            return bus_ts  # exactly the bus time: same rows as ``monitor detect`` of a log
-        return t0 + (bus_ts - t0) / self._scale
-
-    def _bus_time(self, t_s: float) -> float:
-        return (self.sampler.start_time_s or 0.0) + t_s * self._scale
-
-    def _tick_rows(self, rows: np.ndarray) -> None:
-        if len(rows):
-            self.last_t_s = float(rows[-1, 0])
-        for row in rows:
-            bus_time = self._bus_time(float(row[0]))
-            for lp in self.loops:
-                self._tick_loop(lp, row, bus_time)
-
-    def _tick_loop(self, lp: Loop, row: np.ndarray, bus_time: float) -> None:
-        tick = lp.tick(row)
-        if tick.changed:
-            self._state_change(tick, lp)
-        ticker, frames = lp.ticker, lp.frames
-        if frames.due(tick.t_s, tick.state, tick.state_changed):
-            self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
-        for msg in lp.dm_frames(tick, bus_time, row):
-            self._send(msg)
-
-    def _state_change(self, tick: Tick, lp: Loop | None = None) -> None:
-        lp = lp or self.loops[0]
-        ev = lp.event(tick, self.sampler.start_time_s)
+    def _state_change(self, tick: Tick, lp: Loop) -> None:
+        ev = lp.event(tick, self.pipeline.start_time_s)
         self._log_event(ev)
         level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
         log.log(level, "t=%.2f s: %s%s (J %s, eps0 %.4g%s)", ev["t"],
@@ -307,7 +259,7 @@ class Daemon:
                      ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
                      ev["sensor_check"])  # fmt: skip
         if tick.state is State.FAULT and tick.state_changed:
-            self.black_box.trigger(self._bus_time(tick.t_s), lp.alarm_label())
+            self.black_box.trigger(self.pipeline.bus_time(tick.t_s), lp.alarm_label())
         if self.on_event is not None:
             self.on_event(ev)
 
@@ -403,24 +355,3 @@ def _loop_layout(cfg: MonitorConfig) -> list[tuple[Any, ...]]:
     (the single loop's address is ``j1939.source_address``, whose changes wait anyway)."""
     return [(lc.name, lc.signals, lc.alarm_message, lc.source_address if cfg.loops else None)
             for lc in cfg.monitored_loops]  # fmt: skip
-
-
-class JournalFormatter(logging.Formatter):
-    """``<priority>message``: journald reads the syslog priority prefix from stderr and adds
-    its own timestamps, so none here."""
-
-    _PRIORITY = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4, logging.ERROR: 3,
-                 logging.CRITICAL: 2}  # fmt: skip
-
-    def format(self, record: logging.LogRecord) -> str:
-        prio = self._PRIORITY.get(record.levelno, 6)
-        text = super().format(record)
-        return "\n".join(f"<{prio}>{line}" for line in text.splitlines())
-
-
-def setup_logging(level: int = logging.INFO) -> None:
-    handler = logging.StreamHandler()
-    handler.setFormatter(JournalFormatter("%(name)s: %(message)s"))
-    root = logging.getLogger()
-    root.handlers[:] = [handler]
-    root.setLevel(level)

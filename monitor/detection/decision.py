@@ -1,0 +1,124 @@
+"""The per-sample decision, one path for the live ticker and the offline detector.
+
+Given a sample's J, its residual and what the gating found, one ``Decider.decide`` steps the
+alarm machine (``monitor.detection.alarm``) and says whether the monitor's status (alarm
+state and gating status) changed, i.e. whether the sample makes an event.  ``event_record``
+is the one event-log line both write (``monitor detect --events`` and the daemon's log share
+its schema, DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from monitor.detection.alarm import AlarmConfig, AlarmMachine, Isolator, State
+from monitor.detection.gating import status_keys
+from monitor.detection.opstate import OpState
+
+
+class Status(NamedTuple):
+    """What an event reports besides J: alarm state and the gating's findings."""
+
+    state: State
+    op_state: int  # OpState
+    oor: int  # index of the operating signal beyond the trained range, -1: none
+    check: int  # plausibility finding (monitor.detection.plausibility), 0: none
+    sensor: int  # the sensor it names, -1: none
+
+
+#: The status of a quiet sample: normal operation, nothing found, no alarm.
+QUIET = Status(State.NORMAL, int(OpState.NORMAL), -1, 0, -1)
+
+
+class Decision(NamedTuple):
+    state: State
+    changed: bool  # the status differs from the previous sample's (True on the first)
+    state_changed: bool  # the alarm state itself changed
+
+
+class Decider:
+    """One alarm machine and the last status; ``decide`` once per sample, in time order."""
+
+    def __init__(
+        self,
+        alarm: AlarmConfig,
+        eps0: float,
+        isolator: Isolator | None = None,
+        window_n: int = 0,
+    ) -> None:
+        self.machine = AlarmMachine(alarm, eps0, isolator, window_n)
+        self.status: Status | None = None  # of the last sample decided
+
+    @property
+    def state(self) -> State:
+        return self.machine.state
+
+    @property
+    def fault(self) -> str:
+        return self.machine.fault
+
+    def decide(
+        self,
+        j: float,
+        inputs_ok: bool,
+        engine_rpm: float,
+        e: np.ndarray | None,
+        regime: int,
+        op_state: int,
+        oor: int = -1,
+        check: int = 0,
+        sensor: int = -1,
+    ) -> Decision:
+        """Step the alarm machine on one sample: ``inputs_ok`` every model signal present,
+        ``check`` the plausibility finding (a finding is a sensor fault), ``op_state`` the
+        operating state (warm-up counts as not operating, like the engine off)."""
+        sensor_ok = inputs_ok and check == 0
+        state = self.machine.step(
+            j, sensor_ok, engine_rpm, e, regime, op_state != OpState.WARM_UP
+        )
+        status = Status(state, int(op_state), int(oor), int(check), int(sensor))
+        prev = self.status
+        self.status = status
+        return Decision(state, status != prev, prev is None or state is not prev.state)
+
+    def quiet(self) -> bool:
+        """The last sample was quiet: a run of quiet samples may go to ``skip_quiet``."""
+        return self.status == QUIET
+
+    def skip_quiet(self, e: np.ndarray, regimes: np.ndarray) -> None:
+        """``decide`` over a run of quiet samples (J finite and <= eps0, status ``QUIET``)
+        at once; the status stays ``QUIET``."""
+        self.machine.skip_quiet(e, regimes)
+
+
+def event_record(
+    t_s: float,
+    state: State,
+    j: float,
+    eps0: float,
+    fault: str,
+    start_time_s: float | None,
+    op_state: int = int(OpState.NORMAL),
+    out_of_range: str | None = None,
+    check: int = 0,
+    sensor: int = -1,
+) -> dict[str, Any]:
+    """The JSON-lines event of a state change: ``t`` s from the first sample, ``time`` the
+    wall clock (null without a start time), ``state``, ``J`` (null while the window warms up
+    or pauses), ``threshold``, ``fault`` (only in fault) and the gating's keys."""
+    wall = None
+    if start_time_s is not None:
+        wall = dt.datetime.fromtimestamp(start_time_s + t_s, tz=dt.timezone.utc).isoformat()
+    return {
+        "t": round(float(t_s), 6),
+        "time": wall,
+        "state": state.label,
+        "J": float(j) if math.isfinite(j) else None,
+        "threshold": float(eps0),
+        "fault": fault if state is State.FAULT else None,
+        **status_keys(int(op_state), out_of_range, int(check), int(sensor)),
+    }

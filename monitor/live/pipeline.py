@@ -1,0 +1,121 @@
+"""The live frame pipeline, free of threads, buses and disks: frames in, decisions out.
+
+One ``feed`` per received frame: J1939 requests go to the loops' diagnostics, the rest is
+decoded (alive counter, CRC, ranges), sampled onto the 100 Hz clock and every finished row
+ticked by each loop; a loop's state changes and its MON_Alarm / DM1 frames leave through the
+two callbacks the daemon gives (``send``, ``on_change``).  ``silence`` runs the clock on by
+wall time when no sensor frame came for ``bus.silent_s``; ``flush`` ticks the last rows.
+The sample clock is the frames' own timestamps, so a log replayed onto a bus gives the
+events ``monitor detect`` gives for the file.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+
+import can
+import numpy as np
+
+from monitor.codec.frames import FrameCodec
+from monitor.detection.ticker import Tick
+from monitor.live.loops import Loop
+from monitor.sampling.sampler import Sampler, hydraulic_messages
+
+log = logging.getLogger("monitor")
+
+Send = Callable[[can.Message], None]
+OnChange = Callable[[Tick, Loop], None]
+
+
+class FramePipeline:
+    def __init__(
+        self,
+        codec: FrameCodec,
+        columns: tuple[str, ...],
+        loops: list[Loop],
+        send: Send,
+        on_change: OnChange,
+        silent_s: float = 0.5,
+        time_scale: float = 1.0,
+    ) -> None:
+        self.codec = codec
+        self.loops = loops
+        self.sampler = Sampler.for_codec(codec, columns=columns)
+        self._hydraulic = hydraulic_messages(codec, columns)
+        self._diags = [lp.diag for lp in loops if lp.diag is not None]  # kept on reload
+        self._send = send
+        self._on_change = on_change
+        self.silent_s = silent_s
+        self._scale = time_scale
+        self.last_t_s: float | None = None  # sample-clock time of the last row ticked
+        self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
+        self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
+
+    @property
+    def start_time_s(self) -> float | None:
+        """Bus time of the first sensor frame: the sample clock's origin."""
+        return self.sampler.start_time_s
+
+    def feed(self, msg: can.Message) -> None:
+        """One received frame (the black box has already seen it)."""
+        # A request to all (DA 255) is for every loop's address: no short cut.
+        if self._diags and sum([diag.request(msg) for diag in self._diags]):
+            return  # a J1939 request for DM1/DM2: answered at the next tick
+        d = self.codec.decode_message(msg)
+        if d.rejection is not None:
+            log.debug("rejected frame %X: %s", msg.arbitration_id, d.rejection.value)
+            return
+        if d.name not in self._hydraulic:
+            return  # counted as decoded; e.g. another monitor's frames with filters off
+        ts = self._clock(msg.timestamp)
+        self.sampler.feed(ts, d.name, d.values)  # type: ignore[arg-type]
+        self._last_ok_mono = time.monotonic()
+        self._last_ok_ts = ts
+        self._tick_rows(self.sampler.take())
+
+    def silence(self) -> None:
+        """No frame waiting: past ``silent_s`` without a sensor frame the clock runs on."""
+        if not self.sampler.started:
+            return
+        idle_s = time.monotonic() - self._last_ok_mono
+        if idle_s < self.silent_s:
+            return
+        # Past the sampler's max gap the clock stops: the state is inactive by then, and a
+        # frame after a longer silence is mapped to the end of that gap (sampler rule).
+        idle_s = min(idle_s / self._scale, self.sampler.max_gap_s - 2 * self.sampler.period_s)
+        self._tick_rows(self.sampler.advance(self._last_ok_ts + idle_s))
+
+    def flush(self) -> None:
+        """The rows up to the instant of the last frame, as ``monitor detect`` has them."""
+        self._tick_rows(self.sampler.flush())
+
+    def bus_time(self, t_s: float) -> float:
+        """Bus time of a sample-clock time."""
+        return (self.sampler.start_time_s or 0.0) + t_s * self._scale
+
+    def _clock(self, bus_ts: float) -> float:
+        """Sample-clock time of a bus timestamp (the first sensor frame is the origin)."""
+        t0 = self.sampler.start_time_s
+        if t0 is None or self._scale == 1.0:
+            return bus_ts  # exactly the bus time: same rows as ``monitor detect`` of a log
+        return t0 + (bus_ts - t0) / self._scale
+
+    def _tick_rows(self, rows: np.ndarray) -> None:
+        if len(rows):
+            self.last_t_s = float(rows[-1, 0])
+        for row in rows:
+            bus_time = self.bus_time(float(row[0]))
+            for lp in self.loops:
+                self._tick_loop(lp, row, bus_time)
+
+    def _tick_loop(self, lp: Loop, row: np.ndarray, bus_time: float) -> None:
+        tick = lp.tick(row)
+        if tick.changed:
+            self._on_change(tick, lp)
+        ticker, frames = lp.ticker, lp.frames
+        if frames.due(tick.t_s, tick.state, tick.state_changed):
+            self._send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))
+        for msg in lp.dm_frames(tick, bus_time, row):
+            self._send(msg)
