@@ -162,3 +162,111 @@ def crc8_bitwise(data: bytes) -> int:
         for _ in range(8):
             reg = ((reg << 1) ^ 0x1D) & 0xFF if reg & 0x80 else (reg << 1) & 0xFF
     return reg ^ 0xFF
+
+
+def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
+    """The sensor plausibility checks of monitor/detection/plausibility.py, written from its
+    docstring sample by sample in plain Python (dicts of per-sensor state, no arrays).
+
+    ``x``: rows of (SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp, PP, PA, PB, QP).
+    Returns (check code, column) per sample: the first latched finding in check order
+    (signal_range, frozen, stuck, pump_below_port, rest_offset = 1..5), then column order.
+    """
+    names = ["SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp", "PP", "PA", "PB", "QP"]
+    dbc = {"SpoolCmd": (-100.0, 100.0), "PumpDispCmd": (0.0, 100.0),
+           "EngineSpeed": (0.0, 3000.0), "OilTemp": (-40.0, 150.0)}  # fmt: skip
+    lim = dict(dbc)
+    for s in ("PP", "PA", "PB"):
+        lim[s] = (cfg.pressure_min_bar, cfg.pressure_max_bar)
+    lim["QP"] = (0.0, cfg.flow_max_lpm)
+    samples = lambda sec: round(sec / period_s)  # noqa: E731
+    sensors = ["PP", "PA", "PB", "QP"]
+    checks = ["signal_range", "frozen", "stuck", "pump_below_port", "rest_offset"]
+    latched = {(c, s): False for c in checks for s in names}
+    out_of_range_run = {s: 0 for s in names}
+    same_run = {s: 0 for s in sensors}
+    previous = {s: None for s in sensors}
+    anchor = {s: None for s in sensors}
+    moving_in_band = {s: 0 for s in sensors}
+    above_pump_run = {"PA": 0, "PB": 0}
+    rest_run = 0
+    result = []
+    for row in x:
+        v = dict(zip(names, (float(a) for a in row), strict=True))
+        running = v["EngineSpeed"] >= min_engine_rpm  # False for NaN
+        moving = running and (abs(v["SpoolCmd"]) >= cfg.move_spool_pct
+                              or v["QP"] >= cfg.move_flow_lpm)  # fmt: skip
+        for s in names:
+            val = v[s]
+            if math.isnan(val):
+                continue
+            lo, hi = lim[s]
+            if lo <= val <= hi:
+                out_of_range_run[s] = 0
+                latched[("signal_range", s)] = False
+            else:
+                out_of_range_run[s] += 1
+                n = samples(cfg.range_s)
+                if n > 0 and out_of_range_run[s] >= n:
+                    latched[("signal_range", s)] = True
+            if s not in sensors:
+                continue
+            # frozen: the very same value while the engine runs, strictly inside the range
+            if previous[s] is not None and val == previous[s]:
+                if running and lo < val < hi:
+                    same_run[s] += 1
+                    n = samples(cfg.frozen_s)
+                    if n > 0 and same_run[s] >= n:
+                        latched[("frozen", s)] = True
+            else:
+                same_run[s] = 0
+                latched[("frozen", s)] = False
+            previous[s] = val
+            # stuck: within a band of one value for stuck_s of moving time
+            band = cfg.stuck_band_lpm if s == "QP" else cfg.stuck_band_bar
+            if anchor[s] is None or abs(val - anchor[s]) > band:
+                anchor[s] = val
+                moving_in_band[s] = 0
+                latched[("stuck", s)] = False
+            elif moving:
+                moving_in_band[s] += 1
+                n = samples(cfg.stuck_s)
+                if n > 0 and moving_in_band[s] >= n:
+                    latched[("stuck", s)] = True
+        # pump below a port while the spool is open
+        n_rel = samples(cfg.relation_s)
+        if running and abs(v["SpoolCmd"]) >= cfg.relation_spool_pct and n_rel > 0 \
+                and not math.isnan(v["PP"]):
+            for s in ("PA", "PB"):
+                if v[s] > v["PP"] + cfg.relation_margin_bar:
+                    above_pump_run[s] += 1
+                    if above_pump_run[s] >= n_rel:
+                        latched[("pump_below_port", s)] = True
+                elif not math.isnan(v[s]):
+                    above_pump_run[s] = 0
+        latched[("pump_below_port", "PP")] = (
+            latched[("pump_below_port", "PA")] and latched[("pump_below_port", "PB")]
+        )
+        # rest: engine off (a reading), spool centred, settled -> pressures at tank
+        n_rest = samples(cfg.rest_settle_s)
+        at_rest = not math.isnan(v["EngineSpeed"]) and not running \
+            and abs(v["SpoolCmd"]) < cfg.move_spool_pct and n_rest > 0
+        if at_rest:
+            rest_run += 1
+            if rest_run >= n_rest:
+                for s in ("PP", "PA", "PB"):
+                    if not math.isnan(v[s]):
+                        off = abs(v[s]) > cfg.rest_max_bar
+                        latched[("rest_offset", s)] = off
+                        if not off:
+                            latched[("pump_below_port", s)] = False
+        else:
+            rest_run = 0
+        found = (0, -1)
+        for k, c in enumerate(checks):
+            hit = [i for i, s in enumerate(names) if latched[(c, s)]]
+            if hit:
+                found = (k + 1, hit[0])
+                break
+        result.append(found)
+    return np.array([f[0] for f in result]), np.array([f[1] for f in result])

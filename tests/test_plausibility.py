@@ -4,6 +4,7 @@ quiet on healthy data, and ``monitor detect`` and the per-tick path agree."""
 from __future__ import annotations
 
 import cantools
+import naive
 import numpy as np
 import pytest
 from live_support import tick_recording
@@ -186,3 +187,42 @@ def test_detect_and_ticks_give_the_same_sensor_events(model, normal_run) -> None
     checks = {(c["sensor"], c["check"]) for c in det.summary["sensor_checks"]}
     assert checks == named
     assert det.summary["alarm"] is False  # a sensor fault is never a hydraulic alarm
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        PlausibilityConfig(),
+        PlausibilityConfig(frozen_s=0.3, stuck_s=2.0, relation_s=0.2, rest_settle_s=1.0,
+                           range_s=0.05, rest_max_bar=2.0),  # fmt: skip
+    ],
+    ids=["defaults", "short-times"],
+)
+def test_kernel_equals_the_plain_python_twin(normal_run, cfg) -> None:
+    """The numba kernel against tests/naive.py's sample-by-sample reading of the rules, on
+    a run carrying every defect: a frozen QP, a stuck PB, PA reading high, PP out of range,
+    and an engine-off rest with an offset PB, plus NaN gaps."""
+    rec = normal_run
+    n = len(rec)
+    cols = {c: rec[c].copy() for c in COLUMNS}
+    cols["QP"][idx(rec, 10.0) : idx(rec, 14.0)] = 12.34  # frozen
+    k0, k1 = idx(rec, 20.0), idx(rec, 35.0)
+    cols["PB"][k0:k1] = 40.0 + np.random.default_rng(1).normal(0, 0.3, k1 - k0)  # stuck
+    cols["PA"][idx(rec, 40.0) : idx(rec, 50.0)] += 60.0  # reads high: above the pump
+    cols["PP"][idx(rec, 52.0) : idx(rec, 53.0)] = 450.0  # beyond the range
+    r0, r1 = idx(rec, 60.0), idx(rec, 75.0)
+    cols["EngineSpeed"][r0:r1] = 0.0  # key off, pressures settle to tank except PA
+    cols["SpoolCmd"][r0:r1] = 0.0
+    for s in ("PP", "PA"):
+        cols[s][r0:r1] = np.random.default_rng(2).normal(0.5, 0.2, r1 - r0)
+    cols["PB"][r0:r1] = 9.0
+    for s, (a, b) in {"PA": (80.0, 80.5), "QP": (85.0, 85.2), "EngineSpeed": (86.0, 86.1)}.items():
+        cols[s][idx(rec, a) : idx(rec, b)] = np.nan
+    x = np.column_stack([cols[c] for c in COLUMNS])
+    check, sig = Plausibility(cfg, CFG.alarm.min_engine_rpm).series(x)
+    ref_check, ref_sig = naive.plausibility_findings(x, cfg, CFG.alarm.min_engine_rpm)
+    np.testing.assert_array_equal(check, ref_check)
+    np.testing.assert_array_equal(np.where(check > 0, sig, -1), ref_sig)
+    assert n == len(check)
+    if cfg.frozen_s < 1:  # the short times make every check fire: the comparison covers all
+        assert set(np.unique(ref_check).tolist()) == {0, 1, 2, 3, 4, 5}

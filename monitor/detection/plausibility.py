@@ -71,6 +71,13 @@ DBC_RANGES: dict[str, tuple[float, float]] = {
 }
 
 
+# Indices of the kernel's parameter vector (``PlausibilityConfig.params``): numba takes one
+# float array, and names keep its order from drifting between the two sides.
+(P_RANGE_N, P_FROZEN_N, P_STUCK_N, P_BAND_BAR, P_BAND_LPM, P_MOVE_SPOOL, P_MOVE_FLOW,
+ P_REL_SPOOL, P_REL_MARGIN, P_REL_N, P_REST_N, P_REST_MAX) = range(12)  # fmt: skip
+N_PARAMS = 12
+
+
 @dataclass(frozen=True)
 class PlausibilityConfig:
     """``plausibility:`` section (units in the names; a time of 0 switches its check off)."""
@@ -109,14 +116,17 @@ class PlausibilityConfig:
         return lo, hi
 
     def params(self) -> np.ndarray:
-        """Kernel parameters; times as sample counts (0: the check is off)."""
+        """Kernel parameters at the ``P_*`` indices; times as sample counts (0: check off)."""
         n = lambda s: float(round(s / SAMPLE_PERIOD_S))  # noqa: E731
-        return np.array([
-            n(self.range_s), n(self.frozen_s), n(self.stuck_s), self.stuck_band_bar,
-            self.stuck_band_lpm, self.move_spool_pct, self.move_flow_lpm,
-            self.relation_spool_pct, self.relation_margin_bar, n(self.relation_s),
-            n(self.rest_settle_s), self.rest_max_bar,
-        ])  # fmt: skip
+        p = np.zeros(N_PARAMS)
+        p[P_RANGE_N], p[P_FROZEN_N] = n(self.range_s), n(self.frozen_s)
+        p[P_STUCK_N] = n(self.stuck_s)
+        p[P_BAND_BAR], p[P_BAND_LPM] = self.stuck_band_bar, self.stuck_band_lpm
+        p[P_MOVE_SPOOL], p[P_MOVE_FLOW] = self.move_spool_pct, self.move_flow_lpm
+        p[P_REL_SPOOL], p[P_REL_MARGIN] = self.relation_spool_pct, self.relation_margin_bar
+        p[P_REL_N], p[P_REST_N] = n(self.relation_s), n(self.rest_settle_s)
+        p[P_REST_MAX] = self.rest_max_bar
+        return p
 
 
 # State arrays (per column): counters[0] range run, [1] identical run, [2] stuck moving
@@ -129,9 +139,11 @@ def _run(  # pragma: no cover - numba
 ):
     # x[i, cols[c]] is column c (COLUMNS order) of sample i.
     n, m = x.shape[0], cols.shape[0]
-    range_n, frozen_n, stuck_n = p[0], p[1], p[2]
-    band_bar, band_lpm, move_spool, move_flow = p[3], p[4], p[5], p[6]
-    rel_spool, rel_margin, rel_n, rest_n, rest_max = p[7], p[8], p[9], p[10], p[11]
+    range_n, frozen_n, stuck_n = p[P_RANGE_N], p[P_FROZEN_N], p[P_STUCK_N]
+    band_bar, band_lpm = p[P_BAND_BAR], p[P_BAND_LPM]
+    move_spool, move_flow = p[P_MOVE_SPOOL], p[P_MOVE_FLOW]
+    rel_spool, rel_margin, rel_n = p[P_REL_SPOOL], p[P_REL_MARGIN], p[P_REL_N]
+    rest_n, rest_max = p[P_REST_N], p[P_REST_MAX]
     for i in range(n):
         spool = x[i, cols[_SPOOL]]
         engine = x[i, cols[_ENGINE]]
