@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import logging
-import time
 
 import can
 import numpy as np
@@ -207,18 +206,23 @@ def test_daemon_logs_and_announces_the_operating_state(tmp_path, model) -> None:
     cfg = live_config(tmp_path)
     listener = can.Bus(interface="virtual", channel=cfg.bus.channel)
     sender = can.Bus(interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True)
+    status_id = FrameCodec.from_dbc(CFG.dbc).message("MON_Status").frame_id
     daemon = Daemon(cfg)
     daemon.start()
+    frames = []
     try:
         counts = replay_log(log, sender, speed=None)
         settle(daemon, counts.sent)
-        time.sleep(1.3)  # one more heartbeat with the last row's state
+        while (m := listener.recv(0)) is not None:
+            frames.append(m)
+        # One more heartbeat, sent after the last row was ticked, shows the last state.
+        while (m := listener.recv(10.0)) is not None:
+            frames.append(m)
+            if m.arbitration_id == status_id:
+                break
     finally:
         daemon.stop()
         sender.shutdown()
-    frames = []
-    while (m := listener.recv(0)) is not None:
-        frames.append(m)
     listener.shutdown()
     lines = cfg.event_log.path.read_text().splitlines()
     live = [json.loads(x) for x in lines]
