@@ -123,11 +123,13 @@ def test_train_and_detect_cli(tmp_path, capsys):
         == 0
     )
     fault = tmp_path / "f.csv"
+    # Oil as warm as in the first training run: a run at another temperature would lie
+    # outside the model's trained range, and would (rightly) not be judged.
+    cycle = make_cycle("boom", 90, 34)
+    cycle.columns["OilTemp"] = make_cycle("boom", 90, 31)["OilTemp"]
     write_csv(
         fault,
-        simulate(
-            make_cycle("boom", 90, 34), MACHINE, faults=[Fault("spool_wear", 1.0, 30.0)], seed=34
-        ),
+        simulate(cycle, MACHINE, faults=[Fault("spool_wear", 1.0, 30.0)], seed=34),
     )
     summary, events, plot = tmp_path / "s.json", tmp_path / "e.jsonl", tmp_path / "p.png"
     assert (
@@ -150,6 +152,7 @@ def test_train_and_detect_cli(tmp_path, capsys):
     s = json.loads(summary.read_text())
     for key in ("alarm", "first_alarm_t", "fault", "sensor_fault", "max_J", "threshold"):
         assert key in s
+    assert s["verdict"] in ("fault", "healthy") and s["judged_s"] > 0
     lines = [json.loads(x) for x in events.read_text().splitlines()]
     assert {"t", "time", "state", "J", "threshold", "fault"} <= set(lines[0])
     assert plot.stat().st_size > 10_000

@@ -25,8 +25,12 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="diagnose a recording: J(k+1), alarms, isolated fault",
         description="Run the DGRNN detector over a candump log or contract CSV. State "
         "changes (and J once per --j-every seconds) go out as JSON lines on stdout or to "
-        "--events. Exit 0 when the recording was diagnosed, whatever was found; 2 for a "
-        "bad file or argument; 3 when it holds no usable hydraulic data.",
+        "--events. The verdict is fault, sensor_fault, healthy, or not_judged: less than one "
+        "J window of samples was judged (no commands, shorter than the window, engine off, "
+        "warm-up or outside the model's trained range throughout), so the data cannot say "
+        "healthy. Exit 0 when the recording was judged, whatever was found; 2 for a bad file "
+        "or argument; 3 when it holds no usable hydraulic data or was not judged (the "
+        "summary is still written).",
     )
     p.add_argument("recording", type=Path, metavar="REC")
     p.add_argument(
@@ -75,8 +79,11 @@ def _lines(det: Detection, j_every_s: float, tag: dict[str, str]) -> list[dict[s
         t = det.t - det.t[0]
         step = max(1, int(round(j_every_s / 0.01)))
         eps0 = det.summary["threshold"]
+        # The fault named at each J line is the one of the last state change before it.
+        change_t = np.array([e["t"] for e in det.events])
         for i in range(0, len(t), step):
             j = det.j[i]
+            k = int(np.searchsorted(change_t, round(float(t[i]), 6), side="right")) - 1
             out.append(
                 {
                     "event": "j",
@@ -86,7 +93,7 @@ def _lines(det: Detection, j_every_s: float, tag: dict[str, str]) -> list[dict[s
                     "op_state": None if det.gates is None else OpState(det.gates.op_state[i]).label,
                     "J": float(j) if np.isfinite(j) else None,
                     "threshold": eps0,
-                    "fault": None,
+                    "fault": det.events[k]["fault"] if k >= 0 else None,
                 }
                 | tag
             )
@@ -124,19 +131,23 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise MonitorError(f"cannot write output: {exc.strerror or exc} ({exc.filename})") from None
     s = det.summary
-    verdict = (
-        f"FAULT from {s['first_alarm_t']:.2f} s, isolated: {s['fault']}"
-        if s["alarm"]
-        else "no hydraulic fault"
-    )
-    extra = "; sensor fault seen" if s["sensor_fault"] else ""
-    for c in s["sensor_checks"]:
-        extra += f"; {c['sensor']} {c['check']} from {c['first_t']:.2f} s"
-    if s["out_of_range_samples"]:
-        extra += f"; {s['out_of_range_s']:.1f} s outside the trained range"
     max_j = "n/a" if s["max_J"] is None else f"{s['max_J']:.4g}"
-    print(
-        f"{args.recording}: {verdict}{extra} (max J {max_j}, eps0 {s['threshold']:.4g})",
-        file=sys.stderr,
-    )
-    return 0
+    print(f"{args.recording}: {_result_line(s)} (max J {max_j}, eps0 {s['threshold']:.4g}, "
+          f"judged {s['judged_s']:.1f} s)", file=sys.stderr)  # fmt: skip
+    return 3 if s["verdict"] == "not_judged" else 0
+
+
+def _result_line(s: dict[str, Any]) -> str:
+    if s["verdict"] == "not_judged":
+        return f"not judged: {s['not_judged_why']}"
+    line = (f"FAULT from {s['first_alarm_t']:.2f} s, isolated: {s['fault']}" if s["alarm"]
+            else "no hydraulic fault" if s["verdict"] == "healthy" else "sensor fault")  # fmt: skip
+    if s["sensor_fault"] and s["alarm"]:
+        line += "; sensor fault seen"
+    for c in s["sensor_checks"]:
+        line += f"; {c['sensor']} {c['check']} from {c['first_t']:.2f} s"
+    for message, reasons in s["rejected"].items():
+        line += f"; {message} frames rejected: " + ", ".join(f"{n} {r}" for r, n in reasons.items())
+    if s["out_of_range_samples"]:
+        line += f"; {s['out_of_range_s']:.1f} s outside the trained range"
+    return line

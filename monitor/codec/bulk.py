@@ -85,20 +85,21 @@ def decode_frames(codec: FrameCodec, frames: Frames) -> dict[str, DecodedMessage
         )  # fmt: skip
         known[rows] = True
         dlc_ok = (frames.length[rows] == FRAME_LENGTH) & ~frames.remote[rows]
-        counts.rejected[Rejection.DLC.value] += int((~dlc_ok).sum())
+        counts.reject(info.name, Rejection.DLC.value, int((~dlc_ok).sum()))
         rows = rows[dlc_ok]
         data = frames.data[rows, :FRAME_LENGTH]
         crc_ok = crc8_rows(data) == data[:, CRC_BYTE]
-        counts.rejected[Rejection.CRC.value] += int((~crc_ok).sum())
+        counts.reject(info.name, Rejection.CRC.value, int((~crc_ok).sum()))
         rows, data = rows[crc_ok], data[crc_ok]
         counter = (data[:, COUNTER_BYTE] & 0x0F).astype(np.int64)
         jumps = int(np.count_nonzero(counter[1:] != (counter[:-1] + 1) % COUNTER_MODULO))
         counts.counter_jumps += jumps
+        counts.reject(info.name, "counter_jump", jumps)
         raw = raw_values(info, data)
         in_range = np.ones(rows.size, dtype=bool)
         for sig in info.signals:
             in_range &= (raw[sig.name] >= sig.raw_min) & (raw[sig.name] <= sig.raw_max)
-        counts.rejected[Rejection.RANGE.value] += int((~in_range).sum())
+        counts.reject(info.name, Rejection.RANGE.value, int((~in_range).sum()))
         good = int(in_range.sum())
         counts.decoded += good
         if good:

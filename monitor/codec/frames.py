@@ -100,10 +100,22 @@ class DecodeCounts:
                                                               if r is not Rejection.UNKNOWN_ID})
     counter_jumps: int = 0
     per_message: dict[str, int] = field(default_factory=dict)  # decoded frames per message
+    # message -> reason (dlc, crc, range, counter_jump) -> frames; only non-zero entries
+    rejected_by_message: dict[str, dict[str, int]] = field(default_factory=dict)
 
     @property
     def rejected_total(self) -> int:
         return sum(self.rejected.values())
+
+    def reject(self, message: str, reason: str, n: int = 1) -> None:
+        """Count ``n`` frames of ``message`` rejected for ``reason`` (a counter jump is
+        counted per message only: the frame itself is accepted)."""
+        if n <= 0:
+            return
+        if reason in self.rejected:
+            self.rejected[reason] += n
+        per = self.rejected_by_message.setdefault(message, {})
+        per[reason] = per.get(reason, 0) + n
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -113,6 +125,7 @@ class DecodeCounts:
             "rejected": dict(self.rejected),
             "counter_jumps": self.counter_jumps,
             "per_message": dict(self.per_message),
+            "rejected_by_message": {k: dict(v) for k, v in self.rejected_by_message.items()},
         }
 
 
@@ -270,10 +283,10 @@ class FrameCodec:
             return Decoded(None, None, Rejection.UNKNOWN_ID)
         name = info.name
         if len(data) != FRAME_LENGTH:
-            counts.rejected[Rejection.DLC.value] += 1
+            counts.reject(name, Rejection.DLC.value)
             return Decoded(name, None, Rejection.DLC)
         if crc8_sae_j1850(data[:CRC_BYTE]) != data[CRC_BYTE]:
-            counts.rejected[Rejection.CRC.value] += 1
+            counts.reject(name, Rejection.CRC.value)
             return Decoded(name, None, Rejection.CRC)
         # The CRC vouches for the counter, so it updates the state even if a value is out
         # of range below; a corrupt frame (bad CRC) must not resynchronise it.
@@ -283,12 +296,13 @@ class FrameCodec:
         self._rx_counter[name] = counter
         if jump:
             counts.counter_jumps += 1
+            counts.reject(name, "counter_jump")
         raw = info.dbc_message.decode(bytes(data), decode_choices=False, scaling=False)
         values: dict[str, float] = {}
         for sig in info.signals:
             r = raw[sig.name]
             if r < sig.raw_min or r > sig.raw_max:
-                counts.rejected[Rejection.RANGE.value] += 1
+                counts.reject(name, Rejection.RANGE.value)
                 return Decoded(name, None, Rejection.RANGE, jump)
             values[sig.name] = r * sig.scale + sig.offset
         counts.decoded += 1

@@ -16,6 +16,7 @@ from monitor.detection.decision import Decider, event_record
 from monitor.detection.gating import Gate, GateSeries, GatingConfig
 from monitor.detection.opstate import OpState
 from monitor.detection.plausibility import finding
+from monitor.detection.verdict import verdict
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
 from monitor.model.dgrnn import predict_series, table
@@ -198,7 +199,21 @@ def detect(
         **gating_summary(rec, gate, g),
         "source": rec.source,
     }
+    period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
+    summary["verdict"], summary["judged_s"], summary["not_judged_why"] = verdict(
+        summary, states, j, g.op_state, g.oor, inputs_ok, engine, model.window_n, period
+    )
+    summary["rejected"] = rejected_counts(rec)
     return Detection(rec.t, y_hat, e, j, states, events, summary, gates=g)
+
+
+def rejected_counts(rec: Recording) -> dict[str, dict[str, int]]:
+    """Frames rejected per message and reason (dlc, crc, range, counter_jump) while reading
+    a candump log; empty for a CSV."""
+    counts = rec.meta.get("counts")
+    if not isinstance(counts, dict):
+        return {}
+    return {k: dict(v) for k, v in counts.get("rejected_by_message", {}).items()}
 
 
 def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:

@@ -1,0 +1,83 @@
+"""What a recording's detection may conclude, and what it may not.
+
+A recording is judged on the samples whose residual entered a full J window while the
+monitor was running (state normal or fault, J finite).  The verdict:
+
+* ``fault``: a debounced hydraulic-fault alarm was raised;
+* ``sensor_fault``: no alarm, but some sample was a sensor fault (stale or implausible data);
+* ``healthy``: neither, and at least one full J window (N samples) was judged;
+* ``not_judged``: less than one J window was judged, so the data cannot support "healthy":
+  no commands (engine speed never received), a recording shorter than the window, the engine
+  off, warm-up, outside the model's trained range, or missing model signals throughout.
+
+Data that was never judged is never reported healthy.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from monitor.detection.alarm import State
+from monitor.detection.opstate import OpState
+
+VERDICTS = ("fault", "sensor_fault", "healthy", "not_judged")
+
+
+def judged_mask(states: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Samples judged: the monitor running (normal or fault) with J over a full window."""
+    running = (states == State.NORMAL) | (states == State.FAULT)
+    return running & np.isfinite(j)
+
+
+def verdict(
+    summary: dict[str, Any],
+    states: np.ndarray,
+    j: np.ndarray,
+    op_state: np.ndarray,
+    oor: np.ndarray,
+    inputs_ok: np.ndarray,
+    engine_rpm: np.ndarray,
+    window_n: int,
+    period_s: float,
+) -> tuple[str, float, str | None]:
+    """(verdict, judged seconds, why not judged or None) of one recording."""
+    judged = judged_mask(states, j)
+    judged_s = round(float(judged.sum()) * period_s, 3)
+    if summary["alarm"]:
+        return "fault", judged_s, None
+    if summary["sensor_fault"]:
+        return "sensor_fault", judged_s, None
+    if judged.sum() >= window_n:
+        return "healthy", judged_s, None
+    return "not_judged", judged_s, _why(states, op_state, oor, inputs_ok, engine_rpm, window_n,
+                                        period_s)  # fmt: skip
+
+
+def _why(
+    states: np.ndarray,
+    op_state: np.ndarray,
+    oor: np.ndarray,
+    inputs_ok: np.ndarray,
+    engine_rpm: np.ndarray,
+    window_n: int,
+    period_s: float,
+) -> str:
+    n = len(states)
+    if n and not np.isfinite(engine_rpm).any():
+        return "no commands (EngineSpeed never received: HYD_Commands missing)"
+    if n < window_n:
+        return (f"shorter than the J window ({n * period_s:.1f} s of samples, the window is "
+                f"{window_n * period_s:.1f} s)")  # fmt: skip
+    reasons = {
+        "engine off": np.mean(op_state == OpState.ENGINE_OFF),
+        "warm-up": np.mean(op_state == OpState.WARM_UP),
+        "outside the trained range": np.mean((op_state == OpState.NORMAL) & (oor >= 0)),
+        "model signals missing": np.mean((op_state == OpState.NORMAL) & (oor < 0) & ~inputs_ok),
+    }
+    shares = [f"{name} {share:.0%} of the time" for name, share in
+              sorted(reasons.items(), key=lambda kv: -kv[1]) if share > 0]  # fmt: skip
+    if not shares:
+        return f"less than one J window ({window_n * period_s:.1f} s) of judged samples"
+    return ", ".join(shares) + f"; less than one J window ({window_n * period_s:.1f} s) judged"

@@ -1,0 +1,99 @@
+"""`monitor detect` says what it judged: the verdict, the judged time, rejected frames, and
+"not judged" (exit 3) when the data cannot support a verdict."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from monitor.codec.logwrite import write_candump
+from monitor.io.recording import Recording
+from monitor.resources import resource_path
+from monitor.sampling.read import read_recording
+from monitor.sampling.sampler import recording_from_candump
+
+WINDOW_S = 30.0  # the shipped model's J window: N = 3000 samples at 100 Hz
+
+
+def detect_cli(rec: Path, tmp_path: Path, *extra: str) -> tuple[int, dict, str, list[dict]]:
+    summary, events = tmp_path / "s.json", tmp_path / "e.jsonl"
+    proc = subprocess.run(
+        [sys.executable, "-m", "monitor", "detect", str(rec), "--summary", str(summary),
+         "--events", str(events), *extra],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    lines = [json.loads(x) for x in events.read_text().splitlines()] if events.exists() else []
+    return proc.returncode, json.loads(summary.read_text()), proc.stderr, lines
+
+
+def edited_log(tmp_path: Path, name: str, keep_s: float | None = None, **nan_cols: bool) -> Path:
+    rec = read_recording(resource_path("replay", "normal.log"))
+    keep = np.ones(len(rec), dtype=bool) if keep_s is None else rec.t - rec.t[0] < keep_s
+    cols = {k: v[keep].copy() for k, v in rec.columns.items()}
+    for col in nan_cols:
+        cols[col][:] = np.nan  # the frames carrying it are never sent
+    out = tmp_path / name
+    write_candump(out, Recording(rec.t[keep] - rec.t[0], cols, name))
+    return out
+
+
+def test_healthy_log_is_judged_for_all_but_the_first_window(tmp_path: Path) -> None:
+    rc, s, err, _ = detect_cli(resource_path("replay", "normal.log"), tmp_path)
+    assert rc == 0, err
+    assert s["verdict"] == "healthy" and s["rejected"] == {}
+    # 90 s of samples; J needs a full window first: 90 - 30 = 60 s judged (one sample less
+    # than 6,000 because the first full window ends at sample 3,000).
+    assert s["judged_s"] == pytest.approx(90.0 - WINDOW_S, abs=0.02)
+    assert "no hydraulic fault" in err
+
+
+def test_a_log_without_commands_is_not_judged_exit_3(tmp_path: Path) -> None:
+    log = edited_log(tmp_path, "nocmd.log", SpoolCmd=True, PumpDispCmd=True, EngineSpeed=True)
+    rc, s, err, _ = detect_cli(log, tmp_path)
+    assert rc == 3, err
+    assert s["verdict"] == "not_judged" and s["judged_s"] == 0.0
+    assert "not judged: no commands" in err and "HYD_Commands" in err
+    assert not s["alarm"]
+
+
+def test_a_recording_shorter_than_the_window_is_not_judged(tmp_path: Path) -> None:
+    log = edited_log(tmp_path, "short.log", keep_s=20.0)
+    rc, s, err, _ = detect_cli(log, tmp_path)
+    assert rc == 3, err
+    assert s["verdict"] == "not_judged"
+    assert "shorter than the J window" in s["not_judged_why"]
+    assert "not judged" in err
+
+
+def test_rejected_frames_are_counted_per_message_and_reason(tmp_path: Path) -> None:
+    lines = resource_path("replay", "normal.log").read_text().splitlines()
+    # Corrupt the CRC (last byte) of the 100th HYD_Pressures frame (0CFF1021).
+    hits = [i for i, line in enumerate(lines) if " 0CFF1021#" in line]
+    k = hits[100]
+    head, data = lines[k].rsplit("#", 1)
+    lines[k] = f"{head}#{data[:-2]}{(int(data[-2:], 16) ^ 0xFF):02X}"
+    log = tmp_path / "badcrc.log"
+    log.write_text("\n".join(lines) + "\n")
+    rc, s, err, _ = detect_cli(log, tmp_path)
+    assert rc == 0, err
+    # The corrupt frame is rejected; the next one's alive counter then skips one value.
+    expected = {"HYD_Pressures": {"crc": 1, "counter_jump": 1}}
+    assert s["rejected"] == expected
+    assert "HYD_Pressures frames rejected: 1 crc, 1 counter_jump" in err
+    # The frame-by-frame decoder of the daemon counts the same.
+    counts = recording_from_candump(log).meta["counts"]
+    assert counts["rejected_by_message"] == expected
+
+
+def test_j_lines_in_fault_name_the_fault(tmp_path: Path) -> None:
+    rc, s, _, lines = detect_cli(resource_path("replay", "spool_wear.log"), tmp_path)
+    assert rc == 0 and s["verdict"] == "fault"
+    j_fault = [x for x in lines if x["event"] == "j" and x["state"] == "fault"]
+    assert j_fault and all(x["fault"] == "spool_wear" for x in j_fault)
+    j_normal = [x for x in lines if x["event"] == "j" and x["state"] == "normal"]
+    assert j_normal and all(x["fault"] is None for x in j_normal)
