@@ -15,4 +15,6 @@ GOOD_LOGS = [
     "genesis_candump-2021-05-28_164301.log",
 ]
 # file, line number of the first malformed line (found by reading the files)
-BAD_LOGS = [("civic8th_test.log", 1), ("evox_linklog2.log", 1096)]
+BAD_LOGS = [("civic8th_test.log", 1)]
+# file, line number of its torn last line (cut off mid-line, no newline): read up to it
+TORN_LOGS = [("evox_linklog2.log", 1096)]

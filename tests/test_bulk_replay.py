@@ -9,7 +9,7 @@ import can
 import cantools
 import numpy as np
 import pytest
-from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS
+from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS, TORN_LOGS
 
 from monitor.codec import FrameCodec
 from monitor.codec.bulk import decode_frames, raw_values
@@ -17,6 +17,7 @@ from monitor.codec.frames import MessageInfo, _message_info
 from monitor.codec.logwrite import write_candump
 from monitor.detection.offline import detect
 from monitor.errors import InputFileError, NoHydraulicDataError
+from monitor.io.candump import read_candump
 from monitor.io.candump_bulk import read_candump_frames
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
@@ -62,6 +63,16 @@ def test_same_frames_as_python_can_on_real_logs(name):
 def test_malformed_real_logs_name_the_same_line(name, line):
     with pytest.raises(InputFileError, match=rf"{name}:{line}: not a candump -L line"):
         read_candump_frames(REAL_LOGS / name)
+
+
+@needs_real
+@pytest.mark.parametrize(("name", "line"), TORN_LOGS)
+def test_torn_real_log_gives_the_frames_before_the_tear(name, line):
+    """Both readers stop at the torn line: every whole line before it, nothing else."""
+    bulk = read_candump_frames(REAL_LOGS / name)
+    slow = list(read_candump(REAL_LOGS / name))
+    assert len(bulk) == len(slow) == line - 1
+    assert np.array_equal(bulk.timestamp, [m.timestamp for m in slow])
 
 
 def test_line_variants_and_errors(tmp_path):

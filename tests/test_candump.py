@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,7 +16,9 @@ from monitor.codec import load_dbc
 from monitor.codec.logwrite import write_candump
 from monitor.errors import InputFileError
 from monitor.io.candump import read_candump
+from monitor.io.candump_bulk import read_candump_frames
 from monitor.io.recording import Recording
+from monitor.resources import resource_path
 
 needs_real_logs = pytest.mark.skipif(
     not REAL_LOGS.is_dir(), reason=f"shared real CAN logs not found at {REAL_LOGS}"
@@ -192,3 +196,35 @@ def test_good_real_logs_read(name: str) -> None:
     expected = sum(1 for x in path.read_text().splitlines() if x.strip())
     assert len(msgs) == expected > 0
     assert all(not m.is_extended_id for m in msgs)  # passenger-car 11-bit ids
+
+
+def _torn_and_commented(tmp_path: Path) -> tuple[Path, int]:
+    """A shipped log with a comment header and a comment inside, cut off mid-line at its end
+    (what a power cut leaves); returns the path and the number of whole frame lines."""
+    lines = resource_path("replay", "normal.log").read_text().splitlines()[:500]
+    text = "# candump -L can0, logger v1.2\n" + "\n".join(lines[:250]) + "\n# pause\n"
+    text += "\n".join(lines[250:]) + "\n" + lines[0][:17]  # torn: no newline, half a line
+    path = tmp_path / "torn.log"
+    path.write_text(text)
+    return path, 500
+
+
+def test_torn_last_line_and_comments_are_skipped_with_one_warning(tmp_path, caplog) -> None:
+    path, whole = _torn_and_commented(tmp_path)
+    with caplog.at_level(logging.WARNING, logger="monitor"):
+        slow = list(read_candump(path))
+        bulk = read_candump_frames(path)
+    assert len(slow) == whole and len(bulk) == whole
+    torn = [r for r in caplog.records if "torn last line" in r.getMessage()]
+    assert len(torn) == 2  # one per reader
+    assert all(f"{path}:503:" in r.getMessage() for r in torn)  # 500 frames + 2 comments + 1
+
+
+def test_a_malformed_line_that_is_not_the_last_is_still_an_error(tmp_path) -> None:
+    lines = resource_path("replay", "normal.log").read_text().splitlines()[:20]
+    lines[10] = lines[10][:17]  # the same tear, but in the middle of the file
+    path = tmp_path / "mid.log"
+    path.write_text("\n".join(lines) + "\n")
+    for reader in (lambda p: list(read_candump(p)), read_candump_frames):
+        with pytest.raises(InputFileError, match=r"mid.log:11: not a candump -L line"):
+            reader(path)

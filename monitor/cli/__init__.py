@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import pkgutil
 import sys
 from collections.abc import Sequence
@@ -55,6 +56,28 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+class _OneLine(logging.Formatter):
+    def __init__(self, command: str) -> None:
+        super().__init__(f"monitor {command}: %(levelname)s: %(message)s")
+
+    def format(self, record: logging.LogRecord) -> str:
+        record.levelname = record.levelname.lower()
+        return super().format(record)
+
+
+def _warnings_to_stderr(command: str) -> None:
+    """Warnings of the library (a torn log line, ...) as one line each on stderr."""
+    logger = logging.getLogger("monitor")
+    for h in logger.handlers:
+        if getattr(h, "_monitor_cli", False):
+            logger.removeHandler(h)  # a second main() in one process (tests): a fresh stream
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(_OneLine(command))
+    handler._monitor_cli = True  # type: ignore[attr-defined]
+    logger.addHandler(handler)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     # Import only the subcommand asked for: the others pull in the simulator, scipy and
@@ -62,6 +85,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     first = argv[0].replace("-", "_") if argv and not argv[0].startswith("-") else None
     parser = build_parser(first)
     args = parser.parse_args(argv)
+    if args.command not in ("run", "demo"):  # those two log to the journal their own way
+        _warnings_to_stderr(args.command)
     try:
         return int(args.func(args) or 0)
     except MonitorError as exc:

@@ -8,6 +8,7 @@ interface, id (3 hex digits standard, 8 extended), ``#``, data in hex.
 
 from __future__ import annotations
 
+import logging
 import re
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,6 +18,8 @@ import can
 from can.io.canutils import CanutilsLogReader
 
 from monitor.errors import InputFileError
+
+log = logging.getLogger("monitor")
 
 #: Log time of the recording's t = 0 when writing (2023-11-14 22:13:20 UTC), a fixed
 #: epoch so that encoding the same CSV twice gives the same log.
@@ -39,6 +42,27 @@ def format_line(
     return f"({timestamp_s:.6f}) {channel} {ident}#{data.hex().upper()}\n"
 
 
+def skip_odd_line(text: str, path: Path, line_no: int, unterminated: bool) -> None:
+    """A line that is not a frame: return to skip it, raise ``InputFileError`` otherwise.
+
+    Skipped: comment lines (``#`` first, as some loggers write a header) and a torn last
+    line: one without its newline, which is what a power cut leaves at the end of a log being
+    written (warned once, naming file and line).  Any other malformed line is an error
+    naming file and line.
+    """
+    shown = text if len(text) <= 60 else text[:57] + "..."
+    if text.startswith("#"):
+        return
+    if unterminated:
+        log.warning("%s:%d: torn last line skipped (no newline at the end: the log was cut "
+                    "off mid-line): %r", path, line_no, shown)  # fmt: skip
+        return
+    raise InputFileError(
+        f"{path}:{line_no}: not a candump -L line: {shown!r}"
+        " (expected '(SECONDS) IFACE ID#HEXDATA')"
+    )
+
+
 class _CheckedLines:
     """The log's lines, each checked against ``_LINE`` before python-can parses it.
 
@@ -59,11 +83,8 @@ class _CheckedLines:
             self.line_no = line_no  # read by _messages when python-can itself fails
             text = line.strip()
             if text and not _LINE.fullmatch(text):
-                shown = text if len(text) <= 60 else text[:57] + "..."
-                raise InputFileError(
-                    f"{self._path}:{self.line_no}: not a candump -L line: {shown!r}"
-                    " (expected '(SECONDS) IFACE ID#HEXDATA')"
-                )
+                skip_odd_line(text, self._path, line_no, not line.endswith("\n"))
+                continue
             yield line
 
     def close(self) -> None:
@@ -74,8 +95,8 @@ def read_candump(path: str | Path) -> Iterator[can.Message]:
     """Messages of a candump log, in file order, read with python-can's CanutilsLogReader.
 
     The file is opened at once (a missing file fails here); a malformed line raises
-    ``InputFileError`` naming file and line when iteration reaches it.  Blank lines are
-    skipped.
+    ``InputFileError`` naming file and line when iteration reaches it.  Blank lines, comment
+    lines and a torn last line are skipped (``skip_odd_line``).
     """
     p = Path(path)
     try:

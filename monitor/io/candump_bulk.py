@@ -26,7 +26,7 @@ import numpy as np
 from can.io.canutils import CAN_ERR_BUSERROR, CAN_ERR_FLAG, CanutilsLogReader
 
 from monitor.errors import InputFileError
-from monitor.io.candump import _LINE
+from monitor.io.candump import _LINE, skip_odd_line
 from monitor.jit import jit
 
 _HEX = np.full(256, -1, dtype=np.int16)
@@ -219,11 +219,9 @@ def _parse_slow(raw: bytes, starts, ends, lines: np.ndarray, path: Path) -> list
         if not text:
             continue
         if not _LINE.fullmatch(text):
-            shown = text if len(text) <= 60 else text[:57] + "..."
-            raise InputFileError(
-                f"{path}:{i + 1}: not a candump -L line: {shown!r}"
-                " (expected '(SECONDS) IFACE ID#HEXDATA')"
-            )
+            unterminated = i == len(starts) - 1 and not raw.endswith(b"\n")
+            skip_odd_line(text, path, i + 1, unterminated)
+            continue
         try:
             msgs = list(CanutilsLogReader(io.StringIO(text)))
         except (ValueError, IndexError) as exc:
