@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from monitor.cli._paths import output_dir, output_file
 from monitor.errors import MonitorError
 
 _DESCRIPTION = """\
@@ -49,15 +50,15 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         description=_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--json", type=Path, default=Path("bench.json"), metavar="F",
+    p.add_argument("--json", type=output_file, default=Path("bench.json"), metavar="F",
                    help="result file (default bench.json)")  # fmt: skip
-    p.add_argument("--markdown", type=Path, default=None, metavar="F.md",
+    p.add_argument("--markdown", type=output_file, default=None, metavar="F.md",
                    help="markdown table (default: beside --json, .md)")  # fmt: skip
-    p.add_argument("--plot", type=Path, default=None, metavar="F.png",
+    p.add_argument("--plot", type=output_file, default=None, metavar="F.png",
                    help="growth curves (default: beside --json, .png)")  # fmt: skip
     p.add_argument("--quick", action="store_true",
                    help="reduced sizes (2,000 patterns, 90 s log): checks, not speed")  # fmt: skip
-    p.add_argument("--work-dir", type=Path, default=None, metavar="DIR",
+    p.add_argument("--work-dir", type=output_dir, default=None, metavar="DIR",
                    help="cache for the long log and the models (default: a folder in the "
                    "system's temp dir)")  # fmt: skip
     p.add_argument("--live-speed", type=float, default=None, metavar="X",

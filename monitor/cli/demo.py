@@ -23,6 +23,7 @@ from typing import Any
 import can
 
 from monitor.bus.replay import ReplayCounts, replay_log
+from monitor.cli._paths import output_dir
 from monitor.codec.frames import FrameCodec
 from monitor.config.settings import BusConfig, load_config
 from monitor.live.daemon import Daemon
@@ -43,7 +44,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--speed", type=float, default=5.0, metavar="X",
                    help="replay speed factor (default 5: the 90 s log in 18 s)")  # fmt: skip
-    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+    p.add_argument("--out", type=output_dir, default=None, metavar="DIR",
                    help="keep the event log and black box here (default: a temp dir)")  # fmt: skip
     p.set_defaults(func=run)
 

@@ -10,6 +10,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from monitor.cli._paths import output_file
 from monitor.config.settings import load_config
 from monitor.detection.alarm import State
 from monitor.detection.offline import Detection, detect
@@ -54,10 +55,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="P",
         help="prediction horizon p (default: from the config)",
     )
-    p.add_argument("--summary", type=Path, default=None, metavar="F.json")
+    p.add_argument("--summary", type=output_file, default=None, metavar="F.json")
     p.add_argument(
         "--events",
-        type=Path,
+        type=output_file,
         default=None,
         metavar="F.jsonl",
         help="write the JSON lines here instead of stdout",
@@ -69,7 +70,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="S",
         help="also emit J every S seconds (0: state changes only; default 1)",
     )
-    p.add_argument("--plot", type=Path, default=None, metavar="F.png")
+    p.add_argument("--plot", type=output_file, default=None, metavar="F.png")
     p.set_defaults(func=run)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from monitor.cli._paths import output_file
 from monitor.codec.frames import FrameCodec
 from monitor.codec.logwrite import write_candump
 from monitor.errors import ConfigError
@@ -30,8 +31,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         description=_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("csv", metavar="CSV", type=Path, help="contract CSV of physical signals")
-    p.add_argument("--out", metavar="LOG", type=Path, required=True, help="candump log to write")
+    p.add_argument("csv", metavar="CSV", type=Path,
+                   help="contract CSV of physical signals")
+    p.add_argument("--out", metavar="LOG", type=output_file, required=True,
+                   help="candump log to write")
     p.add_argument(
         "--dbc", metavar="FILE", type=Path, default=None, help="DBC file (default: the shipped one)"
     )
@@ -42,7 +45,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         default=DEFAULT_START_TIME_S,
         help=f"log time of t = 0 [s since the Unix epoch] (default {DEFAULT_START_TIME_S:.0f})",
     )
-    p.add_argument("--channel", default="can0", help="interface name in the log (default can0)")
+    p.add_argument("--channel", default="can0",
+                   help="interface name in the log (default can0)")
     p.set_defaults(func=run)
 
 

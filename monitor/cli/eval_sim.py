@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from monitor.cli._paths import output_file
 from monitor.config.settings import load_config
 from monitor.errors import ConfigError
 from monitor.evaluation.report import aggregate, markdown
@@ -100,8 +101,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         description=_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--json", metavar="F", type=Path, required=True, help="results to write")
-    p.add_argument("--markdown", metavar="F.md", type=Path, help="tables (default: stdout)")
+    p.add_argument("--json", metavar="F", type=output_file, required=True, help="results to write")
+    p.add_argument("--markdown", metavar="F.md", type=output_file, help="tables (default: stdout)")
     p.add_argument(
         "--model", metavar="MODEL", action="append", default=None,
         help="evaluate this model file (repeatable; 'shipped' = config's model); without "

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from monitor.cli._paths import output_file
 from monitor.errors import ConfigError
 from monitor.evaluation.uci import DETECTION_KEYS, UCI_PRESETS, WINDOWS, evaluate
 from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule
@@ -30,9 +31,12 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         description=_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--train", metavar="DIR", type=Path, required=True, help="rig folder to fit on")
-    p.add_argument("--test", metavar="DIR", type=Path, required=True, help="rig folder to score")
-    p.add_argument("--json", metavar="FILE", type=Path, required=True, help="results to write")
+    p.add_argument("--train", metavar="DIR", type=Path, required=True,
+                   help="rig folder to fit on")
+    p.add_argument("--test", metavar="DIR", type=Path, required=True,
+                   help="rig folder to score")
+    p.add_argument("--json", metavar="FILE", type=output_file, required=True,
+                   help="results to write")
     p.add_argument(
         "--preset", choices=tuple(UCI_PRESETS), action="append", default=None,
         help="preset(s) to try (repeatable; default: all, the best on --train is the default)",
@@ -47,7 +51,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         default="max",
         help="how J0 is taken from held-out healthy cycles (default max)",
     )
-    p.add_argument("--factor", type=float, default=2.0, help="eps0 = factor * J0 (default 2)")
+    p.add_argument("--factor", type=float, default=2.0,
+                   help="eps0 = factor * J0 (default 2)")
     p.add_argument(
         "--max-cycles",
         metavar="K",

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from monitor.cli._paths import output_dir, output_file
 from monitor.errors import ConfigError, MonitorError
 from monitor.sampling.read import read_recording
 from monitor.sim.machine import load_machine
@@ -44,7 +45,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--real", type=Path, required=True, metavar="REC", help="the recording")
+    p.add_argument("--real", type=Path, required=True, metavar="REC",
+                   help="the recording")
     p.add_argument(
         "--config",
         type=Path,
@@ -52,15 +54,17 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="simulator YAML (default: the shipped config/simulator.yaml)",
     )
-    p.add_argument("--json", type=Path, required=True, metavar="F", help="write the report here")
+    p.add_argument("--json", type=output_file, required=True, metavar="F",
+                   help="write the report here")
     p.add_argument(
         "--report",
-        type=Path,
+        type=output_dir,
         default=None,
         metavar="DIR",
         help="also write PNG plots and summary.txt into DIR (created)",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress lines on stderr")
     p.set_defaults(func=run)
 
 

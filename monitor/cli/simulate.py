@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from monitor.cli._paths import output_file
 from monitor.errors import ConfigError, MonitorError
 from monitor.sim.cycles import CYCLES, make_cycle
 from monitor.sim.effects import describe_catalogue, parse_effect
@@ -73,7 +74,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="simulator YAML (default: the shipped config/simulator.yaml)",
     )
-    p.add_argument("--out", type=Path, required=True, metavar="FILE", help=".csv or .log")
+    p.add_argument("--out", type=output_file, required=True, metavar="FILE", help=".csv or .log")
     p.set_defaults(func=run)
 
 

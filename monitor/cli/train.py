@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from monitor.cli._paths import output_file
 from monitor.config.settings import load_config
 from monitor.errors import MonitorError
 from monitor.live.loops import read_loop
@@ -30,7 +31,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="REC",
         help="normal recordings: contract CSVs or candump logs",
     )
-    p.add_argument("--out", type=Path, required=True, metavar="MODEL", help="model file (.npz)")
+    p.add_argument("--out", type=output_file, required=True, metavar="MODEL",
+                   help="model file (.npz)")
     p.add_argument(
         "--preset",
         choices=sorted(PRESETS),
@@ -68,8 +70,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="J0 from held-out normal J: max (default, no false alarm on it), "
         "quantile, or mean (the paper's literal reading)",
     )
-    p.add_argument("--quantile", type=float, default=0.999, help="for --threshold-rule quantile")
-    p.add_argument("--factor", type=float, default=2.0, help="eps0 = factor x J0 (default 2)")
+    p.add_argument("--quantile", type=float, default=0.999,
+                   help="for --threshold-rule quantile")
+    p.add_argument("--factor", type=float, default=2.0,
+                   help="eps0 = factor x J0 (default 2)")
     p.add_argument(
         "--validation-fraction",
         type=float,
@@ -84,7 +88,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="train on this loop of candump logs with several loops' frames (needs "
         "--config with `loops:`); the fault signatures still come from the boom simulator",
     )
-    p.add_argument("--config", type=Path, default=None, help="monitor YAML for --loop")
+    p.add_argument("--config", type=Path, default=None,
+                   help="monitor YAML for --loop")
     p.add_argument(
         "--isolation",
         choices=("sim", "none"),
