@@ -77,8 +77,11 @@ def test_installed_demo_and_detect_run_from_any_directory(installed):
     demo = _run(py, work, "demo")
     assert demo.returncode == 0, demo.stderr
     assert "fault" in (demo.stdout + demo.stderr).lower()
+    # The demo's files live in a temporary folder it removes: it must not print their path.
+    assert "removed on exit" in demo.stdout and "events.jsonl" not in demo.stdout
     log = work / "run.log"
-    sim = _run(py, work, "simulate", "--duration", "20", "--seed", "3", "--out", str(log))
+    # Longer than the shipped model's 30 s J window, so that the log is judged (exit 0).
+    sim = _run(py, work, "simulate", "--duration", "40", "--seed", "3", "--out", str(log))
     assert sim.returncode == 0, sim.stderr
     det = _run(py, work, "detect", str(log), "--summary", "s.json", "--j-every", "0")
     assert det.returncode == 0, det.stderr

@@ -83,7 +83,7 @@ def open_bus(cfg: BusConfig, can_filters: list[dict[str, int | bool]] | None = N
         raise BusError(
             f"cannot open CAN bus {cfg.interface}:{cfg.channel}: {exc}"
             + (
-                " (is the interface up? `ip link set can0 up type can bitrate 500000`)"
+                f" (is the interface up? {_bring_up_hint(cfg.channel, cfg.bitrate)})"
                 if cfg.interface == "socketcan"
                 else ""
             )
@@ -272,3 +272,11 @@ class BusReader:
         self._event("up", detail, down_s)
         log.info("CAN bus up again after %.1f s (%s; %d reopens so far)", down_s, detail,
                  self.recovery.reopens)  # fmt: skip
+
+
+def _bring_up_hint(channel: str, bitrate: int) -> str:
+    """The command that brings ``channel`` up: a vcan needs the module and no bitrate."""
+    if channel.startswith("vcan"):
+        return (f"`sudo modprobe vcan && sudo ip link add dev {channel} type vcan && "
+                f"sudo ip link set {channel} up`")  # fmt: skip
+    return f"`sudo ip link set {channel} up type can bitrate {bitrate}`"

@@ -84,6 +84,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # matplotlib, seconds of start-up on a controller (minutes in the SocketCAN test VM).
     first = argv[0].replace("-", "_") if argv and not argv[0].startswith("-") else None
     parser = build_parser(first)
+    if not argv:  # `monitor` alone: what it can do, as with --help, but a usage error
+        parser.print_help(sys.stderr)
+        return 2
     args = parser.parse_args(argv)
     if args.command not in ("run", "demo"):  # those two log to the journal their own way
         _warnings_to_stderr(args.command)

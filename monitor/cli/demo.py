@@ -81,11 +81,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     log_path = resource_path("replay", DEMO_LOG)
     with tempfile.TemporaryDirectory(prefix="monitor-demo-") as tmp:
-        out = args.out or Path(tmp)
-        return _demo(log_path, out, args.speed)
+        return _demo(log_path, args.out or Path(tmp), args.speed, kept=args.out is not None)
 
 
-def _demo(log_path: Path, out: Path, speed: float) -> int:
+def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
     # The demo prints its own lines; the daemon's journal lines would interleave with them.
     logging.getLogger("monitor").setLevel(logging.ERROR)
     cfg = load_config()
@@ -171,5 +170,9 @@ def _demo(log_path: Path, out: Path, speed: float) -> int:
         f"  frames: {c['received']} received, {c['decoded']} decoded, "
         f"{sum(c['rejected'].values())} rejected, {c['dropped']} dropped; {c['ticks']} ticks"
     )
-    print(f"  event log: {cfg.event_log.path}; black box: {cfg.black_box.directory}")
+    if kept:
+        print(f"  event log: {cfg.event_log.path}; black box: {cfg.black_box.directory}")
+    else:
+        print("  event log and black box were written to a temporary folder, removed on exit "
+              "(keep them with --out DIR)")  # fmt: skip
     return 0

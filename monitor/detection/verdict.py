@@ -5,10 +5,11 @@ monitor was running (state normal or fault, J finite).  The verdict:
 
 * ``fault``: a debounced hydraulic-fault alarm was raised;
 * ``sensor_fault``: no alarm, but some sample was a sensor fault (stale or implausible data);
-* ``healthy``: neither, and at least one full J window (N samples) was judged;
-* ``not_judged``: less than one J window was judged, so the data cannot support "healthy":
-  no commands (engine speed never received), a recording shorter than the window, the engine
-  off, warm-up, outside the model's trained range, or missing model signals throughout.
+* ``healthy``: neither, and J was judged at least once (each judged J covers a full window
+  of N samples of running, in-range, complete data);
+* ``not_judged``: no J was ever judged, so the data cannot support "healthy": no commands
+  (engine speed never received), a recording shorter than the window, or the engine off,
+  warm-up, outside the model's trained range or missing model signals throughout.
 
 Data that was never judged is never reported healthy.
 """
@@ -49,7 +50,7 @@ def verdict(
         return "fault", judged_s, None
     if summary["sensor_fault"]:
         return "sensor_fault", judged_s, None
-    if judged.sum() >= window_n:
+    if judged.any():
         return "healthy", judged_s, None
     return "not_judged", judged_s, _why(states, op_state, oor, inputs_ok, engine_rpm, window_n,
                                         period_s)  # fmt: skip
@@ -79,5 +80,5 @@ def _why(
     shares = [f"{name} {share:.0%} of the time" for name, share in
               sorted(reasons.items(), key=lambda kv: -kv[1]) if share > 0]  # fmt: skip
     if not shares:
-        return f"less than one J window ({window_n * period_s:.1f} s) of judged samples"
-    return ", ".join(shares) + f"; less than one J window ({window_n * period_s:.1f} s) judged"
+        return f"no full J window ({window_n * period_s:.1f} s) of judged samples"
+    return ", ".join(shares) + f"; no full J window ({window_n * period_s:.1f} s) judged"

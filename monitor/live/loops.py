@@ -180,6 +180,8 @@ def read_loop(path: str | Path, cfg: MonitorConfig, name: str | None) -> Recordi
     (``name`` None) the recording itself."""
     if name is None:
         return read_recording(path)
+    if Path(path).is_dir():
+        raise InputFileError(f"{path}: is a folder; give a recording (.log or .csv) in it")
     if not Path(path).is_file():
         raise InputFileError(f"{path}: no such file")
     return loop_recording(path, cfg, name)

@@ -11,6 +11,8 @@ from monitor.io.recording import Recording
 def read_recording(path: str | Path) -> Recording:
     """A contract CSV (``.csv``) or a candump log (anything else whose first line is one)."""
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f"{path}: is a folder; give a recording (.log or .csv) in it")
     if not path.is_file():
         raise InputFileError(f"{path}: no such file")
     if path.suffix.lower() == ".csv":
