@@ -114,3 +114,42 @@ def test_isolator_add_many_is_add_row_by_row_to_the_bit() -> None:
     np.testing.assert_array_equal(many.sums, one.sums)
     np.testing.assert_array_equal(many.counts, one.counts)
     assert many.counts.sum() == np.isfinite(e).all(axis=1).sum()
+
+
+def episode_run(js, rpm, gap_samples=5):
+    """States and the samples that raised a new episode, with ``episode_gap_samples``."""
+    cfg = AlarmConfig(raise_samples=3, clear_samples=4, clear_ratio=0.5,
+                      sensor_recover_samples=2, min_engine_rpm=500,
+                      episode_gap_samples=gap_samples)  # fmt: skip
+    m = AlarmMachine(cfg, eps0=1.0)
+    states, raised = [], []
+    for k, (j, r) in enumerate(zip(js, rpm, strict=True)):
+        states.append(m.step(j, True, r).name[0])
+        if m.raised:
+            raised.append(k)
+    return "".join(states), raised
+
+
+def test_a_short_gap_inside_a_fault_is_one_episode():
+    # Fault raised at sample 2, engine off for 3 samples (<= 5), J still high after it:
+    # straight back to fault, no new debounce and no new raise.
+    js = [2, 2, 2, 2, 9, 9, 9, 2, 2]
+    rpm = [2200] * 4 + [0] * 3 + [2200] * 2
+    states, raised = episode_run(js, rpm)
+    assert states == "NNFFIIIFF" and raised == [2]
+
+
+def test_a_long_gap_ends_the_episode():
+    # The same with the engine off for 6 samples (> 5): the next fault is a new episode,
+    # raised after the full debounce.
+    js = [2, 2, 2, 2] + [9] * 6 + [2, 2, 2, 2]
+    rpm = [2200] * 4 + [0] * 6 + [2200] * 4
+    states, raised = episode_run(js, rpm)
+    assert states == "NNFF" + "I" * 6 + "NNFF" and raised == [2, 12]
+
+
+def test_the_clear_rule_still_ends_an_episode_after_a_gap():
+    js = [2, 2, 2, 9, 0.1, 0.1, 0.1, 0.1, 2, 2, 2]
+    rpm = [2200, 2200, 2200, 0] + [2200] * 7
+    states, raised = episode_run(js, rpm)
+    assert states == "NNFI" + "FFFN" + "NNF" and raised == [2, 10]

@@ -97,3 +97,22 @@ def test_j_lines_in_fault_name_the_fault(tmp_path: Path) -> None:
     assert j_fault and all(x["fault"] == "spool_wear" for x in j_fault)
     j_normal = [x for x in lines if x["event"] == "j" and x["state"] == "normal"]
     assert j_normal and all(x["fault"] is None for x in j_normal)
+
+
+def test_an_engine_off_gap_inside_a_fault_is_one_episode(tmp_path: Path, model) -> None:
+    """The shipped spool-wear log with the engine off for 3 s in the middle of the fault:
+    the fault comes back after the gap as the same episode, with the same isolation."""
+    from monitor.config.settings import load_config
+    from monitor.detection.offline import detect
+
+    cfg = load_config()
+    rec = read_recording(resource_path("replay", "spool_wear.log"))
+    t = rec.t - rec.t[0]
+    cols = {k: v.copy() for k, v in rec.columns.items()}
+    cols["EngineSpeed"][(t >= 70.0) & (t < 73.0)] = 0.0
+    det = detect(model, Recording(rec.t, cols, "gap", dict(rec.meta)), cfg.alarm, cfg.horizon,
+                 gating=cfg.gating)  # fmt: skip
+    states = [(e["state"], e["fault"]) for e in det.events]
+    assert det.summary["alarm_episodes"] == 1
+    i = states.index(("inactive", None))
+    assert states[i - 1] == states[i + 1] == ("fault", "spool_wear")

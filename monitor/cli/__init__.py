@@ -87,7 +87,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not argv:  # `monitor` alone: what it can do, as with --help, but a usage error
         parser.print_help(sys.stderr)
         return 2
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0), a usage error (2): argparse already printed it
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     if args.command not in ("run", "demo"):  # those two log to the journal their own way
         _warnings_to_stderr(args.command)
     try:

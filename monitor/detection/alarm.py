@@ -35,9 +35,14 @@ class AlarmConfig:
     clear_ratio: float = 0.8  # hysteresis: a fault clears only well below the threshold
     sensor_recover_samples: int = 10  # valid data this long ends a sensor fault (0.1 s)
     min_engine_rpm: float = 500.0  # below: the machine is off, the monitor inactive
+    # An alarm episode outlives an inactive or sensor-fault gap up to this long (60 s): the
+    # fault comes back as the same episode (same isolation, no new black box or DM1
+    # occurrence) and ends only by the clear rule.  A longer gap ends the episode.
+    episode_gap_samples: int = 6000
 
     def __post_init__(self) -> None:
-        for name in ("raise_samples", "clear_samples", "sensor_recover_samples"):
+        for name in ("raise_samples", "clear_samples", "sensor_recover_samples",
+                     "episode_gap_samples"):  # fmt: skip
             if int(getattr(self, name)) < 1:
                 raise ConfigError(f"alarm.{name} must be at least 1 sample")
         if not 0.0 < self.clear_ratio <= 1.0:
@@ -133,7 +138,14 @@ def classify(
 
 
 class AlarmMachine:
-    """Per-sample state: inactive > sensor fault > fault/normal, with debounce."""
+    """Per-sample state: inactive > sensor fault > fault/normal, with debounce.
+
+    Episodes: a fault raised by the debounce opens an alarm episode (``raised`` is True on
+    that sample only); the clear rule closes it.  While it is open, an inactive or
+    sensor-fault gap of at most ``episode_gap_samples`` shows as such, and when valid data
+    returns the state goes straight back to fault with the isolation it had: one fault, one
+    episode, one black box, one DM1 occurrence.  A longer gap closes the episode.
+    """
 
     def __init__(
         self, config: AlarmConfig, eps0: float, isolator: Isolator | None = None, window_n: int = 0
@@ -144,6 +156,10 @@ class AlarmMachine:
         self.window_n = window_n
         self.state = State.NORMAL
         self.fault = "none"
+        self.episode_open = False  # a raised fault the clear rule has not ended
+        self.raised = False  # the last step opened a new episode
+        self._gap = 0  # samples the open episode has spent outside the fault state
+        self._episode_fault = "none"  # its isolation when it left the fault state
         self._above = 0
         self._below = 0
         self._valid = 0
@@ -166,16 +182,23 @@ class AlarmMachine:
         """``operating`` False: the machine runs outside normal operation (warm-up, see
         ``monitor.detection.opstate``) and the monitor is inactive as with the engine off."""
         cfg = self.config
+        self.raised = False
         if not (engine_rpm >= cfg.min_engine_rpm and operating):  # NaN engine speed: off
+            self._in_gap()
             return self._enter(State.INACTIVE)
         if not inputs_ok:
             self._valid = 0
+            self._in_gap()
             return self._enter(State.SENSOR_FAULT)
         if self.state in (State.INACTIVE, State.SENSOR_FAULT):
             self._valid += 1
             if self.state is State.SENSOR_FAULT and self._valid < cfg.sensor_recover_samples:
+                self._in_gap()
                 return self.state
-            self._enter(State.NORMAL)
+            if self.episode_open:
+                self._resume()
+            else:
+                self._enter(State.NORMAL)
         if e is not None and self.isolator is not None:
             self._remember(e, regime)
         if j != j:  # NaN: the window is warming up or paused; the debounce counts pause too
@@ -193,8 +216,23 @@ class AlarmMachine:
                 self.fault = self.isolator.label()
             self._below = self._below + 1 if j < cfg.clear_ratio * self.eps0 else 0
             if self._below >= cfg.clear_samples:
+                self.episode_open = False
                 self._enter(State.NORMAL)
         return self.state
+
+    def _in_gap(self) -> None:
+        """One sample of an open episode outside the fault state; too many close it."""
+        if self.episode_open:
+            self._gap += 1
+            if self._gap > self.config.episode_gap_samples:
+                self.episode_open = False
+
+    def _resume(self) -> None:
+        """Valid data again within the open episode: fault, as before the gap."""
+        self._above = self._below = 0
+        self._gap = 0
+        self.state = State.FAULT
+        self.fault = self._episode_fault
 
     def skip_quiet(self, e: np.ndarray, regimes: np.ndarray) -> None:
         """``step`` over a run of quiet samples in ``NORMAL`` at once: engine on, inputs
@@ -222,7 +260,12 @@ class AlarmMachine:
     def _enter(self, state: State) -> State:
         if state is not self.state:
             self._above = self._below = 0
-            if state is State.FAULT:
+            if self.state is State.FAULT:
+                self._episode_fault = self.fault  # kept for a return within the episode
+            if state is State.FAULT:  # raised by the debounce: a new episode
+                self.raised = True
+                self.episode_open = True
+                self._gap = 0
                 self.fault = "unknown"
                 if self.isolator is not None:
                     self.isolator.reset()

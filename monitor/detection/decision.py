@@ -38,6 +38,8 @@ class Decision(NamedTuple):
     state: State
     changed: bool  # the status differs from the previous sample's (True on the first)
     state_changed: bool  # the alarm state itself changed
+    raised: bool = False  # a new alarm episode starts here (black box, DM1 occurrence)
+    episode_open: bool = False  # an alarm episode is open (in fault, or in a short gap)
 
 
 class Decider:
@@ -83,7 +85,9 @@ class Decider:
         status = Status(state, int(op_state), int(oor), int(check), int(sensor))
         prev = self.status
         self.status = status
-        return Decision(state, status != prev, prev is None or state is not prev.state)
+        m = self.machine
+        return Decision(state, status != prev, prev is None or state is not prev.state,
+                        m.raised, m.episode_open)  # fmt: skip
 
     def quiet(self) -> bool:
         """The last sample was quiet: a run of quiet samples may go to ``skip_quiet``."""

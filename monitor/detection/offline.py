@@ -152,6 +152,7 @@ def detect(
     # (it firms up as evidence accumulates, and may waver on the way).
     votes: dict[str, int] = {}
     in_first = False
+    episodes = 0  # alarm episodes raised
     i = 0
     while i < n:
         if quiet[i] and decider.quiet():
@@ -164,14 +165,14 @@ def detect(
         d = decider.decide(j[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]),
                            int(g.op_state[i]), oor, check, sensor)  # fmt: skip
         states[i] = d.state
-        if d.state is State.FAULT and first_alarm_t is None:
+        episodes += d.raised
+        if d.raised and first_alarm_t is None:
             first_alarm_t = float(t_rel[i])
             in_first = True
-        if in_first:
+        if in_first:  # the first episode, short gaps included
             if d.state is State.FAULT:
                 votes[decider.fault] = votes.get(decider.fault, 0) + 1
-            else:
-                in_first = False
+            in_first = d.episode_open
         if d.changed:
             events.append(event_record(
                 float(t_rel[i]), d.state, float(j[i]), model.eps0, decider.fault, start_s,
@@ -185,6 +186,7 @@ def detect(
     summary = {
         "alarm": first_alarm_t is not None,
         "first_alarm_t": first_alarm_t,
+        "alarm_episodes": episodes,
         "fault": first_fault_label,
         "sensor_fault": bool(np.any(states == State.SENSOR_FAULT)),
         "max_J": float(np.max(j[finite])) if finite.any() else None,

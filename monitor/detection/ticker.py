@@ -43,6 +43,8 @@ class Tick:
     check: int = 0  # plausibility finding (monitor.detection.plausibility), 0: none
     sensor: int = -1
     state_changed: bool = True  # the alarm state itself changed (``changed`` also covers gating)
+    raised: bool = False  # a new alarm episode starts at this row
+    episode_open: bool = False  # an alarm episode is open (fault, or a short gap within one)
 
 
 class Ticker:
@@ -131,7 +133,8 @@ class Ticker:
                                 gate.oor, gate.check, gate.sensor)  # fmt: skip
         self.ticks += 1
         return Tick(float(row[0]), d.state, j, d.changed, gate.op_state, gate.oor_name(gate.oor),
-                    gate.check, gate.sensor, d.state_changed)  # fmt: skip
+                    gate.check, gate.sensor, d.state_changed, d.raised,
+                    d.episode_open)  # fmt: skip
 
 
 def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:

@@ -258,7 +258,7 @@ class Daemon:
             log.info("t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
                      ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
                      ev["sensor_check"])  # fmt: skip
-        if tick.state is State.FAULT and tick.state_changed:
+        if tick.raised:  # a new episode; a fault back after a short gap is the same one
             self.black_box.trigger(self.pipeline.bus_time(tick.t_s), lp.alarm_label())
         if self.on_event is not None:
             self.on_event(ev)

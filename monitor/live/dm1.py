@@ -77,6 +77,7 @@ class Diagnostics:
         self.previous: set[Key] = set()  # previously active, not active now (DM2)
         self._sensor: dict[Key, Lamp] = {}  # DTCs of the current sensor fault
         self._named: str | None = None  # the last fault isolation named in this alarm
+        self._named_episode: str | None = None  # the same, kept through a gap in the episode
         self._counted: set[Key] = set()  # DTCs counted in this episode
         self._started = False
         self._want: set[int] = set()  # PGNs to send as soon as possible
@@ -158,10 +159,18 @@ class Diagnostics:
         fault: str,
         row: np.ndarray,
         finding: tuple[str | None, str | None] = (None, None),
+        episode_open: bool = False,
     ) -> list[can.Message]:
         """Frames to send at sample time ``t_s`` (stamped ``bus_time_s``); ``finding`` is the
-        plausibility check's (signal, check name) behind a sensor fault, if any."""
+        plausibility check's (signal, check name) behind a sensor fault, if any.  While an
+        alarm episode is open (``episode_open``) its fault DTC stays active through a short
+        inactive or sensor-fault gap: one episode, one occurrence."""
         keys = self._keys(state, fault, row, finding)
+        if episode_open and state is not State.FAULT and self._named_episode is not None:
+            name = self._named_episode
+            keys = keys | {(self.cfg.fault_spn[name], self.cfg.fault_fmi[name]): self._fault_lamp}
+        self._named_episode = (self._named or "unknown") if state is State.FAULT else (
+            self._named_episode if episode_open else None)  # fmt: skip
         if not self._started or keys.keys() != self.active.keys():
             self._update(keys)
             self._want.add(PGN_DM1)

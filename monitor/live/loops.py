@@ -141,7 +141,8 @@ class Loop:
         if self.diag is None:
             return []
         named = finding(tick.check, tick.sensor)
-        return self.diag.tick(tick.t_s, bus_time_s, tick.state, self.ticker.fault, row, named)
+        return self.diag.tick(tick.t_s, bus_time_s, tick.state, self.ticker.fault, row, named,
+                              tick.episode_open)  # fmt: skip
 
 
 def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording:
