@@ -29,7 +29,7 @@ from monitor.bus.recovery import (
     error_frame_kind,
     is_link_error,
 )
-from monitor.errors import BusError
+from monitor.errors import BusError, ConfigError
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +55,23 @@ class BusConfig:
     reopen_initial_s: float = 0.1
     reopen_max_s: float = 10.0
 
+    def __post_init__(self) -> None:
+        # The sampler keeps a signal fresh for 3 of its cycles.  A bus whose frames come at
+        # their DBC cycle time, read on a clock k times faster (k = time_scale < 1), sees
+        # them 1/k cycles apart: below k = 0.5 that is past 2 cycles, and every jitter makes
+        # rows stale (a monitor flapping inactive).  Above 100 a 10 ms row is 1 s of bus.
+        if not TIME_SCALE_MIN <= self.time_scale <= TIME_SCALE_MAX:
+            raise ConfigError(
+                f"bus.time_scale must be within {TIME_SCALE_MIN:g}..{TIME_SCALE_MAX:g} (bus "
+                f"seconds per sample-clock second), got {self.time_scale:g}: the sampler "
+                "cannot honour a faster clock (frames would go stale between rows)"
+            )
+        if not 0.0 < self.silent_s <= 60.0:
+            raise ConfigError(f"bus.silent_s must be within 0..60 s, got {self.silent_s:g}")
+
+
+TIME_SCALE_MIN = 0.5
+TIME_SCALE_MAX = 100.0
 
 
 def open_bus(cfg: BusConfig, can_filters: list[dict[str, int | bool]] | None = None) -> can.BusABC:
@@ -137,6 +154,7 @@ class BusReader:
         self._proven = True  # a data frame came through since the last reopen
         self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
         self._last_drop_log = 0.0
+        self._heard_until = -float("inf")
 
     def start(self) -> None:
         self._thread.start()
@@ -149,6 +167,14 @@ class BusReader:
     @property
     def alive(self) -> bool:
         return self._thread.is_alive()
+
+    @property
+    def heard_until(self) -> float:
+        """Monotonic time up to which every received frame is in the queue: the start of the
+        latest receive that found nothing, or now while the bus is down or bus-off (nothing
+        can arrive).  Silence is proven by this, never by a thread that merely got no CPU
+        for a while (see monitor.live.pipeline)."""
+        return self._clock() if self.link != UP else self._heard_until
 
     @property
     def bus_up(self) -> bool:
@@ -179,6 +205,7 @@ class BusReader:
             else:
                 self._fail(DOWN, report)
                 continue
+            asked = self._clock()
             try:
                 msg = self.bus.recv(timeout=self.poll_s)
             except (can.CanError, OSError, ValueError) as exc:
@@ -186,6 +213,7 @@ class BusReader:
                 self._fail(DOWN, f"receive: {exc}")
                 continue
             if msg is None:
+                self._heard_until = asked
                 if self.link == DOWN:  # the reopened bus works (bus-off needs more)
                     self._up("receive works again")
                 continue

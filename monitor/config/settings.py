@@ -310,7 +310,10 @@ def _typed(cls: type, spec: dict, sec: dict[str, Any], name: str, source: Path) 
         if check is not None and not check(v):
             raise ConfigError(f"{source}: {name}.{key} must be {demand}, got {raw!r}")
         values[key] = v
-    return cls(**values)
+    try:
+        return cls(**values)
+    except ConfigError as exc:  # a check across keys in the class itself
+        raise ConfigError(f"{source}: {exc}") from None
 
 
 def load_config(path: str | Path | None = None) -> MonitorConfig:

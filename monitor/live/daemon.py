@@ -77,9 +77,6 @@ class Daemon:
         self.loops = [
             Loop(lc, cfg, self.codec, v) for lc, v in zip(cfg.monitored_loops, views, strict=True)
         ]
-        self.pipeline = FramePipeline(self.codec, self.columns, self.loops, self._send,
-                                      self._state_change, cfg.bus.silent_s,
-                                      cfg.bus.time_scale)  # fmt: skip
         # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.live.writer.
         st = cfg.storage
         self.quota = Quota(st.quota_bytes, cfg.black_box.directory, cfg.event_log.path)
@@ -95,6 +92,10 @@ class Daemon:
         self.reader = BusReader(bus if bus is not None else opener(), cfg.bus.queue_frames,
                                 opener=opener if self._own_bus else None,
                                 backoff=backoff)  # fmt: skip
+        self.pipeline = FramePipeline(self.codec, self.columns, self.loops, self._send,
+                                      self._state_change, cfg.bus.silent_s, cfg.bus.time_scale,
+                                      lambda: self.reader.heard_until,
+                                      lambda: not self.reader.queue.empty())  # fmt: skip
         self.tx_errors = 0
         self.reloads = 0
         self.loop_mono = time.monotonic()  # last pass of the detector loop (watchdog)

@@ -3,10 +3,19 @@
 One ``feed`` per received frame: J1939 requests go to the loops' diagnostics, the rest is
 decoded (alive counter, CRC, ranges), sampled onto the 100 Hz clock and every finished row
 ticked by each loop; a loop's state changes and its MON_Alarm / DM1 frames leave through the
-two callbacks the daemon gives (``send``, ``on_change``).  ``silence`` runs the clock on by
-wall time when no sensor frame came for ``bus.silent_s``; ``flush`` ticks the last rows.
+two callbacks the daemon gives (``send``, ``on_change``).  ``flush`` ticks the last rows.
 The sample clock is the frames' own timestamps, so a log replayed onto a bus gives the
 events ``monitor detect`` gives for the file.
+
+Silence is decided from the data, never from a thread that got no CPU for a while:
+
+* any other frame (a foreign ID, a rejected frame) whose timestamp lies ``bus.silent_s``
+  past the last sensor frame proves the sensors silent up to it: the clock runs on to it;
+* with no frame at all, only the reader can prove silence: ``heard_until`` is the start of
+  its latest receive that found nothing (every frame that arrived before is queued).  When
+  that lies ``bus.silent_s`` past the moment the last sensor frame was taken, and nothing
+  waits in the queue, the clock runs on by that proven time.  A backlog in the queue, or a
+  reader starved of CPU, proves nothing and never makes the monitor inactive.
 """
 
 from __future__ import annotations
@@ -39,6 +48,8 @@ class FramePipeline:
         on_change: OnChange,
         silent_s: float = 0.5,
         time_scale: float = 1.0,
+        heard_until: Callable[[], float] = time.monotonic,
+        backlog: Callable[[], bool] = lambda: False,
     ) -> None:
         self.codec = codec
         self.loops = loops
@@ -49,6 +60,8 @@ class FramePipeline:
         self._on_change = on_change
         self.silent_s = silent_s
         self._scale = time_scale
+        self._heard_until = heard_until
+        self._backlog = backlog
         self.last_t_s: float | None = None  # sample-clock time of the last row ticked
         self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
         self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
@@ -64,11 +77,11 @@ class FramePipeline:
         if self._diags and sum([diag.request(msg) for diag in self._diags]):
             return  # a J1939 request for DM1/DM2: answered at the next tick
         d = self.codec.decode_message(msg)
-        if d.rejection is not None:
-            log.debug("rejected frame %X: %s", msg.arbitration_id, d.rejection.value)
+        if d.rejection is not None or d.name not in self._hydraulic:
+            if d.rejection is not None:
+                log.debug("rejected frame %X: %s", msg.arbitration_id, d.rejection.value)
+            self._other_frame(msg.timestamp)  # not a sensor frame, but proof of time
             return
-        if d.name not in self._hydraulic:
-            return  # counted as decoded; e.g. another monitor's frames with filters off
         ts = self._clock(msg.timestamp)
         self.sampler.feed(ts, d.name, d.values)  # type: ignore[arg-type]
         self._last_ok_mono = time.monotonic()
@@ -76,15 +89,25 @@ class FramePipeline:
         self._tick_rows(self.sampler.take())
 
     def silence(self) -> None:
-        """No frame waiting: past ``silent_s`` without a sensor frame the clock runs on."""
+        """No frame waiting: silence the reader has proven runs the clock on."""
         if not self.sampler.started:
             return
-        idle_s = time.monotonic() - self._last_ok_mono
-        if idle_s < self.silent_s:
+        heard = self._heard_until()  # read before the queue: a frame queued later is pending
+        if self._backlog():
+            return
+        self._run_clock_on((heard - self._last_ok_mono) / self._scale)
+
+    def _other_frame(self, bus_ts: float) -> None:
+        if self.sampler.started and bus_ts == bus_ts:  # NaN stamps prove nothing
+            self._run_clock_on(self._clock(bus_ts) - self._last_ok_ts)
+
+    def _run_clock_on(self, idle_s: float) -> None:
+        """``idle_s`` sample seconds since the last sensor frame are proven silent."""
+        if not idle_s >= self.silent_s / self._scale:
             return
         # Past the sampler's max gap the clock stops: the state is inactive by then, and a
         # frame after a longer silence is mapped to the end of that gap (sampler rule).
-        idle_s = min(idle_s / self._scale, self.sampler.max_gap_s - 2 * self.sampler.period_s)
+        idle_s = min(idle_s, self.sampler.max_gap_s - 2 * self.sampler.period_s)
         self._tick_rows(self.sampler.advance(self._last_ok_ts + idle_s))
 
     def flush(self) -> None:
