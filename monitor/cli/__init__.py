@@ -20,6 +20,7 @@ _ORDER = (
     "detect",
     "train",
     "replay",
+    "watch",
     "simulate",
     "encode",
     "gap",

@@ -80,13 +80,18 @@ def run(args: argparse.Namespace) -> int:
         print("monitor demo: error: --speed must be > 0", file=sys.stderr)
         return 2
     log_path = resource_path("replay", DEMO_LOG)
-    with tempfile.TemporaryDirectory(prefix="monitor-demo-") as tmp:
-        return _demo(log_path, args.out or Path(tmp), args.speed, kept=args.out is not None)
+    logger = logging.getLogger("monitor")
+    level = logger.level
+    # The demo prints its own lines; the daemon's journal lines would interleave with them.
+    logger.setLevel(logging.ERROR)
+    try:
+        with tempfile.TemporaryDirectory(prefix="monitor-demo-") as tmp:
+            return _demo(log_path, args.out or Path(tmp), args.speed, kept=args.out is not None)
+    finally:
+        logger.setLevel(level)
 
 
 def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
-    # The demo prints its own lines; the daemon's journal lines would interleave with them.
-    logging.getLogger("monitor").setLevel(logging.ERROR)
     cfg = load_config()
     channel = f"monitor-demo-{os.getpid()}"
     cfg = dataclasses.replace(

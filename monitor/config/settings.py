@@ -343,9 +343,6 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
         isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1
     ):
         raise ConfigError(f"{source}: detector.horizon must be a whole number >= 1")
-    for key in ("dbc", "model"):
-        if key not in data:
-            raise ConfigError(f"{source}: missing key {key!r}")
     black_box = _typed(
         BlackBoxConfig, _BLACK_BOX, _section(data, "black_box", source), "black_box", source
     )
@@ -370,8 +367,11 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
                             j1939.source_address)  # fmt: skip
     return MonitorConfig(
         source=source,
-        dbc=_path(data["dbc"], "dbc", base, source),
-        model=_path(data["model"], "model", base, source),
+        # Without ``dbc`` or ``model`` the shipped ones (the reference boom loop).
+        dbc=_path(data["dbc"], "dbc", base, source) if "dbc" in data
+        else resource_path("dbc", "monitor.dbc"),
+        model=_path(data["model"], "model", base, source) if "model" in data
+        else resource_path("config", "boom_default.model.npz"),
         horizon=horizon,
         alarm=_alarm(_section(data, "alarm", source), source),
         bus=bus,
