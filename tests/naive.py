@@ -255,11 +255,14 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
             rest_run += 1
             if rest_run >= n_rest:
                 for s in ("PP", "PA", "PB"):
-                    if not math.isnan(v[s]):
-                        off = abs(v[s]) > cfg.rest_max_bar
-                        latched[("rest_offset", s)] = off
-                        if not off:
-                            latched[("pump_below_port", s)] = False
+                    if math.isnan(v[s]):
+                        continue
+                    at_tank = abs(v[s]) <= cfg.rest_max_bar
+                    # The pump side and the rod side bleed to tank; the cap side may hold a
+                    # parked boom's load, so it is never an offset at rest, only cleared.
+                    latched[("rest_offset", s)] = not at_tank and s != "PA"
+                    if at_tank:
+                        latched[("pump_below_port", s)] = False
         else:
             rest_run = 0
         found = (0, -1)

@@ -136,7 +136,7 @@ def test_pump_reading_low_is_named_once_both_ports_show_it(normal_run) -> None:
     assert finding(int(check[-1]), int(sig[-1])) == ("PP", "pump_below_port")
 
 
-def rest_then_run(run: Recording, pa_rest_bar: float) -> Recording:
+def rest_then_run(run: Recording, pa_rest_bar: float, pb_rest_bar: float = 0.0) -> Recording:
     """40 s engine off, spool centred, PA at ``pa_rest_bar``, then ``run``."""
     n_rest = 4000
     rng = np.random.default_rng(3)
@@ -148,7 +148,7 @@ def rest_then_run(run: Recording, pa_rest_bar: float) -> Recording:
         "OilTemp": np.full(n_rest, run["OilTemp"][0]),
         "PP": np.abs(rng.normal(0.0, 0.3, n_rest)),
         "PA": pa_rest_bar + rng.normal(0.0, 0.3, n_rest),
-        "PB": np.abs(rng.normal(0.0, 0.3, n_rest)),
+        "PB": pb_rest_bar + np.abs(rng.normal(0.0, 0.3, n_rest)),
         "QP": np.abs(rng.normal(0.0, 0.1, n_rest)),
     }
     cols = {k: np.concatenate([rest[k], run[k]]) for k in rest}
@@ -156,18 +156,29 @@ def rest_then_run(run: Recording, pa_rest_bar: float) -> Recording:
 
 
 def test_rest_offset_is_found_at_key_off_and_kept_when_the_engine_starts(model, normal_run) -> None:
-    rec = rest_then_run(normal_run, 12.0)
+    rec = rest_then_run(normal_run, 1.0, pb_rest_bar=12.0)  # PB reads 12 bar with no pressure
     found, check, _ = findings_of(rec)
-    assert found == {("PA", "rest_offset"): 30.0 - 0.01}  # 3000th sample of the rest
-    assert check[-1] != 0  # latched: no later rest has shown PA near tank
+    assert found == {("PB", "rest_offset"): 30.0 - 0.01}  # 3000th sample of the rest
+    assert check[-1] != 0  # latched: no later rest has shown PB near tank
     det = detect(model, rec, CFG.alarm, CFG.horizon, gating=CFG.gating)
     running = [e for e in det.events if e["op_state"] == "normal"]
     assert running and all(e["state"] == "sensor_fault" for e in running)
-    assert {(e["sensor"], e["sensor_check"]) for e in running} == {("PA", "rest_offset")}
+    assert {(e["sensor"], e["sensor_check"]) for e in running} == {("PB", "rest_offset")}
     assert det.summary["alarm"] is False
     # A sensor reading tank at rest: no finding; the check off (rest_settle_s 0): none either.
     assert findings_of(rest_then_run(normal_run, 0.5))[0] == {}
     assert findings_of(rec, PlausibilityConfig(rest_settle_s=0.0))[0] == {}
+
+
+def test_a_boom_parked_in_the_air_is_not_a_sensor_fault(model, normal_run) -> None:
+    """Engine off with the boom held up: the cap side keeps the load pressure, 6 kN on the
+    63 mm bore = 6000 / (pi 0.0315^2) Pa = 19.2 bar, the rod side bleeds to tank."""
+    load_bar = 6000.0 / (np.pi * 0.0315**2) / 1e5
+    assert 19.0 < load_bar < 19.5
+    rec = rest_then_run(normal_run, load_bar)
+    assert findings_of(rec)[0] == {}
+    det = detect(model, rec, CFG.alarm, CFG.horizon, gating=CFG.gating)
+    assert det.summary["sensor_fault"] is False
 
 
 def test_detect_and_ticks_give_the_same_sensor_events(model, normal_run) -> None:

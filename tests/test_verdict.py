@@ -116,3 +116,22 @@ def test_an_engine_off_gap_inside_a_fault_is_one_episode(tmp_path: Path, model) 
     assert det.summary["alarm_episodes"] == 1
     i = states.index(("inactive", None))
     assert states[i - 1] == states[i + 1] == ("fault", "spool_wear")
+
+
+def test_a_sensor_fault_from_missing_frames_names_the_signal(tmp_path: Path) -> None:
+    """QP's frames (HYD_Flow) stop for 2 s: the sensor fault names QP, check `stale`, in the
+    events and in the summary's sensor checks; the verdict is sensor_fault."""
+    rec = read_recording(resource_path("replay", "normal.log"))
+    t = rec.t - rec.t[0]
+    cols = {k: v.copy() for k, v in rec.columns.items()}
+    cols["QP"][(t >= 50.0) & (t < 52.0)] = np.nan  # the HYD_Flow frames are not sent
+    log = tmp_path / "noflow.log"
+    write_candump(log, Recording(rec.t - rec.t[0], cols, "noflow"))
+    rc, s, err, lines = detect_cli(log, tmp_path)
+    assert rc == 0, err
+    faults = [x for x in lines if x["event"] == "state" and x["state"] == "sensor_fault"]
+    assert faults and all((x["sensor"], x["sensor_check"]) == ("QP", "stale") for x in faults)
+    assert s["verdict"] == "sensor_fault"
+    stale = [c for c in s["sensor_checks"] if c["check"] == "stale"]
+    assert [c["sensor"] for c in stale] == ["QP"]
+    assert 50.0 <= stale[0]["first_t"] < 50.1

@@ -110,10 +110,12 @@ def event_record(
     out_of_range: str | None = None,
     check: int = 0,
     sensor: int = -1,
+    stale_signal: str | None = None,
 ) -> dict[str, Any]:
     """The JSON-lines event of a state change: ``t`` s from the first sample, ``time`` the
     wall clock (null without a start time), ``state``, ``J`` (null while the window warms up
-    or pauses), ``threshold``, ``fault`` (only in fault) and the gating's keys."""
+    or pauses), ``threshold``, ``fault`` (only in fault) and the gating's keys.  A sensor
+    fault from missing data names its signal: ``sensor`` it, ``sensor_check`` ``stale``."""
     wall = None
     if start_time_s is not None:
         wall = dt.datetime.fromtimestamp(start_time_s + t_s, tz=dt.timezone.utc).isoformat()
@@ -125,4 +127,5 @@ def event_record(
         "threshold": float(eps0),
         "fault": fault if state is State.FAULT else None,
         **status_keys(int(op_state), out_of_range, int(check), int(sensor)),
-    }
+    } | ({"sensor": stale_signal, "sensor_check": "stale"}
+         if state is State.SENSOR_FAULT and check == 0 and stale_signal else {})  # fmt: skip

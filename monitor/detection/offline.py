@@ -125,7 +125,9 @@ def detect(
     engine = rec["EngineSpeed"]
     gate = Gate(model, alarm.min_engine_rpm, gating)
     g = gate.series(rec)
-    inputs_ok = np.all(np.isfinite(table(rec, spec.variables)), axis=1)
+    missing = ~np.isfinite(table(rec, spec.variables))
+    inputs_ok = ~missing.any(axis=1)
+    stale = np.where(inputs_ok, -1, np.argmax(missing, axis=1))  # first missing model signal
     gated = gate.gated(g, inputs_ok)
     y_hat, e = residual_series(model, rec, gated, horizon, exact)
     e[gated] = np.nan
@@ -177,7 +179,7 @@ def detect(
             events.append(event_record(
                 float(t_rel[i]), d.state, float(j[i]), model.eps0, decider.fault, start_s,
                 int(g.op_state[i]), gate.validity.signals[oor] if oor >= 0 else None, check,
-                sensor,
+                sensor, spec.variables[stale[i]] if stale[i] >= 0 else None,
             ))  # fmt: skip
         i += 1
     known = {k: v for k, v in votes.items() if k != "unknown"}
@@ -206,7 +208,24 @@ def detect(
         summary, states, j, g.op_state, g.oor, inputs_ok, engine, model.window_n, period
     )
     summary["rejected"] = rejected_counts(rec)
+    summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)
     return Detection(rec.t, y_hat, e, j, states, events, summary, gates=g)
+
+
+def stale_checks(
+    rec: Recording, states: np.ndarray, check: np.ndarray, missing: np.ndarray,
+    names: tuple[str, ...],
+) -> list[dict[str, Any]]:
+    """Sensor faults from missing data (frames stale, rejected or never sent), per signal."""
+    t = rec.t - rec.t[0]
+    out = []
+    mine = (states == State.SENSOR_FAULT) & (check == 0)
+    for k, name in enumerate(names):
+        rows = np.flatnonzero(mine & missing[:, k])
+        if rows.size:
+            out.append({"sensor": name, "check": "stale", "first_t": round(float(t[rows[0]]), 6),
+                        "samples": int(rows.size)})  # fmt: skip
+    return out
 
 
 def rejected_counts(rec: Recording) -> dict[str, dict[str, int]]:

@@ -23,11 +23,12 @@ Checks (``plausibility:`` in config/monitor.yaml; times in seconds of 100 Hz sam
   proves little (an offset hides while the valve drop exceeds it), so the finding stays
   until a rest (below) reads the port at tank.
 * ``rest_offset``: with the engine off (a reading below ``alarm.min_engine_rpm``) and
-  |SpoolCmd| below ``move_spool_pct`` for ``rest_settle_s``, the
-  pump has stopped and the pressures have settled to tank: PP, PA or PB further than
-  ``rest_max_bar`` from 0 bar gauge is an offset.  (A boom parked in the air keeps load
-  pressure trapped in a chamber; set ``rest_settle_s: 0`` to switch the check off on such
-  machines, or raise ``rest_max_bar``.)
+  |SpoolCmd| below ``move_spool_pct`` for ``rest_settle_s``, the pump has stopped and the
+  lines have bled to tank through the pump and the spool's clearances: PP and PB (the rod
+  side, the tank side of a held gravity load) further than ``rest_max_bar`` from 0 bar gauge
+  is an offset.  PA is not judged at rest: a boom parked in the air keeps its load pressure
+  trapped in the cap side, which is normal; PA reading tank at rest still clears an earlier
+  finding on it.  (``rest_settle_s: 0`` switches the check off.)
 
 A finding latches until its own check shows the sensor healthy again (range: back in range;
 frozen/stuck: the value moves; the relation and rest offsets: a later rest reads the
@@ -207,8 +208,9 @@ def _run(  # pragma: no cover - numba
                 for c in range(_PP, _PB + 1):
                     v = x[i, cols[c]]
                     if not np.isnan(v):
-                        active[4, c] = abs(v) > rest_max
-                        if not active[4, c]:
+                        # PA may hold a parked boom's load: judged only when it reads tank.
+                        active[4, c] = abs(v) > rest_max and c != _PA
+                        if abs(v) <= rest_max:
                             active[3, c] = False  # read at tank: no offset after all
         else:
             misc[0] = 0

@@ -44,6 +44,7 @@ class Tick:
     sensor: int = -1
     state_changed: bool = True  # the alarm state itself changed (``changed`` also covers gating)
     raised: bool = False  # a new alarm episode starts at this row
+    stale_signal: str | None = None  # the first model signal missing, when inputs are not ok
     episode_open: bool = False  # an alarm episode is open (fault, or a short gap within one)
 
 
@@ -66,6 +67,7 @@ class Ticker:
         self.rows_needed = self.predictor.rows_needed
         # Row layout is [t, *columns]: +1 skips t.
         self._var_idx = np.array([1 + columns.index(v) for v in spec.variables], dtype=np.int64)
+        self._names = tuple(spec.variables)
         self._engine_col = 1 + columns.index("EngineSpeed")
         self._spool_col = 1 + columns.index("SpoolCmd") if "SpoolCmd" in columns else -1
         norm_cols = [model.normalizer.names_.index(v) for v in spec.variables]
@@ -129,15 +131,17 @@ class Ticker:
         np.mean(self._sq, axis=1, out=self._v)
         j = self.window.push_squared(float(self._v[0]))
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
+        stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))
         d = self.decider.decide(j, inputs_ok, engine, e, regime_of(spool), gate.op_state,
                                 gate.oor, gate.check, gate.sensor)  # fmt: skip
         self.ticks += 1
         return Tick(float(row[0]), d.state, j, d.changed, gate.op_state, gate.oor_name(gate.oor),
                     gate.check, gate.sensor, d.state_changed, d.raised,
-                    d.episode_open)  # fmt: skip
+                    self._names[stale] if stale >= 0 else None, d.episode_open)  # fmt: skip
 
 
 def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:
     """The JSON-lines event of a state change, schema shared with ``monitor detect``."""
     return event_record(tick.t_s, tick.state, tick.j, eps0, fault, start_time_s,
-                        tick.op_state, tick.out_of_range, tick.check, tick.sensor)  # fmt: skip
+                        tick.op_state, tick.out_of_range, tick.check, tick.sensor,
+                        tick.stale_signal)  # fmt: skip
