@@ -30,3 +30,15 @@ def test_a_channel_that_is_not_up_names_that_channel(capsys, tmp_path: Path) -> 
     err = capsys.readouterr().err
     assert rc == 2
     assert "vcan97" in err and "can0" not in err and "type vcan" in err
+
+
+def test_numbers_in_messages_are_plain_numbers_not_numpy_reprs() -> None:
+    import numpy as np
+    import pytest
+
+    from monitor.errors import ConfigError
+    from monitor.model.grnn import _check_sigma
+
+    with pytest.raises(ConfigError) as err:
+        _check_sigma(np.float64(-5.99))
+    assert str(err.value) == "sigma must be a positive finite number, got -5.99"

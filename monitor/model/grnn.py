@@ -214,7 +214,7 @@ def _require_finite(arr: np.ndarray, name: str) -> None:
 def _check_sigma(sigma: float) -> float:
     s = float(sigma)
     if not (math.isfinite(s) and s > 0.0 and math.isfinite(0.5 / (s * s))):
-        raise ConfigError(f"sigma must be a positive finite number, got {sigma!r}")
+        raise ConfigError(f"sigma must be a positive finite number, got {s:g}")
     return s
 
 
