@@ -18,7 +18,8 @@ from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
-from monitor.training.train import TrainConfig, train
+from monitor.training.settings import TrainConfig
+from monitor.training.train import train
 
 MACHINE = load_machine()
 

@@ -10,15 +10,13 @@ from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.model.dgrnn import (
     DGRNN,
-    PRESETS,
-    DGRNNSpec,
-    Normalizer,
     TickPredictor,
     build_training_pairs,
     predict_series,
     predict_tick,
 )
 from monitor.model.grnn import GRNN
+from monitor.model.spec import PRESETS, DGRNNSpec, Normalizer
 
 SMALL = DGRNNSpec(
     outputs=("y1", "y2"),

@@ -31,7 +31,8 @@ from monitor.sampling.sampler import recording_from_candump
 from monitor.sim.cycles import make_cycle
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
-from monitor.training.train import TrainConfig, train
+from monitor.training.settings import TrainConfig
+from monitor.training.train import train
 
 CFG = load_config()
 MACHINE = load_machine()

@@ -17,10 +17,11 @@ import numpy as np
 
 from monitor.codec.logwrite import write_candump
 from monitor.io.recording import Recording
-from monitor.model.dgrnn import DGRNN, DGRNNSpec, Normalizer, table
+from monitor.model.dgrnn import DGRNN
 from monitor.model.grnn import GRNN
 from monitor.model.modelfile import MonitorModel, load_model, save_model
 from monitor.model.residual import window_j
+from monitor.model.spec import DGRNNSpec, Normalizer, table
 from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine

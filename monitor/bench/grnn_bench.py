@@ -27,8 +27,9 @@ import numpy as np
 
 from monitor.bench.data import Sizes, paper_grnn, test_recording, training_runs
 from monitor.jit import jit
-from monitor.model.dgrnn import TickPredictor, build_training_pairs, table
+from monitor.model.dgrnn import TickPredictor, build_training_pairs
 from monitor.model.grnn_index import cutoff_row
+from monitor.model.spec import table
 
 Progress = Callable[[str], None]
 

@@ -18,17 +18,14 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import can
-
-from monitor.bus.replay import ReplayCounts, replay_log
 from monitor.cli._paths import output_dir
-from monitor.codec.frames import FrameCodec
-from monitor.config.settings import BusConfig, load_config
-from monitor.live.daemon import Daemon
-from monitor.live.outputs import ALARM, fault_codes
 from monitor.resources import resource_path
+
+if TYPE_CHECKING:
+    from monitor.bus.replay import ReplayCounts
+    from monitor.live.daemon import Daemon
 
 DEMO_LOG = "spool_wear.log"
 DEMO_ONSET_S = 45.0  # replay/regenerate.sh: --fault spool_wear:0.6@45
@@ -92,6 +89,15 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
+    import can
+
+    from monitor.bus.reader import BusConfig
+    from monitor.bus.replay import replay_log
+    from monitor.codec.frames import FrameCodec
+    from monitor.config.settings import load_config
+    from monitor.live.daemon import Daemon
+    from monitor.live.outputs import ALARM, fault_codes
+
     cfg = load_config()
     channel = f"monitor-demo-{os.getpid()}"
     cfg = dataclasses.replace(

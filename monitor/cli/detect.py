@@ -6,18 +6,17 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
 from monitor.cli._paths import output_file
-from monitor.config.settings import load_config
 from monitor.detection.alarm import State
-from monitor.detection.offline import Detection, detect
 from monitor.detection.opstate import OpState
 from monitor.errors import MonitorError
-from monitor.live.loops import read_loop
-from monitor.model.modelfile import load_model
+
+if TYPE_CHECKING:
+    from monitor.detection.offline import Detection
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -108,6 +107,11 @@ def _write_lines(lines: list[dict[str, Any]], fh: TextIO) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.config.settings import load_config
+    from monitor.detection.offline import detect
+    from monitor.live.loops import read_loop
+    from monitor.model.modelfile import load_model
+
     cfg = load_config(args.config)
     rec = read_loop(args.recording, cfg, args.loop)
     tag = {} if args.loop is None else {"loop": args.loop}

@@ -7,25 +7,15 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from monitor.cli._paths import output_file
-from monitor.config.settings import load_config
 from monitor.errors import ConfigError
-from monitor.evaluation.report import aggregate, markdown
-from monitor.evaluation.sim_eval import (
-    DEFAULT_SEVERITIES,
-    ONSETS,
-    EvalConfig,
-    ModelUnderTest,
-    fault_plan,
-    normal_plan,
-    planned_seeds,
-    run_all,
-    train_presets,
-)
-from monitor.model.dgrnn import PRESETS
-from monitor.model.modelfile import load_model
+from monitor.evaluation.plan import DEFAULT_SEVERITIES, ONSETS
+from monitor.model.spec import PRESETS
+
+if TYPE_CHECKING:
+    from monitor.evaluation.sim_eval import EvalConfig
 
 _DESCRIPTION = """\
 Train DGRNN models afresh on normal simulated boom cycles (--presets, default
@@ -171,6 +161,19 @@ def _rerun(
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.config.settings import load_config
+    from monitor.evaluation.report import aggregate, markdown
+    from monitor.evaluation.sim_eval import (
+        EvalConfig,
+        ModelUnderTest,
+        fault_plan,
+        normal_plan,
+        planned_seeds,
+        run_all,
+        train_presets,
+    )
+    from monitor.model.modelfile import load_model
+
     started = time.perf_counter()
     base = QUICK if args.quick else FULL
     pick = lambda name: base[name] if getattr(args, name) is None else getattr(args, name)  # noqa: E731

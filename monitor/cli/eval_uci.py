@@ -10,7 +10,7 @@ from typing import Any
 
 from monitor.cli._paths import output_file
 from monitor.errors import ConfigError
-from monitor.evaluation.uci import DETECTION_KEYS, UCI_PRESETS, WINDOWS, evaluate
+from monitor.evaluation.uci_presets import DETECTION_KEYS, UCI_PRESETS, WINDOWS
 from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule
 
 _DESCRIPTION = """\
@@ -68,6 +68,8 @@ def _fmt(v: Any) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.evaluation.uci import evaluate
+
     if args.json.parent and not args.json.parent.is_dir():
         raise ConfigError(f"--json {args.json}: folder {args.json.parent} does not exist")
     rule = ThresholdRule(args.threshold_rule, factor=args.factor)

@@ -7,9 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from monitor.bus.reader import open_bus
+from monitor.bus.reader import BusConfig, open_bus
 from monitor.bus.replay import replay_log
-from monitor.config.settings import BusConfig
 from monitor.errors import ConfigError
 
 

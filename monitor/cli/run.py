@@ -14,11 +14,6 @@ import time
 from pathlib import Path
 from types import FrameType
 
-from monitor.config.settings import load_config
-from monitor.live.daemon import Daemon
-from monitor.live.journal import setup_logging
-from monitor.live.sdnotify import Notifier
-
 log = logging.getLogger("monitor")
 
 
@@ -46,6 +41,11 @@ class _Flags:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.config.settings import load_config
+    from monitor.live.daemon import Daemon
+    from monitor.live.journal import setup_logging
+    from monitor.live.sdnotify import Notifier
+
     setup_logging(logging.DEBUG if args.verbose else logging.INFO)
     cfg = load_config(args.config)
     flags = _Flags()

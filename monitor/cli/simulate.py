@@ -13,7 +13,6 @@ from monitor.sim.cycles import CYCLES, make_cycle
 from monitor.sim.effects import describe_catalogue, parse_effect
 from monitor.sim.faults import parse_fault
 from monitor.sim.machine import load_machine
-from monitor.sim.simulate import simulate
 
 _EPILOG = f"""\
 faults (--fault NAME:SEV[@ONSET_S[+RAMP_S]], severity 0..1, abrupt at ONSET_S or ramped
@@ -79,6 +78,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.sim.simulate import simulate
+
     suffix = args.out.suffix.lower()
     if suffix not in (".csv", ".log"):
         raise ConfigError(f"--out {args.out}: expected a .csv or .log file name")

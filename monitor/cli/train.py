@@ -7,13 +7,10 @@ import sys
 from pathlib import Path
 
 from monitor.cli._paths import output_file
-from monitor.config.settings import load_config
 from monitor.errors import MonitorError
-from monitor.live.loops import read_loop
-from monitor.model.dgrnn import PRESETS
-from monitor.model.modelfile import save_model
+from monitor.model.spec import PRESETS
 from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule
-from monitor.training.train import TrainConfig, train
+from monitor.training.settings import TrainConfig
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -100,6 +97,11 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.config.settings import load_config
+    from monitor.live.loops import read_loop
+    from monitor.model.modelfile import save_model
+    from monitor.training.train import train
+
     cfg = TrainConfig(
         preset=args.preset,
         horizon=args.horizon,

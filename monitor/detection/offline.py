@@ -19,9 +19,10 @@ from monitor.detection.plausibility import finding
 from monitor.detection.verdict import verdict
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
-from monitor.model.dgrnn import predict_series, table
+from monitor.model.dgrnn import predict_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
+from monitor.model.spec import table
 
 
 @dataclass

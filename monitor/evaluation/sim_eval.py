@@ -28,6 +28,7 @@ import numpy as np
 from monitor.detection.alarm import AlarmConfig, State
 from monitor.detection.offline import Detection, detect
 from monitor.errors import ConfigError
+from monitor.evaluation.plan import DEFAULT_SEVERITIES, ONSETS
 from monitor.io.recording import Recording
 from monitor.model.modelfile import MonitorModel
 from monitor.signals import FAULT_NAMES
@@ -35,12 +36,11 @@ from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import MachineParams, load_machine
 from monitor.sim.simulate import simulate
-from monitor.training.train import TrainConfig, train
+from monitor.training.settings import TrainConfig
+from monitor.training.train import train
 
 Progress = Callable[[str], None]
 
-ONSETS = ("abrupt", "gradual")
-DEFAULT_SEVERITIES = tuple(round(0.1 * k, 1) for k in range(1, 11))
 #: Normal test runs are cut into pieces of this length (the training runs' length), so a
 #: run starts from rest about as often as in the data the threshold was set on.
 NORMAL_RUN_S = 300.0

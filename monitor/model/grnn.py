@@ -2,7 +2,7 @@
 
     y_hat(x) = sum_i y_i exp(-d_i) / sum_i exp(-d_i),   d_i = |x - x_i|^2 / (2 sigma^2)
 
-Inputs are already z-scored (see ``monitor.model.dgrnn.Normalizer``); everything is float64.
+Inputs are already z-scored (see ``monitor.model.spec.Normalizer``); everything is float64.
 
 Pattern selection keeps the count bounded (``thinning``).  With ``min_distance`` thinning the
 GRNN is Specht's (1991) clustered form: every training row joins its nearest kept row, and

@@ -22,9 +22,10 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import ModelFileError
-from monitor.model.dgrnn import DGRNN, DGRNNSpec, Normalizer
+from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import Envelope, envelope_from_patterns
 from monitor.model.grnn import GRNN
+from monitor.model.spec import DGRNNSpec, Normalizer
 from monitor.model.threshold import ThresholdRule
 from monitor.signals import SIGNAL_NAMES
 

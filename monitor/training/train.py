@@ -12,56 +12,22 @@ import hashlib
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from monitor.detection.alarm import N_REGIMES, AlarmConfig, Isolator, regime_of
-from monitor.errors import ConfigError, InputFileError
+from monitor.errors import InputFileError
 from monitor.io.recording import Recording
-from monitor.model.dgrnn import DGRNN, PRESETS, DGRNNSpec, Normalizer, table
+from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
-from monitor.model.threshold import ThresholdRule
+from monitor.model.spec import Normalizer, table
 from monitor.signals import FAULT_NAMES
+from monitor.training.settings import TrainConfig
 
 Progress = Callable[[str], None]
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    preset: str = "default"
-    horizon: int | None = None  # None: the preset's own
-    window_n: int = 3000  # J window N (samples): 30 s spans several raise/hold/lower phases
-    max_patterns: int = 6000  # smaller clusters: less bias where PP is steep in SpoolCmd
-    exclude_neighbours: int = 50  # LOO leaves out +-0.5 s: 100 Hz rows are near copies
-    threshold: ThresholdRule = field(default_factory=ThresholdRule)
-    validation_fraction: float = 0.25
-    #: Bound |e| per output at this quantile of held-out normal |e| before J (None: eq. 9
-    #: literal).  0.999 leaves sustained fault residuals alone and caps the rare one-sample
-    #: events (end-stop impacts) that would otherwise set J0 by themselves.
-    residual_clip_quantile: float | None = 0.999
-    isolation: str = "sim"  # "sim": signatures from simulated faults; "none"
-    isolation_runs: int = 2  # simulated runs per fault and severity
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.preset not in PRESETS:
-            raise ConfigError(f"unknown preset {self.preset!r}; known: {', '.join(PRESETS)}")
-        if self.window_n < 1:
-            raise ConfigError(f"window N must be at least 1 sample, got {self.window_n}")
-        if not 0.05 <= self.validation_fraction <= 0.5:
-            raise ConfigError("validation fraction must be within 0.05..0.5")
-        q = self.residual_clip_quantile
-        if q is not None and not 0.9 <= q <= 1.0:
-            raise ConfigError(f"residual clip quantile must be within 0.9..1, got {q}")
-        if self.isolation not in ("sim", "none"):
-            raise ConfigError(f"isolation must be 'sim' or 'none', got {self.isolation!r}")
-
-    def spec(self) -> DGRNNSpec:
-        return DGRNNSpec.preset(self.preset, self.horizon)
 
 
 def split_normal(

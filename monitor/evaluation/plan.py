@@ -1,0 +1,7 @@
+"""The fault plan's vocabulary for `monitor eval-sim`: onset kinds and default severities
+(light to import, so the command line can offer them)."""
+
+from __future__ import annotations
+
+ONSETS = ("abrupt", "gradual")  # a fault at full severity at once, or ramped in over 30 s
+DEFAULT_SEVERITIES = tuple(round(0.1 * k, 1) for k in range(1, 11))  # 0.1 .. 1.0
