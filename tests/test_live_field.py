@@ -77,6 +77,8 @@ def _field_run(tmp_path: Path, log: Path, speed: float, channel: str) -> list[di
     daemon = start_daemon(config, tmp_path, daemon_log)
     try:
         wait_for_text(daemon_log, "monitoring", daemon, 120.0)
+        # The daemon says how long it took to start and what numba's cache gave.
+        wait_for_text(daemon_log, "loaded from the cache", daemon, 60.0)
         env = {**os.environ, "PYTHONPATH": str(REPO)}
         replay = subprocess.run(
             [sys.executable, "-m", "monitor", "replay", str(log), "--bus", channel,

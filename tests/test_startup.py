@@ -45,3 +45,14 @@ def test_help_and_argument_errors_load_no_numba_or_scipy(argv: list[str]) -> Non
                          capture_output=True, text=True, check=False)  # fmt: skip
     heavy = json.loads(out.stderr.strip().splitlines()[-1])
     assert heavy == [], out.stderr
+
+
+def test_warm_up_fills_the_cache_so_the_next_start_compiles_nothing(tmp_path) -> None:
+    env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    runs = [subprocess.run([sys.executable, "-m", "monitor", "warm-up"], capture_output=True,
+                           text=True, env=env, check=True).stderr for _ in range(2)]  # fmt: skip
+    first, second = (r.strip().splitlines()[-1] for r in runs)
+    assert "0 signatures loaded from the cache" in first and " 0 compiled" not in first
+    assert " 0 compiled" in second, second
+    assert str(tmp_path / "cache") in second
+    assert any((tmp_path / "cache").rglob("*.nbi"))  # numba's cache index files

@@ -27,6 +27,7 @@ _ORDER = (
     "eval_sim",
     "eval_uci",
     "bench",
+    "warm_up",
 )
 
 

@@ -64,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     notifier = Notifier()
     where = f"monitoring {cfg.bus.interface}:{cfg.bus.channel}"
     notifier.ready(where)
+    _log_start_up()
     # Half the watchdog timeout between pings; a detector loop that has not turned for
     # that long is stuck, and the missing ping lets systemd restart us.
     ping_s = notifier.watchdog_s / 2 if notifier.watchdog_s else None
@@ -97,3 +98,15 @@ def run(args: argparse.Namespace) -> int:
         daemon.stop()  # ordered: reader, detector, outputs (fsynced), bus
         notifier.close()
     return 0
+
+
+def _log_start_up() -> None:
+    """How long start-up took, and whether numba's cache spared the compiling."""
+    from monitor import STARTED_MONO
+    from monitor.jit import cache_stats
+
+    s = cache_stats()
+    hint = "" if not s["misses"] else " (run `monitor warm-up` once after an install)"
+    log.info("ready %.2f s after the start; numba kernels: %d loaded from the cache, %d "
+             "compiled%s", time.monotonic() - STARTED_MONO, s["hits"], s["misses"],
+             hint)  # fmt: skip

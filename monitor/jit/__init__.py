@@ -18,15 +18,31 @@ FASTMATH: set[str] = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-__all__ = ["FASTMATH", "jit", "pjit", "prange", "get_num_threads"]
+__all__ = ["FASTMATH", "cache_stats", "jit", "pjit", "prange", "get_num_threads"]
+
+#: Every kernel compiled through ``jit``/``pjit``, so start-up can say what the cache gave.
+KERNELS: list[Any] = []
 
 
 def jit(fn: F | None = None, **options: Any) -> Any:
     """``njit`` with on-disk caching and the project's fast-math flags (serial kernels)."""
     opts: dict[str, Any] = {"cache": True, "fastmath": FASTMATH, **options}
     if fn is None:
-        return lambda f: njit(**opts)(f)
-    return njit(**opts)(fn)
+        return lambda f: _registered(njit(**opts)(f))
+    return _registered(njit(**opts)(fn))
+
+
+def _registered(dispatcher: Any) -> Any:
+    KERNELS.append(dispatcher)
+    return dispatcher
+
+
+def cache_stats() -> dict[str, int]:
+    """Kernel signatures loaded from numba's on-disk cache (``hits``) and compiled in this
+    process (``misses``) so far, over every kernel of the monitor imported."""
+    hits = sum(sum(k.stats.cache_hits.values()) for k in KERNELS)
+    misses = sum(sum(k.stats.cache_misses.values()) for k in KERNELS)
+    return {"kernels": len(KERNELS), "hits": int(hits), "misses": int(misses)}
 
 
 def pjit(fn: F | None = None, **options: Any) -> Any:
