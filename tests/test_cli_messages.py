@@ -37,7 +37,7 @@ def test_numbers_in_messages_are_plain_numbers_not_numpy_reprs() -> None:
     import pytest
 
     from monitor.errors import ConfigError
-    from monitor.model.grnn import _check_sigma
+    from monitor.model.grnn_core import _check_sigma
 
     with pytest.raises(ConfigError) as err:
         _check_sigma(np.float64(-5.99))

@@ -11,7 +11,8 @@ import pytest
 
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import FASTMATH
-from monitor.model.grnn import GRNN, cluster, grnn_predict, loo_errors, thin_min_distance
+from monitor.model.grnn import GRNN
+from monitor.model.grnn_core import cluster, grnn_predict, loo_errors, thin_min_distance
 
 
 def _data(seed=0, n=300, nf=4, nout=2):

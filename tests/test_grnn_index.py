@@ -12,7 +12,8 @@ import pytest
 from monitor.detection.alarm import AlarmConfig, AlarmMachine, State, regime_of
 from monitor.detection.offline import detect, gated_residuals, make_isolator
 from monitor.evaluation.sim_eval import EvalConfig, fault_plan, normal_plan, simulate_run
-from monitor.model.grnn import GRNN, grnn_predict
+from monitor.model.grnn import GRNN
+from monitor.model.grnn_core import grnn_predict
 from monitor.model.grnn_index import build_index, cutoff_for, predict_cutoff
 from monitor.model.modelfile import load_model
 from monitor.model.residual import window_j

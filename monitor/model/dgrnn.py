@@ -24,7 +24,8 @@ import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit, pjit, prange
-from monitor.model.grnn import GRNN, n_chunks
+from monitor.model.grnn import GRNN
+from monitor.model.grnn_core import n_chunks
 from monitor.model.grnn_index import CutoffIndex, cutoff_row
 from monitor.model.spec import DGRNNSpec
 

@@ -40,7 +40,7 @@ few dozen patterns per query on the shipped model, so float32 would save little 
 need its own rounding term in the bound).
 
 The exact path is the same kernel on a one-leaf "tree" with c = inf: every pattern in file
-order, every weight (what ``monitor.model.grnn.grnn_predict`` and ``exact=True`` run).
+order, every weight (what ``monitor.model.grnn_core.grnn_predict`` and ``exact=True`` run).
 """
 
 from __future__ import annotations
