@@ -123,74 +123,23 @@ def detect(
     alarm = alarm or AlarmConfig()
     spec = model.spec
     check_recording(model, rec, horizon)
-    engine = rec["EngineSpeed"]
     gate = Gate(model, alarm.min_engine_rpm, gating)
     g = gate.series(rec)
     missing = ~np.isfinite(table(rec, spec.variables))
     inputs_ok = ~missing.any(axis=1)
-    stale = np.where(inputs_ok, -1, np.argmax(missing, axis=1))  # first missing model signal
     gated = gate.gated(g, inputs_ok)
     y_hat, e = residual_series(model, rec, gated, horizon, exact)
     e[gated] = np.nan
-    sensor_ok = inputs_ok & (g.check == 0)
     j = window_j(e, model.window_n)
-    spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
-
     decider = Decider(alarm, model.eps0, make_isolator(model), model.window_n)
-    n = len(rec)
-    states = np.empty(n, dtype=np.int8)
-    regimes = regimes_of(spool)
-    # Quiet samples (normal operation, inputs complete and plausible, J <= eps0) change
-    # nothing in NORMAL but the isolation ring: runs of them go to skip_quiet at once, the
-    # rest are decided one by one.  J finite means the sample was not gated (nor out of range).
-    with np.errstate(invalid="ignore"):
-        quiet = (g.op_state == OpState.NORMAL) & sensor_ok & (g.oor < 0) & (j <= model.eps0)
-    stops = np.append(np.flatnonzero(~quiet), n)
-    events: list[dict[str, Any]] = []
-    start = rec.meta.get("start_time_s")
-    start_s = float(start) if isinstance(start, (int, float)) else None
-    t_rel = rec.t - rec.t[0]
-    first_alarm_t: float | None = None
-    # Isolation votes over the first alarm episode: the label held longest names the fault
-    # (it firms up as evidence accumulates, and may waver on the way).
-    votes: dict[str, int] = {}
-    in_first = False
-    episodes = 0  # alarm episodes raised
-    i = 0
-    while i < n:
-        if quiet[i] and decider.quiet():
-            r = int(stops[np.searchsorted(stops, i)])
-            decider.skip_quiet(e[i:r], regimes[i:r])
-            states[i:r] = State.NORMAL
-            i = r
-            continue
-        oor, check, sensor = int(g.oor[i]), int(g.check[i]), int(g.sensor[i])
-        d = decider.decide(j[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]),
-                           int(g.op_state[i]), oor, check, sensor)  # fmt: skip
-        states[i] = d.state
-        episodes += d.raised
-        if d.raised and first_alarm_t is None:
-            first_alarm_t = float(t_rel[i])
-            in_first = True
-        if in_first:  # the first episode, short gaps included
-            if d.state is State.FAULT:
-                votes[decider.fault] = votes.get(decider.fault, 0) + 1
-            in_first = d.episode_open
-        if d.changed:
-            events.append(event_record(
-                float(t_rel[i]), d.state, float(j[i]), model.eps0, decider.fault, start_s,
-                int(g.op_state[i]), gate.validity.signals[oor] if oor >= 0 else None, check,
-                sensor, spec.variables[stale[i]] if stale[i] >= 0 else None,
-            ))  # fmt: skip
-        i += 1
-    known = {k: v for k, v in votes.items() if k != "unknown"}
-    first_fault_label = max(known or votes, key=(known or votes).get) if votes else None
+    run = _decide_all(decider, model, rec, gate, g, e, j, missing)
     finite = np.isfinite(j)
+    states = run.states
     summary = {
-        "alarm": first_alarm_t is not None,
-        "first_alarm_t": first_alarm_t,
-        "alarm_episodes": episodes,
-        "fault": first_fault_label,
+        "alarm": run.first_alarm_t is not None,
+        "first_alarm_t": run.first_alarm_t,
+        "alarm_episodes": run.episodes,
+        "fault": run.first_fault,
         "sensor_fault": bool(np.any(states == State.SENSOR_FAULT)),
         "max_J": float(np.max(j[finite])) if finite.any() else None,
         "threshold": model.eps0,
@@ -206,11 +155,79 @@ def detect(
     }
     period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
     summary["verdict"], summary["judged_s"], summary["not_judged_why"] = verdict(
-        summary, states, j, g.op_state, g.oor, inputs_ok, engine, model.window_n, period
+        summary, states, j, g.op_state, g.oor, inputs_ok, rec["EngineSpeed"], model.window_n,
+        period,
     )
     summary["rejected"] = rejected_counts(rec)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)
-    return Detection(rec.t, y_hat, e, j, states, events, summary, gates=g)
+    return Detection(rec.t, y_hat, e, j, states, run.events, summary, gates=g)
+
+
+@dataclass
+class _Run:
+    states: np.ndarray
+    events: list[dict[str, Any]]
+    first_alarm_t: float | None
+    first_fault: str | None  # the label held longest over the first alarm episode
+    episodes: int
+
+
+def _decide_all(
+    decider: Decider, model: MonitorModel, rec: Recording, gate: Gate, g: GateSeries,
+    e: np.ndarray, j: np.ndarray, missing: np.ndarray,
+) -> _Run:
+    """The shared per-sample decision over every sample of the recording, in order."""
+    n = len(rec)
+    engine = rec["EngineSpeed"]
+    inputs_ok = ~missing.any(axis=1)
+    stale = np.where(inputs_ok, -1, np.argmax(missing, axis=1))  # first missing model signal
+    regimes = regimes_of(rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(n))
+    states = np.empty(n, dtype=np.int8)
+    # Quiet samples (normal operation, inputs complete and plausible, J <= eps0) change
+    # nothing in NORMAL but the isolation ring: runs of them go to skip_quiet at once, the
+    # rest are decided one by one.  J finite means the sample was not gated (nor out of range).
+    with np.errstate(invalid="ignore"):
+        quiet = (g.op_state == OpState.NORMAL) & inputs_ok & (g.check == 0) & (g.oor < 0) \
+            & (j <= model.eps0)
+    stops = np.append(np.flatnonzero(~quiet), n)
+    start = rec.meta.get("start_time_s")
+    start_s = float(start) if isinstance(start, (int, float)) else None
+    t_rel = rec.t - rec.t[0]
+    run = _Run(states, [], None, None, 0)
+    # Isolation votes over the first alarm episode: the label held longest names the fault
+    # (it firms up as evidence accumulates, and may waver on the way).
+    votes: dict[str, int] = {}
+    in_first = False
+    i = 0
+    while i < n:
+        if quiet[i] and decider.quiet():
+            r = int(stops[np.searchsorted(stops, i)])
+            decider.skip_quiet(e[i:r], regimes[i:r])
+            states[i:r] = State.NORMAL
+            i = r
+            continue
+        oor, check, sensor = int(g.oor[i]), int(g.check[i]), int(g.sensor[i])
+        d = decider.decide(j[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]),
+                           int(g.op_state[i]), oor, check, sensor)  # fmt: skip
+        states[i] = d.state
+        run.episodes += d.raised
+        if d.raised and run.first_alarm_t is None:
+            run.first_alarm_t = float(t_rel[i])
+            in_first = True
+        if in_first:  # the first episode, short gaps included
+            if d.state is State.FAULT:
+                votes[decider.fault] = votes.get(decider.fault, 0) + 1
+            in_first = d.episode_open
+        if d.changed:
+            run.events.append(event_record(
+                float(t_rel[i]), d.state, float(j[i]), model.eps0, decider.fault, start_s,
+                int(g.op_state[i]), gate.validity.signals[oor] if oor >= 0 else None, check,
+                sensor, model.spec.variables[stale[i]] if stale[i] >= 0 else None,
+            ))  # fmt: skip
+        i += 1
+    known = {k: v for k, v in votes.items() if k != "unknown"}
+    run.first_fault = max(known or votes, key=(known or votes).get) if votes else None
+    return run
 
 
 def stale_checks(
