@@ -46,8 +46,8 @@ def run(args: argparse.Namespace) -> int:
     from monitor.live.journal import setup_logging
     from monitor.live.sdnotify import Notifier
 
+    cfg = load_config(args.config)  # a bad file is one line from the CLI, before any logging
     setup_logging(logging.DEBUG if args.verbose else logging.INFO)
-    cfg = load_config(args.config)
     flags = _Flags()
 
     def on_stop(signum: int, frame: FrameType | None) -> None:
