@@ -62,6 +62,12 @@ def markdown(result: dict[str, Any]) -> str:
         ("four_loop_tick_p99_ms", "ms", 3),
         ("detect_realtime_factor", "x real time", 0),
         ("detect_speedup_vs_reference_pipeline", "x", 0),
+        ("cli_help_s", "s", 2),
+        ("cli_help_rss_mb", "MB", 0),
+        ("daemon_start_s", "s", 2),
+        ("first_run_s", "s", 1),
+        ("daemon_rss_mb", "MB", 0),
+        ("daemon_peak_rss_mb", "MB", 0),
     ):
         goal = goals.get(key)
         met = "" if goal is None else ("yes" if goal["met"] else "**no**")

@@ -1,0 +1,137 @@
+"""What a controller engineer asks first: how long `monitor --help` takes, how long the daemon
+takes from process start to its first tick (with numba's cache warm, and empty), and how much
+memory the daemon process holds alone (steady and peak) while a replayer in another process
+feeds it the shipped log over python-can's `udp_multicast` bus.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from monitor.resources import resource_path
+
+# VmHWM of this process's own memory (ru_maxrss would carry the parent's peak across fork).
+_HELP_PROBE = """
+import runpy, sys, time
+t0 = time.perf_counter()
+sys.argv = ["monitor", "--help"]
+try:
+    runpy.run_module("monitor", run_name="__main__")
+except SystemExit:
+    pass
+hwm = next(x for x in open("/proc/self/status") if x.startswith("VmHWM:")).split()[1]
+print(time.perf_counter() - t0, hwm, file=sys.stderr)
+"""
+_FIRST_TICK = re.compile(r"t=\d+\.\d+ s: ")
+
+
+def cli_help(runs: int = 5) -> dict[str, float]:
+    """Median wall time of a whole `monitor --help` process, and its peak RSS."""
+    walls, rss = [], []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        out = subprocess.run([sys.executable, "-c", _HELP_PROBE], capture_output=True,
+                             text=True, check=True)  # fmt: skip
+        walls.append(time.perf_counter() - t0)
+        rss.append(float(out.stderr.split()[-1]) / 1024.0)  # kB
+    return {"cli_help_s": statistics.median(walls), "cli_help_rss_mb": max(rss)}
+
+
+def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.11") -> dict:
+    """The daemon alone in its process: start to first tick (warm, then an empty numba
+    cache), then steady and peak RSS over ``seconds`` of the shipped normal log."""
+    work = Path(tempfile.mkdtemp(prefix="monitor-footprint-"))
+    config = work / "monitor.yaml"
+    config.write_text(f'bus: {{interface: udp_multicast, channel: "{group}"}}\n'
+                      f"event_log: {{path: {work / 'events.jsonl'}}}\n"
+                      f"black_box: {{directory: {work / 'bb'}}}\n")  # fmt: skip
+    out: dict[str, Any] = {}
+    say("footprint: daemon start, empty numba cache")
+    out["first_run_s"] = _start(config, work, group, 20.0, {"NUMBA_CACHE_DIR": str(work / "c")})
+    say("footprint: daemon start, warm cache")
+    out["daemon_start_s"] = _start(config, work, group, 20.0, {})
+    say(f"footprint: daemon RSS over {seconds:.0f} s of the shipped normal log")
+    out.update(_rss(config, work, group, seconds))
+    return out
+
+
+def _env(extra: dict[str, str]) -> dict[str, str]:
+    repo = Path(__file__).resolve().parents[2]
+    return {**os.environ, "PYTHONPATH": str(repo), **extra}
+
+
+def _replayer(group: str, log: Path, env: dict[str, str]) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "monitor", "replay", str(log), "--bus", group,
+         "--interface", "udp_multicast"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+    )  # fmt: skip
+
+
+def _daemon(config: Path, work: Path, env: dict[str, str]) -> tuple[subprocess.Popen, Path]:
+    err = work / f"daemon-{time.monotonic_ns()}.log"
+    with err.open("wb") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "monitor", "run", "--config", str(config)],
+                                stderr=fh, stdin=subprocess.DEVNULL, cwd=work, env=env)  # fmt: skip
+    return proc, err
+
+
+def _start(config: Path, work: Path, group: str, timeout_s: float, extra: dict) -> float | None:
+    """Seconds from starting the process to its first tick (its first state line), with a
+    replayer sending the shipped log from the same moment."""
+    env = _env(extra)
+    t0 = time.perf_counter()
+    proc, err = _daemon(config, work, env)
+    feed = _replayer(group, resource_path("replay", "normal.log"), env)
+    try:
+        while time.perf_counter() - t0 < timeout_s + 60.0 and proc.poll() is None:
+            if _FIRST_TICK.search(err.read_text(errors="replace")):
+                return time.perf_counter() - t0
+            time.sleep(0.01)
+        return None
+    finally:
+        for p in (feed, proc):
+            p.terminate()
+            p.wait(30)
+
+
+def _rss(config: Path, work: Path, group: str, seconds: float) -> dict[str, float]:
+    env = _env({})
+    proc, err = _daemon(config, work, env)
+    try:
+        while not _FIRST_TICK.search(err.read_text(errors="replace")) and proc.poll() is None:
+            # start the replayer only once the daemon listens: every frame is taken
+            if "monitoring" in err.read_text(errors="replace"):
+                break
+            time.sleep(0.05)
+        feed = _replayer(group, resource_path("replay", "normal.log"), env)
+        samples = []
+        end = time.perf_counter() + min(seconds, 90.0)
+        while time.perf_counter() < end and feed.poll() is None:
+            samples.append(_status_kb(proc.pid, "VmRSS") / 1024.0)
+            time.sleep(0.5)
+        peak = _status_kb(proc.pid, "VmHWM") / 1024.0
+        feed.terminate()
+        feed.wait(30)
+    finally:
+        proc.terminate()
+        proc.wait(30)
+    second_half = samples[len(samples) // 2 :] or samples
+    return {"daemon_rss_mb": statistics.median(second_half), "daemon_peak_rss_mb": peak,
+            "daemon_rss_samples": len(samples)}  # fmt: skip
+
+
+def _status_kb(pid: int, key: str) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return float(line.split()[1])
+    return float("nan")
