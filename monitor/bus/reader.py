@@ -14,7 +14,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import can
@@ -30,6 +30,7 @@ from monitor.bus.recovery import (
     is_link_error,
 )
 from monitor.errors import BusError, ConfigError
+from monitor.schema.sections import setting
 
 log = logging.getLogger(__name__)
 
@@ -39,21 +40,27 @@ class BusConfig:
     """The CAN bus: any python-can interface (``socketcan`` on the controller, ``virtual``
     in tests and the demo)."""
 
-    interface: str = "socketcan"
-    channel: str = "can0"
-    bitrate: int = 500_000
-    queue_frames: int = 20_000  # bounded receive buffer (~5 s of a full 500 kbit/s bus)
-    kernel_filters: bool = True  # only the DBC's sensor IDs reach user space
-    silent_s: float = 0.5  # no frame this long (wall clock): the sample clock runs on, stale
+    interface: str = setting("socketcan", doc="any python-can interface")
+    channel: str = setting("can0", doc="the CAN channel (can0, vcan0, a multicast group...)")
+    bitrate: int = setting(500_000, check=lambda v: 10_000 <= v <= 1_000_000,
+                           demand="between 10000 and 1000000", unit="bit/s")  # fmt: skip
+    # Bounded receive buffer (~5 s of a full 500 kbit/s bus); overflow is counted as dropped.
+    queue_frames: int = setting(20_000, check=lambda v: v >= 100, demand=">= 100",
+                                unit="frames")  # fmt: skip
+    kernel_filters: bool = setting(True, doc="only the DBC's sensor IDs reach user space")
+    # No frame this long: the sample clock runs on, rows go stale (proven silence only).
+    silent_s: float = setting(0.5, unit="s")
     # Bus seconds per sample-clock second: 4 when a log is replayed 4x slower than real time
     # onto the bus (a slow test bench or emulator); event times then read in log seconds.
-    time_scale: float = 1.0
+    time_scale: float = setting(1.0, unit="bus s per sample s")
     # Extra keyword arguments for can.Bus (e.g. fd, receive_own_messages); scalars only.
-    options: dict[str, Any] = field(default_factory=dict)
+    options: dict[str, Any] = setting(factory=dict)
     # A bus that fails (link down, bus-off) is reopened after a delay that starts here and
     # doubles per failed attempt up to reopen_max_s (monitor/bus/recovery.py).
-    reopen_initial_s: float = 0.1
-    reopen_max_s: float = 10.0
+    reopen_initial_s: float = setting(0.1, check=lambda v: 0.001 <= v <= 3600,
+                                      demand="within 0.001..3600", unit="s")  # fmt: skip
+    reopen_max_s: float = setting(10.0, check=lambda v: 0.001 <= v <= 3600,
+                                  demand="within 0.001..3600", unit="s")  # fmt: skip
 
     def __post_init__(self) -> None:
         # The sampler keeps a signal fresh for 3 of its cycles.  A bus whose frames come at

@@ -15,12 +15,9 @@ Every problem (unknown key, wrong type, missing input file, impossible value) is
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-import yaml
 
 from monitor.bus.reader import BusConfig
 from monitor.codec.j1939 import dtc as j1939_dtc
@@ -32,21 +29,35 @@ from monitor.detection.plausibility import PlausibilityConfig
 from monitor.errors import ConfigError
 from monitor.model.envelope import ValidityConfig
 from monitor.resources import resource_path
+from monitor.schema.sections import setting, typed
+from monitor.schema.yamlfile import read_yaml
+
+
+def _POSITIVE(v: float) -> bool:  # noqa: N802 - a constant-like check
+    return v > 0
+
+
+def _NON_NEG(v: float) -> bool:  # noqa: N802
+    return v >= 0
 
 
 @dataclass(frozen=True)
 class OutputConfig:
     """Rates of the monitor's own frames (sample-clock seconds for alarms)."""
 
-    alarm_repeat_s: float = 1.0  # MON_Alarm repeated this often while in fault
-    alarm_max_per_s: float = 10.0  # hard cap on MON_Alarm frames, whatever the state does
-    status_period_s: float = 1.0  # MON_Status heartbeat (wall clock)
+    alarm_repeat_s: float = setting(1.0, check=_POSITIVE, demand="> 0", unit="s",
+                                    doc="MON_Alarm repeated this often while in fault")  # fmt: skip
+    alarm_max_per_s: float = setting(10.0, check=_POSITIVE, demand="> 0", unit="1/s",
+                                     doc="hard cap on MON_Alarm frames")  # fmt: skip
+    status_period_s: float = setting(1.0, check=_POSITIVE, demand="> 0", unit="s",
+                                     doc="MON_Status heartbeat (wall clock)")  # fmt: skip
 
 
 @dataclass(frozen=True)
 class EventLogConfig:
-    path: Path = Path("monitor-events.jsonl")
-    rotate_mb: float = 8.0  # MB (10^6 bytes): the file is renamed to .1 at this size
+    path: Path = setting(Path("monitor-events.jsonl"), doc="append-only JSON lines, fsynced")
+    rotate_mb: float = setting(8.0, check=lambda v: v >= 0.001, demand=">= 0.001 (1 kB)",
+                               unit="MB", doc="the file is renamed to .1 at this size")  # fmt: skip
 
     @property
     def rotate_bytes(self) -> int:
@@ -55,11 +66,15 @@ class EventLogConfig:
 
 @dataclass(frozen=True)
 class BlackBoxConfig:
-    directory: Path = Path("monitor-blackbox")
-    pre_s: float = 30.0  # raw frames kept from before the alarm
-    post_s: float = 10.0  # and recorded after it
-    max_frames: int = 200_000  # memory bound of the pre-alarm buffer (~50 s at 4 kHz)
-    max_files: int = 50  # oldest files deleted beyond this
+    directory: Path = setting(Path("monitor-blackbox"), doc="one candump file per alarm")
+    pre_s: float = setting(30.0, check=_NON_NEG, demand=">= 0", unit="s",
+                           doc="raw frames kept from before the alarm")  # fmt: skip
+    post_s: float = setting(10.0, check=_NON_NEG, demand=">= 0", unit="s",
+                            doc="and recorded after it")  # fmt: skip
+    max_frames: int = setting(200_000, check=_POSITIVE, demand=">= 1", unit="frames",
+                              doc="bound of the pre-alarm buffer (~50 s at 4 kHz)")  # fmt: skip
+    max_files: int = setting(50, check=_POSITIVE, demand=">= 1",
+                             doc="oldest files deleted beyond this")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -67,9 +82,14 @@ class StorageConfig:
     """Disk use of the daemon's files and the thread that writes them (``monitor.live.storage``,
     ``monitor.live.writer``)."""
 
-    quota_mb: float = 256.0  # MB (10^6 bytes): black boxes + event log files together
-    writer_queue: int = 1000  # disk-writer jobs queued at most (black-box work beyond: dropped)
-    event_block_s: float = 0.1  # an event waits this long for room in a full queue
+    quota_mb: float = setting(256.0, check=_POSITIVE, demand="> 0", unit="MB",
+                              doc="black boxes + event log files together")  # fmt: skip
+    writer_queue: int = setting(1000, check=lambda v: v >= 10, demand=">= 10",
+                                doc="disk-writer jobs queued at most (black-box work beyond: "
+                                "dropped)")  # fmt: skip
+    event_block_s: float = setting(0.1, check=lambda v: 0 <= v <= 5, demand="between 0 and 5",
+                                   unit="s", doc="an event waits this long for room in a "
+                                   "full queue")  # fmt: skip
 
     @property
     def quota_bytes(self) -> int:
@@ -83,18 +103,25 @@ class J1939Config:
     (SPN and FMI per fault name); a sensor fault one DTC per stale signal."""
 
     enabled: bool = False
-    source_address: int = 0xA0  # the monitor's J1939 address, as in its MON_* frame IDs
-    priority: int = 6  # DM1 priority (J1939-73 default); BAM frames always go at 7
+    source_address: int = setting(0xA0, check=lambda v: 0 <= v <= 253,
+                                  demand="0..253 (254 null, 255 global)",
+                                  doc="our J1939 address, as in the MON_* frame IDs")  # fmt: skip
+    priority: int = setting(6, check=lambda v: 0 <= v <= 7, demand="0..7",
+                            doc="DM1 priority (J1939-73); BAM frames go at 7")  # fmt: skip
     fault_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_SPN))
     fault_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_FMI))
     sensor_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_SENSOR_SPN))
-    sensor_fmi: int = j1939_dtc.DEFAULT_SENSOR_FMI
+    sensor_fmi: int = setting(j1939_dtc.DEFAULT_SENSOR_FMI,
+                              check=lambda v: 0 <= v <= 31, demand="0..31")  # fmt: skip
     check_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_CHECK_FMI))
     fault_lamp: str = "amber"  # none, protect, amber, red or mil; :slow / :fast to flash
     sensor_lamp: str = "amber"
     repeat_when_clear: bool = True  # the no-DTC DM1 every second (else only on the change)
-    bam_gap_s: float = 0.05  # between BAM data packets (J1939-21: 50 to 200 ms)
-    max_frames_per_s: float = 10.0  # token bucket over every J1939 frame we send
+    bam_gap_s: float = setting(0.05, check=lambda v: 0.05 <= v <= 0.2,
+                               demand="between 0.05 and 0.2 (J1939-21)", unit="s",
+                               doc="between BAM data packets")  # fmt: skip
+    max_frames_per_s: float = setting(10.0, check=lambda v: v >= 2, demand=">= 2", unit="1/s",
+                                      doc="token bucket over every J1939 frame")  # fmt: skip
 
     def __post_init__(self) -> None:
         dtc = j1939_dtc
@@ -111,6 +138,15 @@ class J1939Config:
             object.__setattr__(self, key, default | given)
         for key in ("fault_lamp", "sensor_lamp"):
             dtc.Lamp.parse(getattr(self, key), f"j1939.{key}")
+
+
+@dataclass(frozen=True)
+class DetectorSection:
+    """``detector:`` section."""
+
+    horizon: int | None = setting(None, check=lambda v: v is None or v >= 1, demand=">= 1",
+                                  unit="samples", doc="prediction horizon p (eq. 7); "
+                                  "default: the model's")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -160,171 +196,10 @@ def _path(value: Any, key: str, base: Path, source: Path) -> Path:
     return p
 
 
-def _section(data: dict[str, Any], name: str, source: Path) -> dict[str, Any]:
-    sec = data.get(name) or {}
-    if not isinstance(sec, dict):
-        raise ConfigError(f"{source}: section {name!r} must be a mapping")
-    return sec
-
-
-def _alarm(sec: dict[str, Any], source: Path) -> AlarmConfig:
-    known = {f.name: f.type for f in fields(AlarmConfig)}
-    values: dict[str, Any] = {}
-    for key, raw in sec.items():
-        if key not in known:
-            raise ConfigError(f"{source}: unknown key alarm.{key}; known: {', '.join(known)}")
-        default = getattr(AlarmConfig(), key)
-        if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-            raise ConfigError(f"{source}: alarm.{key} must be a number, got {raw!r}")
-        if isinstance(default, int) and not float(raw).is_integer():
-            raise ConfigError(f"{source}: alarm.{key} must be a whole number, got {raw!r}")
-        values[key] = type(default)(raw)
-    try:
-        return AlarmConfig(**values)
-    except ConfigError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
-
-
-# -- generic typed sections -----------------------------------------------------------------
-
-Check = Callable[[Any], bool]
-_POSITIVE: Check = lambda v: v > 0  # noqa: E731
-_NON_NEG: Check = lambda v: v >= 0  # noqa: E731
-# key -> (kind, check, what the check demands); kind: "str", "int", "float", "bool", "path",
-# "options"
-_BUS = {
-    "interface": ("str", None, ""),
-    "channel": ("str", None, ""),
-    "bitrate": ("int", lambda v: 10_000 <= v <= 1_000_000, "between 10000 and 1000000"),
-    "queue_frames": ("int", lambda v: v >= 100, ">= 100"),
-    "kernel_filters": ("bool", None, ""),
-    "silent_s": ("float", _POSITIVE, "> 0"),
-    "time_scale": ("float", lambda v: 0.01 <= v <= 100, "between 0.01 and 100"),
-    "options": ("options", None, ""),
-    "reopen_initial_s": ("float", lambda v: 0.001 <= v <= 3600, "between 0.001 and 3600"),
-    "reopen_max_s": ("float", lambda v: 0.001 <= v <= 3600, "between 0.001 and 3600"),
-}
-_OUTPUTS = {
-    "alarm_repeat_s": ("float", _POSITIVE, "> 0"),
-    "alarm_max_per_s": ("float", _POSITIVE, "> 0"),
-    "status_period_s": ("float", _POSITIVE, "> 0"),
-}
-_EVENT_LOG = {
-    "path": ("path", None, ""),
-    "rotate_mb": ("float", lambda v: v >= 0.001, ">= 0.001 (1 kB)"),
-}
-_BLACK_BOX = {
-    "directory": ("path", None, ""),
-    "pre_s": ("float", _NON_NEG, ">= 0"),
-    "post_s": ("float", _NON_NEG, ">= 0"),
-    "max_frames": ("int", _POSITIVE, ">= 1"),
-    "max_files": ("int", _POSITIVE, ">= 1"),
-}
-_STORAGE = {
-    "quota_mb": ("float", _POSITIVE, "> 0"),
-    "writer_queue": ("int", lambda v: v >= 10, ">= 10"),
-    "event_block_s": ("float", lambda v: 0 <= v <= 5, "between 0 and 5"),
-}
-
-_J1939 = {
-    "enabled": ("bool", None, ""),
-    "source_address": ("int", lambda v: 0 <= v <= 253, "0..253 (254 null, 255 global)"),
-    "priority": ("int", lambda v: 0 <= v <= 7, "0..7"),
-    "fault_spn": ("options", None, ""),
-    "fault_fmi": ("options", None, ""),
-    "sensor_spn": ("options", None, ""),
-    "sensor_fmi": ("int", lambda v: 0 <= v <= j1939_dtc.FMI_MAX, "0..31"),
-    "check_fmi": ("options", None, ""),
-    "fault_lamp": ("str", None, ""),
-    "sensor_lamp": ("str", None, ""),
-    "repeat_when_clear": ("bool", None, ""),
-    "bam_gap_s": ("float", lambda v: 0.05 <= v <= 0.2, "between 0.05 and 0.2 (J1939-21)"),
-    "max_frames_per_s": ("float", lambda v: v >= 2, ">= 2"),
-}
-_OPERATING = {
-    "warmup_oil_c": ("float", lambda v: -40 <= v <= 150, "within -40..150 (degC)"),
-    "warmup_hysteresis_c": ("float", _NON_NEG, ">= 0 (degC)"),
-}
-_PLAUSIBILITY = {f.name: ("float", _NON_NEG, ">= 0") for f in fields(PlausibilityConfig)} | {
-    "pressure_min_bar": ("float", None, ""),
-    "pressure_max_bar": ("float", _POSITIVE, "> 0 (bar)"),
-    "flow_max_lpm": ("float", _POSITIVE, "> 0 (L/min)"),
-}
-_VALIDITY = {
-    "gate": ("bool", None, ""),
-    "margin_fraction": ("float", _NON_NEG, ">= 0"),
-    "margin_pct": ("float", _NON_NEG, ">= 0 (%)"),
-    "margin_rpm": ("float", _NON_NEG, ">= 0 (rpm)"),
-    "margin_c": ("float", _NON_NEG, ">= 0 (degC)"),
-    "min_bin_share": ("float", lambda v: 0 <= v <= 1, "within 0..1"),
-}
-
-
-def _checked_section(cls: type, spec: dict, data: dict[str, Any], name: str, source: Path) -> Any:
-    """A typed section whose dataclass also checks values together (one ConfigError)."""
-    try:
-        return _typed(cls, spec, _section(data, name, source), name, source)
-    except ConfigError as exc:
-        text = str(exc)
-        raise ConfigError(text if text.startswith(f"{source}:") else f"{source}: {text}") from None
-
-
-def _value(kind: str, raw: Any, where: str, source: Path) -> Any:
-    def bad(what: str) -> ConfigError:
-        return ConfigError(f"{source}: {where} must be {what}, got {raw!r}")
-
-    if kind == "str":
-        if not isinstance(raw, str) or not raw:
-            raise bad("a non-empty string")
-        return raw
-    if kind == "path":
-        if not isinstance(raw, str) or not raw:
-            raise bad("a path")
-        return Path(raw).expanduser()
-    if kind == "bool":
-        if not isinstance(raw, bool):
-            raise bad("true or false")
-        return raw
-    if kind == "options":
-        if not isinstance(raw, dict) or not all(
-            isinstance(k, str) and isinstance(v, (str, int, float, bool)) for k, v in raw.items()
-        ):
-            raise bad("a mapping of names to scalar values")
-        return dict(raw)
-    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-        raise bad("a number")
-    if kind == "int":
-        if not float(raw).is_integer():
-            raise bad("a whole number")
-        return int(raw)
-    return float(raw)
-
-
-def _typed(cls: type, spec: dict, sec: dict[str, Any], name: str, source: Path) -> Any:
-    values: dict[str, Any] = {}
-    for key, raw in sec.items():
-        if key not in spec:
-            raise ConfigError(f"{source}: unknown key {name}.{key}; known: {', '.join(spec)}")
-        kind, check, demand = spec[key]
-        v = _value(kind, raw, f"{name}.{key}", source)
-        if check is not None and not check(v):
-            raise ConfigError(f"{source}: {name}.{key} must be {demand}, got {raw!r}")
-        values[key] = v
-    try:
-        return cls(**values)
-    except ConfigError as exc:  # a check across keys in the class itself
-        raise ConfigError(f"{source}: {exc}") from None
-
-
 def load_config(path: str | Path | None = None) -> MonitorConfig:
     """Load and validate a monitor config (default: the shipped config/monitor.yaml)."""
     source = Path(path) if path is not None else resource_path("config", "monitor.yaml")
-    try:
-        data = yaml.safe_load(source.read_text(encoding="utf-8")) or {}
-    except OSError as exc:
-        raise ConfigError(f"{source}: cannot read config: {exc.strerror}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{source}: not valid YAML: {exc}") from None
+    data = read_yaml(source, "config") or {}
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a mapping at the top level")
     unknown = set(data) - _TOP_KEYS
@@ -334,33 +209,25 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             f"known: {', '.join(sorted(_TOP_KEYS))}"
         )
     base = source.parent
-    det = _section(data, "detector", source)
-    extra = set(det) - {"horizon"}
-    if extra:
-        raise ConfigError(f"{source}: unknown key(s) detector.{', detector.'.join(sorted(extra))}")
-    horizon = det.get("horizon")
-    if horizon is not None and (
-        isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1
-    ):
-        raise ConfigError(f"{source}: detector.horizon must be a whole number >= 1")
-    black_box = _typed(
-        BlackBoxConfig, _BLACK_BOX, _section(data, "black_box", source), "black_box", source
-    )
-    bus = _typed(BusConfig, _BUS, _section(data, "bus", source), "bus", source)
+
+    def section(cls: type, name: str) -> Any:
+        return typed(cls, data.get(name), name, source)
+
+    horizon = section(DetectorSection, "detector").horizon
+    black_box = section(BlackBoxConfig, "black_box")
+    bus = section(BusConfig, "bus")
     if bus.reopen_max_s < bus.reopen_initial_s:
         raise ConfigError(f"{source}: bus.reopen_max_s ({bus.reopen_max_s}) must be >= "
                           f"bus.reopen_initial_s ({bus.reopen_initial_s})")  # fmt: skip
-    event_log = _typed(
-        EventLogConfig, _EVENT_LOG, _section(data, "event_log", source), "event_log", source
-    )
-    storage = _typed(StorageConfig, _STORAGE, _section(data, "storage", source), "storage", source)
+    event_log = section(EventLogConfig, "event_log")
+    storage = section(StorageConfig, "storage")
     if storage.quota_mb <= 2 * event_log.rotate_mb:
         raise ConfigError(
             f"{source}: storage.quota_mb ({storage.quota_mb:g}) must be more than twice "
             f"event_log.rotate_mb ({event_log.rotate_mb:g}): the current event log and one "
             "rotated file must fit"
         )
-    j1939 = _checked_section(J1939Config, _J1939, data, "j1939", source)
+    j1939 = section(J1939Config, "j1939")
     loops: tuple[LoopConfig, ...] = ()
     if "loops" in data:
         loops = parse_loops(data["loops"], source, lambda v, k: _path(v, k, base, source),
@@ -373,19 +240,15 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
         model=_path(data["model"], "model", base, source) if "model" in data
         else resource_path("config", "boom_default.model.npz"),
         horizon=horizon,
-        alarm=_alarm(_section(data, "alarm", source), source),
+        alarm=section(AlarmConfig, "alarm"),
         bus=bus,
-        outputs=_typed(
-            OutputConfig, _OUTPUTS, _section(data, "outputs", source), "outputs", source
-        ),
+        outputs=section(OutputConfig, "outputs"),
         event_log=event_log,
         black_box=black_box,
         storage=storage,
         j1939=j1939,
-        operating=_checked_section(OperatingConfig, _OPERATING, data, "operating", source),
-        plausibility=_checked_section(
-            PlausibilityConfig, _PLAUSIBILITY, data, "plausibility", source
-        ),
-        validity=_checked_section(ValidityConfig, _VALIDITY, data, "validity", source),
+        operating=section(OperatingConfig, "operating"),
+        plausibility=section(PlausibilityConfig, "plausibility"),
+        validity=section(ValidityConfig, "validity"),
         loops=loops,
     )

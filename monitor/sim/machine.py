@@ -1,7 +1,9 @@
 """The reference machine's nominal parameters, SI inside, loaded from config/simulator.yaml.
 
 The YAML carries units in its key names (bar, L, mm, cc/rev); ``MachineParams`` holds SI
-values only (Pa, m^3, m, kg, N, s).  ``load_machine`` validates every key once, at the edge.
+values only (Pa, m^3, m, kg, N, s).  ``load_machine`` validates every key once, at the edge,
+with the same strict reader and value checks as config/monitor.yaml (``monitor.schema``);
+the table below only declares each key's SI field, unit factor and range.
 """
 
 from __future__ import annotations
@@ -11,10 +13,10 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from monitor.errors import ConfigError
 from monitor.resources import resource_path
+from monitor.schema.sections import value
+from monitor.schema.yamlfile import read_yaml
 
 BAR = 1e5  # Pa
 LPM = 1e-3 / 60.0  # m^3/s per L/min
@@ -124,18 +126,13 @@ def machine_from_mapping(data: Any, source: str = "<config>") -> MachineParams:
             raise ConfigError(f"{source}: section {section!r} must be a mapping")
         for key, raw in content.items():
             if (section, key) in _BOOL_KEYS:
-                if not isinstance(raw, bool):
-                    raise ConfigError(
-                        f"{source}: {section}.{key} must be true or false, got {raw!r}"
-                    )
-                values[_BOOL_KEYS[section, key]] = raw
+                values[_BOOL_KEYS[section, key]] = value("bool", raw, f"{section}.{key}", source)
                 continue
             if key not in _KEYS[section]:
                 known = ", ".join([*_KEYS[section], *(k for s, k in _BOOL_KEYS if s == section)])
                 raise ConfigError(f"{source}: unknown key {section}.{key}; known: {known}")
             name, factor, low, high = _KEYS[section][key]
-            if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-                raise ConfigError(f"{source}: {section}.{key} must be a number, got {raw!r}")
+            raw = value("float", raw, f"{section}.{key}", source)  # a finite number
             if not low <= raw <= high:
                 raise ConfigError(f"{source}: {section}.{key} = {raw} is outside {low}..{high}")
             values[name] = float(raw) * factor
@@ -156,15 +153,7 @@ def _check_consistency(p: MachineParams, source: str) -> None:
 def load_machine(path: str | Path | None = None) -> MachineParams:
     """Load the simulator config (default: the shipped config/simulator.yaml)."""
     path = Path(path) if path is not None else resource_path("config", "simulator.yaml")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read simulator config: {exc.strerror}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
-    return machine_from_mapping(data or {}, str(path))
+    return machine_from_mapping(read_yaml(path, "simulator config") or {}, str(path))
 
 
 MACHINE_FIELDS = tuple(f.name for f in fields(MachineParams))

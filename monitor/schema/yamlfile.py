@@ -1,0 +1,68 @@
+"""Reading a configuration YAML strictly, before anything looks at its values.
+
+* a size cap (a configuration is a few kB; a huge file is a mistake or an attack);
+* no aliases or anchors (``&a`` / ``*a``): a 500-byte "billion laughs" would expand to
+  gigabytes before any check could run, and no configuration of ours needs them;
+* no duplicate keys: YAML keeps the last one silently, so a key given twice is almost always
+  an edit gone wrong;
+* errors name the file and the line, never the whole input.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from monitor.errors import ConfigError
+
+MAX_BYTES = 1_000_000
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader that refuses aliases and duplicate mapping keys."""
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise _Refused(f"line {event.start_mark.line + 1}: YAML aliases (*name) are not "
+                           "allowed in a configuration")  # fmt: skip
+        return super().compose_node(parent, index)
+
+    def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise _Refused(f"line {key_node.start_mark.line + 1}: key {str(key)[:40]!r} "
+                               "is given twice")  # fmt: skip
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+class _Refused(Exception):
+    pass
+
+
+def read_yaml(path: Path, what: str) -> Any:
+    """The parsed YAML of ``path`` (``what``: "config", "simulator config" for messages)."""
+    try:
+        size = path.stat().st_size
+        if size > MAX_BYTES:
+            raise ConfigError(f"{path}: {size} bytes is too large for a {what} "
+                              f"(at most {MAX_BYTES})")  # fmt: skip
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a text file (UTF-8 expected)") from None
+    try:
+        return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+    except _Refused as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}: " if mark is not None else ""
+        problem = getattr(exc, "problem", None) or "not valid YAML"
+        raise ConfigError(f"{path}: {where}{problem}") from None

@@ -1,0 +1,71 @@
+"""One schema engine for both YAML files: a strict reader (no aliases, no duplicate keys, a
+size cap) and typed sections from dataclass field metadata (finite numbers only)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from monitor.config.settings import load_config
+from monitor.errors import ConfigError
+from monitor.sim.machine import load_machine
+
+BOMB = """a: &a ["x", "x", "x", "x", "x", "x", "x", "x", "x"]
+b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]
+c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b]
+d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c]
+e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d]
+f: &f [*e, *e, *e, *e, *e, *e, *e, *e, *e]
+g: [*f, *f, *f, *f, *f, *f, *f, *f, *f]
+"""
+
+
+@pytest.mark.parametrize("loader", [load_config, load_machine], ids=["monitor", "simulator"])
+def test_a_yaml_bomb_is_refused_at_its_first_alias(tmp_path: Path, loader) -> None:
+    path = tmp_path / "bomb.yaml"
+    path.write_text(BOMB)  # 9^7 = 4.8 million strings if expanded
+    with pytest.raises(ConfigError, match=r"bomb.yaml: line 2: YAML aliases"):
+        loader(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "loader", "message"),
+    [
+        ("bus:\n  channel: can0\n  channel: can1\n", load_config,
+         "line 3: key 'channel' is given twice"),
+        ("alarm:\n  min_engine_rpm: .nan\n", load_config,
+         "alarm.min_engine_rpm must be a finite number"),
+        ("storage:\n  quota_mb: .inf\n", load_config, "storage.quota_mb must be a finite number"),
+        ("detector:\n  horizon: 0\n", load_config, "detector.horizon must be >= 1"),
+        ("load:\n  mass_kg: 400\n  mass_kg: 500\n", load_machine, "key 'mass_kg' is given twice"),
+        ("load:\n  mass_kg: .inf\n", load_machine, "load.mass_kg must be a finite number"),
+        ("bus: [1, 2\n", load_config, "line 2"),
+    ],
+    ids=["duplicate", "nan", "inf", "horizon", "sim-duplicate", "sim-inf", "broken"],
+)  # fmt: skip
+def test_bad_values_are_one_line_naming_file_key_and_value(tmp_path, text, loader, message):
+    path = tmp_path / "c.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        loader(path)
+    assert str(err.value).startswith(f"{path}:") and message in str(err.value)
+    assert len(str(err.value)) < 300 and "\n" not in str(err.value)
+
+
+def test_an_oversized_file_is_refused_before_it_is_parsed(tmp_path: Path) -> None:
+    path = tmp_path / "big.yaml"
+    path.write_text("# " + "x" * 2_000_000 + "\n")
+    with pytest.raises(ConfigError, match="too large for a config"):
+        load_config(path)
+
+
+def test_every_setting_declares_itself_once_with_its_check() -> None:
+    """The reference docs read the checks and units from the same field metadata."""
+    from dataclasses import fields
+
+    from monitor.bus.reader import BusConfig
+
+    meta = {f.name: f.metadata for f in fields(BusConfig)}
+    assert meta["bitrate"]["unit"] == "bit/s" and not meta["bitrate"]["check"](5)
+    assert meta["queue_frames"]["check"](100) and not meta["queue_frames"]["check"](99)
