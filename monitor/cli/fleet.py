@@ -1,0 +1,76 @@
+"""``monitor fleet``: commission and judge a whole fleet on Dask (run), and its page (report)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def add_subparser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "fleet",
+        help="judge every machine's logs on Dask; the fleet report",
+        description="Fleet layout: FLEET/<machine>/commissioning/*.log|*.csv (optional) and "
+        "FLEET/<machine>/logs/*.log|*.csv (file-name order is time order).",
+    )
+    sub = p.add_subparsers(dest="fleet_command", metavar="SUBCOMMAND")
+    sub.required = True
+    r = sub.add_parser(
+        "run",
+        help="train each machine's model, judge every new log, write Parquet results",
+        description="Per machine, train its model from its commissioning data (as `monitor "
+        "train`; without it the default model, and it says so), then judge every log not yet "
+        "in RESULTS (by SHA-256) as `monitor detect` does. Writes RESULTS/logs.parquet, "
+        "events.parquet and models/<machine>.model.npz. Runs on a Dask LocalCluster of "
+        "--workers processes, or on an existing scheduler. Exit 0 when every log got a row "
+        "(whatever the rows say); a log that cannot be judged is a row with its `error`.",
+    )
+    r.add_argument("fleet", type=Path, metavar="FLEET")
+    r.add_argument("--out", type=Path, required=True, metavar="RESULTS")
+    where = r.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=int,
+        default=2,
+        metavar="N",
+        help="local Dask worker processes (default 2)",
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786",
+    )
+    r.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        metavar="DEFAULT",
+        help="model for machines without commissioning data (default: the shipped)",
+    )
+    r.add_argument("--config", type=Path, default=None, help="monitor YAML (default: shipped)")
+    r.add_argument(
+        "--isolation",
+        choices=("sim", "none"),
+        default="sim",
+        help="as `monitor train --isolation` (default sim)",
+    )
+    r.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from monitor.fleet.run import RunOptions, run_fleet
+
+    opts = RunOptions(
+        workers=args.workers,
+        scheduler=args.scheduler,
+        default_model=None if args.model is None else str(args.model.resolve()),
+        config=None if args.config is None else str(args.config.resolve()),
+        isolation=args.isolation,
+    )
+    counts = run_fleet(args.fleet.resolve(), args.out, opts,
+                       say=lambda m: print(m, file=sys.stderr, flush=True))  # fmt: skip
+    print(f"fleet: {counts['judged']} logs judged, {counts['skipped']} already in results, "
+          f"{counts['rows']} rows in {args.out / 'logs.parquet'}", file=sys.stderr)  # fmt: skip
+    return 0

@@ -1,0 +1,110 @@
+"""The one adapter between the fleet and our `monitor train` / `monitor detect` code paths.
+
+Every import of training and detection code lives here, so a move of those modules changes
+this file only.  A fleet row is computed from the very summary `monitor detect --summary`
+writes (same reader, same config, same ``detect`` call), so the two agree bit for bit.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# Columns of RESULTS/events.parquet besides machine and log; the whole event is in `event`.
+EVENT_KEYS = ("t", "time", "state", "J", "threshold", "fault")
+
+
+@dataclass
+class Judged:
+    """One log judged: the row's detector keys and its state-change events."""
+
+    row: dict[str, Any]
+    events: list[dict[str, Any]]
+
+
+def _config(config_path: str | None):  # noqa: ANN202 - MonitorConfig, imported lazily
+    from monitor.config.settings import load_config
+
+    return load_config(None if config_path is None else Path(config_path))
+
+
+def model_to_bytes(model: Any) -> bytes:
+    """A MonitorModel as the bytes of its .model.npz file (what workers receive)."""
+    from monitor.model.modelfile import save_model
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "m.npz"
+        save_model(path, model)
+        return path.read_bytes()
+
+
+def model_from_bytes(data: bytes) -> Any:
+    """The MonitorModel of .model.npz bytes, checked like `monitor detect --model` does."""
+    from monitor.model.modelfile import load_model
+
+    fd, name = tempfile.mkstemp(suffix=".npz")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        return load_model(name)
+    finally:
+        os.unlink(name)
+
+
+def default_model_bytes(model_path: str | None, config_path: str | None) -> bytes:
+    """The model `monitor detect` uses without --model (the config's), or ``model_path``."""
+    cfg = _config(config_path)
+    return Path(model_path or cfg.model).read_bytes()
+
+
+def train_model_bytes(
+    paths: list[str], config_path: str | None = None, isolation: str = "sim"
+) -> bytes:
+    """`monitor train REC... --out M [--isolation I]` with its other defaults: the model
+    file's bytes."""
+    from monitor.live.loops import read_loop
+    from monitor.training.settings import TrainConfig
+    from monitor.training.train import train
+
+    cfg = _config(config_path)
+    recordings = [read_loop(p, cfg, None) for p in paths]
+    return model_to_bytes(train(recordings, TrainConfig(isolation=isolation)))
+
+
+def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> Judged:
+    """`monitor detect PATH --model M --j-every 0`: its summary as row keys, its events."""
+    from monitor.detection.offline import detect
+    from monitor.live.loops import read_loop
+
+    cfg = _config(config_path)
+    model = model_from_bytes(model_bytes)
+    rec = read_loop(path, cfg, None)
+    det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+    s = json.loads(json.dumps(det.summary))  # exactly what --summary writes
+    eps0 = float(s["threshold"])
+    j = det.j[np.isfinite(det.j)]
+    counts = rec.meta.get("counts")
+    frames = int(counts.get("frames", 0)) if isinstance(counts, dict) else None
+    row = {
+        "verdict": s["verdict"],
+        "alarm": bool(s["alarm"]),
+        "fault": s["fault"],
+        "sensor_fault": bool(s["sensor_fault"]),
+        "max_j_ratio": None if s["max_J"] is None else s["max_J"] / eps0,
+        "p95_j_ratio": float(np.percentile(j, 95)) / eps0 if j.size else None,
+        "judged_s": float(s["judged_s"]),
+        "first_alarm_t": s["first_alarm_t"],
+        "frames": frames,
+        "rejected": json.dumps(s["rejected"], sort_keys=True),
+        "max_j": s["max_J"],
+        "eps0": eps0,
+        "samples": int(s["samples"]),
+    }
+    events = [json.loads(json.dumps(dict(e, event="state"))) for e in det.events]
+    return Judged(row, events)

@@ -1,0 +1,105 @@
+"""A simulated fleet in the DESIGN.md layout, with its answer key (`monitor simulate-fleet`).
+
+Each machine's parameters are drawn within +-tolerance of the reference; each day has one oil
+temperature (the oil-viscosity effect makes it matter); one machine's piston seal and one's
+spool wear slowly (severity rising linearly over the days); one machine's flow sensor freezes
+(QP holds its last value) from the middle of the fleet's days on.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from monitor.sim.cycles import make_cycle
+from monitor.sim.effects import parse_effect
+from monitor.sim.faults import Fault
+from monitor.sim.machine import load_machine
+from monitor.sim.simulate import simulate
+
+# Parameters drawn per machine (MachineParams fields), each within +-tolerance.
+_TOLERANCED = ("bulk_modulus_pa", "pump_disp_m3_rev", "valve_rated_flow_m3_s", "mass_kg",
+               "gravity_load_n", "viscous_friction_n_s_m", "dead_volume_a_m3",
+               "dead_volume_b_m3", "line_volume_m3")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class FleetPlan:
+    machines: int
+    days: int
+    seed: int = 0
+    log_s: float = 300.0
+    commissioning_s: float = 1200.0
+    tolerance: float = 0.05
+    wear_max: float = 0.6  # severity on the last day
+
+
+def _roles(n: int) -> list[str]:
+    roles = ["piston_wear", "spool_wear", "frozen_QP"]
+    return [roles[i] if i < len(roles) else "healthy" for i in range(n)]
+
+
+def _freeze(rec: Any, signal: str, from_s: float) -> None:
+    """The sensor stops updating: every sample from ``from_s`` holds the value then."""
+    col = np.array(rec.columns[signal], dtype=float)
+    i = int(np.searchsorted(rec.t - rec.t[0], from_s))
+    if i < len(col):
+        col[i:] = col[i]
+    rec.columns[signal] = col
+
+
+def _write(path: Path, rec: Any) -> None:
+    if path.suffix == ".csv":
+        from monitor.io.csvio import write_csv
+
+        write_csv(path, rec)
+    else:
+        from monitor.codec.logwrite import write_candump
+
+        write_candump(path, rec)
+
+
+def _one(path: Path, machine: Any, duration_s: float, seed: int, oil_c: float,
+         faults: list[Fault], freeze_at_s: float | None) -> None:  # fmt: skip
+    commands = make_cycle("boom", duration_s, seed)
+    commands.columns["OilTemp"] = np.full(len(commands), oil_c)
+    effects = [parse_effect("oil_viscosity")]
+    rec = simulate(commands, machine, faults, effects, seed=seed, rod_pos0_m=0.1)
+    if freeze_at_s is not None:
+        _freeze(rec, "QP", freeze_at_s)
+    _write(path, rec)
+
+
+def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, Any]:
+    """Write FLEET folders under ``out`` and ``out/answer_key.json``; returns the key."""
+    rng = np.random.default_rng(plan.seed)
+    nominal = load_machine()
+    oil = [round(float(rng.uniform(30.0, 60.0)), 1) for _ in range(plan.days)]
+    key: dict[str, Any] = {"plan": plan.__dict__, "oil_temp_c_per_day": oil, "machines": {}}
+    for i, role in enumerate(_roles(plan.machines)):
+        mid = f"M{i + 1:02d}"
+        draw = {f: float(rng.uniform(1 - plan.tolerance, 1 + plan.tolerance))
+                for f in _TOLERANCED}  # fmt: skip
+        machine = nominal.with_changes(**{f: getattr(nominal, f) * k for f, k in draw.items()})
+        base = plan.seed * 100_000 + i * 1000
+        (out / mid / "commissioning").mkdir(parents=True, exist_ok=True)
+        (out / mid / "logs").mkdir(parents=True, exist_ok=True)
+        _one(out / mid / "commissioning" / "normal.log", machine, plan.commissioning_s, base,
+             40.0, [], None)  # fmt: skip
+        days = []
+        for d in range(plan.days):
+            sev = plan.wear_max * d / max(plan.days - 1, 1) if role.endswith("_wear") else 0.0
+            faults = [Fault(role, sev)] if sev > 0 else []
+            freeze = plan.log_s / 2 if role == "frozen_QP" and d >= plan.days // 2 else None
+            _one(out / mid / "logs" / f"day{d + 1:02d}.log", machine, plan.log_s,
+                 base + d + 1, oil[d], faults, freeze)  # fmt: skip
+            days.append({"log": f"{mid}/logs/day{d + 1:02d}.log", "severity": round(sev, 4),
+                         "sensor_frozen_from_s": freeze, "oil_temp_c": oil[d]})  # fmt: skip
+        key["machines"][mid] = {"role": role, "factors": draw, "days": days}
+        say(f"simulate-fleet: {mid} ({role}) written")
+    (out / "answer_key.json").write_text(json.dumps(key, indent=2) + "\n", encoding="utf-8")
+    return key

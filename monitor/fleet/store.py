@@ -1,0 +1,126 @@
+"""RESULTS/: durable per-log parts while a run goes, compacted atomically into Parquet.
+
+Each finished log is written at once as ``parts/<key>.json`` (temporary file, fsync, rename),
+so a killed client loses nothing finished.  ``compact`` merges the parts into logs.parquet and
+events.parquet (write to a temporary file, then ``os.replace``) keeping one row per
+(log, sha256), and only then removes the parts: a kill at any point leaves either the part or
+the row, and never two rows for one log.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+LOG_SCHEMA = pa.schema([
+    ("machine", pa.string()), ("log", pa.string()), ("sha256", pa.string()),
+    ("verdict", pa.string()), ("alarm", pa.bool_()), ("fault", pa.string()),
+    ("sensor_fault", pa.bool_()), ("max_j_ratio", pa.float64()), ("p95_j_ratio", pa.float64()),
+    ("judged_s", pa.float64()), ("first_alarm_t", pa.float64()), ("frames", pa.int64()),
+    ("rejected", pa.string()), ("model", pa.string()), ("error", pa.string()),
+    ("max_j", pa.float64()), ("eps0", pa.float64()), ("samples", pa.int64()),
+])  # fmt: skip
+EVENT_SCHEMA = pa.schema([
+    ("machine", pa.string()), ("log", pa.string()), ("sha256", pa.string()),
+    ("t", pa.float64()), ("time", pa.string()), ("state", pa.string()), ("J", pa.float64()),
+    ("threshold", pa.float64()), ("fault", pa.string()), ("event", pa.string()),
+])  # fmt: skip
+
+
+def _key(log: str, sha256: str | None) -> tuple[str, str]:
+    return (log, sha256 or "")
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+class ResultStore:
+    """The results folder of one fleet run."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.parts = root / "parts"
+        self.models = root / "models"
+        self.parts.mkdir(parents=True, exist_ok=True)
+        self.models.mkdir(parents=True, exist_ok=True)
+
+    def done(self) -> set[tuple[str, str]]:
+        """(log, sha256) of every log with a row, in logs.parquet or a part."""
+        keys = {_key(r["log"], r["sha256"]) for r in self._rows_parquet()}
+        return keys | {_key(p["row"]["log"], p["row"]["sha256"]) for p in self._parts()}
+
+    def add(self, row: dict[str, Any], events: list[dict[str, Any]]) -> None:
+        """One finished log, durable when this returns."""
+        name = hashlib.sha256(f"{row['log']}\0{row['sha256']}".encode()).hexdigest()[:32]
+        data = json.dumps({"row": row, "events": events}).encode("utf-8")
+        _write_atomic(self.parts / f"{name}.json", data)
+
+    def _parts(self) -> list[dict[str, Any]]:
+        out = []
+        for p in sorted(self.parts.glob("*.json")):
+            try:
+                out.append(json.loads(p.read_text(encoding="utf-8")))
+            except (OSError, json.JSONDecodeError):
+                continue  # only a torn temporary can be unreadable, and those are .tmp
+        return out
+
+    def _rows_parquet(self) -> list[dict[str, Any]]:
+        path = self.root / "logs.parquet"
+        return pq.read_table(path).to_pylist() if path.exists() else []
+
+    def _events_parquet(self) -> list[dict[str, Any]]:
+        path = self.root / "events.parquet"
+        return pq.read_table(path).to_pylist() if path.exists() else []
+
+    def compact(self) -> int:
+        """Merge the parts into logs.parquet and events.parquet; the number of rows."""
+        parts = self._parts()
+        rows = {_key(r["log"], r["sha256"]): r for r in self._rows_parquet()}
+        events = [e for e in self._events_parquet()]
+        for p in parts:
+            row = p["row"]
+            key = _key(row["log"], row["sha256"])
+            if row["sha256"] is None or key not in rows:
+                events = [e for e in events if _key(e["log"], e["sha256"]) != key]
+                events += [self._event(row, e) for e in p["events"]]
+            rows[key] = row
+        # A log that changed (new hash) keeps one row: its newest.
+        latest: dict[str, dict[str, Any]] = {}
+        for r in rows.values():
+            latest[r["log"]] = r
+        keep = {_key(r["log"], r["sha256"]) for r in latest.values()}
+        table = pa.Table.from_pylist(sorted(latest.values(), key=lambda r: r["log"]), LOG_SCHEMA)
+        ev = [e for e in events if _key(e["log"], e["sha256"]) in keep]
+        ev.sort(key=lambda e: (e["log"], e["t"]))
+        self._write_table(self.root / "logs.parquet", table)
+        self._write_table(self.root / "events.parquet", pa.Table.from_pylist(ev, EVENT_SCHEMA))
+        for p in self.parts.glob("*.json"):
+            p.unlink()
+        return table.num_rows
+
+    @staticmethod
+    def _event(row: dict[str, Any], e: dict[str, Any]) -> dict[str, Any]:
+        return {"machine": row["machine"], "log": row["log"], "sha256": row["sha256"],
+                "t": e["t"], "time": e.get("time"), "state": e["state"], "J": e.get("J"),
+                "threshold": e.get("threshold"), "fault": e.get("fault"),
+                "event": json.dumps(e)}  # fmt: skip
+
+    @staticmethod
+    def _write_table(path: Path, table: pa.Table) -> None:
+        tmp = path.with_name(f".{path.name}.tmp")
+        pq.write_table(table, tmp)
+        with tmp.open("rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)

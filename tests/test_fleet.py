@@ -1,0 +1,118 @@
+"""`monitor fleet run` on a LocalCluster of 2 workers: per log exactly `monitor detect` with
+the machine's model, the default model without commissioning, incremental reruns, bad input
+as rows, and a killed client that loses nothing finished."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import pyarrow.parquet as pq
+import pytest
+
+from monitor.cli import main
+from tests.fleet_support import copy_fleet, env, fleet_cmd, kill, make_fleet, rows, wait_for
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    return make_fleet(tmp_path_factory.mktemp("fleet"))
+
+
+@pytest.fixture(scope="module")
+def run1(fleet, tmp_path_factory):
+    """The fleet plus bad input: a machine without logs, an unreadable log, a log of another
+    machine type (a CSV without the loop's signals) and a machine without commissioning."""
+    where = tmp_path_factory.mktemp("run1")
+    f = copy_fleet(fleet, where / "fleet")
+    (f / "M09" / "logs").mkdir(parents=True)
+    (f / "M01" / "logs" / "day03.log").write_bytes(b"\x00\x01garbage, not a candump log\n")
+    (f / "M02" / "logs" / "day03.csv").write_text("t,Swing,Bucket\n0,1,2\n0.01,1,2\n")
+    shutil.copytree(fleet / "M03" / "logs", f / "M04" / "logs")
+    out = where / "results"
+    proc = subprocess.run(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
+                          capture_output=True, text=True, env=env())  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    return f, out, proc.stderr
+
+
+def test_every_log_is_one_row_and_bad_input_is_a_row_with_its_reason(run1):
+    f, out, err = run1
+    by_log = {r["log"]: r for r in rows(out)}
+    expected = {p.relative_to(f).as_posix() for p in f.glob("*/logs/*")} | {"M09/logs/"}
+    assert set(by_log) == expected and len(rows(out)) == len(expected)
+    assert "no logs" in by_log["M09/logs/"]["error"]
+    assert by_log["M01/logs/day03.log"]["error"] and by_log["M01/logs/day03.log"]["verdict"] == (
+        "not_judged"
+    )
+    assert by_log["M02/logs/day03.csv"]["error"]
+    assert all(r["error"] is None for log, r in by_log.items() if log.endswith(("01.log",
+               "02.log")))  # fmt: skip
+    assert "Dask dashboard http" in err and "logs," in err and "frames/s" in err
+
+
+def test_no_commissioning_uses_the_default_model_and_says_so(run1):
+    _f, out, err = run1
+    assert "M04: no commissioning data, judged with the default model" in err
+    m04 = [r for r in rows(out) if r["machine"] == "M04"]
+    assert m04 and all(r["model"] == "default" for r in m04)
+    assert all(r["model"] == "commissioned" for r in rows(out) if r["machine"] == "M01")
+
+
+def test_each_row_and_its_events_equal_monitor_detect_with_the_machines_model(run1, tmp_path):
+    f, out, _err = run1
+    events = pq.read_table(out / "events.parquet").to_pylist()
+    judged = [r for r in rows(out) if r["error"] is None and r["machine"] != "M09"]
+    assert len(judged) == 8
+    for r in judged:
+        summary, lines = tmp_path / "s.json", tmp_path / "e.jsonl"
+        model = out / "models" / f"{r['machine']}.model.npz"
+        rc = main(["detect", str(f / r["log"]), "--model", str(model), "--j-every", "0",
+                   "--summary", str(summary), "--events", str(lines)])  # fmt: skip
+        s = json.loads(summary.read_text())
+        assert rc == (3 if s["verdict"] == "not_judged" else 0)
+        assert (r["verdict"], r["alarm"], r["fault"], r["sensor_fault"]) == (
+            s["verdict"], s["alarm"], s["fault"], s["sensor_fault"])  # fmt: skip
+        assert r["max_j"] == s["max_J"] and r["eps0"] == s["threshold"]
+        assert r["max_j_ratio"] == (None if s["max_J"] is None else s["max_J"] / s["threshold"])
+        assert r["judged_s"] == s["judged_s"] and r["first_alarm_t"] == s["first_alarm_t"]
+        assert json.loads(r["rejected"]) == s["rejected"]
+        mine = [json.loads(e["event"]) for e in events if e["log"] == r["log"]]
+        theirs = [json.loads(line) for line in lines.read_text().splitlines()]
+        assert mine == theirs
+
+
+def test_rerun_is_incremental(run1, tmp_path):
+    f, out, _err = run1
+    before = rows(out)
+    res = tmp_path / "r"
+    shutil.copytree(out, res)
+    shutil.copy(f / "M01" / "logs" / "day02.log", f / "M01" / "logs" / "day04.log")
+    proc = subprocess.run(fleet_cmd(str(f), "--out", str(res), "--workers", "1"),
+                          capture_output=True, text=True, env=env())  # fmt: skip
+    (f / "M01" / "logs" / "day04.log").unlink()
+    assert proc.returncode == 0, proc.stderr
+    assert "1 logs judged" in proc.stderr
+    after = rows(res)
+    assert len(after) == len(before) + 1
+    assert len({r["log"] for r in after}) == len(after)
+
+
+def test_a_killed_client_loses_nothing_finished_and_writes_no_row_twice(fleet, tmp_path):
+    f = copy_fleet(fleet, tmp_path / "fleet")
+    out = tmp_path / "results"
+    proc = subprocess.Popen(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
+                            stderr=subprocess.PIPE, text=True, env=env(),
+                            start_new_session=True)  # fmt: skip
+    parts = out / "parts"
+    wait_for(lambda: parts.is_dir() and any(parts.glob("*.json")), "a first finished log", proc)
+    kill(proc)  # the client and its LocalCluster's workers (one process group)
+    finished = len(list(parts.glob("*.json")))
+    total = len(list(f.glob("*/logs/*.log")))
+    again = subprocess.run(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
+                           capture_output=True, text=True, env=env())  # fmt: skip
+    assert again.returncode == 0, again.stderr
+    assert f"{total - finished} logs judged, {finished} already in results" in again.stderr
+    logs = [r["log"] for r in rows(out)]
+    assert sorted(logs) == sorted(p.relative_to(f).as_posix() for p in f.glob("*/logs/*.log"))
