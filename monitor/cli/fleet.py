@@ -57,6 +57,20 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="as `monitor train --isolation` (default sim)",
     )
     r.set_defaults(func=run)
+    rep = sub.add_parser(
+        "report",
+        help="the fleet page: table, health index over time, verdict timeline",
+        description="Read RESULTS/logs.parquet and write DIR/fleet.md with health.png "
+        "(max and p95 of J/eps0 per log and machine, eps0 drawn at 1.0) and timeline.png. "
+        "The trend is Theil-Sen over each machine's last K judged logs; the crossing is the "
+        "number of logs until it reaches 1.0, with its 90 %% interval.",
+    )
+    rep.add_argument("results", type=Path, metavar="RESULTS")
+    rep.add_argument("--out", type=Path, required=True, metavar="DIR")
+    rep.add_argument(
+        "--last", type=int, default=6, metavar="K", help="logs in the trend (default 6)"
+    )
+    rep.set_defaults(func=report)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -73,4 +87,15 @@ def run(args: argparse.Namespace) -> int:
                        say=lambda m: print(m, file=sys.stderr, flush=True))  # fmt: skip
     print(f"fleet: {counts['judged']} logs judged, {counts['skipped']} already in results, "
           f"{counts['rows']} rows in {args.out / 'logs.parquet'}", file=sys.stderr)  # fmt: skip
+    return 0
+
+
+def report(args: argparse.Namespace) -> int:
+    from monitor.errors import ConfigError
+    from monitor.fleet.report import write_report
+
+    if args.last < 3:
+        raise ConfigError("--last must be at least 3 logs")
+    page = write_report(args.results, args.out, args.last)
+    print(f"wrote {page}", file=sys.stderr)
     return 0

@@ -1,0 +1,57 @@
+"""Health index and prognosis per machine, from logs.parquet rows.
+
+The health index of a log is its max and p95 of J / eps0 (1.0 is the alarm threshold).  The
+trend is Theil-Sen (median of pairwise slopes, robust to a few odd logs) over the machine's
+last ``k`` judged logs, in index per log; the prognosis is the number of logs until the fitted
+line reaches 1.0, with the interval from the slope's confidence bounds, or no upward trend.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Prognosis:
+    machine: str
+    logs: int  # judged logs in the fit
+    last_index: float | None  # the newest judged log's max J / eps0
+    slope_per_log: float | None
+    logs_to_alarm: float | None  # None: no upward trend (or too few logs)
+    logs_to_alarm_range: tuple[float, float] | None  # from the slope's 90 % bounds (inf: none)
+
+    @property
+    def text(self) -> str:
+        if self.logs_to_alarm is None:
+            return "no upward trend" if self.logs >= 3 else "too few judged logs"
+        if self.logs_to_alarm <= 0:
+            return "at or above 1.0"
+        lo, hi = self.logs_to_alarm_range or (np.nan, np.inf)
+        hi_s = "no bound" if not np.isfinite(hi) else f"{hi:.0f}"
+        return f"{self.logs_to_alarm:.1f} logs ({lo:.0f}..{hi_s})"
+
+
+def prognosis(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Prognosis:
+    """Theil-Sen over the last ``k`` judged logs of one machine (rows in time order)."""
+    from scipy.stats import theilslopes
+
+    y = [r["max_j_ratio"] for r in rows if r["max_j_ratio"] is not None and not r["error"]]
+    y = np.asarray(y[-k:], dtype=float)
+    last = float(y[-1]) if y.size else None
+    if y.size < 3:
+        return Prognosis(machine, int(y.size), last, None, None, None)
+    x = np.arange(y.size, dtype=float)
+    slope, intercept, lo, hi = theilslopes(y, x, alpha=0.90)
+    if slope <= 0:
+        return Prognosis(machine, int(y.size), last, float(slope), None, None)
+    now = x[-1]
+    level = intercept + slope * now
+
+    def until(s: float) -> float:
+        return float((1.0 - level) / s) if s > 0 else float("inf")
+
+    rng = (max(until(hi), 0.0), until(lo))
+    return Prognosis(machine, int(y.size), last, float(slope), until(slope), rng)

@@ -1,0 +1,136 @@
+"""`monitor fleet report`: the fleet page (Markdown) with its pictures (PNG).
+
+A service manager's minute: the fleet table (last verdict, health index and its trend, the
+predicted crossing, sensor faults), the health index over time per machine with eps0 (1.0)
+drawn, and the verdict timeline (alarm, sensor fault, healthy, not judged, error per log).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import pyarrow.parquet as pq
+
+from monitor.errors import InputFileError
+from monitor.fleet.health import Prognosis, prognosis
+
+_COLOURS = {"fault": "tab:red", "sensor_fault": "tab:orange", "healthy": "tab:green",
+            "not_judged": "0.6"}  # fmt: skip
+
+
+def load_rows(results: Path) -> dict[str, list[dict[str, Any]]]:
+    """logs.parquet rows per machine, each machine's in time (file-name) order."""
+    path = results / "logs.parquet"
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such file (run `monitor fleet run` first)")
+    per: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for r in sorted(pq.read_table(path).to_pylist(), key=lambda r: r["log"]):
+        per[r["machine"]].append(r)
+    return dict(per)
+
+
+def _fmt(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f}"
+
+
+def _table(per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis]) -> list[str]:
+    out = ["| machine | logs | last verdict | health index (last max J/eps0) | trend per log "
+           "| predicted crossing of 1.0 | alarms | sensor faults | errors | model |",
+           "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for mid, rows in per.items():
+        p = progs[mid]
+        last = rows[-1]
+        out.append(
+            f"| {mid} | {len(rows)} | {last['verdict']} | {_fmt(p.last_index)} | "
+            f"{'-' if p.slope_per_log is None else f'{p.slope_per_log:+.3f}'} | {p.text} | "
+            f"{sum(bool(r['alarm']) for r in rows)} | {sum(bool(r['sensor_fault']) for r in rows)}"
+            f" | {sum(r['error'] is not None for r in rows)} | {last['model']} |"
+        )
+    return out
+
+
+def _health_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    n = len(per)
+    cols = min(3, n)
+    nrows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 2.8 * nrows), squeeze=False,
+                             sharey=True)  # fmt: skip
+    for ax, (mid, rows) in zip(axes.flat, per.items(), strict=False):
+        x = list(range(1, len(rows) + 1))
+        ax.plot(x, [r["max_j_ratio"] for r in rows], "o-", label="max J/eps0")
+        ax.plot(x, [r["p95_j_ratio"] for r in rows], "s--", ms=3, label="p95 J/eps0")
+        ax.axhline(1.0, color="tab:red", lw=1, label="eps0 (alarm)")
+        ax.set_title(mid)
+        ax.set_xlim(0.5, len(rows) + 0.5)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_xlabel("log (time order)")
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    axes[0][0].set_ylabel("J / eps0")
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle("Health index per machine (1.0 = alarm threshold)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _timeline_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    fig, ax = plt.subplots(figsize=(8, 0.5 * len(per) + 1.4))
+    for i, (_mid, rows) in enumerate(per.items()):
+        for j, r in enumerate(rows, start=1):
+            if r["error"] is not None:
+                ax.plot(j, i, "kx", ms=9)
+                continue
+            ax.plot(j, i, "s", ms=12, color=_COLOURS.get(r["verdict"], "0.3"))
+            if r["alarm"] and r["sensor_fault"]:
+                ax.plot(j, i, "o", ms=5, color="tab:orange")
+    ax.set_yticks(range(len(per)), list(per))
+    ax.set_xlim(0.5, max(len(r) for r in per.values()) + 0.5)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.invert_yaxis()
+    ax.set_xlabel("log (time order)")
+    handles = [plt.Line2D([], [], marker="s", ls="", color=c, label=v) for v, c in
+               _COLOURS.items()] + [plt.Line2D([], [], marker="x", ls="", color="k",
+                                               label="error")]  # fmt: skip
+    ax.legend(handles=handles, ncol=5, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, 1.25))
+    ax.set_title("Verdict per log (orange dot: sensor fault beside an alarm)", pad=28)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def write_report(results: Path, out: Path, k: int = 6) -> Path:
+    """Write ``out/fleet.md``, ``out/health.png`` and ``out/timeline.png``; the page's path."""
+    per = load_rows(results)
+    progs = {mid: prognosis(mid, rows, k) for mid, rows in per.items()}
+    out.mkdir(parents=True, exist_ok=True)
+    _health_png(per, out / "health.png")
+    _timeline_png(per, out / "timeline.png")
+    lines = ["# Fleet report", "",
+             f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
+             f"max J / eps0 of a log (1.0 raises the alarm); trend: Theil-Sen over the last {k} "
+             "judged logs; crossing: logs until the trend reaches 1.0 (90 % interval).", "",
+             *_table(per, progs), "", "![health index](health.png)", "",
+             "![verdict timeline](timeline.png)", ""]  # fmt: skip
+    errors = [r for rows in per.values() for r in rows if r["error"] is not None]
+    if errors:
+        lines += ["## Logs that could not be judged", ""]
+        lines += [f"- `{r['log']}`: {r['error']}" for r in errors]
+    page = out / "fleet.md"
+    page.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return page
