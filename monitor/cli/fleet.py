@@ -71,6 +71,16 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--last", type=int, default=6, metavar="K", help="logs in the trend (default 6)"
     )
     rep.set_defaults(func=report)
+    b = sub.add_parser(
+        "bench",
+        help="logs/s and frames/s: one process against Dask with 1 and 2 workers",
+        description="Judge every log of FLEET (with the models of a finished run in RESULTS) "
+        "in one process, as a loop of `monitor detect` would, then on a Dask LocalCluster "
+        "of 1 and of 2 workers; print logs/s and frames/s of each, side by side.",
+    )
+    b.add_argument("fleet", type=Path, metavar="FLEET")
+    b.add_argument("--results", type=Path, required=True, metavar="RESULTS")
+    b.set_defaults(func=bench)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -98,4 +108,16 @@ def report(args: argparse.Namespace) -> int:
         raise ConfigError("--last must be at least 3 logs")
     page = write_report(args.results, args.out, args.last)
     print(f"wrote {page}", file=sys.stderr)
+    return 0
+
+
+def bench(args: argparse.Namespace) -> int:
+    import json
+    import os
+
+    from monitor.fleet.bench import bench_fleet
+
+    out = bench_fleet(args.fleet.resolve(), args.results.resolve())
+    out["load_average"] = os.getloadavg()
+    print(json.dumps(out, indent=2))
     return 0
