@@ -90,7 +90,7 @@ def _timeline_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
-    fig, ax = plt.subplots(figsize=(8, 0.5 * len(per) + 1.4))
+    fig, ax = plt.subplots(figsize=(8, 0.5 * len(per) + 1.8))
     for i, (_mid, rows) in enumerate(per.items()):
         for j, r in enumerate(rows, start=1):
             if r["error"] is not None:
@@ -107,8 +107,8 @@ def _timeline_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
     handles = [plt.Line2D([], [], marker="s", ls="", color=c, label=v) for v, c in
                _COLOURS.items()] + [plt.Line2D([], [], marker="x", ls="", color="k",
                                                label="error")]  # fmt: skip
-    ax.legend(handles=handles, ncol=5, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, 1.25))
-    ax.set_title("Verdict per log (orange dot: sensor fault beside an alarm)", pad=28)
+    ax.legend(handles=handles, ncol=5, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2))
+    ax.set_title("Verdict per log (orange dot: sensor fault beside an alarm)")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -1,7 +1,8 @@
 """A simulated fleet in the DESIGN.md layout, with its answer key (`monitor simulate-fleet`).
 
 Each machine's parameters are drawn within +-tolerance of the reference; each day has one oil
-temperature (the oil-viscosity effect makes it matter); one machine's piston seal and one's
+temperature within 35-55 degC (the oil-viscosity effect makes it matter), and the
+commissioning log warms from 30 to 60 degC; one machine's piston seal and one's
 spool wear slowly (severity rising linearly over the days); one machine's flow sensor freezes
 (QP holds its last value) from the middle of the fleet's days on.
 """
@@ -38,6 +39,9 @@ class FleetPlan:
     wear_max: float = 0.6  # severity on the last day
 
 
+_COMMISSIONING_OIL_C = (30.0, 60.0)  # degC at the start and end of the commissioning log
+
+
 def _roles(n: int) -> list[str]:
     roles = ["piston_wear", "spool_wear", "frozen_QP"]
     return [roles[i] if i < len(roles) else "healthy" for i in range(n)]
@@ -63,10 +67,10 @@ def _write(path: Path, rec: Any) -> None:
         write_candump(path, rec)
 
 
-def _one(path: Path, machine: Any, duration_s: float, seed: int, oil_c: float,
+def _one(path: Path, machine: Any, duration_s: float, seed: int, oil_c: tuple[float, float],
          faults: list[Fault], freeze_at_s: float | None) -> None:  # fmt: skip
     commands = make_cycle("boom", duration_s, seed)
-    commands.columns["OilTemp"] = np.full(len(commands), oil_c)
+    commands.columns["OilTemp"] = np.linspace(oil_c[0], oil_c[1], len(commands))
     effects = [parse_effect("oil_viscosity")]
     rec = simulate(commands, machine, faults, effects, seed=seed, rod_pos0_m=0.1)
     if freeze_at_s is not None:
@@ -78,7 +82,7 @@ def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, An
     """Write FLEET folders under ``out`` and ``out/answer_key.json``; returns the key."""
     rng = np.random.default_rng(plan.seed)
     nominal = load_machine()
-    oil = [round(float(rng.uniform(30.0, 60.0)), 1) for _ in range(plan.days)]
+    oil = [round(float(rng.uniform(35.0, 55.0)), 1) for _ in range(plan.days)]
     key: dict[str, Any] = {"plan": plan.__dict__, "oil_temp_c_per_day": oil, "machines": {}}
     for i, role in enumerate(_roles(plan.machines)):
         mid = f"M{i + 1:02d}"
@@ -88,15 +92,17 @@ def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, An
         base = plan.seed * 100_000 + i * 1000
         (out / mid / "commissioning").mkdir(parents=True, exist_ok=True)
         (out / mid / "logs").mkdir(parents=True, exist_ok=True)
+        # Commissioning spans the days' oil temperatures (the machine warms up from cold):
+        # the model's validity range covers them, so no day is unjudged for its temperature.
         _one(out / mid / "commissioning" / "normal.log", machine, plan.commissioning_s, base,
-             40.0, [], None)  # fmt: skip
+             _COMMISSIONING_OIL_C, [], None)  # fmt: skip
         days = []
         for d in range(plan.days):
             sev = plan.wear_max * d / max(plan.days - 1, 1) if role.endswith("_wear") else 0.0
             faults = [Fault(role, sev)] if sev > 0 else []
             freeze = plan.log_s / 2 if role == "frozen_QP" and d >= plan.days // 2 else None
             _one(out / mid / "logs" / f"day{d + 1:02d}.log", machine, plan.log_s,
-                 base + d + 1, oil[d], faults, freeze)  # fmt: skip
+                 base + d + 1, (oil[d], oil[d]), faults, freeze)  # fmt: skip
             days.append({"log": f"{mid}/logs/day{d + 1:02d}.log", "severity": round(sev, 4),
                          "sensor_frozen_from_s": freeze, "oil_temp_c": oil[d]})  # fmt: skip
         key["machines"][mid] = {"role": role, "factors": draw, "days": days}
