@@ -84,7 +84,13 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.errors import ConfigError
     from monitor.fleet.run import RunOptions, run_fleet
+
+    if args.workers < 1:
+        raise ConfigError(f"--workers {args.workers}: at least 1")
+    if not args.fleet.is_dir():
+        raise ConfigError(f"{args.fleet}: no such fleet folder")
 
     opts = RunOptions(
         workers=args.workers,
