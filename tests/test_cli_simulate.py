@@ -54,7 +54,7 @@ def test_simulate_log_decodes_back_to_the_same_signals(tmp_path):
 @pytest.mark.parametrize(
     "args, fragment",
     [
-        (["--duration", "-1"], "duration must be positive"),
+        (["--duration", "-1"], "--duration: must be within 0.01..86400 s, got -1"),
         (["--duration", "5", "--fault", "piston_wear:2"], "outside 0..1"),
         (["--duration", "5", "--fault", "broken_pump:0.5"], "unknown fault 'broken_pump'"),
         (["--duration", "5", "--effect", "magic"], "unknown effect 'magic'"),

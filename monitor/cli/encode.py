@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from monitor.cli._numbers import EPOCH_MAX_S, number
 from monitor.cli._paths import output_file
 from monitor.codec.frames import FrameCodec
 from monitor.codec.logwrite import write_candump
@@ -41,7 +42,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--start-time",
         metavar="S",
-        type=float,
+        type=number(0, EPOCH_MAX_S, unit="s"),
         default=DEFAULT_START_TIME_S,
         help=f"log time of t = 0 [s since the Unix epoch] (default {DEFAULT_START_TIME_S:.0f})",
     )

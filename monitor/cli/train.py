@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from monitor.cli._numbers import WINDOW_MAX, number
 from monitor.cli._paths import output_file
 from monitor.errors import MonitorError
 from monitor.model.spec import PRESETS
@@ -46,7 +47,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--window",
-        type=int,
+        type=number(1, WINDOW_MAX, whole=True),
         default=TrainConfig.window_n,
         metavar="N",
         help=f"J window N in samples (eq. 9; default {TrainConfig.window_n} = "
