@@ -24,6 +24,7 @@ import numpy as np
 from monitor.errors import ModelFileError
 from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import Envelope, envelope_from_patterns
+from monitor.model.filecheck import check_header, read_members
 from monitor.model.grnn import GRNN
 from monitor.model.spec import DGRNNSpec, Normalizer
 from monitor.model.threshold import ThresholdRule
@@ -123,8 +124,7 @@ def load_model(path: str | Path) -> MonitorModel:
     """Load and verify a model file; any problem is a ``ModelFileError`` naming the file."""
     path = Path(path)
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {k: npz[k] for k in npz.files}
+        data = read_members(path)
     except FileNotFoundError:
         raise ModelFileError(f"{path}: no such model file") from None
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
@@ -135,10 +135,13 @@ def load_model(path: str | Path) -> MonitorModel:
     header_bytes = data["header"].tobytes()
     try:
         header = json.loads(header_bytes.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         raise ModelFileError(f"{path}: corrupt model header") from None
+    if not isinstance(header, dict):
+        raise ModelFileError(f"{path}: corrupt model header (not a JSON object)")
     if header.get("format") != MODEL_FORMAT:
-        raise ModelFileError(f"{path}: not a monitor model file (format {header.get('format')!r})")
+        fmt = str(header.get("format"))[:40]
+        raise ModelFileError(f"{path}: not a monitor model file (format {fmt!r})")
     if header.get("version") != MODEL_VERSION:
         raise ModelFileError(
             f"{path}: model file version {header.get('version')!r}; this monitor reads version "
@@ -147,6 +150,7 @@ def load_model(path: str | Path) -> MonitorModel:
     if _checksum(header_bytes, data) != data["checksum"].tobytes().decode("ascii", "replace"):
         raise ModelFileError(f"{path}: checksum mismatch, the model file is corrupt")
     try:
+        check_header(header)
         model = _from_header(header, data)
     except (KeyError, TypeError, ValueError) as exc:
         raise ModelFileError(f"{path}: inconsistent model file ({exc})") from None
