@@ -69,3 +69,13 @@ def test_every_setting_declares_itself_once_with_its_check() -> None:
     meta = {f.name: f.metadata for f in fields(BusConfig)}
     assert meta["bitrate"]["unit"] == "bit/s" and not meta["bitrate"]["check"](5)
     assert meta["queue_frames"]["check"](100) and not meta["queue_frames"]["check"](99)
+
+
+def test_deeply_nested_yaml_is_one_clear_error_not_a_recursion_crash(tmp_path) -> None:
+    from monitor.sim.machine import load_machine
+
+    p = tmp_path / "deep.yaml"
+    p.write_text("bus: " + "[" * 5000 + "]" * 5000 + "\n")
+    for loader in (load_config, load_machine):
+        with pytest.raises(ConfigError, match=r"deep\.yaml: line 1: nested deeper than 32 levels"):
+            loader(p)

@@ -18,6 +18,7 @@ import yaml
 from monitor.errors import ConfigError
 
 MAX_BYTES = 1_000_000
+MAX_DEPTH = 32  # a configuration nests two or three levels
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -28,7 +29,15 @@ class _StrictLoader(yaml.SafeLoader):
             event = self.peek_event()
             raise _Refused(f"line {event.start_mark.line + 1}: YAML aliases (*name) are not "
                            "allowed in a configuration")  # fmt: skip
-        return super().compose_node(parent, index)
+        # PyYAML composes recursively: 5,000 nested brackets would end in a RecursionError.
+        self._depth = getattr(self, "_depth", 0) + 1
+        try:
+            if self._depth > MAX_DEPTH:
+                line = self.peek_event().start_mark.line + 1
+                raise _Refused(f"line {line}: nested deeper than {MAX_DEPTH} levels")
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
 
     def construct_mapping(self, node: Any, deep: bool = False) -> Any:
         seen: set[Any] = set()
