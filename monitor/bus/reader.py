@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import queue
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -102,7 +103,7 @@ def open_bus(cfg: BusConfig, can_filters: list[dict[str, int | bool]] | None = N
         kwargs["can_filters"] = list(can_filters)
     kwargs.update(cfg.options)
     try:
-        return can.ThreadSafeBus(**kwargs)
+        bus = can.ThreadSafeBus(**kwargs)
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         raise BusError(
             f"cannot open CAN bus {cfg.interface}:{cfg.channel}: {exc}"
@@ -112,6 +113,34 @@ def open_bus(cfg: BusConfig, can_filters: list[dict[str, int | bool]] | None = N
                 else ""
             )
         ) from None
+    got = enlarge_receive_buffer(bus)
+    if got is not None:
+        log.debug("%s:%s receive buffer %d bytes", cfg.interface, cfg.channel, got)
+    return bus
+
+
+#: Kernel receive buffer asked for the bus socket: a few seconds of a busy bus.  The default
+#: (~200 kB, a few hundred frames) overflows while a busy controller keeps the reader thread
+#: off the CPU for a fraction of a second, and the kernel drops frames nobody counts.
+RCVBUF_BYTES = 4 << 20
+_SO_RCVBUFFORCE = 33  # Linux: beyond net.core.rmem_max, for a privileged daemon
+
+
+def enlarge_receive_buffer(bus: can.BusABC, size: int = RCVBUF_BYTES) -> int | None:
+    """Ask for a ``size``-byte receive buffer on the bus's socket (socketcan,
+    udp_multicast); the size the kernel granted, or None for a bus without a socket."""
+    sock = getattr(bus, "socket", None)
+    if not isinstance(sock, socket.socket):  # udp_multicast keeps it one level down
+        sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if not isinstance(sock, socket.socket):
+        return None
+    for opt in (_SO_RCVBUFFORCE, socket.SO_RCVBUF):  # unprivileged: up to net.core.rmem_max
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, opt, size)
+            break
+        except OSError:
+            continue
+    return int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
 
 
 @dataclass
@@ -162,6 +191,7 @@ class BusReader:
         self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
         self._last_drop_log = 0.0
         self._heard_until = -float("inf")
+        self._received_at = -float("inf")
 
     def start(self) -> None:
         self._thread.start()
@@ -182,6 +212,12 @@ class BusReader:
         can arrive).  Silence is proven by this, never by a thread that merely got no CPU
         for a while (see monitor.live.pipeline)."""
         return self._clock() if self.link != UP else self._heard_until
+
+    @property
+    def received_at(self) -> float:
+        """Monotonic time at which this thread received its latest frame (stamped on receive,
+        before the queue): the start of any silence the reader can prove."""
+        return self._received_at
 
     @property
     def bus_up(self) -> bool:
@@ -224,6 +260,7 @@ class BusReader:
                 if self.link == DOWN:  # the reopened bus works (bus-off needs more)
                     self._up("receive works again")
                 continue
+            self._received_at = self._clock()
             counts.received += 1
             try:
                 put(msg)

@@ -43,7 +43,14 @@ class Decision(NamedTuple):
 
 
 class Decider:
-    """One alarm machine and the last status; ``decide`` once per sample, in time order."""
+    """One alarm machine and the last status; ``decide`` once per sample, in time order.
+
+    The episode rule lives here, in the one path both detectors take: a fault opens an alarm
+    episode; an inactive or sensor-fault gap of at most ``alarm.episode_gap_samples`` (60 s)
+    inside it does not end it (the fault comes back with the same isolation, no new black
+    box, no new DM1 occurrence); only the clear rule or a longer gap does.  One fault, one
+    episode, live and offline alike.
+    """
 
     def __init__(
         self,

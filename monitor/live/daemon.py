@@ -95,7 +95,8 @@ class Daemon:
         self.pipeline = FramePipeline(self.codec, self.columns, self.loops, self._send,
                                       self._state_change, cfg.bus.silent_s, cfg.bus.time_scale,
                                       lambda: self.reader.heard_until,
-                                      lambda: not self.reader.queue.empty())  # fmt: skip
+                                      lambda: not self.reader.queue.empty(),
+                                      lambda: self.reader.received_at)  # fmt: skip
         self.tx_errors = 0
         self.reloads = 0
         self.loop_mono = time.monotonic()  # last pass of the detector loop (watchdog)

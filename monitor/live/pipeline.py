@@ -12,10 +12,12 @@ Silence is decided from the data, never from a thread that got no CPU for a whil
 * any other frame (a foreign ID, a rejected frame) whose timestamp lies ``bus.silent_s``
   past the last sensor frame proves the sensors silent up to it: the clock runs on to it;
 * with no frame at all, only the reader can prove silence: ``heard_until`` is the start of
-  its latest receive that found nothing (every frame that arrived before is queued).  When
-  that lies ``bus.silent_s`` past the moment the last sensor frame was taken, and nothing
-  waits in the queue, the clock runs on by that proven time.  A backlog in the queue, or a
-  reader starved of CPU, proves nothing and never makes the monitor inactive.
+  its latest receive that found nothing (every frame that arrived before is queued), and
+  ``received_at`` the moment it received its latest frame (stamped by the reader thread at
+  receive time, so no later than the last sensor frame's).  When the first lies
+  ``bus.silent_s`` past the second, and nothing waits in the queue, the clock runs on by that
+  proven time.  Both are the reader's own clock readings: a backlog in the queue, or a
+  detector thread starved of CPU, proves nothing and never makes the monitor inactive.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ class FramePipeline:
         time_scale: float = 1.0,
         heard_until: Callable[[], float] = time.monotonic,
         backlog: Callable[[], bool] = lambda: False,
+        received_at: Callable[[], float] | None = None,
     ) -> None:
         self.codec = codec
         self.loops = loops
@@ -62,8 +65,9 @@ class FramePipeline:
         self._scale = time_scale
         self._heard_until = heard_until
         self._backlog = backlog
+        self._received_at = received_at  # None: no reader, the pipeline stamps frames itself
         self.last_t_s: float | None = None  # sample-clock time of the last row ticked
-        self._last_ok_mono = time.monotonic()  # wall time of the last accepted sensor frame
+        self._last_ok_mono = time.monotonic()  # wall time of the last sensor frame, no reader
         self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
 
     @property
@@ -84,7 +88,8 @@ class FramePipeline:
             return
         ts = self._clock(msg.timestamp)
         self.sampler.feed(ts, d.name, d.values)  # type: ignore[arg-type]
-        self._last_ok_mono = time.monotonic()
+        if self._received_at is None:
+            self._last_ok_mono = time.monotonic()
         self._last_ok_ts = ts
         self._tick_rows(self.sampler.take())
 
@@ -95,7 +100,9 @@ class FramePipeline:
         heard = self._heard_until()  # read before the queue: a frame queued later is pending
         if self._backlog():
             return
-        self._run_clock_on((heard - self._last_ok_mono) / self._scale)
+        # Read after the queue: a frame that came in since is later than ``heard``: no proof.
+        last = self._last_ok_mono if self._received_at is None else self._received_at()
+        self._run_clock_on((heard - last) / self._scale)
 
     def _other_frame(self, bus_ts: float) -> None:
         if self.sampler.started and bus_ts == bus_ts:  # NaN stamps prove nothing
