@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -40,15 +41,26 @@ def write_config(tmp_path: Path, extra: str, base: bool = True, model: Path | No
 
 
 def start_daemon(
-    config: Path, cwd: Path, log_path: Path, env: dict[str, str] | None = None
+    config: Path, cwd: Path, log_path: Path, env: dict[str, str] | None = None, nice: int = 0
 ) -> subprocess.Popen:
-    """``monitor run --config CONFIG`` as a process of this tree, stderr to ``log_path``."""
+    """``monitor run --config CONFIG`` as a process of this tree, stderr to ``log_path``
+    (``nice``: that much lower a priority than this process)."""
     full_env = {**os.environ, "PYTHONPATH": str(REPO), **(env or {})}
     with log_path.open("ab") as err:
         return subprocess.Popen(
             [sys.executable, "-m", "monitor", "run", "--config", str(config)],
             stdin=subprocess.DEVNULL, stderr=err, env=full_env, cwd=cwd,
+            preexec_fn=(lambda: os.nice(nice)) if nice else None,
         )  # fmt: skip
+
+
+def own_udp_port() -> int:
+    """A free UDP port for a udp_multicast run of its own: on Linux a socket bound to a port
+    hears every multicast group any process joined on it, so two runs on different groups
+    but python-can's default port would hear each other."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("", 0))
+        return int(s.getsockname()[1])
 
 
 def wait_for_text(log_path: Path, text: str, proc: subprocess.Popen, timeout_s: float) -> None:

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from live_support import REPO, live_config, replay_settled, run_daemon
+from live_support import REPO, live_config, own_udp_port, replay_settled, run_daemon
 
 from monitor.codec.frames import FrameCodec
 from monitor.codec.j1939.dtc import DEFAULT_FAULT_FMI, DEFAULT_FAULT_SPN
@@ -61,14 +61,14 @@ def test_watch_in_a_terminal_shows_the_bus_and_quits_on_q(tmp_path: Path) -> Non
     cfg = live_config(tmp_path)
     _, _, frames, _ = run_daemon(cfg, replay_settled(LOG))
     ours = [m for m in frames if (m.arbitration_id & 0xFF) == 0xA0]  # our source address
-    session, group = f"watch{os.getpid()}", "239.74.163.7"
-    env = f"PYTHONPATH={REPO}"
+    session, group, port = f"watch{os.getpid()}", "239.74.163.7", own_udp_port()
+    env = f"PYTHONPATH={REPO} CAN_CONFIG='{{\"port\": {port}}}'"
     cmd = (f"{env} {sys.executable} -m monitor watch --interface udp_multicast "
            f"--channel {group}")  # fmt: skip
     subprocess.run(["tmux", "new-session", "-d", "-s", session, "-x", "160", "-y", "30", cmd],
                    check=True)  # fmt: skip
     try:
-        bus = can.Bus(interface="udp_multicast", channel=group)
+        bus = can.Bus(interface="udp_multicast", channel=group, port=port)
         screen = ""
         for _ in range(300):  # until the screen shows the fault (the TUI needs a moment)
             for m in ours[-200:]:
