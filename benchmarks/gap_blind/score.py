@@ -98,11 +98,15 @@ def main(argv=None) -> int:
         return {**k, **judge(k, rep)}
 
     rows = []
-    with ThreadPoolExecutor(max(1, a.jobs)) as ex:
-        for i, row in enumerate(ex.map(one, keys)):
-            rows.append(row)
-            print(f"[{i + 1}/{len(keys)}] {row['file']}: {row['verdict']} "
-                  f"{'ok' if row['ok'] else 'WRONG'}", file=sys.stderr, flush=True)
+    try:
+        with ThreadPoolExecutor(max(1, a.jobs)) as ex:
+            for i, row in enumerate(ex.map(one, keys)):
+                rows.append(row)
+                print(f"[{i + 1}/{len(keys)}] {row['file']}: {row['verdict']} "
+                      f"{'ok' if row['ok'] else 'WRONG'}", file=sys.stderr, flush=True)
+    except KeyError as e:  # the public JSON contract changed: say so, do not score
+        print(f"score: {e.args[0]}", file=sys.stderr)
+        return 2
     summary = summarise(rows)
     a.json.write_text(json.dumps({"summary": summary, "rows": rows}, indent=1))
     print(json.dumps(summary, indent=1))
