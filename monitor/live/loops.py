@@ -180,7 +180,7 @@ def read_loop(path: str | Path, cfg: MonitorConfig, name: str | None) -> Recordi
     """``monitor detect``/``train`` input: loop ``name`` of a log with several loops, or
     (``name`` None) the recording itself."""
     if name is None:
-        return read_recording(path)
+        return read_recording(path, cfg.dbc)  # the config's DBC, as the daemon reads the bus
     if Path(path).is_dir():
         raise InputFileError(f"{path}: is a folder; give a recording (.log or .csv) in it")
     if not Path(path).is_file():
