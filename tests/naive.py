@@ -273,3 +273,18 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
                 break
         result.append(found)
     return np.array([f[0] for f in result]), np.array([f[1] for f in result])
+
+
+def poisson_rate_upper(events, hours, confidence=0.95):
+    """Upper Poisson rate bound by bisection on the Poisson CDF (no scipy)."""
+    k = np.arange(events + 1)
+    log_fact = np.array([math.lgamma(i + 1.0) for i in k])
+
+    def cdf(mu):
+        return float(np.exp(-mu + k * math.log(mu) - log_fact).sum())
+
+    lo, hi = 1e-12, 10.0 * (events + 10)
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cdf(mid) > 1.0 - confidence else (lo, mid)
+    return 0.5 * (lo + hi) / hours

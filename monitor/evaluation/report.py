@@ -11,6 +11,7 @@ import statistics
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+from monitor.evaluation.rates import poisson_rate_upper
 from monitor.evaluation.sim_eval import EvalConfig, ModelUnderTest
 from monitor.signals import FAULT_NAMES
 
@@ -50,8 +51,8 @@ def _false_alarms(runs: Sequence[dict[str, Any]], hours: float, key: str) -> dic
         "alarm_episodes": episodes,
         "runs_with_alarm": sum(r[key] > 0 for r in runs),
         "per_hour": episodes / hours if hours > 0 else None,
-        # With no episode seen, the rate is below 3/hours with 95 % confidence (rule of three).
-        "per_hour_95_upper": (3.0 / hours if episodes == 0 else None) if hours > 0 else None,
+        # One-sided 95 % Poisson bound (about 3/hours with no episode seen: rule of three).
+        "per_hour_95_upper": poisson_rate_upper(episodes, hours) if hours > 0 else None,
     }
 
 
