@@ -28,8 +28,10 @@ def boom_cycle(rng: np.random.Generator, duration_s: float) -> np.ndarray:
     target = np.zeros(n)
     i, k = 0, 0
     while i < n:
-        d = int(rng.uniform(1, 4) * FS_HZ)
         sign = (1, 0, -1, 0)[k % 4]
+        # lowering runs with gravity and is faster than raising: shorter lower phases keep
+        # the boom off its bottom stop most of the time
+        d = int(rng.uniform(1, 2) * FS_HZ) if sign < 0 else int(rng.uniform(1, 4) * FS_HZ)
         target[i:i + d] = sign * rng.uniform(40, 100)
         i, k = i + d, k + 1
     out = np.empty(n)
