@@ -35,7 +35,7 @@ from monitor.sim.effects import Effect
 from monitor.sim.machine import MachineParams
 
 #: Seconds of calibration segments the fits simulate per evaluation.
-FIT_BUDGET_S = 60.0
+FIT_BUDGET_S = 30.0
 #: Trust-region iterations of the tolerance calibration (five factors that trade off
 #: against each other converge slowly: six iterations left a +-5 % machine 20x the noise).
 CAL_ITERATIONS = 15

@@ -96,16 +96,21 @@ def fit(
     costs = [float(np.mean(jac.value(p) ** 2)) for p in points]
     best_u, best_cost = points[int(np.argmin(costs))], min(costs)
     for i in np.argsort(costs, kind="stable")[: max(local_starts, 1)]:
-        jac.reset()
-        res = least_squares(
-            jac.value,
-            points[i],
-            jac=jac,
-            bounds=(np.zeros(len(knobs)), np.ones(len(knobs))),
-            max_nfev=max_iterations,
-            xtol=1e-3,
-            ftol=1e-4,
-        )
+        u = points[i]
+        # A Broyden Jacobian can point the wrong way near a minimum (a secant across it),
+        # where the solver then stalls: a second, shorter round from a fresh one polishes.
+        for budget in (max_iterations, max(2, max_iterations // 2)):
+            jac.reset()
+            res = least_squares(
+                jac.value,
+                u,
+                jac=jac,
+                bounds=(np.zeros(len(knobs)), np.ones(len(knobs))),
+                max_nfev=budget,
+                xtol=1e-3,
+                ftol=1e-4,
+            )
+            u = res.x
         cost = float(np.mean(res.fun**2))
         if cost < best_cost:
             best_u, best_cost = res.x, cost
@@ -114,9 +119,9 @@ def fit(
 
 class _BroydenJacobian:
     """A residual function's Jacobian for ``least_squares``: forward differences (step
-    ``DIFF_STEP``, taken inwards at a bound) at the first point, Broyden's rank-one update
-    from every later point the solver asks at.  Residuals evaluated by the solver are
-    remembered, so the update costs no simulation."""
+    ``DIFF_STEP``, taken inwards at a bound) at the first point, then Broyden's rank-one
+    update from the current point to every point the solver tries (rejected steps
+    included).  Residuals are remembered, so the updates cost no simulation."""
 
     def __init__(self, fun: Callable[[np.ndarray], np.ndarray]):
         self._fun = fun
@@ -129,25 +134,32 @@ class _BroydenJacobian:
         self._j: np.ndarray | None = None
 
     def value(self, u: np.ndarray) -> np.ndarray:
-        key = np.asarray(u, dtype=np.float64).tobytes()
+        u = np.asarray(u, dtype=np.float64)
+        key = u.tobytes()
         if key not in self._seen:
             self._seen[key] = np.asarray(self._fun(u), dtype=np.float64)
+            self._update(u, self._seen[key])
         return self._seen[key]
+
+    def _update(self, u: np.ndarray, f: np.ndarray) -> None:
+        """Broyden's update from the current point to ``u`` (rejected trial steps too)."""
+        if self._j is None or self._x is None or self._f is None:
+            return
+        dx = u - self._x
+        dd = float(dx @ dx)
+        if dd > 0.0:
+            self._j += np.outer(f - self._f - self._j @ dx, dx / dd)
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
         u = np.asarray(u, dtype=np.float64)
         f = self.value(u)
-        if self._j is None or self._x is None or self._f is None:
-            self._j = np.empty((f.size, u.size))
+        if self._j is None:
+            j = np.empty((f.size, u.size))
             for i in range(u.size):
                 h = DIFF_STEP if u[i] + DIFF_STEP <= 1.0 else -DIFF_STEP
                 x = u.copy()
                 x[i] += h
-                self._j[:, i] = (self.value(x) - f) / h
-        else:
-            dx = u - self._x
-            dd = float(dx @ dx)
-            if dd > 0.0:
-                self._j += np.outer(f - self._f - self._j @ dx, dx / dd)
+                j[:, i] = (self.value(x) - f) / h
+            self._j = j
         self._x, self._f = u.copy(), f
         return self._j
