@@ -59,9 +59,9 @@ class BusConfig:
     # A bus that fails (link down, bus-off) is reopened after a delay that starts here and
     # doubles per failed attempt up to reopen_max_s (monitor/bus/recovery.py).
     reopen_initial_s: float = setting(0.1, check=lambda v: 0.001 <= v <= 3600,
-                                      demand="within 0.001..3600", unit="s")  # fmt: skip
+                                      demand="between 0.001 and 3600", unit="s")  # fmt: skip
     reopen_max_s: float = setting(10.0, check=lambda v: 0.001 <= v <= 3600,
-                                  demand="within 0.001..3600", unit="s")  # fmt: skip
+                                  demand="between 0.001 and 3600", unit="s")  # fmt: skip
 
     def __post_init__(self) -> None:
         # The sampler keeps a signal fresh for 3 of its cycles.  A bus whose frames come at
