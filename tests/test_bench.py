@@ -66,9 +66,8 @@ def test_values_are_consistent_with_their_parts(quick):
     assert det["detect_realtime_factor"] == pytest.approx(det["log_s"] / det["detect_s"])
     assert det["alarm"] is True  # the log's fault is found: alarms are part of the timing
     assert det["reference_max_abs_diff_z"] < 1e-6  # the reference did the same work
-    # The daemon alone: its steady RSS below its peak, a warm start faster than a cold one.
+    # The daemon alone: its steady RSS (a median of samples) never above its peak.
     assert 0 < r["daemon_rss_mb"] <= r["daemon_peak_rss_mb"]
-    assert r["daemon_start_s"] < r["first_run_s"]
     assert (out / "b.md").read_text().count("|") > 20
     assert (out / "b.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
