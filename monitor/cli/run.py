@@ -97,6 +97,10 @@ def run(args: argparse.Namespace) -> int:
         notifier.stopping()
         daemon.stop()  # ordered: reader, detector, outputs (fsynced), bus
         notifier.close()
+    if daemon.unwritten:
+        log.error("%d event(s) could not be written to %s (see the errors above)",
+                  daemon.unwritten, cfg.event_log.path)  # fmt: skip
+        return 1
     return 0
 
 

@@ -15,6 +15,7 @@ deque (references to the frames, no copies), after it the frames in batches of
 from __future__ import annotations
 
 import datetime as dt
+import errno
 import logging
 import os
 import time
@@ -29,6 +30,7 @@ import can
 from monitor.config.settings import BlackBoxConfig
 from monitor.errors import ConfigError
 from monitor.io.candump import format_line
+from monitor.live.files import open_append
 from monitor.live.storage import Quota
 from monitor.live.writer import DiskWriter
 
@@ -66,6 +68,7 @@ class BlackBox:
         self._batch: list[can.Message] = []
         self._until_s = 0.0
         self.files: list[Path] = []
+        self._names: set[Path] = set()
         # Writer-thread side: the open file and what it is.
         self._fh: TextIO | None = None
         self._fh_path: Path | None = None
@@ -96,6 +99,9 @@ class BlackBox:
         self.close()
         stamp = dt.datetime.fromtimestamp(bus_time_s, tz=dt.timezone.utc)
         path = self.directory / f"alarm-{stamp:%Y%m%dT%H%M%S.%fZ}-{label}.log"
+        if path in self._names:  # two alarms at one instant (several loops, a clock reset)
+            path = path.with_name(f"{path.stem}-{len(self.files) + 1}.log")
+        self._names.add(path)
         frames = tuple(self._recent)
         self.writer.put_frames(partial(self._start, path, frames), len(frames))
         self._path = path
@@ -133,13 +139,13 @@ class BlackBox:
     def _start(self, path: Path, frames: Sequence[can.Message]) -> None:
         self._finish(self._fh_path)
         try:
-            fh = path.open("w", encoding="ascii", newline="\n")
+            fh, name = _create(path)
         except OSError as exc:
             log.error("black box: cannot write %s: %s", path, exc.strerror)
             return
         self._fh, self._fh_path = fh, path
         self._lines(fh, frames)
-        log.info("black box: %s (%d frames before the alarm)", path, len(frames))
+        log.info("black box: %s (%d frames before the alarm)", name, len(frames))
         self._prune()
         if self.quota is not None:
             self.quota.enforce(recording=path)
@@ -167,3 +173,16 @@ class BlackBox:
                 p.unlink()
             except OSError as exc:
                 log.warning("black box: cannot delete %s: %s", p, exc.strerror)
+
+
+def _create(path: Path) -> tuple[TextIO, Path]:
+    """A new black-box file at ``path``, or beside it if that name is taken (a file left by
+    an earlier run, or something planted there): never through a link, never over a file."""
+    for n in range(100):
+        name = path if n == 0 else path.with_name(f"{path.stem}~{n}.log")
+        try:
+            fd = open_append(name, exclusive=True)
+        except FileExistsError:
+            continue
+        return os.fdopen(fd, "w", encoding="ascii", newline="\n"), name
+    raise FileExistsError(errno.EEXIST, "100 files of that name exist", str(path))

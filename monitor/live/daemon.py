@@ -57,6 +57,7 @@ from monitor.sampling.sampler import Sampler, sensor_filters
 log = logging.getLogger("monitor")
 
 EventHook = Callable[[dict[str, Any]], None]
+_RETRY_S = 5.0  # how often events the disk refused are tried again
 
 
 class Daemon:
@@ -98,6 +99,9 @@ class Daemon:
                                       lambda: not self.reader.queue.empty(),
                                       lambda: self.reader.received_at)  # fmt: skip
         self.tx_errors = 0
+        self.unwritten = 0  # events still not on disk when ``stop`` returned
+        self._disk_errors_sent = 0  # disk_errors at the last MON_Status
+        self._last_retry_mono = 0.0
         self.reloads = 0
         self.loop_mono = time.monotonic()  # last pass of the detector loop (watchdog)
         self.reload_attempts = 0  # reloads finished, successful or not
@@ -178,9 +182,15 @@ class Daemon:
         self.writer.stop(timeout_s)  # drained: every event written and fsynced, files closed
         if self.writer.counts.frames_dropped or self.writer.counts.events_over_bound:
             log.warning("disk writer: %s", self.writer.counts.as_dict())
+        self.unwritten = self.event_log.unwritten + self.event_log.lost + self.writer.pending()
         if self._own_bus:
             self.bus.shutdown()
         log.info("stopped: %s", self.counts())
+
+    @property
+    def disk_errors(self) -> int:
+        """Failed writes, rotations and deletions of the event log and black boxes."""
+        return self.event_log.disk_errors + self.writer.counts.job_errors
 
     def counts(self) -> dict[str, Any]:
         r = self.reader.counts
@@ -198,6 +208,8 @@ class Daemon:
             "alarm_frames": sum(lp.frames.sent for lp in self.loops),
             "alarm_frames_held_back": sum(lp.frames.held_back for lp in self.loops),
             "events": self.event_log.written,
+            "disk_errors": self.disk_errors,
+            "events_unwritten": self.event_log.unwritten,
             "tx_errors": self.tx_errors,
             **diag,
             "error_frames": r.error_frames,
@@ -285,6 +297,13 @@ class Daemon:
         if now - self._last_status_mono < self.cfg.outputs.status_period_s:
             return
         self._last_status_mono = now
+        waiting = self.event_log.unwritten
+        if waiting and now - self._last_retry_mono >= _RETRY_S:  # the disk may be back
+            self._last_retry_mono = now
+            self.writer.put_event(self.event_log.retry)
+        errors = self.disk_errors
+        disk_error = bool(waiting) or errors != self._disk_errors_sent
+        self._disk_errors_sent = errors
         r = self.reader.counts
         rejected = self.codec.counts.rejected_total
         gates = [lp.ticker.gate for lp in self.loops]  # the operating state is shared
@@ -292,7 +311,8 @@ class Daemon:
         rc = self.reader.recovery
         self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
                                       int(gates[0].op_state), oor, check,
-                                      rc.bus_down + rc.bus_off + rc.error_passive))  # fmt: skip
+                                      rc.bus_down + rc.bus_off + rc.error_passive,
+                                      disk_error))  # fmt: skip
 
     def _bus_events(self) -> None:
         events = self.reader.take_events()

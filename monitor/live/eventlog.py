@@ -7,7 +7,10 @@ the highest number is the oldest; only the storage quota (``monitor.live.storage
 rotated files, and never one that holds an unsent alarm.
 
 Every event gets ``seq``, 1, 2, ... per event log: a restart appends and continues from the
-last ``seq`` on disk, which is how an uploader acknowledges events (``monitor.live.storage``).
+last ``seq`` written, kept in ``<event log>.seq`` (and read from the logs' tails), so an
+uploader that moves acknowledged logs away, or a damaged tail, never restarts the numbering
+(``monitor.live.storage`` says how an uploader acknowledges events).  Files are opened
+without following symbolic links (``monitor.live.files``).
 ``stamp`` runs in the detector thread (so a hook sees the record as written); ``write`` and
 ``close`` in the disk writer's (``monitor.live.writer``).
 """
@@ -16,19 +19,37 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import logging
 import os
+import time
+from collections import deque
+from contextlib import suppress
 from pathlib import Path
 from typing import Any
 
 from monitor.bus.recovery import BusEvent
 from monitor.detection.alarm import State
 from monitor.errors import ConfigError
+from monitor.live.files import NO_SPACE, append_all, fsync_dir, open_append, open_small
 from monitor.live.storage import Quota, rotated_logs
 
+log = logging.getLogger(__name__)
+
 _TAIL_BYTES = 64 * 1024  # enough for the last few events
+_ERROR_LOG_S = 5.0  # at most one log line per this many seconds for repeated disk errors
+MAX_PENDING = 100_000  # events held in memory while the disk refuses them (~30 MB)
 
 
 class EventLog:
+    """The event log at ``path``; ``rotate_bytes`` None: never rotated.
+
+    A line the disk refuses (full, failing, read-only) is kept in memory, in ``seq`` order,
+    and written before any later one: at the next event, at ``retry`` and at ``close``.
+    On a full disk the quota first deletes black boxes and acknowledged logs
+    (``Quota.make_room``), then the write is tried again.  ``unwritten`` says how many lines
+    are still waiting; ``disk_errors`` counts every failed write, rotation or ``seq`` update.
+    """
+
     def __init__(
         self, path: Path, rotate_bytes: int | None = None, quota: Quota | None = None
     ) -> None:
@@ -37,20 +58,28 @@ class EventLog:
         self.quota = quota
         self.written = 0
         self.rotations = 0
+        self.disk_errors = 0
+        self.lost = 0  # lines given up beyond MAX_PENDING (logged)
+        self._pending: deque[tuple[int | None, bytes]] = deque()
+        self._last_error_log = -float("inf")
+        self._fd: int | None = None
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            new = not self.path.exists()
-            self._fh = self.path.open("a", encoding="utf-8")
+            new = not os.path.lexists(self.path)
+            self._fd = open_append(self.path)
             if new:  # the file's directory entry must survive a power cut too
-                _fsync_dir(self.path.parent)
+                fsync_dir(self.path.parent)
             elif not _ends_with_newline(self.path):
                 # A line torn by a power cut: end it, so the next event is a line of its own.
-                self._fh.write("\n")
-                self._sync()
-            self.last_seq = self._last_seq_on_disk()
+                append_all(self._fd, b"\n", os.fstat(self._fd).st_size)
+                os.fsync(self._fd)
+            self._seq_fd: int | None = open_small(seq_path(self.path))
+            self.last_seq = max(self._last_seq_on_disk(), _read_seq(self._seq_fd))
         except OSError as exc:
-            raise ConfigError(f"event_log.path: cannot open {self.path}: {exc.strerror}") from None
-        self._size = self.path.stat().st_size
+            raise ConfigError(
+                f"event_log.path: cannot open {exc.filename or self.path}: {exc.strerror}"
+            ) from None
+        self._size = os.fstat(self._fd).st_size
 
     def _last_seq_on_disk(self) -> int:
         for p in (self.path, *reversed(rotated_logs(self.path))):  # newest file first
@@ -59,6 +88,11 @@ class EventLog:
                 return seq
         return 0
 
+    @property
+    def unwritten(self) -> int:
+        """Lines the disk has refused so far and that still wait in memory."""
+        return len(self._pending)
+
     def stamp(self, record: dict[str, Any]) -> dict[str, Any]:
         """Give ``record`` the next ``seq`` (detector thread, before it is queued)."""
         self.last_seq += 1
@@ -66,37 +100,113 @@ class EventLog:
         return record
 
     def write(self, record: dict[str, Any]) -> None:
-        line = json.dumps(record) + "\n"
-        n = len(line.encode("utf-8"))
-        if self.rotate_bytes is not None and self._size and self._size + n > self.rotate_bytes:
-            self._rotate()
-        self._fh.write(line)
-        self._sync()
-        self._size += n
-        self.written += 1
+        """Append ``record`` as a line, after any line still waiting; never raises for a
+        disk error (counted, logged, the line kept for the next try)."""
+        if len(self._pending) >= MAX_PENDING:
+            self._pending.popleft()
+            self.lost += 1
+            log.error("event log: %d events waiting for the disk; the oldest given up "
+                      "(%d lost)", MAX_PENDING, self.lost)  # fmt: skip
+        seq = record.get("seq")
+        self._pending.append((seq if isinstance(seq, int) else None, _line(record)))
+        self.retry()
+
+    def retry(self) -> bool:
+        """Write the lines waiting, in order; True when none is left."""
+        while self._pending:
+            seq, line = self._pending[0]
+            try:
+                self._append(line)
+            except OSError as exc:
+                self._error(f"cannot write event seq {seq} to {self.path}: {exc.strerror}; "
+                            f"{len(self._pending)} event(s) kept in memory")  # fmt: skip
+                return False
+            self._pending.popleft()
+            self.written += 1
+            if seq is not None:
+                self._save_seq(seq)
         if self.quota is not None:
             self.quota.enforce()
+        return True
 
-    def _sync(self) -> None:
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
+    def _append(self, line: bytes) -> None:
+        if self._fd is None:
+            self._fd = open_append(self.path)
+            self._size = os.fstat(self._fd).st_size
+        limit = self.rotate_bytes
+        if limit is not None and self._size and self._size + len(line) > limit:
+            self._rotate()
+        try:
+            append_all(self._fd, line, self._size)
+        except OSError as exc:
+            if exc.errno not in NO_SPACE or self.quota is None or not self.quota.make_room():
+                raise
+            log.warning("event log: disk full; black boxes and acknowledged logs deleted to "
+                        "make room for an event")  # fmt: skip
+            append_all(self._fd, line, self._size)
+        self._size += len(line)
+        os.fsync(self._fd)
+
+    def _save_seq(self, seq: int) -> None:
+        # In place, fixed width: a rewrite of the same 21 bytes needs no new disk block, so
+        # it works on a full disk, and a moved or damaged log cannot restart the numbering.
+        try:
+            os.pwrite(self._seq_fd, b"%020d\n" % seq, 0)
+            os.fsync(self._seq_fd)
+        except OSError as exc:
+            self._error(f"cannot update {seq_path(self.path)}: {exc.strerror}")
 
     def _rotate(self) -> None:
-        self._sync()
-        self._fh.close()
-        for p in rotated_logs(self.path):  # oldest first, so no rename overwrites a file
-            n = int(p.name.rsplit(".", 1)[1])
-            p.rename(p.with_name(f"{self.path.name}.{n + 1}"))
-        self.path.rename(self.path.with_name(self.path.name + ".1"))
-        self._fh = self.path.open("a", encoding="utf-8")
-        _fsync_dir(self.path.parent)
+        """Rename the full file away and start a new one; on failure write on in it."""
+        try:
+            os.fsync(self._fd)
+            for p in rotated_logs(self.path):  # oldest first, so no rename overwrites a file
+                n = int(p.name.rsplit(".", 1)[1])
+                p.rename(p.with_name(f"{self.path.name}.{n + 1}"))
+            self.path.rename(self.path.with_name(self.path.name + ".1"))
+        except OSError as exc:
+            self._error(f"cannot rotate {self.path}: {exc.strerror}; writing on in it")
+            return
+        fd, self._fd = self._fd, None
+        os.close(fd)
         self._size = 0
         self.rotations += 1
+        self._fd = open_append(self.path)  # a failure here leaves it for the next write
+        fsync_dir(self.path.parent)
+
+    def _error(self, message: str) -> None:
+        self.disk_errors += 1
+        now = time.monotonic()
+        if now - self._last_error_log >= _ERROR_LOG_S:
+            self._last_error_log = now
+            log.error("event log: %s (%d disk errors)", message, self.disk_errors)
 
     def close(self) -> None:
-        if not self._fh.closed:
-            self._sync()
-            self._fh.close()
+        """Write what waits (one more try), then close; ``unwritten`` tells what could not."""
+        if self._pending:
+            self.retry()
+        if self._pending:
+            log.error("event log: %d event(s) could not be written to %s", len(self._pending),
+                      self.path)  # fmt: skip
+        for fd in (self._fd, self._seq_fd):
+            if fd is not None:
+                with suppress(OSError):
+                    os.close(fd)
+        self._fd = self._seq_fd = None
+
+
+def seq_path(path: Path) -> Path:
+    """The small file holding the last ``seq`` written to event log ``path``."""
+    return path.with_name(path.name + ".seq")
+
+
+def _line(record: dict[str, Any]) -> bytes:
+    return (json.dumps(record) + "\n").encode("utf-8")
+
+
+def _read_seq(fd: int) -> int:
+    text = os.pread(fd, 64, 0).strip()
+    return int(text) if text.isdigit() and len(text) <= 20 else 0
 
 
 def _ends_with_newline(path: Path) -> bool:
@@ -125,19 +235,6 @@ def _last_seq(path: Path) -> int | None:
         if isinstance(ev, dict) and isinstance(ev.get("seq"), int):
             return ev["seq"]
     return None
-
-
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass  # not every filesystem lets a directory be fsynced
-    finally:
-        os.close(fd)
 
 
 def bus_event_record(

@@ -96,12 +96,15 @@ class AlarmFrames:
         out_of_range: bool = False,
         sensor_check: bool = False,
         bus_events: int = 0,
+        disk_error: bool = False,
     ) -> can.Message:
         """``op_state`` (monitor.detection.opstate.OpState), ``out_of_range`` (outside the model's
         training envelope) and ``sensor_check`` (a named plausibility finding active, even
         while the state shows inactive) go into MON_Status's OpState, OutOfRange and
         SensorCheck; ``bus_events`` (link down, bus-off, error-passive since the start) into
-        the wrapping BusEvents counter."""
+        the wrapping BusEvents counter; ``disk_error`` (a write of the event log or a black
+        box failed since the last MON_Status, or events wait in memory for the disk) into
+        DiskError."""
         # Counters wrap (the DBC says so): a receiver looks at differences.
         values = {
             "State": int(state),
@@ -112,5 +115,6 @@ class AlarmFrames:
             "OutOfRange": int(bool(out_of_range)),
             "SensorCheck": int(bool(sensor_check)),
             "BusEvents": bus_events % 16,
+            "DiskError": int(bool(disk_error)),
         }
         return self.codec.encode_message(STATUS, values, bus_time_s)

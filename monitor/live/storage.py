@@ -31,6 +31,8 @@ import logging
 import re
 from pathlib import Path
 
+from monitor.live.files import read_small
+
 log = logging.getLogger(__name__)
 
 NOT_ALARMS = frozenset({"normal", "inactive"})
@@ -52,15 +54,21 @@ def ack_path(path: Path) -> Path:
 
 
 def acked_seq(path: Path) -> int:
-    """The highest ``seq`` acknowledged for event log ``path`` (0: none)."""
+    """The highest ``seq`` acknowledged for event log ``path`` (0: none).  Read without
+    blocking and without following a link: a FIFO or a device planted there acknowledges
+    nothing."""
     try:
-        text = ack_path(path).read_text(encoding="ascii").strip()
-    except FileNotFoundError:
+        raw = read_small(ack_path(path))
+    except OSError as exc:
+        log.warning("cannot read %s (%s): treating every event as unsent", ack_path(path),
+                    exc.strerror)  # fmt: skip
         return 0
-    except (OSError, UnicodeDecodeError) as exc:
-        log.warning("cannot read %s (%s): treating every event as unsent", ack_path(path), exc)
+    if raw is None:
         return 0
+    text = raw.decode("ascii", "replace").strip()
     try:
+        if not text.isdigit():
+            raise ValueError(text)
         return int(text)
     except ValueError:
         log.warning("%s holds %r, not a whole number: treating every event as unsent",
@@ -111,17 +119,26 @@ class Quota:
             self._alarm_seq[key] = last_alarm_seq(path)
         return self._alarm_seq[key] > acked
 
-    def enforce(self, recording: Path | None = None) -> int:
+    def make_room(self) -> bool:
+        """A full disk and an event to write: delete every file the rules allow (black boxes
+        first, then acknowledged rotated logs); True if anything was deleted."""
+        before = self.deleted_black_boxes + self.deleted_event_logs
+        self.enforce(limit_bytes=0)
+        return self.deleted_black_boxes + self.deleted_event_logs > before
+
+    def enforce(self, recording: Path | None = None, limit_bytes: int | None = None) -> int:
         """Delete files as the module says until they fit; return the bytes in use.
 
-        ``recording``: the black box being written, never deleted.
+        ``recording``: the black box being written, never deleted.  ``limit_bytes``: the
+        target instead of the quota (``make_room``).
         """
+        limit = self.quota_bytes if limit_bytes is None else limit_bytes
         boxes = [(p, _size(p)) for p in self.black_boxes()]
         rotated = [(p, _size(p)) for p in rotated_logs(self.event_log_path)]
         used = sum(s for _, s in boxes) + sum(s for _, s in rotated)
         used += _size(self.event_log_path)
         for p, size in boxes:
-            if used <= self.quota_bytes:
+            if used <= limit:
                 break
             if p == recording:
                 continue
@@ -131,7 +148,7 @@ class Quota:
                 log.info("storage quota: deleted black box %s (%d bytes)", p.name, size)
         acked = None
         for p, size in rotated:
-            if used <= self.quota_bytes:
+            if used <= limit:
                 break
             acked = acked_seq(self.event_log_path) if acked is None else acked
             if self._unsent_alarm(p, acked):
@@ -140,6 +157,8 @@ class Quota:
                 used -= size
                 self.deleted_event_logs += 1
                 log.info("storage quota: deleted event log %s (%d bytes)", p.name, size)
+        if limit_bytes is not None:
+            return used
         over = used > self.quota_bytes
         if over:
             self.over_quota += 1

@@ -61,6 +61,7 @@ class DiskWriter:
         self._stopping = False
         self._exited = False  # the thread has returned (under the lock: no job is missed)
         self._last_drop_log = -float("inf")
+        self._last_error_log = -float("inf")
         self._thread = threading.Thread(target=self._run, name="disk-writer", daemon=True)
 
     def start(self) -> None:
@@ -148,7 +149,13 @@ class DiskWriter:
             job()
         except OSError as exc:  # a full or failing disk must not stop the other writes
             self.counts.job_errors += 1
-            log.error("disk writer: %s (%d write errors)", exc, self.counts.job_errors)
+            now = time.monotonic()
+            if now - self._last_error_log > 5.0:  # a full disk fails every job: not every line
+                self._last_error_log = now
+                log.error("disk writer: %s (%d write errors)", exc, self.counts.job_errors)
+        except Exception:  # nor may any other failure of one job end the thread
+            self.counts.job_errors += 1
+            log.exception("disk writer: a job failed (%d write errors)", self.counts.job_errors)
 
     def _run(self) -> None:
         cond = self._cond
