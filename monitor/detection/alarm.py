@@ -220,6 +220,13 @@ class AlarmMachine:
                 self._enter(State.NORMAL)
         return self.state
 
+    def carry_over(self, old: AlarmMachine) -> None:
+        """A reload: the alarm state, its isolation and its episode go on in this machine
+        (its debounce counts start again: they counted the old model's J)."""
+        self.state, self.fault = old.state, old.fault
+        self.episode_open, self._gap = old.episode_open, old._gap
+        self._episode_fault, self._valid = old._episode_fault, old._valid
+
     def _in_gap(self) -> None:
         """One sample of an open episode outside the fault state; too many close it."""
         if self.episode_open:

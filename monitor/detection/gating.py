@@ -88,6 +88,13 @@ class Gate:
         self.sensor = -1
         self.oor = -1
 
+    def carry_over(self, old: Gate) -> None:
+        """A reload: keep what the rows so far have built up (operating state, plausibility
+        history) when its settings are unchanged; those do not depend on the model."""
+        if old.cfg == self.cfg and old.min_engine_rpm == self.min_engine_rpm:
+            self.tracker, self.plausibility = old.tracker, old.plausibility
+            self.op_state, self.check, self.sensor = old.op_state, old.check, old.sensor
+
     # -- offline --------------------------------------------------------------------------
 
     def series(self, rec: Recording) -> GateSeries:

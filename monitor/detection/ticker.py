@@ -106,6 +106,15 @@ class Ticker:
     def residual(self) -> np.ndarray:
         return self._e
 
+    def carry_over(self, old: Ticker) -> None:
+        """A reload: this ticker (a new model or new settings) goes on from ``old``'s alarm
+        state, status and gating, so a reload never clears an alarm by itself.  Its J window
+        starts empty; while it fills J is NaN and the alarm state holds, and only then does
+        the new model judge (raise, hold or clear by the usual rules)."""
+        self.machine.carry_over(old.machine)
+        self.decider.status = old.decider.status
+        self.gate.carry_over(old.gate)
+
     def tick(self, row: np.ndarray) -> Tick:
         """Advance one sample: ``row`` is a sampler row ``[t, *columns]``."""
         raw, z, e = self._raw, self._z, self._e

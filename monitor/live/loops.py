@@ -12,6 +12,7 @@ exactly ``monitor.sampling.sampler.ROW_COLUMNS``.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -99,6 +100,7 @@ class Loop:
         self.name = lc.name
         self.view = view
         self.model, self.ticker = self.load(lc, cfg, view)
+        self.digest = file_digest(lc.model)  # a reload keeps the ticker if this is unchanged
         self.frames = AlarmFrames(codec, cfg.outputs, lc.alarm_message)
         self.diag: Diagnostics | None = None
         if cfg.j1939.enabled:
@@ -115,10 +117,21 @@ class Loop:
         model = load_model(lc.model)
         return model, Ticker(model, cfg.alarm, cfg.horizon, columns=view, gating=cfg.gating)
 
-    def swap(self, lc: LoopConfig, model: MonitorModel, ticker: Ticker, cfg: MonitorConfig) -> None:
-        """A reload: the new model and ticker; frames and DTC history go on."""
-        self.cfg, self.model, self.ticker = lc, model, ticker
+    def swap(
+        self,
+        lc: LoopConfig,
+        cfg: MonitorConfig,
+        new: tuple[MonitorModel, Ticker, str] | None = None,
+    ) -> None:
+        """A reload: ``new`` (model, ticker, model file digest) takes over from the running
+        ticker's alarm state (``Ticker.carry_over``); None keeps model and ticker.  Frames
+        and DTC history go on."""
+        self.cfg = lc
         self.frames.cfg = cfg.outputs
+        if new is not None:
+            model, ticker, self.digest = new
+            ticker.carry_over(self.ticker)
+            self.model, self.ticker = model, ticker
 
     @property
     def state(self) -> State:
@@ -208,3 +221,12 @@ def wide_recording(cfg: MonitorConfig, recordings: dict[str, Recording]) -> Reco
             if name is not None and rec.has(contract) and name not in columns:
                 columns[name] = rec[contract]
     return Recording(t=first.t, columns=columns, source="+".join(recordings), meta={})
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's bytes: whether a reload brings a different model."""
+    h = hashlib.sha256()
+    with Path(path).open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
