@@ -25,7 +25,7 @@ from monitor.config.settings import BlackBoxConfig
 from monitor.errors import ConfigError
 from monitor.live.blackbox import BlackBox
 from monitor.live.eventlog import EventLog, seq_path
-from monitor.live.storage import Quota, acked_seq, ack_path, rotated_logs
+from monitor.live.storage import Quota, ack_path, acked_seq, rotated_logs
 from monitor.live.writer import DiskWriter
 
 T0 = 1_700_000_000.0
@@ -77,8 +77,9 @@ def _fill(path: Path) -> int:
 
 def _event(i: int) -> dict:
     # Alarms and normals in turn, each about 300 bytes like the daemon's lines.
-    return {"t": i * 1.5, "state": "fault" if i % 2 else "normal", "J": 0.01,
-            "threshold": 0.0012, "fault": "spool_wear" if i % 2 else None, "pad": "x" * 200}  # fmt: skip
+    fault = i % 2 == 1
+    return {"t": i * 1.5, "state": "fault" if fault else "normal", "J": 0.01,
+            "threshold": 0.0012, "fault": "spool_wear" if fault else None, "pad": "x" * 200}
 
 
 def _lines(*paths: Path) -> list[dict]:

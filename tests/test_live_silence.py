@@ -146,6 +146,31 @@ def test_only_the_readers_own_view_runs_the_clock_on(tmp_path: Path) -> None:
         daemon.reader.bus.shutdown()
 
 
+def test_frames_stamped_ahead_of_the_readers_clock_do_not_run_the_clock_on(tmp_path) -> None:
+    """A flood of foreign frames stamped 300 s ahead, received within 0.2 s, then 3 s later
+    by the reader's clock: the sample clock runs on by what the reader saw, not 300 s."""
+    reader = {"heard": float("-inf"), "rx": 1000.0, "backlog": False}
+    pipe, daemon = _pipeline(tmp_path, reader)
+    try:
+        frames = _frames(5.0)
+        for m in frames:
+            pipe.feed(m)
+        t_last = pipe.last_t_s
+        assert t_last is not None
+        ahead = frames[-1].timestamp + 300.0
+        for k in range(200):
+            reader["rx"] = 1000.0 + k * 0.001
+            pipe.feed(can.Message(arbitration_id=0x123, data=bytes(8), is_extended_id=False,
+                                  timestamp=ahead + k))  # fmt: skip
+        assert pipe.last_t_s == t_last  # 0.2 s by the reader's clock: under bus.silent_s
+        reader["rx"] = 1003.0
+        pipe.feed(can.Message(arbitration_id=0x123, data=bytes(8), is_extended_id=False,
+                              timestamp=ahead + 500))  # fmt: skip
+        assert pipe.last_t_s == pytest.approx(t_last + 3.0, abs=0.011)
+    finally:
+        daemon.reader.bus.shutdown()
+
+
 def test_the_reader_stamps_each_frame_when_it_receives_it() -> None:
     ticks = itertools.count(1)
     bus = can.Bus(interface="virtual", channel="silence-stamp")

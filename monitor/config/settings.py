@@ -51,6 +51,11 @@ class OutputConfig:
                                      doc="hard cap on MON_Alarm frames")  # fmt: skip
     status_period_s: float = setting(1.0, check=_POSITIVE, demand="> 0", unit="s",
                                      doc="MON_Status heartbeat (wall clock)")  # fmt: skip
+    frames_max_per_s: float = setting(
+        50.0, check=_POSITIVE, demand="> 0", unit="1/s",
+        doc="hard cap on every frame the monitor sends (alarms, status, J1939), wall clock "
+        "(divided by bus.time_scale below 1); frames over it are dropped and counted",
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)

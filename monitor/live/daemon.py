@@ -100,6 +100,10 @@ class Daemon:
                                       lambda: not self.reader.queue.empty(),
                                       lambda: self.reader.received_at)  # fmt: skip
         self.tx_errors = 0
+        self.tx_capped = 0  # own frames dropped by outputs.frames_max_per_s
+        self._last_cap_log = 0.0
+        # A log replayed faster than real time (time_scale < 1) times its alarms faster too.
+        self._budget = TokenBucket(cfg.outputs.frames_max_per_s / min(1.0, cfg.bus.time_scale))
         self.unwritten = 0  # events still not on disk when ``stop`` returned
         self._disk_errors_sent = 0  # disk_errors at the last MON_Status
         self._last_retry_mono = 0.0
@@ -240,6 +244,7 @@ class Daemon:
             "disk_errors": self.disk_errors,
             "events_unwritten": self.event_log.unwritten,
             "tx_errors": self.tx_errors,
+            "tx_capped": self.tx_capped,
             **diag,
             "error_frames": r.error_frames,
             **self.reader.recovery.as_dict(),
@@ -308,6 +313,14 @@ class Daemon:
     def _send(self, msg: can.Message) -> None:
         if not self.reader.bus_up:  # down or bus-off: it would fail, or block for nothing
             self.tx_errors += 1
+            return
+        if not self._budget.take(time.monotonic()):  # whatever the input, never a flood
+            self.tx_capped += 1
+            now = time.monotonic()
+            if now - self._last_cap_log > 5.0:
+                self._last_cap_log = now
+                log.error("own frames over outputs.frames_max_per_s (%g/s): %d dropped so far",
+                          self.cfg.outputs.frames_max_per_s, self.tx_capped)  # fmt: skip
             return
         try:
             self.bus.send(msg, timeout=0.05)
@@ -437,6 +450,24 @@ class Daemon:
             self.reload_attempts += 1
             log.error("reload of %s still not parsed after %.0f s; given up, keeping the "
                       "running config and model", self.cfg.source, RELOAD_LIMIT_S)  # fmt: skip
+
+
+class TokenBucket:
+    """At most ``rate_per_s`` takes per second on average, bursts of one second's worth."""
+
+    def __init__(self, rate_per_s: float) -> None:
+        self.rate = float(rate_per_s)
+        self.tokens = self.rate
+        self.last: float | None = None
+
+    def take(self, now_s: float) -> bool:
+        if self.last is not None and now_s > self.last:
+            self.tokens = min(self.rate, self.tokens + (now_s - self.last) * self.rate)
+        self.last = now_s
+        if self.tokens < 1.0:
+            return False
+        self.tokens -= 1.0
+        return True
 
 
 class _Reload(NamedTuple):

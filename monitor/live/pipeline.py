@@ -10,7 +10,9 @@ events ``monitor detect`` gives for the file.
 Silence is decided from the data, never from a thread that got no CPU for a while:
 
 * any other frame (a foreign ID, a rejected frame) whose timestamp lies ``bus.silent_s``
-  past the last sensor frame proves the sensors silent up to it: the clock runs on to it;
+  past the last sensor frame proves the sensors silent up to it: the clock runs on to it,
+  but never further than the reader's own clock saw pass since that sensor frame (a
+  sender's timestamps are not trusted beyond the reader's clock);
 * with no frame at all, only the reader can prove silence: ``heard_until`` is the start of
   its latest receive that found nothing (every frame that arrived before is queued), and
   ``received_at`` the moment it received its latest frame (stamped by the reader thread at
@@ -69,6 +71,7 @@ class FramePipeline:
         self.last_t_s: float | None = None  # sample-clock time of the last row ticked
         self._last_ok_mono = time.monotonic()  # wall time of the last sensor frame, no reader
         self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
+        self._last_ok_rx = -float("inf")  # the reader's receive stamp by then (``received_at``)
 
     @property
     def start_time_s(self) -> float | None:
@@ -90,6 +93,8 @@ class FramePipeline:
         self.sampler.feed(ts, d.name, d.values)  # type: ignore[arg-type]
         if self._received_at is None:
             self._last_ok_mono = time.monotonic()
+        else:
+            self._last_ok_rx = self._received_at()
         self._last_ok_ts = ts
         self._tick_rows(self.sampler.take())
 
@@ -106,7 +111,12 @@ class FramePipeline:
 
     def _other_frame(self, bus_ts: float) -> None:
         if self.sampler.started and bus_ts == bus_ts:  # NaN stamps prove nothing
-            self._run_clock_on(self._clock(bus_ts) - self._last_ok_ts)
+            idle = self._clock(bus_ts) - self._last_ok_ts
+            if self._received_at is not None:
+                # A sender's timestamp proves no more time than the reader's own clock saw
+                # pass: a flood stamped ahead must not run the sample clock on.
+                idle = min(idle, (self._received_at() - self._last_ok_rx) / self._scale)
+            self._run_clock_on(idle)
 
     def _run_clock_on(self, idle_s: float) -> None:
         """``idle_s`` sample seconds since the last sensor frame are proven silent."""
