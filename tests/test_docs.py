@@ -39,3 +39,23 @@ def test_readme_links_point_at_files() -> None:
     text = (REPO / "README.md").read_text()
     for target in re.findall(r"\]\(([^)#]+)\)", text):
         assert (REPO / target).exists(), target
+
+
+def test_frame_ids_the_docs_give_are_the_dbcs() -> None:
+    """Every proprietary frame ID (PF 0xFF) written in the README or the docs is one the
+    shipped DBCs define: a candump filter copied from the docs must show frames."""
+    import cantools
+
+    ids = {
+        m.frame_id
+        for name in ("monitor.dbc", "excavator4.dbc")
+        for m in cantools.database.load_file(REPO / "dbc" / name).messages
+    }
+    masks = {0x1FFFFFFF, 0x1FFFFFF0}  # candump masks, not frames
+    wrong = []
+    for doc in DOCS:
+        for token in re.findall(r"\b(?:0x)?([0-9A-Fa-f]{8})\b", doc.read_text()):
+            frame_id = int(token, 16)
+            if (frame_id >> 16) & 0xFF == 0xFF and frame_id not in masks | ids:
+                wrong.append(f"{doc.relative_to(REPO)}: {token}")
+    assert not wrong, wrong
