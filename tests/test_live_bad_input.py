@@ -177,3 +177,29 @@ def test_whole_bus_silent_is_inactive_and_resumes(tmp_path) -> None:
     assert states(events) == ["normal", "inactive", "normal"]
     assert stop_s < events[1]["t"] < stop_s + 0.1
     assert daemon.last_j == daemon.last_j  # window held: J defined 5 s after the restart
+
+
+def test_frames_with_unbelievable_timestamps_are_ignored_and_counted(tmp_path) -> None:
+    """Frames stamped 1e20 s, infinity, NaN or before 1970 among good ones: ignored and
+    counted, the events exactly those of the log without them."""
+    good = frames()
+    stamps = [1e20, float("inf"), float("nan"), -5.0]
+    bad = [
+        can.Message(timestamp=ts, arbitration_id=m.arbitration_id, is_extended_id=True,
+                    data=m.data)
+        for ts, m in zip(stamps, good[1500:1504], strict=True)
+    ]  # fmt: skip
+    _, clean = run_daemon(tmp_path / "a", good)
+    events: list[dict] = []
+    daemon = Daemon(live_config(tmp_path / "b"), on_event=events.append)
+    with can.Bus(interface="virtual", channel=daemon.cfg.bus.channel,
+                 preserve_timestamps=True) as sender:  # fmt: skip
+        daemon.start()
+        try:
+            n = send_all(sender, good[:1500] + bad + good[1500:])
+            wait_until(lambda: daemon.reader.counts.received >= n)
+            settle(daemon, len(good))
+        finally:
+            daemon.stop()
+    assert daemon.error is None and daemon.counts()["bad_timestamps"] == 4
+    assert [(e["t"], e["state"]) for e in events] == [(e["t"], e["state"]) for e in clean]

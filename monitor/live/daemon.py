@@ -245,6 +245,7 @@ class Daemon:
             "events_unwritten": self.event_log.unwritten,
             "tx_errors": self.tx_errors,
             "tx_capped": self.tx_capped,
+            "bad_timestamps": self.pipeline.bad_timestamps,
             **diag,
             "error_frames": r.error_frames,
             **self.reader.recovery.as_dict(),

@@ -39,6 +39,9 @@ from monitor.sampling.sampler import Sampler, hydraulic_messages
 log = logging.getLogger("monitor")
 
 Send = Callable[[can.Message], None]
+#: Latest believable frame timestamp, s since 1970 (year 5138): the bound a candump line's
+#: timestamp has offline too.  Later, negative or NaN stamps are ignored and counted.
+MAX_BUS_TIME_S = 1e11
 OnChange = Callable[[Tick, Loop], None]
 
 
@@ -69,6 +72,7 @@ class FramePipeline:
         self._backlog = backlog
         self._received_at = received_at  # None: no reader, the pipeline stamps frames itself
         self.last_t_s: float | None = None  # sample-clock time of the last row ticked
+        self.bad_timestamps = 0  # frames ignored: a timestamp outside 0..MAX_BUS_TIME_S
         self._last_ok_mono = time.monotonic()  # wall time of the last sensor frame, no reader
         self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
         self._last_ok_rx = -float("inf")  # the reader's receive stamp by then (``received_at``)
@@ -80,6 +84,9 @@ class FramePipeline:
 
     def feed(self, msg: can.Message) -> None:
         """One received frame (the black box has already seen it)."""
+        if not 0.0 <= msg.timestamp <= MAX_BUS_TIME_S:  # NaN too: no time, no sample
+            self.bad_timestamps += 1
+            return
         # A request to all (DA 255) is for every loop's address: no short cut.
         if self._diags and sum([diag.request(msg) for diag in self._diags]):
             return  # a J1939 request for DM1/DM2: answered at the next tick
