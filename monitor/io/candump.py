@@ -33,6 +33,16 @@ _LINE = re.compile(
     r"(?:[ \t]+[RTrt])?"
 )
 
+#: Longest line a log may have.  A CAN FD line with 64 data bytes is some 170 characters, so
+#: a longer one is a binary or corrupt file (a 2 GB sparse file is one line of NULs); refusing
+#: it as soon as it passes the limit keeps the reader's memory bounded.
+MAX_LINE_BYTES = 1000
+#: Timestamps a log may carry: seconds from 0 up to 1e11 (the year 5138), at most
+#: ``MAX_TIMESTAMP_DIGITS`` digits before the point.  A larger one is a corrupt line; taken
+#: as time it would make the sample clock span millennia.
+MAX_TIMESTAMP_S = 1e11
+MAX_TIMESTAMP_DIGITS = 20
+
 
 def format_line(
     timestamp_s: float, channel: str, frame_id: int, extended: bool, data: bytes
@@ -42,13 +52,30 @@ def format_line(
     return f"({timestamp_s:.6f}) {channel} {ident}#{data.hex().upper()}\n"
 
 
-def skip_odd_line(text: str, path: Path, line_no: int, unterminated: bool) -> None:
+def line_problem(text: str) -> str | None:
+    """Why a stripped, non-blank line is not a frame of a candump -L log, or None."""
+    if "\x00" in text:
+        return "NUL bytes, not a text log"
+    if not _LINE.fullmatch(text):
+        return "not a candump -L line"
+    stamp = text[1 : text.index(")")]  # _LINE: "(" digits "." digits ")"
+    whole = stamp.index(".")
+    if whole > MAX_TIMESTAMP_DIGITS:
+        return f"timestamp with {whole} digits before the point (at most {MAX_TIMESTAMP_DIGITS})"
+    if float(stamp) > MAX_TIMESTAMP_S:
+        return f"timestamp {float(stamp):.4g} s out of range (0 to {MAX_TIMESTAMP_S:.0e} s)"
+    return None
+
+
+def skip_odd_line(
+    text: str, path: Path, line_no: int, unterminated: bool, problem: str | None = None
+) -> None:
     """A line that is not a frame: return to skip it, raise ``InputFileError`` otherwise.
 
     Skipped: comment lines (``#`` first, as some loggers write a header) and a torn last
     line: one without its newline, which is what a power cut leaves at the end of a log being
     written (warned once, naming file and line).  Any other malformed line is an error
-    naming file and line.
+    naming file and line; ``problem`` (from ``line_problem``) says what is wrong with it.
     """
     shown = text if len(text) <= 60 else text[:57] + "..."
     if text.startswith("#"):
@@ -57,9 +84,17 @@ def skip_odd_line(text: str, path: Path, line_no: int, unterminated: bool) -> No
         log.warning("%s:%d: torn last line skipped (no newline at the end: the log was cut "
                     "off mid-line): %r", path, line_no, shown)  # fmt: skip
         return
+    problem = problem or "not a candump -L line"
     raise InputFileError(
-        f"{path}:{line_no}: not a candump -L line: {shown!r}"
-        " (expected '(SECONDS) IFACE ID#HEXDATA')"
+        f"{path}:{line_no}: {problem}: {shown!r} (expected '(SECONDS) IFACE ID#HEXDATA')"
+    )
+
+
+def too_long_line(path: Path, line_no: int) -> InputFileError:
+    """The error for a line longer than ``MAX_LINE_BYTES`` (a binary or corrupt file)."""
+    return InputFileError(
+        f"{path}:{line_no}: line longer than {MAX_LINE_BYTES} bytes, not a candump -L log"
+        " (a binary or corrupt file?)"
     )
 
 
@@ -79,11 +114,20 @@ class _CheckedLines:
         self.line_no = 0
 
     def __iter__(self) -> Iterator[str]:
-        for line_no, line in enumerate(self._fh, start=1):
+        line_no = 0
+        while True:
+            # At most the limit (and a CRLF) at a time: one endless line must not be read whole.
+            line = self._fh.readline(MAX_LINE_BYTES + 2)
+            if not line:
+                return
+            line_no += 1
             self.line_no = line_no  # read by _messages when python-can itself fails
+            if len(line) - line.endswith("\n") - line.rstrip("\n").endswith("\r") > MAX_LINE_BYTES:
+                raise too_long_line(self._path, line_no)
             text = line.strip()
-            if text and not _LINE.fullmatch(text):
-                skip_odd_line(text, self._path, line_no, not line.endswith("\n"))
+            problem = line_problem(text) if text else None
+            if problem:
+                skip_odd_line(text, self._path, line_no, not line.endswith("\n"), problem)
                 continue
             yield line
 

@@ -13,6 +13,10 @@ optional ``\\r``) takes the fast path.  Any other line (remote, CAN FD, directio
 tabs, stray text) goes through the line check and python-can's reader, one line at a time,
 so it means what it means in ``read_candump``, and a malformed line raises the same
 ``InputFileError`` naming file and line.
+
+The file is read in chunks, each checked before the next: a line longer than
+``MAX_LINE_BYTES`` or a NUL byte in a whole line stops the read there (a binary file, a
+2 GB sparse file), so refusing it costs one chunk of memory, not the file.
 """
 
 from __future__ import annotations
@@ -26,7 +30,14 @@ import numpy as np
 from can.io.canutils import CAN_ERR_BUSERROR, CAN_ERR_FLAG, CanutilsLogReader
 
 from monitor.errors import InputFileError
-from monitor.io.candump import _LINE, skip_odd_line
+from monitor.io.candump import (
+    MAX_LINE_BYTES,
+    MAX_TIMESTAMP_DIGITS,
+    MAX_TIMESTAMP_S,
+    line_problem,
+    skip_odd_line,
+    too_long_line,
+)
 from monitor.jit import jit
 
 _HEX = np.full(256, -1, dtype=np.int16)
@@ -61,7 +72,7 @@ def read_candump_frames(path: str | Path) -> Frames:
     """All frames of a candump -L log; ``InputFileError`` for a missing file or a bad line."""
     p = Path(path)
     try:
-        raw = p.read_bytes()
+        raw = _read_text(p)
     except OSError as exc:
         raise InputFileError(f"{p}: cannot read: {exc.strerror or exc}") from None
     buf = np.frombuffer(raw, dtype=np.uint8)
@@ -73,6 +84,50 @@ def read_candump_frames(path: str | Path) -> Frames:
     is_fast[fast[good]] = True
     slow = _parse_slow(raw, starts, ends, np.flatnonzero(~is_fast), p)
     return _merge({k: v[good] for k, v in fields.items()}, fast[good], slow)
+
+
+_CHUNK = 1 << 20
+
+
+def _read_text(p: Path) -> bytearray:
+    """The file's bytes, read chunk by chunk and refused at the first line longer than
+    ``MAX_LINE_BYTES`` or the first whole line with a NUL byte (``InputFileError`` naming
+    it).  NULs in an unterminated last line are left to the torn-line rule."""
+    data = bytearray()
+    lines_before = 0  # newlines before the current chunk
+    line_len = 0  # bytes of the current line before the current chunk
+    nul_line = 0  # line number of a NUL not yet followed by a newline
+    with p.open("rb") as fh:
+        while chunk := fh.read(_CHUNK):
+            arr = np.frombuffer(chunk, dtype=np.uint8)
+            nl = np.flatnonzero(arr == 10)
+            lengths = np.diff(nl, prepend=-1 - line_len) - 1  # of the lines ending here
+            before = np.where(nl > 0, arr[nl - 1], data[-1] if data else 10)
+            lengths -= before == 13  # a CR before the LF is not part of the line
+            tail = arr.size - 1 - nl[-1] if nl.size else line_len + arr.size
+            long = np.flatnonzero(lengths > MAX_LINE_BYTES)
+            if long.size:
+                raise too_long_line(p, lines_before + int(long[0]) + 1)
+            if tail > MAX_LINE_BYTES + 1:
+                raise too_long_line(p, lines_before + nl.size + 1)
+            if nul_line and nl.size:
+                raise _nul_line(p, nul_line)
+            nuls = np.flatnonzero(arr == 0)
+            if nuls.size:
+                k = int(np.searchsorted(nl, nuls[0]))  # the NUL's line within the chunk
+                if k < nl.size:
+                    raise _nul_line(p, lines_before + k + 1)
+                nul_line = nul_line or lines_before + k + 1
+            lines_before += nl.size
+            line_len = int(tail)
+            data += chunk
+    if line_len > MAX_LINE_BYTES and data[-1] != 13:  # the unterminated last line
+        raise too_long_line(p, lines_before + 1)
+    return data
+
+
+def _nul_line(p: Path, line_no: int) -> InputFileError:
+    return InputFileError(f"{p}:{line_no}: NUL bytes, not a text log (a candump -L log is text)")
 
 
 @jit
@@ -139,21 +194,25 @@ def _parse_fast(buf, starts, ends, pos) -> tuple[dict[str, np.ndarray], np.ndarr
     fit (it is then read the slow way, which names it if it is malformed)."""
     width = int((pos["sp1"] - starts - 2).max()) if starts.size else 1
     ts, exact, ts_chars, can_id, length, data, good = _fields(
-        buf, starts, ends, pos["sp1"], pos["sp2"], pos["hash"], _HEX, _POW10, max(width, 1)
+        buf, starts, ends, pos["sp1"], pos["sp2"], pos["hash"], _HEX, _POW10, max(width, 1),
+        MAX_TIMESTAMP_DIGITS,
     )
     # Timestamps of 2^53 and more digits: numpy's bytes -> float64, correctly rounded as
     # python-can's float() (the zero padding of shorter ones is not part of an "S" string).
     slow = good & ~exact
     if slow.any():
         ts[slow] = ts_chars[slow].view(f"S{ts_chars.shape[1]}").ravel().astype(np.float64)
+    # Out of range: read the slow way, where line_problem names it.
+    good &= ts <= MAX_TIMESTAMP_S
     out = {"timestamp": ts, "can_id": can_id, "extended": (pos["hash"] - pos["sp2"] - 1) > 3,
            "length": length, "data": data}  # fmt: skip
     return out, good
 
 
 @jit(fastmath=False)  # the timestamp division must round as IEEE says, not reassociate
-def _fields(buf, starts, ends, sp1, sp2, hs, hexval, pow10, width):  # pragma: no cover
-    """Per plain line: timestamp, id, data, and whether its characters fit.
+def _fields(buf, starts, ends, sp1, sp2, hs, hexval, pow10, width, max_whole):  # pragma: no cover
+    """Per plain line: timestamp, id, data, and whether its characters fit (a timestamp of
+    more than ``max_whole`` digits before the point does not).
 
     A timestamp whose digits N (the point dropped) are below 2^53 is N / 10^k with N and
     10^k (k <= 22) exact doubles, and IEEE division rounds the exact quotient once: the
@@ -188,7 +247,7 @@ def _fields(buf, starts, ends, sp1, sp2, hs, hexval, pow10, width):  # pragma: n
                 if digits <= 18:  # fits int64
                     num = num * 10 + (c - 48)
             ts[r, k - a] = c
-        if dots != 1:
+        if dots != 1 or digits - frac > max_whole:
             good[r] = False
         elif digits <= 18 and num < 9007199254740992 and frac < 23:  # N < 2^53
             value[r] = num / pow10[frac]
@@ -211,16 +270,17 @@ def _fields(buf, starts, ends, sp1, sp2, hs, hexval, pow10, width):  # pragma: n
     return value, exact, ts, can_id, length, data, good
 
 
-def _parse_slow(raw: bytes, starts, ends, lines: np.ndarray, path: Path) -> list:
+def _parse_slow(raw: bytes | bytearray, starts, ends, lines: np.ndarray, path: Path) -> list:
     """(line index, Message) for the other lines, through the line check and python-can."""
     out = []
     for i in lines.tolist():
         text = raw[starts[i] : ends[i]].decode("utf-8", errors="replace").strip()
         if not text:
             continue
-        if not _LINE.fullmatch(text):
+        problem = line_problem(text)
+        if problem:
             unterminated = i == len(starts) - 1 and not raw.endswith(b"\n")
-            skip_odd_line(text, path, i + 1, unterminated)
+            skip_odd_line(text, path, i + 1, unterminated, problem)
             continue
         try:
             msgs = list(CanutilsLogReader(io.StringIO(text)))

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -19,6 +20,24 @@ from monitor.io.recording import Recording
 from monitor.signals import CSV_COLUMNS
 
 _MISSING = ("", "nan", "NaN", "NAN")
+
+#: Longest line a CSV may have (a contract row is some 100 characters; text columns may add
+#: notes): a longer one, such as a binary file's, is refused before it is read whole.
+MAX_LINE_CHARS = 1_000_000
+
+
+def _lines(fh: TextIO, p: Path) -> Iterator[str]:
+    """The lines of ``fh`` for ``csv.reader``, each checked as it is read: none longer than
+    ``MAX_LINE_CHARS``, no NUL byte (a binary file)."""
+    line_no = 0
+    while line := fh.readline(MAX_LINE_CHARS + 2):  # and a CR LF
+        line_no += 1
+        if len(line.rstrip("\r\n")) > MAX_LINE_CHARS:
+            raise InputFileError(f"{p}:{line_no}: line longer than {MAX_LINE_CHARS} "
+                                 "characters (a binary or corrupt file?)")  # fmt: skip
+        if "\x00" in line:
+            raise InputFileError(f"{p}:{line_no}: NUL bytes, not a text file")
+        yield line
 
 
 def _bad_value_error(
@@ -66,7 +85,7 @@ def read_csv(path: str | Path) -> Recording:
     p = Path(path)
     try:
         with p.open(newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
+            reader = csv.reader(_lines(fh, p))
             try:
                 header = next(reader)
             except StopIteration:

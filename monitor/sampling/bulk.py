@@ -36,6 +36,8 @@ from monitor.sampling.sampler import (
     TimeCounts,
     hydraulic_messages,
     no_hydraulic_data,
+    row_limit,
+    too_many_rows,
 )
 from monitor.signals import ROD_POS
 
@@ -129,6 +131,8 @@ def recording_from_candump_bulk(
     # Rows emitted before each applied frame: a running maximum over application order.
     first_row = np.maximum.accumulate(np.ceil((st[applied] - _EPS_S) / period)).astype(np.int64)
     n_rows = max(int(first_row[-1]), math.floor((newest + _EPS_S) / period) + 1)
+    if n_rows > row_limit(len(frames)):  # before a row is allocated
+        raise too_many_rows(path, n_rows, len(frames), float(ts.max() - ts.min()), int(tc[2]))
     inst = np.arange(n_rows) * period
 
     seen: set[str] = set()

@@ -22,7 +22,7 @@ def read_recording(path: str | Path, dbc: str | Path | None = None) -> Recording
         return read_csv(path)
     try:
         with path.open("r", encoding="utf-8", errors="replace") as fh:
-            first = fh.readline()
+            first = fh.readline(4096)  # enough to tell; a file of one endless line is not read
     except OSError as exc:
         raise InputFileError(f"{path}: cannot read: {exc.strerror}") from None
     if first.startswith("t,") or ",PP" in first:

@@ -19,6 +19,11 @@ the clock.  The rule:
 * a forward gap longer than ``max_gap_s`` (60 s) is shortened to ``max_gap_s`` of stale
   (NaN) rows and counted, so a clock jump of days cannot allocate millions of rows.
 
+Those rules still let a log ask for rows out of all proportion to its frames (a frame every
+59.9 s is 6,000 rows each; a shuffled log resyncs the clock at every turn), so a log may need
+at most ``row_limit(frames)`` rows: one hour, or 20 rows per frame of the log (a normal log
+needs about 0.3).  More is refused before the rows are allocated (``too_many_rows``).
+
 Rows always stay on one increasing 10 ms grid.  The sampler is fed incrementally
 (``feed``) and hands out the rows that are complete (``advance``/``flush``), so the live
 daemon and the offline replay share it.
@@ -35,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from monitor.codec.frames import FrameCodec
-from monitor.errors import NoHydraulicDataError
+from monitor.errors import InputFileError, NoHydraulicDataError
 from monitor.io.candump import read_candump
 from monitor.io.recording import Recording
 from monitor.signals import ROD_POS, SAMPLE_PERIOD_S, SIGNAL_NAMES
@@ -45,6 +50,32 @@ ROW_COLUMNS: tuple[str, ...] = (*SIGNAL_NAMES, ROD_POS.name)
 
 _EPS_S = 1e-6  # log timestamps have 1 us resolution; absorbs float noise of t0 + k * period
 _NAN = math.nan
+
+#: Rows any log may need: one hour at 100 Hz.
+MIN_ROW_LIMIT = 360_000
+#: Rows per frame of the log a longer one may need (a normal log needs about 0.3).
+ROWS_PER_FRAME = 20
+
+
+def row_limit(frames: int) -> int:
+    """The most rows a log of ``frames`` frames may need."""
+    return max(MIN_ROW_LIMIT, ROWS_PER_FRAME * frames)
+
+
+def too_many_rows(
+    path: str | Path, rows: int, frames: int, span_s: float, resyncs: int
+) -> InputFileError:
+    """The error for a log needing more than ``row_limit(frames)`` rows; ``span_s``: its
+    hydraulic frames' log time from first to last, ``resyncs``: the clock resets followed."""
+    if rows * SAMPLE_PERIOD_S > 2 * span_s + 3600:  # far more time than the log spans
+        why = f"its clock jumps back and forth ({resyncs} resyncs): fix or sort its timestamps"
+    else:
+        why = "it is long and sparse: split it into pieces"
+    return InputFileError(
+        f"{path}: would need {rows} rows of {SAMPLE_PERIOD_S * 1000:g} ms for {frames} frames"
+        f" spanning {span_s:.1f} s of log time, more than the limit of {row_limit(frames)}"
+        f" (an hour, or {ROWS_PER_FRAME} per frame); {why}"
+    )
 
 
 @dataclass
@@ -107,6 +138,11 @@ class Sampler:
     def pending(self) -> int:
         """Number of completed rows waiting in ``take``."""
         return len(self._pending)
+
+    @property
+    def rows(self) -> int:
+        """Rows emitted so far (handed out or pending)."""
+        return self._k
 
     @property
     def width(self) -> int:
@@ -239,25 +275,36 @@ def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) ->
 
     ``meta["counts"]`` holds the log's frame counts: frames read, decoded, ignored
     (unknown id), rejected by reason, counter jumps, and the sampler's time counts.
-    Raises ``InputFileError`` for a malformed line and ``NoHydraulicDataError`` (exit 3)
-    when no valid hydraulic frame of the DBC is in the log.
+    Raises ``InputFileError`` for a malformed line or a log needing more than
+    ``row_limit(frames)`` rows, and ``NoHydraulicDataError`` (exit 3) when no valid
+    hydraulic frame of the DBC is in the log.
     """
     codec = codec or FrameCodec.from_dbc()
     codec.reset_counters()
     sampler = Sampler.for_codec(codec)
     hydraulic = hydraulic_messages(codec)
+    # The frames are known only at the end; the file's lines bound them, so rows beyond
+    # row_limit(lines) are refused anyway and need not be kept.
+    most = row_limit(_count_lines(path))
     chunks: list[np.ndarray] = []
     decode, feed = codec.decode_message, sampler.feed
+    first, last = math.inf, -math.inf
     for msg in read_candump(path):
         d = decode(msg)
         if d.rejection is None and d.name in hydraulic:
             feed(msg.timestamp, d.name, d.values)  # type: ignore[arg-type]
+            first, last = min(first, msg.timestamp), max(last, msg.timestamp)
             if sampler.pending >= 8192:  # lists of floats cost more memory than arrays
-                chunks.append(sampler.take())
+                rows = sampler.take()
+                if sampler.rows <= most:
+                    chunks.append(rows)
     counts = {**codec.counts.as_dict(), **sampler.counts.as_dict()}
     if not sampler.started:
         raise no_hydraulic_data(path, counts)
     chunks.append(sampler.flush())
+    frames = counts["frames"]
+    if sampler.rows > row_limit(frames):
+        raise too_many_rows(path, sampler.rows, frames, last - first, counts["time_resyncs"])
     rows = np.concatenate(chunks)
     columns = {
         name: rows[:, 1 + i]
@@ -270,6 +317,20 @@ def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) ->
         "counts": counts,
     }
     return Recording(t=rows[:, 0], columns=columns, source=str(path), meta=meta)
+
+
+def _count_lines(path: str | Path) -> int:
+    """Lines of a file (an unterminated last one counted), read in chunks; 0 if unreadable
+    (``read_candump`` then says why)."""
+    n, last = 0, b"\n"
+    try:
+        with open(path, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                n += chunk.count(b"\n")
+                last = chunk[-1:]
+    except OSError:
+        return 0
+    return n + (last != b"\n")
 
 
 _ID_MASK_EXT = 0x1FFFFFFF
