@@ -100,7 +100,9 @@ def test_timestamps_bit_identical_to_float(tmp_path):
     rng = np.random.default_rng(3)
     stamps = [f"{rng.integers(0, 10 ** int(rng.integers(1, 11)))}."
               f"{rng.integers(0, 10**6):0{int(rng.integers(1, 10))}d}" for _ in range(3000)]
-    stamps += ["9007199254.740993", "12345678901234567.5", "0.000001", "1700000000.000000"]
+    # 2^53 and more digits (numpy's parse), in range (at most 1e11 s)
+    stamps += ["9007199254.740993", "99999999999.999999", "1700000000.0000001234", "0.000001",
+               "1700000000.000000", "00000000001700000000.5"]
     log = tmp_path / "ts.log"
     log.write_text("".join(f"({s}) can0 123#00\n" for s in stamps))
     got = read_candump_frames(log).timestamp

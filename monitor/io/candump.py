@@ -63,7 +63,8 @@ def line_problem(text: str) -> str | None:
     if whole > MAX_TIMESTAMP_DIGITS:
         return f"timestamp with {whole} digits before the point (at most {MAX_TIMESTAMP_DIGITS})"
     if float(stamp) > MAX_TIMESTAMP_S:
-        return f"timestamp {float(stamp):.4g} s out of range (0 to {MAX_TIMESTAMP_S:.0e} s)"
+        shown = stamp if len(stamp) <= 30 else stamp[:27] + "..."
+        return f"timestamp {shown} s out of range (0 to {MAX_TIMESTAMP_S:.0e} s)".replace("e+", "e")
     return None
 
 

@@ -284,8 +284,8 @@ def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) ->
     sampler = Sampler.for_codec(codec)
     hydraulic = hydraulic_messages(codec)
     # The frames are known only at the end; the file's lines bound them, so rows beyond
-    # row_limit(lines) are refused anyway and need not be kept.
-    most = row_limit(_count_lines(path))
+    # row_limit(lines) are refused anyway and need not be kept (lines counted when needed).
+    most: int | None = None
     chunks: list[np.ndarray] = []
     decode, feed = codec.decode_message, sampler.feed
     first, last = math.inf, -math.inf
@@ -296,7 +296,9 @@ def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) ->
             first, last = min(first, msg.timestamp), max(last, msg.timestamp)
             if sampler.pending >= 8192:  # lists of floats cost more memory than arrays
                 rows = sampler.take()
-                if sampler.rows <= most:
+                if most is None and sampler.rows > MIN_ROW_LIMIT:
+                    most = row_limit(_count_lines(path))
+                if most is None or sampler.rows <= most:
                     chunks.append(rows)
     counts = {**codec.counts.as_dict(), **sampler.counts.as_dict()}
     if not sampler.started:
