@@ -178,12 +178,16 @@ class AlarmMachine:
         e: np.ndarray | None = None,
         regime: int = 0,
         operating: bool = True,
+        running: bool = False,
     ) -> State:
         """``operating`` False: the machine runs outside normal operation (warm-up, see
-        ``monitor.detection.opstate``) and the monitor is inactive as with the engine off."""
+        ``monitor.detection.opstate``) and the monitor is inactive as with the engine off.
+        ``running``: the engine runs whatever ``engine_rpm`` says (it is missing while the
+        pump shows a working machine: ``opstate.silent_source``)."""
         cfg = self.config
         self.raised = False
-        if not (engine_rpm >= cfg.min_engine_rpm and operating):  # NaN engine speed: off
+        # NaN engine speed: off, unless ``running``
+        if not ((running or engine_rpm >= cfg.min_engine_rpm) and operating):
             self._in_gap()
             return self._enter(State.INACTIVE)
         if not inputs_ok:

@@ -18,6 +18,7 @@ import numpy as np
 from monitor.detection.alarm import AlarmConfig, AlarmMachine, Isolator, State
 from monitor.detection.gating import status_keys
 from monitor.detection.opstate import OpState
+from monitor.detection.plausibility import STALE
 
 
 class Status(NamedTuple):
@@ -84,10 +85,11 @@ class Decider:
     ) -> Decision:
         """Step the alarm machine on one sample: ``inputs_ok`` every model signal present,
         ``check`` the plausibility finding (a finding is a sensor fault), ``op_state`` the
-        operating state (warm-up counts as not operating, like the engine off)."""
+        operating state (warm-up counts as not operating, like the engine off).  A ``STALE``
+        finding (EngineSpeed silent, the pump working) counts the engine as running."""
         sensor_ok = inputs_ok and check == 0
         state = self.machine.step(
-            j, sensor_ok, engine_rpm, e, regime, op_state != OpState.WARM_UP
+            j, sensor_ok, engine_rpm, e, regime, op_state != OpState.WARM_UP, check == STALE
         )
         status = Status(state, int(op_state), int(oor), int(check), int(sensor))
         prev = self.status

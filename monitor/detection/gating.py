@@ -4,9 +4,12 @@ One ``Gate`` per detector run holds the three parts (``monitor.detection.opstate
 ``detection.plausibility``, ``model.envelope``) and gives, per sample, the operating state,
 the active sensor finding and the out-of-range signal, either for a whole recording
 (``series``, ``monitor detect``) or one row at a time (``step``, the daemon's ticker) with
-the same numbers.  A sample is *gated* (no prediction is seeded from it and its residual
-does not feed J) when the machine is not in normal operation, a model input is missing, a
-sensor finding is active, or (with ``validity.gate``) an operating signal is out of range.
+the same numbers.  EngineSpeed missing while the pump shows a working machine
+(``opstate.silent_source``) is a finding of its own, ``stale`` on EngineSpeed, named before
+any plausibility finding; the engine then counts as running.  A sample is *gated* (no
+prediction is seeded from it and its residual does not feed J) when the machine is not in
+normal operation, a model input is missing, a sensor finding is active, or (with
+``validity.gate``) an operating signal is out of range.
 """
 
 from __future__ import annotations
@@ -16,8 +19,21 @@ from typing import Any
 
 import numpy as np
 
-from monitor.detection.opstate import OperatingConfig, OpState, OpStateTracker, op_states
-from monitor.detection.plausibility import COLUMNS, Plausibility, PlausibilityConfig, finding
+from monitor.detection.opstate import (
+    OperatingConfig,
+    OpState,
+    OpStateTracker,
+    SilenceTracker,
+    op_states,
+    silent_source,
+)
+from monitor.detection.plausibility import (
+    COLUMNS,
+    STALE,
+    Plausibility,
+    PlausibilityConfig,
+    finding,
+)
 from monitor.io.recording import Recording
 from monitor.model.envelope import Validity, ValidityConfig, model_envelope
 from monitor.model.modelfile import MonitorModel
@@ -35,8 +51,9 @@ class GatingConfig:
 @dataclass
 class GateSeries:
     """Per sample: ``op_state`` (OpState), ``check``/``sensor`` (plausibility finding code
-    and column, 0/-1 for none), ``oor`` (index into ``Validity.signals`` of the signal out
-    of the trained range in normal operation, -1 for none)."""
+    and column, 0/-1 for none; ``STALE`` on EngineSpeed for a silent source), ``oor``
+    (index into ``Validity.signals`` of the signal out of the trained range in normal
+    operation, -1 for none)."""
 
     op_state: np.ndarray
     check: np.ndarray
@@ -69,6 +86,8 @@ class Gate:
         self.min_engine_rpm = float(min_engine_rpm)
         self.tracker = OpStateTracker(min_engine_rpm, cfg.operating)
         self.plausibility = Plausibility(cfg.plausibility, min_engine_rpm)
+        self.silence = SilenceTracker(cfg.plausibility.rest_max_bar, cfg.plausibility.move_flow_lpm)
+        self._engine_col = COLUMNS.index("EngineSpeed")
         self.validity = Validity(model_envelope(model), cfg.validity)
         self.gate_oor = cfg.validity.gate
         # Live rows: [t, *columns] copied into a (1, width + 1) buffer whose last entry is
@@ -83,6 +102,8 @@ class Gate:
             self._val_idx = tuple(pos.get(n, width) for n in self.validity.signals)
             self._engine = pos.get("EngineSpeed", width)
             self._oil = pos.get("OilTemp", width)
+            self._pp = pos.get("PP", width)
+            self._qp = pos.get("QP", width)
         self.op_state = OpState.NORMAL
         self.check = 0
         self.sensor = -1
@@ -103,9 +124,16 @@ class Gate:
         def col(name: str) -> np.ndarray:
             return rec[name] if rec.has(name) else np.full(n, np.nan)
 
-        ops = op_states(col("EngineSpeed"), col("OilTemp"), self.min_engine_rpm,
-                        self.cfg.operating)  # fmt: skip
+        plaus = self.cfg.plausibility
+        engine = col("EngineSpeed")
+        silent = silent_source(engine, col("PP"), col("QP"), plaus.rest_max_bar,
+                               plaus.move_flow_lpm)  # fmt: skip
+        # A silent source is not an engine off: the pump shows the engine running.
+        running = np.where(silent, self.min_engine_rpm, engine)
+        ops = op_states(running, col("OilTemp"), self.min_engine_rpm, self.cfg.operating)
         check, sensor = self.plausibility.series(np.column_stack([col(c) for c in COLUMNS]))
+        check[silent] = STALE
+        sensor[silent] = self._engine_col
         oor = self.validity.series(self.validity_values(rec))
         oor[ops != OpState.NORMAL] = -1
         return GateSeries(ops, check, sensor, oor)
@@ -128,9 +156,13 @@ class Gate:
         """One row ``[t, *columns]``: sets ``op_state``, ``check``/``sensor`` and ``oor``."""
         ext = self._ext_row
         np.copyto(self._ext_head, row)
-        op = self.tracker.step(float(ext[self._engine]), float(ext[self._oil]))
+        engine = float(ext[self._engine])
+        silent = self.silence.step(engine, float(ext[self._pp]), float(ext[self._qp]))
+        op = self.tracker.step(self.min_engine_rpm if silent else engine, float(ext[self._oil]))
         self.check = self.plausibility.step(self._ext, self._plaus_idx)
         self.sensor = self.plausibility.signal
+        if silent:
+            self.check, self.sensor = STALE, self._engine_col
         self.oor = self.validity.check(ext, self._val_idx) if op is OpState.NORMAL else -1
         self.op_state = op
 

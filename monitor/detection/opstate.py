@@ -11,6 +11,18 @@ The model is trained on a running, warm machine, so detection runs only in ``nor
 * ``normal``: otherwise.  A missing OilTemp keeps the last decision; before the first
   reading the machine counts as warm (no evidence of a cold start).
 
+A missing EngineSpeed is not always an engine off: when the message that carries it
+(HYD_Commands) falls silent, or its frames are rejected, while the pump shows a working
+machine, the source is silent, not the machine (``silent_source``).  The pump is working when
+PP is fresh and above ``plausibility.rest_max_bar`` (the reading the rest check allows for a
+stopped pump bled to tank) and QP is fresh and at least ``plausibility.move_flow_lpm`` (the
+flow that counts as moving); the finding then holds while EngineSpeed stays missing and PP
+stays fresh above ``rest_max_bar``, so a boom held at pressure (no flow) does not flap it.
+While it holds, the engine counts as running (``op_states`` and the tracker then decide warm-up
+or normal from OilTemp) and the sample is a sensor fault naming EngineSpeed, check ``stale``
+(``monitor.detection.gating``).  A silence that starts with the pump at rest (no flow), or in
+which PP goes stale too (every message silent) or bleeds to tank, stays ``engine_off``.
+
 MON_Alarm.State shows both non-normal states as ``inactive`` (3); the operating state itself
 goes into MON_Status.OpState (value table = ``OpState``) and the event log's ``op_state``.
 The offline series and the per-tick tracker apply the same comparisons, so ``monitor
@@ -68,6 +80,40 @@ def op_states(
     states = np.where(warm, OpState.NORMAL, OpState.WARM_UP).astype(np.int8)
     states[~running] = OpState.ENGINE_OFF
     return states
+
+
+def silent_source(
+    engine_rpm: np.ndarray, pp_bar: np.ndarray, qp_lpm: np.ndarray, rest_bar: float,
+    flow_lpm: float,
+) -> np.ndarray:
+    """Per sample (bool): EngineSpeed missing while the pump shows a working machine (module
+    docstring); the same decisions as ``SilenceTracker`` sample by sample."""
+    engine = np.asarray(engine_rpm, dtype=np.float64)
+    pp = np.asarray(pp_bar, dtype=np.float64)
+    qp = np.asarray(qp_lpm, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        hold = np.isnan(engine) & (pp > rest_bar)  # NaN PP compares False: not held
+        start = hold & (qp >= flow_lpm)
+    # Held from a start to the end of its run of ``hold``: the last start must come after
+    # the last sample outside ``hold``.
+    idx = np.arange(len(hold))
+    last_start = np.maximum.accumulate(np.where(start, idx, -1)) if len(idx) else idx
+    last_out = np.maximum.accumulate(np.where(hold, -1, idx)) if len(idx) else idx
+    return hold & (last_start > last_out)
+
+
+class SilenceTracker:
+    """``silent_source`` one sample at a time (the live path)."""
+
+    def __init__(self, rest_bar: float, flow_lpm: float) -> None:
+        self.rest_bar = float(rest_bar)
+        self.flow_lpm = float(flow_lpm)
+        self.silent = False
+
+    def step(self, engine_rpm: float, pp_bar: float, qp_lpm: float) -> bool:
+        hold = engine_rpm != engine_rpm and pp_bar > self.rest_bar
+        self.silent = hold and (self.silent or qp_lpm >= self.flow_lpm)
+        return self.silent
 
 
 class OpStateTracker:

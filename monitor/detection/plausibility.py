@@ -267,8 +267,14 @@ class Plausibility:
              self._active, self._misc, self.min_engine_rpm, check, sig)  # fmt: skip
 
 
+#: The gate's finding after the kernel's checks (``monitor.detection.gating``): EngineSpeed
+#: missing while the pump shows a working machine (``opstate.silent_source``).
+STALE = len(CHECKS) + 1
+_NAMES = (*CHECKS, "stale")
+
+
 def finding(check: int, signal: int) -> tuple[str | None, str | None]:
     """(sensor, check name) of a finding code, (None, None) for none."""
     if check <= 0:
         return None, None
-    return COLUMNS[signal], CHECKS[check - 1]
+    return COLUMNS[signal], _NAMES[check - 1]

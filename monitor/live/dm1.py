@@ -1,14 +1,15 @@
 """When the monitor says what over J1939: DM1 on change and every second, DM2 on request.
 
 One ``tick`` per 100 Hz row, after the alarm state machine, on the sample clock (like
-MON_Alarm, so a log replayed at any speed gives the same frames).  The active DTCs follow
-the alarm state: in ``fault`` one DTC for the isolated fault, in ``sensor_fault`` one per
-model signal that is stale (missing) in the row, kept through the recovery debounce; none
-otherwise.  Isolation refines its answer while an alarm lasts and may fall back to
-``unknown`` for a moment: the DTC keeps the last fault it named, so a display sees one
-trouble code per alarm, not a flicker.  A DTC counts one occurrence per episode (a
-stretch with any DTC active) in which it becomes active, since the start, at most 126; one
-that goes inactive joins the previously active DTCs that DM2 reports.
+MON_Alarm, so a log replayed at any speed gives the same frames).  The active DTCs follow the
+alarm state: in ``fault`` one DTC for the isolated fault, in ``sensor_fault`` one per model
+signal that is stale (missing) in the row (and EngineSpeed when the gating names it silent
+while the pump works, FMI ``sensor_fmi`` as for any stale signal), kept through the recovery
+debounce; none otherwise.  Isolation refines its answer while an alarm lasts and may fall back
+to ``unknown`` for a moment: the DTC keeps the last fault it named, so a display sees one
+trouble code per alarm, not a flicker.  A DTC counts one occurrence per episode (a stretch with
+any DTC active) in which it becomes active, since the start, at most 126; one that goes
+inactive joins the previously active DTCs that DM2 reports.
 
 J1939-73: DM1 goes out when the set of active DTCs changes and every second while one is
 active; with none, once on the change and, with ``repeat_when_clear``, every second in the
@@ -109,10 +110,12 @@ class Diagnostics:
         # The DTCs of this sensor fault: one per stale signal (FMI ``sensor_fmi``), or the
         # signal a plausibility check named (FMI per check); kept through the recovery
         # debounce, when the row is whole again and the finding gone.
+        # A silent EngineSpeed (check ``stale``) is named even when the model does not use it.
         stale = np.isnan(row[self._idx])
         signal, check = finding
-        if stale.any():
-            names = (s for s, bad in zip(self._signals, stale, strict=True) if bad)
+        if stale.any() or check == "stale":
+            names = {s for s, bad in zip(self._signals, stale, strict=True) if bad}
+            names |= {signal} if check == "stale" and signal is not None else set()
             self._sensor = {(cfg.sensor_spn[n], cfg.sensor_fmi): self._sensor_lamp for n in names}
         elif signal is not None and check is not None:
             self._sensor = {(cfg.sensor_spn[signal], cfg.check_fmi[check]): self._sensor_lamp}
