@@ -261,6 +261,22 @@ def test_sensor_named_by_a_plausibility_check_gets_its_spn_and_the_check_fmi() -
         J1939Config(enabled=True, check_fmi={"drift": 3})
 
 
+def test_silent_engine_speed_is_named_even_when_the_model_does_not_use_it() -> None:
+    """HYD_Commands silent while the pump works: the gating names EngineSpeed ``stale``;
+    the paper preset's model (QP, PP, PA, PB) has no stale signal of its own to name."""
+    diag = Diagnostics(J1939Config(enabled=True, repeat_when_clear=False), SIGNALS)
+    frames: list[can.Message] = []
+    for k in range(100):
+        t = k * 0.01
+        state = State.NORMAL if k < 30 else State.SENSOR_FAULT if k < 90 else State.NORMAL
+        silent = 30 <= k < 80  # then 0.1 s of recovery debounce, the commands back
+        named = ("EngineSpeed", "stale") if silent else (None, None)
+        stale = ("SpoolCmd", "PumpDispCmd", "EngineSpeed") if silent else ()
+        frames += diag.tick(t, t, state, "", _row(t, stale), named)
+    engine = (520210, 9, 1)  # EngineSpeed's SPN (520192 + 16 + 2), FMI 9 abnormal update rate
+    assert _dm1s(frames) == [(0.0, NO_DTC), (0.3, [engine]), (0.9, NO_DTC)]
+
+
 def test_dm2_and_dm1_answer_requests() -> None:
     diag = Diagnostics(J1939Config(enabled=True, repeat_when_clear=False), SIGNALS)
     before = _drive(diag, [(1.0, State.FAULT, "piston_wear", ()), (1.0, State.NORMAL, "", ())])

@@ -50,7 +50,7 @@ def test_gated_rows_match_detect(model) -> None:
     cols["EngineSpeed"][2000:2600] = 0.0  # machine off for 6 s
     cols["PA"][4000:4150] = np.nan  # one sensor silent 1.5 s
     cols["QP"][5000:5001] = np.nan  # a single stale sample
-    cols["EngineSpeed"][6000:6100] = np.nan  # commands frame stale: engine unknown = off
+    cols["EngineSpeed"][6000:6100] = np.nan  # commands stale < silent_settle_s: engine off
     rec2 = Recording(rec.t, cols, "edited", dict(rec.meta))
     det = detect(model, rec2, CFG.alarm, CFG.horizon)
     js, events = tick_recording(Ticker(model, CFG.alarm, CFG.horizon), rec2)

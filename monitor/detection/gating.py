@@ -37,6 +37,7 @@ from monitor.detection.plausibility import (
 from monitor.io.recording import Recording
 from monitor.model.envelope import Validity, ValidityConfig, model_envelope
 from monitor.model.modelfile import MonitorModel
+from monitor.signals import SAMPLE_PERIOD_S
 
 
 @dataclass(frozen=True)
@@ -86,7 +87,9 @@ class Gate:
         self.min_engine_rpm = float(min_engine_rpm)
         self.tracker = OpStateTracker(min_engine_rpm, cfg.operating)
         self.plausibility = Plausibility(cfg.plausibility, min_engine_rpm)
-        self.silence = SilenceTracker(cfg.plausibility.rest_max_bar, cfg.plausibility.move_flow_lpm)
+        plaus = cfg.plausibility
+        self._settle_n = round(cfg.operating.silent_settle_s / SAMPLE_PERIOD_S)
+        self.silence = SilenceTracker(plaus.rest_max_bar, plaus.move_flow_lpm, self._settle_n)
         self._engine_col = COLUMNS.index("EngineSpeed")
         self.validity = Validity(model_envelope(model), cfg.validity)
         self.gate_oor = cfg.validity.gate
@@ -127,7 +130,7 @@ class Gate:
         plaus = self.cfg.plausibility
         engine = col("EngineSpeed")
         silent = silent_source(engine, col("PP"), col("QP"), plaus.rest_max_bar,
-                               plaus.move_flow_lpm)  # fmt: skip
+                               plaus.move_flow_lpm, self._settle_n)  # fmt: skip
         # A silent source is not an engine off: the pump shows the engine running.
         running = np.where(silent, self.min_engine_rpm, engine)
         ops = op_states(running, col("OilTemp"), self.min_engine_rpm, self.cfg.operating)

@@ -13,15 +13,17 @@ The model is trained on a running, warm machine, so detection runs only in ``nor
 
 A missing EngineSpeed is not always an engine off: when the message that carries it
 (HYD_Commands) falls silent, or its frames are rejected, while the pump shows a working
-machine, the source is silent, not the machine (``silent_source``).  The pump is working when
-PP is fresh and above ``plausibility.rest_max_bar`` (the reading the rest check allows for a
-stopped pump bled to tank) and QP is fresh and at least ``plausibility.move_flow_lpm`` (the
-flow that counts as moving); the finding then holds while EngineSpeed stays missing and PP
-stays fresh above ``rest_max_bar``, so a boom held at pressure (no flow) does not flap it.
-While it holds, the engine counts as running (``op_states`` and the tracker then decide warm-up
-or normal from OilTemp) and the sample is a sensor fault naming EngineSpeed, check ``stale``
-(``monitor.detection.gating``).  A silence that starts with the pump at rest (no flow), or in
-which PP goes stale too (every message silent) or bleeds to tank, stays ``engine_off``.
+machine, the source is silent, not the machine (``silent_source``).  The finding starts once
+EngineSpeed has been missing for ``operating.silent_settle_s`` with PP fresh above
+``plausibility.rest_max_bar`` throughout (the reading the rest check allows for a stopped pump
+bled to tank) and QP fresh at ``plausibility.move_flow_lpm`` or more (the flow that counts as
+moving: the pump turns); it holds while EngineSpeed stays missing and PP fresh above
+``rest_max_bar``, so a boom held at pressure (no flow) does not flap it.  While it holds, the
+engine counts as running (``op_states`` and the tracker then decide warm-up or normal from
+OilTemp) and the sample is a sensor fault naming EngineSpeed, check ``stale``
+(``monitor.detection.gating``).  A silence in which the pump never delivers flow after the
+settle time, in which PP goes stale too (the whole bus silent, as at key-off) or bleeds to
+tank, stays ``engine_off``.
 
 MON_Alarm.State shows both non-normal states as ``inactive`` (3); the operating state itself
 goes into MON_Status.OpState (value table = ``OpState``) and the event log's ``op_state``.
@@ -55,6 +57,9 @@ class OperatingConfig:
 
     warmup_oil_c: float = 30.0  # below: warm-up, monitor inactive (state 3)
     warmup_hysteresis_c: float = 2.0  # cold again only below warmup_oil_c minus this
+    # Long enough that the whole bus going quiet at key-off is not taken for it: messages
+    # stop a cycle or so apart, and the pump stops delivering as the engine spins down.
+    silent_settle_s: float = 1.0  # EngineSpeed missing this long, pump working: sensor fault
 
     def __post_init__(self) -> None:
         if not -40.0 <= self.warmup_oil_c <= 150.0:
@@ -62,6 +67,9 @@ class OperatingConfig:
                               f"{self.warmup_oil_c}")  # fmt: skip
         if self.warmup_hysteresis_c < 0:
             raise ConfigError("operating.warmup_hysteresis_c must be >= 0")
+        if not 0.0 <= self.silent_settle_s <= 60.0:
+            raise ConfigError(f"operating.silent_settle_s must be within 0..60 s, got "
+                              f"{self.silent_settle_s}")  # fmt: skip
 
 
 def op_states(
@@ -83,36 +91,45 @@ def op_states(
 
 
 def silent_source(
-    engine_rpm: np.ndarray, pp_bar: np.ndarray, qp_lpm: np.ndarray, rest_bar: float,
+    engine_rpm: np.ndarray,
+    pp_bar: np.ndarray,
+    qp_lpm: np.ndarray,
+    rest_bar: float,
     flow_lpm: float,
+    settle_n: int,
 ) -> np.ndarray:
     """Per sample (bool): EngineSpeed missing while the pump shows a working machine (module
     docstring); the same decisions as ``SilenceTracker`` sample by sample."""
     engine = np.asarray(engine_rpm, dtype=np.float64)
     pp = np.asarray(pp_bar, dtype=np.float64)
     qp = np.asarray(qp_lpm, dtype=np.float64)
+    idx = np.arange(len(engine))
     with np.errstate(invalid="ignore"):
         hold = np.isnan(engine) & (pp > rest_bar)  # NaN PP compares False: not held
-        start = hold & (qp >= flow_lpm)
-    # Held from a start to the end of its run of ``hold``: the last start must come after
-    # the last sample outside ``hold``.
-    idx = np.arange(len(hold))
-    last_start = np.maximum.accumulate(np.where(start, idx, -1)) if len(idx) else idx
+        flow = qp >= flow_lpm
+    # Samples since the last one outside ``hold`` (the run of it so far, this one included).
     last_out = np.maximum.accumulate(np.where(hold, -1, idx)) if len(idx) else idx
+    start = hold & flow & (idx - last_out > settle_n)
+    # Held from a start to the end of its run of ``hold``.
+    last_start = np.maximum.accumulate(np.where(start, idx, -1)) if len(idx) else idx
     return hold & (last_start > last_out)
 
 
 class SilenceTracker:
     """``silent_source`` one sample at a time (the live path)."""
 
-    def __init__(self, rest_bar: float, flow_lpm: float) -> None:
+    def __init__(self, rest_bar: float, flow_lpm: float, settle_n: int) -> None:
         self.rest_bar = float(rest_bar)
         self.flow_lpm = float(flow_lpm)
+        self.settle_n = int(settle_n)
+        self.run = 0  # samples of ``hold`` in a row
         self.silent = False
 
     def step(self, engine_rpm: float, pp_bar: float, qp_lpm: float) -> bool:
         hold = engine_rpm != engine_rpm and pp_bar > self.rest_bar
-        self.silent = hold and (self.silent or qp_lpm >= self.flow_lpm)
+        self.run = self.run + 1 if hold else 0
+        start = self.run > self.settle_n and qp_lpm >= self.flow_lpm
+        self.silent = hold and (self.silent or start)
         return self.silent
 
 

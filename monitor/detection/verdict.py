@@ -11,6 +11,11 @@ monitor was running (state normal or fault, J finite).  The verdict:
   (engine speed never received), a recording shorter than the window, or the engine off,
   warm-up, outside the model's trained range or missing model signals throughout.
 
+A recording without any EngineSpeed is ``not_judged`` (no commands) even where its samples
+are sensor faults because the pump shows a working machine (``opstate.silent_source``): a
+log recorded without HYD_Commands supports no verdict, whereas the samples say what the
+daemon would have said on the bus.
+
 Data that was never judged is never reported healthy.
 """
 
@@ -48,7 +53,8 @@ def verdict(
     judged_s = round(float(judged.sum()) * period_s, 3)
     if summary["alarm"]:
         return "fault", judged_s, None
-    if summary["sensor_fault"]:
+    no_commands = len(states) > 0 and not np.isfinite(engine_rpm).any()
+    if summary["sensor_fault"] and not no_commands:
         return "sensor_fault", judged_s, None
     if judged.any():
         return "healthy", judged_s, None
