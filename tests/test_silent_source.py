@@ -114,6 +114,28 @@ def test_detect_names_the_silent_commands_instead_of_engine_off(tmp_path: Path) 
                                    "samples": round((90.0 - sf[0]["t"]) / 0.01) + 1}]  # fmt: skip
 
 
+def test_rejected_commands_frames_are_a_silent_source_too(tmp_path: Path) -> None:
+    """A node jamming the ID: HYD_Commands frames still arrive from 30 s but fail their CRC,
+    so EngineSpeed goes stale exactly as if they had stopped."""
+    lines = LOG.read_text().splitlines()
+    t0 = float(lines[0].split()[0].strip("()"))
+    out = []
+    for line in lines:
+        if COMMANDS in line and float(line.split()[0].strip("()")) - t0 >= 30.0:
+            head, data = line.split("#")
+            line = f"{head}#{data[:-2]}{int(data[-2:], 16) ^ 0xFF:02X}"  # CRC byte flipped
+        out.append(line)
+    log = tmp_path / "jammed.log"
+    log.write_text("".join(x + "\n" for x in out))
+    rc, s, events = detect_cli(log, tmp_path)
+    assert rc == 0
+    assert s["rejected"] == {"HYD_Commands": {"crc": 6001}}  # 30.00..90.00 s at 100 Hz
+    sf = [e for e in events if e["state"] == "sensor_fault"]
+    assert [(e["sensor"], e["sensor_check"]) for e in sf] == [("EngineSpeed", "stale")]
+    assert 30.0 + STALE_S + SETTLE_S - 1e-6 <= sf[0]["t"] < 30.0 + STALE_S + SETTLE_S + 1.0
+    assert s["verdict"] == "sensor_fault"
+
+
 def test_the_full_log_still_raises_the_spool_wear_fault(tmp_path: Path) -> None:
     rc, s, events = detect_cli(LOG, tmp_path)
     assert rc == 0
