@@ -30,3 +30,15 @@ def model(shipped_config):
     from monitor.model.modelfile import load_model
 
     return load_model(shipped_config.model)
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    """The fuzz suite's counts (inputs tried per target and how they ended), when it ran."""
+    import sys
+
+    support = sys.modules.get("fuzz_support")
+    lines = support.summary_lines() if support is not None else []
+    if lines:
+        terminalreporter.section("fuzz inputs and outcomes")
+        for line in lines:
+            terminalreporter.write_line(line)

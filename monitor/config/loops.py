@@ -23,6 +23,7 @@ from typing import Any
 
 from monitor.errors import ConfigError
 from monitor.sampling.sampler import ROW_COLUMNS
+from monitor.schema.sections import key_text, shown
 from monitor.signals import ROD_POS
 
 DEFAULT_LOOP = "boom"
@@ -62,7 +63,7 @@ def parse_loops(
         for i, lp in enumerate(loops):
             value = getattr(lp, key)
             if value in seen:
-                raise ConfigError(f"{source}: loops[{i}].{key} {value!r} is also loops"
+                raise ConfigError(f"{source}: loops[{i}].{key} {shown(value)} is also loops"
                                   f"[{seen[value]}]'s; each loop needs its own")  # fmt: skip
             seen[value] = i
     return tuple(loops)
@@ -76,7 +77,7 @@ def _loop(
         raise ConfigError(f"{source}: {where} must be a mapping with name and model")
     unknown = set(item) - set(_KEYS)
     if unknown:
-        raise ConfigError(f"{source}: unknown key {where}.{sorted(map(str, unknown))[0]}; "
+        raise ConfigError(f"{source}: unknown key {where}.{sorted(map(key_text, unknown))[0]}; "
                           f"known: {', '.join(_KEYS)}")  # fmt: skip
     for key in ("name", "model"):
         if key not in item:
@@ -84,31 +85,31 @@ def _loop(
     name = item["name"]
     if not isinstance(name, str) or not _NAME.match(name):
         raise ConfigError(f"{source}: {where}.name must be lower case letters, digits and _ "
-                          f"(starting with a letter, at most 32), got {name!r}")  # fmt: skip
+                          f"(starting with a letter, at most 32), got {shown(name)}")  # fmt: skip
     signals = item.get("signals") or {}
     if not isinstance(signals, dict):
         raise ConfigError(f"{source}: {where}.signals must be a mapping of contract names to "
                           "DBC signal names")  # fmt: skip
     for contract, dbc_name in signals.items():
         if contract not in ROW_COLUMNS:
-            raise ConfigError(f"{source}: {where}.signals: unknown signal {contract!r}; "
+            raise ConfigError(f"{source}: {where}.signals: unknown signal {shown(contract)}; "
                               f"known: {', '.join(ROW_COLUMNS)}")  # fmt: skip
         if dbc_name is None and contract == ROD_POS.name:
             continue  # optional: this loop has no rod position
         if not isinstance(dbc_name, str) or not dbc_name:
             raise ConfigError(f"{source}: {where}.signals.{contract} must be a DBC signal "
-                              f"name, got {dbc_name!r}")  # fmt: skip
+                              f"name, got {shown(dbc_name)}")  # fmt: skip
     targets = [signals.get(c, c) for c in ROW_COLUMNS]
     doubled = sorted({t for t in targets if t is not None and targets.count(t) > 1})
     if doubled:
-        raise ConfigError(f"{source}: {where}.signals: DBC signal {doubled[0]!r} would carry "
+        raise ConfigError(f"{source}: {where}.signals: DBC signal {shown(doubled[0])} would carry "
                           "two of the loop's signals")  # fmt: skip
     alarm = item.get("alarm_message", ALARM_MESSAGE)
     if not isinstance(alarm, str) or not alarm:
         raise ConfigError(f"{source}: {where}.alarm_message must be a DBC message name, "
-                          f"got {alarm!r}")  # fmt: skip
+                          f"got {shown(alarm)}")  # fmt: skip
     sa = item.get("source_address", address)
     if isinstance(sa, bool) or not isinstance(sa, int) or not 0 <= sa <= 253:
         raise ConfigError(f"{source}: {where}.source_address must be a whole number 0..253, "
-                          f"got {sa!r}")  # fmt: skip
+                          f"got {shown(sa)}")  # fmt: skip
     return LoopConfig(name, path_of(item["model"], f"{where}.model"), dict(signals), alarm, sa)

@@ -29,7 +29,7 @@ from monitor.detection.plausibility import PlausibilityConfig
 from monitor.errors import ConfigError
 from monitor.model.envelope import ValidityConfig
 from monitor.resources import resource_path
-from monitor.schema.sections import setting, typed
+from monitor.schema.sections import keys_text, setting, shown, typed
 from monitor.schema.yamlfile import read_yaml
 
 
@@ -193,7 +193,7 @@ _TOP_KEYS = {
 
 def _path(value: Any, key: str, base: Path, source: Path) -> Path:
     if not isinstance(value, str) or not value:
-        raise ConfigError(f"{source}: {key} must be a file path, got {value!r}")
+        raise ConfigError(f"{source}: {key} must be a file path, got {shown(value)}")
     p = Path(value)
     p = p if p.is_absolute() else base / p
     if not p.is_file():
@@ -210,7 +210,7 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
     unknown = set(data) - _TOP_KEYS
     if unknown:
         raise ConfigError(
-            f"{source}: unknown key(s) {', '.join(sorted(map(str, unknown)))}; "
+            f"{source}: unknown key(s) {keys_text(unknown)}; "
             f"known: {', '.join(sorted(_TOP_KEYS))}"
         )
     base = source.parent

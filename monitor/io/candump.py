@@ -146,7 +146,9 @@ def read_candump(path: str | Path) -> Iterator[can.Message]:
     p = Path(path)
     try:
         # errors="replace": a binary or non-ASCII line becomes a line error, not a crash.
-        fh = p.open("r", encoding="utf-8", errors="replace")
+        # newline="\n": lines end at LF only (a CR LF's CR is stripped with the line), as in
+        # the bulk reader; a lone CR is inside a line, which is then malformed.
+        fh = p.open("r", encoding="utf-8", errors="replace", newline="\n")
     except OSError as exc:
         raise InputFileError(f"{p}: cannot read: {exc.strerror or exc}") from None
     return _messages(_CheckedLines(fh, p), p)

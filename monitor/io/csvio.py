@@ -40,6 +40,11 @@ def _lines(fh: TextIO, p: Path) -> Iterator[str]:
         yield line
 
 
+def _shown(text: str) -> str:
+    """``text`` quoted for a message, cut to 60 characters (a field may hold 128 k)."""
+    return repr(text if len(text) <= 60 else text[:57] + "...")
+
+
 def _bad_value_error(
     path: Path, name: str, values: list[str], lines: list[int]
 ) -> InputFileError | None:
@@ -51,9 +56,13 @@ def _bad_value_error(
         try:
             x = float(text)
         except ValueError:
-            return InputFileError(f"{path}:{line}: column {name!r}: {value!r} is not a number")
+            return InputFileError(
+                f"{path}:{line}: column {_shown(name)}: {_shown(value)} is not a number"
+            )
         if math.isinf(x):
-            return InputFileError(f"{path}:{line}: column {name!r}: {value!r} is not finite")
+            return InputFileError(
+                f"{path}:{line}: column {_shown(name)}: {_shown(value)} is not finite"
+            )
     return None
 
 
@@ -69,7 +78,8 @@ def _to_float(path: Path, name: str, values: list[str], lines: list[int]) -> np.
         err = _bad_value_error(path, name, values, lines)
         if err is not None:
             raise err
-        raise InputFileError(f"{path}: column {name!r}: unreadable numbers")  # pragma: no cover
+        # pragma: no cover
+        raise InputFileError(f"{path}: column {_shown(name)}: unreadable numbers")
     return arr
 
 
@@ -116,12 +126,14 @@ def read_csv(path: str | Path) -> Recording:
 
     dupes = sorted({h for h in header if header.count(h) > 1})
     if dupes:
-        raise InputFileError(f"{p}:{header_line}: duplicate column(s) {', '.join(dupes)}")
+        raise InputFileError(
+            f"{p}:{header_line}: duplicate column(s) {_shown(', '.join(dupes))}"
+        )
     missing = [c for c in CSV_COLUMNS if c not in header]
     if missing:
         raise InputFileError(
             f"{p}:{header_line}: missing required column(s) {', '.join(missing)}"
-            f" (header: {','.join(header)})"
+            f" (header: {_shown(','.join(header))})"
         )
     if not rows:
         raise InputFileError(f"{p}: no data rows after the header")

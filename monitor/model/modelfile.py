@@ -120,6 +120,13 @@ def save_model(path: str | Path, model: MonitorModel) -> None:
         )
 
 
+def _brief(exc: BaseException) -> str:
+    """An exception's text for a one-line message: whitespace folded, cut to 120 characters
+    (a check may quote a whole header section)."""
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
 def load_model(path: str | Path) -> MonitorModel:
     """Load and verify a model file; any problem is a ``ModelFileError`` naming the file."""
     path = Path(path)
@@ -128,7 +135,7 @@ def load_model(path: str | Path) -> MonitorModel:
     except FileNotFoundError:
         raise ModelFileError(f"{path}: no such model file") from None
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise ModelFileError(f"{path}: not a monitor model file ({exc})") from None
+        raise ModelFileError(f"{path}: not a monitor model file ({_brief(exc)})") from None
     missing = [k for k in ("header", "checksum", *_ARRAYS) if k not in data]
     if missing:
         raise ModelFileError(f"{path}: not a monitor model file (missing {', '.join(missing)})")
@@ -152,10 +159,12 @@ def load_model(path: str | Path) -> MonitorModel:
     try:
         check_header(header)
         model = _from_header(header, data)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ModelFileError(f"{path}: inconsistent model file ({exc})") from None
-    if model.envelope is None:
-        model.envelope = envelope_from_patterns(model)
+        derived = model.envelope is None
+        if derived:  # in the try: it relies on the normalizer's names matching the spec
+            model.envelope = envelope_from_patterns(model)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise ModelFileError(f"{path}: inconsistent model file ({_brief(exc)})") from None
+    if derived and model.envelope is not None:
         log.info(
             "%s: no stored training envelope (a model file from before it existed); validity "
             "ranges derived from its patterns: %s", path,

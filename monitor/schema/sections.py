@@ -17,6 +17,26 @@ from typing import Any
 
 from monitor.errors import ConfigError
 
+
+def shown(v: Any, limit: int = 60) -> str:
+    """``repr`` of a value for a message, cut to ``limit`` characters (a YAML value may be a
+    megabyte, and a message is one line)."""
+    r = repr(v)
+    return r if len(r) <= limit else r[: limit - 3] + "..."
+
+
+def key_text(k: Any) -> str:
+    """A key for a message: as written when short and printable, else quoted and cut."""
+    s = str(k)
+    return s if s.isprintable() and len(s) <= 40 else shown(s, 40)
+
+
+def keys_text(keys: Any) -> str:
+    """Keys for a message, sorted, at most five named."""
+    names = sorted(map(key_text, keys))
+    more = f", ... ({len(names)} in all)" if len(names) > 5 else ""
+    return ", ".join(names[:5]) + more
+
 Check = Callable[[Any], bool]
 
 
@@ -102,12 +122,14 @@ def typed(cls: type, sec: Any, name: str, source: Path | str) -> Any:
     for key, raw in sec.items():
         f = known.get(key)
         if f is None:
-            raise ConfigError(f"{source}: unknown key {name}.{key}; known: {', '.join(known)}")
+            raise ConfigError(
+                f"{source}: unknown key {name}.{key_text(key)}; known: {', '.join(known)}"
+            )
         v = value(_kind(f.type), raw, f"{name}.{key}", source)
         check = f.metadata.get("check")
         if check is not None and not check(v):
             demand = f.metadata.get("demand") or "valid"
-            raise ConfigError(f"{source}: {name}.{key} must be {demand}, got {raw!r}")
+            raise ConfigError(f"{source}: {name}.{key} must be {demand}, got {shown(raw)}")
         values[key] = v
     try:
         return cls(**values)

@@ -15,7 +15,7 @@ from typing import Any
 
 from monitor.errors import ConfigError
 from monitor.resources import resource_path
-from monitor.schema.sections import value
+from monitor.schema.sections import key_text, shown, value
 from monitor.schema.yamlfile import read_yaml
 
 BAR = 1e5  # Pa
@@ -121,16 +121,20 @@ def machine_from_mapping(data: Any, source: str = "<config>") -> MachineParams:
     values: dict[str, Any] = {}
     for section, content in data.items():
         if section not in _KEYS:
-            raise ConfigError(f"{source}: unknown section {section!r}; known: {', '.join(_KEYS)}")
+            raise ConfigError(
+                f"{source}: unknown section {shown(section)}; known: {', '.join(_KEYS)}"
+            )
         if not isinstance(content, dict):
-            raise ConfigError(f"{source}: section {section!r} must be a mapping")
+            raise ConfigError(f"{source}: section {shown(section)} must be a mapping")
         for key, raw in content.items():
             if (section, key) in _BOOL_KEYS:
                 values[_BOOL_KEYS[section, key]] = value("bool", raw, f"{section}.{key}", source)
                 continue
             if key not in _KEYS[section]:
                 known = ", ".join([*_KEYS[section], *(k for s, k in _BOOL_KEYS if s == section)])
-                raise ConfigError(f"{source}: unknown key {section}.{key}; known: {known}")
+                raise ConfigError(
+                    f"{source}: unknown key {section}.{key_text(key)}; known: {known}"
+                )
             name, factor, low, high = _KEYS[section][key]
             raw = value("float", raw, f"{section}.{key}", source)  # a finite number
             if not low <= raw <= high:
