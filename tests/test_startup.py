@@ -4,8 +4,10 @@ error and `monitor replay` never load numba or scipy (seconds and ~100 MB on a c
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -47,12 +49,75 @@ def test_help_and_argument_errors_load_no_numba_or_scipy(argv: list[str]) -> Non
     assert heavy == [], out.stderr
 
 
-def test_warm_up_fills_the_cache_so_the_next_start_compiles_nothing(tmp_path) -> None:
-    env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+@pytest.fixture(scope="module")
+def warm(tmp_path_factory) -> tuple[list[str], Path]:
+    """``monitor warm-up`` twice into a cache of its own: (stderr of each run, cache dir)."""
+    cache = tmp_path_factory.mktemp("warm") / "cache"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
     runs = [subprocess.run([sys.executable, "-m", "monitor", "warm-up"], capture_output=True,
                            text=True, env=env, check=True).stderr for _ in range(2)]  # fmt: skip
-    first, second = (r.strip().splitlines()[-1] for r in runs)
+    return runs, cache
+
+
+def _line(stderr: str, text: str) -> str:
+    return next(line for line in stderr.splitlines() if text in line)
+
+
+def test_warm_up_fills_the_cache_so_the_next_start_compiles_nothing(warm) -> None:
+    runs, cache = warm
+    first, second = (_line(r, "signatures loaded from the cache") for r in runs)
     assert "0 signatures loaded from the cache" in first and " 0 compiled" not in first
     assert " 0 compiled" in second, second
-    assert str(tmp_path / "cache") in second
-    assert any((tmp_path / "cache").rglob("*.nbi"))  # numba's cache index files
+    assert str(cache) in second
+    assert any(cache.rglob("*.nbi"))  # numba's cache index files
+
+
+# A process that ticks the rows of the spool-wear log (read here: the bulk reader is numba's)
+# the way the daemon does and says whether it loaded numba.
+TICKS = """
+import json, sys
+import numpy as np
+from monitor.config.settings import load_config
+from monitor.detection.ticker import Ticker, event
+from monitor.model.modelfile import load_model
+cfg = load_config()
+ticker = Ticker(load_model(cfg.model), cfg.alarm, cfg.horizon, gating=cfg.gating)
+rows = np.load(sys.argv[1])
+events = []
+for row in rows:
+    tick = ticker.tick(row)
+    if tick.changed:
+        events.append(event(tick, ticker.fault, ticker.eps0, float(sys.argv[2])))
+print(json.dumps({"numba": "numba" in sys.modules, "events": events}))
+"""
+
+
+@pytest.mark.parametrize("aot", ["1", "0"])
+def test_the_tick_kernels_compiled_ahead_of_time_decide_as_the_jit(
+    warm, aot: str, tmp_path
+) -> None:
+    """After warm-up the per-tick detector runs without numba (the module pycc built) and
+    gives exactly the events of `monitor detect`; with MONITOR_AOT=0 it loads numba."""
+    import numpy as np
+    from live_support import assert_same_events, rows_of
+
+    from monitor.config.settings import load_config
+    from monitor.detection.offline import detect
+    from monitor.model.modelfile import load_model
+    from monitor.resources import resource_path
+    from monitor.sampling.read import read_recording
+
+    runs, cache = warm
+    assert "2 of 2 tick kernels compiled ahead of time" in runs[-1], runs[-1]
+    rec = read_recording(resource_path("replay", "spool_wear.log"))
+    np.save(tmp_path / "rows.npy", rows_of(rec))
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "MONITOR_AOT": aot}
+    out = subprocess.run([sys.executable, "-c", TICKS, str(tmp_path / "rows.npy"),
+                          repr(rec.meta["start_time_s"])],
+                         capture_output=True, text=True, env=env, check=True)  # fmt: skip
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got["numba"] is (aot == "0")
+    cfg = load_config()
+    offline = detect(load_model(cfg.model), rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+    assert [e["state"] for e in offline.events] == ["normal", "fault"]
+    assert_same_events(got["events"], offline)

@@ -1,7 +1,8 @@
 """What a controller engineer asks first: how long `monitor --help` takes, how long the daemon
 takes from process start to its first tick (with numba's cache warm, and empty), and how much
-memory the daemon process holds alone (steady and peak) while a replayer in another process
-feeds it the shipped log over python-can's `udp_multicast` bus.
+memory the daemon process holds alone (steady, peak, growth) while a replayer in another
+process feeds it the shipped log over python-can's `udp_multicast` bus; the daemon figures
+with the tick kernels compiled ahead of time and, side by side, with numba's JIT.
 """
 
 from __future__ import annotations
@@ -47,8 +48,10 @@ def cli_help(runs: int = 5) -> dict[str, float]:
 
 
 def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.11") -> dict:
-    """The daemon alone in its process: start to first tick (warm, then an empty numba
-    cache), then steady and peak RSS over ``seconds`` of the shipped normal log."""
+    """The daemon alone in its process: start to first tick (empty numba cache, then after
+    ``monitor warm-up``), then steady and peak RSS over ``seconds`` of the shipped normal
+    log replayed in a loop, each with the tick kernels compiled ahead of time and, side by
+    side, with numba's JIT (``MONITOR_AOT=0``)."""
     work = Path(tempfile.mkdtemp(prefix="monitor-footprint-"))
     config = work / "monitor.yaml"
     config.write_text(f'bus: {{interface: udp_multicast, channel: "{group}"}}\n'
@@ -57,10 +60,19 @@ def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.
     out: dict[str, Any] = {}
     say("footprint: daemon start, empty numba cache")
     out["first_run_s"] = _start(config, work, group, 20.0, {"NUMBA_CACHE_DIR": str(work / "c")})
-    say("footprint: daemon start, warm cache")
-    out["daemon_start_s"] = _start(config, work, group, 20.0, {})
-    say(f"footprint: daemon RSS over {seconds:.0f} s of the shipped normal log")
-    out.update(_rss(config, work, group, seconds))
+    warm = {"NUMBA_CACHE_DIR": str(work / "w")}
+    say("footprint: monitor warm-up (numba cache and the tick kernels ahead of time)")
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "monitor", "warm-up"], env=_env(warm), check=True,
+                   capture_output=True)  # fmt: skip
+    out["warm_up_s"] = time.perf_counter() - t0
+    for tag, extra in (("", warm), ("_jit", {**warm, "MONITOR_AOT": "0"})):
+        kind = "JIT" if tag else "ahead of time"
+        say(f"footprint: daemon start, warm cache, tick kernels {kind}")
+        out[f"daemon_start{tag}_s"] = _start(config, work, group, 20.0, extra)
+        say(f"footprint: daemon RSS over {seconds:.0f} s of the shipped normal log ({kind})")
+        out.update({f"{k}{tag}" if tag else k: v
+                    for k, v in _rss(config, work, group, seconds, extra).items()})  # fmt: skip
     return out
 
 
@@ -104,8 +116,11 @@ def _start(config: Path, work: Path, group: str, timeout_s: float, extra: dict) 
             p.wait(30)
 
 
-def _rss(config: Path, work: Path, group: str, seconds: float) -> dict[str, float]:
-    env = _env({})
+def _rss(config: Path, work: Path, group: str, seconds: float, extra: dict) -> dict[str, float]:
+    """RSS samples every 0.5 s while the shipped normal log is replayed again and again for
+    ``seconds``: steady (median of the second half), peak (VmHWM) and growth (median of the
+    last tenth minus that of the second tenth: a leak shows there on a long run)."""
+    env = _env(extra)
     proc, err = _daemon(config, work, env)
     try:
         while not _FIRST_TICK.search(err.read_text(errors="replace")) and proc.poll() is None:
@@ -115,8 +130,10 @@ def _rss(config: Path, work: Path, group: str, seconds: float) -> dict[str, floa
             time.sleep(0.05)
         feed = _replayer(group, resource_path("replay", "normal.log"), env)
         samples = []
-        end = time.perf_counter() + min(seconds, 90.0)
-        while time.perf_counter() < end and feed.poll() is None:
+        end = time.perf_counter() + seconds
+        while time.perf_counter() < end and proc.poll() is None:
+            if feed.poll() is not None:  # the log ended: again, for as long as asked
+                feed = _replayer(group, resource_path("replay", "normal.log"), env)
             samples.append(_status_kb(proc.pid, "VmRSS") / 1024.0)
             time.sleep(0.5)
         peak = _status_kb(proc.pid, "VmHWM") / 1024.0
@@ -126,8 +143,11 @@ def _rss(config: Path, work: Path, group: str, seconds: float) -> dict[str, floa
         proc.terminate()
         proc.wait(30)
     second_half = samples[len(samples) // 2 :] or samples
+    tenth = max(1, len(samples) // 10)
+    growth = statistics.median(samples[-tenth:]) - statistics.median(samples[tenth : 2 * tenth]
+                                                                      or samples)  # fmt: skip
     return {"daemon_rss_mb": statistics.median(second_half), "daemon_peak_rss_mb": peak,
-            "daemon_rss_samples": len(samples)}  # fmt: skip
+            "daemon_rss_growth_mb": growth, "daemon_rss_samples": len(samples)}  # fmt: skip
 
 
 def _status_kb(pid: int, key: str) -> float:

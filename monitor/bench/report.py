@@ -68,6 +68,11 @@ def markdown(result: dict[str, Any]) -> str:
         ("first_run_s", "s", 1),
         ("daemon_rss_mb", "MB", 0),
         ("daemon_peak_rss_mb", "MB", 0),
+        ("daemon_rss_growth_mb", "MB", 1),
+        ("daemon_start_jit_s", "s", 2),
+        ("daemon_rss_mb_jit", "MB", 0),
+        ("daemon_peak_rss_mb_jit", "MB", 0),
+        ("warm_up_s", "s", 1),
     ):
         goal = goals.get(key)
         met = "" if goal is None else ("yes" if goal["met"] else "**no**")

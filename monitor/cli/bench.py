@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from monitor.cli._numbers import number
 from monitor.cli._paths import output_dir, output_file
 from monitor.errors import MonitorError
 
@@ -60,6 +61,11 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
                    help="markdown table (default: beside --json, .md)")  # fmt: skip
     p.add_argument("--plot", type=output_file, default=None, metavar="F.png",
                    help="growth curves (default: beside --json, .png)")  # fmt: skip
+    p.add_argument("--footprint-s", type=number(5.0, 86400.0, unit="s"), default=None,
+                   metavar="S",
+                   help="seconds of the daemon's RSS sampling, each of AOT and JIT (default 90, "
+                   "20 with --quick; 3600 for the hour-long soak that shows a leak as "
+                   "daemon_rss_growth_mb)")  # fmt: skip
     p.add_argument("--quick", action="store_true",
                    help="reduced sizes (2,000 patterns, 90 s log): checks, not speed")  # fmt: skip
     p.add_argument("--work-dir", type=output_dir, default=None, metavar="DIR",
@@ -109,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
 
     _say("footprint: monitor --help, 5 processes")
     foot = footprint.cli_help()
-    foot.update(footprint.daemon(20.0 if args.quick else 90.0, _say))
+    foot.update(footprint.daemon(args.footprint_s or (20.0 if args.quick else 90.0), _say))
     grnn = grnn_bench.measure(sizes, _say)
     model_path = data.monitor_model(work, sizes.headline_patterns, sizes.train_s, _say)
     summary = data.model_summary(load_model(model_path))

@@ -134,7 +134,7 @@ class PlausibilityConfig:
 # samples, [3] relation run per port (violating samples);
 # ref[c] stuck reference, last[c] previous value; active[check, column] latched findings;
 # misc[0] rest run (engine off, spool centred).
-@jit
+@jit(aot=True)
 def _run(  # pragma: no cover - numba
     x, cols, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, out_sig
 ):

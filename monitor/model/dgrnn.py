@@ -111,7 +111,7 @@ class DGRNN:
         return g
 
 
-@jit
+@jit(aot=True)
 def _predict_at(Z, t, tree, inv2s2, cut, fvar, flag, nout, p, delta, xbuf, pred, scratch, out):
     """Eq. 7: y_hat(t) from the measured history up to k = t - p; False if not predictable.
 
