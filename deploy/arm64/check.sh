@@ -12,7 +12,7 @@
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/../.." && pwd)
 root=${1:-${XDG_CACHE_HOME:-$HOME/.cache}/hydraulic-monitor-arm64}
-tests=${ARM64_TESTS:-"tests/test_grnn.py tests/test_grnn_index.py tests/test_dgrnn.py tests/test_detector.py tests/test_codec.py tests/test_sampler.py tests/test_live_e2e.py"}
+tests=${ARM64_TESTS:-"tests/test_grnn.py tests/test_grnn_index.py tests/test_dgrnn.py tests/test_detector.py tests/test_codec.py tests/test_sampler.py tests/test_live_e2e.py tests/test_startup.py"}
 
 die() { echo "arm64 check: $*" >&2; exit 2; }
 [ "$(id -u)" = 0 ] || die "needs root (chroot and binfmt_misc)"
@@ -28,7 +28,7 @@ binfmt=/proc/sys/fs/binfmt_misc
 if [ ! -x "$root/usr/bin/python3" ]; then
     echo "arm64 check: debootstrap bookworm arm64 into $root"
     debootstrap --arch=arm64 --variant=minbase \
-        --include=python3,python3-venv,python3-pip,ca-certificates \
+        --include=python3,python3-venv,python3-pip,python3-dev,gcc,ca-certificates \
         bookworm "$root" http://deb.debian.org/debian
 fi
 # This host's CA bundle: pip inside the chroot must trust what the host trusts (proxies).
@@ -40,6 +40,10 @@ trap 'umount "$root/proc" 2>/dev/null || true' EXIT
 
 in_root() { chroot "$root" /usr/bin/env -i PATH=/venv/bin:/usr/bin:/bin HOME=/root \
     PIP_DISABLE_PIP_VERSION_CHECK=1 /bin/sh -c "cd /src && $1"; }
+# gcc and the Python headers: `monitor warm-up` compiles the tick kernels ahead of time
+# (tests/test_startup.py checks that the daemon's tick then runs without numba).
+[ -x "$root/usr/bin/gcc" ] || chroot "$root" /usr/bin/env -i PATH=/usr/bin:/bin \
+    DEBIAN_FRONTEND=noninteractive /bin/sh -c "apt-get update -qq && apt-get install -y -qq gcc python3-dev >/dev/null"
 in_root '[ -x /venv/bin/python ] || python3 -m venv /venv'
 in_root 'pip install -q ".[test]"'
 in_root 'python -c "import platform, numba, numpy; print(platform.machine(), \
