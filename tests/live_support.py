@@ -77,13 +77,19 @@ def wait_for_text(log_path: Path, text: str, proc: subprocess.Popen, timeout_s: 
 
 
 def live_config(tmp: Path, config: Path | None = None, **bus: Any) -> MonitorConfig:
-    """The shipped config (or ``config``) on a fresh virtual channel, outputs under ``tmp``."""
+    """The shipped config (or ``config``) on a fresh virtual channel, outputs under ``tmp``.
+
+    Logs are replayed here as fast as the bus takes them, so the monitor's frames (timed on
+    the sample clock) come many times faster than in the field: the wall-clock cap on them
+    (``outputs.frames_max_per_s``, tested in test_own_frames) is lifted so that it drops
+    none of the frames these tests compare."""
     cfg = load_config(config)
     opts = {"interface": "virtual", "channel": f"test-{next(_channels)}",
             "queue_frames": 200_000, "silent_s": 30.0, **bus}  # fmt: skip
     return dataclasses.replace(
         cfg,
         bus=BusConfig(**opts),
+        outputs=dataclasses.replace(cfg.outputs, frames_max_per_s=1e6),
         event_log=dataclasses.replace(cfg.event_log, path=tmp / "events.jsonl"),
         black_box=dataclasses.replace(cfg.black_box, directory=tmp / "blackbox"),
     )
