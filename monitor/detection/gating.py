@@ -117,6 +117,7 @@ class Gate:
         history) when its settings are unchanged; those do not depend on the model."""
         if old.cfg == self.cfg and old.min_engine_rpm == self.min_engine_rpm:
             self.tracker, self.plausibility = old.tracker, old.plausibility
+            self.silence = old.silence
             self.op_state, self.check, self.sensor = old.op_state, old.check, old.sensor
 
     # -- offline --------------------------------------------------------------------------
