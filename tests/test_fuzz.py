@@ -6,7 +6,7 @@ is one line of bounded length; never another exception (which the CLI would show
 traceback).  Inputs stay small; big inputs are the readers' limits' business
 (tests/test_input_limits.py).
 
-``MONITOR_FUZZ_EXAMPLES`` sets the examples per test (default: a few dozen, about a minute
+``MONITOR_FUZZ_EXAMPLES`` sets the examples per test (default: 150-200, under a minute
 in all, derandomized so CI is repeatable); e.g. ``MONITOR_FUZZ_EXAMPLES=5000`` for a long
 random run.  The counts of inputs and outcomes are printed in the terminal summary.
 """
@@ -17,6 +17,7 @@ import io
 import json
 import math
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -134,6 +135,10 @@ def near_valid_logs(draw) -> bytes:
     return data
 
 
+# The bulk reader refuses a binary file (NULs, a long line) while reading, before looking at
+# any line; the line-by-line reader may meet an earlier malformed line first.
+_READ_TIME_REFUSAL = re.compile(r":\d+: (NUL bytes|line longer than)")
+
 CANDUMP_READERS = {
     "candump bulk frames": read_candump_frames,
     "candump python-can": lambda p: list(read_candump(p)),
@@ -142,7 +147,7 @@ CANDUMP_READERS = {
 }
 
 
-@fuzz(60)
+@fuzz(150)
 @given(data=st.binary(max_size=600))
 def test_candump_readers_on_random_bytes(work, data: bytes) -> None:
     path = _write(work / "random.log", data)
@@ -150,10 +155,11 @@ def test_candump_readers_on_random_bytes(work, data: bytes) -> None:
         outcome(f"{name}, random bytes", lambda r=read: r(path), path)
 
 
-@fuzz(80)
+@fuzz(150)
 @given(data=near_valid_logs())
 # found: a lone CR ended a line for python-can's reader, not for the bulk one
 @example(data=_LOG_LINES[0].encode() + b"\r" + _LOG_LINES[1].encode() + b"\n")
+@example(data=b"\x00(0.0) can0 0CFF1021#\n")  # found: the two NUL messages differed
 def test_candump_readers_on_near_valid_logs(work, data: bytes) -> None:
     """Also: the bulk path and the daemon's frame-by-frame path agree (same frames, same
     rows, or the same error)."""
@@ -164,7 +170,7 @@ def test_candump_readers_on_near_valid_logs(work, data: bytes) -> None:
     assert k1 == k2
     if k1 == "ok":
         assert frames.timestamp.tolist() == [m.timestamp for m in msgs]
-    else:
+    elif not _READ_TIME_REFUSAL.search(frames):
         assert frames == msgs
     (k1, bulk), (k2, slow) = got["candump recording (bulk)"], \
         got["candump recording (frame by frame)"]  # fmt: skip
@@ -175,7 +181,7 @@ def test_candump_readers_on_near_valid_logs(work, data: bytes) -> None:
         for name, col in bulk.columns.items():
             assert np.array_equal(col, slow.columns[name], equal_nan=True), name
         assert bulk.meta == slow.meta
-    else:
+    elif not _READ_TIME_REFUSAL.search(bulk):
         assert bulk == slow
 
 
@@ -212,7 +218,7 @@ def near_valid_csvs(draw) -> str:
     return "".join(",".join(r) + draw(ends) for r in rows)
 
 
-@fuzz(60)
+@fuzz(200)
 @given(data=st.binary(max_size=400) | st.text(max_size=400).map(str.encode))
 def test_csv_reader_on_random_input(work, data: bytes) -> None:
     path = _write(work / "random.csv", data)
@@ -220,7 +226,7 @@ def test_csv_reader_on_random_input(work, data: bytes) -> None:
     outcome("recording from .csv, random input", lambda: read_recording(path), path)
 
 
-@fuzz(80)
+@fuzz(200)
 @given(text=near_valid_csvs())
 @example(text='"' + _CSV)  # found: the whole file quoted in the missing-columns message
 def test_csv_reader_on_near_valid_csvs(work, text: str) -> None:
@@ -291,7 +297,7 @@ def _config_with_paths(doc: Any) -> Any:
     return doc
 
 
-@fuzz(80)
+@fuzz(200)
 @given(doc=mutated(_CONFIG))
 @example(doc={**_CONFIG, "\n": 1})  # found: a key with a newline split the message
 @example(doc={**_CONFIG, "detector": {"\n": 1}})
@@ -314,7 +320,7 @@ yaml_text = st.one_of(
 )  # fmt: skip
 
 
-@fuzz(80)
+@fuzz(200)
 @given(text=yaml_text)
 def test_config_loader_on_random_yaml(work, text: str) -> None:
     path = _write(work / "random.yaml", text)
@@ -346,7 +352,7 @@ def _save(path: Path, arrays: dict[str, np.ndarray], header: Any) -> Path:
     return _write(path, buf.getvalue())
 
 
-@fuzz(40)
+@fuzz(150)
 @given(st.data())
 def test_model_loader_on_corrupted_files(work, data) -> None:
     raw = bytearray(_MODEL_BYTES)
@@ -359,7 +365,7 @@ def test_model_loader_on_corrupted_files(work, data) -> None:
     outcome("model, corrupted bytes", lambda: load_model(path), path)
 
 
-@fuzz(60)
+@fuzz(200)
 @given(header=mutated(_HEADER))
 # found: a bad spec quoted whole; a bad name without a stored envelope (ValueError)
 @example(header={**_HEADER, "spec": {**_HEADER["spec"], "outputs": None}})
@@ -374,7 +380,7 @@ def test_model_loader_on_mutated_headers(work, header: Any) -> None:
 array_change = st.sampled_from(["nan", "inf", "shape", "dtype", "empty", "drop", "extra"])
 
 
-@fuzz(40)
+@fuzz(150)
 @given(name=st.sampled_from(sorted(k for k in _MODEL if k not in ("header", "checksum"))),
        change=array_change, seed=st.integers(0, 2**32 - 1))  # fmt: skip
 def test_model_loader_on_mutated_arrays(work, name: str, change: str, seed: int) -> None:

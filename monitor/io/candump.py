@@ -91,6 +91,12 @@ def skip_odd_line(
     )
 
 
+def nul_line(path: Path, line_no: int) -> InputFileError:
+    """The error for a whole line (newline and all) with a NUL byte: a binary file.  NULs in
+    an unterminated last line are a torn line's (a power cut), skipped with it."""
+    return InputFileError(f"{path}:{line_no}: NUL bytes, not a text log (a candump -L log is text)")
+
+
 def too_long_line(path: Path, line_no: int) -> InputFileError:
     """The error for a line longer than ``MAX_LINE_BYTES`` (a binary or corrupt file)."""
     return InputFileError(
@@ -125,6 +131,8 @@ class _CheckedLines:
             self.line_no = line_no  # read by _messages when python-can itself fails
             if len(line) - line.endswith("\n") - line.rstrip("\n").endswith("\r") > MAX_LINE_BYTES:
                 raise too_long_line(self._path, line_no)
+            if "\x00" in line and line.endswith("\n"):
+                raise nul_line(self._path, line_no)
             text = line.strip()
             problem = line_problem(text) if text else None
             if problem:

@@ -16,12 +16,14 @@ so it means what it means in ``read_candump``, and a malformed line raises the s
 
 The file is read in chunks, each checked before the next: a line longer than
 ``MAX_LINE_BYTES`` or a NUL byte in a whole line stops the read there (a binary file, a
-2 GB sparse file), so refusing it costs one chunk of memory, not the file.
+2 GB sparse file), so refusing it costs one chunk of memory, not the file.  (So the line
+named may come after a malformed line that ``read_candump`` would name first.)
 """
 
 from __future__ import annotations
 
 import io
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,6 +37,7 @@ from monitor.io.candump import (
     MAX_TIMESTAMP_DIGITS,
     MAX_TIMESTAMP_S,
     line_problem,
+    nul_line,
     skip_odd_line,
     too_long_line,
 )
@@ -96,7 +99,7 @@ def _read_text(p: Path) -> bytearray:
     data = bytearray()
     lines_before = 0  # newlines before the current chunk
     line_len = 0  # bytes of the current line before the current chunk
-    nul_line = 0  # line number of a NUL not yet followed by a newline
+    pending_nul = 0  # line number of a NUL not yet followed by a newline
     with p.open("rb") as fh:
         while chunk := fh.read(_CHUNK):
             arr = np.frombuffer(chunk, dtype=np.uint8)
@@ -105,29 +108,26 @@ def _read_text(p: Path) -> bytearray:
             before = np.where(nl > 0, arr[nl - 1], data[-1] if data else 10)
             lengths -= before == 13  # a CR before the LF is not part of the line
             tail = arr.size - 1 - nl[-1] if nl.size else line_len + arr.size
+            # The first offending line, as the line-by-line reader meets it (length first).
             long = np.flatnonzero(lengths > MAX_LINE_BYTES)
-            if long.size:
-                raise too_long_line(p, lines_before + int(long[0]) + 1)
-            if tail > MAX_LINE_BYTES + 1:
-                raise too_long_line(p, lines_before + nl.size + 1)
-            if nul_line and nl.size:
-                raise _nul_line(p, nul_line)
+            long_no = lines_before + int(long[0]) + 1 if long.size else \
+                lines_before + nl.size + 1 if tail > MAX_LINE_BYTES + 1 else math.inf  # fmt: skip
             nuls = np.flatnonzero(arr == 0)
-            if nuls.size:
-                k = int(np.searchsorted(nl, nuls[0]))  # the NUL's line within the chunk
-                if k < nl.size:
-                    raise _nul_line(p, lines_before + k + 1)
-                nul_line = nul_line or lines_before + k + 1
+            k = int(np.searchsorted(nl, nuls[0])) if nuls.size else -1  # its line in the chunk
+            nul_no = pending_nul if pending_nul and nl.size else \
+                lines_before + k + 1 if 0 <= k < nl.size else math.inf  # fmt: skip
+            if long_no <= nul_no and long_no < math.inf:
+                raise too_long_line(p, int(long_no))
+            if nul_no < math.inf:
+                raise nul_line(p, int(nul_no))
+            if k == nl.size:  # in the unterminated tail so far
+                pending_nul = pending_nul or lines_before + k + 1
             lines_before += nl.size
             line_len = int(tail)
             data += chunk
     if line_len > MAX_LINE_BYTES and data[-1] != 13:  # the unterminated last line
         raise too_long_line(p, lines_before + 1)
     return data
-
-
-def _nul_line(p: Path, line_no: int) -> InputFileError:
-    return InputFileError(f"{p}:{line_no}: NUL bytes, not a text log (a candump -L log is text)")
 
 
 @jit
