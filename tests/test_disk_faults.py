@@ -271,3 +271,40 @@ def test_daemon_on_a_full_disk_flags_disk_error_and_reports_unwritten(small_disk
     dbc = daemon.codec.message("MON_Status").dbc_message
     status = [dbc.decode(m.data) for m in frames if m.arbitration_id == dbc.frame_id]
     assert status and any(s["DiskError"] == "error" for s in status)
+
+
+def test_run_exits_1_when_events_could_not_be_written(tmp_path, monkeypatch) -> None:
+    """`monitor run`'s ordered stop with events still refused by the disk: exit 1 (a
+    service manager then restarts it and the journal says how many), never 0."""
+    import argparse
+    import signal
+
+    from monitor.cli import run as run_cmd
+    from monitor.live import daemon as daemon_module
+
+    class Stopped:  # the daemon's surface that `run` uses; SIGTERM right after the start
+        reload_attempts = 0
+        loop_mono = 0.0
+        healthy = True
+        unwritten = 0
+
+        def __init__(self, cfg) -> None:  # noqa: ANN001
+            pass
+
+        def start(self) -> None:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+        def stop(self) -> None:
+            self.unwritten = 3  # what Daemon.stop finds when the event log kept lines
+
+    monkeypatch.setattr(daemon_module, "Daemon", Stopped)
+    monkeypatch.setattr("monitor.live.journal.setup_logging", lambda level: None)  # pytest's
+    config = tmp_path / "m.yaml"
+    config.write_text(f"event_log: {{path: {tmp_path / 'ev.jsonl'}}}\n")
+    saved = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)}
+    try:
+        code = run_cmd.run(argparse.Namespace(config=config, verbose=False))
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    assert code == 1
