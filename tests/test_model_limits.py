@@ -96,3 +96,22 @@ def test_a_huge_extra_array_is_not_unpacked(tmp_path, monkeypatch) -> None:
 def test_the_shipped_model_still_loads() -> None:
     m = load_model(SHIPPED)
     assert np.isfinite(m.eps0) and m.eps0 > 0 and m.window_n >= 1
+
+
+def _rename_first_scaled(h):
+    h.pop("validity", None)  # an older file: the envelope is derived from the patterns
+    h["normalizer"]["names"][1] = None
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (_rename_first_scaled, r"the normalizer has no mean and std for PA\)"),
+        (lambda h: h["spec"].update(outputs=None), r"bad DGRNN spec \{.{60,77}\.\.\.: "),
+    ],
+)
+def test_spec_and_normalizer_disagreeing_is_one_short_line(tmp_path, change, message) -> None:
+    """Found by tests/test_fuzz.py: a bare ValueError (traceback), a message quoting the spec."""
+    with pytest.raises(ModelFileError, match=message) as exc:
+        load_model(_craft(tmp_path, header_change=change))
+    assert "\n" not in str(exc.value) and len(str(exc.value)) < len(str(tmp_path)) + 250

@@ -180,6 +180,9 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
     if unknown:
         raise ValueError(f"the model uses signals this monitor does not know: {unknown}")
     normalizer = Normalizer.from_dict(header["normalizer"])
+    unscaled = [v for v in spec.variables if v not in list(normalizer.names_)]
+    if unscaled:
+        raise ValueError(f"the normalizer has no mean and std for {', '.join(unscaled)[:80]}")
     grnn = GRNN.from_arrays(
         data["patterns"],
         data["targets"],

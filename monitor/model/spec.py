@@ -133,7 +133,9 @@ class DGRNNSpec:
             delta = delta if isinstance(delta, bool) else tuple(delta)
             return cls(d["outputs"], d["exogenous"], pairs, d["horizon"], delta)
         except (KeyError, AttributeError, TypeError) as exc:
-            raise ConfigError(f"bad DGRNN spec {dict(d)!r}: {exc}") from None
+            shown = repr(dict(d))  # cut: a model file's spec may be anything
+            shown = shown if len(shown) <= 80 else shown[:77] + "..."
+            raise ConfigError(f"bad DGRNN spec {shown}: {exc}") from None
 
     @classmethod
     def preset(cls, name: str, horizon: int | None = None) -> DGRNNSpec:
