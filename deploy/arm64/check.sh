@@ -28,7 +28,7 @@ binfmt=/proc/sys/fs/binfmt_misc
 if [ ! -x "$root/usr/bin/python3" ]; then
     echo "arm64 check: debootstrap bookworm arm64 into $root"
     debootstrap --arch=arm64 --variant=minbase \
-        --include=python3,python3-venv,python3-pip,python3-dev,gcc,ca-certificates \
+        --include=python3,python3-venv,python3-pip,python3-dev,g++,ca-certificates \
         bookworm "$root" http://deb.debian.org/debian
 fi
 # This host's CA bundle: pip inside the chroot must trust what the host trusts (proxies).
@@ -40,10 +40,10 @@ trap 'umount "$root/proc" 2>/dev/null || true' EXIT
 
 in_root() { chroot "$root" /usr/bin/env -i PATH=/venv/bin:/usr/bin:/bin HOME=/root \
     PIP_DISABLE_PIP_VERSION_CHECK=1 /bin/sh -c "cd /src && $1"; }
-# gcc and the Python headers: `monitor warm-up` compiles the tick kernels ahead of time
+# g++ and the Python headers: `monitor warm-up` compiles the tick kernels ahead of time
 # (tests/test_startup.py checks that the daemon's tick then runs without numba).
-[ -x "$root/usr/bin/gcc" ] || chroot "$root" /usr/bin/env -i PATH=/usr/bin:/bin \
-    DEBIAN_FRONTEND=noninteractive /bin/sh -c "apt-get update -qq && apt-get install -y -qq gcc python3-dev >/dev/null"
+[ -x "$root/usr/bin/g++" ] || chroot "$root" /usr/bin/env -i PATH=/usr/bin:/bin \
+    DEBIAN_FRONTEND=noninteractive /bin/sh -c "apt-get update -qq && apt-get install -y -qq g++ python3-dev >/dev/null"
 in_root '[ -x /venv/bin/python ] || python3 -m venv /venv'
 in_root 'pip install -q ".[test]"'
 in_root 'python -c "import platform, numba, numpy; print(platform.machine(), \

@@ -25,8 +25,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--no-aot", dest="aot", action="store_false",
-        help="do not compile the live tick's kernels ahead of time (numba pycc, needs a C "
-        "compiler); the daemon then loads numba and uses the JIT kernels",
+        help="do not compile the live tick's kernels ahead of time (numba pycc, needs a C++ "
+        "compiler, g++); the daemon then loads numba and uses the JIT kernels",
     )  # fmt: skip
     p.set_defaults(func=run)
 
@@ -79,7 +79,7 @@ def _build_aot() -> None:
     t0 = time.perf_counter()
     try:
         path = aot.build(tick)
-    except Exception as exc:  # no C compiler, no setuptools: the JIT kernels serve
+    except Exception as exc:  # no C++ compiler, no setuptools: the JIT kernels serve
         print(f"warm-up: tick kernels not compiled ahead of time ({type(exc).__name__}: "
               f"{exc}); the daemon uses the JIT kernels", file=sys.stderr)  # fmt: skip
         return

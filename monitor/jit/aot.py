@@ -99,7 +99,8 @@ def compiled_function(fn: Any) -> Any:
 
 def build(kernels: list[Any]) -> Path:
     """Compile ``kernels`` (``Kernel``s already run through the JIT once, so numba knows
-    their argument types) into the module; returns its path.  Needs a C compiler."""
+    their argument types) into the module; returns its path.  Needs a C++ compiler (numba's
+    pycc builds through distutils' C++ driver)."""
     from numba.pycc import CC
 
     out = directory()
