@@ -16,7 +16,8 @@ import can
 from live_support import drain, live_config, settle, wait_until
 
 from monitor.io.candump import read_candump
-from monitor.live.daemon import Daemon, TokenBucket
+from monitor.live.daemon import Daemon
+from monitor.live.outputs import TokenBucket
 from monitor.resources import resource_path
 
 DM1_REQUEST = can.Message(arbitration_id=0x18EAA0F9, data=b"\xca\xfe\x00")  # DM1 from 0xF9

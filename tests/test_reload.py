@@ -19,7 +19,7 @@ from live_support import assert_same_events, settle, wait_until, write_config
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect
 from monitor.io.candump import read_candump
-from monitor.live import daemon as daemon_module
+from monitor.live import reload as reload_module
 from monitor.live.daemon import Daemon
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
@@ -100,13 +100,13 @@ def test_a_slow_reload_never_stalls_detection(tmp_path, monkeypatch) -> None:
     decoded and ticked; the reload lands when the parse ends."""
     cfg = load_config(_config(tmp_path))
     release = threading.Event()
-    real = daemon_module.load_config
+    real = reload_module.load_config
 
     def slow_load(source):  # noqa: ANN001, ANN202
         release.wait(120)
         return real(source)
 
-    monkeypatch.setattr(daemon_module, "load_config", slow_load)
+    monkeypatch.setattr(reload_module, "load_config", slow_load)
     msgs = list(read_candump(LOG))[:6000]
     daemon = Daemon(cfg)
     with can.Bus(interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True) as tx:
@@ -139,3 +139,27 @@ def test_a_bad_reload_keeps_everything_running(tmp_path, bad: str, caplog) -> No
         daemon.stop()
     assert daemon.reloads == 0 and daemon.error is None
     assert "reload failed, keeping the running config and model" in caplog.text
+
+
+def test_a_reload_that_takes_too_long_is_given_up_and_its_late_result_dropped(
+    monkeypatch,
+) -> None:
+    from monitor.live.reload import Reloader
+
+    monkeypatch.setattr(reload_module, "RELOAD_LIMIT_S", -1.0)  # every parse is overdue
+    release, finished = threading.Event(), threading.Event()
+
+    def slow() -> Exception:
+        release.wait(120)
+        finished.set()
+        return ValueError("the late result")
+
+    r = Reloader(slow)
+    r.request()
+    given_up = r.poll()
+    assert isinstance(given_up, TimeoutError) and "given up" in str(given_up)
+    assert r.poll() is None  # given up once, not at every poll
+    release.set()
+    assert finished.wait(120)
+    wait_until(lambda: not r.busy)
+    assert r.poll() is None and not r.pending  # the late result is dropped

@@ -33,22 +33,23 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
-from typing import Any, NamedTuple
+from typing import Any
 
 import can
 
 from monitor.bus.reader import BusReader, open_bus
 from monitor.bus.recovery import Backoff
 from monitor.codec.frames import FrameCodec
-from monitor.config.settings import MonitorConfig, load_config
+from monitor.config.settings import MonitorConfig
 from monitor.detection.alarm import State
 from monitor.detection.ticker import Tick, Ticker
 from monitor.live.blackbox import BlackBox
 from monitor.live.dm1 import Diagnostics
 from monitor.live.eventlog import bus_event_record
-from monitor.live.loops import Loop, file_digest, row_layout, worst_state
-from monitor.live.outputs import AlarmFrames, EventLog
+from monitor.live.loops import Loop, row_layout, worst_state
+from monitor.live.outputs import AlarmFrames, EventLog, TokenBucket
 from monitor.live.pipeline import FramePipeline
+from monitor.live.reload import Reload, Reloader, prepare
 from monitor.live.storage import Quota
 from monitor.live.writer import DiskWriter
 from monitor.model.modelfile import MonitorModel
@@ -58,7 +59,6 @@ log = logging.getLogger("monitor")
 
 EventHook = Callable[[dict[str, Any]], None]
 _RETRY_S = 5.0  # how often events the disk refused are tried again
-RELOAD_LIMIT_S = 30.0  # a reload not parsed by then is given up
 
 
 class Daemon:
@@ -113,13 +113,7 @@ class Daemon:
         self._last_status_mono = 0.0
         self._last_tx_error_log = 0.0
         self._stop = threading.Event()
-        self._reload_lock = threading.Lock()
-        self._reload_busy = False  # a reload thread is parsing
-        self._reload_again = False  # another SIGHUP came meanwhile
-        self._reload_gen = 0  # reloads requested
-        self._reload_given_up = 0  # the last one given up as overdue
-        self._reload_since = 0.0
-        self._reload_result: _Reload | Exception | None = None
+        self.reloader = Reloader(lambda: prepare(self.cfg, self.loops, self.quota))
         self._thread = threading.Thread(target=self._run, name="detector", daemon=True)
         self.error: BaseException | None = None
 
@@ -136,29 +130,9 @@ class Daemon:
             )  # fmt: skip
 
     def request_reload(self) -> None:
-        """SIGHUP: parse the config and load the models on a thread of their own, so a slow
-        or hostile file never stalls detection; the detector swaps the result in between
-        two frames.  A request while one runs is done after it."""
-        with self._reload_lock:
-            if self._reload_busy:
-                self._reload_again = True
-                return
-            self._reload_busy = True
-            self._reload_gen += 1
-            self._reload_since = time.monotonic()
-            gen = self._reload_gen
-        threading.Thread(target=self._reload_thread, args=(gen,), name="reload",
-                         daemon=True).start()  # fmt: skip
-
-    def _reload_thread(self, gen: int) -> None:
-        result = self._prepare_reload()
-        with self._reload_lock:
-            if gen > self._reload_given_up:
-                self._reload_result = result
-            self._reload_busy = False
-            again, self._reload_again = self._reload_again, False
-        if again:
-            self.request_reload()
+        """SIGHUP: parse and load on a thread of its own (``monitor.live.reload``); the
+        detector swaps the result in between two frames."""
+        self.reloader.request()
 
     @property
     def healthy(self) -> bool:
@@ -264,8 +238,10 @@ class Daemon:
         q = self.reader.queue
         while True:
             self.loop_mono = time.monotonic()
-            if self._reload_busy or self._reload_result is not None:
-                self._check_reload()
+            if self.reloader.pending:
+                result = self.reloader.poll()
+                if result is not None:
+                    self._apply_reload(result)
             try:
                 msg = q.get(timeout=0.05)
             except queue.Empty:
@@ -374,34 +350,9 @@ class Daemon:
 
     def _do_reload(self) -> None:
         """Reload at once in this thread (parse, load, swap): what a SIGHUP does in two."""
-        self._apply_reload(self._prepare_reload())
+        self._apply_reload(prepare(self.cfg, self.loops, self.quota))
 
-    def _prepare_reload(self) -> _Reload | Exception:
-        """Parse the config and load the models that changed (any thread)."""
-        try:
-            cfg = load_config(self.cfg.source)
-            if _loop_layout(cfg) != _loop_layout(self.cfg):
-                log.warning("loop changes other than their models take effect at the next "
-                            "restart")  # fmt: skip
-                cfg = replace(cfg, loops=self.cfg.loops, model=self.cfg.model)
-            same_rules = _ticker_rules(cfg) == _ticker_rules(self.cfg)
-            loaded: list[tuple[MonitorModel, Ticker, str] | None] = []
-            for lc, lp in zip(cfg.monitored_loops, self.loops, strict=True):
-                digest = file_digest(lc.model)
-                if digest == lp.digest and same_rules:
-                    loaded.append(None)  # the same model, judged the same way: keep its ticker
-                else:
-                    loaded.append((*Loop.load(lc, cfg, lp.view), digest))
-            event_log = (
-                EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
-                if cfg.event_log.path != self.cfg.event_log.path
-                else None
-            )
-        except Exception as exc:  # any failure: keep monitoring with what we have
-            return exc
-        return _Reload(cfg, loaded, event_log)
-
-    def _apply_reload(self, result: _Reload | Exception) -> None:
+    def _apply_reload(self, result: Reload | Exception) -> None:
         """Swap a prepared reload in (detector thread, between two frames)."""
         self.reload_attempts += 1
         if isinstance(result, Exception):
@@ -432,58 +383,3 @@ class Daemon:
                          lp.state.label)  # fmt: skip
         self.cfg = cfg
         self.reloads += 1
-
-    def _check_reload(self) -> None:
-        """Detector thread: swap in a prepared reload; give up on one that takes too long
-        (a hostile file must not keep the old settings waiting for ever)."""
-        with self._reload_lock:
-            result, self._reload_result = self._reload_result, None
-            overdue = (
-                self._reload_busy
-                and self._reload_gen > self._reload_given_up
-                and time.monotonic() - self._reload_since > RELOAD_LIMIT_S
-            )
-            if overdue:
-                self._reload_given_up = self._reload_gen  # its result will be dropped
-        if result is not None:
-            self._apply_reload(result)
-        elif overdue:
-            self.reload_attempts += 1
-            log.error("reload of %s still not parsed after %.0f s; given up, keeping the "
-                      "running config and model", self.cfg.source, RELOAD_LIMIT_S)  # fmt: skip
-
-
-class TokenBucket:
-    """At most ``rate_per_s`` takes per second on average, bursts of one second's worth."""
-
-    def __init__(self, rate_per_s: float) -> None:
-        self.rate = float(rate_per_s)
-        self.tokens = self.rate
-        self.last: float | None = None
-
-    def take(self, now_s: float) -> bool:
-        if self.last is not None and now_s > self.last:
-            self.tokens = min(self.rate, self.tokens + (now_s - self.last) * self.rate)
-        self.last = now_s
-        if self.tokens < 1.0:
-            return False
-        self.tokens -= 1.0
-        return True
-
-
-class _Reload(NamedTuple):
-    cfg: MonitorConfig
-    loaded: list[tuple[MonitorModel, Ticker, str] | None]  # per loop; None: keep it
-    event_log: EventLog | None  # a new event log path, opened
-
-
-def _ticker_rules(cfg: MonitorConfig) -> tuple[Any, ...]:
-    """The settings a ticker is built with besides its model."""
-    return (cfg.alarm, cfg.horizon, cfg.gating)
-
-
-def _loop_layout(cfg: MonitorConfig) -> list[tuple[Any, ...]]:
-    """What a reload cannot change: each loop's name, signals, alarm message and address
-    (the single loop's address is ``j1939.source_address``, whose changes wait anyway)."""
-    return [(lc.name, lc.signals, lc.alarm_message, lc.source_address if cfg.loops else None)
-            for lc in cfg.monitored_loops]  # fmt: skip

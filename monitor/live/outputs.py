@@ -118,3 +118,21 @@ class AlarmFrames:
             "DiskError": int(bool(disk_error)),
         }
         return self.codec.encode_message(STATUS, values, bus_time_s)
+
+
+class TokenBucket:
+    """At most ``rate_per_s`` takes per second on average, bursts of one second's worth."""
+
+    def __init__(self, rate_per_s: float) -> None:
+        self.rate = float(rate_per_s)
+        self.tokens = self.rate
+        self.last: float | None = None
+
+    def take(self, now_s: float) -> bool:
+        if self.last is not None and now_s > self.last:
+            self.tokens = min(self.rate, self.tokens + (now_s - self.last) * self.rate)
+        self.last = now_s
+        if self.tokens < 1.0:
+            return False
+        self.tokens -= 1.0
+        return True

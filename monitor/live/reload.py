@@ -1,0 +1,129 @@
+"""SIGHUP: a new config and model, prepared off the detector thread.
+
+``prepare`` parses the config, loads the models that changed and opens a new event log if
+its path changed; it runs on a thread of its own (``Reloader``), so a slow or hostile file
+never stalls detection, and the detector swaps the result in between two frames
+(``Daemon._apply_reload``).  A loop whose model file (SHA-256) and ticker settings are
+unchanged keeps its ticker: its J window and alarm state go on.  Otherwise the new ticker
+takes over the running alarm state (``Ticker.carry_over``).  What a reload cannot change
+(the loops' layout, bus, DBC, J1939) waits for a restart.  A reload not parsed within
+``RELOAD_LIMIT_S`` is given up: its result, if it ever comes, is dropped.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Any, NamedTuple
+
+from monitor.config.settings import MonitorConfig, load_config
+from monitor.detection.ticker import Ticker
+from monitor.live.eventlog import EventLog
+from monitor.live.loops import Loop, file_digest
+from monitor.live.storage import Quota
+from monitor.model.modelfile import MonitorModel
+
+log = logging.getLogger("monitor")
+
+RELOAD_LIMIT_S = 30.0  # a reload not parsed by then is given up
+
+
+class Reload(NamedTuple):
+    cfg: MonitorConfig
+    loaded: list[tuple[MonitorModel, Ticker, str] | None]  # per loop; None: keep it
+    event_log: EventLog | None  # a new event log path, opened
+
+
+def prepare(current: MonitorConfig, loops: Sequence[Loop], quota: Quota) -> Reload | Exception:
+    """Parse ``current.source`` again and load what changed (any thread); an exception is
+    returned, not raised: the running config and model stay."""
+    try:
+        cfg = load_config(current.source)
+        if loop_layout(cfg) != loop_layout(current):
+            log.warning("loop changes other than their models take effect at the next restart")
+            cfg = replace(cfg, loops=current.loops, model=current.model)
+        same_rules = ticker_rules(cfg) == ticker_rules(current)
+        loaded: list[tuple[MonitorModel, Ticker, str] | None] = []
+        for lc, lp in zip(cfg.monitored_loops, loops, strict=True):
+            digest = file_digest(lc.model)
+            if digest == lp.digest and same_rules:
+                loaded.append(None)  # the same model, judged the same way: keep its ticker
+            else:
+                loaded.append((*Loop.load(lc, cfg, lp.view), digest))
+        event_log = (
+            EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, quota)
+            if cfg.event_log.path != current.event_log.path
+            else None
+        )
+    except Exception as exc:  # any failure: keep monitoring with what we have
+        return exc
+    return Reload(cfg, loaded, event_log)
+
+
+def ticker_rules(cfg: MonitorConfig) -> tuple[Any, ...]:
+    """The settings a ticker is built with besides its model."""
+    return (cfg.alarm, cfg.horizon, cfg.gating)
+
+
+def loop_layout(cfg: MonitorConfig) -> list[tuple[Any, ...]]:
+    """What a reload cannot change: each loop's name, signals, alarm message and address
+    (the single loop's address is ``j1939.source_address``, whose changes wait anyway)."""
+    return [(lc.name, lc.signals, lc.alarm_message, lc.source_address if cfg.loops else None)
+            for lc in cfg.monitored_loops]  # fmt: skip
+
+
+class Reloader:
+    """Runs ``prepare_fn`` on a ``reload`` thread per request; ``poll`` (detector thread)
+    hands over a finished result, or an error once a reload has taken too long."""
+
+    def __init__(self, prepare_fn: Callable[[], Reload | Exception]) -> None:
+        self._prepare = prepare_fn
+        self._lock = threading.Lock()
+        self.busy = False  # a reload thread is parsing
+        self._again = False  # another request came meanwhile: run once more after it
+        self._gen = 0  # requests started
+        self._given_up = 0  # the last one given up as overdue
+        self._since = 0.0
+        self._result: Reload | Exception | None = None
+
+    @property
+    def pending(self) -> bool:
+        """Something for ``poll`` to look at (read without the lock: a hint only)."""
+        return self.busy or self._result is not None
+
+    def request(self) -> None:
+        with self._lock:
+            if self.busy:
+                self._again = True
+                return
+            self.busy = True
+            self._gen += 1
+            self._since = time.monotonic()
+            gen = self._gen
+        threading.Thread(target=self._run, args=(gen,), name="reload", daemon=True).start()
+
+    def _run(self, gen: int) -> None:
+        result = self._prepare()
+        with self._lock:
+            if gen > self._given_up:
+                self._result = result
+            self.busy = False
+            again, self._again = self._again, False
+        if again:
+            self.request()
+
+    def poll(self) -> Reload | Exception | None:
+        """The finished reload, a ``TimeoutError`` for one given up now, or None."""
+        with self._lock:
+            result, self._result = self._result, None
+            if result is not None:
+                return result
+            if self.busy and self._gen > self._given_up:
+                waited = time.monotonic() - self._since
+                if waited > RELOAD_LIMIT_S:
+                    self._given_up = self._gen  # its result will be dropped
+                    return TimeoutError(f"still not parsed after {RELOAD_LIMIT_S:.0f} s; given up")
+        return None
