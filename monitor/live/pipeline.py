@@ -33,15 +33,13 @@ import numpy as np
 
 from monitor.codec.frames import FrameCodec
 from monitor.detection.ticker import Tick
+from monitor.io.candump import MAX_TIMESTAMP_S
 from monitor.live.loops import Loop
 from monitor.sampling.sampler import Sampler, hydraulic_messages
 
 log = logging.getLogger("monitor")
 
 Send = Callable[[can.Message], None]
-#: Latest believable frame timestamp, s since 1970 (year 5138): the bound a candump line's
-#: timestamp has offline too.  Later, negative or NaN stamps are ignored and counted.
-MAX_BUS_TIME_S = 1e11
 OnChange = Callable[[Tick, Loop], None]
 
 
@@ -72,7 +70,7 @@ class FramePipeline:
         self._backlog = backlog
         self._received_at = received_at  # None: no reader, the pipeline stamps frames itself
         self.last_t_s: float | None = None  # sample-clock time of the last row ticked
-        self.bad_timestamps = 0  # frames ignored: a timestamp outside 0..MAX_BUS_TIME_S
+        self.bad_timestamps = 0  # frames ignored: a timestamp outside 0..MAX_TIMESTAMP_S
         self._last_ok_mono = time.monotonic()  # wall time of the last sensor frame, no reader
         self._last_ok_ts = 0.0  # its sample-clock time (``_clock``)
         self._last_ok_rx = -float("inf")  # the reader's receive stamp by then (``received_at``)
@@ -84,7 +82,8 @@ class FramePipeline:
 
     def feed(self, msg: can.Message) -> None:
         """One received frame (the black box has already seen it)."""
-        if not 0.0 <= msg.timestamp <= MAX_BUS_TIME_S:  # NaN too: no time, no sample
+        # The bound a candump line's timestamp has offline; NaN fails too: no time, no sample.
+        if not 0.0 <= msg.timestamp <= MAX_TIMESTAMP_S:
             self.bad_timestamps += 1
             return
         # A request to all (DA 255) is for every loop's address: no short cut.
