@@ -288,3 +288,33 @@ def poisson_rate_upper(events, hours, confidence=0.95):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if cdf(mid) > 1.0 - confidence else (lo, mid)
     return 0.5 * (lo + hi) / hours
+
+
+def bias_statistic(e, regimes, scale, window, min_count):
+    """The bias statistic B from its definition, recomputed from scratch at every sample: the
+    last ``window`` samples whose residuals are all finite; per regime with at least
+    ``min_count`` of them, z = mean * sqrt(count) / scale; B = mean over those regimes of the
+    outputs' mean z^2.  NaN at a sample with a missing residual and before any regime counts."""
+    e = np.asarray(e, dtype=float)
+    n, n_out = e.shape
+    out = np.full(n, np.nan)
+    valid = []  # indices of the valid samples so far
+    for i in range(n):
+        if not all(math.isfinite(v) for v in e[i]):
+            continue
+        valid.append(i)
+        last = valid[-window:]
+        terms = []
+        for r in range(scale.shape[0]):
+            members = [k for k in last if regimes[k] == r]
+            if len(members) < min_count:
+                continue
+            total = 0.0
+            for o in range(n_out):
+                mean = sum(e[k, o] for k in members) / len(members)
+                z = mean * math.sqrt(len(members)) / scale[r, o]
+                total += z * z
+            terms.append(total / n_out)
+        if terms:
+            out[i] = sum(terms) / len(terms)
+    return out

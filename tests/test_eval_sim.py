@@ -194,3 +194,24 @@ def test_cli_bad_arguments_exit_2(tmp_path: Path, argv: list[str]) -> None:
 
 def test_cli_json_folder_missing(tmp_path: Path) -> None:
     assert main(["eval-sim", "--model", "shipped", "--json", str(tmp_path / "no" / "x.json")]) == 2
+
+
+def test_cli_dask_workers_give_the_one_process_rows(tmp_path: Path) -> None:
+    """--workers 2 (a Dask LocalCluster) scores the same runs to the same rows as the
+    one-process loop; only the timings differ."""
+    common = ["eval-sim", "--model", "shipped", "--severities", "0.3,1.0", "--runs", "1",
+              "--normal-hours", "0.1", "--onsets", "abrupt"]  # fmt: skip
+    one, two = tmp_path / "one.json", tmp_path / "two.json"
+    assert main([*common, "--json", str(one)]) == 0
+    assert main([*common, "--workers", "2", "--json", str(two)]) == 0
+    a, b = (json.loads(p.read_text())["models"]["shipped"]["runs"] for p in (one, two))
+    assert a == b
+    assert len(a["fault"]) == 6 and len(a["normal"]) == 2
+
+
+def test_seed_sets_are_disjoint() -> None:
+    dev, blind = EvalConfig(runs=10, normal_hours=10.0), EvalConfig(runs=10, normal_hours=10.0,
+                                                                  seed_set=3)  # fmt: skip
+    assert not planned_seeds(dev) & planned_seeds(blind)
+    assert len(planned_seeds(blind)) == len(planned_seeds(dev))
+    assert min(planned_seeds(blind)) == NORMAL_SEED_BASE + 30_000_000

@@ -65,20 +65,41 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--threshold-rule",
         choices=THRESHOLD_RULES,
         default="max",
-        help="J0 from held-out normal J: max (default, no false alarm on it), "
-        "quantile, or mean (the paper's literal reading)",
+        help="the thresholds eps0 (of J) and b0 (of B) from their held-out normal values: "
+        "max (default: factor x the largest), quantile, mean (the paper's literal reading), "
+        "or evt (a Gumbel fit of the per-window maxima, for --rate false alarms per hour)",
     )
     p.add_argument("--quantile", type=float, default=0.999,
                    help="for --threshold-rule quantile")
     p.add_argument("--factor", type=float, default=2.0,
-                   help="eps0 = factor x J0 (default 2)")
+                   help="eps0 = factor x J0, b0 = factor x the held-out B (default 2; not "
+                   "for evt)")
+    p.add_argument("--rate", type=number(1e-7, 1.0), default=1e-3, metavar="PER_H",
+                   help="for --threshold-rule evt: false alarms per hour (default 0.001)")
     p.add_argument(
         "--validation-fraction",
         type=float,
         default=0.25,
         metavar="F",
-        help="share of the normal data held out for J0 (default 0.25)",
+        help="share of the normal data held out for J0 (default 0.25; not used with "
+        "--held-out)",
     )
+    p.add_argument(
+        "--held-out",
+        nargs="+",
+        type=Path,
+        default=None,
+        metavar="REC",
+        help="normal recordings kept apart for the thresholds (J0 and b0) instead of a "
+        "share of REC: the more normal hours here, the surer the stated false-alarm rate",
+    )
+    p.add_argument(
+        "--bias",
+        choices=("on", "off"),
+        default=None,
+        help="the bias statistic B beside J (default: on, off for --preset paper)",
+    )
+
     p.add_argument(
         "--loop",
         default=None,
@@ -108,9 +129,10 @@ def run(args: argparse.Namespace) -> int:
         horizon=args.horizon,
         window_n=args.window,
         max_patterns=args.max_patterns,
-        threshold=ThresholdRule(args.threshold_rule, args.quantile, args.factor),
+        threshold=ThresholdRule(args.threshold_rule, args.quantile, args.factor, args.rate),
         validation_fraction=args.validation_fraction,
         isolation=args.isolation,
+        bias=None if args.bias is None else args.bias == "on",
     )
     monitor_cfg = load_config(args.config)
     recordings = []
@@ -118,7 +140,13 @@ def run(args: argparse.Namespace) -> int:
         rec = read_loop(path, monitor_cfg, args.loop)
         print(f"read {path}: {len(rec)} samples ({len(rec) / 100:.0f} s)", file=sys.stderr)
         recordings.append(rec)
-    model = train(recordings, cfg, progress=lambda msg: print(msg, file=sys.stderr))
+    held_out = []
+    for path in args.held_out or ():
+        rec = read_loop(path, monitor_cfg, args.loop)
+        print(f"read {path} (held out): {len(rec)} samples", file=sys.stderr)
+        held_out.append(rec)
+    model = train(recordings, cfg, progress=lambda msg: print(msg, file=sys.stderr),
+                  held_out=held_out or None)
     try:
         save_model(args.out, model)
     except OSError as exc:

@@ -19,6 +19,7 @@ from monitor.detection.plausibility import finding
 from monitor.detection.verdict import verdict
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
+from monitor.model.bias import alarm_level, bias_regimes, bias_series
 from monitor.model.dgrnn import predict_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
@@ -131,9 +132,16 @@ def detect(
     y_hat, e = residual_series(model, rec, gated, horizon, exact)
     e[gated] = np.nan
     j = window_j(e, model.window_n)
-    decider = Decider(alarm, model.eps0, make_isolator(model), model.window_n)
-    run = _decide_all(decider, model, rec, gate, g, e, j, missing)
+    b = None
+    if model.bias is not None:
+        spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
+        b = bias_series(e, bias_regimes(spool), model.bias)
+    level = alarm_level(j, model.eps0, b, model.bias)
+    # The alarm machine compares the level with 1: J against eps0, B against b0.
+    decider = Decider(alarm, 1.0, make_isolator(model), model.window_n)
+    run = _decide_all(decider, model, rec, gate, g, e, j, level, missing)
     finite = np.isfinite(j)
+    b_finite = np.isfinite(b) if b is not None else np.zeros(0, dtype=bool)
     states = run.states
     summary = {
         "alarm": run.first_alarm_t is not None,
@@ -144,6 +152,11 @@ def detect(
         "max_J": float(np.max(j[finite])) if finite.any() else None,
         "threshold": model.eps0,
         "J0": model.j0,
+        # The bias statistic (null without one): its largest value and threshold, and the
+        # largest alarm level max(J / eps0, B / b0), 1 being the alarm threshold.
+        "max_B": float(np.max(b[b_finite])) if b_finite.any() else None,
+        "bias_threshold": model.bias.b0 if model.bias is not None else None,
+        "max_level": float(np.nanmax(level)) if np.isfinite(level).any() else None,
         "threshold_rule": model.threshold.rule,
         "window_n": model.window_n,
         "horizon": horizon or spec.horizon,
@@ -174,7 +187,7 @@ class _Run:
 
 def _decide_all(
     decider: Decider, model: MonitorModel, rec: Recording, gate: Gate, g: GateSeries,
-    e: np.ndarray, j: np.ndarray, missing: np.ndarray,
+    e: np.ndarray, j: np.ndarray, level: np.ndarray, missing: np.ndarray,
 ) -> _Run:
     """The shared per-sample decision over every sample of the recording, in order."""
     n = len(rec)
@@ -183,12 +196,12 @@ def _decide_all(
     stale = np.where(inputs_ok, -1, np.argmax(missing, axis=1))  # first missing model signal
     regimes = regimes_of(rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(n))
     states = np.empty(n, dtype=np.int8)
-    # Quiet samples (normal operation, inputs complete and plausible, J <= eps0) change
+    # Quiet samples (normal operation, inputs complete and plausible, level <= 1) change
     # nothing in NORMAL but the isolation ring: runs of them go to skip_quiet at once, the
     # rest are decided one by one.  J finite means the sample was not gated (nor out of range).
     with np.errstate(invalid="ignore"):
         quiet = (g.op_state == OpState.NORMAL) & inputs_ok & (g.check == 0) & (g.oor < 0) \
-            & (j <= model.eps0)
+            & (level <= 1.0)
     stops = np.append(np.flatnonzero(~quiet), n)
     start = rec.meta.get("start_time_s")
     start_s = float(start) if isinstance(start, (int, float)) else None
@@ -207,7 +220,7 @@ def _decide_all(
             i = r
             continue
         oor, check, sensor = int(g.oor[i]), int(g.check[i]), int(g.sensor[i])
-        d = decider.decide(j[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]),
+        d = decider.decide(level[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]),
                            int(g.op_state[i]), oor, check, sensor)  # fmt: skip
         states[i] = d.state
         run.episodes += d.raised

@@ -23,6 +23,7 @@ from monitor.detection.gating import Gate, GatingConfig
 from monitor.detection.offline import make_isolator
 from monitor.detection.opstate import OpState
 from monitor.errors import ModelFileError
+from monitor.model.bias import BiasWindow, bias_regime
 from monitor.model.dgrnn import TickPredictor
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import WindowJ
@@ -88,7 +89,11 @@ class Ticker:
         # a first-call compile of seconds would back the bus queue up.
         self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
         self.window = WindowJ(model.window_n)
-        self.decider = Decider(self.alarm, model.eps0, make_isolator(model), model.window_n)
+        self.bias = BiasWindow(model.bias) if model.bias is not None else None
+        self._b0 = model.bias.b0 if model.bias is not None else math.nan
+        self.b = math.nan  # the bias statistic B of the last tick (NaN: none or not yet)
+        # The alarm machine compares the level max(J / eps0, B / b0) with 1.
+        self.decider = Decider(self.alarm, 1.0, make_isolator(model), model.window_n)
         self.machine = self.decider.machine
         self.eps0 = float(model.eps0)
         self.gate = Gate(model, self.alarm.min_engine_rpm, gating, columns)
@@ -140,8 +145,13 @@ class Ticker:
         np.mean(self._sq, axis=1, out=self._v)
         j = self.window.push_squared(float(self._v[0]))
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
+        level = j / self.eps0
+        if self.bias is not None:
+            b = self.b = self.bias.push(e, bias_regime(spool))
+            if level == level and b == b and self._b0 == self._b0:  # neither is NaN
+                level = max(level, b / self._b0)
         stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))
-        d = self.decider.decide(j, inputs_ok, engine, e, regime_of(spool), gate.op_state,
+        d = self.decider.decide(level, inputs_ok, engine, e, regime_of(spool), gate.op_state,
                                 gate.oor, gate.check, gate.sensor)  # fmt: skip
         self.ticks += 1
         return Tick(float(row[0]), d.state, j, d.changed, gate.op_state, gate.oor_name(gate.oor),

@@ -5,3 +5,7 @@ from __future__ import annotations
 
 ONSETS = ("abrupt", "gradual")  # a fault at full severity at once, or ramped in over 30 s
 DEFAULT_SEVERITIES = tuple(round(0.1 * k, 1) for k in range(1, 11))  # 0.1 .. 1.0
+#: Test seed sets lie this far apart (a plan's seeds stay below 1.4e6 within a set); set 0 is
+#: the development set, the others are for blind results.
+SEED_SET_STRIDE = 10_000_000
+MAX_SEED_SET = 200

@@ -34,11 +34,18 @@ class Prognosis:
         return f"{self.logs_to_alarm:.1f} logs ({lo:.0f}..{hi_s})"
 
 
+def health_index(row: dict[str, Any]) -> float | None:
+    """A log's health index: the largest alarm level max(J / eps0, B / b0), 1.0 = alarm;
+    max J / eps0 for rows from models without the bias statistic or older results."""
+    level = row.get("max_level")
+    return level if level is not None else row.get("max_j_ratio")
+
+
 def prognosis(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Prognosis:
     """Theil-Sen over the last ``k`` judged logs of one machine (rows in time order)."""
     from scipy.stats import theilslopes
 
-    y = [r["max_j_ratio"] for r in rows if r["max_j_ratio"] is not None and not r["error"]]
+    y = [v for r in rows if (v := health_index(r)) is not None and not r["error"]]
     y = np.asarray(y[-k:], dtype=float)
     last = float(y[-1]) if y.size else None
     if y.size < 3:

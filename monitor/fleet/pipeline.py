@@ -105,6 +105,7 @@ def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
         "max_j": s["max_J"],
         "eps0": eps0,
         "samples": int(s["samples"]),
+        "max_level": s.get("max_level"),
     }
     events = [json.loads(json.dumps(dict(e, event="state"))) for e in det.events]
     return Judged(row, events)

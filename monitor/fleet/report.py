@@ -14,7 +14,7 @@ from typing import Any
 import pyarrow.parquet as pq
 
 from monitor.errors import InputFileError
-from monitor.fleet.health import Prognosis, prognosis
+from monitor.fleet.health import Prognosis, health_index, prognosis
 
 _COLOURS = {"fault": "tab:red", "sensor_fault": "tab:orange", "healthy": "tab:green",
             "not_judged": "0.6"}  # fmt: skip
@@ -36,7 +36,7 @@ def _fmt(x: float | None) -> str:
 
 
 def _table(per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis]) -> list[str]:
-    out = ["| machine | logs | last verdict | health index (last max J/eps0) | trend per log "
+    out = ["| machine | logs | last verdict | health index (last max level) | trend per log "
            "| predicted crossing of 1.0 | alarms | sensor faults | errors | model |",
            "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for mid, rows in per.items():
@@ -65,7 +65,8 @@ def _health_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
                              sharey=True)  # fmt: skip
     for ax, (mid, rows) in zip(axes.flat, per.items(), strict=False):
         x = list(range(1, len(rows) + 1))
-        ax.plot(x, [r["max_j_ratio"] for r in rows], "o-", label="max J/eps0")
+        ax.plot(x, [health_index(r) for r in rows], "o-", label="health index")
+        ax.plot(x, [r["max_j_ratio"] for r in rows], ".:", label="max J/eps0")
         ax.plot(x, [r["p95_j_ratio"] for r in rows], "s--", ms=3, label="p95 J/eps0")
         ax.axhline(1.0, color="tab:red", lw=1, label="eps0 (alarm)")
         ax.set_title(mid)
@@ -75,7 +76,7 @@ def _health_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
         ax.grid(alpha=0.3)
     for ax in axes.flat[n:]:
         ax.set_visible(False)
-    axes[0][0].set_ylabel("J / eps0")
+    axes[0][0].set_ylabel("level (1.0 = alarm)")
     axes[0][0].legend(fontsize=7)
     fig.suptitle("Health index per machine (1.0 = alarm threshold)")
     fig.tight_layout()

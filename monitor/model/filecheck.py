@@ -72,3 +72,12 @@ def check_header(header: Any) -> None:
                 and c > 0 for c in clip)  # fmt: skip
     ):
         raise ValueError("header residual_clip must be null or a list of finite numbers > 0")
+    bias = header.get("bias")
+    if bias is not None:
+        if not isinstance(bias, dict):
+            raise ValueError("header bias must be an object")
+        for key in ("window_n", "min_count"):
+            v = bias.get(key)
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
+                raise ValueError(f"header bias.{key} must be a whole number 1..{MAX_WINDOW_N}")
+        _number(bias, "b0", 0.0, strict=True)

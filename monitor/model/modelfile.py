@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import ModelFileError
+from monitor.model.bias import BiasModel
 from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import Envelope, envelope_from_patterns
 from monitor.model.filecheck import check_header, read_members
@@ -36,6 +37,7 @@ MODEL_FORMAT = "hydraulic-monitor-dgrnn"
 # 2: patterns carry member counts (Specht's clustered GRNN).  The optional header key
 # ``validity`` (the training envelope) was added without a version bump: readers that do
 # not know it ignore it, and files without it get an envelope derived from their patterns.
+# Likewise ``bias`` (the bias statistic's window, scales and threshold): without it, J alone.
 MODEL_VERSION = 2
 _ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
 
@@ -58,6 +60,8 @@ class MonitorModel:
     training: dict[str, Any] = field(default_factory=dict)
     #: Trained range and occupancy per signal (None: not known; see ``monitor.model.envelope``).
     envelope: Envelope | None = None
+    #: The bias statistic B beside J (None: J alone, as the paper; see ``monitor.model.bias``).
+    bias: BiasModel | None = None
 
     @property
     def spec(self) -> DGRNNSpec:
@@ -88,6 +92,8 @@ class MonitorModel:
         }
         if self.envelope is not None:
             head["validity"] = self.envelope.to_dict()
+        if self.bias is not None:
+            head["bias"] = self.bias.to_dict()
         return head
 
 
@@ -213,4 +219,14 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
         residual_clip=None if header["residual_clip"] is None else tuple(header["residual_clip"]),
         training=header["training"],
         envelope=Envelope.from_dict(header["validity"]) if "validity" in header else None,
+        bias=_bias(header, len(spec.outputs)),
     )
+
+
+def _bias(header: dict[str, Any], n_out: int) -> BiasModel | None:
+    if header.get("bias") is None:
+        return None
+    bias = BiasModel.from_dict(header["bias"])
+    if bias.scale.shape[1] != n_out:
+        raise ValueError(f"bias scale has {bias.scale.shape[1]} outputs, the model {n_out}")
+    return bias

@@ -10,6 +10,12 @@ what.  Rules:
   price of rare false alarms on transients the validation set barely covers.
 - ``mean``: the literal reading, J0 = mean of normal J.  Ordinary duty-cycle transients then
   exceed eps0 (DESIGN.md); kept for comparison with the paper.
+- ``evt``: a threshold with a stated false-alarm rate.  The held-out series is cut into
+  blocks one window long (so neighbouring maxima are nearly independent), a Gumbel
+  distribution is fitted to the block maxima (scipy, maximum likelihood), and eps0 is its
+  return level for ``rate_per_h`` exceedances per hour of operation: "eps0 chosen for < 1
+  false alarm per 1/rate_per_h hours at this duty cycle".  eps0 is never below the largest
+  value seen; J0 is that largest value.  ``factor`` does not apply.
 """
 
 from __future__ import annotations
@@ -20,7 +26,9 @@ import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
 
-THRESHOLD_RULES = ("max", "quantile", "mean")
+THRESHOLD_RULES = ("max", "quantile", "mean", "evt")
+#: Fewer block maxima than this cannot support a fitted tail: ``evt`` says so.
+MIN_BLOCKS = 8
 
 
 @dataclass(frozen=True)
@@ -28,6 +36,7 @@ class ThresholdRule:
     rule: str = "max"
     quantile: float = 0.999
     factor: float = 2.0
+    rate_per_h: float = 1e-3  # ``evt``: target false alarms per hour of operation
 
     def __post_init__(self) -> None:
         if self.rule not in THRESHOLD_RULES:
@@ -36,6 +45,8 @@ class ThresholdRule:
             raise ConfigError(f"threshold quantile must be in 0.5..1, got {self.quantile}")
         if not self.factor > 0:
             raise ConfigError(f"threshold factor must be positive, got {self.factor}")
+        if not 1e-7 <= self.rate_per_h <= 1.0:
+            raise ConfigError(f"threshold rate_per_h must be in 1e-7..1, got {self.rate_per_h}")
 
     def j0(self, normal_j: np.ndarray) -> float:
         """J0 from the J values of normal validation data (NaN, i.e. warm-up, ignored)."""
@@ -49,10 +60,53 @@ class ThresholdRule:
             return float(np.quantile(j, self.quantile))
         return float(j.mean())
 
-    def eps0(self, normal_j: np.ndarray) -> tuple[float, float]:
-        """(J0, eps0 = factor * J0)."""
+    def eps0(
+        self, normal_j: np.ndarray, block: int = 1, period_s: float = 0.01
+    ) -> tuple[float, float]:
+        """(J0, eps0): eps0 = factor * J0, or for ``evt`` the return level of the block
+        maxima (blocks of ``block`` samples of ``period_s``), see :meth:`fit_evt`."""
+        if self.rule == "evt":
+            fit = self.fit_evt(normal_j, block, period_s)
+            return fit["max"], fit["level"]
         j0 = self.j0(normal_j)
         return j0, self.factor * j0
 
+    def fit_evt(self, series: np.ndarray, block: int, period_s: float = 0.01) -> dict[str, float]:
+        """Gumbel fit of the block maxima of a normal series (NaN ignored; a block counts
+        when at least half of it is finite): location, scale, the return level for
+        ``rate_per_h`` and how many blocks it rests on."""
+        from scipy.stats import gumbel_r
+
+        x = np.asarray(series, dtype=np.float64)
+        n = len(x) // block
+        maxima = []
+        for k in range(n):
+            part = x[k * block : (k + 1) * block]
+            ok = np.isfinite(part)
+            if ok.sum() * 2 >= block:
+                maxima.append(float(part[ok].max()))
+        if len(maxima) < MIN_BLOCKS:
+            raise InputFileError(
+                f"the evt threshold needs at least {MIN_BLOCKS} held-out windows of "
+                f"{block * period_s:g} s, got {len(maxima)} (give more normal data, or use "
+                "the max rule)"
+            )
+        loc, scale = gumbel_r.fit(maxima)
+        p = self.rate_per_h * block * period_s / 3600.0  # exceedance probability per block
+        level = float(gumbel_r.ppf(1.0 - p, loc, scale))
+        top = max(maxima)
+        return {"loc": float(loc), "scale": float(scale), "blocks": float(len(maxima)),
+                "block_s": block * period_s, "max": top, "level": max(level, top)}  # fmt: skip
+
+    def describe(self) -> str:
+        """The rule in one line, for the model file and ``monitor train``."""
+        if self.rule == "evt":
+            return (f"chosen for < 1 false alarm per {1.0 / self.rate_per_h:g} h at the "
+                    "held-out data's duty cycle (Gumbel fit of per-window maxima)")  # fmt: skip
+        if self.rule == "quantile":
+            return f"{self.factor:g} x the {self.quantile:g} quantile of held-out normal values"
+        return f"{self.factor:g} x the {self.rule} of held-out normal values"
+
     def to_dict(self) -> dict[str, object]:
-        return {"rule": self.rule, "quantile": self.quantile, "factor": self.factor}
+        return {"rule": self.rule, "quantile": self.quantile, "factor": self.factor,
+                "rate_per_h": self.rate_per_h}  # fmt: skip

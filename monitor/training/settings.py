@@ -27,6 +27,11 @@ class TrainConfig:
     isolation: str = "sim"  # "sim": signatures from simulated faults; "none"
     isolation_runs: int = 2  # simulated runs per fault and severity
     seed: int = 0
+    #: The bias statistic beside J (``monitor.model.bias``); None: on for every preset but
+    #: ``paper``, which stays the paper's method.
+    bias: bool | None = None
+    bias_window_n: int = 6000  # 60 s: several raise/hold/lower phases of every regime
+    bias_min_count: int = 300  # 3 s of a regime in the window before it counts
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
@@ -38,8 +43,14 @@ class TrainConfig:
         q = self.residual_clip_quantile
         if q is not None and not 0.9 <= q <= 1.0:
             raise ConfigError(f"residual clip quantile must be within 0.9..1, got {q}")
+        if not 1 <= self.bias_min_count <= self.bias_window_n:
+            raise ConfigError("bias min_count must be within 1..bias window")
         if self.isolation not in ("sim", "none"):
             raise ConfigError(f"isolation must be 'sim' or 'none', got {self.isolation!r}")
+
+    @property
+    def with_bias(self) -> bool:
+        return self.preset != "paper" if self.bias is None else self.bias
 
     def spec(self) -> DGRNNSpec:
         return DGRNNSpec.preset(self.preset, self.horizon)

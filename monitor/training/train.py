@@ -15,15 +15,17 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from monitor.detection.alarm import N_REGIMES, AlarmConfig, Isolator, regime_of
+from monitor.detection.alarm import N_REGIMES, AlarmConfig, Isolator
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
+from monitor.model.bias import BiasModel, bias_regimes, bias_series, fit_scale
 from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
 from monitor.model.spec import Normalizer, table
+from monitor.model.threshold import MIN_BLOCKS
 from monitor.signals import FAULT_NAMES
 from monitor.training.settings import TrainConfig
 
@@ -60,17 +62,25 @@ def normal_residuals(model: MonitorModel, rec: Recording) -> np.ndarray:
 
 
 def train(
-    recordings: Sequence[Recording], cfg: TrainConfig, progress: Progress | None = None
+    recordings: Sequence[Recording],
+    cfg: TrainConfig,
+    progress: Progress | None = None,
+    held_out: Sequence[Recording] | None = None,
 ) -> MonitorModel:
+    """A model from normal ``recordings``; the thresholds come from ``held_out`` normal
+    recordings when given, else from the last ``cfg.validation_fraction`` of them."""
     say = progress or (lambda _msg: None)
     if not recordings:
         raise InputFileError("no normal recordings to train on")
     spec = cfg.spec()
-    for rec in recordings:
+    for rec in [*recordings, *(held_out or ())]:
         missing = [n for n in spec.variables if not rec.has(n)]
         if missing:
             raise InputFileError(f"{rec.source}: missing signal(s) {', '.join(missing)}")
-    fit_part, val_part = split_normal(recordings, cfg.validation_fraction)
+    if held_out:
+        fit_part, val_part = list(recordings), list(held_out)
+    else:
+        fit_part, val_part = split_normal(recordings, cfg.validation_fraction)
     tables = [table(r, spec.variables) for r in fit_part]
     normalizer = Normalizer().fit(np.concatenate(tables), spec.variables)
     started = time.perf_counter()
@@ -94,14 +104,27 @@ def train(
         say(f"  residual bound |e| <= {', '.join(f'{c:.3g}' for c in clip)} (z, per output)")
         e_val = [np.clip(e, -clip, clip) for e in e_val]
     j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
-    model.j0, model.eps0 = cfg.threshold.eps0(j_val)
+    model.j0, model.eps0 = cfg.threshold.eps0(j_val, block=cfg.window_n)
     say(
         f"  J0 {model.j0:.4g} ({cfg.threshold.rule} of J on {len(val_part)} held-out part(s)),"
-        f" eps0 {model.eps0:.4g}"
+        f" eps0 {model.eps0:.4g}: {cfg.threshold.describe()}"
     )
+    bias_note = "off (--bias off, or the paper preset)"
+    if cfg.with_bias:
+        try:
+            model.bias = fit_bias(
+                e_val, [r["SpoolCmd"] if r.has("SpoolCmd") else None for r in val_part], cfg
+            )
+            bias_note = "on"
+            say(f"  bias statistic over {cfg.bias_window_n / 100:g} s, b0 {model.bias.b0:.4g}: "
+                f"{cfg.threshold.describe()}")  # fmt: skip
+        except InputFileError as exc:
+            # Short commissioning data cannot support the bias threshold: J alone, said.
+            bias_note = f"off: {exc}"
+            say(f"  bias statistic {bias_note}")
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
-    model.envelope = envelope_from_recordings(recordings, AlarmConfig().min_engine_rpm)
+    model.envelope = envelope_from_recordings([*fit_part, *val_part], AlarmConfig().min_engine_rpm)
     env = model.envelope
     say("  trained envelope: " + ", ".join(
         f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(env.signals, env.lo, env.hi, strict=True)
@@ -110,24 +133,53 @@ def train(
         labels, centroids = simulated_signatures(model, cfg, say)
         model.isolation_labels, model.isolation_centroids = labels, centroids
     model.training = {
-        "sources": [r.source for r in recordings],
+        "sources": [r.source for r in [*fit_part, *val_part]],
         "patterns_from": [r.source for r in fit_part],
         "validation_from": [r.source for r in val_part],
-        "samples": int(sum(len(r) for r in recordings)),
-        "data_sha256": data_hash([table(r, spec.variables) for r in recordings]),
+        "samples": int(sum(len(r) for r in [*fit_part, *val_part])),
+        "data_sha256": data_hash([table(r, spec.variables) for r in [*fit_part, *val_part]]),
         "preset": cfg.preset,
         "max_patterns": cfg.max_patterns,
         "residual_clip_quantile": cfg.residual_clip_quantile,
         "isolation": cfg.isolation,
+        "threshold": cfg.threshold.describe(),
+        "bias": bias_note,
         "trained_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     return model
 
 
+def fit_bias(e_val: list[np.ndarray], spool_val: list[np.ndarray], cfg: TrainConfig) -> BiasModel:
+    """The bias statistic's scales and threshold b0 from held-out normal residuals
+    (``InputFileError`` when they are too short to support them)."""
+    if any(s is None for s in spool_val):
+        raise InputFileError("the held-out recordings have no SpoolCmd")
+    judged = sum(int(np.isfinite(e).all(axis=1).sum()) for e in e_val)
+    if judged < MIN_BLOCKS * cfg.bias_window_n:
+        # Its threshold must rest on several of its own windows, not on one or two.
+        raise InputFileError(
+            f"{judged / 6000:.1f} min of held-out normal data; the bias statistic needs "
+            f"{MIN_BLOCKS * cfg.bias_window_n / 6000:g} min ({MIN_BLOCKS} windows): give more "
+            "with --held-out"
+        )
+    regimes = [bias_regimes(s) for s in spool_val]
+    bias = BiasModel(cfg.bias_window_n, cfg.bias_min_count, fit_scale(e_val, regimes))
+    b_val = np.concatenate([bias_series(e, r, bias) for e, r in zip(e_val, regimes, strict=True)])
+    _, b0 = cfg.threshold.eps0(b_val, block=cfg.bias_window_n)
+    return BiasModel(bias.window_n, bias.min_count, bias.scale, b0)
+
+
+#: Severities the fault signatures are learnt at: one signature per fault and severity, since
+#: a fault's residual pattern changes with its size (slight spool wear leaks at hold only).
+ISOLATION_SEVERITIES = (0.15, 0.3, 0.5, 1.0)
+
+
 def simulated_signatures(
     model: MonitorModel, cfg: TrainConfig, say: Progress
 ) -> tuple[tuple[str, ...], np.ndarray]:
-    """One unit-length mean-residual signature per fault, from simulated faulty boom cycles."""
+    """Unit-length mean-residual signatures, one per fault and severity (the label repeats),
+    from simulated faulty boom cycles; isolation names the nearest."""
+    from monitor.detection.alarm import regimes_of
     from monitor.detection.offline import residual_series
     from monitor.sim.cycles import make_cycle
     from monitor.sim.faults import Fault
@@ -136,16 +188,16 @@ def simulated_signatures(
 
     machine = load_machine()
     n_out = len(model.spec.outputs)
-    centroids = []
+    labels, centroids = [], []
     say(
-        f"  learning fault signatures from {len(FAULT_NAMES) * 3 * cfg.isolation_runs} "
-        "simulated runs"
+        f"  learning fault signatures from "
+        f"{len(FAULT_NAMES) * len(ISOLATION_SEVERITIES) * cfg.isolation_runs} simulated runs"
     )
     for k, fault in enumerate(FAULT_NAMES):
-        acc = Isolator((), np.zeros((0, N_REGIMES * n_out)), n_out)
-        for sev in (0.4, 0.7, 1.0):
+        for sev in ISOLATION_SEVERITIES:
+            acc = Isolator((), np.zeros((0, N_REGIMES * n_out)), n_out)
             for r in range(cfg.isolation_runs):
-                seed = 70_000 + 1000 * k + 100 * r + int(sev * 10) + cfg.seed
+                seed = 70_000 + 1000 * k + 100 * r + int(round(sev * 20)) + cfg.seed
                 rec = simulate(
                     make_cycle("boom", 90.0, seed),
                     machine,
@@ -153,9 +205,9 @@ def simulated_signatures(
                     seed=seed,
                 )
                 _, e = residual_series(model, rec, np.zeros(len(rec), dtype=bool))
-                for i in range(2000, len(rec)):
-                    acc.add(e[i], regime_of(rec["SpoolCmd"][i]))
-        sig = np.nan_to_num(acc.signature())
-        norm = np.linalg.norm(sig)
-        centroids.append(sig / norm if norm > 0 else sig)
-    return FAULT_NAMES, np.array(centroids)
+                acc.add_many(e[2000:], regimes_of(rec["SpoolCmd"][2000:]))
+            sig = np.nan_to_num(acc.signature())
+            norm = np.linalg.norm(sig)
+            labels.append(fault)
+            centroids.append(sig / norm if norm > 0 else sig)
+    return tuple(labels), np.array(centroids)

@@ -1,0 +1,225 @@
+"""The bias statistic B: small sustained residuals, beside the paper's J.
+
+J (eq. 9) is the mean *squared* residual, so a small fault's steady offset adds little to
+the scatter every duty cycle already has.  A worn seal or a stroke-limited spool moves the
+*mean* of the residual in the operating regimes where it acts, and a mean over many samples
+averages the scatter away.  B therefore keeps, over the last ``window_n`` valid samples, the
+mean signed residual of every output in each of five spool regimes (hold; raising and
+lowering at small and at large commands: a stroke limit only shows at large ones), turns
+each into a standard score with the long-run standard deviation ``scale`` learnt from
+held-out normal data, and averages the squared scores over the regimes seen often enough:
+
+    z[r, o] = mean_r(e_o) * sqrt(n_r) / scale[r, o]      (n_r >= min_count samples in regime r)
+    B       = mean over those r of (1/n_out) * sum_o z[r, o]^2
+
+On normal data B is about 1 (a chi-square per degree of freedom); it grows with a fault's
+offset squared and with the time the fault has been present.  Its threshold b0 comes from
+held-out normal B by the same rule as eps0 from J (``monitor.model.threshold``).
+
+One step kernel (``_push``) serves the live ticker and the batch series, so both give the
+same numbers.  A NaN residual (a gated or missing sample) pauses the window, as for J.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.errors import ConfigError, InputFileError
+from monitor.jit import jit
+
+#: Spool command edges (%) of the regimes: |s| <= 5 hold; 5 < |s| <= 60 small; above: large.
+HOLD_PCT = 5.0
+LARGE_PCT = 60.0
+N_BIAS_REGIMES = 5  # hold, raise small, raise large, lower small, lower large
+#: Long-run standard deviation estimated by means of batches this long (samples of one regime).
+BATCH = 500
+#: A regime's scale is at least this share of the output's largest scale over the regimes: a
+#: regime where the model is nearly exact (PB trapped at hold) would otherwise turn a
+#: duty-cycle quirk the held-out data never showed into a huge score.
+SCALE_FLOOR = 0.25
+
+
+def bias_regime(spool_pct: float) -> int:
+    """The regime of one sample (NaN counts as hold)."""
+    a = abs(spool_pct)
+    if not a > HOLD_PCT:
+        return 0
+    return (1 if spool_pct > 0 else 3) + (1 if a > LARGE_PCT else 0)
+
+
+def bias_regimes(spool_pct: np.ndarray) -> np.ndarray:
+    """``bias_regime`` for a whole series."""
+    s = np.asarray(spool_pct, dtype=np.float64)
+    a = np.abs(s)
+    large = (a > LARGE_PCT).astype(np.int64)
+    out = np.where(s > 0, 1, 3) + large
+    return np.where(a > HOLD_PCT, out, 0).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class BiasModel:
+    """What the detector needs for B: window, the per-regime scales, threshold b0."""
+
+    window_n: int  # samples (6000: 60 s at 100 Hz)
+    min_count: int  # samples of a regime in the window before it counts
+    scale: np.ndarray  # (N_BIAS_REGIMES, outputs), z-units x sqrt(samples)
+    b0: float = float("nan")  # threshold; NaN: B is computed but never alarms
+
+    def __post_init__(self) -> None:
+        if self.window_n < 2 or not 1 <= self.min_count <= self.window_n:
+            raise ConfigError(
+                f"bias window {self.window_n} and min_count {self.min_count} must satisfy "
+                "1 <= min_count <= window"
+            )
+        s = np.asarray(self.scale, dtype=np.float64)
+        if s.ndim != 2 or s.shape[0] != N_BIAS_REGIMES or not np.all(s > 0):
+            raise ConfigError(f"bias scale must be ({N_BIAS_REGIMES}, outputs) and positive")
+        object.__setattr__(self, "scale", np.ascontiguousarray(s))
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "window_n": int(self.window_n),
+            "min_count": int(self.min_count),
+            "scale": [[float(v) for v in row] for row in self.scale],
+            "b0": float(self.b0),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, object]) -> BiasModel:
+        return cls(int(d["window_n"]), int(d["min_count"]),  # type: ignore[arg-type]
+                   np.asarray(d["scale"], dtype=np.float64), float(d["b0"]))  # type: ignore[arg-type]  # fmt: skip
+
+
+def fit_scale(residuals: list[np.ndarray], regimes: list[np.ndarray]) -> np.ndarray:
+    """Long-run standard deviation of the mean residual per regime and output, by batch means
+    over held-out normal data (``BATCH`` consecutive samples of one regime per batch, so the
+    residuals' autocorrelation is inside the batch).  A regime with fewer than three batches
+    takes the output's largest scale; every scale is floored at ``SCALE_FLOOR`` of it."""
+    n_out = residuals[0].shape[1]
+    scale = np.full((N_BIAS_REGIMES, n_out), np.nan)
+    for r in range(N_BIAS_REGIMES):
+        means = []
+        for e, reg in zip(residuals, regimes, strict=True):
+            x = e[(reg == r) & np.isfinite(e).all(axis=1)]
+            nb = len(x) // BATCH
+            if nb:
+                means.append(x[: nb * BATCH].reshape(nb, BATCH, n_out).mean(axis=1))
+        if means and sum(len(m) for m in means) >= 3:
+            scale[r] = np.std(np.concatenate(means), axis=0, ddof=1) * np.sqrt(BATCH)
+    top = np.max(np.where(np.isfinite(scale), scale, -np.inf), axis=0)
+    if not np.all(np.isfinite(top)) or not np.all(top > 0):
+        raise InputFileError(
+            "too little held-out normal data for the bias statistic: every output needs "
+            f"3 batches of {BATCH} samples in some spool regime (give longer recordings)"
+        )
+    return np.maximum(np.where(np.isfinite(scale), scale, top), SCALE_FLOOR * top)
+
+
+# State vector layout of the step kernel.
+_POS, _COUNT, _PUSHES = 0, 1, 2
+
+
+@jit(aot=True)
+def _push(ring_e, ring_r, sums, counts, state, e, regime, scale, min_count,
+          resum_every):  # pragma: no cover - numba
+    """One sample into the window; returns B (NaN: paused, or no regime counted yet)."""
+    n_out = e.shape[0]
+    for o in range(n_out):
+        if np.isnan(e[o]):
+            return np.nan
+    size = ring_r.shape[0]
+    pos = state[_POS]
+    if state[_COUNT] == size:  # full: the oldest sample leaves
+        old = ring_r[pos]
+        counts[old] -= 1.0
+        for o in range(n_out):
+            sums[old, o] -= ring_e[pos, o]
+    else:
+        state[_COUNT] += 1
+    for o in range(n_out):
+        ring_e[pos, o] = e[o]
+        sums[regime, o] += e[o]
+    ring_r[pos] = regime
+    counts[regime] += 1.0
+    state[_POS] = pos + 1 if pos + 1 < size else 0
+    state[_PUSHES] += 1
+    if state[_PUSHES] == resum_every:  # exact re-summation: add/subtract would drift
+        state[_PUSHES] = 0
+        sums[:, :] = 0.0
+        for i in range(state[_COUNT]):
+            for o in range(n_out):
+                sums[ring_r[i], o] += ring_e[i, o]
+    total = 0.0
+    used = 0
+    for r in range(sums.shape[0]):
+        k = counts[r]
+        if k >= min_count:
+            root = np.sqrt(k)
+            for o in range(n_out):
+                z = sums[r, o] / k * root / scale[r, o]
+                total += z * z / n_out
+            used += 1
+    return total / used if used > 0 else np.nan
+
+
+@jit
+def _series(e, regimes, scale, window, min_count, resum_every):  # pragma: no cover - numba
+    n, n_out = e.shape
+    out = np.empty(n)
+    ring_e = np.zeros((window, n_out))
+    ring_r = np.zeros(window, dtype=np.int64)
+    sums = np.zeros((scale.shape[0], n_out))
+    counts = np.zeros(scale.shape[0])
+    state = np.zeros(3, dtype=np.int64)
+    for i in range(n):
+        out[i] = _push(ring_e, ring_r, sums, counts, state, e[i], regimes[i], scale, min_count,
+                       resum_every)  # fmt: skip
+    return out
+
+
+def _resum(window: int) -> int:
+    return max(1000, 10 * window)
+
+
+def bias_series(e: np.ndarray, regimes: np.ndarray, bias: BiasModel) -> np.ndarray:
+    """B at every sample of a series of residuals (samples, outputs) and their regimes."""
+    a = np.ascontiguousarray(e, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != bias.scale.shape[1]:
+        raise InputFileError(f"residuals {a.shape} do not fit the bias scale {bias.scale.shape}")
+    r = np.ascontiguousarray(regimes, dtype=np.int64)
+    return _series(a, r, bias.scale, bias.window_n, bias.min_count, _resum(bias.window_n))
+
+
+class BiasWindow:
+    """B kept up to date one tick at a time (the live ticker's; same kernel as the series)."""
+
+    def __init__(self, bias: BiasModel) -> None:
+        self.bias = bias
+        n_out = bias.scale.shape[1]
+        self._ring_e = np.zeros((bias.window_n, n_out))
+        self._ring_r = np.zeros(bias.window_n, dtype=np.int64)
+        self._sums = np.zeros((N_BIAS_REGIMES, n_out))
+        self._counts = np.zeros(N_BIAS_REGIMES)
+        self._state = np.zeros(3, dtype=np.int64)
+        self._resum = _resum(bias.window_n)
+
+    def push(self, e: np.ndarray, regime: int) -> float:
+        """One sample's residuals (outputs) and bias regime; returns B."""
+        b = self.bias
+        return float(_push(self._ring_e, self._ring_r, self._sums, self._counts, self._state,
+                           e, regime, b.scale, b.min_count, self._resum))  # fmt: skip
+
+
+def alarm_level(
+    j: np.ndarray, eps0: float, b: np.ndarray | None, bias: BiasModel | None
+) -> np.ndarray:
+    """What the alarm compares with 1: max(J / eps0, B / b0), J / eps0 alone while B is
+    NaN or without a bias model; NaN while J is (the window warms up or pauses)."""
+    level = np.asarray(j, dtype=np.float64) / eps0
+    if b is None or bias is None or bias.b0 != bias.b0:
+        return level
+    with np.errstate(invalid="ignore"):
+        both = np.isfinite(level) & np.isfinite(b)
+        return np.where(both, np.maximum(level, b / bias.b0), level)
