@@ -417,7 +417,13 @@ def test_a_fault_on_before_an_outage_is_the_same_episode_after_it(tmp_path) -> N
     # desk shows what an outage during an alarm does: inactive over the gap, then, the gap
     # being shorter than alarm.episode_gap_samples, the same alarm episode at once (same
     # isolation, no new debounce, no second black box).
-    cut_s, gap_s = 58.0, 5.0  # the alarm is on from 55.6 s
+    cfg = load_config()
+    model = load_model(cfg.model)
+    plain = detect(model, recording_from_candump(LOG), cfg.alarm, cfg.horizon)
+    on_s = next(e["t"] for e in plain.events if e["state"] == "fault")
+    # The gap opens 2 s into the alarm; 1.5 s keeps HYD_OilTemp (1 s cycle, stale after 3 s)
+    # fresh across it, so the return is to fault directly, not through a stale sensor.
+    cut_s, gap_s = on_s + 2.0, 1.5
     path = tmp_path / "gap_in_alarm.log"
     with path.open("w") as fh:
         t0 = None
@@ -426,10 +432,10 @@ def test_a_fault_on_before_an_outage_is_the_same_episode_after_it(tmp_path) -> N
             shift = gap_s if m.timestamp - t0 >= cut_s else 0.0
             fh.write(format_line(m.timestamp + shift, "can0", m.arbitration_id,
                                  m.is_extended_id, bytes(m.data)))  # fmt: skip
-    cfg = load_config()
-    det = detect(load_model(cfg.model), recording_from_candump(path), cfg.alarm, cfg.horizon)
+    det = detect(model, recording_from_candump(path), cfg.alarm, cfg.horizon)
     states = [(e["state"], e["t"], e["fault"]) for e in det.events]
     assert [s for s, _, _ in states] == ["normal", "fault", "inactive", "fault"], states
+    assert states[1][1] == on_s  # the log before the gap is judged as without it
     assert states[1][2] == states[3][2] == "spool_wear"
     assert cut_s + gap_s <= states[3][1] < cut_s + gap_s + 0.05
     assert det.summary["alarm_episodes"] == 1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import zipfile
 
 import numpy as np
 import pytest
@@ -68,6 +69,16 @@ def test_corrupt_old_and_foreign_model_files_are_refused(tmp_path, small_model):
     np.savez(old, **data)
     with pytest.raises(ModelFileError, match="version 99"):
         load_model(old)
+    # A NUL byte in an array's .npy header (numpy parses it as Python: a SyntaxError inside).
+    nul = tmp_path / "nul.npz"
+    with zipfile.ZipFile(path) as src, zipfile.ZipFile(nul, "w") as dst:
+        for info in src.infolist():
+            blob = src.read(info)
+            if info.filename == "patterns.npy":
+                blob = blob.replace(b"'shape': (", b"'shape': \x00", 1)
+            dst.writestr(info, blob)
+    with pytest.raises(ModelFileError, match="not a monitor model file .an array header"):
+        load_model(nul)
 
 
 def test_a_recording_without_the_model_signals_is_refused(small_model):

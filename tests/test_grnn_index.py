@@ -12,6 +12,7 @@ import pytest
 from monitor.detection.alarm import AlarmConfig, AlarmMachine, State, regime_of
 from monitor.detection.offline import detect, gated_residuals, make_isolator
 from monitor.evaluation.sim_eval import EvalConfig, fault_plan, normal_plan, simulate_run
+from monitor.model.bias import bias_regimes, bias_series
 from monitor.model.grnn import GRNN
 from monitor.model.grnn_core import grnn_predict
 from monitor.model.grnn_index import build_index, cutoff_for, predict_cutoff
@@ -186,10 +187,16 @@ def test_detect_fast_forward_equals_stepping_every_sample(shipped):
     det = detect(shipped, rec, alarm)
     _, e, _, inputs_ok = gated_residuals(shipped, rec, alarm.min_engine_rpm)
     j = window_j(e, shipped.window_n)
-    m = AlarmMachine(alarm, shipped.eps0, make_isolator(shipped), shipped.window_n)
+    # The level the alarm compares with 1: J / eps0, or B / b0 where the bias statistic is
+    # defined and larger (B itself is checked against tests/naive.py in test_bias.py).
+    b = bias_series(e, bias_regimes(rec["SpoolCmd"]), shipped.bias)
+    level = j / shipped.eps0
+    both = np.isfinite(level) & np.isfinite(b)
+    level[both] = np.maximum(level[both], b[both] / shipped.bias.b0)
+    m = AlarmMachine(alarm, 1.0, make_isolator(shipped), shipped.window_n)
     states, faults = [], []
     for i in range(len(rec)):
-        s = m.step(j[i], bool(inputs_ok[i]), rec["EngineSpeed"][i], e[i],
+        s = m.step(level[i], bool(inputs_ok[i]), rec["EngineSpeed"][i], e[i],
                    regime_of(rec["SpoolCmd"][i]))  # fmt: skip
         states.append(int(s))
         faults.append(m.fault if s is State.FAULT else None)

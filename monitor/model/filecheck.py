@@ -5,6 +5,7 @@ the detector uses has its type and range (a NaN or infinite threshold would neve
 from __future__ import annotations
 
 import math
+import tokenize
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -32,8 +33,11 @@ def read_members(path: Path) -> dict[str, np.ndarray]:
     unpacked = sum(size for name, size in sizes.items() if name in LAYOUT)
     if unpacked > MAX_MODEL_BYTES:
         raise ValueError(f"its arrays unpack to {unpacked} bytes, more than {MAX_MODEL_BYTES}")
-    with np.load(path, allow_pickle=False) as npz:
-        data = {k: npz[k] for k in npz.files if k in LAYOUT}
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {k: npz[k] for k in npz.files if k in LAYOUT}
+    except (SyntaxError, tokenize.TokenError) as exc:  # numpy parses .npy headers as Python
+        raise ValueError(f"an array header is unreadable ({type(exc).__name__})") from None
     for name, a in data.items():
         dtype, rank = LAYOUT[name]
         if a.dtype != np.dtype(dtype) or a.ndim > rank:

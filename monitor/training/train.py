@@ -124,7 +124,8 @@ def train(
             say(f"  bias statistic {bias_note}")
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
-    model.envelope = envelope_from_recordings([*fit_part, *val_part], AlarmConfig().min_engine_rpm)
+    everything = [*recordings, *(held_out or ())]
+    model.envelope = envelope_from_recordings(everything, AlarmConfig().min_engine_rpm)
     env = model.envelope
     say("  trained envelope: " + ", ".join(
         f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(env.signals, env.lo, env.hi, strict=True)
@@ -133,11 +134,11 @@ def train(
         labels, centroids = simulated_signatures(model, cfg, say)
         model.isolation_labels, model.isolation_centroids = labels, centroids
     model.training = {
-        "sources": [r.source for r in [*fit_part, *val_part]],
+        "sources": [r.source for r in everything],
         "patterns_from": [r.source for r in fit_part],
         "validation_from": [r.source for r in val_part],
-        "samples": int(sum(len(r) for r in [*fit_part, *val_part])),
-        "data_sha256": data_hash([table(r, spec.variables) for r in [*fit_part, *val_part]]),
+        "samples": int(sum(len(r) for r in everything)),
+        "data_sha256": data_hash([table(r, spec.variables) for r in everything]),
         "preset": cfg.preset,
         "max_patterns": cfg.max_patterns,
         "residual_clip_quantile": cfg.residual_clip_quantile,
