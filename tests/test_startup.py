@@ -111,7 +111,8 @@ def test_the_tick_kernels_compiled_ahead_of_time_decide_as_the_jit(
     runs, cache = warm
     if shutil.which("g++") is None:  # numba's pycc compiles through distutils' C++ driver
         pytest.skip("no C++ compiler (g++): `monitor warm-up` cannot compile the tick kernels")
-    assert "3 of 3 tick kernels compiled ahead of time" in runs[-1], runs[-1]
+    assert "9 of 9 kernels (live tick, offline detection) compiled ahead of time" in runs[-1], \
+        runs[-1]
     rec = read_recording(resource_path("replay", "spool_wear.log"))
     np.save(tmp_path / "rows.npy", rows_of(rec))
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "MONITOR_AOT": aot}
@@ -124,3 +125,77 @@ def test_the_tick_kernels_compiled_ahead_of_time_decide_as_the_jit(
     offline = detect(load_model(cfg.model), rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
     assert [e["state"] for e in offline.events] == ["normal", "fault"]
     assert_same_events(got["events"], offline)
+
+
+# `monitor detect` in a process of its own: its summary, events, and whether numba loaded.
+DETECT = """
+import json, runpy, sys
+sys.argv = ["monitor", "detect", sys.argv[1], "--summary", sys.argv[2], "--events", sys.argv[3],
+            "--j-every", "0"]
+try:
+    runpy.run_module("monitor", run_name="__main__")
+except SystemExit:
+    pass
+print(json.dumps({"numba": "numba" in sys.modules}))
+"""
+
+
+def test_monitor_detect_after_warm_up_loads_no_numba_and_judges_as_the_jit(
+    warm, tmp_path
+) -> None:
+    """The offline kernels (candump scan, sample clock, DGRNN over a series on one thread,
+    J, B) compiled ahead of time give `monitor detect` the JIT's verdict, events and alarm
+    times; only sums may differ in the last bits (pycc compiles without fast-math)."""
+    from live_support import assert_same_events
+
+    from monitor.resources import resource_path
+
+    runs, cache = warm
+    if shutil.which("g++") is None:
+        pytest.skip("no C++ compiler (g++): `monitor warm-up` cannot compile the kernels")
+    log = resource_path("replay", "spool_wear.log")
+    got = {}
+    for aot in ("1", "0"):
+        summary, events = tmp_path / f"s{aot}.json", tmp_path / f"e{aot}.jsonl"
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "MONITOR_AOT": aot}
+        out = subprocess.run([sys.executable, "-c", DETECT, str(log), str(summary), str(events)],
+                             capture_output=True, text=True, env=env, check=True)  # fmt: skip
+        probe = json.loads(out.stdout.strip().splitlines()[-1])
+        assert probe["numba"] is (aot == "0"), out.stderr
+        got[aot] = (json.loads(summary.read_text()),
+                    [json.loads(x) for x in events.read_text().splitlines()])  # fmt: skip
+    (s_aot, e_aot), (s_jit, e_jit) = got["1"], got["0"]
+    assert s_aot["verdict"] == s_jit["verdict"] == "fault"
+    assert s_aot["first_alarm_t"] == s_jit["first_alarm_t"]
+    assert s_aot["fault"] == s_jit["fault"] == "spool_wear"
+    for key in ("max_J", "max_B", "max_level"):
+        assert s_aot[key] == pytest.approx(s_jit[key], rel=1e-9), key
+    assert_same_events(e_aot, e_jit)
+
+
+GUARD = """
+import json, sys
+import numpy as np
+from monitor.model.residual import _j_series
+a = _j_series(np.ones(10), 3, 1000)
+aot_only = "numba" not in sys.modules
+b = _j_series(np.ones(10, dtype=np.float32), 3, 1000)  # pycc would crash on these
+c = _j_series(np.ones(20)[::2], 3, 1000)
+print(json.dumps({"aot_only": aot_only, "numba": "numba" in sys.modules,
+                  "out": [np.nan_to_num(x, nan=-1.0).tolist() for x in (a, b, c)]}))
+"""
+
+
+def test_an_ahead_of_time_kernel_hands_other_argument_types_to_the_jit(warm) -> None:
+    """pycc's functions trust their arguments; the guard sends a float32 or a strided array
+    to the JIT instead, which gives the same values (a crash is the failure)."""
+    runs, cache = warm
+    if shutil.which("g++") is None:
+        pytest.skip("no C++ compiler (g++): `monitor warm-up` cannot compile the kernels")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "MONITOR_AOT": "1"}
+    out = subprocess.run([sys.executable, "-c", GUARD], capture_output=True, text=True,
+                         env=env, check=True)  # fmt: skip
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got["aot_only"] and got["numba"]
+    expected = [-1.0, -1.0] + [1.0] * 8  # the mean of three ones, from the third sample on
+    assert got["out"] == [expected] * 3

@@ -63,13 +63,19 @@ class _Progress:
         elif not force and t - self.last_t < 10.0:
             return
         self.last_wall, self.last_t = now, t
-        j = daemon.last_j
         line = (
             f"  log {t:5.1f}/{span_s:.0f} s  state {daemon.state.label:<12} "
-            f"J {'warming' if j != j else f'{j:.4f}'} (eps0 {daemon.model.eps0:.4f})  "
-            f"frames {daemon.reader.counts.received}"
+            f"{_levels(daemon)}  frames {daemon.reader.counts.received}"
         )
         print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", flush=True)
+
+
+def _levels(daemon: Daemon) -> str:
+    """The alarm level and J's share of it: the alarm is raised above 1, by J or by B."""
+    j, level = daemon.last_j, daemon.last_level
+    if level != level:
+        return "level n/a, J warming"
+    return f"level {level:.2f}, J/eps0 {j / daemon.model.eps0:.2f}"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -114,9 +120,9 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
     def on_event(ev: dict[str, Any]) -> None:
         if tty:
             print("\r" + " " * 100 + "\r", end="")
-        j = "n/a" if ev["J"] is None else f"{ev['J']:.4f}"
         fault = f", isolated: {ev['fault']}" if ev["fault"] else ""
-        print(f"[log t={ev['t']:6.2f} s] state -> {ev['state'].upper()} (J {j}{fault})", flush=True)
+        print(f"[log t={ev['t']:6.2f} s] state -> {ev['state'].upper()} ({_levels(daemon)}{fault})",
+              flush=True)  # fmt: skip
         if ev["state"] == "fault":
             alarms.append(ev)
 

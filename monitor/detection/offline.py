@@ -38,6 +38,8 @@ class Detection:
     events: list[dict[str, Any]] = field(default_factory=list)
     summary: dict[str, Any] = field(default_factory=dict)
     gates: GateSeries | None = None  # operating state, sensor findings, out of range
+    b: np.ndarray | None = None  # the bias statistic B per sample (None: the model has none)
+    level: np.ndarray | None = None  # max(J / eps0, B / b0): what the alarm compares with 1
 
 
 def make_isolator(model: MonitorModel) -> Isolator | None:
@@ -173,7 +175,7 @@ def detect(
     )
     summary["rejected"] = rejected_counts(rec)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)
-    return Detection(rec.t, y_hat, e, j, states, run.events, summary, gates=g)
+    return Detection(rec.t, y_hat, e, j, states, run.events, summary, gates=g, b=b, level=level)
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""The picture of a detection run: signals and predictions, residuals, J against eps0."""
+"""The picture of a detection run: signals and predictions, residuals, J / eps0 and B / b0."""
 
 from __future__ import annotations
 
@@ -33,12 +33,18 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
         ax_e.plot(t, det.residual[:, k], lw=0.5, label=name)
     ax_e.set_ylabel("residual e [z]")
     ax_e.legend(loc="upper right", fontsize=7, ncol=len(outputs))
+    # J and the bias statistic B, each over its own threshold: the alarm is raised when
+    # either stays above 1 (max(J / eps0, B / b0) is the level the alarm machine sees).
     ax_j = axes[-1]
+    eps0, b0 = det.summary["threshold"], det.summary.get("bias_threshold")
     j = np.where(det.j > 0, det.j, np.nan)
-    ax_j.semilogy(t, j, lw=0.8, color="k", label="J(k+1)")
-    eps0 = det.summary["threshold"]
-    ax_j.axhline(eps0, color="tab:red", ls="--", lw=1, label=f"eps0 = {eps0:.3g}")
-    ax_j.set_ylabel("J [z^2]")
+    ax_j.semilogy(t, j / eps0, lw=0.8, color="k", label=f"J / eps0 (eps0 = {eps0:.3g} z^2)")
+    if det.b is not None and b0:
+        b = np.where(det.b > 0, det.b, np.nan)
+        ax_j.semilogy(t, b / b0, lw=0.8, color="tab:green", label=f"B / b0 (b0 = {b0:.3g})")
+    ax_j.axhline(1.0, color="tab:red", ls="--", lw=1, label="alarm threshold")
+    ax_j.set_ylabel("level (1 = alarm)")
+    ax_j.set_ylim(bottom=1e-2)  # below a hundredth of the threshold nothing is close
     ax_j.set_xlabel("time from first sample [s]")
     ax_j.legend(loc="upper left", fontsize=7)
     for state, colour in _STATE_COLOURS.items():
@@ -68,10 +74,9 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
         if s["alarm"]
         else "no hydraulic fault"
     )
-    max_j = "n/a" if s["max_J"] is None else f"{s['max_J']:.3g}"
-    fig.suptitle(
-        f"{Path(str(s['source'])).name}: {verdict}; max J {max_j}, eps0 {eps0:.3g}", fontsize=10
-    )
+    top = "n/a" if s.get("max_level") is None else f"{s['max_level']:.3g}"
+    fig.suptitle(f"{Path(str(s['source'])).name}: {verdict}; max level {top} (1 = alarm)",
+                 fontsize=10)  # fmt: skip
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

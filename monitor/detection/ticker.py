@@ -47,6 +47,7 @@ class Tick:
     raised: bool = False  # a new alarm episode starts at this row
     stale_signal: str | None = None  # the first model signal missing, when inputs are not ok
     episode_open: bool = False  # an alarm episode is open (fault, or a short gap within one)
+    level: float = math.nan  # what the alarm compares with 1: max(J / eps0, B / b0)
 
 
 class Ticker:
@@ -156,7 +157,8 @@ class Ticker:
         self.ticks += 1
         return Tick(float(row[0]), d.state, j, d.changed, gate.op_state, gate.oor_name(gate.oor),
                     gate.check, gate.sensor, d.state_changed, d.raised,
-                    self._names[stale] if stale >= 0 else None, d.episode_open)  # fmt: skip
+                    self._names[stale] if stale >= 0 else None, d.episode_open,
+                    level)  # fmt: skip
 
 
 def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:

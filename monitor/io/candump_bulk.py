@@ -130,7 +130,7 @@ def _read_text(p: Path) -> bytearray:
     return data
 
 
-@jit
+@jit(aot=True)
 def _scan_lines(buf):  # pragma: no cover - numba
     """One pass over the bytes: per line its bounds (a trailing CR excluded), the positions
     of its first two spaces and first '#', and whether it has the plain form
@@ -209,7 +209,7 @@ def _parse_fast(buf, starts, ends, pos) -> tuple[dict[str, np.ndarray], np.ndarr
     return out, good
 
 
-@jit(fastmath=False)  # the timestamp division must round as IEEE says, not reassociate
+@jit(aot=True, fastmath=False)  # the timestamp division must round as IEEE says, not reassociate
 def _fields(buf, starts, ends, sp1, sp2, hs, hexval, pow10, width, max_whole):  # pragma: no cover
     """Per plain line: timestamp, id, data, and whether its characters fit (a timestamp of
     more than ``max_whole`` digits before the point does not).

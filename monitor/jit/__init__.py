@@ -75,14 +75,28 @@ class Kernel:
             call = self._resolve()
         return call(*args)
 
+    @property
+    def runs_ahead_of_time(self) -> bool:
+        """Whether a call would run ahead-of-time code (resolves the kernel, loads no numba)."""
+        if self._call is None:
+            self._resolve()
+        return self.ahead_of_time
+
     def _resolve(self) -> Callable[..., Any]:
         if self.aot and self._dispatcher is None:
             from monitor.jit import aot
 
             fn = aot.compiled_function(self.py_func)
             if fn is not None:
-                self._call = fn
-                return fn
+
+                def call(*args: Any) -> Any:
+                    try:
+                        return fn(*args)
+                    except TypeError:  # argument types warm-up never saw: the JIT takes them
+                        return self.dispatcher(*args)
+
+                self._call = call
+                return call
         self._call = self.dispatcher
         return self._call
 

@@ -1,11 +1,14 @@
-"""The live tick's kernels compiled ahead of time, so the daemon never loads numba.
+"""Kernels compiled ahead of time, so the daemon and `monitor detect` never load numba.
 
-numba and LLVM hold ~110 MB of a daemon's ~170 MB and take ~0.5 s to load, for the two
-kernels a tick calls (the DGRNN's one-sample prediction and the plausibility checks; both
-declared with ``jit(aot=True)``).  ``monitor warm-up`` runs them once through the JIT, then
-compiles them with numba's ``pycc`` (their signatures taken from that run) into one CPython
-extension module in the cache directory.  A ``Kernel`` declared ``aot`` calls the module's
-function when the module is there and matches; otherwise it is a JIT kernel as before.
+numba and LLVM hold ~110 MB of a daemon's ~170 MB and take ~0.5 s to load, for a few
+kernels: the live tick's (the DGRNN's one-sample prediction, the plausibility checks, the
+bias window) and the offline detector's (the candump scan, the sample clock, the DGRNN over
+a series on one thread, J and B over a series).  They are declared with ``jit(aot=True)``.
+``monitor warm-up`` runs them once through the JIT, then compiles them with numba's ``pycc``
+(their signatures taken from that run) into one CPython extension module in the cache
+directory.  A ``Kernel`` declared ``aot`` calls the module's function when the module is
+there and matches; otherwise it is a JIT kernel as before.  pycc compiles without the JIT's
+fast-math flags: sums may differ from the JIT's in the last bits, never in NaN handling.
 
 The module's name carries a digest of every source file that declares kernels, the numba
 and Python versions and ``NUMBA_CPU_NAME``, so an upgraded monitor or numba never runs stale
@@ -19,12 +22,15 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import importlib.util
+import json
 import logging
 import os
 import sys
 from functools import cache
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 log = logging.getLogger(__name__)
 
@@ -43,7 +49,7 @@ def directory() -> Path:
 
 @cache
 def module_name() -> str:
-    """``monitor_tick_<digest>``: of the kernels' sources, numba, Python and the CPU name."""
+    """``monitor_aot_<digest>``: of the kernels' sources, numba, Python and the CPU name."""
     h = hashlib.sha256()
     try:
         h.update(importlib.metadata.version("numba").encode())
@@ -56,7 +62,7 @@ def module_name() -> str:
         if b"monitor.jit import" in text:  # a module that declares kernels
             h.update(path.relative_to(_PACKAGE).as_posix().encode())
             h.update(text)
-    return f"monitor_tick_{h.hexdigest()[:16]}"
+    return f"monitor_aot_{h.hexdigest()[:16]}"
 
 
 def export_name(fn: Any) -> str:
@@ -92,9 +98,88 @@ def _suffixes() -> list[str]:
 
 
 def compiled_function(fn: Any) -> Any:
-    """The ahead-of-time compiled form of kernel function ``fn``, or None."""
+    """The ahead-of-time compiled form of kernel function ``fn``, guarded by the argument
+    types it was compiled for (``Guarded``), or None."""
     mod = _module()
-    return None if mod is None else getattr(mod, export_name(fn), None)
+    name = export_name(fn)
+    compiled = None if mod is None else getattr(mod, name, None)
+    spec = _specs().get(name)
+    return None if compiled is None or spec is None else Guarded(compiled, spec)
+
+
+class Guarded:
+    """A pycc function with its argument types: pycc's wrappers do not check them (a
+    float32 array where float64 was compiled crashes the process), so every call checks
+    dtype, rank, layout and writability of arrays and the kind of scalars first.
+    ``__call__`` raises TypeError on a mismatch (the kernel then hands over to the JIT)."""
+
+    def __init__(self, fn: Any, spec: list[Any]) -> None:
+        self.fn = fn
+        self.spec = spec
+        # The arguments of the last call, kept alive so their ids stay theirs: the tick
+        # passes the same buffers every time, and an object seen before needs no new check.
+        self._seen: tuple[Any, ...] = ()
+
+    def __call__(self, *args: Any) -> Any:
+        seen = self._seen
+        if len(args) != len(self.spec):
+            raise TypeError("arguments of other types than those compiled ahead of time")
+        if len(seen) != len(args):
+            seen = (None,) * len(args)
+        for a, old, spec in zip(args, seen, self.spec, strict=True):
+            if a is not old and not _fits(a, spec):
+                raise TypeError("arguments of other types than those compiled ahead of time")
+        self._seen = args
+        return self.fn(*args)
+
+
+def _fits(value: Any, spec: Any) -> bool:
+    kind = spec[0]
+    if kind == "array":
+        _, dtype, ndim, layout, mutable = spec
+        if not isinstance(value, np.ndarray) or value.ndim != ndim or value.dtype.str != dtype:
+            return False
+        flags = value.flags
+        if (mutable and not flags.writeable) or not flags.aligned:
+            return False
+        return layout == "A" or (flags.c_contiguous if layout == "C" else flags.f_contiguous)
+    if kind == "tuple":
+        return isinstance(value, tuple) and len(value) == len(spec[1]) and all(
+            map(_fits, value, spec[1])
+        )
+    if kind == "int":
+        return isinstance(value, (int, np.integer))
+    if kind == "float":
+        return isinstance(value, (int, float, np.integer, np.floating))
+    if kind == "bool":
+        return isinstance(value, (bool, np.bool_))
+    return False
+
+
+def _describe(t: Any) -> Any:
+    """A numba type as ``_fits`` checks it (JSON-able); RuntimeError for kinds it cannot."""
+    from numba.core import types
+
+    if isinstance(t, types.Array):
+        return ["array", np.dtype(str(t.dtype)).str, t.ndim, t.layout, bool(t.mutable)]
+    if isinstance(t, types.BaseTuple):
+        return ["tuple", [_describe(x) for x in t.types]]
+    if isinstance(t, types.Boolean):
+        return ["bool"]
+    if isinstance(t, types.Integer):
+        return ["int"]
+    if isinstance(t, types.Float):
+        return ["float"]
+    raise RuntimeError(f"argument type {t} cannot be checked before an ahead-of-time call")
+
+
+@cache
+def _specs() -> dict[str, Any]:
+    path = directory() / f"{module_name()}.json"
+    try:
+        return dict(json.loads(path.read_text(encoding="utf-8")))
+    except (OSError, ValueError, TypeError):
+        return {}
 
 
 def build(kernels: list[Any]) -> Path:
@@ -109,13 +194,17 @@ def build(kernels: list[Any]) -> Path:
     cc.output_dir = str(out)
     cc.verbose = False
     cc.target_cpu = os.environ.get("NUMBA_CPU_NAME", "host")
+    specs = {}
     for k in kernels:
         sigs = k.dispatcher.nopython_signatures
         if len(sigs) != 1:
             raise RuntimeError(f"{k!r} has {len(sigs)} compiled signatures, 1 expected")
+        specs[export_name(k.py_func)] = [_describe(t) for t in sigs[0].args]
         cc.export(export_name(k.py_func), sigs[0])(k.py_func)
     cc.compile()
+    (out / f"{module_name()}.json").write_text(json.dumps(specs), encoding="utf-8")
     _module.cache_clear()
+    _specs.cache_clear()
     found = sorted(out.glob(f"{module_name()}.*"))
     if not found:
         raise RuntimeError(f"pycc wrote no module to {out}")

@@ -165,6 +165,11 @@ class Daemon:
         return self.loops[0].last_j
 
     @property
+    def last_level(self) -> float:
+        """The first loop's alarm level max(J / eps0, B / b0) at its last tick (1 = alarm)."""
+        return self.loops[0].last_level
+
+    @property
     def sampler(self) -> Sampler:
         return self.pipeline.sampler
 

@@ -108,6 +108,7 @@ class Loop:
             self.diag = Diagnostics(j1939, self.model.spec.variables, view)
         self.tag = {"loop": lc.name} if cfg.loops else {}  # events name the loop when loops are set
         self.last_j = float("nan")
+        self.last_level = float("nan")  # max(J / eps0, B / b0) of the last tick, 1 = alarm
 
     @staticmethod
     def load(
@@ -139,7 +140,7 @@ class Loop:
 
     def tick(self, row: np.ndarray) -> Tick:
         tick = self.ticker.tick(row)
-        self.last_j = tick.j
+        self.last_j, self.last_level = tick.j, tick.level
         return tick
 
     def event(self, tick: Tick, start_time_s: float | None) -> dict[str, Any]:

@@ -164,7 +164,7 @@ def _push(ring_e, ring_r, sums, counts, state, e, regime, scale, min_count,
     return total / used if used > 0 else np.nan
 
 
-@jit
+@jit(aot=True)
 def _series(e, regimes, scale, window, min_count, resum_every):  # pragma: no cover - numba
     n, n_out = e.shape
     out = np.empty(n)

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
-from monitor.jit import jit, pjit, prange
+from monitor.jit import jit, numba_loaded, pjit, prange
 from monitor.model.grnn import GRNN
 from monitor.model.grnn_core import n_chunks
 from monitor.model.grnn_index import CutoffIndex, cutoff_row
@@ -144,20 +144,26 @@ def _predict_at(Z, t, tree, inv2s2, cut, fvar, flag, nout, p, delta, xbuf, pred,
     return True
 
 
+@jit(aot=True)
+def _predict_rows(Z, tree, inv2s2, cut, stack_len, fvar, flag, nout, p, delta, lo, hi, out):
+    """``_predict_at`` for rows lo..hi-1 of ``out`` (left untouched where not predictable)."""
+    npat = tree[0].shape[0]  # pragma: no cover - numba
+    xbuf = np.empty(fvar.shape[0])
+    pred = np.empty((p, nout))
+    scratch = (np.empty(stack_len, np.int64), np.empty(npat), np.empty(npat, np.int64))
+    for t in range(lo, hi):
+        _predict_at(Z, t, tree, inv2s2, cut, fvar, flag, nout, p, delta, xbuf, pred, scratch,
+                    out[t])  # fmt: skip
+
+
 @pjit
 def _predict_series(Z, tree, inv2s2, cut, stack_len, fvar, flag, nout, p, delta, nchunk):
     n = Z.shape[0]  # pragma: no cover - numba
-    npat = tree[0].shape[0]
     out = np.full((n, nout), np.nan)
     nchunk = max(1, min(n, nchunk))
     for c in prange(nchunk):
-        xbuf = np.empty(fvar.shape[0])
-        pred = np.empty((p, nout))
-        scratch = (np.empty(stack_len, np.int64), np.empty(npat), np.empty(npat, np.int64))
-        for t in range(c * n // nchunk, (c + 1) * n // nchunk):
-            _predict_at(
-                Z, t, tree, inv2s2, cut, fvar, flag, nout, p, delta, xbuf, pred, scratch, out[t]
-            )
+        _predict_rows(Z, tree, inv2s2, cut, stack_len, fvar, flag, nout, p, delta,
+                      c * n // nchunk, (c + 1) * n // nchunk, out)  # fmt: skip
     return out
 
 
@@ -174,12 +180,15 @@ def _index(model: DGRNN, exact: bool) -> tuple[GRNN, CutoffIndex]:
 
 
 def predict_series(
-    model: DGRNN, data: Any, horizon: int | None = None, exact: bool = False
+    model: DGRNN, data: Any, horizon: int | None = None, exact: bool = False,
+    serial: bool = False,
 ) -> np.ndarray:
     """Offline: y_hat(t) for every row t of z-scored ``data`` (columns ``spec.variables``).
 
     Returns (rows, n_outputs), NaN where t is not predictable (too early for the lags and
-    horizon, or a missing sample in the inputs it reads).  Parallel over t.  By default
+    horizon, or a missing sample in the inputs it reads).  Parallel over t, unless
+    ``serial`` or the kernel was compiled ahead of time and numba is not loaded (one
+    thread, the same values: each row is computed alone).  By default
     each GRNN query sums only the patterns within the cut-off of ``monitor.model.grnn_index``
     (error <= 1e-6 of each output's std per step); ``exact=True`` sums every pattern.
     """
@@ -188,11 +197,14 @@ def predict_series(
     fvar, flag = model.spec.feature_columns()
     p = _horizon(model, horizon)
     nout = len(model.spec.outputs)
-    inv = 0.5 / g.sigma_**2
-    return _predict_series(
-        Z, index.tree, inv, index.cut, index.scratch()[0].shape[0], fvar, flag, nout, p,
-        model.spec.delta_mask(), n_chunks(),
-    )  # fmt: skip
+    args = (Z, index.tree, 0.5 / g.sigma_**2, index.cut, index.scratch()[0].shape[0], fvar,
+            flag, nout, p, model.spec.delta_mask())  # fmt: skip
+    if serial or (not numba_loaded() and _predict_rows.runs_ahead_of_time):
+        # One thread of ahead-of-time code (``monitor warm-up``): no numba, ~100 MB less.
+        out = np.full((Z.shape[0], nout), np.nan)
+        _predict_rows(*args, 0, Z.shape[0], out)
+        return out
+    return _predict_series(*args, n_chunks())
 
 
 class TickPredictor:

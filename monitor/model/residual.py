@@ -60,7 +60,7 @@ def _default_resum(N: int) -> int:
     return max(1000, 10 * (N + 1))
 
 
-@jit
+@jit(aot=True)
 def _j_series(s, size, resum_every):  # pragma: no cover - numba
     n = s.shape[0]
     out = np.full(n, np.nan)

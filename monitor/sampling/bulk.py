@@ -42,7 +42,7 @@ from monitor.sampling.sampler import (
 from monitor.signals import ROD_POS
 
 
-@jit(fastmath=False)
+@jit(aot=True, fastmath=False)
 def _clock(ts, period, max_gap, resync, eps):  # pragma: no cover - numba
     """Sampler time of every frame (NaN: skipped) and the counts, as ``Sampler.feed``.
 
