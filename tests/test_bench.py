@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import pytest
 
@@ -23,6 +24,8 @@ KEYS = (
     "first_run_s",
     "daemon_rss_mb",
     "daemon_peak_rss_mb",
+    "detect_rss_mb",
+    "detect_rss_mb_jit",
 )
 
 
@@ -68,6 +71,10 @@ def test_values_are_consistent_with_their_parts(quick):
     assert det["reference_max_abs_diff_z"] < 1e-6  # the reference did the same work
     # The daemon alone: its steady RSS (a median of samples) never above its peak.
     assert 0 < r["daemon_rss_mb"] <= r["daemon_peak_rss_mb"]
+    # `monitor detect` after warm-up loads no numba where g++ built the module; the JIT does.
+    assert r["detect_numba_loaded_jit"] == 1.0
+    if shutil.which("g++"):
+        assert r["detect_numba_loaded"] == 0.0
     assert (out / "b.md").read_text().count("|") > 20
     assert (out / "b.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

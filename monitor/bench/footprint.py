@@ -1,8 +1,9 @@
 """What a controller engineer asks first: how long `monitor --help` takes, how long the daemon
 takes from process start to its first tick (with numba's cache warm, and empty), and how much
 memory the daemon process holds alone (steady, peak, growth) while a replayer in another
-process feeds it the shipped log over python-can's `udp_multicast` bus; the daemon figures
-with the tick kernels compiled ahead of time and, side by side, with numba's JIT.
+process feeds it the shipped log over python-can's `udp_multicast` bus, and what `monitor
+detect` of a shipped log takes (wall, peak RSS); the daemon and detect figures with the
+kernels compiled ahead of time and, side by side, with numba's JIT.
 """
 
 from __future__ import annotations
@@ -31,6 +32,18 @@ except SystemExit:
     pass
 hwm = next(x for x in open("/proc/self/status") if x.startswith("VmHWM:")).split()[1]
 print(time.perf_counter() - t0, hwm, file=sys.stderr)
+"""
+# `monitor detect` of a shipped log in its own process: wall, peak RSS, numba loaded or not.
+_DETECT_PROBE = """
+import runpy, sys, time
+t0 = time.perf_counter()
+sys.argv = ["monitor", "detect", sys.argv[1], "--j-every", "0"]
+try:
+    runpy.run_module("monitor", run_name="__main__")
+except SystemExit:
+    pass
+hwm = next(x for x in open("/proc/self/status") if x.startswith("VmHWM:")).split()[1]
+print(time.perf_counter() - t0, hwm, int("numba" in sys.modules), file=sys.stderr)
 """
 _FIRST_TICK = re.compile(r"t=\d+\.\d+ s: ")
 
@@ -68,12 +81,29 @@ def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.
     out["warm_up_s"] = time.perf_counter() - t0
     for tag, extra in (("", warm), ("_jit", {**warm, "MONITOR_AOT": "0"})):
         kind = "JIT" if tag else "ahead of time"
+        say(f"footprint: monitor detect of the shipped spool-wear log ({kind})")
+        out.update({f"{k}{tag}": v for k, v in _detect(extra).items()})
         say(f"footprint: daemon start, warm cache, tick kernels {kind}")
         out[f"daemon_start{tag}_s"] = _start(config, work, group, 20.0, extra)
         say(f"footprint: daemon RSS over {seconds:.0f} s of the shipped normal log ({kind})")
         out.update({f"{k}{tag}" if tag else k: v
                     for k, v in _rss(config, work, group, seconds, extra).items()})  # fmt: skip
     return out
+
+
+def _detect(extra: dict[str, str], runs: int = 3) -> dict[str, float]:
+    """`monitor detect replay/spool_wear.log`, ``runs`` processes: median wall, peak RSS."""
+    log = resource_path("replay", "spool_wear.log")
+    walls, rss, numba = [], [], []
+    for _ in range(runs):
+        done = subprocess.run([sys.executable, "-c", _DETECT_PROBE, str(log)], env=_env(extra),
+                              capture_output=True, text=True, check=True)  # fmt: skip
+        wall, hwm, loaded = done.stderr.split()[-3:]
+        walls.append(float(wall))
+        rss.append(float(hwm) / 1024.0)  # kB
+        numba.append(float(loaded))
+    return {"detect_s": statistics.median(walls), "detect_rss_mb": max(rss),
+            "detect_numba_loaded": max(numba)}  # fmt: skip
 
 
 def _env(extra: dict[str, str]) -> dict[str, str]:

@@ -73,6 +73,10 @@ def markdown(result: dict[str, Any]) -> str:
         ("daemon_rss_mb_jit", "MB", 0),
         ("daemon_peak_rss_mb_jit", "MB", 0),
         ("warm_up_s", "s", 1),
+        ("detect_rss_mb", "MB", 0),
+        ("detect_s", "s", 2),
+        ("detect_rss_mb_jit", "MB", 0),
+        ("detect_s_jit", "s", 2),
     ):
         goal = goals.get(key)
         met = "" if goal is None else ("yes" if goal["met"] else "**no**")
