@@ -17,7 +17,7 @@ from monitor.codec.frames import MessageInfo, _message_info
 from monitor.codec.logwrite import write_candump
 from monitor.detection.offline import detect
 from monitor.errors import InputFileError, NoHydraulicDataError
-from monitor.io.candump import read_candump
+from monitor.io.candump import format_line, read_candump
 from monitor.io.candump_bulk import read_candump_frames
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
@@ -253,3 +253,51 @@ def test_no_hydraulic_data_and_rod_pos(tmp_path):
     write_candump(log, rec)
     assert "RodPos" in recording_from_candump_bulk(log).columns
     assert_same_recording(recording_from_candump_bulk(log), recording_from_candump(log))
+
+
+def _with_outage(src: Path, dst: Path, cut_s: float, gap_s: float, drop: int | None = None):
+    """``src`` with ``gap_s`` of silence inserted at ``cut_s`` of log time; frames of CAN id
+    ``drop`` are left out after the cut (that sender does not come back)."""
+    with dst.open("w") as fh:
+        t0 = None
+        for m in read_candump(src):
+            t0 = m.timestamp if t0 is None else t0
+            after = m.timestamp - t0 >= cut_s
+            if after and m.arbitration_id == drop:
+                continue
+            shift = gap_s if after else 0.0
+            fh.write(format_line(m.timestamp + shift, "can0", m.arbitration_id,
+                                 m.is_extended_id, bytes(m.data)))  # fmt: skip
+    return dst
+
+
+def _first_row_back(rec) -> int:
+    """The first row with PP again after the silence (PP is stale 30 ms into it)."""
+    silent = np.flatnonzero(~np.isfinite(rec["PP"]))
+    return int(silent[-1]) + 1
+
+
+@pytest.mark.parametrize("gap_s", [0.5, 2.5, 5.0, 75.0])
+def test_after_an_outage_a_slow_signal_is_fresh_until_its_next_frame(tmp_path, gap_s):
+    """HYD_OilTemp comes once a second and is stale 3 s after its last frame.  After a
+    silence of the whole bus it must not read as a failed sensor for the second until its
+    next frame: staleness restarts at the first frame back (an outage is >= 1 s)."""
+    log = _with_outage(resource_path("replay", "normal.log"), tmp_path / "o.log", 40.3, gap_s)
+    bulk, ref = recording_from_candump_bulk(log), recording_from_candump(log)
+    assert_same_recording(bulk, ref)
+    back = _first_row_back(ref)
+    silence = min(gap_s, 60.0)  # a gap over max_gap_s is shortened to it
+    assert ref.t[back] == pytest.approx(40.3 + silence, abs=0.02)
+    assert np.isfinite(ref["OilTemp"][back:]).all()
+
+
+def test_after_an_outage_a_sender_that_stays_silent_is_stale_after_its_time(tmp_path):
+    oil_id = FrameCodec.from_dbc().message("HYD_OilTemp").frame_id
+    log = _with_outage(resource_path("replay", "normal.log"), tmp_path / "o.log", 40.3, 5.0,
+                       drop=oil_id)  # fmt: skip
+    bulk, ref = recording_from_candump_bulk(log), recording_from_candump(log)
+    assert_same_recording(bulk, ref)
+    back = _first_row_back(ref)
+    oil = np.isfinite(ref["OilTemp"])
+    # Fresh for its 3 s staleness from the first frame back, then missing for good.
+    assert oil[back : back + 299].all() and not oil[back + 301 :].any()

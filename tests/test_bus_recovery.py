@@ -421,9 +421,10 @@ def test_a_fault_on_before_an_outage_is_the_same_episode_after_it(tmp_path) -> N
     model = load_model(cfg.model)
     plain = detect(model, recording_from_candump(LOG), cfg.alarm, cfg.horizon)
     on_s = next(e["t"] for e in plain.events if e["state"] == "fault")
-    # The gap opens 2 s into the alarm; 1.5 s keeps HYD_OilTemp (1 s cycle, stale after 3 s)
-    # fresh across it, so the return is to fault directly, not through a stale sensor.
-    cut_s, gap_s = on_s + 2.0, 1.5
+    # The gap opens 2 s into the alarm.  HYD_OilTemp (1 s cycle, 3 s stale) last came up to
+    # 1 s before it: after 5 s of silence it is fresh again only by the outage rule
+    # (sampler.OUTAGE_S), so the return is to fault directly, not through a stale sensor.
+    cut_s, gap_s = on_s + 2.0, 5.0
     path = tmp_path / "gap_in_alarm.log"
     with path.open("w") as fh:
         t0 = None

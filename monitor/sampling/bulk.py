@@ -11,7 +11,8 @@ Same result as ``monitor.sampling.sampler.recording_from_candump`` (python-can r
    applied frame its sampler time st.  Applied times never decrease, and a frame is
    visible from row ``K = max over frames so far of ceil((st - eps) / period)`` on (the rows
    the sampler emits before applying it), so each signal's value in row k is that of its
-   last frame with K <= k (one ``searchsorted``), or NaN when older than its staleness.
+   last frame with K <= k (one ``searchsorted``), or NaN when older than its staleness
+   (counted from the end of the last outage when that is later, as the sampler does).
 
 The kernel uses plain IEEE arithmetic (no fast-math), so every time is the float the
 frame-by-frame sampler computes.
@@ -31,6 +32,7 @@ from monitor.io.recording import Recording
 from monitor.jit import jit
 from monitor.sampling.sampler import (
     _EPS_S,
+    OUTAGE_S,
     ROW_COLUMNS,
     Sampler,
     TimeCounts,
@@ -134,6 +136,12 @@ def recording_from_candump_bulk(
     if n_rows > row_limit(len(frames)):  # before a row is allocated
         raise too_many_rows(path, n_rows, len(frames), float(ts.max() - ts.min()), int(tc[2]))
     inst = np.arange(n_rows) * period
+    # Outages (OUTAGE_S of silence): from the first row after each, staleness restarts at
+    # the time of the frame that ended it (the sampler's ``_resumed``).
+    st_applied = st[applied]
+    ends = np.flatnonzero(np.diff(st_applied) >= OUTAGE_S) + 1
+    back_at = np.searchsorted(first_row[ends], np.arange(n_rows), side="right") - 1
+    resumed = np.append(st_applied[ends], -np.inf)[back_at]  # -1: no outage yet, -inf
 
     seen: set[str] = set()
     columns: dict[str, np.ndarray] = {}
@@ -152,7 +160,7 @@ def recording_from_candump_bulk(
             last = np.searchsorted(first_row[sel], np.arange(n_rows), side="right") - 1
             have = last >= 0
             li = last[have]
-            fresh = inst[have] - st[f[li]] <= stale[name]
+            fresh = inst[have] - np.maximum(st[f[li]], resumed[have]) <= stale[name]
             col[np.flatnonzero(have)[fresh]] = vals[li[fresh]]
         if name != ROD_POS.name or name in seen:
             columns[name] = col

@@ -19,6 +19,12 @@ the clock.  The rule:
 * a forward gap longer than ``max_gap_s`` (60 s) is shortened to ``max_gap_s`` of stale
   (NaN) rows and counted, so a clock jump of days cannot allocate millions of rows.
 
+A silence of the whole bus of at least ``OUTAGE_S`` (1 s: a link down, a logger paused)
+restarts every signal's staleness clock when frames return: a signal sent before it counts
+as fresh again for its staleness time after the first frame back.  Without that, the 1 Hz
+oil temperature, 3 s stale, would read as a failed sensor for up to a second after every
+outage longer than 2 s, until its next frame.
+
 Those rules still let a log ask for rows out of all proportion to its frames (a frame every
 59.9 s is 6,000 rows each; a shuffled log resyncs the clock at every turn), so a log may need
 at most ``row_limit(frames)`` rows: one hour, or 20 rows per frame of the log (a normal log
@@ -50,6 +56,9 @@ ROW_COLUMNS: tuple[str, ...] = (*SIGNAL_NAMES, ROD_POS.name)
 
 _EPS_S = 1e-6  # log timestamps have 1 us resolution; absorbs float noise of t0 + k * period
 _NAN = math.nan
+
+#: A silence of every message this long is an outage: staleness restarts after it (s).
+OUTAGE_S = 1.0
 
 #: Rows any log may need: one hour at 100 Hz.
 MIN_ROW_LIMIT = 360_000
@@ -120,6 +129,7 @@ class Sampler:
         self.counts = TimeCounts()
         self._offset = 0.0  # sampler time = log time + offset (changes on resync/gap)
         self._newest = -math.inf  # sampler time of the newest frame applied
+        self._resumed = -math.inf  # sampler time of the first frame after the last outage
         self._k = 0  # next instant to emit
         self._pending: list[list[float]] = []
         self._behind: list[tuple[float, str, Mapping[str, float]]] = []
@@ -174,6 +184,8 @@ class Sampler:
             st = newest + self.max_gap_s
             self.counts.gaps_shortened += 1
         self._emit_before(st)
+        if st - newest >= OUTAGE_S:  # the rows of the silence are out: staleness restarts
+            self._resumed = st
         self._apply(st, values)
 
     def _behind_frame(self, timestamp_s: float, name: str, values: Mapping[str, float]) -> None:
@@ -201,10 +213,11 @@ class Sampler:
 
     def _row(self, k: int) -> list[float]:
         inst = k * self.period_s
+        back = self._resumed
         return [
             inst,
             *[
-                v if inst - tl <= stale else _NAN
+                v if inst - max(tl, back) <= stale else _NAN
                 for v, tl, stale in zip(self._values, self._last_t, self._stale_s, strict=True)
             ],
         ]
@@ -223,7 +236,8 @@ class Sampler:
         else:  # a long gap: same state throughout, vectorised
             inst = np.arange(k0, end) * self.period_s
             vals = np.array(self._values)
-            fresh = (inst[:, None] - np.array(self._last_t)[None, :]) <= np.array(self._stale_s)
+            since = np.maximum(np.array(self._last_t), self._resumed)
+            fresh = (inst[:, None] - since[None, :]) <= np.array(self._stale_s)
             block = np.column_stack([inst, np.where(fresh, vals[None, :], np.nan)])
             self._pending.extend(block.tolist())
         self._k = end
