@@ -26,6 +26,7 @@ import json
 import logging
 import os
 import sys
+import weakref
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -116,20 +117,23 @@ class Guarded:
     def __init__(self, fn: Any, spec: list[Any]) -> None:
         self.fn = fn
         self.spec = spec
-        # The arguments of the last call, kept alive so their ids stay theirs: the tick
-        # passes the same buffers every time, and an object seen before needs no new check.
-        self._seen: tuple[Any, ...] = ()
+        # The last call's arguments (arrays by weak reference: a whole recording is never
+        # kept alive by this): the tick passes the same buffers every time, and an object
+        # seen before needs no new check.
+        self._seen: list[Any] = [None] * len(spec)
 
     def __call__(self, *args: Any) -> Any:
         seen = self._seen
-        if len(args) != len(self.spec):
+        if len(args) != len(seen):
             raise TypeError("arguments of other types than those compiled ahead of time")
-        if len(seen) != len(args):
-            seen = (None,) * len(args)
-        for a, old, spec in zip(args, seen, self.spec, strict=True):
-            if a is not old and not _fits(a, spec):
-                raise TypeError("arguments of other types than those compiled ahead of time")
-        self._seen = args
+        for i, a in enumerate(args):
+            old = seen[i]
+            if type(old) is weakref.ReferenceType:
+                old = old()
+            if a is not old:
+                if not _fits(a, self.spec[i]):
+                    raise TypeError("arguments of other types than those compiled ahead of time")
+                seen[i] = weakref.ref(a) if type(a) is np.ndarray else a
         return self.fn(*args)
 
 
