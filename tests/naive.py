@@ -196,6 +196,10 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
         running = v["EngineSpeed"] >= min_engine_rpm  # False for NaN
         moving = running and (abs(v["SpoolCmd"]) >= cfg.move_spool_pct
                               or v["QP"] >= cfg.move_flow_lpm)  # fmt: skip
+        # The valve passes oil: open, the pump well above the port the command feeds.
+        fed = v["PA"] if v["SpoolCmd"] > 0 else v["PB"]
+        passing = (running and abs(v["SpoolCmd"]) >= cfg.relation_spool_pct
+                   and v["PP"] - fed > cfg.relation_margin_bar)  # fmt: skip
         for s in names:
             val = v[s]
             if math.isnan(val):
@@ -211,9 +215,10 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
                     latched[("signal_range", s)] = True
             if s not in sensors:
                 continue
-            # frozen: the very same value while the engine runs, strictly inside the range
+            # frozen: the very same value while the engine runs, strictly inside the range,
+            # or a flow of exactly zero (its lower limit) while the valve passes oil
             if previous[s] is not None and val == previous[s]:
-                if running and lo < val < hi:
+                if running and (lo < val < hi or (s == "QP" and val == lo and passing)):
                     same_run[s] += 1
                     n = samples(cfg.frozen_s)
                     if n > 0 and same_run[s] >= n:

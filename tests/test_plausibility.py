@@ -83,6 +83,39 @@ def test_frozen_sensor_is_named_after_frozen_s(normal_run) -> None:
     assert found == {("QP", "frozen"): 31.0}
 
 
+def _rows(n: int, spool: float, pp: float, pa: float, pb: float, qp: float) -> Recording:
+    """``n`` samples of one steady state, engine running, oil warm; the pressures carry
+    their sensors' noise (0.3 bar rms), QP is exactly ``qp`` throughout."""
+    t = np.arange(n) * 0.01
+    noise = np.random.default_rng(3).normal(0.0, 0.3, (3, n))
+    cols = dict(SpoolCmd=spool, PumpDispCmd=80.0, EngineSpeed=1800.0, OilTemp=50.0, QP=qp)
+    out = {k: np.full(n, float(v)) for k, v in cols.items()}
+    out.update(PP=pp + noise[0], PA=pa + noise[1], PB=pb + noise[2])
+    return Recording(t, out, "rows", {})
+
+
+def test_a_flow_reading_pinned_at_zero_while_the_valve_passes_oil_is_frozen() -> None:
+    # Spool 50 % open towards A, pump 60 bar above port A: oil flows through the metering
+    # edge, so QP at exactly 0.00 L/min (its range limit) for 1 s is a hung sensor: the
+    # finding at the 101st identical sample.  B fed the same way with a negative command.
+    found, _, _ = findings_of(_rows(150, 50.0, 180.0, 120.0, 5.0, 0.0))
+    assert found == {("QP", "frozen"): 1.0}
+    found, _, _ = findings_of(_rows(150, -50.0, 180.0, 5.0, 120.0, 0.0))
+    assert found == {("QP", "frozen"): 1.0}
+
+
+@pytest.mark.parametrize(
+    "spool, pp, pa, pb",
+    [(50.0, 200.0, 195.0, 5.0),  # at the end stop: A has risen to the pump, no drop, no flow
+     (10.0, 180.0, 120.0, 5.0),  # spool barely open (below relation_spool_pct)
+     (-50.0, 180.0, 120.0, 175.0)],  # fed port B at the pump (A high does not count)
+)
+def test_a_flow_reading_of_zero_without_flow_through_the_valve_is_not_frozen(
+    spool: float, pp: float, pa: float, pb: float
+) -> None:
+    assert findings_of(_rows(300, spool, pp, pa, pb, 0.0))[0] == {}
+
+
 def test_stuck_sensor_with_live_noise_is_named(normal_run) -> None:
     rng = np.random.default_rng(1)
     pa = normal_run["PA"].copy()
@@ -211,12 +244,14 @@ def test_detect_and_ticks_give_the_same_sensor_events(model, normal_run) -> None
 )
 def test_kernel_equals_the_plain_python_twin(normal_run, cfg) -> None:
     """The numba kernel against tests/naive.py's sample-by-sample reading of the rules, on
-    a run carrying every defect: a frozen QP, a stuck PB, PA reading high, PP out of range,
-    and an engine-off rest with an offset PB, plus NaN gaps."""
+    a run carrying every defect: a frozen QP, QP pinned at 0 L/min while oil flows, a stuck
+    PB, PA reading high, PP out of range, and an engine-off rest with an offset PB, plus NaN
+    gaps."""
     rec = normal_run
     n = len(rec)
     cols = {c: rec[c].copy() for c in COLUMNS}
     cols["QP"][idx(rec, 10.0) : idx(rec, 14.0)] = 12.34  # frozen
+    cols["QP"][idx(rec, 36.5) : idx(rec, 40.5)] = 0.0  # pinned at zero while oil flows
     k0, k1 = idx(rec, 20.0), idx(rec, 35.0)
     cols["PB"][k0:k1] = 40.0 + np.random.default_rng(1).normal(0, 0.3, k1 - k0)  # stuck
     cols["PA"][idx(rec, 40.0) : idx(rec, 50.0)] += 60.0  # reads high: above the pump

@@ -10,7 +10,12 @@ Checks (``plausibility:`` in config/monitor.yaml; times in seconds of 100 Hz sam
   runs: a live sensor always shows noise (0.3 bar / 0.1 L/min rms on the reference machine,
   far above the 0.01 resolution), so a variance of exactly zero is a frozen filter or a
   hung sensor node that still sends frames.  A reading at its range limit is saturated and
-  may legitimately repeat, so it does not count.
+  may legitimately repeat, so it does not count, except QP at 0 L/min while the valve
+  passes oil: the spool open by ``relation_spool_pct`` or more and PP more than
+  ``relation_margin_bar`` above the port it feeds (A for a positive command, B for a
+  negative).  An open metering edge with that pressure drop across it has flow through it,
+  so a flow reading pinned at zero there is a frozen sensor (a flow meter reads exactly 0
+  only without flow, e.g. at an end stop, where the fed port rises to PP).
 * ``stuck``: PP, PA, PB or QP stay within +-``stuck_band_bar`` (``stuck_band_lpm``) of one
   value while the machine moves (|SpoolCmd| >= ``move_spool_pct`` or QP >=
   ``move_flow_lpm``) for ``stuck_s`` of moving time in total: a sensor whose noise is alive
@@ -151,6 +156,10 @@ def _run(  # pragma: no cover - numba
         running = engine >= min_rpm
         qp = x[i, cols[_QP]]
         moving = running and (abs(spool) >= move_spool or qp >= move_flow)
+        # The valve passes oil: open, with the pump well above the port it feeds (False
+        # when a pressure is NaN).
+        fed = x[i, cols[_PA]] if spool > 0 else x[i, cols[_PB]]
+        passing = running and abs(spool) >= rel_spool and x[i, cols[_PP]] - fed > rel_margin
         for c in range(m):
             v = x[i, cols[c]]
             if np.isnan(v):
@@ -167,7 +176,8 @@ def _run(  # pragma: no cover - numba
                 last[c] = v
                 continue  # commands and oil temperature: range only
             # frozen
-            if v == last[c] and running and lo[c] < v < hi[c]:
+            if v == last[c] and running and (lo[c] < v < hi[c]
+                                             or (c == _QP and v == lo[c] and passing)):
                 counters[1, c] += 1
                 if frozen_n > 0 and counters[1, c] >= frozen_n:
                     active[1, c] = True
