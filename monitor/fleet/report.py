@@ -124,7 +124,8 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     _timeline_png(per, out / "timeline.png")
     lines = ["# Fleet report", "",
              f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
-             f"max J / eps0 of a log (1.0 raises the alarm); trend: Theil-Sen over the last {k} "
+             f"the largest alarm level of a log, max(J / eps0, B / b0) (1.0 raises the alarm); "
+             f"trend: Theil-Sen over the last {k} "
              "judged logs; crossing: logs until the trend reaches 1.0 (90 % interval).", "",
              *_table(per, progs), "", "![health index](health.png)", "",
              "![verdict timeline](timeline.png)", ""]  # fmt: skip
