@@ -74,7 +74,7 @@ def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.
     say("footprint: daemon start, empty numba cache")
     out["first_run_s"] = _start(config, work, group, 20.0, {"NUMBA_CACHE_DIR": str(work / "c")})
     warm = {"NUMBA_CACHE_DIR": str(work / "w")}
-    say("footprint: monitor warm-up (numba cache and the tick kernels ahead of time)")
+    say("footprint: monitor warm-up (numba cache and the kernels ahead of time)")
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "monitor", "warm-up"], env=_env(warm), check=True,
                    capture_output=True)  # fmt: skip
@@ -83,7 +83,7 @@ def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.
         kind = "JIT" if tag else "ahead of time"
         say(f"footprint: monitor detect of the shipped spool-wear log ({kind})")
         out.update({f"{k}{tag}": v for k, v in _detect(extra).items()})
-        say(f"footprint: daemon start, warm cache, tick kernels {kind}")
+        say(f"footprint: daemon start, warm cache, kernels {kind}")
         out[f"daemon_start{tag}_s"] = _start(config, work, group, 20.0, extra)
         say(f"footprint: daemon RSS over {seconds:.0f} s of the shipped normal log ({kind})")
         out.update({f"{k}{tag}" if tag else k: v

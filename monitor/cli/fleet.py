@@ -61,9 +61,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "report",
         help="the fleet page: table, health index over time, verdict timeline",
         description="Read RESULTS/logs.parquet and write DIR/fleet.md with health.png "
-        "(max and p95 of J/eps0 per log and machine, eps0 drawn at 1.0) and timeline.png. "
+        "(per log and machine the health index, the largest alarm level max(J/eps0, B/b0), "
+        "with max and p95 of J/eps0; the alarm threshold drawn at 1.0) and timeline.png. "
         "The trend is Theil-Sen over each machine's last K judged logs; the crossing is the "
-        "number of logs until it reaches 1.0, with its 90 %% interval.",
+        "number of logs until it reaches 1.0, with its 90 % interval.",
     )
     rep.add_argument("results", type=Path, metavar="RESULTS")
     rep.add_argument("--out", type=Path, required=True, metavar="DIR")

@@ -13,15 +13,17 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "simulate-fleet",
         help="write a simulated fleet (FLEET/<machine>/commissioning|logs) and its answer key",
-        description="Simulate N machines drawn within +-5 %% of the reference, each with "
+        description="Simulate N machines drawn within +-5 % of the reference, each with "
         "its commissioning log and one candump log a day (one oil temperature per day). "
         "M01 wears its piston seal and M02 its spool slowly (severity 0 on day 1 rising to "
-        "0.6 on the last), M03's flow sensor freezes from the middle day on; the rest are "
+        "--wear-max on the last), M03's flow sensor freezes from the middle day on; the rest are "
         "healthy. OUT/answer_key.json says which is which.",
     )
     p.add_argument("out", type=Path, metavar="OUT", help="fleet folder to write (created)")
-    p.add_argument("--machines", type=int, required=True, metavar="N")
-    p.add_argument("--days", type=int, required=True, metavar="D")
+    p.add_argument("--machines", type=int, required=True, metavar="N",
+                   help="machines to simulate (M01, M02, ...; roles as above)")  # fmt: skip
+    p.add_argument("--days", type=int, required=True, metavar="D",
+                   help="daily logs per machine")  # fmt: skip
     p.add_argument("--seed", type=int, default=0, metavar="S", help="default 0")
     p.add_argument(
         "--log-s",
@@ -37,6 +39,15 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="S",
         help="length of each machine's commissioning log in seconds (default 1200)",
     )
+    p.add_argument(
+        "--wear-max",
+        type=float,
+        default=0.6,
+        metavar="SEV",
+        help="severity of the wearing machines on the last day, rising linearly from 0 on "
+        "day 1 (default 0.6; a slow wear such as 0.2 over 8 days shows the prognosis "
+        "before the alarm)",
+    )
     p.set_defaults(func=run)
 
 
@@ -48,9 +59,12 @@ def run(args: argparse.Namespace) -> int:
     if args.log_s < 60 or args.commissioning_s < 180:
         raise ConfigError("--log-s must be at least 60 s and --commissioning-s at least 180 s "
                           "(the J window is 30 s)")  # fmt: skip
+    if not 0.0 <= args.wear_max <= 1.0:
+        raise ConfigError(f"--wear-max must be a severity in [0, 1], got {args.wear_max:g}")
     if args.out.exists() and any(args.out.iterdir()):
         raise ConfigError(f"{args.out}: exists and is not empty")
-    plan = FleetPlan(args.machines, args.days, args.seed, args.log_s, args.commissioning_s)
+    plan = FleetPlan(args.machines, args.days, args.seed, args.log_s, args.commissioning_s,
+                     wear_max=args.wear_max)  # fmt: skip
     simulate_fleet(args.out, plan, say=lambda m: print(m, file=sys.stderr))
     print(f"wrote {args.machines} machines x {args.days} days to {args.out}", file=sys.stderr)
     return 0
