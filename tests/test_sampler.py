@@ -89,9 +89,12 @@ def test_incremental_feed_matches_batch() -> None:
 
 
 def test_oil_temperature_goes_stale_after_three_seconds() -> None:
+    # The flow frames keep the bus alive (a silent bus is an outage, after which staleness
+    # starts afresh); only the 1 Hz oil temperature stops after its first frame.
     s = sampler()
     s.feed(0.0, "HYD_OilTemp", {"OilTemp": 50.0})
-    s.feed(3.5, "HYD_Flow", {"QP": 1.0})
+    for k in range(351):
+        s.feed(0.005 + k * 0.01, "HYD_Flow", {"QP": 1.0})
     rows = s.flush()
     oil = rows[:, COL["OilTemp"]]
     assert (oil[:301] == 50.0).all() and np.isnan(oil[301:]).all()
