@@ -94,6 +94,25 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "share of REC: the more normal hours here, the surer the stated false-alarm rate",
     )
     p.add_argument(
+        "--reference",
+        type=Path,
+        default=None,
+        metavar="MODEL",
+        help="a model of the same machine type trained on hours of normal data (the shipped "
+        "one, say): eps0 and b0 are raised to at least its thresholds, since minutes of "
+        "commissioning cannot show the tail of hours (what `monitor fleet run` does)",
+    )
+    p.add_argument(
+        "--folds",
+        type=number(0, 20, whole=True),
+        default=TrainConfig.folds,
+        metavar="K",
+        help="thresholds from residuals cross-fitted over all of REC in K folds of "
+        f"{TrainConfig.fold_block_s:g} s blocks (default {TrainConfig.folds}; needs "
+        f"2K blocks, else the last --validation-fraction is held out); 0: hold out the last "
+        "--validation-fraction",
+    )
+    p.add_argument(
         "--bias",
         choices=("on", "off"),
         default=None,
@@ -121,7 +140,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from monitor.config.settings import load_config
     from monitor.live.loops import read_loop
-    from monitor.model.modelfile import save_model
+    from monitor.model.modelfile import load_model, save_model
     from monitor.training.train import train
 
     cfg = TrainConfig(
@@ -131,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
         max_patterns=args.max_patterns,
         threshold=ThresholdRule(args.threshold_rule, args.quantile, args.factor, args.rate),
         validation_fraction=args.validation_fraction,
+        folds=args.folds,
         isolation=args.isolation,
         bias=None if args.bias is None else args.bias == "on",
     )
@@ -145,8 +165,9 @@ def run(args: argparse.Namespace) -> int:
         rec = read_loop(path, monitor_cfg, args.loop)
         print(f"read {path} (held out): {len(rec)} samples", file=sys.stderr)
         held_out.append(rec)
+    reference = None if args.reference is None else load_model(args.reference)
     model = train(recordings, cfg, progress=lambda msg: print(msg, file=sys.stderr),
-                  held_out=held_out or None)
+                  held_out=held_out or None, reference=reference)  # fmt: skip
     try:
         save_model(args.out, model)
     except OSError as exc:

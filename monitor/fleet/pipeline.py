@@ -64,17 +64,21 @@ def default_model_bytes(model_path: str | None, config_path: str | None) -> byte
 
 
 def train_model_bytes(
-    paths: list[str], config_path: str | None = None, isolation: str = "sim"
+    paths: list[str],
+    config_path: str | None = None,
+    isolation: str = "sim",
+    reference: bytes | None = None,
 ) -> bytes:
-    """`monitor train REC... --out M [--isolation I]` with its other defaults: the model
-    file's bytes."""
+    """`monitor train REC... --out M [--isolation I] [--reference R]` with its other
+    defaults: the model file's bytes (``reference``: the reference model's bytes)."""
     from monitor.live.loops import read_loop
     from monitor.training.settings import TrainConfig
     from monitor.training.train import train
 
     cfg = _config(config_path)
     recordings = [read_loop(p, cfg, None) for p in paths]
-    return model_to_bytes(train(recordings, TrainConfig(isolation=isolation)))
+    ref = None if reference is None else model_from_bytes(reference)
+    return model_to_bytes(train(recordings, TrainConfig(isolation=isolation), reference=ref))
 
 
 def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> Judged:

@@ -42,8 +42,8 @@ def judge_task(model_bytes: bytes, path: str, config: str | None) -> dict[str, A
         return {"row": {}, "events": [], "error": f"{type(exc).__name__}: {exc}"}
 
 
-def train_task(paths: list[str], config: str | None, isolation: str) -> bytes:
-    return pipeline.train_model_bytes(paths, config, isolation)
+def train_task(paths: list[str], config: str | None, isolation: str, reference: bytes) -> bytes:
+    return pipeline.train_model_bytes(paths, config, isolation, reference)
 
 
 def _empty_row(machine: str, log: str, sha: str | None, model: str, error: str) -> dict:
@@ -107,8 +107,11 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, say
             say(f"fleet: {m.machine_id}: no commissioning data, judged with the default model")
             out[m.machine_id] = (default, "default")
             continue
+        # The default model floors the commissioned thresholds (minutes cannot show the
+        # tail of hours: monitor.training.train.floor_thresholds).
         fut = client.submit(train_task, [str(p) for p in m.commissioning], opts.config,
-                            opts.isolation, key=f"train-{m.machine_id}", pure=False)  # fmt: skip
+                            opts.isolation, default, key=f"train-{m.machine_id}",
+                            pure=False)  # fmt: skip
         if first:  # alone: it fills numba's cache for the training kernels
             fut.result()
             first = False

@@ -20,6 +20,10 @@ class TrainConfig:
     exclude_neighbours: int = 50  # LOO leaves out +-0.5 s: 100 Hz rows are near copies
     threshold: ThresholdRule = field(default_factory=ThresholdRule)
     validation_fraction: float = 0.25
+    #: Thresholds from residuals cross-fitted over all the normal data in this many folds
+    #: (``monitor.training.crossfit``); 0: hold out the last ``validation_fraction``.
+    folds: int = 4
+    fold_block_s: float = 60.0  # blocks dealt round-robin to the folds
     #: Bound |e| per output at this quantile of held-out normal |e| before J (None: eq. 9
     #: literal).  0.999 leaves sustained fault residuals alone and caps the rare one-sample
     #: events (end-stop impacts) that would otherwise set J0 by themselves.
@@ -40,6 +44,10 @@ class TrainConfig:
             raise ConfigError(f"window N must be at least 1 sample, got {self.window_n}")
         if not 0.05 <= self.validation_fraction <= 0.5:
             raise ConfigError("validation fraction must be within 0.05..0.5")
+        if self.folds != 0 and not 2 <= self.folds <= 20:
+            raise ConfigError(f"folds must be 0 (hold out a share) or 2..20, got {self.folds}")
+        if not 1.0 <= self.fold_block_s <= 3600.0:
+            raise ConfigError(f"fold block must be within 1..3600 s, got {self.fold_block_s}")
         q = self.residual_clip_quantile
         if q is not None and not 0.9 <= q <= 1.0:
             raise ConfigError(f"residual clip quantile must be within 0.9..1, got {q}")

@@ -1,7 +1,9 @@
 """``monitor train``: normal recordings -> a verified model file.
 
-Normal data is split in two: the patterns (and the z-score statistics, F0) come from the
-first part, J0 from the held-out rest, so the threshold is set on data the GRNN never saw.
+The thresholds are set on residuals of data the GRNN never saw: recordings given apart
+(``--held-out``), or, by default, residuals cross-fitted over all the normal data, each block
+predicted by a model fitted on the others (``crossfit.py``); data too short for that is split
+in two, the patterns (and the z-score statistics, F0) from the first part, J0 from the rest.
 Fault isolation learns one residual signature per fault from the simulator (the product's
 own physics model), driven through the freshly trained DGRNN.
 """
@@ -16,7 +18,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from monitor.detection.alarm import N_REGIMES, AlarmConfig, Isolator
-from monitor.errors import InputFileError
+from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.model.bias import BiasModel, bias_regimes, bias_series, fit_scale
 from monitor.model.dgrnn import DGRNN
@@ -27,6 +29,7 @@ from monitor.model.residual import window_j
 from monitor.model.spec import Normalizer, table
 from monitor.model.threshold import MIN_BLOCKS
 from monitor.signals import FAULT_NAMES
+from monitor.training.crossfit import cross_fitted_residuals, n_blocks
 from monitor.training.settings import TrainConfig
 
 Progress = Callable[[str], None]
@@ -66,9 +69,14 @@ def train(
     cfg: TrainConfig,
     progress: Progress | None = None,
     held_out: Sequence[Recording] | None = None,
+    reference: MonitorModel | None = None,
 ) -> MonitorModel:
     """A model from normal ``recordings``; the thresholds come from ``held_out`` normal
-    recordings when given, else from the last ``cfg.validation_fraction`` of them."""
+    recordings when given, else from residuals cross-fitted over all of them
+    (``monitor.training.crossfit``), or from their last ``cfg.validation_fraction`` when
+    they are too short for ``cfg.folds`` folds (or ``cfg.folds`` is 0).  A ``reference``
+    model of the same machine type (trained on hours) floors both thresholds: see
+    :func:`floor_thresholds`."""
     say = progress or (lambda _msg: None)
     if not recordings:
         raise InputFileError("no normal recordings to train on")
@@ -77,10 +85,19 @@ def train(
         missing = [n for n in spec.variables if not rec.has(n)]
         if missing:
             raise InputFileError(f"{rec.source}: missing signal(s) {', '.join(missing)}")
+    block_n = int(round(cfg.fold_block_s * 100))
+    crossfit = not held_out and cfg.folds >= 2 and n_blocks(
+        [len(r) for r in recordings], block_n) >= 2 * cfg.folds  # fmt: skip
     if held_out:
         fit_part, val_part = list(recordings), list(held_out)
+    elif crossfit:
+        fit_part, val_part = list(recordings), list(recordings)
     else:
         fit_part, val_part = split_normal(recordings, cfg.validation_fraction)
+        if cfg.folds >= 2:
+            say(f"  too short to cross-fit {cfg.folds} folds of {cfg.fold_block_s:g} s blocks "
+                f"(needs {2 * cfg.folds * cfg.fold_block_s / 60:g} min): the last "
+                f"{cfg.validation_fraction:.0%} held out for the thresholds")  # fmt: skip
     tables = [table(r, spec.variables) for r in fit_part]
     normalizer = Normalizer().fit(np.concatenate(tables), spec.variables)
     started = time.perf_counter()
@@ -97,7 +114,13 @@ def train(
     model = MonitorModel(dgrnn, normalizer, cfg.window_n, cfg.threshold, math.nan, math.nan)
     # Held-out residuals once, unbounded; the bound (if any) is learnt from them and then
     # applied exactly as the detector applies it.
-    e_val = [normal_residuals(model, r) for r in val_part]
+    if crossfit:
+        say(f"  thresholds cross-fitted: {cfg.folds} folds of {cfg.fold_block_s:g} s blocks")
+        e_val = cross_fitted_residuals(
+            model, [normalizer.transform(t) for t in tables], val_part, cfg.folds, block_n,
+            normal_residuals, say)  # fmt: skip
+    else:
+        e_val = [normal_residuals(model, r) for r in val_part]
     if cfg.residual_clip_quantile is not None:
         clip = np.nanquantile(np.abs(np.concatenate(e_val)), cfg.residual_clip_quantile, axis=0)
         model.residual_clip = tuple(float(c) for c in clip)
@@ -106,7 +129,8 @@ def train(
     j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
     model.j0, model.eps0 = cfg.threshold.eps0(j_val, block=cfg.window_n)
     say(
-        f"  J0 {model.j0:.4g} ({cfg.threshold.rule} of J on {len(val_part)} held-out part(s)),"
+        f"  J0 {model.j0:.4g} ({cfg.threshold.rule} of J on {len(val_part)} "
+        f"{'cross-fitted' if crossfit else 'held-out'} part(s)),"
         f" eps0 {model.eps0:.4g}: {cfg.threshold.describe()}"
     )
     bias_note = "off (--bias off, or the paper preset)"
@@ -122,6 +146,10 @@ def train(
             # Short commissioning data cannot support the bias threshold: J alone, said.
             bias_note = f"off: {exc}"
             say(f"  bias statistic {bias_note}")
+    floor_note = None
+    if reference is not None:
+        floor_note = floor_thresholds(model, reference)
+        say(f"  thresholds floored by the reference model: {floor_note}")
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
     everything = [*recordings, *(held_out or ())]
@@ -133,10 +161,13 @@ def train(
     if cfg.isolation == "sim":
         labels, centroids = simulated_signatures(model, cfg, say)
         model.isolation_labels, model.isolation_centroids = labels, centroids
+    validation = (f"cross-fitted, {cfg.folds} folds of {cfg.fold_block_s:g} s blocks"
+                  if crossfit else "held out")  # fmt: skip
     model.training = {
         "sources": [r.source for r in everything],
         "patterns_from": [r.source for r in fit_part],
         "validation_from": [r.source for r in val_part],
+        "validation": validation,
         "samples": int(sum(len(r) for r in everything)),
         "data_sha256": data_hash([table(r, spec.variables) for r in everything]),
         "preset": cfg.preset,
@@ -145,9 +176,40 @@ def train(
         "isolation": cfg.isolation,
         "threshold": cfg.threshold.describe(),
         "bias": bias_note,
+        "threshold_floor": floor_note,
         "trained_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     return model
+
+
+def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
+    """Raise eps0 and b0 to at least the reference model's; what was done, in one line.
+
+    Minutes of commissioning cannot show the tail of hours: on simulated machines the
+    largest B of 20 minutes was a third of what 2 hours of the same duty cycle reach, so
+    thresholds set on it alone raised false alarms.  B is a standard score, so the
+    reference's b0, set on hours of held-out data, carries over to another machine of the
+    type; and a model fitted on minutes predicts no better than the reference fitted on
+    hours, so the reference's eps0 is a lower bound for its J."""
+    if reference.spec != model.spec or reference.window_n != model.window_n:
+
+        def what(m: MonitorModel) -> str:
+            return (f"{'/'.join(m.spec.outputs)} from {'/'.join(m.spec.variables)}, horizon "
+                    f"{m.spec.horizon}, J window {m.window_n}")  # fmt: skip
+
+        raise ConfigError(
+            f"the reference model ({what(reference)}) does not match the model trained "
+            f"({what(model)}): train with the reference's preset, --horizon and --window"
+        )
+    notes = []
+    if reference.eps0 > model.eps0:
+        notes.append(f"eps0 {model.eps0:.4g} -> {reference.eps0:.4g}")
+        model.eps0 = reference.eps0
+    rb, mb = reference.bias, model.bias
+    if rb is not None and mb is not None and rb.b0 > mb.b0:
+        notes.append(f"b0 {mb.b0:.4g} -> {rb.b0:.4g}")
+        model.bias = BiasModel(mb.window_n, mb.min_count, mb.scale, rb.b0)
+    return ", ".join(notes) or "own thresholds already above the reference's"
 
 
 def fit_bias(e_val: list[np.ndarray], spool_val: list[np.ndarray], cfg: TrainConfig) -> BiasModel:
