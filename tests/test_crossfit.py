@@ -128,3 +128,19 @@ def test_a_reference_of_another_kind_is_refused_naming_both(commissioned) -> Non
     m, _, _ = commissioned
     with pytest.raises(ConfigError, match=r"J window 6000\).*J window 3000"):
         floor_thresholds(replace(m), replace(m, window_n=6000))
+
+
+def test_monitor_train_refuses_a_reference_of_another_preset_before_fitting(
+    tmp_path, capsys
+) -> None:
+    from monitor.cli import main
+    from monitor.resources import resource_path
+
+    out = tmp_path / "m.npz"
+    log = str(resource_path("replay", "normal.log"))
+    rc = main(["train", log, "--preset", "paper", "--reference", "shipped", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and not out.exists()
+    assert not any("fitting" in line for line in err)  # refused before the long work
+    assert "the reference model (PP/PA/PB/QP from" in err[-1]
+    assert "does not match the model to train (QP from QP/PP/PA/PB" in err[-1]

@@ -95,12 +95,12 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--reference",
-        type=Path,
         default=None,
         metavar="MODEL",
-        help="a model of the same machine type trained on hours of normal data (the shipped "
-        "one, say): eps0 and b0 are raised to at least its thresholds, since minutes of "
-        "commissioning cannot show the tail of hours (what `monitor fleet run` does)",
+        help="a model of the same machine type trained on hours of normal data (`shipped`: "
+        "the config's model): eps0 and b0 are raised to at least its thresholds, since "
+        "minutes of commissioning cannot show the tail of hours (what `monitor fleet run` "
+        "does with its default model)",
     )
     p.add_argument(
         "--folds",
@@ -127,7 +127,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--config with `loops:`); the fault signatures still come from the boom simulator",
     )
     p.add_argument("--config", type=Path, default=None,
-                   help="monitor YAML for --loop")
+                   help="monitor YAML for --loop and for the model `--reference shipped` names")
     p.add_argument(
         "--isolation",
         choices=("sim", "none"),
@@ -165,7 +165,10 @@ def run(args: argparse.Namespace) -> int:
         rec = read_loop(path, monitor_cfg, args.loop)
         print(f"read {path} (held out): {len(rec)} samples", file=sys.stderr)
         held_out.append(rec)
-    reference = None if args.reference is None else load_model(args.reference)
+    reference = None
+    if args.reference is not None:
+        shipped = args.reference == "shipped"
+        reference = load_model(monitor_cfg.model if shipped else Path(args.reference))
     model = train(recordings, cfg, progress=lambda msg: print(msg, file=sys.stderr),
                   held_out=held_out or None, reference=reference)  # fmt: skip
     try:

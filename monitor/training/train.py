@@ -26,7 +26,7 @@ from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
-from monitor.model.spec import Normalizer, table
+from monitor.model.spec import DGRNNSpec, Normalizer, table
 from monitor.model.threshold import MIN_BLOCKS
 from monitor.signals import FAULT_NAMES
 from monitor.training.crossfit import cross_fitted_residuals, n_blocks
@@ -81,6 +81,8 @@ def train(
     if not recordings:
         raise InputFileError("no normal recordings to train on")
     spec = cfg.spec()
+    if reference is not None:  # before the long work
+        check_reference(reference, spec, cfg.window_n)
     for rec in [*recordings, *(held_out or ())]:
         missing = [n for n in spec.variables if not rec.has(n)]
         if missing:
@@ -182,6 +184,22 @@ def train(
     return model
 
 
+def check_reference(reference: MonitorModel, spec: DGRNNSpec, window_n: int) -> None:
+    """ConfigError naming both when ``reference`` is not a model of this spec and window."""
+    if reference.spec == spec and reference.window_n == window_n:
+        return
+
+    def what(s: DGRNNSpec, n: int) -> str:
+        return (f"{'/'.join(s.outputs)} from {'/'.join(s.variables)}, horizon {s.horizon}, "
+                f"J window {n}")  # fmt: skip
+
+    raise ConfigError(
+        f"the reference model ({what(reference.spec, reference.window_n)}) does not match the "
+        f"model to train ({what(spec, window_n)}): train with the reference's preset, "
+        "--horizon and --window"
+    )
+
+
 def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
     """Raise eps0 and b0 to at least the reference model's; what was done, in one line.
 
@@ -191,16 +209,7 @@ def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
     reference's b0, set on hours of held-out data, carries over to another machine of the
     type; and a model fitted on minutes predicts no better than the reference fitted on
     hours, so the reference's eps0 is a lower bound for its J."""
-    if reference.spec != model.spec or reference.window_n != model.window_n:
-
-        def what(m: MonitorModel) -> str:
-            return (f"{'/'.join(m.spec.outputs)} from {'/'.join(m.spec.variables)}, horizon "
-                    f"{m.spec.horizon}, J window {m.window_n}")  # fmt: skip
-
-        raise ConfigError(
-            f"the reference model ({what(reference)}) does not match the model trained "
-            f"({what(model)}): train with the reference's preset, --horizon and --window"
-        )
+    check_reference(reference, model.spec, model.window_n)
     notes = []
     if reference.eps0 > model.eps0:
         notes.append(f"eps0 {model.eps0:.4g} -> {reference.eps0:.4g}")
