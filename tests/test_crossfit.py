@@ -83,7 +83,7 @@ def test_each_block_is_predicted_from_the_other_folds_only() -> None:
 def commissioned() -> tuple[MonitorModel, list[str], list]:
     recs = _recordings(300.0, (11, 12))  # 10 blocks of 60 s: enough for 4 folds (8)
     said: list[str] = []
-    return train(recs, TrainConfig(isolation="none"), said.append), said, recs
+    return train(recs, TrainConfig(isolation="none", folds=4), said.append), said, recs
 
 
 def test_train_cross_fits_when_the_data_allows_and_says_so(commissioned) -> None:
@@ -97,8 +97,8 @@ def test_train_cross_fits_when_the_data_allows_and_says_so(commissioned) -> None
     assert m.bias is not None and math.isfinite(m.bias.b0)
 
     short: list[str] = []
-    m = train(recs[:1], TrainConfig(isolation="none", bias=False), short.append)  # 5 blocks
-    assert m.training["validation"] == "held out"
+    m = train(recs[:1], TrainConfig(isolation="none", bias=False, folds=4), short.append)
+    assert m.training["validation"] == "held out"  # 5 blocks of 60 s, fewer than 8
     assert any("too short to cross-fit 4 folds" in line for line in short)
 
 

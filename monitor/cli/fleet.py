@@ -20,9 +20,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "run",
         help="train each machine's model, judge every new log, write Parquet results",
         description="Per machine, train its model from its commissioning data (as `monitor "
-        "train --reference DEFAULT`: thresholds cross-fitted over the commissioning and never "
-        "below the default model's; without commissioning data the default model, and it "
-        "says so), then judge every log not yet "
+        "train --reference DEFAULT`: thresholds never below the default model's; without "
+        "commissioning data the default model, and it says so), then judge every log not yet "
         "in RESULTS (by SHA-256) as `monitor detect` does. Writes RESULTS/logs.parquet, "
         "events.parquet and models/<machine>.model.npz. Runs on a Dask LocalCluster of "
         "--workers processes, or on an existing scheduler. Exit 0 when every log got a row "

@@ -108,8 +108,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         default=TrainConfig.folds,
         metavar="K",
         help="thresholds from residuals cross-fitted over all of REC in K folds of "
-        f"{TrainConfig.fold_block_s:g} s blocks (default {TrainConfig.folds}; needs "
-        f"2K blocks, else the last --validation-fraction is held out); 0: hold out the last "
+        f"{TrainConfig.fold_block_s:g} s blocks (needs 2K blocks, else the last "
+        "--validation-fraction is held out); default 0: hold out the last "
         "--validation-fraction",
     )
     p.add_argument(

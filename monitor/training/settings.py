@@ -21,8 +21,10 @@ class TrainConfig:
     threshold: ThresholdRule = field(default_factory=ThresholdRule)
     validation_fraction: float = 0.25
     #: Thresholds from residuals cross-fitted over all the normal data in this many folds
-    #: (``monitor.training.crossfit``); 0: hold out the last ``validation_fraction``.
-    folds: int = 4
+    #: (``monitor.training.crossfit``); 0: hold out the last ``validation_fraction``.  Off by
+    #: default: on simulated 20-minute commissioning runs it found slight wear earlier but
+    #: its bias statistic raised false alarms (docs/benchmarks.md, 2026-11-25).
+    folds: int = 0
     fold_block_s: float = 60.0  # blocks dealt round-robin to the folds
     #: Bound |e| per output at this quantile of held-out normal |e| before J (None: eq. 9
     #: literal).  0.999 leaves sustained fault residuals alone and caps the rare one-sample

@@ -204,8 +204,9 @@ def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
     """Raise eps0 and b0 to at least the reference model's; what was done, in one line.
 
     Minutes of commissioning cannot show the tail of hours: on simulated machines the
-    largest B of 20 minutes was a third of what 2 hours of the same duty cycle reach, so
-    thresholds set on it alone raised false alarms.  B is a standard score, so the
+    largest B of 20 cross-fitted minutes (3.5 to 9) stayed far below what 2 hours of the
+    same duty cycle reach (17), so thresholds set on it alone raised false alarms.  B is a
+    standard score, so the
     reference's b0, set on hours of held-out data, carries over to another machine of the
     type; and a model fitted on minutes predicts no better than the reference fitted on
     hours, so the reference's eps0 is a lower bound for its J."""
