@@ -26,7 +26,7 @@ from monitor.gap.candidates import (
     n_params,
 )
 from monitor.gap.decide import decide, pair_plan, within_noise
-from monitor.gap.predict import SENSOR_EFFECTS, plant_traces, predict, sense
+from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, sense
 from monitor.gap.prepare import Prepared, prepare
 from monitor.gap.segments import Segment, make_segments, split, spread
 from monitor.gap.shrink import resamples
@@ -81,6 +81,7 @@ class _Evaluator:
 
     def __init__(self, prep: Prepared, segments: Sequence[Segment], machine: MachineParams):
         self.prep, self.segments, self.machine = prep, list(segments), machine
+        self.plant = SegmentPlant(prep, segments)
         self._base: tuple[tuple, list] | None = None
 
     def predict(self, factors: dict[str, float], effects: Sequence[Effect]) -> dict:
@@ -88,9 +89,9 @@ class _Evaluator:
         if all(e.name in SENSOR_EFFECTS for e in effects):
             key = tuple(sorted(factors.items()))
             if self._base is None or self._base[0] != key:
-                self._base = (key, plant_traces(self.prep, self.segments, m, ()))
+                self._base = (key, self.plant.traces(m, ()))
             return sense(self.prep, self.segments, self._base[1], effects)
-        return predict(self.prep, self.segments, m, effects)
+        return sense(self.prep, self.segments, self.plant.traces(m, effects), effects)
 
     def residual(self, factors: dict[str, float], effects: Sequence[Effect]) -> np.ndarray:
         return S.stacked(self.prep, self.segments, self.predict(factors, effects))
