@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from monitor.errors import NoHydraulicDataError
 from monitor.gap import calibrate as cal_mod
@@ -120,6 +121,16 @@ def diagnose(
     effects: Sequence[str] = tuple(KNOBS),
 ) -> Diagnosis:
     """Diagnose the gap between ``machine``'s simulator and ``rec``."""
+    # The fits' linear algebra works on Jacobians of a few columns: BLAS threads gain
+    # nothing there, and OpenBLAS's idle threads spin between calls (with two of them, 6 of
+    # 16 CPU seconds of a diagnosis went to spinning).
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _diagnose(rec, machine, progress, effects)
+
+
+def _diagnose(
+    rec: Recording, machine: MachineParams, progress: Progress | None, effects: Sequence[str]
+) -> Diagnosis:
     say = progress or (lambda _msg: None)
     clock = time.perf_counter()
     timings: dict[str, float] = {}
