@@ -34,7 +34,10 @@ class Knob:
     def value(self, u: float) -> float:
         u = min(max(u, 0.0), 1.0)
         if self.log:
-            return math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
+            v = math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
+            # exp(log(5)) is 4.999999999999999: a fit at its bound would hand the effect a
+            # value just outside its range, which the catalogue refuses (exit 2).
+            return min(max(v, self.low), self.high)
         return self.low + u * (self.high - self.low)
 
     def unit(self, value: float) -> float:
