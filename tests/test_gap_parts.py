@@ -94,6 +94,19 @@ def test_fit_recovers_a_known_minimum_inside_bounds():
     assert res.values["b"] == pytest.approx(0.5, rel=0.02)
 
 
+def test_log_knobs_stay_inside_their_bounds_at_the_ends():
+    # Every log-mapped knob of the catalogue, at both ends of the unit interval and between.
+    from monitor.gap.candidates import KNOBS
+
+    for knobs in KNOBS.values():
+        for k in knobs:
+            for u in np.linspace(0.0, 1.0, 101):
+                assert k.low <= k.value(float(u)) <= k.high, (k.name, u)
+            assert k.value(0.0) == pytest.approx(k.low) and k.value(1.0) == pytest.approx(k.high)
+    # The value that failed a blind benchmark run: a pump time constant fitted to its bound.
+    assert Knob("time_constant_ms", 5.0, 500.0, log=True).value(0.0) >= 5.0
+
+
 def test_tolerances_scale_their_fields():
     m = cal_mod.apply(M, {"mass": 1.1, "volumes": 0.9})
     assert m.mass_kg == pytest.approx(440.0)

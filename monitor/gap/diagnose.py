@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from monitor.errors import NoHydraulicDataError
 from monitor.gap import calibrate as cal_mod
@@ -26,7 +27,7 @@ from monitor.gap.candidates import (
     n_params,
 )
 from monitor.gap.decide import decide, pair_plan, within_noise
-from monitor.gap.predict import SENSOR_EFFECTS, plant_traces, predict, sense
+from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, sense
 from monitor.gap.prepare import Prepared, prepare
 from monitor.gap.segments import Segment, make_segments, split, spread
 from monitor.gap.shrink import resamples
@@ -36,6 +37,12 @@ from monitor.sim.machine import MachineParams
 
 #: Seconds of calibration segments the fits simulate per evaluation.
 FIT_BUDGET_S = 30.0
+#: The fits integrate with this multiple of the configured RK4 step (200 us: 333 us, still
+#: 30 steps per 100 Hz sample and a 1 kHz record).  At the stiffest corner of the tolerance
+#: bands (volumes and mass -15 %) that departs from the configured step by 0.014 of the
+#: pressure sensors' noise variance (500 us: 0.84, 1 ms: several times the noise), so the
+#: fits' optimum stays put; the held-out scores, and so the verdict, use the configured step.
+FIT_STEP_FACTOR = 5.0 / 3.0
 #: Trust-region iterations of the tolerance calibration (five factors that trade off
 #: against each other converge slowly: six iterations left a +-5 % machine 20x the noise).
 CAL_ITERATIONS = 15
@@ -81,6 +88,7 @@ class _Evaluator:
 
     def __init__(self, prep: Prepared, segments: Sequence[Segment], machine: MachineParams):
         self.prep, self.segments, self.machine = prep, list(segments), machine
+        self.plant = SegmentPlant(prep, segments)
         self._base: tuple[tuple, list] | None = None
 
     def predict(self, factors: dict[str, float], effects: Sequence[Effect]) -> dict:
@@ -88,9 +96,9 @@ class _Evaluator:
         if all(e.name in SENSOR_EFFECTS for e in effects):
             key = tuple(sorted(factors.items()))
             if self._base is None or self._base[0] != key:
-                self._base = (key, plant_traces(self.prep, self.segments, m, ()))
+                self._base = (key, self.plant.traces(m, ()))
             return sense(self.prep, self.segments, self._base[1], effects)
-        return predict(self.prep, self.segments, m, effects)
+        return sense(self.prep, self.segments, self.plant.traces(m, effects), effects)
 
     def residual(self, factors: dict[str, float], effects: Sequence[Effect]) -> np.ndarray:
         return S.stacked(self.prep, self.segments, self.predict(factors, effects))
@@ -113,6 +121,16 @@ def diagnose(
     effects: Sequence[str] = tuple(KNOBS),
 ) -> Diagnosis:
     """Diagnose the gap between ``machine``'s simulator and ``rec``."""
+    # The fits' linear algebra works on Jacobians of a few columns: BLAS threads gain
+    # nothing there, and OpenBLAS's idle threads spin between calls (with two of them, 6 of
+    # 16 CPU seconds of a diagnosis went to spinning).
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _diagnose(rec, machine, progress, effects)
+
+
+def _diagnose(
+    rec: Recording, machine: MachineParams, progress: Progress | None, effects: Sequence[str]
+) -> Diagnosis:
     say = progress or (lambda _msg: None)
     clock = time.perf_counter()
     timings: dict[str, float] = {}
@@ -134,7 +152,8 @@ def diagnose(
         f"{len(cal)} calibration ({sum(s.duration_s() for s in fit_segs):.0f} s fitted), "
         f"{len(held)} held out; RodPos {'measured' if prep.has_rodpos else 'from flow'}"
     )
-    fit_ev = _Evaluator(prep, fit_segs, machine)
+    fit_machine = machine.with_changes(step_s=machine.step_s * FIT_STEP_FACTOR)
+    fit_ev = _Evaluator(prep, fit_segs, fit_machine)
     held_ev = _Evaluator(prep, held, machine)
     tol = cal_mod.knobs()
 

@@ -10,6 +10,7 @@ sensor effect reuses the plant traces.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,9 +20,9 @@ from monitor.gap.segments import Segment
 from monitor.io.recording import Recording
 from monitor.sim.effects import Effect
 from monitor.sim.machine import BAR, LPM, MachineParams
-from monitor.sim.pack import measured_state, pack_params
+from monitor.sim.pack import measured_state, pack_inputs, pack_params
 from monitor.sim.sensors import lag
-from monitor.sim.simulate import PlantTrace, run_plant
+from monitor.sim.simulate import PlantTrace, check_commands, run_packed
 
 SENSOR_EFFECTS = ("sensor_lag",)
 #: Rows around a start whose median gives the start pressures (noise 0.3 bar rms).
@@ -36,30 +37,109 @@ def plant_effects(effects: Sequence[Effect]) -> tuple[Effect, ...]:
     return tuple(e for e in effects if e.name not in SENSOR_EFFECTS)
 
 
-def _start_state(prep: Prepared, seg: Segment, machine: MachineParams, prm: np.ndarray):
+@dataclass(frozen=True)
+class _Start:
+    """What the recording says about a segment's first row (SI)."""
+
+    pp_pa: float
+    pa_pa: float
+    pb_pa: float
+    rod_m: float
+    vel_m_s: float
+    spool: float
+
+
+def _measured_start(prep: Prepared, seg: Segment) -> _Start:
     i = seg.start
     lo, hi = max(i - _START_ROWS, 0), i + _START_ROWS + 1
     p = {n: np.nanmedian(prep.meas[n][lo:hi]) for n in ("PP", "PA", "PB")}
     p = {n: (v if np.isfinite(v) else 0.0) for n, v in p.items()}
-    x_m = prep.rod_mm[i] * 1e-3
-    if x_m < END_STOP_SNAP_M:
-        x_m = 0.0
-    elif x_m > machine.stroke_m - END_STOP_SNAP_M:
-        x_m = machine.stroke_m
     if seg.quiet:
         v_m_s = 0.0
     else:
         j0, j1 = max(i - 3, 0), min(i + 3, len(prep) - 1)
         v_m_s = (prep.rod_mm[j1] - prep.rod_mm[j0]) * 1e-3 / (prep.t[j1] - prep.t[j0])
-    return measured_state(
-        machine,
-        prm,
+    return _Start(
         p["PP"] * BAR,
         p["PA"] * BAR,
         p["PB"] * BAR,
-        x_m,
+        prep.rod_mm[i] * 1e-3,
         v_m_s,
-        spool=float(np.clip(prep.cmd["SpoolCmd"][i], -100, 100)) / 100.0,
+        float(np.clip(prep.cmd["SpoolCmd"][i], -100, 100)) / 100.0,
+    )
+
+
+def _start_state(start: _Start, machine: MachineParams, prm: np.ndarray) -> np.ndarray:
+    x_m = start.rod_m
+    if x_m < END_STOP_SNAP_M:
+        x_m = 0.0
+    elif x_m > machine.stroke_m - END_STOP_SNAP_M:
+        x_m = machine.stroke_m
+    return measured_state(
+        machine, prm, start.pp_pa, start.pa_pa, start.pb_pa, x_m, start.vel_m_s, spool=start.spool
+    )
+
+
+class SegmentPlant:
+    """Plant runs of a fixed set of segments, for many (machine, effects) hypotheses.
+
+    The commands are checked and packed, and the start measurements taken, once: a fit
+    simulates the same segments a few hundred times, and building them anew for every run
+    cost more than a tenth of a diagnosis besides the integration.
+    """
+
+    def __init__(self, prep: Prepared, segments: Sequence[Segment]):
+        self.prep, self.segments = prep, list(segments)
+        self._t0: list[float] = []
+        self._dt: list[float] = []
+        self._inputs: list[np.ndarray] = []
+        self._starts: list[_Start] = []
+        for seg in self.segments:
+            rows = slice(seg.start, seg.stop + 1)
+            cmds = Recording(prep.t[rows], {n: v[rows] for n, v in prep.cmd.items()})
+            check_commands(cmds)
+            self._t0.append(float(cmds.t[0]))
+            self._dt.append(float(cmds.t[1] - cmds.t[0]))
+            self._inputs.append(_pack(cmds, ()))
+            self._starts.append(_measured_start(prep, seg))
+        self._visc: tuple[tuple, list[np.ndarray]] | None = None
+
+    def _inputs_for(self, effects: Sequence[Effect]) -> list[np.ndarray]:
+        """The packed commands; the viscosity column depends on the oil's reference
+        viscosities (the catalogue defaults in a fit: one extra packing per diagnosis)."""
+        visc = [e for e in effects if e.name == "oil_viscosity"]
+        if not visc:
+            return self._inputs
+        key = (visc[0].params["nu40_cst"], visc[0].params["nu100_cst"])
+        if self._visc is None or self._visc[0] != key:
+            packed = []
+            for seg in self.segments:
+                rows = slice(seg.start, seg.stop + 1)
+                cmds = Recording(self.prep.t[rows], {n: v[rows] for n, v in self.prep.cmd.items()})
+                packed.append(_pack(cmds, visc))
+            self._visc = (key, packed)
+        return self._visc[1]
+
+    def traces(self, machine: MachineParams, effects: Sequence[Effect]) -> list[PlantTrace]:
+        """One plant run per segment (1 kHz record) with the plant effects of ``effects``."""
+        fx = plant_effects(effects)
+        prm = pack_params(machine, fx)
+        return [
+            run_packed(t0, dt, u, prm, _start_state(start, machine, prm), machine.step_s)
+            for t0, dt, u, start in zip(
+                self._t0, self._dt, self._inputs_for(fx), self._starts, strict=True
+            )
+        ]
+
+
+def _pack(cmds: Recording, effects: Sequence[Effect]) -> np.ndarray:
+    return pack_inputs(
+        cmds.t,
+        cmds["SpoolCmd"],
+        cmds["PumpDispCmd"],
+        cmds["EngineSpeed"],
+        cmds["OilTemp"],
+        effects=tuple(effects),
     )
 
 
@@ -67,15 +147,7 @@ def plant_traces(
     prep: Prepared, segments: Sequence[Segment], machine: MachineParams, effects: Sequence[Effect]
 ) -> list[PlantTrace]:
     """One plant run per segment (1 kHz record) with the plant effects of ``effects``."""
-    fx = plant_effects(effects)
-    prm = pack_params(machine, fx)
-    out = []
-    for seg in segments:
-        rows = slice(seg.start, seg.stop + 1)
-        cmds = Recording(prep.t[rows], {n: v[rows] for n, v in prep.cmd.items()})
-        y0 = _start_state(prep, seg, machine, prm)
-        out.append(run_plant(cmds, machine, effects=fx, state0=y0))
-    return out
+    return SegmentPlant(prep, segments).traces(machine, effects)
 
 
 def sense(

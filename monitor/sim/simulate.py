@@ -36,7 +36,8 @@ class PlantTrace:
     spool: np.ndarray  # effective spool position, fraction of full stroke
 
 
-def _check_commands(commands: Recording) -> None:
+def check_commands(commands: Recording) -> None:
+    """Raise ConfigError unless the commands are all there, finite and on a uniform axis."""
     commands.require(COMMAND_NAMES)
     if len(commands) < 2:
         raise ConfigError(f"{commands.source}: need at least two command samples")
@@ -65,11 +66,8 @@ def run_plant(
     e.g. ``pack.measured_state``) to simulate a segment of a recording from its measured
     state.
     """
-    _check_commands(commands)
+    check_commands(commands)
     input_dt = float(commands.t[1] - commands.t[0])
-    n_sub = max(1, int(round(input_dt / machine.step_s)))
-    h = input_dt / n_sub
-    every = 1 if record_period_s is None else max(1, int(round(record_period_s / h)))
     prm = pack_params(machine, effects)
     u = pack_inputs(
         commands.t,
@@ -86,8 +84,26 @@ def run_plant(
         y0 = np.asarray(state0, dtype=np.float64)
         if y0.shape != (K.N_STATES,):
             raise ConfigError(f"state0 must have {K.N_STATES} values, got {y0.shape}")
-    rec = K.integrate(y0, u, n_sub, input_dt, prm, every)
-    t = commands.t[0] + np.arange(rec.shape[0]) * (h * every)
+    return run_packed(float(commands.t[0]), input_dt, u, prm, y0, machine.step_s, record_period_s)
+
+
+def run_packed(
+    t0_s: float,
+    input_dt: float,
+    inputs: np.ndarray,
+    prm: np.ndarray,
+    y0: np.ndarray,
+    step_s: float,
+    record_period_s: float | None = RECORD_PERIOD_S,
+) -> PlantTrace:
+    """``run_plant`` on inputs already packed (``pack_inputs``, a uniform axis from ``t0_s``
+    every ``input_dt``) and a parameter vector (``pack_params``): for callers that run the
+    same commands many times (the sim-to-real fits), with no checks repeated."""
+    n_sub = max(1, int(round(input_dt / step_s)))
+    h = input_dt / n_sub
+    every = 1 if record_period_s is None else max(1, int(round(record_period_s / h)))
+    rec = K.integrate(y0, inputs, n_sub, input_dt, prm, every)
+    t = t0_s + np.arange(rec.shape[0]) * (h * every)
     return PlantTrace(
         t,
         rec[:, K.R_PP],
