@@ -30,6 +30,34 @@ def test_a_straight_rise_crosses_where_the_line_does():
     assert lo == pytest.approx(3.0) and hi == pytest.approx(3.0)  # exact line: no spread
 
 
+def test_a_rise_that_scatter_explains_is_no_trend_and_four_straight_rises_are():
+    # Kendall's tau, one-sided, by hand: n logs all rising happen by chance 1 in n! times
+    # (3 logs: 1/6 = 0.17, above 0.10: no trend; 4 logs: 1/24 = 0.042: a trend).
+    three = prognosis("A", [_row("A", i, 0.4 + 0.1 * i) for i in range(3)])
+    assert three.logs_to_alarm is None and three.p_value == pytest.approx(1 / 6)
+    assert three.text == "no clear upward trend (p 0.17)"
+    four = prognosis("A", [_row("A", i, 0.4 + 0.1 * i) for i in range(4)])
+    assert four.p_value == pytest.approx(1 / 24) and four.logs_to_alarm == pytest.approx(3.0)
+    # Rising but with one log out of order (5 of 6 pairs concordant): p = 4/24 = 0.17.
+    noisy = prognosis("A", [_row("A", i, r) for i, r in enumerate([0.4, 0.6, 0.5, 0.7])])
+    assert noisy.logs_to_alarm is None and noisy.p_value == pytest.approx(4 / 24)
+
+
+def test_a_trend_already_at_one_below_the_alarm_is_due_now():
+    # 0.2, 0.5, 0.8, 0.98: pairwise slopes 0.3, 0.3, 0.26, 0.3, 0.24, 0.18, median 0.28;
+    # scipy's intercept median(y) - slope * median(x) = 0.65 - 0.42 = 0.23, so the line is at
+    # 0.23 + 3 * 0.28 = 1.07 at the last log, whose own level (0.98) has not alarmed.
+    p = prognosis("A", [_row("A", i, r) for i, r in enumerate([0.2, 0.5, 0.8, 0.98])])
+    assert p.slope_per_log == pytest.approx(0.28)
+    assert p.logs_to_alarm == pytest.approx((1.0 - 1.07) / 0.28)
+    assert p.text == "due now (the trend line is at or above 1.0)"
+
+
+def test_a_machine_whose_last_log_alarmed_is_at_or_above_one_whatever_the_trend():
+    p = prognosis("A", [_row("A", i, r) for i, r in enumerate([0.3, 4.6, 2.0])])
+    assert p.text == "at or above 1.0"
+
+
 def test_flat_or_falling_is_no_upward_trend_and_unjudged_logs_are_left_out():
     rows = [_row("B", i, r) for i, r in enumerate([0.5, 0.5, None, 0.4, 0.45, 0.3])]
     p = prognosis("B", rows)

@@ -14,7 +14,7 @@ from typing import Any
 import pyarrow.parquet as pq
 
 from monitor.errors import InputFileError
-from monitor.fleet.health import Prognosis, health_index, prognosis
+from monitor.fleet.health import TREND_P, Prognosis, health_index, prognosis
 
 _COLOURS = {"fault": "tab:red", "sensor_fault": "tab:orange", "healthy": "tab:green",
             "not_judged": "0.6"}  # fmt: skip
@@ -125,8 +125,9 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     lines = ["# Fleet report", "",
              f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
              f"the largest alarm level of a log, max(J / eps0, B / b0) (1.0 raises the alarm); "
-             f"trend: Theil-Sen over the last {k} "
-             "judged logs; crossing: logs until the trend reaches 1.0 (90 % interval).", "",
+             f"trend: Theil-Sen over the last {k} judged logs, counted when Kendall's tau "
+             f"makes a rise unlikely to be scatter (one-sided p < {TREND_P:g}, so at least 4 "
+             "logs); crossing: logs until the trend reaches 1.0 (90 % interval).", "",
              *_table(per, progs), "", "![health index](health.png)", "",
              "![verdict timeline](timeline.png)", ""]  # fmt: skip
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
