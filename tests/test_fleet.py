@@ -94,9 +94,30 @@ def test_rerun_is_incremental(run1, tmp_path):
     (f / "M01" / "logs" / "day04.log").unlink()
     assert proc.returncode == 0, proc.stderr
     assert "1 logs judged" in proc.stderr
+    # Only M01 has a new log, and its commissioning is unchanged: its model is reused.
+    assert "fleet: 1 machine model(s) reused (commissioning unchanged)" in proc.stderr
     after = rows(res)
     assert len(after) == len(before) + 1
     assert len({r["log"] for r in after}) == len(after)
+
+
+def test_new_commissioning_data_trains_the_machine_again(run1, tmp_path):
+    f, out, _err = run1
+    g, res = copy_fleet(f, tmp_path / "fleet"), tmp_path / "r"
+    shutil.copytree(out, res)
+    old_model = (res / "models" / "M02.model.npz").read_bytes()
+    # M02 is commissioned again (another recording) and sends a new log.
+    shutil.copy(g / "M01" / "commissioning" / "normal.log", g / "M02" / "commissioning" /
+                "again.log")  # fmt: skip
+    shutil.copy(g / "M02" / "logs" / "day02.log", g / "M02" / "logs" / "day04.log")
+    proc = subprocess.run(fleet_cmd(str(g), "--out", str(res), "--workers", "1"),
+                          capture_output=True, text=True, env=env())  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "reused" not in proc.stderr
+    assert (res / "models" / "M02.model.npz").read_bytes() != old_model
+    meta = json.loads((res / "models" / "M02.trained-from.json").read_text())
+    assert sorted(meta["commissioning"]) == ["M02/commissioning/again.log",
+                                             "M02/commissioning/normal.log"]  # fmt: skip
 
 
 def test_a_killed_client_loses_nothing_finished_and_writes_no_row_twice(fleet, tmp_path):

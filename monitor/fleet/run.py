@@ -9,6 +9,7 @@ it.  Results come back to the client, which writes each one durably as it arrive
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -97,15 +98,35 @@ def _client(opts: RunOptions, say: Say) -> Iterator[Any]:
             cluster.close()
 
 
-def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, say: Say) -> dict:
-    """machine id -> (future or bytes of its model, model label)."""
+def _manifest(m: Machine, fleet: Fleet, default: bytes, opts: RunOptions) -> dict[str, Any]:
+    """What a machine's model is trained from: a stored model trained from the same is
+    reused, so a daily rerun commissions only new or changed machines."""
+    config = None if opts.config is None else sha256_file(Path(opts.config))
+    return {"commissioning": {fleet.relative(p): sha256_file(p) for p in m.commissioning},
+            "reference_sha256": hashlib.sha256(default).hexdigest(),
+            "isolation": opts.isolation, "config_sha256": config}  # fmt: skip
+
+
+def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, needed: set[str],
+            say: Say) -> dict:  # fmt: skip
+    """machine id -> (future or bytes of its model, model label), for the ``needed`` ones."""
+    from distributed import wait
+
     default = pipeline.default_model_bytes(opts.default_model, opts.config)
     out: dict[str, tuple[Any, str]] = {}
+    manifests: dict[str, dict[str, Any]] = {}
     first = True
     for m in fleet.machines:
+        if m.machine_id not in needed:
+            continue
         if not m.commissioning:
             say(f"fleet: {m.machine_id}: no commissioning data, judged with the default model")
             out[m.machine_id] = (default, "default")
+            continue
+        manifests[m.machine_id] = manifest = _manifest(m, fleet, default, opts)
+        cached = store.cached_model(m.machine_id, manifest)
+        if cached is not None:
+            out[m.machine_id] = (cached, "commissioned")
             continue
         # The default model floors the commissioned thresholds (minutes cannot show the
         # tail of hours: monitor.training.train.floor_thresholds).
@@ -113,11 +134,14 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, say
                             opts.isolation, default, key=f"train-{m.machine_id}",
                             pure=False)  # fmt: skip
         if first:  # alone: it fills numba's cache for the training kernels
-            fut.result()
+            wait([fut])  # a failure is reported below, with the others'
             first = False
-        out[m.machine_id] = (fut, "commissioned")
+        out[m.machine_id] = (fut, "training")
+    reused = [mid for mid, (_, label) in out.items() if label == "commissioned"]
+    if reused:
+        say(f"fleet: {len(reused)} machine model(s) reused (commissioning unchanged)")
     for mid, (fut, label) in list(out.items()):
-        if label == "default":
+        if label != "training":
             continue
         try:
             data = fut.result()
@@ -125,11 +149,11 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, say
             say(f"fleet: {mid}: commissioning failed ({exc}); judged with the default model")
             out[mid] = (default, f"default (commissioning failed: {exc})")
             continue
-        (store.models / f"{mid}.model.npz").write_bytes(data)
+        store.save_model(mid, data, manifests[mid])
         out[mid] = (fut, "commissioned")
     for mid, (data, label) in out.items():
         if label.startswith("default"):
-            (store.models / f"{mid}.model.npz").write_bytes(data)
+            store.save_model(mid, data, None)
     return out
 
 
@@ -176,7 +200,8 @@ def run_fleet(root: Path, out: Path, opts: RunOptions, say: Say) -> dict[str, in
     say(f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new")
     if todo:
         with _client(opts, say) as client:
-            models = _models(client, fleet, store, opts, say)
+            needed = {m.machine_id for m, _p, _sha in todo}
+            models = _models(client, fleet, store, opts, needed, say)
             futures: dict[Any, tuple[Machine, Path, str]] = {}
             for i, (m, p, sha) in enumerate(todo):
                 fut = client.submit(judge_task, models[m.machine_id][0], str(p), opts.config,

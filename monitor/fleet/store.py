@@ -59,6 +59,28 @@ class ResultStore:
         self.parts.mkdir(parents=True, exist_ok=True)
         self.models.mkdir(parents=True, exist_ok=True)
 
+    def cached_model(self, machine: str, manifest: dict[str, Any]) -> bytes | None:
+        """The model stored for ``machine`` if it was trained from exactly ``manifest``
+        (its commissioning files' hashes, reference model and settings), else None."""
+        npz, meta = self._model_paths(machine)
+        try:
+            same = json.loads(meta.read_text(encoding="utf-8")) == manifest
+            return npz.read_bytes() if same else None
+        except (OSError, ValueError):
+            return None
+
+    def save_model(self, machine: str, data: bytes, manifest: dict[str, Any] | None) -> None:
+        """The model file, then (last, so a killed run never vouches for a model it did not
+        finish) what it was trained from; None: not a commissioned model, nothing to reuse."""
+        npz, meta = self._model_paths(machine)
+        meta.unlink(missing_ok=True)
+        _write_atomic(npz, data)
+        if manifest is not None:
+            _write_atomic(meta, json.dumps(manifest, sort_keys=True).encode())
+
+    def _model_paths(self, machine: str) -> tuple[Path, Path]:
+        return self.models / f"{machine}.model.npz", self.models / f"{machine}.trained-from.json"
+
     def done(self) -> set[tuple[str, str]]:
         """(log, sha256) of every log with a row, in logs.parquet or a part."""
         keys = {_key(r["log"], r["sha256"]) for r in self._rows_parquet()}
