@@ -8,8 +8,10 @@ out (docs/benchmarks.md).  Cross-fitting uses all of it instead: the data is cut
 of ``block_n`` samples dealt round-robin to ``folds`` folds (so every fold spans the whole
 run and its temperatures); for each fold a DGRNN with the full model's bandwidth is fitted
 on the other folds' blocks and predicts the fold's own.  The thresholds then rest on out-of-
-sample residuals over the whole run, and, since each fold model saw less data than the
-final one, they err on the safe side.
+sample residuals over the whole run, and each fold model saw less data than the final one.
+It is an option (``monitor train --folds K``), not the default: on simulated 20-minute
+commissioning runs the bias statistic it enables raised false alarms, and J alone was no
+better than with the last quarter held out (docs/benchmarks.md, 2026-11-25).
 """
 
 from __future__ import annotations
