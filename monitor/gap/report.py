@@ -49,9 +49,8 @@ def effect_params(effect: Effect) -> dict[str, dict]:
     the contract's names), with the same plain values under ``sensor_calibration``."""
     if effect.name == sensorcal.NAME:
         keys = sensorcal.report_keys(effect)
-        rod = effect.labels["signal"] == "RodPos"  # its offset is not fitted (see sensorcal)
         out: dict[str, dict] = {
-            k: {"value": round(float(v), 6), "unit": unit, "fitted": not (rod and unit == "mm")}
+            k: {"value": round(float(v), 6), "unit": unit, "fitted": True}
             for k, (v, unit) in keys.items()
         }
         out[effect.name] = {k: round(float(v), 6) for k, (v, _) in keys.items()}

@@ -10,7 +10,8 @@ explain a gap that a physical effect spreads over several signals consistently: 
 physical effect removes more, and wins the ranking.
 
 RodPos is compared through the rod velocity, which an offset does not change: its gain is
-fitted, its offset is left at 0 (not observable from the velocity).
+fitted in closed form, its offset by a search over plant runs (it shows only through the
+start states: where a rod rests on an end stop, how full the chambers are).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from monitor.gap import score as S
 from monitor.gap.candidates import Candidate
@@ -112,7 +114,10 @@ def fit_signal(
     if ok.sum() < 10:
         return None
     x, y = x[ok], y[ok]
-    gain, offset = _linear(x, y, with_offset=signal != "RodPos")
+    if signal == "RodPos":  # the velocity has no offset: keep the one the plant ran with
+        gain, offset = _linear(x, y, with_offset=False)[0], _offset(applied)
+    else:
+        gain, offset = _linear(x, y, with_offset=True)
     g_spec, o_spec = CATALOGUE[NAME].param("gain"), SENSOR_CAL_SIGNALS[signal]
     gain = min(max(gain, g_spec.low), g_spec.high)
     offset = min(max(offset, -o_spec.max_offset), o_spec.max_offset)
@@ -120,11 +125,121 @@ def fit_signal(
     return Effect.make(NAME, signal=signal, gain=gain, offset=offset), drop
 
 
-def best_signal(prep: Prepared, segments: Sequence[Segment], pred: dict[str, np.ndarray]) -> Effect:
-    """The signal whose gain and offset remove the most of the calibration residual."""
-    fits = [fit_signal(prep, segments, pred, s) for s in SENSOR_CAL_SIGNALS]
-    fitted = [f for f in fits if f is not None]
-    return max(fitted, key=lambda f: f[1])[0]
+def _offset(effect: Effect | None) -> float:
+    return 0.0 if effect is None else effect.params["offset"]
+
+
+#: RodPos offsets tried first (mm): the objective is rough (a rod started a few mm off an
+#: end stop it rests on, or snapped onto it), so a grid comes before the local search.
+ROD_OFFSET_GRID_MM = (-40.0, -20.0, -10.0, -5.0, -2.0, 0.0, 2.0, 5.0, 10.0, 20.0, 40.0)
+
+
+def _rod_offset(
+    prep: Prepared,
+    segments: Sequence[Segment],
+    predict: Predict,
+    factors: dict[str, float],
+    gain: float,
+) -> Effect:
+    """The RodPos offset, seen only through the start states (which rod starts rest on an
+    end stop, how far the chambers are filled): one plant run per offset tried, the gain
+    refitted in closed form on each."""
+
+    def cost(offset: float) -> tuple[float, Effect]:
+        effect = Effect.make(NAME, signal="RodPos", gain=gain, offset=offset)
+        pred = predict(factors, (effect,))
+        found = fit_signal(prep, segments, pred, "RodPos", applied=effect)
+        if found is not None:
+            pred = _recalibrated(prep, segments, pred, effect, found[0])
+            effect = found[0]
+        return float(np.mean(S.stacked(prep, segments, pred) ** 2)), effect
+
+    tried = {o: cost(o) for o in ROD_OFFSET_GRID_MM}
+    grid = sorted(tried)
+    i = min(range(len(grid)), key=lambda k: tried[grid[k]][0])
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    res = minimize_scalar(lambda o: cost(o)[0], bounds=(lo, hi), method="bounded",
+                          options={"xatol": 0.5, "maxiter": 12})  # fmt: skip
+    best = cost(float(res.x))
+    return min(best, tried[grid[i]], key=lambda c: c[0])[1]
+
+
+#: Kinematics a flow or rod-position error must leave consistent (relative): read through
+#: the hypothesis, measured rod speed per measured pump flow must match the simulator's
+#: within this, or at least not be further off than without the hypothesis.
+KINEMATIC_TOLERANCE = 0.03
+#: Rows for the kinematic check: flow and rod speed well above their noise, spool open.
+_MIN_FLOW_LPM, _MIN_SPEED_MM_S, _MIN_SPOOL_PCT = 5.0, 10.0, 10.0
+
+
+def kinematic_mismatch(
+    prep: Prepared, segments: Sequence[Segment], base: dict[str, np.ndarray], effect: Effect | None
+) -> float | None:
+    """|log| of (measured rod speed / pump flow) over the simulator's, with the measured QP
+    or RodPos read through ``effect``'s inverse; None without RodPos or enough motion.
+
+    A physical effect changes the flow and the rod alike (pump leakage slows the rod by as
+    much as it cuts QP); a flow meter or stroke sensor error changes one of the two.  This is
+    what tells a QP or RodPos gain from leakage or friction, which can mimic it in the
+    residual of the signal alone (and, for RodPos, through the start states)."""
+    if ROD_VEL not in base:
+        return None
+    rows = _rows(segments)
+    q_meas, v_meas = prep.meas["QP"][rows], prep.meas[ROD_VEL][rows]
+    q_sim, v_sim = base["QP"][rows], base[ROD_VEL][rows] - _base(prep, segments, ROD_VEL)[rows]
+    if effect is not None and effect.labels["signal"] == "QP":
+        q_meas = (q_meas - effect.params["offset"]) / effect.params["gain"]
+    elif effect is not None and effect.labels["signal"] == "RodPos":
+        v_meas = v_meas / effect.params["gain"]
+    ok = (
+        (prep.cmd["SpoolCmd"][rows] > _MIN_SPOOL_PCT)  # extension: QP all goes to the cap side
+        & (q_meas > _MIN_FLOW_LPM)
+        & (q_sim > _MIN_FLOW_LPM)
+        & (v_meas > _MIN_SPEED_MM_S)
+        & (v_sim > _MIN_SPEED_MM_S)
+    )
+    if ok.sum() < 50:
+        return None
+    ratio = np.median(v_meas[ok] / q_meas[ok]) / np.median(v_sim[ok] / q_sim[ok])
+    return abs(float(np.log(ratio)))
+
+
+def kinematically_consistent(
+    prep: Prepared, segments: Sequence[Segment], base: dict[str, np.ndarray], effect: Effect
+) -> bool:
+    """Whether a QP or RodPos hypothesis keeps rod speed and pump flow consistent (other
+    signals: always)."""
+    if effect.labels["signal"] not in ("QP", "RodPos"):
+        return True
+    after = kinematic_mismatch(prep, segments, base, effect)
+    before = kinematic_mismatch(prep, segments, base, None)
+    if after is None or before is None:
+        return True
+    return after <= KINEMATIC_TOLERANCE or after <= before
+
+
+def _hypotheses(
+    prep: Prepared,
+    segments: Sequence[Segment],
+    predict: Predict,
+    factors: dict[str, float],
+) -> list[tuple[float, Effect]]:
+    """(calibration cost, effect) per signal: gain and offset in closed form on the
+    calibrated nominal's plant runs, refitted from corrected start states where the
+    signal sets them (a RodPos offset is searched: the velocity does not show it)."""
+    base = predict(factors, ())
+    out = []
+    for signal in SENSOR_CAL_SIGNALS:
+        found = fit_signal(prep, segments, base, signal)
+        if found is None:
+            continue
+        effect = found[0]
+        if signal == "RodPos":
+            effect = _rod_offset(prep, segments, predict, factors, effect.params["gain"])
+        effect, pred = _refined(prep, segments, predict, factors, effect)
+        if kinematically_consistent(prep, segments, base, effect):
+            out.append((float(np.mean(S.stacked(prep, segments, pred) ** 2)), effect))
+    return out
 
 
 #: Refits of gain and offset from plant runs started from the corrected state (a pressure
@@ -160,13 +275,11 @@ def fit_candidate(
     predict: Predict,
     factors: dict[str, float],
 ) -> Candidate:
-    """The candidate on the calibrated machine (``factors``): the signal is chosen on the
-    plant runs of the calibrated nominal simulator (a few linear fits); a signal that sets
-    the start states gets START_REFITS plant runs more."""
-    effect = best_signal(prep, segments, predict(factors, ()))
-    effect, pred = _refined(prep, segments, predict, factors, effect)
-    resid = S.stacked(prep, segments, pred)
-    return Candidate((effect,), dict(factors), float(np.mean(resid**2)))
+    """The candidate on the calibrated machine (``factors``): the signal whose hypothesis
+    fits the calibration part best (a few linear fits and a few dozen plant runs of the
+    fit segments, for the signals that set the start states)."""
+    cost, effect = min(_hypotheses(prep, segments, predict, factors), key=lambda h: h[0])
+    return Candidate((effect,), dict(factors), cost)
 
 
 def refit_with_tolerances(
