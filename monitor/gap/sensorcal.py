@@ -1,17 +1,19 @@
 """The ``sensor_calibration`` candidate: gain and offset of one measured signal.
 
-A sensor error changes what one transducer reads, not the physics: the plant the
-calibrated simulator already ran is the same, so the candidate needs no new plant run.  For
-each measured signal in turn, the reading ``gain x simulated + offset`` is fitted to the
-recording by linear least squares on the calibration part; the signal whose fit removes the
-most of the (normalised) calibration residual is the candidate.  It is then scored on the
-held-out part like every other candidate.  Because it can only move one signal, it cannot
-explain a gap that a physical effect spreads over several signals consistently: there a
-physical effect removes more, and wins the ranking.
+A sensor error changes what one transducer reads, not the physics, so the plant the
+calibrated simulator already ran serves: for each measured signal in turn the reading
+``gain x simulated + offset`` is fitted to the recording by linear least squares on the
+calibration part.  Two things a reading error does reach beyond its own signal are
+followed with a few plant runs more: a pressure or RodPos reading also sets the segments'
+start states (they are re-run from the start read through the inverse calibration), and a
+RodPos offset shows only there (the compared rod velocity has no offset), so it is searched.
+The signal whose hypothesis fits the calibration part best is the candidate, scored on the
+held-out part like every other.
 
-RodPos is compared through the rod velocity, which an offset does not change: its gain is
-fitted in closed form, its offset by a search over plant runs (it shows only through the
-start states: where a rod rests on an end stop, how full the chambers are).
+What a sensor error cannot do tells it from physics: it changes one signal, so it cannot
+explain a gap that a physical effect spreads consistently over several (there the physical
+effect wins the ranking); and a flow meter or stroke sensor error breaks the kinematics
+between pump flow and rod speed, which leakage or friction keep (``kinematic_mismatch``).
 """
 
 from __future__ import annotations
@@ -76,8 +78,9 @@ def _recalibrated(
     the sensor model only, the plant runs (started through ``old``) kept."""
     col = compared_column(old.labels["signal"])
     base = _base(prep, segments, col)
-    raw = (pred[col] - base - old.params["offset"]) / old.params["gain"]
-    return {**pred, col: base + new.params["gain"] * raw + new.params["offset"]}
+    raw = (pred[col] - base - _shown_offset(old)) / old.params["gain"]
+    out = base + new.params["gain"] * raw + _shown_offset(new)
+    return {**pred, col: out if col == ROD_VEL else np.maximum(out, 0.0)}  # as predict.sense
 
 
 def _linear(x: np.ndarray, y: np.ndarray, with_offset: bool) -> tuple[float, float]:
@@ -96,11 +99,16 @@ def fit_signal(
     pred: dict[str, np.ndarray],
     signal: str,
     applied: Effect | None = None,
-) -> tuple[Effect, float] | None:
+) -> Effect | None:
     """The best gain and offset of ``signal`` (within the catalogue's ranges) for a
     prediction ``pred`` made with ``applied`` (a sensor calibration of the same signal, or
-    None), and the drop of the summed squared normalised residual against no calibration
-    error; None if the signal is not compared."""
+    None); None if the signal is not compared.
+
+    Rows where the measured signal sits at the sensor's zero are left out: a negative
+    offset reads 0 there (the sensor clips), not the offset.  A RodPos gain is the ratio of
+    measured to simulated rod speed per pump flow where that is known (extension, clear of
+    the stops): fitted to the rod velocity's residual, it came out low when the reading
+    clips at the top of its range, and it would soak up physics through the start states."""
     col = compared_column(signal)
     if col not in pred:
         return None
@@ -108,25 +116,36 @@ def fit_signal(
     base = _base(prep, segments, col)[rows]
     x = pred[col][rows] - base
     if applied is not None:
-        x = (x - applied.params["offset"]) / applied.params["gain"]
+        x = (x - _shown_offset(applied)) / applied.params["gain"]
     y = prep.meas[col][rows] - base
     ok = np.isfinite(x) & np.isfinite(y)
+    if signal != "RodPos":
+        ok &= y > _ZERO_MARGIN
     if ok.sum() < 10:
         return None
-    x, y = x[ok], y[ok]
     if signal == "RodPos":  # the velocity has no offset: keep the one the plant ran with
-        gain, offset = _linear(x, y, with_offset=False)[0], _offset(applied)
+        ratio = _kinematic_ratio(prep, rows, pred["QP"][rows], x, prep.meas["QP"][rows], y)
+        gain = ratio if ratio is not None else _linear(x[ok], y[ok], with_offset=False)[0]
+        offset = _offset(applied)
     else:
-        gain, offset = _linear(x, y, with_offset=True)
+        gain, offset = _linear(x[ok], y[ok], with_offset=True)
     g_spec, o_spec = CATALOGUE[NAME].param("gain"), SENSOR_CAL_SIGNALS[signal]
     gain = min(max(gain, g_spec.low), g_spec.high)
     offset = min(max(offset, -o_spec.max_offset), o_spec.max_offset)
-    drop = float(np.sum((x - y) ** 2) - np.sum((gain * x + offset - y) ** 2)) / prep.scale[col] ** 2
-    return Effect.make(NAME, signal=signal, gain=gain, offset=offset), drop
+    return Effect.make(NAME, signal=signal, gain=gain, offset=offset)
+
+
+#: Measured values at or below this (bar, L/min) may be the sensor clipping at zero.
+_ZERO_MARGIN = 1.0
 
 
 def _offset(effect: Effect | None) -> float:
     return 0.0 if effect is None else effect.params["offset"]
+
+
+def _shown_offset(effect: Effect) -> float:
+    """The offset in the compared column: none for RodPos (compared as a velocity)."""
+    return 0.0 if effect.labels["signal"] == "RodPos" else effect.params["offset"]
 
 
 #: RodPos offsets tried first (mm): the objective is rough (a rod started a few mm off an
@@ -150,8 +169,8 @@ def _rod_offset(
         pred = predict(factors, (effect,))
         found = fit_signal(prep, segments, pred, "RodPos", applied=effect)
         if found is not None:
-            pred = _recalibrated(prep, segments, pred, effect, found[0])
-            effect = found[0]
+            pred = _recalibrated(prep, segments, pred, effect, found)
+            effect = found
         return float(np.mean(S.stacked(prep, segments, pred) ** 2)), effect
 
     tried = {o: cost(o) for o in ROD_OFFSET_GRID_MM}
@@ -170,6 +189,28 @@ def _rod_offset(
 KINEMATIC_TOLERANCE = 0.03
 #: Rows for the kinematic check: flow and rod speed well above their noise, spool open.
 _MIN_FLOW_LPM, _MIN_SPEED_MM_S, _MIN_SPOOL_PCT = 5.0, 10.0, 10.0
+
+
+def _kinematic_ratio(
+    prep: Prepared,
+    rows: np.ndarray,
+    q_sim: np.ndarray,
+    v_sim: np.ndarray,
+    q_meas: np.ndarray,
+    v_meas: np.ndarray,
+) -> float | None:
+    """Measured rod speed per pump flow over the simulator's (medians on extension rows
+    with flow and speed well above noise); None with too few such rows."""
+    ok = (
+        (prep.cmd["SpoolCmd"][rows] > _MIN_SPOOL_PCT)  # extension: QP all goes to the cap side
+        & (q_meas > _MIN_FLOW_LPM)
+        & (q_sim > _MIN_FLOW_LPM)
+        & (v_meas > _MIN_SPEED_MM_S)
+        & (v_sim > _MIN_SPEED_MM_S)
+    )
+    if ok.sum() < 50:
+        return None
+    return float(np.median(v_meas[ok] / q_meas[ok]) / np.median(v_sim[ok] / q_sim[ok]))
 
 
 def kinematic_mismatch(
@@ -191,17 +232,8 @@ def kinematic_mismatch(
         q_meas = (q_meas - effect.params["offset"]) / effect.params["gain"]
     elif effect is not None and effect.labels["signal"] == "RodPos":
         v_meas = v_meas / effect.params["gain"]
-    ok = (
-        (prep.cmd["SpoolCmd"][rows] > _MIN_SPOOL_PCT)  # extension: QP all goes to the cap side
-        & (q_meas > _MIN_FLOW_LPM)
-        & (q_sim > _MIN_FLOW_LPM)
-        & (v_meas > _MIN_SPEED_MM_S)
-        & (v_sim > _MIN_SPEED_MM_S)
-    )
-    if ok.sum() < 50:
-        return None
-    ratio = np.median(v_meas[ok] / q_meas[ok]) / np.median(v_sim[ok] / q_sim[ok])
-    return abs(float(np.log(ratio)))
+    ratio = _kinematic_ratio(prep, rows, q_sim, v_sim, q_meas, v_meas)
+    return None if ratio is None else abs(float(np.log(ratio)))
 
 
 def kinematically_consistent(
@@ -230,10 +262,9 @@ def _hypotheses(
     base = predict(factors, ())
     out = []
     for signal in SENSOR_CAL_SIGNALS:
-        found = fit_signal(prep, segments, base, signal)
-        if found is None:
+        effect = fit_signal(prep, segments, base, signal)
+        if effect is None:
             continue
-        effect = found[0]
         if signal == "RodPos":
             effect = _rod_offset(prep, segments, predict, factors, effect.params["gain"])
         effect, pred = _refined(prep, segments, predict, factors, effect)
@@ -264,7 +295,7 @@ def _refined(
         found = fit_signal(prep, segments, pred, effect.labels["signal"], applied=effect)
         if found is None:
             break
-        effect = found[0]
+        effect = found
         pred = predict(factors, (effect,))
     return effect, pred
 
@@ -301,8 +332,8 @@ def refit_with_tolerances(
         pred = predict({**first.factors, **values}, (current,))
         found = fit_signal(prep, segments, pred, current.labels["signal"], applied=current)
         if found is not None:
-            pred = _recalibrated(prep, segments, pred, current, found[0])
-            current = found[0]
+            pred = _recalibrated(prep, segments, pred, current, found)
+            current = found
         return S.stacked(prep, segments, pred)
 
     starts = [{k.name: first.factors.get(k.name, 1.0) for k in tolerances}]
