@@ -48,4 +48,5 @@ EFFECT_NAMES: tuple[str, ...] = (
     "hose_compliance",
     "sensor_lag",
     "load_variation",
+    "sensor_calibration",
 )

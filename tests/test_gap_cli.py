@@ -69,7 +69,7 @@ def test_report_keeps_the_contract_keys(deadband_run):
     assert {s["name"] for s in rep["where"]["signals"]} == set(SIGNALS)
     nrmse = [s["nrmse"] for s in rep["where"]["signals"]]
     assert nrmse == sorted(nrmse, reverse=True)
-    assert len(rep["ranking"]) == 9
+    assert len(rep["ranking"]) == 10  # the catalogue, sensor_calibration included
     red = [r["heldout_reduction"] for r in rep["ranking"]]
     assert rep["ranking"][0]["effect"] == "valve_deadband" and red[0] == max(red)
     # The rod velocity is compared as well (the recording has RodPos).

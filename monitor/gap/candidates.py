@@ -40,6 +40,8 @@ KNOBS: dict[str, tuple[Knob, ...]] = {
     "hose_compliance": (Knob("wall_modulus_gpa", 0.1, 3.0, log=True),),
     "sensor_lag": (Knob("delay_ms", 0.0, 100.0), Knob("time_constant_ms", 0.0, 200.0)),
     "load_variation": (Knob("slope_n_per_mm", -20.0, 20.0),),
+    # Fitted in closed form, one signal at a time (sensorcal.py); listed for the penalty.
+    "sensor_calibration": (Knob("gain", 0.5, 1.5), Knob("offset", -50.0, 50.0)),
 }
 assert set(KNOBS) == set(CATALOGUE)
 

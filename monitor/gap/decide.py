@@ -39,6 +39,8 @@ PAIR_GAIN = 0.3
 PAIR_MATERIAL = 0.05
 #: Runners-up (by rank) each tried as the best single effect's partner.
 PAIR_POOL = 3
+#: Not paired: fitted in closed form alone (``sensorcal.py``).
+SENSOR_ONLY = "sensor_calibration"
 
 
 @dataclass
@@ -68,7 +70,11 @@ def pair_plan(singles: list[Candidate], best_sums: SegmentSums, floor: np.ndarra
     if within_noise(best_sums, floor) or not singles:
         return []
     best = singles[0].effects[0].name
-    return [(best, c.effects[0].name) for c in singles[1 : 1 + PAIR_POOL]]
+    if best == SENSOR_ONLY:
+        return []
+    # A sensor calibration is fitted in closed form on its own, never inside a pair.
+    others = [c for c in singles[1:] if c.effects[0].name != SENSOR_ONLY]
+    return [(best, c.effects[0].name) for c in others[:PAIR_POOL]]
 
 
 def decide(

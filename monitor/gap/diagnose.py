@@ -18,6 +18,7 @@ from threadpoolctl import threadpool_limits
 from monitor.errors import NoHydraulicDataError
 from monitor.gap import calibrate as cal_mod
 from monitor.gap import score as S
+from monitor.gap import sensorcal
 from monitor.gap.candidates import (
     CONFOUNDED,
     KNOBS,
@@ -27,7 +28,7 @@ from monitor.gap.candidates import (
     n_params,
 )
 from monitor.gap.decide import decide, pair_plan, within_noise
-from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, sense
+from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sense
 from monitor.gap.prepare import Prepared, prepare
 from monitor.gap.segments import Segment, make_segments, split, spread
 from monitor.gap.shrink import resamples
@@ -83,7 +84,8 @@ class Diagnosis:
 class _Evaluator:
     """Simulations of a fixed set of segments for (tolerance factors, effects) hypotheses.
 
-    Sensor-only effects reuse the plant runs of the same factors (one cached set).
+    Sensor-only effects reuse the plant runs of the same factors (one cached set), unless a
+    sensor calibration error changes the start states.
     """
 
     def __init__(self, prep: Prepared, segments: Sequence[Segment], machine: MachineParams):
@@ -93,7 +95,7 @@ class _Evaluator:
 
     def predict(self, factors: dict[str, float], effects: Sequence[Effect]) -> dict:
         m = cal_mod.apply(self.machine, factors)
-        if all(e.name in SENSOR_EFFECTS for e in effects):
+        if all(e.name in SENSOR_EFFECTS for e in effects) and not moves_starts(effects):
             key = tuple(sorted(factors.items()))
             if self._base is None or self._base[0] != key:
                 self._base = (key, self.plant.traces(m, ()))
@@ -175,11 +177,14 @@ def _diagnose(
     singles = []
     for i, name in enumerate(effects):
         t0 = time.perf_counter()
-        free = [k for k in tol if k.name in CONFOUNDED.get(name, ())]
-        local = CONFOUNDED_LOCAL_STARTS if free else 1
-        c = scored(
-            fit_candidate([name], fit_ev.residual, base.factors, free, None, local_starts=local)
-        )
+        if name == sensorcal.NAME:
+            c = scored(sensorcal.fit_candidate(prep, fit_segs, fit_ev.predict, base.factors))
+        else:
+            free = [k for k in tol if k.name in CONFOUNDED.get(name, ())]
+            local = CONFOUNDED_LOCAL_STARTS if free else 1
+            c = scored(
+                fit_candidate([name], fit_ev.residual, base.factors, free, None, local_starts=local)
+            )
         singles.append(c)
         say(
             f"[{i + 1}/{len(effects)}] {name}: held-out reduction {c.heldout_reduction:+.2f} "
@@ -191,9 +196,11 @@ def _diagnose(
         for i, c in enumerate(singles[:REFINE_TOP]):
             starts = [(c.factors, c.effects), ({}, c.effects)]
             kept = sums[c.name]
-            r = scored(
-                fit_candidate([c.effects[0].name], fit_ev.residual, base.factors, tol, starts)
-            )
+            if c.name == sensorcal.NAME:
+                r = sensorcal.refit_with_tolerances(prep, fit_segs, fit_ev.predict, c, tol)
+            else:
+                r = fit_candidate([c.effects[0].name], fit_ev.residual, base.factors, tol, starts)
+            r = scored(r)
             say(f"refit {r.name} with tolerances: held-out reduction {r.heldout_reduction:+.2f}")
             if r.criterion < c.criterion:
                 singles[i] = r

@@ -3,14 +3,14 @@
 The output is what the sensors would read without noise, so the residual against the
 recording is the simulator's gap plus sensor noise.  Quantisation and noise are left out
 on purpose: they would make the fits' objective rough.  The plant runs once per set of
-plant parameters; the sensor model (``sensor_lag``) is applied afterwards, so fitting a
-sensor effect reuses the plant traces.
+plant parameters; the sensor model (``sensor_lag``, ``sensor_calibration``) is applied
+afterwards, so fitting a sensor effect reuses the plant traces.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -24,7 +24,7 @@ from monitor.sim.pack import measured_state, pack_inputs, pack_params
 from monitor.sim.sensors import lag
 from monitor.sim.simulate import PlantTrace, check_commands, run_packed
 
-SENSOR_EFFECTS = ("sensor_lag",)
+SENSOR_EFFECTS = ("sensor_lag", "sensor_calibration")
 #: Rows around a start whose median gives the start pressures (noise 0.3 bar rms).
 _START_ROWS = 2
 #: A rod measured this close to an end stop rests on it (m).  A rod started a fraction of a
@@ -35,6 +35,22 @@ END_STOP_SNAP_M = 3e-3
 
 def plant_effects(effects: Sequence[Effect]) -> tuple[Effect, ...]:
     return tuple(e for e in effects if e.name not in SENSOR_EFFECTS)
+
+
+#: Signals whose reading sets a segment's start state: a calibration error of one of them
+#: starts the plant from a wrong state (a PA reading 10 % high holds a load 10 % heavier
+#: than the real one), so its hypothesis needs plant runs from the corrected start.
+START_SIGNALS = ("PP", "PA", "PB", "RodPos")
+
+
+def _calibration(effects: Sequence[Effect]) -> Effect | None:
+    return next((e for e in effects if e.name == "sensor_calibration"), None)
+
+
+def moves_starts(effects: Sequence[Effect]) -> bool:
+    """Whether ``effects`` change the plant's start states (not only the sensor model)."""
+    cal = _calibration(effects)
+    return cal is not None and cal.labels["signal"] in START_SIGNALS
 
 
 @dataclass(frozen=True)
@@ -67,6 +83,21 @@ def _measured_start(prep: Prepared, seg: Segment) -> _Start:
         v_m_s,
         float(np.clip(prep.cmd["SpoolCmd"][i], -100, 100)) / 100.0,
     )
+
+
+def _true_start(start: _Start, cal: Effect | None) -> _Start:
+    """The start the recording shows, read through the inverse of a hypothesised sensor
+    calibration error (``reading = gain x true + offset``)."""
+    if cal is None or cal.labels["signal"] not in START_SIGNALS:
+        return start
+    gain, offset = cal.params["gain"], cal.params["offset"]
+    signal = cal.labels["signal"]
+    if signal == "RodPos":
+        rod_m = (start.rod_m * 1e3 - offset) / gain * 1e-3
+        return replace(start, rod_m=rod_m, vel_m_s=start.vel_m_s / gain)
+    field = {"PP": "pp_pa", "PA": "pa_pa", "PB": "pb_pa"}[signal]
+    true_pa = (getattr(start, field) - offset * BAR) / gain
+    return replace(start, **{field: max(true_pa, 0.0)})
 
 
 def _start_state(start: _Start, machine: MachineParams, prm: np.ndarray) -> np.ndarray:
@@ -124,8 +155,11 @@ class SegmentPlant:
         """One plant run per segment (1 kHz record) with the plant effects of ``effects``."""
         fx = plant_effects(effects)
         prm = pack_params(machine, fx)
+        cal = _calibration(effects)
         return [
-            run_packed(t0, dt, u, prm, _start_state(start, machine, prm), machine.step_s)
+            run_packed(
+                t0, dt, u, prm, _start_state(_true_start(start, cal), machine, prm), machine.step_s
+            )
             for t0, dt, u, start in zip(
                 self._t0, self._dt, self._inputs_for(fx), self._starts, strict=True
             )
@@ -158,10 +192,13 @@ def sense(
 ) -> dict[str, np.ndarray]:
     """Noise-free sensor readings on the recording's grid (NaN outside the segments)."""
     delay_s = tau_s = 0.0
+    gain, offset, cal_signal = 1.0, 0.0, None
     for e in effects:
         if e.name == "sensor_lag":
             delay_s = e.params["delay_ms"] * 1e-3
             tau_s = e.params["time_constant_ms"] * 1e-3
+        elif e.name == "sensor_calibration":
+            gain, offset, cal_signal = e.params["gain"], e.params["offset"], e.labels["signal"]
     out = {n: np.full(len(prep), np.nan) for n in compared(prep)}
     for seg, tr in zip(segments, traces, strict=True):
         rel = tr.t_s - tr.t_s[0]
@@ -177,11 +214,17 @@ def sense(
             ("QP", tr.qp_m3_s, LPM),
         ):
             out[name][rows] = lag(rel, values, delay_s, tau_s)[idx] / unit
+            if name == cal_signal:
+                # The contract's pressure and flow sensors clip at zero (a negative offset
+                # reads 0 at rest, not the offset).
+                out[name][rows] = np.maximum(gain * out[name][rows] + offset, 0.0)
         if ROD_VEL in out:
             # The simulated and the measured rod position filtered alike within the segment
             # (same edges), so the residual is the filtered difference of the two rods.  The
             # rod position sensor is not lagged.
             sim_v = rod_velocity(smooth_rod(tr.rod_pos_m[idx] * 1e3))
+            if cal_signal == "RodPos":
+                sim_v = gain * sim_v  # an offset of RodPos does not change its velocity
             out[ROD_VEL][rows] = prep.meas[ROD_VEL][rows] + sim_v - rod_velocity(prep.rod_mm[rows])
     return out
 

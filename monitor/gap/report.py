@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monitor.gap import calibrate as cal_mod
+from monitor.gap import sensorcal
 from monitor.gap import where as W
 from monitor.gap.candidates import KNOBS, Candidate
 from monitor.gap.diagnose import Diagnosis
@@ -42,7 +43,18 @@ def simulate_all(diag: Diagnosis, machine: MachineParams) -> Traces:
 
 
 def effect_params(effect: Effect) -> dict[str, dict]:
-    """Values keyed by the effect's ``--effect`` parameter names, with units."""
+    """Values keyed by the effect's ``--effect`` parameter names, with units.
+
+    ``sensor_calibration`` is keyed by the signal instead (``PA_gain``, ``PA_offset_bar``:
+    the contract's names), with the same plain values under ``sensor_calibration``."""
+    if effect.name == sensorcal.NAME:
+        keys = sensorcal.report_keys(effect)
+        out: dict[str, dict] = {
+            k: {"value": round(float(v), 6), "unit": unit, "fitted": True}
+            for k, (v, unit) in keys.items()
+        }
+        out[effect.name] = {k: round(float(v), 6) for k, (v, _) in keys.items()}
+        return out
     fitted = {k.name for k in KNOBS[effect.name]}
     if effect.name == "cylinder_friction":
         fitted.add("static_n")
@@ -62,8 +74,14 @@ def _candidate_row(c: Candidate) -> dict:
         "effect": c.name,
         "heldout_reduction": round(float(c.heldout_reduction), 4),
         "criterion": round(float(c.criterion), 2),
-        "params": {e.name: {k: round(v, 6) for k, v in e.params.items()} for e in c.effects},
+        "params": {e.name: _plain_params(e) for e in c.effects},
     }
+
+
+def _plain_params(e: Effect) -> dict[str, float]:
+    if e.name == sensorcal.NAME:
+        return {k: round(float(v), 6) for k, (v, _) in sensorcal.report_keys(e).items()}
+    return {k: round(v, 6) for k, v in e.params.items()}
 
 
 def _regime_shrink(diag: Diagnosis, traces: Traces, held_mask: np.ndarray) -> list[dict]:
@@ -137,7 +155,9 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
 
 def _fmt_params(params: dict[str, dict]) -> str:
     return ", ".join(
-        f"{k} = {v['value']:.4g} {v['unit']}" for k, v in params.items() if v["fitted"]
+        f"{k} = {v['value']:.4g} {v['unit']}"
+        for k, v in params.items()
+        if v.get("fitted")  # sensor_calibration's plain copy has no "fitted"
     )
 
 

@@ -24,10 +24,41 @@ class ParamSpec:
 
 
 @dataclass(frozen=True)
+class ChoiceSpec:
+    """A parameter that names something (e.g. which signal) instead of a number."""
+
+    name: str
+    options: tuple[str, ...]
+    default: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class SensorCalSignal:
+    """A measured signal ``sensor_calibration`` can act on: its unit, the unit as written in
+    the gap report's key names (``QP_offset_lpm``) and the largest offset accepted."""
+
+    unit: str
+    key_unit: str
+    max_offset: float
+
+
+#: Signals a sensor calibration error can affect, in the contract's order and units.
+SENSOR_CAL_SIGNALS: dict[str, SensorCalSignal] = {
+    "PP": SensorCalSignal("bar", "bar", 20.0),
+    "PA": SensorCalSignal("bar", "bar", 20.0),
+    "PB": SensorCalSignal("bar", "bar", 20.0),
+    "QP": SensorCalSignal("L/min", "lpm", 10.0),
+    "RodPos": SensorCalSignal("mm", "mm", 50.0),
+}
+
+
+@dataclass(frozen=True)
 class EffectSpec:
     name: str
     doc: str
     params: tuple[ParamSpec, ...]
+    choices: tuple[ChoiceSpec, ...] = ()
 
     def param(self, name: str) -> ParamSpec:
         for p in self.params:
@@ -160,6 +191,24 @@ CATALOGUE: dict[str, EffectSpec] = {
                 ),
             ),
         ),
+        EffectSpec(
+            "sensor_calibration",
+            "one measured signal reads gain x true + offset (after noise-free physics; the "
+            "plant and the other signals are untouched)",
+            (
+                ParamSpec("gain", "-", 1.1, 0.5, 1.5, "reading per true value"),
+                ParamSpec(
+                    "offset",
+                    "signal unit",
+                    0.0,
+                    -50.0,
+                    50.0,
+                    "added to the reading, in bar (PP, PA, PB; within +-20), L/min (QP; "
+                    "within +-10) or mm (RodPos; within +-50)",
+                ),
+            ),
+            (ChoiceSpec("signal", tuple(SENSOR_CAL_SIGNALS), "PA", "the miscalibrated signal"),),
+        ),
     )
 }
 assert tuple(CATALOGUE) == EFFECT_NAMES  # the contract's names, in its order
@@ -167,18 +216,30 @@ assert tuple(CATALOGUE) == EFFECT_NAMES  # the contract's names, in its order
 
 @dataclass(frozen=True)
 class Effect:
-    """One enabled effect with every parameter set (defaults filled in)."""
+    """One enabled effect with every parameter set (defaults filled in); ``labels`` holds
+    the named choices (``sensor_calibration``'s signal)."""
 
     name: str
     params: dict[str, float] = field(default_factory=dict)
+    labels: dict[str, str] = field(default_factory=dict)
 
     @classmethod
-    def make(cls, name: str, **values: float) -> Effect:
+    def make(cls, name: str, **values: float | str) -> Effect:
         spec = CATALOGUE.get(name)
         if spec is None:
             raise ConfigError(f"unknown effect {name!r}; known: {', '.join(CATALOGUE)}")
         params = {p.name: p.default for p in spec.params}
+        labels = {c.name: c.default for c in spec.choices}
         for key, value in values.items():
+            choice = next((c for c in spec.choices if c.name == key), None)
+            if choice is not None:
+                if value not in choice.options:
+                    raise ConfigError(
+                        f"effect {name}: {key} = {value!r} is not one of "
+                        f"{', '.join(choice.options)}"
+                    )
+                labels[key] = str(value)
+                continue
             p = spec.param(key)
             value = float(value)
             if not p.low <= value <= p.high:
@@ -186,11 +247,18 @@ class Effect:
                     f"effect {name}: {key} = {value:g} {p.unit} is outside {p.low:g}..{p.high:g}"
                 )
             params[key] = value
-        _check_relations(name, params)
-        return cls(name, params)
+        _check_relations(name, params, labels)
+        return cls(name, params, labels)
 
 
-def _check_relations(name: str, params: dict[str, float]) -> None:
+def _check_relations(name: str, params: dict[str, float], labels: dict[str, str]) -> None:
+    if name == "sensor_calibration":
+        sig = SENSOR_CAL_SIGNALS[labels["signal"]]
+        if abs(params["offset"]) > sig.max_offset:
+            raise ConfigError(
+                f"effect sensor_calibration: offset = {params['offset']:g} {sig.unit} is outside "
+                f"-{sig.max_offset:g}..{sig.max_offset:g} for {labels['signal']}"
+            )
     if name == "cylinder_friction" and params["static_n"] < params["coulomb_n"]:
         raise ConfigError(
             f"effect cylinder_friction: static_n = {params['static_n']:g} N must be at least "
@@ -203,12 +271,17 @@ def _check_relations(name: str, params: dict[str, float]) -> None:
 def parse_effect(text: str) -> Effect:
     """Parse the CLI form ``NAME[:param=value,...]``."""
     name, _, rest = text.partition(":")
-    values: dict[str, float] = {}
+    values: dict[str, float | str] = {}
+    spec = CATALOGUE.get(name.strip())
+    choices = {c.name for c in spec.choices} if spec is not None else set()
     if rest:
         for item in rest.split(","):
             key, eq, raw = item.partition("=")
             if not eq:
                 raise ConfigError(f"--effect {text!r}: expected param=value, got {item!r}")
+            if key.strip() in choices:
+                values[key.strip()] = raw.strip()
+                continue
             try:
                 values[key.strip()] = float(raw)
             except ValueError:
@@ -223,6 +296,10 @@ def describe_catalogue() -> str:
     lines = []
     for spec in CATALOGUE.values():
         lines.append(f"  {spec.name}: {spec.doc}")
+        for c in spec.choices:
+            lines.append(
+                f"      {c.name} [name] default {c.default}, one of {'|'.join(c.options)}: {c.doc}"
+            )
         for p in spec.params:
             rng = f"default {p.default:g}, range {p.low:g}..{p.high:g}"
             lines.append(f"      {p.name} [{p.unit}] {rng}: {p.doc}")

@@ -98,7 +98,7 @@ def _pack_effect(prm: np.ndarray, effect: Effect) -> None:
         prm[K.E_WALL] = p["wall_modulus_gpa"] * 1e9
     elif name == "load_variation":
         prm[K.SLOPE] = p["slope_n_per_mm"] * 1e3
-    elif name != "sensor_lag":  # sensor_lag acts on the sensor model, not the plant
+    elif name not in ("sensor_lag", "sensor_calibration"):  # these act on the sensor model
         raise ValueError(f"effect {name!r} has no kernel packing")
 
 

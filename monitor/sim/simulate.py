@@ -137,10 +137,22 @@ def simulate(
     trace = run_plant(commands, machine, faults, effects, rod_pos0_m)
     rng = np.random.default_rng(seed) if seed is not None else None
     delay_s = tau_s = 0.0
+    cal: dict[str, tuple[float, float]] = {}  # signal: (gain, offset in its unit)
     for effect in effects:
         if effect.name == "sensor_lag":
             delay_s = effect.params["delay_ms"] * 1e-3
             tau_s = effect.params["time_constant_ms"] * 1e-3
+        elif effect.name == "sensor_calibration":
+            cal[effect.labels["signal"]] = (effect.params["gain"], effect.params["offset"])
+
+    def reading(name: str, values: np.ndarray) -> np.ndarray:
+        # The transducer's gain and offset act on what it senses; its noise, range and the
+        # bus's quantisation come after (a miscalibrated sensor still clips at its range).
+        if name not in cal:
+            return values
+        gain, offset = cal[name]
+        return gain * values + offset
+
     t = commands.t
     rel = trace.t_s - trace.t_s[0]
     idx = np.minimum(np.round((t - t[0]) / (rel[1] - rel[0])).astype(int), len(rel) - 1)
@@ -160,22 +172,28 @@ def simulate(
     for name, values in (("PP", trace.pp_pa), ("PA", trace.pa_pa), ("PB", trace.pb_pa)):
         out[name] = measure(
             name,
-            sampled(values, True) / PA_PER_BAR,
+            reading(name, sampled(values, True) / PA_PER_BAR),
             s.pressure_noise_bar,
             s.pressure_range_bar,
             rng,
         )
     out["QP"] = measure(
-        "QP", sampled(trace.qp_m3_s, True) / M3S_PER_LPM, s.flow_noise_lpm, s.flow_range_lpm, rng
+        "QP",
+        reading("QP", sampled(trace.qp_m3_s, True) / M3S_PER_LPM),
+        s.flow_noise_lpm,
+        s.flow_range_lpm,
+        rng,
     )
     rod_mm = sampled(trace.rod_pos_m, False) * 1e3
-    out["RodPos"] = measure("RodPos", rod_mm, s.rodpos_noise_mm, s.rodpos_range_mm, rng)
+    out["RodPos"] = measure(
+        "RodPos", reading("RodPos", rod_mm), s.rodpos_noise_mm, s.rodpos_range_mm, rng
+    )
     out["SpoolPos"] = sampled(trace.spool, False) * 100.0
     out["RodPosTrue"] = rod_mm
     out["RodVel"] = sampled(trace.rod_vel_m_s, False) * 1e3
     meta = {
         "faults": [f.__dict__ for f in faults],
-        "effects": {e.name: dict(e.params) for e in effects},
+        "effects": {e.name: {**e.labels, **e.params} for e in effects},
         "seed": seed,
         "step_s": machine.step_s,
     }
