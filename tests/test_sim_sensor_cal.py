@@ -44,14 +44,21 @@ def test_pressure_gain_and_offset_scale_that_signal_only(nominal):
 
 
 def test_flow_offset_alone_adds_the_offset(nominal):
-    rec = simulate(CMDS, M, effects=[Effect.make("sensor_calibration", signal="QP", gain=1.0,
-                                                 offset=-1.5)], seed=None)  # fmt: skip
+    # Only the offset given: the gain is 1 (the effect's 1.1 is for neither given).
+    rec = simulate(CMDS, M, effects=[parse_effect("sensor_calibration:signal=QP,offset=-1.5")],
+                   seed=None)  # fmt: skip
     _others_identical(nominal, rec, "QP")
     r = dbc_resolutions()["QP"][0]
     # The flow sensor clips at 0 L/min: a dead-headed pump reads 0, not -1.5.
     expected = np.clip(nominal["QP"] - 1.5, 0.0, 60.0)
     assert np.abs(rec["QP"] - expected).max() <= r + 1e-9
     assert rec["QP"].min() == 0.0
+
+
+def test_the_default_is_a_gain_of_1_1_and_an_offset_alone_has_gain_1() -> None:
+    assert Effect.make("sensor_calibration").params == {"gain": 1.1, "offset": 0.0}
+    assert Effect.make("sensor_calibration", offset=3.0).params == {"gain": 1.0, "offset": 3.0}
+    assert Effect.make("sensor_calibration", gain=0.9).params == {"gain": 0.9, "offset": 0.0}
 
 
 def test_rodpos_reading_is_exactly_gain_true_plus_offset_clipped_and_quantised(nominal):

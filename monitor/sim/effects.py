@@ -196,7 +196,8 @@ CATALOGUE: dict[str, EffectSpec] = {
             "one measured signal reads gain x true + offset (after noise-free physics; the "
             "plant and the other signals are untouched)",
             (
-                ParamSpec("gain", "-", 1.1, 0.5, 1.5, "reading per true value"),
+                ParamSpec("gain", "-", 1.1, 0.5, 1.5,
+                          "reading per true value (1 when only offset is given)"),
                 ParamSpec(
                     "offset",
                     "signal unit",
@@ -247,6 +248,8 @@ class Effect:
                     f"effect {name}: {key} = {value:g} {p.unit} is outside {p.low:g}..{p.high:g}"
                 )
             params[key] = value
+        if name == "sensor_calibration" and "offset" in values and "gain" not in values:
+            params["gain"] = 1.0  # an offset alone is an offset, not an offset and a gain
         _check_relations(name, params, labels)
         return cls(name, params, labels)
 
