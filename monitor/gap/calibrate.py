@@ -58,8 +58,15 @@ def knobs() -> list[Knob]:
     return [t.knob() for t in TOLERANCES]
 
 
+#: A factor this close to the edge of its band (as a share of the band) ended at its bound.
+AT_BOUND_SHARE = 0.98
+
+
 def describe(machine: MachineParams, factors: dict[str, float]) -> dict[str, dict]:
-    """The JSON form: value, unit, nominal and change in percent per tolerance."""
+    """The JSON form: value, unit, nominal, change in percent per tolerance, and whether the
+    fit ended at the band's bound (the machine is outside the tolerance the simulator's
+    configuration assumes, or the band took up part of an effect: either way the user is
+    told rather than the gap silently absorbed)."""
     out = {}
     for tol in TOLERANCES:
         f = factors.get(tol.name, 1.0)
@@ -70,5 +77,6 @@ def describe(machine: MachineParams, factors: dict[str, float]) -> dict[str, dic
             "nominal": round(nominal, 6),
             "change_pct": round(100 * (f - 1), 2),
             "band_pct": round(100 * tol.band, 1),
+            "at_bound": bool(abs(f - 1.0) >= AT_BOUND_SHARE * tol.band),
         }
     return out

@@ -199,6 +199,14 @@ def summary_text(report: dict) -> str:
             f"(90 % bootstrap interval {100 * lo:.0f}..{100 * hi:.0f} %)"
         )
     lines.append(f"Confidence: {report['confidence']:.2f}")
+    bounded = [f"{n} {c['change_pct']:+.1f} % (band +-{c['band_pct']:g} %)"
+               for n, c in report["calibrated"].items() if c.get("at_bound")]  # fmt: skip
+    if bounded:
+        lines.append(
+            f"Tolerance at its bound: {', '.join(bounded)}. The machine is outside the "
+            "tolerance the simulator's configuration assumes, or the band took up part of an "
+            "effect: check simulator.yaml (nominal values) before trusting the verdict."
+        )
     lines += ["", "Held-out NRMSE per signal (before -> after; sensor noise alone):"]
     for n in sh["before"]:
         lines.append(
@@ -210,6 +218,7 @@ def summary_text(report: dict) -> str:
         lines.append(
             f"  {name:17s} {c['value']:.5g} {c['unit']} "
             f"({c['change_pct']:+.1f} %, band +-{c['band_pct']:g} %)"
+            + ("  AT ITS BOUND" if c.get("at_bound") else "")
         )
     lines += ["", "Candidates (held-out gap removed, best first):"]
     for row in report["ranking"]:
