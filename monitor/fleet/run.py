@@ -98,13 +98,19 @@ def _client(opts: RunOptions, say: Say) -> Iterator[Any]:
             cluster.close()
 
 
-def _manifest(m: Machine, fleet: Fleet, default: bytes, opts: RunOptions) -> dict[str, Any]:
+def _settings(default: bytes, opts: RunOptions) -> dict[str, Any]:
+    """What every machine's model is trained with besides its own commissioning files (hashed
+    once per run: the default model is megabytes)."""
+    config = None if opts.config is None else sha256_file(Path(opts.config))
+    return {"reference_sha256": hashlib.sha256(default).hexdigest(),
+            "isolation": opts.isolation, "config_sha256": config}  # fmt: skip
+
+
+def _manifest(m: Machine, fleet: Fleet, settings: dict[str, Any]) -> dict[str, Any]:
     """What a machine's model is trained from: a stored model trained from the same is
     reused, so a daily rerun commissions only new or changed machines."""
-    config = None if opts.config is None else sha256_file(Path(opts.config))
     return {"commissioning": {fleet.relative(p): sha256_file(p) for p in m.commissioning},
-            "reference_sha256": hashlib.sha256(default).hexdigest(),
-            "isolation": opts.isolation, "config_sha256": config}  # fmt: skip
+            **settings}  # fmt: skip
 
 
 def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, needed: set[str],
@@ -115,6 +121,7 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, nee
     default = pipeline.default_model_bytes(opts.default_model, opts.config)
     out: dict[str, tuple[Any, str]] = {}
     manifests: dict[str, dict[str, Any]] = {}
+    settings = _settings(default, opts)
     first = True
     for m in fleet.machines:
         if m.machine_id not in needed:
@@ -123,7 +130,7 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, nee
             say(f"fleet: {m.machine_id}: no commissioning data, judged with the default model")
             out[m.machine_id] = (default, "default")
             continue
-        manifests[m.machine_id] = manifest = _manifest(m, fleet, default, opts)
+        manifests[m.machine_id] = manifest = _manifest(m, fleet, settings)
         cached = store.cached_model(m.machine_id, manifest)
         if cached is not None:
             out[m.machine_id] = (cached, "commissioned")
