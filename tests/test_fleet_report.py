@@ -65,6 +65,32 @@ def test_flat_or_falling_is_no_upward_trend_and_unjudged_logs_are_left_out():
     assert prognosis("C", rows[:2]).text == "too few judged logs"
 
 
+def test_slight_wear_is_trended_on_the_typical_level_not_on_the_scattered_peak():
+    # The peak (max J / eps0) scatters with the manoeuvres of each log: alone it is no trend
+    # (9 of 15 pairs concordant, Kendall p 0.36).  The median rises 0.02 a log.
+    peak = [0.6, 0.3, 0.7, 0.4, 0.8, 0.5]
+    mid = [0.10, 0.12, 0.14, 0.16, 0.18, 0.20]
+    alone = prognosis("A", [_row("A", i, m) for i, m in enumerate(peak)])
+    assert alone.logs_to_alarm is None and alone.basis == "peak"
+    rows = [_row("A", i, m, p50_j_ratio=q) for i, (m, q) in enumerate(zip(peak, mid, strict=True))]
+    p = prognosis("A", rows)
+    # Peak-to-typical ratios 6, 2.5, 5, 2.5, 4.44, 2.5: median (2.5 + 4.444) / 2 = 3.472.
+    ratio = (2.5 + 0.8 / 0.18) / 2
+    assert p.basis == "typical" and p.p_value == pytest.approx(1 / 720)  # 6 straight rises
+    assert p.slope_per_log == pytest.approx(0.02 * ratio)
+    assert p.logs_to_alarm == pytest.approx((1.0 - 0.20 * ratio) / (0.02 * ratio))
+    assert p.last_index == 0.5  # the page still shows the newest log's peak
+
+
+def test_a_healthy_machine_with_a_steady_typical_level_has_no_trend_however_its_peak_jumps():
+    peak = [0.2, 0.3, 0.45, 0.6, 0.7, 0.9]  # six straight rises of the peak ...
+    mid = [0.12, 0.10, 0.13, 0.11, 0.12, 0.10]  # ... while the typical level stays put
+    rows = [_row("A", i, m, p50_j_ratio=q) for i, (m, q) in enumerate(zip(peak, mid, strict=True))]
+    p = prognosis("A", rows)
+    assert p.basis == "typical" and p.logs_to_alarm is None
+    assert prognosis("A", [_row("A", i, m) for i, m in enumerate(peak)]).logs_to_alarm is not None
+
+
 def test_report_writes_the_page_and_its_pictures(tmp_path):
     rows = [_row("M01", i, 0.4 + 0.1 * i) for i in range(4)]
     rows += [_row("M02", i, 0.3) for i in range(4)]

@@ -14,16 +14,19 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "simulate-fleet",
         help="write a simulated fleet (FLEET/<machine>/commissioning|logs) and its answer key",
         description="Simulate N machines drawn within +-5 % of the reference, each with "
-        "its commissioning log and one candump log a day (one oil temperature per day). "
-        "M01 wears its piston seal and M02 its spool slowly (severity 0 on day 1 rising to "
-        "--wear-max on the last), M03's flow sensor freezes from the middle day on; the rest are "
-        "healthy. OUT/answer_key.json says which is which.",
+        "its commissioning log and one candump log a day or --logs-per-day (one oil "
+        "temperature per day). M01 wears its piston seal and M02 its spool slowly (severity 0 "
+        "in the first log rising to --wear-max in the last), M03's flow sensor freezes from "
+        "the middle day on; the rest are healthy. OUT/answer_key.json says which is which.",
     )
     p.add_argument("out", type=Path, metavar="OUT", help="fleet folder to write (created)")
     p.add_argument("--machines", type=int, required=True, metavar="N",
                    help="machines to simulate (M01, M02, ...; roles as above)")  # fmt: skip
     p.add_argument("--days", type=int, required=True, metavar="D",
-                   help="daily logs per machine")  # fmt: skip
+                   help="days of logs per machine")  # fmt: skip
+    p.add_argument("--logs-per-day", type=int, default=1, metavar="L",
+                   help="logs per machine and day (default 1: dayDD.log; more: dayDD-1.log, "
+                   "dayDD-2.log, ..., as a machine that uploads after every few hours)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="default 0")
     p.add_argument(
         "--log-s",
@@ -44,8 +47,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         type=float,
         default=0.6,
         metavar="SEV",
-        help="severity of the wearing machines on the last day, rising linearly from 0 on "
-        "day 1 (default 0.6; a slow wear such as 0.2 over 8 days shows the prognosis "
+        help="severity of the wearing machines in the last log, rising linearly from 0 in "
+        "the first (default 0.6; a slow wear such as 0.2 over 8 days shows the prognosis "
         "before the alarm)",
     )
     p.set_defaults(func=run)
@@ -56,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.machines < 1 or args.days < 1:
         raise ConfigError("--machines and --days must be at least 1")
+    if not 1 <= args.logs_per_day <= 24:
+        raise ConfigError(f"--logs-per-day must be 1..24, got {args.logs_per_day}")
+    if args.days * args.logs_per_day > 999:
+        raise ConfigError("--days x --logs-per-day must be at most 999 logs per machine")
     if args.log_s < 60 or args.commissioning_s < 180:
         raise ConfigError("--log-s must be at least 60 s and --commissioning-s at least 180 s "
                           "(the J window is 30 s)")  # fmt: skip
@@ -64,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out.exists() and any(args.out.iterdir()):
         raise ConfigError(f"{args.out}: exists and is not empty")
     plan = FleetPlan(args.machines, args.days, args.seed, args.log_s, args.commissioning_s,
-                     wear_max=args.wear_max)  # fmt: skip
+                     wear_max=args.wear_max, logs_per_day=args.logs_per_day)  # fmt: skip
     simulate_fleet(args.out, plan, say=lambda m: print(m, file=sys.stderr))
-    print(f"wrote {args.machines} machines x {args.days} days to {args.out}", file=sys.stderr)
+    print(f"wrote {args.machines} machines x {args.days} days x {args.logs_per_day} log(s) "
+          f"to {args.out}", file=sys.stderr)
     return 0

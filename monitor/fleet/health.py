@@ -1,14 +1,21 @@
 """Health index and prognosis per machine, from logs.parquet rows.
 
-The health index of a log is its largest alarm level (1.0 is the alarm threshold).  The
-trend is Theil-Sen (median of pairwise slopes, robust to a few odd logs) over the machine's
-last ``k`` judged logs, in index per log; the prognosis is the number of logs until the fitted
-line reaches 1.0, with the interval from the slope's confidence bounds, or no upward trend.
+The health index of a log is its largest alarm level (1.0 is the alarm threshold).  It is
+what the page shows, but it is a poor quantity to trend: the peak of J over a few minutes
+depends on which manoeuvres the log happens to hold, and scatters by a factor of 3-5 on a
+healthy machine, while slight wear raises every window a little.  So the trend follows the
+log's *typical* level, the median of J / eps0, which moves with wear and barely with the
+duty cycle, scaled by the machine's peak-to-typical ratio over the fitted logs (the median
+of max / median per log), so that it is in alarm-level units and reaches 1.0 about when a
+log's peak would.  Rows written before the median existed are trended on the peak.
 
-A rise counts as a trend only when Kendall's tau says it is unlikely to be day-to-day
-scatter (one-sided p < ``TREND_P``): three rising logs of a healthy machine happen by chance
-one time in six, and a service visit planned on them is wasted.  So a trend needs at least
-four judged logs, and a wearing machine's prognosis comes after four logs of rise.
+The trend is Theil-Sen (median of pairwise slopes, robust to a few odd logs) over the
+machine's last ``k`` judged logs, in level per log; the prognosis is the number of logs until
+the fitted line reaches 1.0, with the interval from the slope's confidence bounds, or no
+upward trend.  A rise counts only when Kendall's tau says it is unlikely to be scatter
+(one-sided p < ``TREND_P``): three rising logs of a healthy machine happen by chance one time
+in six, and a service visit planned on them is wasted.  So a trend needs at least four
+judged logs.
 """
 
 from __future__ import annotations
@@ -31,6 +38,8 @@ class Prognosis:
     logs_to_alarm: float | None  # None: no upward trend (or too few logs)
     logs_to_alarm_range: tuple[float, float] | None  # from the slope's 90 % bounds (inf: none)
     p_value: float | None = None  # Kendall's tau, one-sided, of a rise (None: not tested)
+    basis: str = "peak"  # "typical" (median J x peak ratio) or "peak" (the health index)
+    level_now: float | None = None  # the trend line at the newest fitted log
 
     @property
     def text(self) -> str:
@@ -56,27 +65,43 @@ def health_index(row: dict[str, Any]) -> float | None:
     return level if level is not None else row.get("max_j_ratio")
 
 
+def trended(rows: list[dict[str, Any]]) -> tuple[np.ndarray, str]:
+    """The levels a prognosis fits, one per row, and their basis.
+
+    ``typical``: median J / eps0 of each log times the median over the rows of the log's
+    max / median J (every row needs both and a positive median); else ``peak``: the
+    health index."""
+    peak = [r.get("max_j_ratio") for r in rows]
+    mid = [r.get("p50_j_ratio") for r in rows]
+    usable = [m is not None and m > 0 and p is not None for m, p in zip(mid, peak, strict=True)]
+    if rows and all(usable):
+        ratio = float(np.median(np.asarray(peak, float) / np.asarray(mid, float)))
+        return np.asarray(mid, float) * ratio, "typical"
+    return np.asarray([health_index(r) for r in rows], dtype=float), "peak"
+
+
 def prognosis(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Prognosis:
     """Theil-Sen over the last ``k`` judged logs of one machine (rows in time order)."""
     from scipy.stats import kendalltau, theilslopes
 
-    y = [v for r in rows if (v := health_index(r)) is not None and not r["error"]]
-    y = np.asarray(y[-k:], dtype=float)
-    last = float(y[-1]) if y.size else None
-    if y.size < 3:
-        return Prognosis(machine, int(y.size), last, None, None, None)
+    judged = [r for r in rows if health_index(r) is not None and not r["error"]][-k:]
+    last = float(health_index(judged[-1])) if judged else None
+    if len(judged) < 3:
+        return Prognosis(machine, len(judged), last, None, None, None)
+    y, basis = trended(judged)
     x = np.arange(y.size, dtype=float)
     slope, intercept, lo, hi = theilslopes(y, x, alpha=0.90)
+    level = float(intercept + slope * x[-1])
     if slope <= 0:
-        return Prognosis(machine, int(y.size), last, float(slope), None, None)
+        return Prognosis(machine, y.size, last, float(slope), None, None, None, basis, level)
     p_rise = float(kendalltau(x, y, alternative="greater").pvalue)
     if not p_rise < TREND_P:
-        return Prognosis(machine, int(y.size), last, float(slope), None, None, p_rise)
-    now = x[-1]
-    level = intercept + slope * now
+        return Prognosis(machine, y.size, last, float(slope), None, None, p_rise, basis, level)
 
     def until(s: float) -> float:
         return float((1.0 - level) / s) if s > 0 else float("inf")
 
     rng = (max(until(hi), 0.0), until(lo))
-    return Prognosis(machine, int(y.size), last, float(slope), until(slope), rng, p_rise)
+    return Prognosis(
+        machine, y.size, last, float(slope), until(slope), rng, p_rise, basis, level
+    )

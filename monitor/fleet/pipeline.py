@@ -110,6 +110,7 @@ def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
         "eps0": eps0,
         "samples": int(s["samples"]),
         "max_level": s.get("max_level"),
+        "p50_j_ratio": float(np.median(j)) / eps0 if j.size else None,
     }
     events = [json.loads(json.dumps(dict(e, event="state"))) for e in det.events]
     return Judged(row, events)

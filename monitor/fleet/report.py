@@ -51,7 +51,21 @@ def _table(per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis]) ->
     return out
 
 
-def _health_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
+def _trend_line(rows: list[dict[str, Any]], p: Prognosis, k: int):
+    """x and level of the prognosis's line: over its fitted logs, then on to 1.0."""
+    if p.logs_to_alarm is None or p.slope_per_log is None or p.level_now is None:
+        return None
+    pos = [i + 1 for i, r in enumerate(rows) if health_index(r) is not None and not r["error"]]
+    pos = pos[-k:]
+    ahead = max(min(p.logs_to_alarm, k), 0.0)  # no further than the fit reaches back
+    x = [pos[0], pos[-1], pos[-1] + ahead]
+    start = p.level_now - p.slope_per_log * (len(pos) - 1)
+    return x, [start, p.level_now, p.level_now + p.slope_per_log * ahead]
+
+
+def _health_png(
+    per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis], path: Path, k: int
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -61,16 +75,26 @@ def _health_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
     n = len(per)
     cols = min(3, n)
     nrows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 2.8 * nrows), squeeze=False,
-                             sharey=True)  # fmt: skip
+    # Own y scale per machine (a machine far above 1.0 would flatten the others), never
+    # below 1.3 so that the alarm line is always in view.
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 2.8 * nrows), squeeze=False)
     for ax, (mid, rows) in zip(axes.flat, per.items(), strict=False):
         x = list(range(1, len(rows) + 1))
-        ax.plot(x, [health_index(r) for r in rows], "o-", label="health index")
-        ax.plot(x, [r["max_j_ratio"] for r in rows], ".:", label="max J/eps0")
-        ax.plot(x, [r["p95_j_ratio"] for r in rows], "s--", ms=3, label="p95 J/eps0")
+        index = [health_index(r) for r in rows]
+        ax.plot(x, index, "o-", label="health index (max level)")
+        if any(r.get("max_level") not in (None, r["max_j_ratio"]) for r in rows):
+            ax.plot(x, [r["max_j_ratio"] for r in rows], ".:", label="max J/eps0")
+        ax.plot(x, [r.get("p50_j_ratio") for r in rows], "s--", ms=3, label="median J/eps0")
+        right = len(rows) + 0.5
+        line = _trend_line(rows, progs[mid], k)
+        if line is not None:
+            ax.plot(*line, "-", color="tab:purple", lw=2, alpha=0.7, label="trend to 1.0")
+            right = max(right, line[0][-1] + 0.5)
         ax.axhline(1.0, color="tab:red", lw=1, label="eps0 (alarm)")
         ax.set_title(mid)
-        ax.set_xlim(0.5, len(rows) + 0.5)
+        ax.set_xlim(0.5, right)
+        top = max([v for v in index if v is not None] + [1.0])
+        ax.set_ylim(0.0, max(1.3, 1.08 * top))
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("log (time order)")
         ax.grid(alpha=0.3)
@@ -120,14 +144,16 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     per = load_rows(results)
     progs = {mid: prognosis(mid, rows, k) for mid, rows in per.items()}
     out.mkdir(parents=True, exist_ok=True)
-    _health_png(per, out / "health.png")
+    _health_png(per, progs, out / "health.png", k)
     _timeline_png(per, out / "timeline.png")
     lines = ["# Fleet report", "",
              f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
              f"the largest alarm level of a log, max(J / eps0, B / b0) (1.0 raises the alarm); "
-             f"trend: Theil-Sen over the last {k} judged logs, counted when Kendall's tau "
-             f"makes a rise unlikely to be scatter (one-sided p < {TREND_P:g}, so at least 4 "
-             "logs); crossing: logs until the trend reaches 1.0 (90 % interval).", "",
+             f"trend: Theil-Sen over the last {k} judged logs of their typical level (median J /"
+             " eps0, which follows wear, scaled by the machine's peak-to-median ratio; the peak "
+             "itself scatters with each log's manoeuvres), counted when Kendall's tau makes a "
+             f"rise unlikely to be scatter (one-sided p < {TREND_P:g}, so at least 4 logs); "
+             "crossing: logs until the trend reaches 1.0 (90 % interval).", "",
              *_table(per, progs), "", "![health index](health.png)", "",
              "![verdict timeline](timeline.png)", ""]  # fmt: skip
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]

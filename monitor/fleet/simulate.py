@@ -3,8 +3,11 @@
 Each machine's parameters are drawn within +-tolerance of the reference; each day has one oil
 temperature within 35-55 degC (the oil-viscosity effect makes it matter), and the
 commissioning log warms from 30 to 60 degC; one machine's piston seal and one's
-spool wear slowly (severity rising linearly over the days); one machine's flow sensor freezes
-(QP holds its last value) from the middle of the fleet's days on.
+spool wear slowly (severity rising linearly from the first log to the last); one machine's
+flow sensor freezes (QP holds its last value) from the middle of the fleet's days on.
+
+A day holds one log (``dayDD.log``) or several (``dayDD-L.log``, L = 1, 2, ...: a machine
+that uploads after every few hours of work); file-name order is time order either way.
 """
 
 from __future__ import annotations
@@ -36,7 +39,8 @@ class FleetPlan:
     log_s: float = 300.0
     commissioning_s: float = 1200.0
     tolerance: float = 0.05
-    wear_max: float = 0.6  # severity on the last day
+    wear_max: float = 0.6  # severity on the last log
+    logs_per_day: int = 1
 
 
 _COMMISSIONING_OIL_C = (30.0, 60.0)  # degC at the start and end of the commissioning log
@@ -78,6 +82,13 @@ def _one(path: Path, machine: Any, duration_s: float, seed: int, oil_c: tuple[fl
     _write(path, rec)
 
 
+def _log_name(day: int, part: int, logs_per_day: int) -> str:
+    """``day01.log`` with one log a day, else ``day01-1.log``, ``day01-2.log``, ..."""
+    if logs_per_day == 1:
+        return f"day{day + 1:02d}.log"
+    return f"day{day + 1:02d}-{part + 1}.log"
+
+
 def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, Any]:
     """Write FLEET folders under ``out`` and ``out/answer_key.json``; returns the key."""
     rng = np.random.default_rng(plan.seed)
@@ -97,13 +108,17 @@ def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, An
         _one(out / mid / "commissioning" / "normal.log", machine, plan.commissioning_s, base,
              _COMMISSIONING_OIL_C, [], None)  # fmt: skip
         days = []
-        for d in range(plan.days):
-            sev = plan.wear_max * d / max(plan.days - 1, 1) if role.endswith("_wear") else 0.0
+        n_logs = plan.days * plan.logs_per_day
+        for j in range(n_logs):
+            d, part = divmod(j, plan.logs_per_day)
+            sev = plan.wear_max * j / max(n_logs - 1, 1) if role.endswith("_wear") else 0.0
             faults = [Fault(role, sev)] if sev > 0 else []
             freeze = plan.log_s / 2 if role == "frozen_QP" and d >= plan.days // 2 else None
-            _one(out / mid / "logs" / f"day{d + 1:02d}.log", machine, plan.log_s,
-                 base + d + 1, (oil[d], oil[d]), faults, freeze)  # fmt: skip
-            days.append({"log": f"{mid}/logs/day{d + 1:02d}.log", "severity": round(sev, 4),
+            name = _log_name(d, part, plan.logs_per_day)
+            # Seeds base + 1 + j: with one log a day, the same logs as before logs_per_day.
+            _one(out / mid / "logs" / name, machine, plan.log_s, base + 1 + j,
+                 (oil[d], oil[d]), faults, freeze)  # fmt: skip
+            days.append({"log": f"{mid}/logs/{name}", "day": d + 1, "severity": round(sev, 4),
                          "sensor_frozen_from_s": freeze, "oil_temp_c": oil[d]})  # fmt: skip
         key["machines"][mid] = {"role": role, "factors": draw, "days": days}
         say(f"simulate-fleet: {mid} ({role}) written")

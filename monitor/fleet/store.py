@@ -28,6 +28,8 @@ LOG_SCHEMA = pa.schema([
     # max(J / eps0, B / b0): the level the alarm compares with 1 (results written before it
     # existed read it as null; the health index then falls back to max_j_ratio).
     ("max_level", pa.float64()),
+    # median J / eps0 of the log: what the prognosis trends (null in older results).
+    ("p50_j_ratio", pa.float64()),
 ])  # fmt: skip
 EVENT_SCHEMA = pa.schema([
     ("machine", pa.string()), ("log", pa.string()), ("sha256", pa.string()),
