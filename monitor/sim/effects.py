@@ -256,8 +256,14 @@ CATALOGUE: dict[str, EffectSpec] = {
             "one measured signal reads gain x true + offset (after noise-free physics; the "
             "plant and the other signals are untouched)",
             (
-                ParamSpec("gain", "-", 1.1, 0.5, 1.5,
-                          "reading per true value (1 when only offset is given)"),
+                ParamSpec(
+                    "gain",
+                    "-",
+                    1.1,
+                    0.5,
+                    1.5,
+                    "reading per true value (1 when only offset is given)",
+                ),
                 ParamSpec(
                     "offset",
                     "signal unit",
