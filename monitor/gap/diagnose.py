@@ -23,6 +23,7 @@ from monitor.gap.candidates import (
     CONFOUNDED,
     KNOBS,
     Candidate,
+    Member,
     criterion,
     default_member,
     fit_candidate,
@@ -279,7 +280,7 @@ def _diagnose(
     )
 
 
-def member_defaults(c: Candidate) -> list:
+def member_defaults(c: Candidate) -> list[Member]:
     """The default formulation of each of a candidate's effects."""
     return [default_member(e.name) for e in c.effects]
 
