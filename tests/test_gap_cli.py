@@ -72,6 +72,9 @@ def test_report_keeps_the_contract_keys(deadband_run):
     assert len(rep["ranking"]) == 10  # the catalogue, sensor_calibration included
     red = [r["heldout_reduction"] for r in rep["ranking"]]
     assert rep["ranking"][0]["effect"] == "valve_deadband" and red[0] == max(red)
+    # Which formulation fitted (issue 18): a deadband has one; every row names its members.
+    assert rep["member"] == "default" and rep["also_member"] is None
+    assert all(set(r["members"]) == set(r["effect"].split("+")) for r in rep["ranking"])
     # The rod velocity is compared as well (the recording has RodPos).
     compared = {*SIGNALS, "RodVel"}
     assert set(rep["shrink"]["before"]) == compared == set(rep["shrink"]["after"])

@@ -143,7 +143,7 @@ def test_friction_is_fitted_with_the_valve_gain_a_calibration_bent_to_mimic_it()
     segs = make_segments(prep)
     ev = _Evaluator(prep, segs, M)
     bent = {"viscous_friction": 1.3, "valve_gain": 0.93}
-    assert CONFOUNDED["cylinder_friction"] == ("viscous_friction", "valve_gain")
+    assert {"viscous_friction", "valve_gain"} <= set(CONFOUNDED["cylinder_friction"])
     fits = {}
     for free_names in (("viscous_friction",), CONFOUNDED["cylinder_friction"]):
         free = [k for k in knobs() if k.name in free_names]

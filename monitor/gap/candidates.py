@@ -48,39 +48,70 @@ assert set(KNOBS) == set(CATALOGUE)
 #: Tolerances an effect trades off against, fitted together with it: the calibration
 #: soaks up what it can of an effect (entrained air looks like larger volumes within
 #: their band, a deadband like a weaker valve, Coulomb friction like more viscous friction
-#: and a weaker valve, both slowing the rod), and an effect fitted on top of that
-#: calibration would be scored against a machine already bent towards it.
+#: and a weaker valve, both slowing the rod; at reversals it also passes for a lighter
+#: boom: the other team's plant calibrated mass to -15 % under a 400 N friction), and an
+#: effect fitted on top of that calibration would be scored against a machine already bent
+#: towards it.
 CONFOUNDED: dict[str, tuple[str, ...]] = {
     "entrained_air": ("volumes",),
     "hose_compliance": ("volumes",),
     "valve_deadband": ("valve_gain",),
-    "cylinder_friction": ("viscous_friction", "valve_gain"),
+    "cylinder_friction": ("viscous_friction", "valve_gain", "mass"),
     "oil_viscosity": ("viscous_friction",),
     "load_variation": ("gravity_load",),
 }
 assert {t for ts in CONFOUNDED.values() for t in ts} <= {t.name for t in TOLERANCES}
 
 
-def make_effect(name: str, values: dict[str, float]) -> Effect:
+@dataclass(frozen=True)
+class Member:
+    """One formulation within an effect's family: the parameters it fixes (values in the
+    catalogue's units, or a named choice such as a mixture law) and the knobs it fits."""
+
+    name: str
+    knobs: tuple[Knob, ...]
+    fixed: tuple[tuple[str, float | str], ...] = ()
+
+
+#: Name of the formulation ``KNOBS`` fits, per effect (the catalogue's defaults otherwise).
+DEFAULT_MEMBER: dict[str, str] = {
+    "entrained_air": "free_air",
+    "oil_viscosity": "pump_leak",
+    "cylinder_friction": "stribeck",
+    "load_variation": "linear",
+}
+
+
+def default_member(name: str) -> Member:
+    return Member(DEFAULT_MEMBER.get(name, "default"), KNOBS[name])
+
+
+def make_effect(name: str, values: dict[str, float], member: Member | None = None) -> Effect:
     """The catalogue effect for fitted knob values (knob names are the effect's, except
-    ``static_excess_n``, which keeps static friction at or above Coulomb friction)."""
-    params = dict(values)
+    ``static_excess_n``, which keeps static friction at or above Coulomb friction), with
+    the parameters ``member`` fixes."""
+    params: dict[str, float | str] = dict(member.fixed) if member is not None else {}
+    params.update(values)
     if name == "cylinder_friction":
-        extra = params.pop("static_excess_n")
+        extra = float(params.pop("static_excess_n"))
         high = CATALOGUE[name].param("static_n").high
-        params["static_n"] = min(params["coulomb_n"] + extra, high)
+        params["static_n"] = min(float(params["coulomb_n"]) + extra, high)
     return Effect.make(name, **params)
 
 
-def knob_values(effect: Effect) -> dict[str, float]:
+def knob_values(effect: Effect, member: Member | None = None) -> dict[str, float]:
     """Inverse of ``make_effect``: a fitted effect's values as knob values (a fit's start)."""
-    values = {k.name: effect.params.get(k.name, 0.0) for k in KNOBS[effect.name]}
+    knobs = member.knobs if member is not None else KNOBS[effect.name]
+    values = {k.name: effect.params.get(k.name, 0.0) for k in knobs}
     if effect.name == "cylinder_friction":
         values["static_excess_n"] = effect.params["static_n"] - effect.params["coulomb_n"]
     return values
 
 
-def n_params(effects: Sequence[Effect]) -> int:
+def n_params(effects: Sequence[Effect], members: Sequence[Member] = ()) -> int:
+    """Fitted parameters of the effects (their members' knobs where given)."""
+    if members:
+        return sum(len(m.knobs) for m in members)
     return sum(len(KNOBS[e.name]) for e in effects)
 
 
@@ -92,6 +123,7 @@ class Candidate:
     effects: tuple[Effect, ...]
     factors: dict[str, float]
     fit_cost: float
+    members: tuple[Member, ...] = ()  # per effect; empty: the default formulations
     heldout_mse: np.ndarray = field(default_factory=lambda: np.zeros(0))
     heldout_gap: float = 0.0
     heldout_reduction: float = 0.0
@@ -113,18 +145,26 @@ def fit_candidate(
     starts: Sequence[tuple[dict[str, float], Sequence[Effect]]] | None = None,
     max_iterations: int = MAX_ITERATIONS,
     local_starts: int = 1,
+    members: Sequence[Member] | None = None,
 ) -> Candidate:
     """Fit the knobs of the effects ``names`` (and the ``tolerances`` knobs, if given,
     jointly; otherwise at ``factors``).  ``starts`` are (factors, effects) to start from;
-    local fits run from the ``local_starts`` best of them."""
-    eff_knobs = [Knob(f"{n}.{k.name}", k.low, k.high, k.log) for n in names for k in KNOBS[n]]
+    local fits run from the ``local_starts`` best of them.  ``members`` (one per name) picks
+    each effect's formulation; by default the one ``KNOBS`` fits."""
+    mem = list(members) if members else [default_member(n) for n in names]
+    eff_knobs = [
+        Knob(f"{n}.{k.name}", k.low, k.high, k.log)
+        for n, m in zip(names, mem, strict=True)
+        for k in m.knobs
+    ]
     knobs = [*tolerances, *eff_knobs]
 
     def split(values: dict[str, float]) -> tuple[dict[str, float], tuple[Effect, ...]]:
         f = dict(factors)
         f.update({k.name: values[k.name] for k in tolerances})
         fx = tuple(
-            make_effect(n, {k.name: values[f"{n}.{k.name}"] for k in KNOBS[n]}) for n in names
+            make_effect(n, {k.name: values[f"{n}.{k.name}"] for k in m.knobs}, m)
+            for n, m in zip(names, mem, strict=True)
         )
         return f, fx
 
@@ -145,11 +185,12 @@ def fit_candidate(
         start_points = []
         for f0, fx0 in starts:
             point = {k.name: f0.get(k.name, 1.0) for k in tolerances}
-            point.update({f"{e.name}.{k}": v for e in fx0 for k, v in knob_values(e).items()})
+            for e, m in zip(fx0, mem, strict=True):
+                point.update({f"{e.name}.{k}": v for k, v in knob_values(e, m).items()})
             start_points.append(point)
     result = fit(lambda v: residual(*split(v)), knobs, start_points, max_iterations, local_starts)
     f, fx = split(result.values)
-    return Candidate(fx, f, result.cost)
+    return Candidate(fx, f, result.cost, tuple(mem) if members else ())
 
 
 def criterion(gap: float, floor: np.ndarray, n_eff: float, k: int) -> float:

@@ -23,11 +23,14 @@ from monitor.gap.candidates import (
     CONFOUNDED,
     KNOBS,
     Candidate,
+    Member,
     criterion,
+    default_member,
     fit_candidate,
     n_params,
 )
 from monitor.gap.decide import decide, pair_plan, within_noise
+from monitor.gap.families import fit_family
 from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sense
 from monitor.gap.prepare import Prepared, prepare
 from monitor.gap.segments import Segment, make_segments, split, spread
@@ -113,7 +116,7 @@ def _score(c: Candidate, sums: S.SegmentSums, floor: np.ndarray, gap0: float, n_
     c.heldout_mse = sums.mse()
     c.heldout_gap = S.gap(c.heldout_mse, floor)
     c.heldout_reduction = S.reduction(gap0, c.heldout_gap)
-    c.criterion = criterion(c.heldout_gap, floor, n_eff, n_params(c.effects))
+    c.criterion = criterion(c.heldout_gap, floor, n_eff, n_params(c.effects, c.members))
 
 
 def diagnose(
@@ -167,10 +170,19 @@ def _diagnose(
     lap("calibrate")
     say("calibrated " + _percent(base.factors))
 
+    member_sums: dict[int, S.SegmentSums] = {}
+
     def scored(c: Candidate) -> Candidate:
-        sums[c.name] = held_ev.sums(c.factors, c.effects)
+        kept = member_sums.pop(id(c), None)
+        sums[c.name] = kept if kept is not None else held_ev.sums(c.factors, c.effects)
         _score(c, sums[c.name], floor, base.gap0, base.n_eff)
         return c
+
+    def judge(c: Candidate) -> float:
+        """A family member's held-out criterion (its sums kept for ``scored``)."""
+        member_sums[id(c)] = held_ev.sums(c.factors, c.effects)
+        _score(c, member_sums[id(c)], floor, base.gap0, base.n_eff)
+        return c.criterion
 
     # 2. Every effect on the calibrated machine (with the tolerances it trades off against
     # refitted), then the best few with all the tolerances refitted jointly.
@@ -183,8 +195,11 @@ def _diagnose(
             free = [k for k in tol if k.name in CONFOUNDED.get(name, ())]
             local = CONFOUNDED_LOCAL_STARTS if free else 1
             c = scored(
-                fit_candidate([name], fit_ev.residual, base.factors, free, None, local_starts=local)
+                fit_family(
+                    name, fit_ev.residual, base.factors, free, local, judge, base.cal.fit_cost
+                )
             )
+            member_sums.clear()
         singles.append(c)
         say(
             f"[{i + 1}/{len(effects)}] {name}: held-out reduction {c.heldout_reduction:+.2f} "
@@ -199,7 +214,14 @@ def _diagnose(
             if c.name == sensorcal.NAME:
                 r = sensorcal.refit_with_tolerances(prep, fit_segs, fit_ev.predict, c, tol)
             else:
-                r = fit_candidate([c.effects[0].name], fit_ev.residual, base.factors, tol, starts)
+                r = fit_candidate(
+                    [c.effects[0].name],
+                    fit_ev.residual,
+                    base.factors,
+                    tol,
+                    starts,
+                    members=c.members or None,
+                )
             r = scored(r)
             say(f"refit {r.name} with tolerances: held-out reduction {r.heldout_reduction:+.2f}")
             if r.criterion < c.criterion:
@@ -226,7 +248,10 @@ def _diagnose(
         for a, b in pair_plan(singles, sums[singles[0].name], floor):
             first, other = by_name[a], by_name[b]
             starts = [(first.factors, (*first.effects, *other.effects))]
-            c = scored(fit_candidate([a, b], fit_ev.residual, first.factors, (), starts))
+            members = [m for x in (first, other) for m in (x.members or member_defaults(x))]
+            c = scored(
+                fit_candidate([a, b], fit_ev.residual, first.factors, (), starts, members=members)
+            )
             pairs.append(c)
             say(f"pair {c.name}: held-out reduction {c.heldout_reduction:+.2f}")
     lap("pairs")
@@ -253,6 +278,11 @@ def _diagnose(
         idx,
         timings,
     )
+
+
+def member_defaults(c: Candidate) -> list[Member]:
+    """The default formulation of each of a candidate's effects."""
+    return [default_member(e.name) for e in c.effects]
 
 
 def _percent(factors: dict[str, float]) -> str:

@@ -80,7 +80,8 @@ def fit(
     local_starts: int = 1,
 ) -> FitResult:
     """Minimise ``sum(residual(values)**2)`` with every knob inside its bounds, by local
-    fits from the ``local_starts`` best starting points (the best result kept)."""
+    fits from the ``local_starts`` best starting points (the best result kept).  With
+    ``max_iterations`` 0, only the starting points are evaluated and the best returned."""
     calls = 0
 
     def values_of(u: np.ndarray) -> dict[str, float]:
@@ -112,6 +113,8 @@ def fit(
 
     costs = [float(np.mean(jac.value(p) ** 2)) for p in points]
     best_u, best_cost = points[int(np.argmin(costs))], min(costs)
+    if max_iterations <= 0:  # a screen: the best starting point, no local fit
+        return FitResult(values_of(best_u), best_cost, calls)
     for i in np.argsort(costs, kind="stable")[: max(local_starts, 1)]:
         u, cost = local(points[i], max_iterations)
         if cost < best_cost:

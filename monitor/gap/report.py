@@ -14,7 +14,7 @@ import numpy as np
 from monitor.gap import calibrate as cal_mod
 from monitor.gap import sensorcal
 from monitor.gap import where as W
-from monitor.gap.candidates import KNOBS, Candidate
+from monitor.gap.candidates import Candidate, default_member
 from monitor.gap.diagnose import Diagnosis
 from monitor.gap.predict import predict
 from monitor.gap.score import compared, normalised
@@ -42,8 +42,9 @@ def simulate_all(diag: Diagnosis, machine: MachineParams) -> Traces:
     return Traces(nominal, corrected)
 
 
-def effect_params(effect: Effect) -> dict[str, dict]:
-    """Values keyed by the effect's ``--effect`` parameter names, with units.
+def effect_params(effect: Effect, fitted: set[str] | None = None) -> dict[str, dict]:
+    """Values keyed by the effect's ``--effect`` parameter names, with units; ``fitted``
+    names the fitted ones (default: those of the effect's default formulation).
 
     ``sensor_calibration`` is keyed by the signal instead (``PA_gain``, ``PA_offset_bar``:
     the contract's names), with the same plain values under ``sensor_calibration``."""
@@ -55,7 +56,8 @@ def effect_params(effect: Effect) -> dict[str, dict]:
         }
         out[effect.name] = {k: round(float(v), 6) for k, (v, _) in keys.items()}
         return out
-    fitted = {k.name for k in KNOBS[effect.name]}
+    if fitted is None:
+        fitted = {k.name for k in default_member(effect.name).knobs}
     if effect.name == "cylinder_friction":
         fitted.add("static_n")
     spec = CATALOGUE[effect.name]
@@ -69,13 +71,24 @@ def effect_params(effect: Effect) -> dict[str, dict]:
     }
 
 
+def member_names(c: Candidate) -> dict[str, str]:
+    """Which formulation of each effect's family fitted (``default`` for one-member ones)."""
+    members = c.members or tuple(default_member(e.name) for e in c.effects)
+    return {e.name: m.name for e, m in zip(c.effects, members, strict=True)}
+
+
 def _candidate_row(c: Candidate) -> dict:
     return {
         "effect": c.name,
         "heldout_reduction": round(float(c.heldout_reduction), 4),
         "criterion": round(float(c.criterion), 2),
         "params": {e.name: _plain_params(e) for e in c.effects},
+        "members": member_names(c),
     }
+
+
+def _fitted(member) -> set[str]:
+    return {k.name for k in member.knobs}
 
 
 def _plain_params(e: Effect) -> dict[str, float]:
@@ -119,17 +132,25 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
     )
     params: dict[str, dict] = {}
     also_params = None
+    member = also_member = None
     if chosen is not None:
         by_name = {e.name: e for e in chosen.effects}
-        params = effect_params(by_name[diag.verdict])
+        mem = dict(zip(by_name, chosen.members or map(default_member, by_name), strict=True))
+        params = effect_params(by_name[diag.verdict], _fitted(mem[diag.verdict]))
+        member = mem[diag.verdict].name
         if diag.also is not None:
-            also_params = effect_params(by_name[diag.also])
+            also_params = effect_params(by_name[diag.also], _fitted(mem[diag.also]))
+            also_member = mem[diag.also].name
     duration = float(prep.t[-1] - prep.t[0])
     return {
         "verdict": diag.verdict,
         "also": diag.also,
         "params": params,
         "also_params": also_params,
+        # Which formulation of the effect's family fitted (issue 18; "default" for effects
+        # with one formulation).
+        "member": member,
+        "also_member": also_member,
         "calibrated": cal_mod.describe(machine, chosen.factors if chosen else diag.factors),
         "confidence": round(float(diag.confidence), 3),
         "where": {
@@ -191,6 +212,8 @@ def summary_text(report: dict) -> str:
         )
     else:
         lines.append(f"Verdict: {v} ({_fmt_params(report['params'])})")
+        if report.get("member") not in (None, "default"):
+            lines.append(f"Formulation: {report['member']} (of the {v} family)")
         if report["also"]:
             lines.append(f"Also:    {report['also']} ({_fmt_params(report['also_params'])})")
         lo, hi = sh["heldout_reduction_ci90"]
@@ -222,7 +245,11 @@ def summary_text(report: dict) -> str:
         )
     lines += ["", "Candidates (held-out gap removed, best first):"]
     for row in report["ranking"]:
-        lines.append(f"  {row['effect']:22s} {100 * row['heldout_reduction']:6.1f} %")
+        mem = ", ".join(m for m in row["members"].values() if m != "default")
+        lines.append(
+            f"  {row['effect']:22s} {100 * row['heldout_reduction']:6.1f} %"
+            + (f"  ({mem})" if mem else "")
+        )
     for row in report["pairs"]:
         lines.append(f"  pair {row['effect']:17s} {100 * row['heldout_reduction']:6.1f} %")
     lines += ["", "Where (calibrated nominal simulator, all segments):"]

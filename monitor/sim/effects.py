@@ -92,12 +92,29 @@ CATALOGUE: dict[str, EffectSpec] = {
                     1.4,
                     "gas compression exponent (1 isothermal, 1.4 adiabatic)",
                 ),
+                ParamSpec(
+                    "dissolved_at_bar",
+                    "bar",
+                    30.0,
+                    2.0,
+                    200.0,
+                    "law dissolving: gauge pressure at which all the air has gone into solution",
+                ),
+            ),
+            (
+                ChoiceSpec(
+                    "law",
+                    ("free_air", "dissolving"),
+                    "free_air",
+                    "mixture law: free_air keeps the air as gas at every pressure (Simscape); "
+                    "dissolving lets it go into solution linearly up to dissolved_at_bar",
+                ),
             ),
         ),
         EffectSpec(
             "oil_viscosity",
-            "pump leakage and part of the cylinder friction follow oil viscosity, "
-            "from OilTemp through the Walther equation (ASTM D341)",
+            "leakage (pump, piston seal, valve clearances) and part of the cylinder friction "
+            "follow oil viscosity, from OilTemp through the Walther equation (ASTM D341)",
             (
                 ParamSpec("nu40_cst", "cSt", 46.0, 15.0, 150.0, "kinematic viscosity at 40 degC"),
                 ParamSpec("nu100_cst", "cSt", 6.8, 3.0, 20.0, "kinematic viscosity at 100 degC"),
@@ -117,6 +134,23 @@ CATALOGUE: dict[str, EffectSpec] = {
                     1.0,
                     "share of the viscous friction that scales with viscosity",
                 ),
+                ParamSpec(
+                    "piston_leak_lpm_per_100bar",
+                    "L/min",
+                    0.0,
+                    0.0,
+                    5.0,
+                    "leakage across the piston seal (A<->B) at 100 bar and 40 degC (laminar)",
+                ),
+                ParamSpec(
+                    "valve_leak_lpm_per_100bar",
+                    "L/min",
+                    0.0,
+                    0.0,
+                    2.0,
+                    "clearance leakage of each closed metering edge (P->A, P->B, A->T, B->T) "
+                    "at 100 bar and 40 degC (laminar)",
+                ),
             ),
         ),
         EffectSpec(
@@ -134,6 +168,23 @@ CATALOGUE: dict[str, EffectSpec] = {
                     1.0,
                     100.0,
                     "velocity over which static friction decays to Coulomb",
+                ),
+                ParamSpec(
+                    "stribeck_exponent",
+                    "-",
+                    2.0,
+                    0.5,
+                    2.0,
+                    "shape of that decay, exp(-|v/vs|^e): 2 Gaussian, 1 exponential",
+                ),
+                ParamSpec(
+                    "smoothing_velocity_mm_s",
+                    "mm/s",
+                    0.5,
+                    0.2,
+                    20.0,
+                    "friction sign is tanh(v/this): 0.5 is nearly sharp; a few mm/s "
+                    "stand in for presliding (a smooth, LuGre-like reversal)",
                 ),
             ),
         ),
@@ -179,7 +230,8 @@ CATALOGUE: dict[str, EffectSpec] = {
         ),
         EffectSpec(
             "load_variation",
-            "gravity load on the rod changes with boom position (lever geometry)",
+            "gravity load on the rod changes with boom position (lever geometry): slope "
+            "and curvature",
             (
                 ParamSpec(
                     "slope_n_per_mm",
@@ -189,6 +241,14 @@ CATALOGUE: dict[str, EffectSpec] = {
                     20.0,
                     "load change per mm of stroke about the reference position",
                 ),
+                ParamSpec(
+                    "curvature_n_per_mm2",
+                    "N/mm^2",
+                    0.0,
+                    -0.1,
+                    0.1,
+                    "quadratic term: load change of curvature x (mm from the reference)^2",
+                ),
             ),
         ),
         EffectSpec(
@@ -196,8 +256,14 @@ CATALOGUE: dict[str, EffectSpec] = {
             "one measured signal reads gain x true + offset (after noise-free physics; the "
             "plant and the other signals are untouched)",
             (
-                ParamSpec("gain", "-", 1.1, 0.5, 1.5,
-                          "reading per true value (1 when only offset is given)"),
+                ParamSpec(
+                    "gain",
+                    "-",
+                    1.1,
+                    0.5,
+                    1.5,
+                    "reading per true value (1 when only offset is given)",
+                ),
                 ParamSpec(
                     "offset",
                     "signal unit",

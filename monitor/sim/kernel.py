@@ -27,7 +27,13 @@ PUMPDYN_ON, TAU_PUMP = 34, 35
 HOSE_ON, E_WALL = 36, 37
 SLOPE = 38
 V_EPS = 39
-N_PARAMS = 40
+# Family members (issue 18): every default keeps the formulas above bit for bit.
+PISTON_LEAK, VALVE_LEAK = 40, 41  # m^3/(s Pa) at 40 degC, laminar: divided by nu/nu40
+STRIBECK_EXP = 42  # -, exp(-|v/vs|^e): 2 Gaussian (default), 1 exponential
+CURV = 43  # N/m^2, gravity load curvature about XREF
+AIR_LAW, AIR_PCRIT = 44, 45  # 0 free air (Simscape), 1 air dissolving up to AIR_PCRIT (Pa abs)
+# 46-49 free for this family work; 50-69 are reserved for other additions.
+N_PARAMS = 70
 
 # --- input columns (per input sample, linearly interpolated inside a step) ----------------
 IN_SPOOL, IN_DISP, IN_SPEED_RPS, IN_VISC_RATIO, IN_LEAK, IN_STROKE_LIM, IN_UNDERLAP = range(7)
@@ -67,11 +73,28 @@ def _compliance(p: float, vol: float, hose_vol: float, prm: np.ndarray) -> float
         n = prm[AIR_N]
         r = (P_ATM / pabs) ** (1.0 / n)
         a = prm[AIR_ALPHA]
-        beta = beta * (1.0 + a * r) / (1.0 + a * r * beta / (n * pabs))
+        if prm[AIR_LAW] > 0.0:
+            beta = _dissolving_air(beta, pabs, a, r, n, prm[AIR_PCRIT])
+        else:
+            beta = beta * (1.0 + a * r) / (1.0 + a * r * beta / (n * pabs))
     c = vol / beta
     if prm[HOSE_ON] > 0.0:
         c += hose_vol / prm[E_WALL]
     return c
+
+
+@jit(inline="always")
+def _dissolving_air(beta: float, pabs: float, a: float, r: float, n: float, pcrit: float) -> float:
+    """Effective modulus (Pa) when the free air (fraction a at atmosphere, compressed
+    polytropically: r = (p0/p)^(1/n)) also dissolves, linearly in pressure from atmospheric
+    (all free) to ``pcrit`` (none free).  Gas volume a*theta*r per liquid volume, so
+    d(gas)/dp = a*(theta*r/(n p) + r/(pcrit - p0)) below pcrit; pure liquid above it."""
+    if pabs >= pcrit:
+        return beta
+    span = pcrit - P_ATM
+    theta = _clip((pcrit - pabs) / span, 0.0, 1.0)
+    soft = a * (theta * r / (n * pabs) + r / span)
+    return (1.0 + a * theta * r) / (1.0 / beta + soft)
 
 
 @jit(inline="always")
@@ -130,6 +153,15 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
     q_pb = _orifice(kv * o_neg, pp - pb, dpl)
     q_at = _orifice(kv * o_neg, pa - ptank, dpl)
     q_il = u[IN_LEAK] * (pa - pb)
+    if prm[VISC_ON] > 0.0 and (prm[PISTON_LEAK] > 0.0 or prm[VALVE_LEAK] > 0.0):
+        # Thin oil leaks across the piston seal and the spool's clearances too (laminar).
+        vr = u[IN_VISC_RATIO]
+        q_il += prm[PISTON_LEAK] * (pa - pb) / vr
+        kc = prm[VALVE_LEAK] / vr
+        q_pa += kc * (pp - pa)
+        q_pb += kc * (pp - pb)
+        q_at += kc * (pa - ptank)
+        q_bt += kc * (pb - ptank)
 
     # Pump: displacement command times the compensator's destroke, optionally lagged.
     target = _disp_target(pp, u, prm)
@@ -144,14 +176,17 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
 
     # Rod: pressure force against gravity (optionally position dependent) and friction.
     f_hyd = pa * prm[AA] - pb * prm[AB]
-    f_grav = prm[FGRAV] + prm[SLOPE] * (x - prm[XREF])
+    dx = x - prm[XREF]
+    f_grav = prm[FGRAV] + prm[SLOPE] * dx + prm[CURV] * dx * dx
     c = prm[CVISC]
     if prm[VISC_ON] > 0.0:
         c *= 1.0 - prm[FRIC_SHARE] + prm[FRIC_SHARE] * visc_ratio
     f_fric = c * v
     if prm[FRIC_ON] > 0.0:
         r = v / prm[VS]
-        f_fric += (prm[FC] + (prm[FS] - prm[FC]) * math.exp(-r * r)) * math.tanh(v / prm[V_EPS])
+        e = prm[STRIBECK_EXP]
+        decay = math.exp(-r * r) if e == 2.0 else math.exp(-(abs(r) ** e))
+        f_fric += (prm[FC] + (prm[FS] - prm[FC]) * decay) * math.tanh(v / prm[V_EPS])
     drive = f_hyd - f_grav
     stroke = prm[STROKE]
     # End stops: the rod rests on a stop while the net drive presses it there.

@@ -11,7 +11,8 @@ from monitor.sim.effects import Effect
 from monitor.sim.faults import Fault, fault_inputs
 from monitor.sim.machine import BAR, LPM, MachineParams
 
-#: Smoothing velocity of the friction sign (m/s): well below any speed of interest.
+#: Smoothing velocity of the friction sign (m/s) unless the effect sets one: well below any
+#: speed of interest.
 FRICTION_SMOOTHING_M_S = 5e-4
 
 
@@ -63,6 +64,8 @@ def pack_params(
     prm[K.E_WALL] = 1e9
     prm[K.AIR_N] = 1.4
     prm[K.VS] = 0.01
+    prm[K.STRIBECK_EXP] = 2.0
+    prm[K.AIR_PCRIT] = 1e7
     for effect in effects:
         _pack_effect(prm, effect)
     return prm
@@ -75,15 +78,22 @@ def _pack_effect(prm: np.ndarray, effect: Effect) -> None:
         prm[K.AIR_ON] = 1.0
         prm[K.AIR_ALPHA] = p["air_fraction"]
         prm[K.AIR_N] = p["polytropic_index"]
+        if effect.labels.get("law", "free_air") == "dissolving":
+            prm[K.AIR_LAW] = 1.0
+            prm[K.AIR_PCRIT] = p["dissolved_at_bar"] * BAR + K.P_ATM
     elif name == "oil_viscosity":
         prm[K.VISC_ON] = 1.0
         prm[K.LEAK_K] = p["pump_leak_lpm_per_100bar"] * LPM / (100 * BAR)
         prm[K.FRIC_SHARE] = p["friction_share"]
+        prm[K.PISTON_LEAK] = p["piston_leak_lpm_per_100bar"] * LPM / (100 * BAR)
+        prm[K.VALVE_LEAK] = p["valve_leak_lpm_per_100bar"] * LPM / (100 * BAR)
     elif name == "cylinder_friction":
         prm[K.FRIC_ON] = 1.0
         prm[K.FC] = p["coulomb_n"]
         prm[K.FS] = p["static_n"]
         prm[K.VS] = p["stribeck_velocity_mm_s"] * 1e-3
+        prm[K.STRIBECK_EXP] = p["stribeck_exponent"]
+        prm[K.V_EPS] = p["smoothing_velocity_mm_s"] * 1e-3
     elif name == "spool_dynamics":
         prm[K.SPOOL_ON] = 1.0
         prm[K.WN] = 2 * math.pi * p["natural_freq_hz"]
@@ -98,6 +108,7 @@ def _pack_effect(prm: np.ndarray, effect: Effect) -> None:
         prm[K.E_WALL] = p["wall_modulus_gpa"] * 1e9
     elif name == "load_variation":
         prm[K.SLOPE] = p["slope_n_per_mm"] * 1e3
+        prm[K.CURV] = p["curvature_n_per_mm2"] * 1e6
     elif name not in ("sensor_lag", "sensor_calibration"):  # these act on the sensor model
         raise ValueError(f"effect {name!r} has no kernel packing")
 
@@ -141,7 +152,8 @@ def rest_state(
     y = np.zeros(K.N_STATES)
     x = min(max(rod_pos_m, 0.0), m.stroke_m)
     pb = 2 * BAR  # a little trapped rod-side pressure
-    f_grav = m.gravity_load_n + prm[K.SLOPE] * (x - m.reference_rod_pos_m)
+    dx = x - m.reference_rod_pos_m
+    f_grav = m.gravity_load_n + prm[K.SLOPE] * dx + prm[K.CURV] * dx * dx
     y[K.S_PP] = m.compensator_full_pa if m.compensator_enabled else m.relief_crack_pa
     y[K.S_PB] = pb
     y[K.S_PA] = max((f_grav + pb * m.area_b_m2) / m.area_a_m2, 0.0)
