@@ -32,6 +32,7 @@ from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sens
 from monitor.gap.prepare import Prepared, prepare
 from monitor.gap.segments import Segment, make_segments, split, spread
 from monitor.gap.shrink import resamples
+from monitor.gap.suggest import suggest
 from monitor.io.recording import Recording
 from monitor.sim.effects import Effect
 from monitor.sim.machine import MachineParams
@@ -79,6 +80,9 @@ class Diagnosis:
     confidence: float
     boot_idx: np.ndarray
     timings_s: dict[str, float] = field(default_factory=dict)
+    #: For ``unexplained``: the terms to model next (``suggest.py``); empty otherwise.
+    suggestion: list[dict] = field(default_factory=list)
+    suggestion_tried: list[dict] = field(default_factory=list)
 
 
 class _Evaluator:
@@ -233,6 +237,18 @@ def _diagnose(
 
     idx = resamples(len(held))
     d = decide(noise_only, singles, pairs, sums, base.nominal, idx, floor)
+    lead = None
+    if d.verdict == "unexplained":
+        lead = suggest(
+            prep,
+            (fit_segs, fit_ev.plant, cal_mod.apply(fit_machine, base.factors)),
+            (held, held_ev.plant, cal_mod.apply(machine, base.factors)),
+            floor,
+            base.gap0,
+            base.n_eff,
+        )
+        say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
+        lap("suggest")
     timings["total"] = time.perf_counter() - clock
     return Diagnosis(
         prep,
@@ -252,6 +268,8 @@ def _diagnose(
         d.confidence,
         idx,
         timings,
+        lead.ranked if lead else [],
+        lead.tried if lead else [],
     )
 
 

@@ -150,6 +150,11 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
             "heldout_s": round(sum(s.duration_s() for s in diag.heldout), 1),
         },
         "timings_s": {k: round(v, 2) for k, v in diag.timings_s.items()},
+        **(
+            {"suggestion": diag.suggestion, "suggestion_tried": diag.suggestion_tried}
+            if diag.verdict == "unexplained"
+            else {}
+        ),
     }
 
 
@@ -159,6 +164,20 @@ def _fmt_params(params: dict[str, dict]) -> str:
         for k, v in params.items()
         if v.get("fitted")  # sensor_calibration's plain copy has no "fitted"
     )
+
+
+def _what_next(suggestion: list[dict]) -> list[str]:
+    """ "What to model next": the suggested terms, each with its held-out reduction."""
+    if not suggestion:
+        return []
+    out = ["What to model next:"]
+    for i, s in enumerate(suggestion):
+        plus = "" if i == 0 else " (together with the above)"
+        out.append(
+            f"  {s['term']} ({s['signal']}): {s['description']}; removes "
+            f"{100 * s['heldout_reduction']:.0f} % of the held-out gap{plus}"
+        )
+    return out
 
 
 def summary_text(report: dict) -> str:
@@ -189,6 +208,7 @@ def summary_text(report: dict) -> str:
             "Verdict: unexplained: no catalogue effect removes a clear share of the held-out "
             f"gap (best: {best['effect']}, {100 * best['heldout_reduction']:.0f} %)."
         )
+        lines += _what_next(report.get("suggestion") or [])
     else:
         lines.append(f"Verdict: {v} ({_fmt_params(report['params'])})")
         if report["also"]:

@@ -1,0 +1,270 @@
+"""A lead for ``unexplained``: which term, added to the simulator, explains the held-out gap.
+
+When no catalogue effect explains the gap, every term of a small library of physical
+shapes (``terms.py``: leakage between named volumes in dp, sqrt(dp) and dp^2, rod forces in
+velocity, sign(velocity), position and a periodic load, pump and valve settings;
+``sensorterms.py``: a sensor's gain, offset or delay) is added in turn to the
+tolerance-calibrated simulator, its one or two coefficients fitted on the calibration
+segments, and scored on the held-out segments like the effects (same held-out reduction,
+same penalised criterion).  The answer is sparse: the best term, and a second one only
+when the pair removes clearly more than the best alone (the rules a second effect meets).
+
+Cost: every plant term is screened with one Gauss-Newton step from the calibrated
+simulator (one finite-difference run of the fit segments per coefficient); the best few
+get one more step and a run of their own, the best three a held-out run.  The periodic
+load's frequency is the peak of the calibration residual's spectrum, so only its
+amplitude and phase are fitted (two linear coefficients).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from monitor.gap import score as S
+from monitor.gap.candidates import criterion
+from monitor.gap.decide import PAIR_GAIN, PAIR_MATERIAL
+from monitor.gap.predict import SegmentPlant, sense
+from monitor.gap.prepare import Prepared
+from monitor.gap.segments import Segment
+from monitor.gap.sensorterms import SensorTerm, fit_sensor_terms
+from monitor.gap.terms import PlantTerm, describe, library, periodic
+from monitor.sim.machine import MachineParams
+
+#: Plant terms refined (a second Gauss-Newton step and a run of their own) after screening.
+REFINE = 5
+#: Terms scored on the held-out part (the best by calibration cost; sensor terms extra).
+SCORED = 3
+#: Runners-up tried as the best term's partner.
+PAIR_POOL = 2
+#: The periodic load's frequency is searched in this band (Hz).
+PERIODIC_BAND_HZ = (0.1, 20.0)
+
+Pred = dict[str, np.ndarray]
+
+
+@dataclass
+class Fitted:
+    """A term (or a pair) with fitted coefficients and its scores."""
+
+    terms: tuple[PlantTerm | SensorTerm, ...]
+    coefs: tuple[np.ndarray, ...]  # per plant term (empty for a sensor term)
+    fit_cost: float
+    heldout_gap: float = math.inf
+    heldout_reduction: float = 0.0
+    criterion: float = math.inf
+
+    @property
+    def n_coefs(self) -> int:
+        return sum(len(c) if len(c) else 1 for c in self.coefs)
+
+
+@dataclass
+class Suggestions:
+    ranked: list[dict]  # the contract's ``suggestion`` (one or two entries)
+    tried: list[dict] = field(default_factory=list)  # every term scored on the held-out part
+
+
+class _Runs:
+    """Simulated readings of a set of segments for a set of terms on a calibrated machine."""
+
+    def __init__(
+        self, prep: Prepared, segments: Sequence[Segment], plant: SegmentPlant, m: MachineParams
+    ):
+        self.prep, self.segments, self.plant, self.machine = prep, list(segments), plant, m
+        self.base = sense(prep, self.segments, plant.traces(m, ()), ())
+
+    def pred(self, terms: Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]]) -> Pred:
+        m, corr = self.machine, {}
+        plant_terms = [(t, c) for t, c in terms if isinstance(t, PlantTerm)]
+        for t, c in plant_terms:
+            m, more = t.apply(m, c)
+            corr.update(more)
+        if plant_terms:
+            pred = sense(self.prep, self.segments, self.plant.traces(m, (), corr), ())
+        else:
+            pred = self.base
+        for t, _ in terms:
+            if isinstance(t, SensorTerm):
+                pred = t.apply(self.prep, self.segments, pred)
+        return pred
+
+    def residual(self, terms: Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]]) -> np.ndarray:
+        return S.stacked(self.prep, self.segments, self.pred(terms))
+
+
+def _gn_step(
+    runs: _Runs,
+    fixed: Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]],
+    term: PlantTerm,
+    c: np.ndarray,
+    r: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """One Gauss-Newton step of ``term``'s coefficients from ``c`` (residual ``r`` there):
+    forward differences, bounded; returns the new coefficients and the cost the linear
+    model predicts for them."""
+    cols = []
+    for i, h in enumerate(term.steps):
+        ci = c.copy()
+        ci[i] = ci[i] + h if ci[i] + h <= term.high[i] else ci[i] - h
+        cols.append((runs.residual([*fixed, (term, ci)]) - r) / (ci[i] - c[i]))
+    jac = np.column_stack(cols)
+    dc, *_ = np.linalg.lstsq(jac, -r, rcond=None)
+    new = np.clip(c + dc, term.low, term.high)
+    return new, float(np.mean((r + jac @ (new - c)) ** 2))
+
+
+def _fit_plant(runs: _Runs, term: PlantTerm, r0: np.ndarray, steps: int) -> Fitted:
+    """``term``'s coefficients from zero by ``steps`` Gauss-Newton steps; with one step, the
+    cost is the linear model's prediction (no run at the new point)."""
+    c, r = np.zeros(len(term.steps)), r0
+    cost0 = float(np.mean(r0**2))
+    new, predicted = _gn_step(runs, (), term, c, r)
+    if steps == 1:
+        return Fitted((term,), (new,), min(predicted, cost0))
+    best = Fitted((term,), (c,), cost0)
+    for k in range(steps):
+        r_new = runs.residual([(term, new)])
+        cost = float(np.mean(r_new**2))
+        if cost >= best.fit_cost:
+            break
+        best = Fitted((term,), (new,), cost)
+        if k + 1 < steps:
+            new, _ = _gn_step(runs, (), term, new, r_new)
+    return best
+
+
+def _sensor_fitted(runs: _Runs, t: SensorTerm) -> Fitted:
+    return Fitted((t,), (np.zeros(0),), float(np.mean(runs.residual([(t, np.zeros(0))]) ** 2)))
+
+
+def _pairs(f: Fitted) -> list[tuple[PlantTerm | SensorTerm, np.ndarray]]:
+    return list(zip(f.terms, f.coefs, strict=True))
+
+
+def periodic_frequency_hz(prep: Prepared, segments: Sequence[Segment], pred: Pred) -> float:
+    """The strongest line of the residual's spectrum in ``PERIODIC_BAND_HZ`` (summed over the
+    compared signals; the residual outside the segments set to zero, zero-padded eightfold
+    and the peak interpolated: a line's frequency to a small share of 1/duration)."""
+    r = S.normalised(prep, pred)
+    dt = float(prep.t[1] - prep.t[0])
+    mask = np.zeros(len(prep), dtype=bool)
+    for seg in segments:
+        mask[seg.scored] = True
+    n = 8 * len(prep)
+    power = np.zeros(n // 2 + 1)
+    for v in r.values():
+        x = np.where(mask & np.isfinite(v), v, 0.0)
+        x[mask] -= x[mask].mean()
+        power += np.abs(np.fft.rfft(x, n)) ** 2
+    freqs = np.fft.rfftfreq(n, dt)
+    band = np.flatnonzero((freqs >= PERIODIC_BAND_HZ[0]) & (freqs <= PERIODIC_BAND_HZ[1]))
+    i = int(band[np.argmax(power[band])])
+    a, b, c = np.log(power[i - 1 : i + 2] + 1e-300)
+    shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) < 0 else 0.0
+    return float((i + shift) * (freqs[1] - freqs[0]))
+
+
+def suggest(
+    prep: Prepared,
+    fit: tuple[Sequence[Segment], SegmentPlant, MachineParams],
+    held: tuple[Sequence[Segment], SegmentPlant, MachineParams],
+    floor: np.ndarray,
+    gap0: float,
+    n_eff: float,
+) -> Suggestions:
+    """Ranked correction terms for an ``unexplained`` gap.  ``fit`` and ``held``: the
+    segments, their plant and the tolerance-calibrated machine (at the fits' step and the
+    configured step); ``gap0`` the calibrated simulator's held-out gap and ``n_eff`` its
+    effective sample size (as for the effects)."""
+    fit_runs, held_runs = _Runs(prep, *fit), _Runs(prep, *held)
+    r0 = fit_runs.residual(())
+    f_hz = periodic_frequency_hz(prep, fit[0], fit_runs.base)
+    plant_terms = [*library(), periodic(2 * math.pi * f_hz)]
+
+    screened = sorted((_fit_plant(fit_runs, t, r0, 1) for t in plant_terms),
+                      key=lambda f: f.fit_cost)  # fmt: skip
+    refined = [_fit_plant(fit_runs, f.terms[0], r0, 2) for f in screened[:REFINE]]
+    refined.sort(key=lambda f: f.fit_cost)
+    sensors = sorted((_sensor_fitted(fit_runs, t) for t in fit_sensor_terms(prep, fit[0],
+                      fit_runs.base)), key=lambda f: f.fit_cost)  # fmt: skip
+
+    def scored(f: Fitted) -> Fitted:
+        sums = S.segment_sums(prep, held_runs.segments, held_runs.pred(_pairs(f)))
+        f.heldout_gap = S.gap(sums.mse(), floor)
+        f.heldout_reduction = S.reduction(gap0, f.heldout_gap)
+        f.criterion = criterion(f.heldout_gap, floor, n_eff, f.n_coefs)
+        return f
+
+    singles = [scored(f) for f in [*refined[:SCORED], *sensors[:1]]]
+    singles.sort(key=lambda f: f.criterion)
+    best = singles[0]
+    ranked = [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
+    pair = _best_pair(fit_runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
+    if (
+        pair is not None
+        and pair.heldout_gap <= (1 - PAIR_GAIN) * best.heldout_gap
+        and best.heldout_gap - pair.heldout_gap >= PAIR_MATERIAL * gap0
+    ):
+        ranked = [
+            _entry(best, pair.terms[0], pair.coefs[0], best.heldout_reduction),
+            _entry(pair, pair.terms[1], pair.coefs[1], pair.heldout_reduction),
+        ]
+    tried = [_entry(f, f.terms[0], f.coefs[0], f.heldout_reduction) for f in singles]
+    return Suggestions(ranked, tried)
+
+
+def _best_pair(
+    runs: _Runs, best: Fitted, others: Sequence[Fitted], r0: np.ndarray, scored
+) -> Fitted | None:
+    """The best term with each runner-up: the runner-up's coefficients refitted (one
+    Gauss-Newton step) with the best term in place; the pair with the best criterion."""
+    out = []
+    for other in others:
+        if other.terms[0] == best.terms[0]:
+            continue
+        fixed = _pairs(best)
+        t = other.terms[0]
+        if isinstance(t, SensorTerm):
+            pred = runs.pred(fixed)
+            found = [s for s in fit_sensor_terms(runs.prep, runs.segments, pred) if s.key == t.key]
+            if not found:
+                continue
+            f = Fitted((*best.terms, found[0]), (*best.coefs, np.zeros(0)), 0.0)
+        else:  # (the plant runs first and a sensor term reads them, whatever the order)
+            r = runs.residual([*fixed, *_pairs(other)])
+            c, _ = _gn_step(runs, fixed, t, other.coefs[0], r)
+            f = Fitted((*best.terms, t), (*best.coefs, c), 0.0)
+        f.fit_cost = float(np.mean(runs.residual(_pairs(f)) ** 2))
+        out.append(scored(f))
+    return min(out, key=lambda f: f.criterion) if out else None
+
+
+def _entry(f: Fitted, term: PlantTerm | SensorTerm, c: np.ndarray, reduction: float) -> dict:
+    """The contract's object: term, signal, description, coefficient (with ``unit``) and
+    the held-out reduction (of this term together with the ones ranked above it)."""
+    if isinstance(term, SensorTerm):
+        coef, text, unit, shape = term.coefficient, term.description(), term.unit, term.kind
+        extra: dict = {}
+    else:
+        coef, text = describe(term, c)
+        unit, shape = term.unit, term.shape
+        extra = {}
+        if term.frequency_hz is not None:
+            extra = {
+                "frequency_hz": round(term.frequency_hz, 5),
+                "phase_deg": round(math.degrees(math.atan2(-c[1], c[0])), 1),
+            }
+    return {
+        "term": term.kind,
+        "signal": term.signal,
+        "shape": shape,
+        "description": text,
+        "coefficient": round(float(coef), 6),
+        "unit": unit,
+        **extra,
+        "heldout_reduction": round(float(reduction), 4),
+    }
