@@ -241,8 +241,9 @@ def _diagnose(
     if d.verdict == "unexplained":
         lead = suggest(
             prep,
-            (fit_segs, fit_ev.plant, cal_mod.apply(fit_machine, base.factors)),
-            (held, held_ev.plant, cal_mod.apply(machine, base.factors)),
+            (fit_segs, fit_ev.plant, fit_machine),
+            (held, held_ev.plant, machine),
+            base.factors,
             floor,
             base.gap0,
             base.n_eff,

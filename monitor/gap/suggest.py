@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from monitor.gap import calibrate as cal_mod
 from monitor.gap import score as S
 from monitor.gap.candidates import criterion
 from monitor.gap.decide import PAIR_GAIN, PAIR_MATERIAL
@@ -53,6 +54,8 @@ class Fitted:
     terms: tuple[PlantTerm | SensorTerm, ...]
     coefs: tuple[np.ndarray, ...]  # per plant term (empty for a sensor term)
     fit_cost: float
+    factors: dict[str, float] | None = None  # tolerances refitted with the term (else: the
+    # calibration's)
     heldout_gap: float = math.inf
     heldout_reduction: float = 0.0
     criterion: float = math.inf
@@ -68,22 +71,33 @@ class Suggestions:
     tried: list[dict] = field(default_factory=list)  # every term scored on the held-out part
 
 
+Terms = Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]]
+
+
 class _Runs:
-    """Simulated readings of a set of segments for a set of terms on a calibrated machine."""
+    """Simulated readings of a set of segments for a set of terms on the nominal machine
+    ``m0`` with tolerance factors (the calibration's unless given)."""
 
     def __init__(
-        self, prep: Prepared, segments: Sequence[Segment], plant: SegmentPlant, m: MachineParams
+        self,
+        prep: Prepared,
+        segments: Sequence[Segment],
+        plant: SegmentPlant,
+        m0: MachineParams,
+        factors: dict[str, float],
     ):
-        self.prep, self.segments, self.plant, self.machine = prep, list(segments), plant, m
-        self.base = sense(prep, self.segments, plant.traces(m, ()), ())
+        self.prep, self.segments, self.plant, self.m0 = prep, list(segments), plant, m0
+        self.machine = cal_mod.apply(m0, factors)
+        self.base = sense(prep, self.segments, plant.traces(self.machine, ()), ())
 
-    def pred(self, terms: Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]]) -> Pred:
-        m, corr = self.machine, {}
+    def pred(self, terms: Terms, factors: dict[str, float] | None = None) -> Pred:
+        m = self.machine if factors is None else cal_mod.apply(self.m0, factors)
+        corr: dict[str, float] = {}
         plant_terms = [(t, c) for t, c in terms if isinstance(t, PlantTerm)]
         for t, c in plant_terms:
             m, more = t.apply(m, c)
             corr.update(more)
-        if plant_terms:
+        if plant_terms or factors is not None:
             pred = sense(self.prep, self.segments, self.plant.traces(m, (), corr), ())
         else:
             pred = self.base
@@ -92,16 +106,17 @@ class _Runs:
                 pred = t.apply(self.prep, self.segments, pred)
         return pred
 
-    def residual(self, terms: Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]]) -> np.ndarray:
-        return S.stacked(self.prep, self.segments, self.pred(terms))
+    def residual(self, terms: Terms, factors: dict[str, float] | None = None) -> np.ndarray:
+        return S.stacked(self.prep, self.segments, self.pred(terms, factors))
 
 
 def _gn_step(
     runs: _Runs,
-    fixed: Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]],
+    fixed: Terms,
     term: PlantTerm,
     c: np.ndarray,
     r: np.ndarray,
+    factors: dict[str, float] | None = None,
 ) -> tuple[np.ndarray, float]:
     """One Gauss-Newton step of ``term``'s coefficients from ``c`` (residual ``r`` there):
     forward differences, bounded; returns the new coefficients and the cost the linear
@@ -110,7 +125,7 @@ def _gn_step(
     for i, h in enumerate(term.steps):
         ci = c.copy()
         ci[i] = ci[i] + h if ci[i] + h <= term.high[i] else ci[i] - h
-        cols.append((runs.residual([*fixed, (term, ci)]) - r) / (ci[i] - c[i]))
+        cols.append((runs.residual([*fixed, (term, ci)], factors) - r) / (ci[i] - c[i]))
     jac = np.column_stack(cols)
     dc, *_ = np.linalg.lstsq(jac, -r, rcond=None)
     new = np.clip(c + dc, term.low, term.high)
@@ -135,6 +150,50 @@ def _fit_plant(runs: _Runs, term: PlantTerm, r0: np.ndarray, steps: int) -> Fitt
         if k + 1 < steps:
             new, _ = _gn_step(runs, (), term, new, r_new)
     return best
+
+
+#: Finite-difference step of a tolerance factor in the joint refit.
+_FACTOR_STEP = 0.02
+#: Gauss-Newton steps of the joint refit.
+JOINT_STEPS = 2
+
+
+def _refit_with_tolerances(runs: _Runs, f: Fitted, factors: dict[str, float]) -> Fitted:
+    """The best term's coefficients and every tolerance factor fitted jointly (a few
+    Gauss-Newton steps from the better of the calibrated and the nominal factors): the
+    calibration, made without the term, may have bent the machine towards it (an A->tank
+    leak takes mass, gravity load and volumes to their bounds)."""
+    term, tols = f.terms[0], cal_mod.TOLERANCES
+    assert isinstance(term, PlantTerm)
+    n = len(term.steps)
+    low = np.array([*term.low, *(1 - t.band for t in tols)])
+    high = np.array([*term.high, *(1 + t.band for t in tols)])
+    steps = np.array([*term.steps, *([_FACTOR_STEP] * len(tols))])
+
+    def fac(x: np.ndarray) -> dict[str, float]:
+        return {t.name: float(v) for t, v in zip(tols, x[n:], strict=True)}
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        return runs.residual([(term, x[:n])], fac(x))
+
+    starts = [np.array([*f.coefs[0], *(factors.get(t.name, 1.0) for t in tols)]),
+              np.array([*f.coefs[0], *([1.0] * len(tols))])]  # fmt: skip
+    tried = [(float(np.mean(r**2)), x, r) for x in starts for r in [residual(x)]]
+    cost, x, r = min(tried, key=lambda c: c[0])
+    for _ in range(JOINT_STEPS):
+        cols = []
+        for i, h in enumerate(steps):
+            xi = x.copy()
+            xi[i] = xi[i] + h if xi[i] + h <= high[i] else xi[i] - h
+            cols.append((residual(xi) - r) / (xi[i] - x[i]))
+        dx, *_ = np.linalg.lstsq(np.column_stack(cols), -r, rcond=None)
+        x_new = np.clip(x + dx, low, high)
+        r_new = residual(x_new)
+        cost_new = float(np.mean(r_new**2))
+        if cost_new >= cost:
+            break
+        cost, x, r = cost_new, x_new, r_new
+    return Fitted((term,), (x[:n],), cost, fac(x))
 
 
 def _sensor_fitted(runs: _Runs, t: SensorTerm) -> Fitted:
@@ -172,15 +231,16 @@ def suggest(
     prep: Prepared,
     fit: tuple[Sequence[Segment], SegmentPlant, MachineParams],
     held: tuple[Sequence[Segment], SegmentPlant, MachineParams],
+    factors: dict[str, float],
     floor: np.ndarray,
     gap0: float,
     n_eff: float,
 ) -> Suggestions:
     """Ranked correction terms for an ``unexplained`` gap.  ``fit`` and ``held``: the
-    segments, their plant and the tolerance-calibrated machine (at the fits' step and the
-    configured step); ``gap0`` the calibrated simulator's held-out gap and ``n_eff`` its
-    effective sample size (as for the effects)."""
-    fit_runs, held_runs = _Runs(prep, *fit), _Runs(prep, *held)
+    segments, their plant and the nominal machine (at the fits' step and the configured
+    step); ``factors`` the calibrated tolerances; ``gap0`` the calibrated simulator's
+    held-out gap and ``n_eff`` its effective sample size (as for the effects)."""
+    fit_runs, held_runs = _Runs(prep, *fit, factors), _Runs(prep, *held, factors)
     r0 = fit_runs.residual(())
     f_hz = periodic_frequency_hz(prep, fit[0], fit_runs.base)
     plant_terms = [*library(), periodic(2 * math.pi * f_hz)]
@@ -193,7 +253,7 @@ def suggest(
                       fit_runs.base)), key=lambda f: f.fit_cost)  # fmt: skip
 
     def scored(f: Fitted) -> Fitted:
-        sums = S.segment_sums(prep, held_runs.segments, held_runs.pred(_pairs(f)))
+        sums = S.segment_sums(prep, held_runs.segments, held_runs.pred(_pairs(f), f.factors))
         f.heldout_gap = S.gap(sums.mse(), floor)
         f.heldout_reduction = S.reduction(gap0, f.heldout_gap)
         f.criterion = criterion(f.heldout_gap, floor, n_eff, f.n_coefs)
@@ -201,6 +261,10 @@ def suggest(
 
     singles = [scored(f) for f in [*refined[:SCORED], *sensors[:1]]]
     singles.sort(key=lambda f: f.criterion)
+    if isinstance(singles[0].terms[0], PlantTerm):
+        joint = _refit_with_tolerances(fit_runs, singles[0], factors)
+        if joint.fit_cost < singles[0].fit_cost and scored(joint).criterion < singles[0].criterion:
+            singles[0] = joint
     best = singles[0]
     ranked = [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
     pair = _best_pair(fit_runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
@@ -226,19 +290,19 @@ def _best_pair(
     for other in others:
         if other.terms[0] == best.terms[0]:
             continue
-        fixed = _pairs(best)
+        fixed, fac = _pairs(best), best.factors
         t = other.terms[0]
         if isinstance(t, SensorTerm):
-            pred = runs.pred(fixed)
+            pred = runs.pred(fixed, fac)
             found = [s for s in fit_sensor_terms(runs.prep, runs.segments, pred) if s.key == t.key]
             if not found:
                 continue
-            f = Fitted((*best.terms, found[0]), (*best.coefs, np.zeros(0)), 0.0)
+            f = Fitted((*best.terms, found[0]), (*best.coefs, np.zeros(0)), 0.0, fac)
         else:  # (the plant runs first and a sensor term reads them, whatever the order)
-            r = runs.residual([*fixed, *_pairs(other)])
-            c, _ = _gn_step(runs, fixed, t, other.coefs[0], r)
-            f = Fitted((*best.terms, t), (*best.coefs, c), 0.0)
-        f.fit_cost = float(np.mean(runs.residual(_pairs(f)) ** 2))
+            r = runs.residual([*fixed, *_pairs(other)], fac)
+            c, _ = _gn_step(runs, fixed, t, other.coefs[0], r, fac)
+            f = Fitted((*best.terms, t), (*best.coefs, c), 0.0, fac)
+        f.fit_cost = float(np.mean(runs.residual(_pairs(f), fac) ** 2))
         out.append(scored(f))
     return min(out, key=lambda f: f.criterion) if out else None
 
@@ -267,4 +331,9 @@ def _entry(f: Fitted, term: PlantTerm | SensorTerm, c: np.ndarray, reduction: fl
         "unit": unit,
         **extra,
         "heldout_reduction": round(float(reduction), 4),
+        **(
+            {"tolerances_refitted_pct": {k: round(100 * (v - 1), 2) for k, v in f.factors.items()}}
+            if f.factors is not None
+            else {}
+        ),
     }
