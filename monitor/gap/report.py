@@ -166,10 +166,18 @@ def _fmt_params(params: dict[str, dict]) -> str:
     )
 
 
-def _what_next(suggestion: list[dict]) -> list[str]:
-    """ "What to model next": the suggested terms, each with its held-out reduction."""
+def _what_next(suggestion: list[dict], tried: list[dict]) -> list[str]:
+    """The lines "What to model next": the suggested terms, each with its held-out reduction
+    (or the best term tried, when none removes a material share)."""
     if not suggestion:
-        return []
+        if not tried:
+            return []
+        t = tried[0]
+        return [
+            "What to model next: no term of the correction library removes a material share "
+            f"of the held-out gap (best: {t['term']} {t['signal']}, "
+            f"{100 * t['heldout_reduction']:.0f} %)."
+        ]
     out = ["What to model next:"]
     for i, s in enumerate(suggestion):
         plus = "" if i == 0 else " (together with the above)"
@@ -208,7 +216,7 @@ def summary_text(report: dict) -> str:
             "Verdict: unexplained: no catalogue effect removes a clear share of the held-out "
             f"gap (best: {best['effect']}, {100 * best['heldout_reduction']:.0f} %)."
         )
-        lines += _what_next(report.get("suggestion") or [])
+        lines += _what_next(report.get("suggestion") or [], report.get("suggestion_tried") or [])
     else:
         lines.append(f"Verdict: {v} ({_fmt_params(report['params'])})")
         if report["also"]:

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 
 from monitor.gap import calibrate as cal_mod
 from monitor.gap import score as S
@@ -43,6 +44,13 @@ SCORED = 3
 PAIR_POOL = 2
 #: The periodic load's frequency is searched in this band (Hz).
 PERIODIC_BAND_HZ = (0.1, 20.0)
+#: A line's prominence is its power over the spectrum's local (log) mean within this (Hz):
+#: without RodPos the residual's power is largest below 0.5 Hz (the rod integrated from
+#: the flow drifts), and the strongest bin there is no line.
+PROMINENCE_WINDOW_HZ = 0.2
+#: A term is suggested only when it removes at least this share of the held-out gap (one
+#: that makes the held-out part worse is no lead).
+SUGGEST_MIN = 0.2
 
 Pred = dict[str, np.ndarray]
 
@@ -205,9 +213,10 @@ def _pairs(f: Fitted) -> list[tuple[PlantTerm | SensorTerm, np.ndarray]]:
 
 
 def periodic_frequency_hz(prep: Prepared, segments: Sequence[Segment], pred: Pred) -> float:
-    """The strongest line of the residual's spectrum in ``PERIODIC_BAND_HZ`` (summed over the
-    compared signals; the residual outside the segments set to zero, zero-padded eightfold
-    and the peak interpolated: a line's frequency to a small share of 1/duration)."""
+    """The most prominent line of the residual's spectrum in ``PERIODIC_BAND_HZ`` (power
+    summed over the compared signals, over its local mean; the residual outside the
+    segments set to zero, zero-padded eightfold and the peak interpolated: a line's
+    frequency to a small share of 1/duration)."""
     r = S.normalised(prep, pred)
     dt = float(prep.t[1] - prep.t[0])
     mask = np.zeros(len(prep), dtype=bool)
@@ -220,8 +229,11 @@ def periodic_frequency_hz(prep: Prepared, segments: Sequence[Segment], pred: Pre
         x[mask] -= x[mask].mean()
         power += np.abs(np.fft.rfft(x, n)) ** 2
     freqs = np.fft.rfftfreq(n, dt)
+    log_p = np.log(power + 1e-300)
+    width = max(int(PROMINENCE_WINDOW_HZ / (freqs[1] - freqs[0])), 3)
+    prominence = log_p - uniform_filter1d(log_p, width, mode="nearest")
     band = np.flatnonzero((freqs >= PERIODIC_BAND_HZ[0]) & (freqs <= PERIODIC_BAND_HZ[1]))
-    i = int(band[np.argmax(power[band])])
+    i = int(band[np.argmax(prominence[band])])
     a, b, c = np.log(power[i - 1 : i + 2] + 1e-300)
     shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) < 0 else 0.0
     return float((i + shift) * (freqs[1] - freqs[0]))
@@ -266,6 +278,9 @@ def suggest(
         if joint.fit_cost < singles[0].fit_cost and scored(joint).criterion < singles[0].criterion:
             singles[0] = joint
     best = singles[0]
+    tried = [_entry(f, f.terms[0], f.coefs[0], f.heldout_reduction) for f in singles]
+    if best.heldout_reduction < SUGGEST_MIN:
+        return Suggestions([], tried)
     ranked = [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
     pair = _best_pair(fit_runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
     if (
@@ -277,7 +292,6 @@ def suggest(
             _entry(best, pair.terms[0], pair.coefs[0], best.heldout_reduction),
             _entry(pair, pair.terms[1], pair.coefs[1], pair.heldout_reduction),
         ]
-    tried = [_entry(f, f.terms[0], f.coefs[0], f.heldout_reduction) for f in singles]
     return Suggestions(ranked, tried)
 
 
