@@ -12,6 +12,7 @@ from monitor.gap.calibrate import apply
 from monitor.gap.diagnose import diagnose
 from monitor.gap.report import build_report, simulate_all, summary_text
 from monitor.sim.cycles import make_cycle
+from monitor.sim.effects import parse_effect
 from monitor.sim.machine import BAR, LPM, load_machine
 from monitor.sim.simulate import simulate
 
@@ -70,3 +71,12 @@ def test_an_a_to_tank_leak_is_suggested_with_its_path_and_coefficient():
         assert first["coefficient"] == pytest.approx(coef, rel=0.10)
     assert first["heldout_reduction"] > 0.8
     assert len(rep["suggestion"]) <= 2
+
+
+def test_a_catalogue_effect_gets_no_suggestion():
+    rec = simulate(make_cycle("boom", SECONDS, 4), apply(M, MACHINE_TOLERANCE), seed=4,
+                   effects=[parse_effect("valve_deadband:overlap_pct=12")])  # fmt: skip
+    diag = diagnose(rec, M)
+    rep = build_report(diag, M, simulate_all(diag, M))
+    assert rep["verdict"] == "valve_deadband"
+    assert "suggestion" not in rep and "What to model next" not in summary_text(rep)

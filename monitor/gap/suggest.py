@@ -271,7 +271,12 @@ def suggest(
         f.criterion = criterion(f.heldout_gap, floor, n_eff, f.n_coefs)
         return f
 
-    singles = [scored(f) for f in [*refined[:SCORED], *sensors[:1]]]
+    # The periodic term is always scored: its frequency is the data's own line, and a load
+    # the calibration half absorbed can rank it low on the calibration part.
+    per = [f for f in refined[SCORED:] + screened[REFINE:] if f.terms[0].kind == "force_periodic"]
+    if per and per[0] in screened:
+        per = [_fit_plant(fit_runs, per[0].terms[0], r0, 2)]
+    singles = [scored(f) for f in [*refined[:SCORED], *per[:1], *sensors[:1]]]
     singles.sort(key=lambda f: f.criterion)
     if isinstance(singles[0].terms[0], PlantTerm):
         joint = _refit_with_tolerances(fit_runs, singles[0], factors)
