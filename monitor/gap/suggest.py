@@ -12,7 +12,7 @@ when the pair removes clearly more than the best alone (the rules a second effec
 Cost: every plant term is screened with one Gauss-Newton step from the calibrated
 simulator (one finite-difference run of the fit segments per coefficient); the best few
 get one more step and a run of their own, the best three a held-out run.  The periodic
-load's frequency is the peak of the calibration residual's spectrum, so only its
+load's frequency is one of a few lines of the calibration residual's spectrum, so only its
 amplitude and phase are fitted (two linear coefficients).
 """
 
@@ -212,11 +212,18 @@ def _pairs(f: Fitted) -> list[tuple[PlantTerm | SensorTerm, np.ndarray]]:
     return list(zip(f.terms, f.coefs, strict=True))
 
 
-def periodic_frequency_hz(prep: Prepared, segments: Sequence[Segment], pred: Pred) -> float:
-    """The most prominent line of the residual's spectrum in ``PERIODIC_BAND_HZ`` (power
-    summed over the compared signals, over its local mean; the residual outside the
-    segments set to zero, zero-padded eightfold and the peak interpolated: a line's
-    frequency to a small share of 1/duration)."""
+#: Candidate lines tried for the periodic load: the strongest and the most prominent.
+N_LINES = 2
+#: Lines closer than this (Hz) are one line.
+LINE_SEPARATION_HZ = 0.05
+
+
+def periodic_frequencies_hz(prep: Prepared, segments: Sequence[Segment], pred: Pred) -> list[float]:
+    """Candidate lines of the residual's spectrum in ``PERIODIC_BAND_HZ`` (power summed over
+    the compared signals; the residual outside the segments set to zero, zero-padded
+    eightfold and each peak interpolated: a line's frequency to a small share of
+    1/duration): the ``N_LINES`` strongest and the ``N_LINES`` most prominent (power over
+    the local mean of the log spectrum), whichever the plant fit then prefers."""
     r = S.normalised(prep, pred)
     dt = float(prep.t[1] - prep.t[0])
     mask = np.zeros(len(prep), dtype=bool)
@@ -228,15 +235,24 @@ def periodic_frequency_hz(prep: Prepared, segments: Sequence[Segment], pred: Pre
         x = np.where(mask & np.isfinite(v), v, 0.0)
         x[mask] -= x[mask].mean()
         power += np.abs(np.fft.rfft(x, n)) ** 2
-    freqs = np.fft.rfftfreq(n, dt)
+    df = 1.0 / (n * dt)
     log_p = np.log(power + 1e-300)
-    width = max(int(PROMINENCE_WINDOW_HZ / (freqs[1] - freqs[0])), 3)
+    width = max(int(PROMINENCE_WINDOW_HZ / df), 3)
     prominence = log_p - uniform_filter1d(log_p, width, mode="nearest")
-    band = np.flatnonzero((freqs >= PERIODIC_BAND_HZ[0]) & (freqs <= PERIODIC_BAND_HZ[1]))
-    i = int(band[np.argmax(prominence[band])])
-    a, b, c = np.log(power[i - 1 : i + 2] + 1e-300)
-    shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) < 0 else 0.0
-    return float((i + shift) * (freqs[1] - freqs[0]))
+    lo, hi = (int(round(f / df)) for f in PERIODIC_BAND_HZ)
+    out: list[float] = []
+    for score in (log_p, prominence):
+        s = score[lo:hi].copy()
+        for _ in range(N_LINES):
+            i = lo + int(np.argmax(s))
+            a, b, c = log_p[i - 1 : i + 2]
+            shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) < 0 else 0.0
+            f = (i + shift) * df
+            if all(abs(f - g) > LINE_SEPARATION_HZ for g in out):
+                out.append(float(f))
+            k = int(LINE_SEPARATION_HZ / df)
+            s[max(i - lo - k, 0) : i - lo + k + 1] = -np.inf
+    return out
 
 
 def suggest(
@@ -254,8 +270,8 @@ def suggest(
     held-out gap and ``n_eff`` its effective sample size (as for the effects)."""
     fit_runs, held_runs = _Runs(prep, *fit, factors), _Runs(prep, *held, factors)
     r0 = fit_runs.residual(())
-    f_hz = periodic_frequency_hz(prep, fit[0], fit_runs.base)
-    plant_terms = [*library(), periodic(2 * math.pi * f_hz)]
+    lines = periodic_frequencies_hz(prep, fit[0], fit_runs.base)
+    plant_terms = [*library(), *(periodic(2 * math.pi * f) for f in lines)]
 
     screened = sorted((_fit_plant(fit_runs, t, r0, 1) for t in plant_terms),
                       key=lambda f: f.fit_cost)  # fmt: skip
@@ -274,7 +290,9 @@ def suggest(
     # The periodic term is always scored: its frequency is the data's own line, and a load
     # the calibration half absorbed can rank it low on the calibration part.
     per = [f for f in refined[SCORED:] + screened[REFINE:] if f.terms[0].kind == "force_periodic"]
-    if per and per[0] in screened:
+    if any(f.terms[0].kind == "force_periodic" for f in refined[:SCORED]):
+        per = []
+    elif per and per[0] in screened:
         per = [_fit_plant(fit_runs, per[0].terms[0], r0, 2)]
     singles = [scored(f) for f in [*refined[:SCORED], *per[:1], *sensors[:1]]]
     singles.sort(key=lambda f: f.criterion)
