@@ -55,7 +55,7 @@ SUGGEST_MIN = 0.2
 Pred = dict[str, np.ndarray]
 
 
-@dataclass
+@dataclass(eq=False)
 class Fitted:
     """A term (or a pair) with fitted coefficients and its scores."""
 
@@ -289,11 +289,14 @@ def suggest(
 
     # The periodic term is always scored: its frequency is the data's own line, and a load
     # the calibration half absorbed can rank it low on the calibration part.
-    per = [f for f in refined[SCORED:] + screened[REFINE:] if f.terms[0].kind == "force_periodic"]
-    if any(f.terms[0].kind == "force_periodic" for f in refined[:SCORED]):
-        per = []
-    elif per and per[0] in screened:
-        per = [_fit_plant(fit_runs, per[0].terms[0], r0, 2)]
+    def periodic_in(fs: Sequence[Fitted]) -> list[Fitted]:
+        return [f for f in fs if f.terms[0].kind == "force_periodic"]
+
+    per: list[Fitted] = []
+    if not periodic_in(refined[:SCORED]):
+        per = periodic_in(refined[SCORED:])[:1]
+        if not per and periodic_in(screened[REFINE:]):
+            per = [_fit_plant(fit_runs, periodic_in(screened[REFINE:])[0].terms[0], r0, 2)]
     singles = [scored(f) for f in [*refined[:SCORED], *per[:1], *sensors[:1]]]
     singles.sort(key=lambda f: f.criterion)
     if isinstance(singles[0].terms[0], PlantTerm):
