@@ -37,7 +37,7 @@ from monitor.gap.terms import PlantTerm, describe, library, periodic
 from monitor.sim.machine import MachineParams
 
 #: Plant terms refined (a second Gauss-Newton step and a run of their own) after screening.
-REFINE = 5
+REFINE = 3
 #: Terms scored on the held-out part (the best by calibration cost; sensor terms extra).
 SCORED = 3
 #: Runners-up tried as the best term's partner.
@@ -213,7 +213,7 @@ def _pairs(f: Fitted) -> list[tuple[PlantTerm | SensorTerm, np.ndarray]]:
 
 
 #: Candidate lines tried for the periodic load: the strongest and the most prominent.
-N_LINES = 2
+N_LINES = 1
 #: Lines closer than this (Hz) are one line.
 LINE_SEPARATION_HZ = 0.05
 
