@@ -6,11 +6,15 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from monitor.gap.calibrate import apply
 from monitor.gap.diagnose import diagnose
 from monitor.gap.report import build_report, simulate_all, summary_text
+from monitor.gap.segments import Segment
+from monitor.gap.suggest import periodic_frequencies_hz
+from monitor.signals import MEASURED_NAMES
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import parse_effect
 from monitor.sim.machine import BAR, LPM, load_machine
@@ -80,3 +84,28 @@ def test_a_catalogue_effect_gets_no_suggestion():
     rep = build_report(diag, M, simulate_all(diag, M))
     assert rep["verdict"] == "valve_deadband"
     assert "suggestion" not in rep and "What to model next" not in summary_text(rep)
+
+
+class _Prep:
+    """What the spectrum needs of a prepared recording: time, signals, their scales."""
+
+    def __init__(self, t: np.ndarray, meas: dict[str, np.ndarray]):
+        self.t, self.meas, self.scale = t, meas, {n: 1.0 for n in meas}
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+def test_the_periodic_load_frequency_is_found_among_drift_and_noise():
+    # A synthetic residual, 300 s at 100 Hz seen only in 6 s segments every 30 s (as a fit
+    # budget spreads them): a 1.37 Hz line of 0.1, a drift ten times stronger below 0.3 Hz
+    # and white noise of 0.3.  A line's frequency is resolved to ~1/span (1/300 Hz).
+    rng = np.random.default_rng(0)
+    t = np.arange(30000) * 0.01
+    meas = {n: 0.3 * rng.standard_normal(t.size) for n in MEASURED_NAMES}
+    meas["PA"] += 0.1 * np.sin(2 * np.pi * 1.37 * t + 0.4) + np.sin(2 * np.pi * 0.05 * t)
+    prep = _Prep(t, meas)
+    segments = [Segment(i, i + 600, False) for i in range(0, 29400, 3000)]
+    pred = {n: np.zeros(t.size) for n in meas}
+    found = periodic_frequencies_hz(prep, segments, pred)
+    assert any(abs(f - 1.37) < 1 / 300 for f in found)

@@ -226,14 +226,19 @@ def periodic_frequencies_hz(prep: Prepared, segments: Sequence[Segment], pred: P
     the local mean of the log spectrum), whichever the plant fit then prefers."""
     r = S.normalised(prep, pred)
     dt = float(prep.t[1] - prep.t[0])
-    mask = np.zeros(len(prep), dtype=bool)
-    for seg in segments:
-        mask[seg.scored] = True
     n = 8 * len(prep)
     power = np.zeros(n // 2 + 1)
     for v in r.values():
-        x = np.where(mask & np.isfinite(v), v, 0.0)
-        x[mask] -= x[mask].mean()
+        x = np.zeros(len(prep))
+        for seg in segments:
+            # Each segment's quadratic trend removed: a residual drifting over seconds (a rod
+            # integrated from the flow, a slow load) would otherwise leak through the
+            # segments' on-off pattern into lines at multiples of its repetition rate.
+            y = np.nan_to_num(v[seg.scored])
+            k = np.arange(y.size)
+            if y.size > 2:
+                y = y - np.polyval(np.polyfit(k, y, 2), k)
+            x[seg.scored] = y
         power += np.abs(np.fft.rfft(x, n)) ** 2
     df = 1.0 / (n * dt)
     log_p = np.log(power + 1e-300)
