@@ -24,9 +24,11 @@ how it works:
 verdict: an effect name, `none` (gap within sensor noise) or `unexplained` (no effect
 removes a clear share of the held-out gap).  JSON keys: verdict, also, params, calibrated,
 confidence, where{signals,regimes,bands,windows}, ranking, shrink{before,after,
-heldout_reduction}.  A `sensor_calibration` verdict (gain and offset of one measured
-signal) has params.sensor_calibration keyed by the signal: PA_gain, PA_offset_bar,
-QP_offset_lpm, RodPos_offset_mm, ...
+heldout_reduction}; for `unexplained` also suggestion (what to model next: one or two
+terms with term, signal, description, coefficient, unit, heldout_reduction).
+A `sensor_calibration` verdict (gain and offset of one measured signal) has
+params.sensor_calibration keyed by the signal: PA_gain, PA_offset_bar, QP_offset_lpm,
+RodPos_offset_mm, ...
 
 exit status: 0 diagnosed (whatever the verdict), 2 bad argument/config/file or commands
 missing, 3 a recording the tool cannot use (too short, no hydraulic signals, no motion,

@@ -35,6 +35,7 @@ from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sens
 from monitor.gap.prepare import Prepared, prepare
 from monitor.gap.segments import Segment, make_segments, split, spread
 from monitor.gap.shrink import resamples
+from monitor.gap.suggest import suggest
 from monitor.io.recording import Recording
 from monitor.sim.effects import Effect
 from monitor.sim.machine import MachineParams
@@ -82,6 +83,9 @@ class Diagnosis:
     confidence: float
     boot_idx: np.ndarray
     timings_s: dict[str, float] = field(default_factory=dict)
+    #: For ``unexplained``: the terms to model next (``suggest.py``); empty otherwise.
+    suggestion: list[dict] = field(default_factory=list)
+    suggestion_tried: list[dict] = field(default_factory=list)
 
 
 class _Evaluator:
@@ -258,6 +262,19 @@ def _diagnose(
 
     idx = resamples(len(held))
     d = decide(noise_only, singles, pairs, sums, base.nominal, idx, floor)
+    lead = None
+    if d.verdict == "unexplained":
+        lead = suggest(
+            prep,
+            (fit_segs, fit_ev.plant, fit_machine),
+            (held, held_ev.plant, machine),
+            base.factors,
+            floor,
+            base.gap0,
+            base.n_eff,
+        )
+        say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
+        lap("suggest")
     timings["total"] = time.perf_counter() - clock
     return Diagnosis(
         prep,
@@ -277,6 +294,8 @@ def _diagnose(
         d.confidence,
         idx,
         timings,
+        lead.ranked if lead else [],
+        lead.tried if lead else [],
     )
 
 

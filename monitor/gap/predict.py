@@ -9,7 +9,7 @@ afterwards, so fitting a sensor effect reuses the plant traces.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -151,10 +151,16 @@ class SegmentPlant:
             self._visc = (key, packed)
         return self._visc[1]
 
-    def traces(self, machine: MachineParams, effects: Sequence[Effect]) -> list[PlantTrace]:
-        """One plant run per segment (1 kHz record) with the plant effects of ``effects``."""
+    def traces(
+        self,
+        machine: MachineParams,
+        effects: Sequence[Effect],
+        corrections: Mapping[str, float] | None = None,
+    ) -> list[PlantTrace]:
+        """One plant run per segment (1 kHz record) with the plant effects of ``effects``
+        (and data-driven ``corrections``, ``monitor.sim.corrections``)."""
         fx = plant_effects(effects)
-        prm = pack_params(machine, fx)
+        prm = pack_params(machine, fx, corrections)
         cal = _calibration(effects)
         return [
             run_packed(

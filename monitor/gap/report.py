@@ -171,6 +171,11 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
             "heldout_s": round(sum(s.duration_s() for s in diag.heldout), 1),
         },
         "timings_s": {k: round(v, 2) for k, v in diag.timings_s.items()},
+        **(
+            {"suggestion": diag.suggestion, "suggestion_tried": diag.suggestion_tried}
+            if diag.verdict == "unexplained"
+            else {}
+        ),
     }
 
 
@@ -180,6 +185,28 @@ def _fmt_params(params: dict[str, dict]) -> str:
         for k, v in params.items()
         if v.get("fitted")  # sensor_calibration's plain copy has no "fitted"
     )
+
+
+def _what_next(suggestion: list[dict], tried: list[dict]) -> list[str]:
+    """The lines "What to model next": the suggested terms, each with its held-out reduction
+    (or the best term tried, when none removes a material share)."""
+    if not suggestion:
+        if not tried:
+            return []
+        t = tried[0]
+        return [
+            "What to model next: no term of the correction library removes a material share "
+            f"of the held-out gap (best: {t['term']} {t['signal']}, "
+            f"{100 * t['heldout_reduction']:.0f} %)."
+        ]
+    out = ["What to model next:"]
+    for i, s in enumerate(suggestion):
+        plus = "" if i == 0 else " (together with the above)"
+        out.append(
+            f"  {s['term']} ({s['signal']}): {s['description']}; removes "
+            f"{100 * s['heldout_reduction']:.0f} % of the held-out gap{plus}"
+        )
+    return out
 
 
 def summary_text(report: dict) -> str:
@@ -210,6 +237,7 @@ def summary_text(report: dict) -> str:
             "Verdict: unexplained: no catalogue effect removes a clear share of the held-out "
             f"gap (best: {best['effect']}, {100 * best['heldout_reduction']:.0f} %)."
         )
+        lines += _what_next(report.get("suggestion") or [], report.get("suggestion_tried") or [])
     else:
         lines.append(f"Verdict: {v} ({_fmt_params(report['params'])})")
         if report.get("member") not in (None, "default"):

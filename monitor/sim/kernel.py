@@ -32,12 +32,21 @@ PISTON_LEAK, VALVE_LEAK = 40, 41  # m^3/(s Pa) at 40 degC, laminar: divided by n
 STRIBECK_EXP = 42  # -, exp(-|v/vs|^e): 2 Gaussian (default), 1 exponential
 CURV = 43  # N/m^2, gravity load curvature about XREF
 AIR_LAW, AIR_PCRIT = 44, 45  # 0 free air (Simscape), 1 air dissolving up to AIR_PCRIT (Pa abs)
-# 46-49 free for this family work; 50-69 are reserved for other additions.
+# 46-49 free.
+# 50-69: data-driven corrections (monitor/sim/corrections.py, the ``suggestion`` of an
+# ``unexplained`` diagnosis).  Every one is zero in the nominal model, and a zero one
+# leaves the simulation bit-identical (its arithmetic is skipped).
+LEAK_PT_LIN, LEAK_PT_SQRT, LEAK_AT_LIN, LEAK_AT_SQRT = 50, 51, 52, 53
+LEAK_BT_LIN, LEAK_BT_SQRT, LEAK_AB_LIN, LEAK_AB_SQRT = 54, 55, 56, 57
+F_VEL, F_SIGN, F_POS, F_PER_COS, F_PER_SIN, F_PER_W = 58, 59, 60, 61, 62, 63
+KV_PA_REL, KV_PB_REL, KV_AT_REL, KV_BT_REL = 64, 65, 66, 67
+LEAK_AT_SQ, CORR_ON = 68, 69
 N_PARAMS = 70
 
 # --- input columns (per input sample, linearly interpolated inside a step) ----------------
 IN_SPOOL, IN_DISP, IN_SPEED_RPS, IN_VISC_RATIO, IN_LEAK, IN_STROKE_LIM, IN_UNDERLAP = range(7)
-N_INPUTS = 7
+IN_TIME = 7  # the recording's time (s): a periodic correction is periodic in it
+N_INPUTS = 8
 
 # --- states ------------------------------------------------------------------------------
 S_PP, S_PA, S_PB, S_X, S_V, S_XS, S_VS, S_DISP = range(8)
@@ -119,6 +128,49 @@ def _pump_flow(y: np.ndarray, u: np.ndarray, prm: np.ndarray, target: float) -> 
 
 
 @jit(inline="always")
+def _leak(k_lin: float, k_sqrt: float, dp: float, dp_lam: float) -> float:
+    """A correction leakage (m^3/s): laminar k_lin*dp plus orifice-like k_sqrt*sqrt(dp)."""
+    q = 0.0
+    if k_lin != 0.0:
+        q += k_lin * dp
+    if k_sqrt != 0.0:
+        q += _orifice(k_sqrt, dp, dp_lam)
+    return q
+
+
+@jit(inline="always")
+def _edge_corrections(q_pa: float, q_bt: float, q_pb: float, q_at: float, prm: np.ndarray):
+    """Metering edge flows scaled by (1 + relative gain change) per edge."""
+    if prm[KV_PA_REL] != 0.0:
+        q_pa *= 1.0 + prm[KV_PA_REL]
+    if prm[KV_BT_REL] != 0.0:
+        q_bt *= 1.0 + prm[KV_BT_REL]
+    if prm[KV_PB_REL] != 0.0:
+        q_pb *= 1.0 + prm[KV_PB_REL]
+    if prm[KV_AT_REL] != 0.0:
+        q_at *= 1.0 + prm[KV_AT_REL]
+    return q_pa, q_bt, q_pb, q_at
+
+
+@jit(inline="always")
+def _force_corrections(
+    f_load: float, f_fric: float, x: float, v: float, t: float, prm: np.ndarray
+) -> tuple[float, float]:
+    """Correction forces on the rod (N): position and periodic terms act as load, velocity
+    and sign(velocity) terms as friction."""
+    if prm[F_POS] != 0.0:
+        f_load += prm[F_POS] * (x - prm[XREF])
+    if prm[F_PER_COS] != 0.0 or prm[F_PER_SIN] != 0.0:
+        w = prm[F_PER_W] * t
+        f_load += prm[F_PER_COS] * math.cos(w) + prm[F_PER_SIN] * math.sin(w)
+    if prm[F_VEL] != 0.0:
+        f_fric += prm[F_VEL] * v
+    if prm[F_SIGN] != 0.0:
+        f_fric += prm[F_SIGN] * math.tanh(v / prm[V_EPS])
+    return f_load, f_fric
+
+
+@jit(inline="always")
 def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
     """Write dy/dt into ``dy``; return the pump outlet flow QP in m^3/s."""
     pp = max(y[S_PP], 0.0)
@@ -162,6 +214,13 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         q_pb += kc * (pp - pb)
         q_at += kc * (pa - ptank)
         q_bt += kc * (pb - ptank)
+    if prm[CORR_ON] > 0.0:
+        q_pa, q_bt, q_pb, q_at = _edge_corrections(q_pa, q_bt, q_pb, q_at, prm)
+        q_il += _leak(prm[LEAK_AB_LIN], prm[LEAK_AB_SQRT], pa - pb, dpl)
+        q_at += _leak(prm[LEAK_AT_LIN], prm[LEAK_AT_SQRT], pa - ptank, dpl)
+        if prm[LEAK_AT_SQ] != 0.0:
+            q_at += prm[LEAK_AT_SQ] * (pa - ptank) * abs(pa - ptank)
+        q_bt += _leak(prm[LEAK_BT_LIN], prm[LEAK_BT_SQRT], pb - ptank, dpl)
 
     # Pump: displacement command times the compensator's destroke, optionally lagged.
     target = _disp_target(pp, u, prm)
@@ -172,6 +231,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
     qp = _pump_flow(y, u, prm, target)
     visc_ratio = u[IN_VISC_RATIO] if prm[VISC_ON] > 0.0 else 1.0
     q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
+    if prm[CORR_ON] > 0.0:
+        q_relief += _leak(prm[LEAK_PT_LIN], prm[LEAK_PT_SQRT], pp - ptank, dpl)
     dy[S_PP] = (qp - q_relief - q_pa - q_pb) / _compliance(pp, prm[V_LINE], prm[V_LINE], prm)
 
     # Rod: pressure force against gravity (optionally position dependent) and friction.
@@ -187,6 +248,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         e = prm[STRIBECK_EXP]
         decay = math.exp(-r * r) if e == 2.0 else math.exp(-(abs(r) ** e))
         f_fric += (prm[FC] + (prm[FS] - prm[FC]) * decay) * math.tanh(v / prm[V_EPS])
+    if prm[CORR_ON] > 0.0:
+        f_grav, f_fric = _force_corrections(f_grav, f_fric, x, v, u[IN_TIME], prm)
     drive = f_hyd - f_grav
     stroke = prm[STROKE]
     # End stops: the rod rests on a stop while the net drive presses it there.

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
 from monitor.sim import kernel as K
+from monitor.sim.corrections import pack_corrections
 from monitor.sim.effects import Effect
 from monitor.sim.faults import Fault, fault_inputs
 from monitor.sim.machine import BAR, LPM, MachineParams
@@ -33,9 +35,12 @@ def viscosity_cst(temp_c: np.ndarray, nu40_cst: float, nu100_cst: float) -> np.n
 
 
 def pack_params(
-    machine: MachineParams, effects: list[Effect] | tuple[Effect, ...] = ()
+    machine: MachineParams,
+    effects: list[Effect] | tuple[Effect, ...] = (),
+    corrections: Mapping[str, float] | None = None,
 ) -> np.ndarray:
-    """The kernel's parameter vector for a machine with the given effects switched on."""
+    """The kernel's parameter vector for a machine with the given effects switched on and
+    the given data-driven ``corrections`` (``monitor.sim.corrections``, SI) added."""
     m = machine
     prm = np.zeros(K.N_PARAMS)
     prm[K.BETA] = m.bulk_modulus_pa
@@ -68,6 +73,8 @@ def pack_params(
     prm[K.AIR_PCRIT] = 1e7
     for effect in effects:
         _pack_effect(prm, effect)
+    if corrections:
+        pack_corrections(prm, corrections)
     return prm
 
 
@@ -141,6 +148,7 @@ def pack_inputs(
     u[:, K.IN_LEAK] = f["piston_leak_m3_s_pa"]
     u[:, K.IN_STROKE_LIM] = f["stroke_limit"]
     u[:, K.IN_UNDERLAP] = f["underlap"]
+    u[:, K.IN_TIME] = t_s
     return u
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +60,7 @@ def run_plant(
     rod_pos0_m: float = 0.1,
     record_period_s: float | None = RECORD_PERIOD_S,
     state0: np.ndarray | None = None,
+    corrections: Mapping[str, float] | None = None,
 ) -> PlantTrace:
     """Integrate the plant driven by ``commands``; ``record_period_s=None`` records every step.
 
@@ -68,7 +70,7 @@ def run_plant(
     """
     check_commands(commands)
     input_dt = float(commands.t[1] - commands.t[0])
-    prm = pack_params(machine, effects)
+    prm = pack_params(machine, effects, corrections)
     u = pack_inputs(
         commands.t,
         commands["SpoolCmd"],
@@ -124,6 +126,7 @@ def simulate(
     seed: int | None = 0,
     rod_pos0_m: float = 0.1,
     sensors: SensorParams | None = None,
+    corrections: Mapping[str, float] | None = None,
 ) -> Recording:
     """Contract signals at the commands' sample times; ``seed=None`` gives noise-free output.
 
@@ -134,7 +137,7 @@ def simulate(
     names = [e.name for e in effects]
     if len(set(names)) != len(names):
         raise ConfigError(f"an effect is given twice: {', '.join(names)}")
-    trace = run_plant(commands, machine, faults, effects, rod_pos0_m)
+    trace = run_plant(commands, machine, faults, effects, rod_pos0_m, corrections=corrections)
     rng = np.random.default_rng(seed) if seed is not None else None
     delay_s = tau_s = 0.0
     cal: dict[str, tuple[float, float]] = {}  # signal: (gain, offset in its unit)
