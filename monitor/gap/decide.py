@@ -31,8 +31,8 @@ from monitor.gap.shrink import boot_gap, boot_mse, boot_reduction
 #: every signal (a perfect simulator sits at 1).
 NONE_RATIO = 2.0
 #: Below this multiple on every signal, a gap that no effect explains significantly is
-#: still ``none`` (not ``unexplained``): it is what a tolerance calibration with one factor
-#: for three volumes leaves on a healthy machine of the type.
+#: still ``none`` (not ``unexplained``): it is what a tolerance calibration leaves on a
+#: healthy machine of the type.
 MARGINAL_RATIO = 4.0
 #: An effect must remove at least this share of the held-out gap to be named ...
 EXPLAIN_MIN = 0.5
