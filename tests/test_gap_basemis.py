@@ -100,3 +100,18 @@ def test_base_mismatch_with_a_small_structured_part_no_effect_explains_is_none()
             False, [c], [], {c.name: worse}, nominal, IDX, FLOOR, ({c.name: worse_s}, nominal_s)
         )
         assert (d.verdict, d.chosen) == (verdict, None)
+
+
+def test_an_effects_own_fast_part_is_not_base_mismatch():
+    # The calibrated simulator: fast part 0.03 of a gap of 0.04 per signal (as above).  With
+    # the effect: whole 0.02 (gap 0.01), smoothed 0.0022 (structured 0.002), so its fast
+    # part is 0.008: only that is base mismatch, 0.008 / 0.04 = 20 % of the gap.
+    rep = basemis.report(
+        _sums([0.05] * N_SEG),
+        _sums([0.0102] * N_SEG),
+        FLOOR,
+        ("PA", "PB"),
+        (_sums([0.02] * N_SEG), _sums([0.0022] * N_SEG)),
+    )
+    assert rep["share"] == pytest.approx(0.2)
+    assert rep["signals"]["PA"]["structured_nrmse"] == pytest.approx(0.1, abs=1e-5)

@@ -142,7 +142,13 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
         "pairs": [_candidate_row(c) for c in diag.pairs],
         "shrink": shrink,
         "base_mismatch": (
-            basemis.report(diag.nominal, diag.smooth_nominal, diag.floor, compared(prep))
+            basemis.report(
+                diag.nominal,
+                diag.smooth_nominal,
+                diag.floor,
+                compared(prep),
+                (after, diag.smooth[chosen.name]) if chosen is not None else None,
+            )
             if diag.smooth_nominal is not None
             else None
         ),
