@@ -7,9 +7,11 @@ and stay narrower than what an effect would need to hide in them; viscous fricti
 also stands in for the friction law's details, keeps +-30 %.
 
 The three oil volumes vary separately (hoses and cylinders of another batch): ``volumes``
-scales all three (the cap-side dead volume is its reported value), ``volume_b`` and
-``line_volume`` scale the rod side and the pump line further, relative to it.  The effects
-that trade off against the volumes (air, hose compliance) refit only the common factor.
+scales both cylinder dead volumes (the cap side is its reported value), ``volume_b`` the
+rod side further, relative to it, and ``line_volume`` the pump line on its own.  The line
+is not stacked on the common factor: at -20 % x -20 % (0.32 L) its pressure is so stiff
+that the fits' coarser step departs from the configured one by half the noise.  The
+effects that trade off against the volumes (air, hose compliance) refit ``volumes`` only.
 """
 
 from __future__ import annotations
@@ -40,11 +42,7 @@ TOLERANCES: tuple[Tolerance, ...] = (
     Tolerance("viscous_friction", ("viscous_friction_n_s_m",), "N s/m", 1.0, 0.30),
     Tolerance("valve_gain", ("valve_rated_flow_m3_s",), "L/min at rated dp", 6e4, 0.20),
     Tolerance(
-        "volumes",
-        ("dead_volume_a_m3", "dead_volume_b_m3", "line_volume_m3"),
-        "L (cap-side dead volume)",
-        1e3,
-        0.20,
+        "volumes", ("dead_volume_a_m3", "dead_volume_b_m3"), "L (cap-side dead volume)", 1e3, 0.2
     ),
     # Relative to ``volumes``: a +-15 % rod side on a +-15 % cap side is within +-35 % of
     # it at the extremes, within +-20 % for nearly all draws.
