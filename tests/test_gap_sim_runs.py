@@ -64,15 +64,7 @@ def test_the_fits_coarser_step_stays_well_inside_the_sensor_noise():
     prep = prepare(rec, M)
     _, held = split(make_segments(prep))
     stiff = cal_mod.apply(
-        M,
-        {
-            "volumes": 0.8,
-            "volume_b": 0.8,
-            "line_volume": 0.8,
-            "mass": 0.8,
-            "valve_gain": 1.2,
-            "viscous_friction": 0.7,
-        },  # fmt: skip
+        M, {"volumes": 0.85, "mass": 0.85, "valve_gain": 1.1, "viscous_friction": 0.7}
     )
     coarse = stiff.with_changes(step_s=stiff.step_s * FIT_STEP_FACTOR)
     assert coarse.step_s > M.step_s

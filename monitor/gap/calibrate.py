@@ -2,16 +2,8 @@
 
 A real machine differs from the nominal values by a few percent; if the tool did not
 calibrate those first, a heavier boom or a stiffer valve would be taken for a missing
-effect.  The bands cover machines drawn within +-15 % of nominal with a margin (+-20 %),
-and stay narrower than what an effect would need to hide in them; viscous friction, which
-also stands in for the friction law's details, keeps +-30 %.
-
-The three oil volumes vary separately (hoses and cylinders of another batch): ``volumes``
-scales both cylinder dead volumes (the cap side is its reported value), ``volume_b`` the
-rod side further, relative to it, and ``line_volume`` the pump line on its own.  The line
-is not stacked on the common factor: at -20 % x -20 % (0.32 L) its pressure is so stiff
-that the fits' coarser step departs from the configured one by half the noise.  The
-effects that trade off against the volumes (air, hose compliance) refit ``volumes`` only.
+effect.  The bands are wider than the few percent a machine varies by, narrower than what
+an effect would need to hide in them.
 """
 
 from __future__ import annotations
@@ -37,28 +29,27 @@ class Tolerance:
 
 
 TOLERANCES: tuple[Tolerance, ...] = (
-    Tolerance("mass", ("mass_kg",), "kg", 1.0, 0.20),
-    Tolerance("gravity_load", ("gravity_load_n",), "N", 1.0, 0.20),
+    Tolerance("mass", ("mass_kg",), "kg", 1.0, 0.15),
+    Tolerance("gravity_load", ("gravity_load_n",), "N", 1.0, 0.10),
     Tolerance("viscous_friction", ("viscous_friction_n_s_m",), "N s/m", 1.0, 0.30),
-    Tolerance("valve_gain", ("valve_rated_flow_m3_s",), "L/min at rated dp", 6e4, 0.20),
+    Tolerance("valve_gain", ("valve_rated_flow_m3_s",), "L/min at rated dp", 6e4, 0.10),
     Tolerance(
-        "volumes", ("dead_volume_a_m3", "dead_volume_b_m3"), "L (cap-side dead volume)", 1e3, 0.2
+        "volumes",
+        ("dead_volume_a_m3", "dead_volume_b_m3", "line_volume_m3"),
+        "L (cap-side dead volume)",
+        1e3,
+        0.15,
     ),
-    # Relative to ``volumes``: a +-15 % rod side on a +-15 % cap side is within +-35 % of
-    # it at the extremes, within +-20 % for nearly all draws.
-    Tolerance("volume_b", ("dead_volume_b_m3",), "L (rod-side dead volume)", 1e3, 0.20),
-    Tolerance("line_volume", ("line_volume_m3",), "L (pump line)", 1e3, 0.20),
 )
 
 
 def apply(machine: MachineParams, factors: dict[str, float]) -> MachineParams:
-    """``machine`` with every tolerance field multiplied by its factor (missing: 1); a field
-    under two tolerances (the rod-side volume) by both."""
+    """``machine`` with every tolerance field multiplied by its factor (missing: 1)."""
     changes: dict[str, float] = {}
     for tol in TOLERANCES:
         f = factors.get(tol.name, 1.0)
         for name in tol.fields:
-            changes[name] = changes.get(name, getattr(machine, name)) * f
+            changes[name] = getattr(machine, name) * f
     return machine.with_changes(**changes)
 
 
@@ -77,14 +68,11 @@ def describe(machine: MachineParams, factors: dict[str, float]) -> dict[str, dic
     configuration assumes, or the band took up part of an effect: either way the user is
     told rather than the gap silently absorbed)."""
     out = {}
-    fitted = apply(machine, factors)
     for tol in TOLERANCES:
         f = factors.get(tol.name, 1.0)
         nominal = getattr(machine, tol.fields[0]) * tol.to_unit
         out[tol.name] = {
-            # The field's fitted value (the rod side: both factors); the change is this
-            # tolerance's own factor.
-            "value": round(getattr(fitted, tol.fields[0]) * tol.to_unit, 6),
+            "value": round(nominal * f, 6),
             "unit": tol.unit,
             "nominal": round(nominal, 6),
             "change_pct": round(100 * (f - 1), 2),
