@@ -10,18 +10,16 @@ command change.
 The catalogue's effects act on what the duty cycle drives: leakage, friction, load and
 gains change the slow balance of flows and forces; lags, compliance and pump or spool
 dynamics change how the pressures follow the commands, which are rate-limited to 200 %/s
-over phases of 1-4 s.  What an effect changes therefore persists over a phase (a level,
-a slope, a delay of the whole move), below 1-2 Hz, where the commands have their power.
-So the residual is split by a centred moving average over the half second a transient
-lasts, ``SMOOTH_S`` (first null at 1 / SMOOTH_S = 2 Hz, gain 0.97 at 0.25 Hz):
+over phases of 1-4 s.  What an effect changes therefore shows below a few hertz, where
+the commands have their power.  So the residual is split by a centred moving average of
+``SMOOTH_S`` (first null at 1 / SMOOTH_S = 5 Hz, gain 0.8 at 1.7 Hz, 0.99 at 0.25 Hz).
+A longer average (0.5 s, null at 2 Hz) was tried: it also took a periodic load at 1.7 Hz,
+an out-of-catalogue disturbance, for base mismatch and called it ``none``.
 
 - the *structured* gap: the smoothed residual's mean square above the smoothed noise
   (white noise through a W-sample average keeps 1/W of its variance);
-- the *base mismatch*: the rest of the gap (ringing, the shape of transients), above the
-  noise.
-
-Measured on a healthy blind-plant machine: 50-70 % of the gap is base mismatch with a 0.5 s
-average, 40-50 % with 0.2 s (docs/benchmarks.md, 2026-11-25).
+- the *base mismatch*: the rest of the gap (ringing, the sharp part of transients), above
+  the noise.
 
 An effect is judged on the structured gap as well as the whole (``decide.py``), and
 ``none`` also covers a simulator whose structured residual is below a practical level on
@@ -40,8 +38,8 @@ from monitor.gap.score import SegmentSums, gap, normalised
 from monitor.gap.segments import Segment
 from monitor.signals import SAMPLE_RATE_HZ
 
-#: Width of the moving average that keeps the structured part (s): first null at 2 Hz.
-SMOOTH_S = 0.5
+#: Width of the moving average that keeps the structured part (s): first null at 5 Hz.
+SMOOTH_S = 0.2
 #: A structured residual below this share of the signal's standard deviation (NRMSE above
 #: the noise), on every signal, does not change what the simulator is good for: 2 % of the
 #: spread of a boom pressure (~50 bar) is 1 bar, the pressure sensors' own accuracy class.
