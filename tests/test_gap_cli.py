@@ -87,6 +87,11 @@ def test_report_keeps_the_contract_keys(deadband_run):
         assert (report_dir / name).stat().st_size > 1000
     first = (report_dir / "summary.txt").read_text().splitlines()[0]
     assert first.startswith(f"Gap mostly in {rep['where']['signals'][0]['name']}")
+    # The second line says which part of the gap is base mismatch.
+    second = (report_dir / "summary.txt").read_text().splitlines()[1]
+    bm = rep["base_mismatch"]
+    assert second.startswith(f"Base mismatch: {100 * bm['share']:.0f} % of the gap")
+    assert 0.0 <= bm["share"] <= 1.0 and set(bm["signals"]) == compared
 
 
 def test_a_tolerance_at_its_bound_is_said_in_the_json_and_the_first_lines(deadband_run):

@@ -9,6 +9,11 @@ over the tolerance-calibrated simulator is significant under the block bootstrap
 that half of the resampled held-out parts do not show is tolerance or noise, not an effect.
 A second effect is named only when the pair's gain over the best single effect is
 significant in the same sense and removes a material share of the gap.
+
+With the smoothed (structured) sums (``basemis.py``), the same two tests also run on the
+structured gap alone: an effect that removes most of what an effect can produce, but not
+the base mismatch above 5 Hz, is named; and a gap that no effect explains is ``none``
+when its structured part is below the practical level on every signal.
 """
 
 from __future__ import annotations
@@ -17,16 +22,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monitor.gap import basemis
 from monitor.gap.candidates import Candidate
-from monitor.gap.score import SegmentSums
+from monitor.gap.score import SegmentSums, gap, reduction
 from monitor.gap.shrink import boot_gap, boot_mse, boot_reduction
 
 #: ``none``: held-out mean squared residual below this multiple of the noise floor on
 #: every signal (a perfect simulator sits at 1).
 NONE_RATIO = 2.0
 #: Below this multiple on every signal, a gap that no effect explains significantly is
-#: still ``none`` (not ``unexplained``): it is what a tolerance calibration with one factor
-#: for three volumes leaves on a healthy machine of the type.
+#: still ``none`` (not ``unexplained``): it is what a tolerance calibration leaves on a
+#: healthy machine of the type.
 MARGINAL_RATIO = 4.0
 #: An effect must remove at least this share of the held-out gap to be named ...
 EXPLAIN_MIN = 0.5
@@ -85,8 +91,12 @@ def decide(
     nominal: SegmentSums,
     idx: np.ndarray,
     floor: np.ndarray,
+    structured: tuple[dict[str, SegmentSums], SegmentSums] | None = None,
 ) -> Decision:
-    """Verdict, second effect, the chosen candidate and a bootstrap confidence (0..1)."""
+    """Verdict, second effect, the chosen candidate and a bootstrap confidence (0..1).
+
+    ``structured``: the smoothed sums per candidate name and of the calibrated simulator
+    (None: judge the whole gap only)."""
     if noise_only:
         # Share of resamples in which every signal stays within the noise band.
         conf = float(np.mean(np.all(boot_mse(nominal, idx) < NONE_RATIO * floor, axis=1)))
@@ -94,7 +104,19 @@ def decide(
     best = singles[0]
     red_b = boot_reduction(nominal, sums[best.name], idx, floor)
     gain_b = boot_gap(nominal, idx, floor) - boot_gap(sums[best.name], idx, floor)
-    if best.heldout_reduction < EXPLAIN_MIN or np.mean(gain_b > 0) < SIGNIFICANT:
+    explains = best.heldout_reduction >= EXPLAIN_MIN and np.mean(gain_b > 0) >= SIGNIFICANT
+    if not explains and structured is not None:
+        s_conf = _structured_share(best, structured, idx, floor)
+        if s_conf is not None:
+            return Decision(best.effects[0].name, None, best, s_conf)
+    if not explains:
+        if structured is not None and basemis.practically_small(
+            structured[1], basemis.smoothed_floor(floor)
+        ):
+            # What is left is base mismatch and a structured part too small to matter.
+            conf = boot_mse(structured[1], idx) - basemis.smoothed_floor(floor)
+            small = np.sqrt(np.maximum(conf, 0.0)) < basemis.PRACTICAL_NRMSE
+            return Decision("none", None, None, float(np.mean(np.all(small, axis=1))))
         if within_noise(nominal, floor, MARGINAL_RATIO):
             conf = np.all(boot_mse(nominal, idx) < MARGINAL_RATIO * floor, axis=1)
             return Decision("none", None, None, float(np.mean(conf)))
@@ -126,3 +148,26 @@ def decide(
         runner = sums[singles[1].name]
         wins &= boot_gap(sums[best.name], idx, floor) < boot_gap(runner, idx, floor)
     return Decision(best.effects[0].name, None, best, float(np.mean(wins)))
+
+
+def _structured_share(
+    best: Candidate,
+    structured: tuple[dict[str, SegmentSums], SegmentSums],
+    idx: np.ndarray,
+    floor: np.ndarray,
+) -> float | None:
+    """Confidence that ``best`` explains the structured gap (None: it does not).
+
+    Named when it removes at least ``EXPLAIN_MIN`` of the calibrated simulator's structured
+    gap and its structured gain is significant under the block bootstrap."""
+    smooth, nominal_s = structured
+    if best.name not in smooth:
+        return None
+    floor_s = basemis.smoothed_floor(floor)
+    after = smooth[best.name]
+    red = reduction(gap(nominal_s.mse(), floor_s), gap(after.mse(), floor_s))
+    gain = boot_gap(nominal_s, idx, floor_s) - boot_gap(after, idx, floor_s)
+    if red < EXPLAIN_MIN or np.mean(gain > 0) < SIGNIFICANT:
+        return None
+    red_b = boot_reduction(nominal_s, after, idx, floor_s)
+    return float(np.mean((red_b >= EXPLAIN_MIN) & (gain > 0)))

@@ -16,9 +16,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from monitor.errors import NoHydraulicDataError
+from monitor.gap import basemis, sensorcal
 from monitor.gap import calibrate as cal_mod
 from monitor.gap import score as S
-from monitor.gap import sensorcal
 from monitor.gap.candidates import (
     CONFOUNDED,
     KNOBS,
@@ -86,6 +86,9 @@ class Diagnosis:
     #: For ``unexplained``: the terms to model next (``suggest.py``); empty otherwise.
     suggestion: list[dict] = field(default_factory=list)
     suggestion_tried: list[dict] = field(default_factory=list)
+    # The same, on the smoothed (structured) residual: see ``basemis.py``.
+    smooth: dict[str, S.SegmentSums] = field(default_factory=dict)
+    smooth_nominal: S.SegmentSums | None = None
 
 
 class _Evaluator:
@@ -114,6 +117,16 @@ class _Evaluator:
 
     def sums(self, factors: dict[str, float], effects: Sequence[Effect]) -> S.SegmentSums:
         return S.segment_sums(self.prep, self.segments, self.predict(factors, effects))
+
+    def both_sums(
+        self, factors: dict[str, float], effects: Sequence[Effect]
+    ) -> tuple[S.SegmentSums, S.SegmentSums]:
+        """Sums of the residual and of its smoothed (structured) part, one simulation."""
+        pred = self.predict(factors, effects)
+        return (
+            S.segment_sums(self.prep, self.segments, pred),
+            basemis.smoothed_sums(self.prep, self.segments, pred),
+        )
 
 
 def _score(c: Candidate, sums: S.SegmentSums, floor: np.ndarray, gap0: float, n_eff: float):
@@ -170,22 +183,24 @@ def _diagnose(
     tol_fit = fit_candidate([], fit_ev.residual, {}, tol, [({}, ())], CAL_ITERATIONS)
     floor = S.noise_floor(prep)
     sums: dict[str, S.SegmentSums] = {}
+    smooth: dict[str, S.SegmentSums] = {}
     base = _Baseline(prep, held, held_ev, floor, tol_fit)
     lap("calibrate")
     say("calibrated " + _percent(base.factors))
 
-    member_sums: dict[int, S.SegmentSums] = {}
+    member_sums: dict[int, tuple[S.SegmentSums, S.SegmentSums]] = {}
 
     def scored(c: Candidate) -> Candidate:
         kept = member_sums.pop(id(c), None)
-        sums[c.name] = kept if kept is not None else held_ev.sums(c.factors, c.effects)
+        both = kept if kept is not None else held_ev.both_sums(c.factors, c.effects)
+        sums[c.name], smooth[c.name] = both
         _score(c, sums[c.name], floor, base.gap0, base.n_eff)
         return c
 
     def judge(c: Candidate) -> float:
         """A family member's held-out criterion (its sums kept for ``scored``)."""
-        member_sums[id(c)] = held_ev.sums(c.factors, c.effects)
-        _score(c, member_sums[id(c)], floor, base.gap0, base.n_eff)
+        member_sums[id(c)] = held_ev.both_sums(c.factors, c.effects)
+        _score(c, member_sums[id(c)][0], floor, base.gap0, base.n_eff)
         return c.criterion
 
     # 2. Every effect on the calibrated machine (with the tolerances it trades off against
@@ -214,7 +229,7 @@ def _diagnose(
     if not within_noise(base.nominal, floor):
         for i, c in enumerate(singles[:REFINE_TOP]):
             starts = [(c.factors, c.effects), ({}, c.effects)]
-            kept = sums[c.name]
+            kept = sums[c.name], smooth[c.name]
             if c.name == sensorcal.NAME:
                 r = sensorcal.refit_with_tolerances(prep, fit_segs, fit_ev.predict, c, tol)
             else:
@@ -231,7 +246,7 @@ def _diagnose(
             if r.criterion < c.criterion:
                 singles[i] = r
             else:
-                sums[c.name] = kept
+                sums[c.name], smooth[c.name] = kept
         # The tolerances again, from where the refits put them (without their effects):
         # if that fits the calibration part better, it is the simulator to beat.
         starts = [(base.factors, ())] + [(c.factors, ()) for c in singles[:REFINE_TOP]]
@@ -261,7 +276,9 @@ def _diagnose(
     lap("pairs")
 
     idx = resamples(len(held))
-    d = decide(noise_only, singles, pairs, sums, base.nominal, idx, floor)
+    d = decide(
+        noise_only, singles, pairs, sums, base.nominal, idx, floor, (smooth, base.smooth_nominal)
+    )
     lead = None
     if d.verdict == "unexplained":
         lead = suggest(
@@ -296,6 +313,8 @@ def _diagnose(
         timings,
         lead.ranked if lead else [],
         lead.tried if lead else [],
+        smooth,
+        base.smooth_nominal,
     )
 
 
@@ -323,5 +342,6 @@ class _Baseline:
         self.factors = tol_fit.factors
         pred0 = held_ev.predict(self.factors, ())
         self.nominal = S.segment_sums(prep, held, pred0)
+        self.smooth_nominal = basemis.smoothed_sums(prep, held, pred0)
         self.gap0 = S.gap(self.nominal.mse(), floor)
         self.n_eff = S.effective_n(prep, held, pred0)

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monitor.gap import basemis, sensorcal
 from monitor.gap import calibrate as cal_mod
-from monitor.gap import sensorcal
 from monitor.gap import where as W
 from monitor.gap.candidates import Candidate, default_member
 from monitor.gap.diagnose import Diagnosis
@@ -162,6 +162,17 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
         "ranking": [_candidate_row(c) for c in diag.singles],
         "pairs": [_candidate_row(c) for c in diag.pairs],
         "shrink": shrink,
+        "base_mismatch": (
+            basemis.report(
+                diag.nominal,
+                diag.smooth_nominal,
+                diag.floor,
+                compared(prep),
+                (after, diag.smooth[chosen.name]) if chosen is not None else None,
+            )
+            if diag.smooth_nominal is not None
+            else None
+        ),
         "recording": {
             "source": prep.source,
             "duration_s": round(duration, 2),
@@ -209,6 +220,17 @@ def _what_next(suggestion: list[dict], tried: list[dict]) -> list[str]:
     return out
 
 
+def _base_line(bm: dict) -> str:
+    """Which part of the gap is base mismatch, and the largest structured residual."""
+    worst = max(bm["signals"], key=lambda n: bm["signals"][n]["structured_nrmse"])
+    level = bm["signals"][worst]["structured_nrmse"]
+    return (
+        f"Base mismatch: {100 * bm['share']:.0f} % of the gap is above {bm['above_hz']:g} Hz "
+        "(the simulator's base dynamics; no catalogue effect produces it); structured part "
+        f"largest in {worst} (NRMSE {level:.3f}, practical level {bm['practical_nrmse']:g})."
+    )
+
+
 def summary_text(report: dict) -> str:
     """One page a service engineer reads first; the first line says where the gap lies."""
     w = report["where"]
@@ -222,14 +244,18 @@ def summary_text(report: dict) -> str:
     first += f", {band['band_hz'][0]:g}-{band['band_hz'][1]:g} Hz ({100 * band['share']:.0f} %)"
     if win:
         first += f", worst at {win['t_start']:g}-{win['t_end']:g} s"
-    lines = [first + ".", ""]
+    lines = [first + "."]
+    if report.get("base_mismatch"):
+        lines.append(_base_line(report["base_mismatch"]))
+    lines.append("")
     v = report["verdict"]
     sh = report["shrink"]
     if v == "none":
         lines.append(
             "Verdict: none: after calibrating tolerances the simulator is within sensor noise "
             "(held-out mean squared residual under 2x the noise on every signal, or under 4x "
-            "with no effect explaining the rest)."
+            "with no effect explaining the rest), or what remains is base mismatch and a "
+            "structured part below the practical level that no effect explains."
         )
     elif v == "unexplained":
         best = report["ranking"][0]
