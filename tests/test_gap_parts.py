@@ -169,3 +169,16 @@ def test_unusable_recordings_are_explained(clean):
     still["SpoolCmd"] = np.zeros(len(rec))
     with pytest.raises(NoHydraulicDataError, match="never leaves centre"):
         prepare(Recording(rec.t, still), M)
+
+
+def test_a_pressure_offset_the_diagnosis_can_name_is_not_taken_for_another_machine(clean):
+    rec, _, _ = clean
+    # PB reads 12 bar low: negative at rest, within the 20 bar a sensor_calibration offset
+    # may have, so the recording is diagnosed (a sensor offset), not refused.
+    low = dict(rec.columns)
+    low["PB"] = rec["PB"] - 12.0
+    assert prepare(Recording(rec.t, low), M).has_rodpos == prepare(rec, M).has_rodpos
+    # 30 bar below zero is no offset the catalogue names: other units or another machine.
+    low["PB"] = rec["PB"] - 30.0
+    with pytest.raises(NoHydraulicDataError, match="PB spans"):
+        prepare(Recording(rec.t, low), M)

@@ -15,6 +15,7 @@ import numpy as np
 from monitor.errors import InputFileError, NoHydraulicDataError
 from monitor.io.recording import Recording
 from monitor.signals import COMMAND_NAMES, MEASURED_NAMES, SAMPLE_PERIOD_S
+from monitor.sim.effects import SENSOR_CAL_SIGNALS
 from monitor.sim.machine import BAR, LPM, MachineParams
 
 #: Shortest recording worth diagnosing: calibration and held-out parts need a few duty
@@ -242,7 +243,10 @@ def _check_plausible(src: str, cols: dict[str, np.ndarray], machine: MachinePara
     p_max = machine.relief_full_pa / BAR
     for name in ("PP", "PA", "PB"):
         p99 = np.nanpercentile(cols[name], 99)
-        if p99 > PLAUSIBLE_MARGIN * p_max or np.nanpercentile(cols[name], 1) < -5.0:
+        # Below zero by up to the largest sensor offset the diagnosis can name (plus noise):
+        # a transducer reading -12 bar at rest is what `sensor_calibration` is for.
+        p_min = -(SENSOR_CAL_SIGNALS[name].max_offset + 5.0)
+        if p99 > PLAUSIBLE_MARGIN * p_max or np.nanpercentile(cols[name], 1) < p_min:
             raise NoHydraulicDataError(
                 f"{src}: {name} spans {np.nanpercentile(cols[name], 1):.1f}..{p99:.1f} bar, "
                 f"outside what a loop with relief at {p_max:.0f} bar can show: another "
