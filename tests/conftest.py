@@ -9,6 +9,9 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
+# The shared helpers assert too: rewritten, a failed comparison of event lists shows the diff.
+pytest.register_assert_rewrite("live_support", "sim_support", "fleet_support")
+
 # Tests start `python -m monitor ...` processes; in a checkout that is not pip-installed these
 # must import this tree's package, whatever their working directory.
 os.environ["PYTHONPATH"] = os.pathsep.join(
