@@ -34,7 +34,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from monitor.gap.prepare import Prepared
-from monitor.gap.score import SegmentSums, gap, normalised
+from monitor.gap.score import SegmentSums, gap, segment_sums
 from monitor.gap.segments import Segment
 from monitor.signals import SAMPLE_RATE_HZ
 
@@ -60,15 +60,7 @@ def smoothed_sums(
     prep: Prepared, segments: Sequence[Segment], pred: dict[str, np.ndarray]
 ) -> SegmentSums:
     """Like ``score.segment_sums`` on the smoothed residual, segment by segment."""
-    r = normalised(prep, pred)
-    sq = np.zeros((len(segments), len(r)))
-    count = np.zeros_like(sq)
-    for i, seg in enumerate(segments):
-        for j, n in enumerate(r):
-            s, ok = smooth(r[n][seg.scored])
-            sq[i, j] = float(np.sum(s[ok] ** 2))
-            count[i, j] = ok.sum()
-    return SegmentSums(sq, count)
+    return segment_sums(prep, segments, pred, smooth)
 
 
 def smoothed_floor(floor: np.ndarray) -> np.ndarray:

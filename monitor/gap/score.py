@@ -10,7 +10,7 @@ segments cheaply.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,15 +54,20 @@ class SegmentSums:
 
 
 def segment_sums(
-    prep: Prepared, segments: Sequence[Segment], pred: dict[str, np.ndarray]
+    prep: Prepared,
+    segments: Sequence[Segment],
+    pred: dict[str, np.ndarray],
+    filt: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> SegmentSums:
+    """Sums per segment and signal; ``filt`` maps a segment's residual to (filtered residual,
+    mask of the samples that count), e.g. the base-mismatch smoothing (``basemis.smooth``)."""
     r = normalised(prep, pred)
     sq = np.zeros((len(segments), len(r)))
     count = np.zeros_like(sq)
     for i, seg in enumerate(segments):
         for j, n in enumerate(r):
             v = r[n][seg.scored]
-            ok = np.isfinite(v)
+            v, ok = filt(v) if filt is not None else (v, np.isfinite(v))
             sq[i, j] = float(np.sum(v[ok] ** 2))
             count[i, j] = ok.sum()
     return SegmentSums(sq, count)
