@@ -63,14 +63,26 @@ def default_model_bytes(model_path: str | None, config_path: str | None) -> byte
     return Path(model_path or cfg.model).read_bytes()
 
 
+#: How a machine is commissioned, as `monitor train --folds 4 --bias off`: J's threshold
+#: from residuals cross-fitted over the whole commissioning run (each minute predicted by
+#: a model fitted on the others), not from its last quarter held out.  On two simulated
+#: fleets of six machines (docs/benchmarks.md, "Commissioning cross-fitted, J alone") the
+#: last quarter, the warm end of a warming run, gave 1 false alarm in 172 healthy logs,
+#: cross-fitting none, with the same wear found.  The bias statistic stays off: its
+#: per-regime scales from 20 minutes are too uncertain (it raised the false alarms when
+#: cross-fitting was tried with it).  Recorded in each model's trained-from.json.
+COMMISSIONING = {"folds": 4, "bias": False}
+
+
 def train_model_bytes(
     paths: list[str],
     config_path: str | None = None,
     isolation: str = "sim",
     reference: bytes | None = None,
 ) -> bytes:
-    """`monitor train REC... --out M [--isolation I] [--reference R]` with its other
-    defaults: the model file's bytes (``reference``: the reference model's bytes)."""
+    """`monitor train REC... --out M --folds 4 --bias off [--isolation I] [--reference R]`
+    with its other defaults (:data:`COMMISSIONING`): the model file's bytes
+    (``reference``: the reference model's bytes)."""
     from monitor.live.loops import read_loop
     from monitor.training.settings import TrainConfig
     from monitor.training.train import train
@@ -78,7 +90,8 @@ def train_model_bytes(
     cfg = _config(config_path)
     recordings = [read_loop(p, cfg, None) for p in paths]
     ref = None if reference is None else model_from_bytes(reference)
-    return model_to_bytes(train(recordings, TrainConfig(isolation=isolation), reference=ref))
+    settings = TrainConfig(isolation=isolation, **COMMISSIONING)
+    return model_to_bytes(train(recordings, settings, reference=ref))
 
 
 def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> Judged:

@@ -103,7 +103,8 @@ def _settings(default: bytes, opts: RunOptions) -> dict[str, Any]:
     once per run: the default model is megabytes)."""
     config = None if opts.config is None else sha256_file(Path(opts.config))
     return {"reference_sha256": hashlib.sha256(default).hexdigest(),
-            "isolation": opts.isolation, "config_sha256": config}  # fmt: skip
+            "isolation": opts.isolation, "config_sha256": config,
+            "train": pipeline.COMMISSIONING}  # fmt: skip
 
 
 def _manifest(m: Machine, fleet: Fleet, settings: dict[str, Any]) -> dict[str, Any]:
