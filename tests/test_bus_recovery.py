@@ -364,6 +364,7 @@ def outage(tmp_path_factory) -> dict[str, Any]:
     try:
         sent = send_all(sender, before)
         settle(daemon, sent)
+        last_rx = daemon.reader.received_at  # the reader's clock at the last frame before
         link.down()  # ip link set can0 down
         wait_until(lambda: daemon.reader.recovery.bus_down == 1, 30.0)
         # Down long enough for a heartbeat to fall due and the silence to make it inactive.
@@ -371,6 +372,10 @@ def outage(tmp_path_factory) -> dict[str, Any]:
         wait_until(lambda: daemon.reader.recovery.reopen_failures >= 2, 30.0)
         link.up = True  # ip link set can0 up
         wait_until(lambda: daemon.reader.bus_up, 30.0)
+        # The daemon times the silence on its reader's clock, the desk by the frames: the
+        # log's gap must be the longer, or the daemon's clock would have run past the frames
+        # after it (3 s measured at a load average of 16 on 2 cores).
+        assert time.monotonic() - last_rx < GAP_S, "the outage outlasted the log's gap"
         settle(daemon, sent + send_all(sender, after))
         alive = daemon.healthy
     finally:
