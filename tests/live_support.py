@@ -191,3 +191,37 @@ def assert_same_events(live: list[dict[str, Any]], det: Detection | list[dict[st
         else:
             assert abs(a["J"] - b["J"]) <= 1e-9 * abs(b["J"])
         assert a["threshold"] == b["threshold"]
+
+
+def events_of_frames(
+    live: list[dict[str, Any]], t_end: float, ticked_to_s: float | None
+) -> list[dict[str, Any]]:
+    """The live events up to ``t_end``, the sample time of the last frame sent; after it at
+    most the inactive of a silence the daemon heard before it was stopped.
+
+    A daemon is stopped some wall time after the last frame.  Had its reader heard
+    ``bus.silent_s`` of silence by then (under load the detector is seconds behind the
+    reader, so when it catches up that silence is already proven), the daemon rightly ran
+    the sample clock on past the last frame (to ``ticked_to_s``, its ``last_t_s``) and went
+    inactive: the one change that silence may add, and only if the clock ran on.  Whether
+    it did depends on wall time, not on the frames, so a test of the frames cannot ask."""
+    sent = [e for e in live if e["t"] <= t_end + 1e-6]
+    after = [e for e in live if e["t"] > t_end + 1e-6]
+    assert ticked_to_s is not None
+    if ticked_to_s <= t_end + 1e-6 or (sent and sent[-1]["state"] == "inactive"):
+        assert after == []  # no silence proven after the last frame, or inactive already
+    else:
+        assert [e["state"] for e in after] == ["inactive"]
+        assert t_end < after[0]["t"] <= ticked_to_s
+    return sent
+
+
+def assert_same_events_as_sent(
+    live: list[dict[str, Any]], det: Detection, ticked_to_s: float | None
+) -> list[dict[str, Any]]:
+    """``assert_same_events`` for the frames sent: the desk's log ends at its last frame,
+    the daemon may have heard silence after it (``events_of_frames``).  Returns the live
+    events up to that frame."""
+    sent = events_of_frames(live, float(det.t[-1]), ticked_to_s)
+    assert_same_events(sent, det)
+    return sent

@@ -18,12 +18,21 @@ import json
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import can
 import pytest
 from can.interfaces.virtual import VirtualBus
-from live_support import assert_same_events, drain, live_config, send_all, settle, wait_until
+from live_support import (
+    assert_same_events,
+    assert_same_events_as_sent,
+    drain,
+    live_config,
+    send_all,
+    settle,
+    wait_until,
+)
 
 from monitor.bus.reader import BusReader
 from monitor.bus.recovery import Backoff, error_frame_kind, is_link_error
@@ -35,6 +44,7 @@ from monitor.errors import BusError, ConfigError
 from monitor.io.candump import format_line, read_candump
 from monitor.live.daemon import Daemon
 from monitor.live.outputs import ALARM, fault_codes
+from monitor.live.pipeline import FramePipeline
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
 from monitor.sampling.sampler import recording_from_candump
@@ -333,14 +343,18 @@ def _frames() -> tuple[list[can.Message], list[can.Message]]:
     return before, after
 
 
+def _write_log(path: Path, frames: list[can.Message]) -> None:
+    with path.open("w") as fh:
+        for m in frames:
+            fh.write(format_line(m.timestamp, "can0", m.arbitration_id, m.is_extended_id,
+                                 bytes(m.data)))  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def outage(tmp_path_factory) -> dict[str, Any]:
     tmp = tmp_path_factory.mktemp("outage")
     before, after = _frames()
-    with (tmp / "gapped.log").open("w") as fh:  # the same frames as a log, for the desk
-        for m in before + after:
-            fh.write(format_line(m.timestamp, "can0", m.arbitration_id, m.is_extended_id,
-                                 bytes(m.data)))  # fmt: skip
+    _write_log(tmp / "gapped.log", before + after)  # the same frames as a log, for the desk
     cfg = live_config(tmp, silent_s=0.5, reopen_initial_s=0.05, reopen_max_s=0.2)
     link = Link()
     events: list[dict[str, Any]] = []
@@ -350,6 +364,7 @@ def outage(tmp_path_factory) -> dict[str, Any]:
     try:
         sent = send_all(sender, before)
         settle(daemon, sent)
+        last_rx = daemon.reader.received_at  # the reader's clock at the last frame before
         link.down()  # ip link set can0 down
         wait_until(lambda: daemon.reader.recovery.bus_down == 1, 30.0)
         # Down long enough for a heartbeat to fall due and the silence to make it inactive.
@@ -357,6 +372,10 @@ def outage(tmp_path_factory) -> dict[str, Any]:
         wait_until(lambda: daemon.reader.recovery.reopen_failures >= 2, 30.0)
         link.up = True  # ip link set can0 up
         wait_until(lambda: daemon.reader.bus_up, 30.0)
+        # The daemon times the silence on its reader's clock, the desk by the frames: the
+        # log's gap must be the longer, or the daemon's clock would have run past the frames
+        # after it (3 s measured at a load average of 16 on 2 cores).
+        assert time.monotonic() - last_rx < GAP_S, "the outage outlasted the log's gap"
         settle(daemon, sent + send_all(sender, after))
         alive = daemon.healthy
     finally:
@@ -394,10 +413,12 @@ def test_alarms_resume_after_recovery_as_the_desk_sees_the_gap(outage) -> None:
     cfg = outage["cfg"]
     model = load_model(cfg.model)
     desk = detect(model, recording_from_candump(outage["gapped"]), cfg.alarm, cfg.horizon)
-    assert_same_events(outage["events"], desk)  # the detector kept its state over the gap
-    states = [e["state"] for e in outage["events"]]
+    # The detector kept its state over the gap.  The daemon may also have heard the bus
+    # silent after the last frame, before it was stopped: that depends on wall time.
+    events = assert_same_events_as_sent(outage["events"], desk, outage["daemon"].last_t_s)
+    states = [e["state"] for e in events]
     assert states[-1] == "fault" and "inactive" in states
-    fault = next(e for e in outage["events"] if e["state"] == "fault")
+    fault = next(e for e in events if e["state"] == "fault")
     # The J window was held, not restarted: the alarm comes at the log instant it comes
     # at without the outage (shifted by the gap), not a 30 s window later.
     plain = detect(model, recording_from_candump(LOG), cfg.alarm, cfg.horizon)
@@ -410,6 +431,60 @@ def test_alarms_resume_after_recovery_as_the_desk_sees_the_gap(outage) -> None:
     t_fault, sig = next((t, v) for t, v in alarms if v["State"] == State.FAULT)
     assert t_fault == pytest.approx(fault["t"], abs=1e-6)
     assert sig["Fault"] == fault_codes(codec)[fault["fault"]]
+
+
+def test_a_silence_after_the_last_frame_adds_an_inactive_only_when_the_reader_proved_it(
+    tmp_path: Path,
+) -> None:
+    """The test above, with the timing it cannot choose made explicit: the gapped log
+    through the daemon's frame pipeline (no threads), the reader's receive stamps and empty
+    receives given as numbers.  Whether the daemon heard the bus silent after the last frame
+    before it was stopped decides whether it ends inactive; the desk's log ends at the frame."""
+    cfg = live_config(tmp_path, silent_s=0.5)
+    daemon = Daemon(cfg)  # not started: its codec and loops only
+    reader = {"heard": -float("inf"), "rx": 1000.0}
+    events: list[dict[str, Any]] = []
+    pipe = FramePipeline(daemon.codec, daemon.columns, daemon.loops, lambda m: None,
+                         lambda tick, lp: events.append(lp.event(tick, pipe.start_time_s)),
+                         cfg.bus.silent_s, 1.0, heard_until=lambda: reader["heard"],
+                         backlog=lambda: False, received_at=lambda: reader["rx"])  # fmt: skip
+    before, after = _frames()
+    _write_log(tmp_path / "gapped.log", before + after)
+
+    def receive(frames: list[can.Message]) -> None:
+        for m in frames:
+            reader["rx"] += 1e-4  # the reader takes them as fast as they are sent
+            pipe.feed(m)
+
+    try:
+        receive(before)
+        reader["heard"] = reader["rx"] + 3.0  # the link is down 3 s: silence proven
+        pipe.silence()
+        reader["rx"] = reader["heard"] + 0.1  # up again, the rest of the log
+        receive(after)
+    finally:
+        daemon.reader.bus.shutdown()
+    model = load_model(cfg.model)
+    desk = detect(model, recording_from_candump(tmp_path / "gapped.log"), cfg.alarm, cfg.horizon)
+    t_end = float(desk.t[-1])
+    # Stopped before the reader proved any silence: the desk's events exactly.
+    pipe.flush()
+    assert pipe.last_t_s == t_end
+    assert_same_events(events, desk)
+    assert_same_events_as_sent(events, desk, pipe.last_t_s)
+    # Stopped after the reader heard 3 s of silence since the last frame: the clock ran on
+    # and the rows went stale, inactive 30 ms (3 cycles of the 10 ms frames) after it.
+    reader["heard"] = reader["rx"] + 3.0
+    pipe.silence()
+    assert pipe.last_t_s == pytest.approx(t_end + 3.0, abs=0.011)
+    assert [(e["t"], e["state"]) for e in events[len(desk.events) :]] == [
+        (pytest.approx(t_end + 0.04, abs=1e-6), "inactive")
+    ]
+    with pytest.raises(AssertionError):
+        assert_same_events(events, desk)  # what the live test compared: then it failed
+    assert assert_same_events_as_sent(events, desk, pipe.last_t_s) == events[:-1]
+    with pytest.raises(AssertionError):  # an inactive without a clock that ran on
+        assert_same_events_as_sent(events, desk, t_end)
 
 
 def test_a_fault_on_before_an_outage_is_the_same_episode_after_it(tmp_path) -> None:
