@@ -118,8 +118,9 @@ def test_the_suggestion_from_the_diagnosis_held_out_run_equals_one_from_its_own_
     """``diagnose`` hands ``suggest`` the calibrated machine's held-out readings it has
     simulated already; the suggestion must be the one a fresh run of them gives."""
     w = 2 * math.pi * 0.8
+    corr = {"force_cos": 500.0, "force_sin": 0.0, "force_omega": w}
     rec = simulate(make_cycle("boom", SECONDS, 3), apply(M, MACHINE_TOLERANCE), seed=3,
-                   corrections={"force_cos": 500.0, "force_sin": 0.0, "force_omega": w})  # fmt: skip
+                   corrections=corr)  # fmt: skip
     prep = prepare(rec, M)
     cal, held = split(make_segments(prep))
     fit_segs = spread(cal, FIT_BUDGET_S)
