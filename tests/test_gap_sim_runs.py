@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from monitor.gap import calibrate as cal_mod
-from monitor.gap.diagnose import FIT_STEP_FACTOR
+from monitor.gap.diagnose import FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR
 from monitor.gap.predict import SegmentPlant, _measured_start, _start_state, predict
 from monitor.gap.prepare import prepare
 from monitor.gap.score import compared, noise_floor
@@ -55,10 +55,12 @@ def test_segment_plant_equals_running_each_segment_through_run_plant(recording, 
             np.testing.assert_allclose(getattr(tr, name), getattr(ref, name), rtol=1e-12)
 
 
-def test_the_fits_coarser_step_stays_well_inside_the_sensor_noise():
+@pytest.mark.parametrize("factor", sorted({FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR}))
+def test_the_fits_coarser_step_stays_well_inside_the_sensor_noise(factor):
     """At the stiffest corner of the tolerance bands (smallest volumes and mass, the fastest
-    pressure dynamics, least damping) the fits' step departs from the configured one by a
-    small fraction of the noise a perfect simulator leaves (a 500 us step: most of it)."""
+    pressure dynamics, least damping) the fits' and the held-out scores' step departs from
+    the configured one by a small fraction of the noise a perfect simulator leaves (a 500 us
+    step: most of it), on the held-out segments the scores are taken on."""
     fx = [Effect.make("cylinder_friction", coulomb_n=400.0)]
     rec = simulate(make_cycle("boom", 300.0, 3), M, effects=fx, seed=3)
     prep = prepare(rec, M)
@@ -66,7 +68,7 @@ def test_the_fits_coarser_step_stays_well_inside_the_sensor_noise():
     stiff = cal_mod.apply(
         M, {"volumes": 0.85, "mass": 0.85, "valve_gain": 1.1, "viscous_friction": 0.7}
     )
-    coarse = stiff.with_changes(step_s=stiff.step_s * FIT_STEP_FACTOR)
+    coarse = stiff.with_changes(step_s=stiff.step_s * factor)
     assert coarse.step_s > M.step_s
     ref = predict(prep, held, stiff, ())
     got = predict(prep, held, coarse, ())

@@ -9,11 +9,14 @@ import math
 import numpy as np
 import pytest
 
+from monitor.gap import score as S
 from monitor.gap.calibrate import apply
-from monitor.gap.diagnose import diagnose
+from monitor.gap.diagnose import FIT_BUDGET_S, FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR, diagnose
+from monitor.gap.predict import SegmentPlant, sense
+from monitor.gap.prepare import prepare
 from monitor.gap.report import build_report, simulate_all, summary_text
-from monitor.gap.segments import Segment
-from monitor.gap.suggest import periodic_frequencies_hz
+from monitor.gap.segments import Segment, make_segments, split, spread
+from monitor.gap.suggest import periodic_frequencies_hz, suggest
 from monitor.signals import MEASURED_NAMES
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import parse_effect
@@ -109,3 +112,33 @@ def test_the_periodic_load_frequency_is_found_among_drift_and_noise():
     pred = {n: np.zeros(t.size) for n in meas}
     found = periodic_frequencies_hz(prep, segments, pred)
     assert any(abs(f - 1.37) < 1 / 300 for f in found)
+
+
+def test_the_suggestion_from_the_diagnosis_held_out_run_equals_one_from_its_own_run():
+    """``diagnose`` hands ``suggest`` the calibrated machine's held-out readings it has
+    simulated already; the suggestion must be the one a fresh run of them gives."""
+    w = 2 * math.pi * 0.8
+    corr = {"force_cos": 500.0, "force_sin": 0.0, "force_omega": w}
+    rec = simulate(make_cycle("boom", SECONDS, 3), apply(M, MACHINE_TOLERANCE), seed=3,
+                   corrections=corr)  # fmt: skip
+    prep = prepare(rec, M)
+    cal, held = split(make_segments(prep))
+    fit_segs = spread(cal, FIT_BUDGET_S)
+    fit_m = M.with_changes(step_s=M.step_s * FIT_STEP_FACTOR)
+    held_m = M.with_changes(step_s=M.step_s * HELDOUT_STEP_FACTOR)
+    factors = MACHINE_TOLERANCE  # the calibration's place: where the machine was made
+    held_plant = SegmentPlant(prep, held)
+    base = sense(prep, held, held_plant.traces(apply(held_m, factors), ()), ())
+    floor = S.noise_floor(prep)
+    gap0 = S.gap(S.segment_sums(prep, held, base).mse(), floor)
+    n_eff = S.effective_n(prep, held, base)
+
+    def run(shared):
+        return suggest(prep, (fit_segs, SegmentPlant(prep, fit_segs), fit_m),
+                       (held, held_plant, held_m), factors, floor, gap0, n_eff,
+                       held_base=shared)  # fmt: skip
+
+    own, shared = run(None), run(base)
+    assert own.ranked and own.ranked[0]["term"] == "force_periodic"
+    assert shared.ranked == own.ranked
+    assert shared.tried == own.tried

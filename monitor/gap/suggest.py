@@ -93,10 +93,15 @@ class _Runs:
         plant: SegmentPlant,
         m0: MachineParams,
         factors: dict[str, float],
+        base: Pred | None = None,
     ):
+        """``base``: the readings of the calibrated machine without a term, when the caller
+        has simulated them already (the same run: not repeated)."""
         self.prep, self.segments, self.plant, self.m0 = prep, list(segments), plant, m0
         self.machine = cal_mod.apply(m0, factors)
-        self.base = sense(prep, self.segments, plant.traces(self.machine, ()), ())
+        if base is None:
+            base = sense(prep, self.segments, plant.traces(self.machine, ()), ())
+        self.base = base
 
     def pred(self, terms: Terms, factors: dict[str, float] | None = None) -> Pred:
         m = self.machine if factors is None else cal_mod.apply(self.m0, factors)
@@ -268,12 +273,14 @@ def suggest(
     floor: np.ndarray,
     gap0: float,
     n_eff: float,
+    held_base: Pred | None = None,
 ) -> Suggestions:
     """Ranked correction terms for an ``unexplained`` gap.  ``fit`` and ``held``: the
     segments, their plant and the nominal machine (at the fits' step and the configured
     step); ``factors`` the calibrated tolerances; ``gap0`` the calibrated simulator's
-    held-out gap and ``n_eff`` its effective sample size (as for the effects)."""
-    fit_runs, held_runs = _Runs(prep, *fit, factors), _Runs(prep, *held, factors)
+    held-out gap and ``n_eff`` its effective sample size (as for the effects);
+    ``held_base`` the held-out readings of the calibrated machine, if already simulated."""
+    fit_runs, held_runs = _Runs(prep, *fit, factors), _Runs(prep, *held, factors, held_base)
     r0 = fit_runs.residual(())
     lines = periodic_frequencies_hz(prep, fit[0], fit_runs.base)
     plant_terms = [*library(), *(periodic(2 * math.pi * f) for f in lines)]
