@@ -120,6 +120,27 @@ def test_new_commissioning_data_trains_the_machine_again(run1, tmp_path):
                                              "M02/commissioning/normal.log"]  # fmt: skip
 
 
+def test_a_model_trained_with_other_settings_is_commissioned_again(run1, tmp_path):
+    # Results written by a monitor that commissioned otherwise (its trained-from.json has no
+    # training settings: the last quarter held out, the bias statistic on): after an
+    # upgrade the machine is commissioned again, not judged with the old model.
+    f, out, _err = run1
+    g, res = copy_fleet(f, tmp_path / "fleet"), tmp_path / "r"
+    shutil.copytree(out, res)
+    meta_path = res / "models" / "M01.trained-from.json"
+    meta = json.loads(meta_path.read_text())
+    del meta["train"]
+    meta_path.write_text(json.dumps(meta))
+    shutil.copy(g / "M01" / "logs" / "day02.log", g / "M01" / "logs" / "day04.log")
+    proc = subprocess.run(fleet_cmd(str(g), "--out", str(res), "--workers", "1"),
+                          capture_output=True, text=True, env=env())  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "reused" not in proc.stderr
+    again = json.loads(meta_path.read_text())
+    assert again["train"] == {"folds": 4, "bias": False}
+    assert again["commissioning"] == meta["commissioning"]
+
+
 def test_a_killed_client_loses_nothing_finished_and_writes_no_row_twice(fleet, tmp_path):
     f = copy_fleet(fleet, tmp_path / "fleet")
     out = tmp_path / "results"
