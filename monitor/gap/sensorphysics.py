@@ -56,19 +56,22 @@ def compare(
     idx: np.ndarray,
     floor: np.ndarray,
 ) -> Comparison | None:
-    """``sensor`` (held-out sums ``sensor_sums``) against the library's best plant term
-    ``lead.best`` on the same held-out segments and gap measure.  The sensor is not named
-    when that term has the smaller held-out gap and is suggested.  None when the library's
-    best term is not a plant term (a sensor term: the same hypothesis)."""
-    best = lead.best
-    if best is None or best.sums is None or not isinstance(best.terms[0], PlantTerm):
+    """``sensor`` (held-out sums ``sensor_sums``) against the library's best plant
+    term on the same held-out segments and gap measure.  The sensor is not named when the
+    library's first suggestion is that plant term and it has the smaller held-out gap.
+    None when the library scored no plant term."""
+    plant = [f for f in lead.singles if isinstance(f.terms[0], PlantTerm) and f.sums is not None]
+    if not plant:
         return None
+    best = plant[0]
     term = best.terms[0]
+    assert isinstance(term, PlantTerm) and best.sums is not None
+    first = bool(lead.ranked) and lead.singles[0] is best
     return Comparison(
         sensor.effects[0].labels["signal"],
         float(sensor.heldout_reduction),
         f"{term.kind} {term.signal}",
         float(best.heldout_reduction),
         gain_share(sensor_sums, best.sums, idx, floor),
-        not (lead.ranked and best.heldout_gap < sensor.heldout_gap),
+        not (first and best.heldout_gap < sensor.heldout_gap),
     )

@@ -78,7 +78,7 @@ class Fitted:
 class Suggestions:
     ranked: list[dict]  # the contract's ``suggestion`` (one or two entries)
     tried: list[dict] = field(default_factory=list)  # every term scored on the held-out part
-    best: Fitted | None = None  # the best single term (scored), suggested or not
+    singles: list[Fitted] = field(default_factory=list)  # scored single terms, best first
 
 
 Terms = Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]]
@@ -314,7 +314,7 @@ def suggest(
     best = singles[0]
     tried = [_entry(f, f.terms[0], f.coefs[0], f.heldout_reduction) for f in singles]
     if best.heldout_reduction < SUGGEST_MIN:
-        return Suggestions([], tried, best)
+        return Suggestions([], tried, singles)
     ranked = [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
     pair = _best_pair(fit_runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
     if (
@@ -326,7 +326,7 @@ def suggest(
             _entry(best, pair.terms[0], pair.coefs[0], best.heldout_reduction),
             _entry(pair, pair.terms[1], pair.coefs[1], pair.heldout_reduction),
         ]
-    return Suggestions(ranked, tried, best)
+    return Suggestions(ranked, tried, singles)
 
 
 def _best_pair(
