@@ -12,7 +12,7 @@ import pytest
 from monitor.gap.calibrate import apply
 from monitor.gap.diagnose import diagnose
 from monitor.gap.predict import _Start, _true_start
-from monitor.gap.report import build_report, simulate_all
+from monitor.gap.report import build_report, simulate_all, summary_text
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
@@ -105,3 +105,53 @@ def test_a_physical_effect_is_not_called_a_sensor_error(effect, seed):
     sensor = next(r for r in rep["ranking"] if r["effect"] == "sensor_calibration")
     assert rep["ranking"].index(sensor) > 0
     assert sensor["heldout_reduction"] < 0.5, sensor
+
+
+#: PP sensor noise (bar rms) of the simulated recordings (``monitor.sim.sensors``).
+PP_NOISE_BAR = 0.3
+
+
+def test_a_pp_offset_is_named_and_the_plant_terms_explain_less():
+    offset_bar = -8.0
+    rec = _recording([Effect.make("sensor_calibration", signal="PP", gain=1.0, offset=offset_bar)],
+                     seed=8)  # fmt: skip
+    rep = _report(rec)
+    assert rep["verdict"] == "sensor_calibration"
+    fitted = rep["params"]["sensor_calibration"]
+    assert set(fitted) == {"PP_gain", "PP_offset_bar"}
+    # Gain and offset are fitted together on PP, which sits near the compensator pressure
+    # most of the time: the offset's standard error is the noise over sqrt(n) times
+    # sqrt(1 + mean^2 / variance) of the simulated PP.  Derived from the recording itself
+    # (n: the fit's ~30 s at 100 Hz), with a fourfold allowance for the tolerances refitted
+    # beside it.
+    pp = rec.columns["PP"]
+    n = 30 * 100
+    se = PP_NOISE_BAR / n**0.5 * (1 + pp.mean() ** 2 / pp.var()) ** 0.5
+    assert fitted["PP_offset_bar"] == pytest.approx(offset_bar, abs=4 * se + 0.1)
+    assert fitted["PP_gain"] == pytest.approx(1.0, abs=4 * se / pp.mean() + 0.002)
+    # The physics cannot do it: the best plant term (a compensator shift would move PP at
+    # holds by as much, but the flow and the rod with it) removes less.
+    check = rep["sensor_check"]
+    assert check["signal"] == "PP" and check["sensor_named"]
+    assert check["term_heldout_reduction"] < check["sensor_heldout_reduction"]
+
+
+def test_a_compensator_setting_is_not_called_a_pp_sensor_error():
+    # 30 bar below the type's setting: PP reads 30 bar low wherever the pump sits at its
+    # compensator pressure, as a PP offset would, but less flow passes the valve.
+    shift_bar = -30.0
+    m = apply(M, MACHINE_TOLERANCE)
+    m = m.with_changes(compensator_start_pa=m.compensator_start_pa + shift_bar * BAR,
+                       compensator_full_pa=m.compensator_full_pa + shift_bar * BAR)  # fmt: skip
+    rep = _report(simulate(make_cycle("boom", SECONDS, 6), m, seed=6))
+    assert rep["verdict"] == "unexplained"
+    first = rep["suggestion"][0]
+    assert (first["term"], first["signal"]) == ("pump_setting", "compensator")
+    # PP reads the compensator pressure directly at holds (0.3 bar noise over thousands of
+    # samples); the allowance is the one Gauss-Newton refinement of the term and the
+    # tolerances refitted with it (10 %).
+    assert first["coefficient"] == pytest.approx(shift_bar, rel=0.10)
+    check = rep["sensor_check"]
+    assert check["signal"] == "PP" and not check["sensor_named"]
+    assert check["term_heldout_reduction"] > check["sensor_heldout_reduction"]
+    assert "Not a sensor error" in summary_text(rep)

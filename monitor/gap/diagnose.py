@@ -16,7 +16,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from monitor.errors import NoHydraulicDataError
-from monitor.gap import basemis, sensorcal
+from monitor.gap import basemis, sensorcal, sensorphysics
 from monitor.gap import calibrate as cal_mod
 from monitor.gap import score as S
 from monitor.gap.candidates import (
@@ -29,7 +29,7 @@ from monitor.gap.candidates import (
     fit_candidate,
     n_params,
 )
-from monitor.gap.decide import decide, pair_plan, within_noise
+from monitor.gap.decide import Decision, decide, pair_plan, within_noise
 from monitor.gap.families import fit_family
 from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sense
 from monitor.gap.prepare import Prepared, prepare
@@ -94,6 +94,8 @@ class Diagnosis:
     # The same, on the smoothed (structured) residual: see ``basemis.py``.
     smooth: dict[str, S.SegmentSums] = field(default_factory=dict)
     smooth_nominal: S.SegmentSums | None = None
+    #: A sensor calibration's verdict against the best plant term (``sensorphysics.py``).
+    sensor_check: dict | None = None
 
 
 class _Evaluator:
@@ -285,8 +287,8 @@ def _diagnose(
     d = decide(
         noise_only, singles, pairs, sums, base.nominal, idx, floor, (smooth, base.smooth_nominal)
     )
-    lead = None
-    if d.verdict == "unexplained":
+    lead = checked = None
+    if d.verdict in ("unexplained", sensorcal.NAME):
         lead = suggest(
             prep,
             (fit_segs, fit_ev.plant, fit_machine),
@@ -297,7 +299,16 @@ def _diagnose(
             base.n_eff,
             held_base=base.pred0,
         )
+    if d.verdict == sensorcal.NAME and d.chosen is not None and lead is not None:
+        # A sensor error moves one signal only: a plant term that explains more of the
+        # held-out gap moved the others with it (``sensorphysics.py``).
+        checked = sensorphysics.compare(d.chosen, sums[d.chosen.name], lead, idx, floor)
+        if checked is not None and not checked.sensor_named:
+            say(f"not a sensor error: {checked.term} explains more across the signals")
+            d = Decision("unexplained", None, None, checked.plant_share)
+    if d.verdict == "unexplained" and lead is not None:
         say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
+    if lead is not None:
         lap("suggest")
     timings["total"] = time.perf_counter() - clock
     return Diagnosis(
@@ -318,10 +329,11 @@ def _diagnose(
         d.confidence,
         idx,
         timings,
-        lead.ranked if lead else [],
+        lead.ranked if lead and d.verdict == "unexplained" else [],
         lead.tried if lead else [],
         smooth,
         base.smooth_nominal,
+        checked.as_dict() if checked is not None else None,
     )
 
 

@@ -187,7 +187,21 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
             if diag.verdict == "unexplained"
             else {}
         ),
+        **({"sensor_check": diag.sensor_check} if diag.sensor_check is not None else {}),
     }
+
+
+def _sensor_line(check: dict) -> str:
+    """How the sensor calibration fared against the best plant term (``sensorphysics``)."""
+    red = 100 * check["sensor_heldout_reduction"]
+    sens = f"a {check['signal']} sensor calibration removes {red:.0f} %"
+    term = f"{check['term']} removes {100 * check['term_heldout_reduction']:.0f} %"
+    if check["sensor_named"]:
+        return f"Sensor, not physics: {sens}; the best plant term, {term}."
+    return (
+        f"Not a sensor error: {sens} of the held-out gap, but the plant term {term} across "
+        "all signals (a reading error cannot move the other signals' physics)."
+    )
 
 
 def _fmt_params(params: dict[str, dict]) -> str:
@@ -259,13 +273,18 @@ def summary_text(report: dict) -> str:
         )
     elif v == "unexplained":
         best = report["ranking"][0]
-        lines.append(
-            "Verdict: unexplained: no catalogue effect removes a clear share of the held-out "
-            f"gap (best: {best['effect']}, {100 * best['heldout_reduction']:.0f} %)."
-        )
+        if report.get("sensor_check"):
+            lines.append("Verdict: unexplained. " + _sensor_line(report["sensor_check"]))
+        else:
+            lines.append(
+                "Verdict: unexplained: no catalogue effect removes a clear share of the "
+                f"held-out gap (best: {best['effect']}, {100 * best['heldout_reduction']:.0f} %)."
+            )
         lines += _what_next(report.get("suggestion") or [], report.get("suggestion_tried") or [])
     else:
         lines.append(f"Verdict: {v} ({_fmt_params(report['params'])})")
+        if report.get("sensor_check"):
+            lines.append(_sensor_line(report["sensor_check"]))
         if report.get("member") not in (None, "default"):
             lines.append(f"Formulation: {report['member']} (of the {v} family)")
         if report["also"]:

@@ -67,6 +67,7 @@ class Fitted:
     heldout_gap: float = math.inf
     heldout_reduction: float = 0.0
     criterion: float = math.inf
+    sums: S.SegmentSums | None = None  # held-out, once scored
 
     @property
     def n_coefs(self) -> int:
@@ -77,6 +78,7 @@ class Fitted:
 class Suggestions:
     ranked: list[dict]  # the contract's ``suggestion`` (one or two entries)
     tried: list[dict] = field(default_factory=list)  # every term scored on the held-out part
+    singles: list[Fitted] = field(default_factory=list)  # scored single terms, best first
 
 
 Terms = Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]]
@@ -297,6 +299,7 @@ def suggest(
         f.heldout_gap = S.gap(sums.mse(), floor)
         f.heldout_reduction = S.reduction(gap0, f.heldout_gap)
         f.criterion = criterion(f.heldout_gap, floor, n_eff, f.n_coefs)
+        f.sums = sums
         return f
 
     # The periodic term is always scored: its frequency is the data's own line, and a load
@@ -318,7 +321,7 @@ def suggest(
     best = singles[0]
     tried = [_entry(f, f.terms[0], f.coefs[0], f.heldout_reduction) for f in singles]
     if best.heldout_reduction < SUGGEST_MIN:
-        return Suggestions([], tried)
+        return Suggestions([], tried, singles)
     ranked = [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
     pair = _best_pair(fit_runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
     if (
@@ -330,7 +333,7 @@ def suggest(
             _entry(best, pair.terms[0], pair.coefs[0], best.heldout_reduction),
             _entry(pair, pair.terms[1], pair.coefs[1], pair.heldout_reduction),
         ]
-    return Suggestions(ranked, tried)
+    return Suggestions(ranked, tried, singles)
 
 
 def _best_pair(
