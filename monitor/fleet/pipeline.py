@@ -94,6 +94,23 @@ def train_model_bytes(
     return model_to_bytes(train(recordings, settings, reference=ref))
 
 
+def threshold_note(model_path: Path) -> str | None:
+    """One line when the machine's J0 rests on one event of its commissioning run
+    (``monitor train``'s note, kept in the model file), else None; None for a model file
+    that cannot be read (the report then says nothing rather than fail)."""
+    from monitor.errors import MonitorError
+    from monitor.model.modelfile import load_model
+
+    try:
+        event = load_model(model_path).training.get("threshold_one_event")
+    except MonitorError:
+        return None
+    if not event:
+        return None
+    return (f"J0 rests on one event ({event['ratio']:.1f} x any other window's, "
+            f"{Path(event['source']).name} at {event['t_s'] / 60:.1f} min)")  # fmt: skip
+
+
 def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> Judged:
     """`monitor detect PATH --model M --j-every 0`: its summary as row keys, its events."""
     from monitor.detection.offline import detect

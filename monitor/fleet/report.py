@@ -15,6 +15,7 @@ import pyarrow.parquet as pq
 
 from monitor.errors import InputFileError
 from monitor.fleet.health import TREND_P, Prognosis, health_index, prognosis
+from monitor.fleet.pipeline import threshold_note
 
 _COLOURS = {"fault": "tab:red", "sensor_fault": "tab:orange", "healthy": "tab:green",
             "not_judged": "0.6"}  # fmt: skip
@@ -35,7 +36,9 @@ def _fmt(x: float | None) -> str:
     return "-" if x is None else f"{x:.2f}"
 
 
-def _table(per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis]) -> list[str]:
+def _table(
+    per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis], notes: dict[str, str]
+) -> list[str]:
     out = ["| machine | logs | last verdict | health index (last max level) | trend per log "
            "| predicted crossing of 1.0 | alarms | sensor faults | errors | model |",
            "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
@@ -46,7 +49,8 @@ def _table(per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis]) ->
             f"| {mid} | {len(rows)} | {last['verdict']} | {_fmt(p.last_index)} | "
             f"{'-' if p.slope_per_log is None else f'{p.slope_per_log:+.3f}'} | {p.text} | "
             f"{sum(bool(r['alarm']) for r in rows)} | {sum(bool(r['sensor_fault']) for r in rows)}"
-            f" | {sum(r['error'] is not None for r in rows)} | {last['model']} |"
+            f" | {sum(r['error'] is not None for r in rows)} | {last['model']}"
+            f"{'; ' + notes[mid] if mid in notes else ''} |"
         )
     return out
 
@@ -143,6 +147,14 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     """Write ``out/fleet.md``, ``out/health.png`` and ``out/timeline.png``; the page's path."""
     per = load_rows(results)
     progs = {mid: prognosis(mid, rows, k) for mid, rows in per.items()}
+    # A threshold resting on one commissioning event makes a machine less sensitive to
+    # slow wear than its neighbours: the page says so beside its model.
+    notes = {}
+    for mid in per:
+        path = results / "models" / f"{mid}.model.npz"
+        note = threshold_note(path) if path.is_file() else None
+        if note:
+            notes[mid] = note
     out.mkdir(parents=True, exist_ok=True)
     _health_png(per, progs, out / "health.png", k)
     _timeline_png(per, out / "timeline.png")
@@ -154,7 +166,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
              "itself scatters with each log's manoeuvres), counted when Kendall's tau makes a "
              f"rise unlikely to be scatter (one-sided p < {TREND_P:g}, so at least 4 logs); "
              "crossing: logs until the trend reaches 1.0 (90 % interval).", "",
-             *_table(per, progs), "", "![health index](health.png)", "",
+             *_table(per, progs, notes), "", "![health index](health.png)", "",
              "![verdict timeline](timeline.png)", ""]  # fmt: skip
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
     if errors:

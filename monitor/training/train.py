@@ -27,7 +27,7 @@ from monitor.model.grnn import GRNN
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
 from monitor.model.spec import DGRNNSpec, Normalizer, table
-from monitor.model.threshold import MIN_BLOCKS
+from monitor.model.threshold import MIN_BLOCKS, one_event
 from monitor.signals import FAULT_NAMES
 from monitor.training.crossfit import cross_fitted_residuals, n_blocks
 from monitor.training.settings import TrainConfig
@@ -128,13 +128,22 @@ def train(
         model.residual_clip = tuple(float(c) for c in clip)
         say(f"  residual bound |e| <= {', '.join(f'{c:.3g}' for c in clip)} (z, per output)")
         e_val = [np.clip(e, -clip, clip) for e in e_val]
-    j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
-    model.j0, model.eps0 = cfg.threshold.eps0(j_val, block=cfg.window_n)
+    j_parts = [window_j(e, cfg.window_n) for e in e_val]
+    model.j0, model.eps0 = cfg.threshold.eps0(np.concatenate(j_parts), block=cfg.window_n)
     say(
         f"  J0 {model.j0:.4g} ({cfg.threshold.rule} of J on {len(val_part)} "
         f"{'cross-fitted' if crossfit else 'held-out'} part(s)),"
         f" eps0 {model.eps0:.4g}: {cfg.threshold.describe()}"
     )
+    event = one_event(j_parts, cfg.window_n)
+    if event is not None:
+        rec = val_part[int(event.pop("part"))]
+        t_s = float(rec.t[min(int(event.pop("start")), len(rec) - 1)])
+        event = {"source": rec.source, "t_s": t_s, **event}
+        say(f"  note: J0 rests on one event, {event['source']} at {event['t_s'] / 60:.1f} min "
+            f"({event['ratio']:.1f} x any other window's J): the threshold is that much less "
+            "sensitive unless such events are this machine's normal work; check what it did "
+            "then")  # fmt: skip
     bias_note = "off (--bias off, or the paper preset)"
     if cfg.with_bias:
         try:
@@ -179,6 +188,7 @@ def train(
         "threshold": cfg.threshold.describe(),
         "bias": bias_note,
         "threshold_floor": floor_note,
+        "threshold_one_event": event,
         "trained_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     return model
