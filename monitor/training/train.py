@@ -135,15 +135,7 @@ def train(
         f"{'cross-fitted' if crossfit else 'held-out'} part(s)),"
         f" eps0 {model.eps0:.4g}: {cfg.threshold.describe()}"
     )
-    event = one_event(j_parts, cfg.window_n)
-    if event is not None:
-        rec = val_part[int(event.pop("part"))]
-        t_s = float(rec.t[min(int(event.pop("start")), len(rec) - 1)])
-        event = {"source": rec.source, "t_s": t_s, **event}
-        say(f"  note: J0 rests on one event, {event['source']} at {event['t_s'] / 60:.1f} min "
-            f"({event['ratio']:.1f} x any other window's J): the threshold is that much less "
-            "sensitive unless such events are this machine's normal work; check what it did "
-            "then")  # fmt: skip
+    own_eps0 = model.eps0
     bias_note = "off (--bias off, or the paper preset)"
     if cfg.with_bias:
         try:
@@ -161,6 +153,16 @@ def train(
     if reference is not None:
         floor_note = floor_thresholds(model, reference)
         say(f"  thresholds floored by the reference model: {floor_note}")
+    # Said only when the event sets the threshold (not when the reference's floor does).
+    event = one_event(j_parts, cfg.window_n) if model.eps0 == own_eps0 else None
+    if event is not None:
+        rec = val_part[int(event.pop("part"))]
+        t_s = float(rec.t[min(int(event.pop("start")), len(rec) - 1)])
+        event = {"source": rec.source, "t_s": t_s, **event}
+        say(f"  note: J0 rests on one event, {event['source']} at {event['t_s'] / 60:.1f} min "
+            f"({event['ratio']:.1f} x any other window's J): the threshold is that much less "
+            "sensitive unless such events are this machine's normal work; check what it did "
+            "then")  # fmt: skip
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
     everything = [*recordings, *(held_out or ())]
