@@ -8,10 +8,12 @@ import json
 import shutil
 import subprocess
 
+import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
 from monitor.cli import main
+from monitor.model.modelfile import load_model
 from tests.fleet_support import copy_fleet, env, fleet_cmd, kill, make_fleet, rows, wait_for
 
 
@@ -50,6 +52,23 @@ def test_every_log_is_one_row_and_bad_input_is_a_row_with_its_reason(run1):
     assert all(r["error"] is None for log, r in by_log.items() if log.endswith(("01.log",
                "02.log")))  # fmt: skip
     assert "Dask dashboard http" in err and "logs," in err and "frames/s" in err
+
+
+def test_drift_is_the_logs_median_j_over_the_commissioning_runs(run1, tmp_path):
+    # p50_j_drift: the median of J over the log (every judged sample's J, as `monitor
+    # detect --j-every 0.01` prints it) over the median J of the machine's own held-out
+    # normal data, which `monitor train` keeps in the model file.
+    f, out, _err = run1
+    r = next(r for r in rows(out) if r["log"] == "M01/logs/day02.log")
+    model = out / "models" / "M01.model.npz"
+    j_median = load_model(model).training["j_median"]
+    lines = tmp_path / "e.jsonl"
+    main(["detect", str(f / r["log"]), "--model", str(model), "--j-every", "0.01",
+          "--events", str(lines)])  # fmt: skip
+    js = [e["J"] for e in map(json.loads, lines.read_text().splitlines())
+          if e.get("event") == "j" and e.get("J") is not None]  # fmt: skip
+    assert len(js) > 1000
+    assert r["p50_j_drift"] == pytest.approx(float(np.median(js)) / j_median, rel=1e-6)
 
 
 def test_no_commissioning_uses_the_default_model_and_says_so(run1):

@@ -99,11 +99,26 @@ def test_report_writes_the_page_and_its_pictures(tmp_path):
     out = tmp_path / "page"
     assert main(["fleet", "report", str(tmp_path), "--out", str(out)]) == 0
     page = (out / "fleet.md").read_text()
-    assert "| M01 | 4 | healthy | 0.70 | +0.100 | 3.0 logs" in page
-    assert "| M02 | 4 | healthy | 0.30 | +0.000 | no upward trend" in page
+    assert "| M01 | 4 | healthy | 0.70 | - | +0.100 | 3.0 logs" in page
+    assert "| M02 | 4 | healthy | 0.30 | - | +0.000 | no upward trend" in page
     assert "M03/logs/day01.log`: unreadable: Permission denied" in page
     for png in ("health.png", "timeline.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_drift_is_the_median_of_the_last_three_logs_and_flagged_from_three(tmp_path):
+    # M01: drifts 1.0, 1.2, 5.0, 4.0, 2.9 -> median of the last three (5.0, 4.0, 2.9) is 4.0,
+    # at or above 3: flagged.  M02: 0.9, 3.5, 1.1 -> 1.1, not flagged (one odd log is not a
+    # drift).  M03: results from before the column: "-".
+    rows = [_row("M01", i, 0.3, p50_j_drift=d) for i, d in enumerate([1.0, 1.2, 5.0, 4.0, 2.9])]
+    rows += [_row("M02", i, 0.3, p50_j_drift=d) for i, d in enumerate([0.9, 3.5, 1.1])]
+    rows += [_row("M03", i, 0.3) for i in range(3)]
+    pq.write_table(pa.Table.from_pylist(rows, LOG_SCHEMA), tmp_path / "logs.parquet")
+    assert main(["fleet", "report", str(tmp_path), "--out", str(tmp_path / "page")]) == 0
+    page = (tmp_path / "page" / "fleet.md").read_text()
+    assert "| M01 | 5 | healthy | 0.30 | 4.0 x (wearing?) |" in page
+    assert "| M02 | 3 | healthy | 0.30 | 1.1 x |" in page
+    assert "| M03 | 3 | healthy | 0.30 | - |" in page
 
 
 def test_report_without_results_is_one_line_and_exit_2(tmp_path, capsys):

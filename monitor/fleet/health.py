@@ -27,6 +27,21 @@ import numpy as np
 
 #: One-sided p-value of Kendall's tau below which a rise is a trend.
 TREND_P = 0.10
+#: Drift from commissioning: the median over the last ``DRIFT_LOGS`` judged logs of each
+#: log's median J over the commissioning run's (out of sample).  It does not depend on
+#: eps0, which one unusual minute of a commissioning run can set high.  On three simulated
+#: fleets (258 healthy 5-minute logs) it stayed at or below 1.6 on healthy machines and
+#: passed ``DRIFT_FLAG`` at piston-seal wear 0.03-0.34 and spool wear 0.03
+#: (docs/benchmarks.md, "Drift from commissioning").
+DRIFT_LOGS = 3
+DRIFT_FLAG = 3.0
+
+
+def drift(rows: list[dict[str, Any]], n: int = DRIFT_LOGS) -> float | None:
+    """Median ``p50_j_drift`` of the last ``n`` logs that have one (None: none have)."""
+    vals = [r.get("p50_j_drift") for r in rows if not r.get("error")]
+    vals = [v for v in vals if v is not None][-n:]
+    return float(np.median(vals)) if vals else None
 
 
 @dataclass(frozen=True)

@@ -94,6 +94,14 @@ def train_model_bytes(
     return model_to_bytes(train(recordings, settings, reference=ref))
 
 
+def _drift(j: np.ndarray, j_median: float | None) -> float | None:
+    """The log's median J over the model's median J on its own normal data, judged out
+    of sample (``monitor train`` keeps it; None for models from before, or no J)."""
+    if not j.size or not j_median or not j_median > 0:
+        return None
+    return float(np.median(j)) / float(j_median)
+
+
 def threshold_note(model_path: Path) -> str | None:
     """One line when the machine's J0 rests on one event of its commissioning run
     (``monitor train``'s note, kept in the model file), else None; None for a model file
@@ -141,6 +149,7 @@ def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
         "samples": int(s["samples"]),
         "max_level": s.get("max_level"),
         "p50_j_ratio": float(np.median(j)) / eps0 if j.size else None,
+        "p50_j_drift": _drift(j, model.training.get("j_median")),
     }
     events = [json.loads(json.dumps(dict(e, event="state"))) for e in det.events]
     return Judged(row, events)

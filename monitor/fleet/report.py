@@ -14,7 +14,15 @@ from typing import Any
 import pyarrow.parquet as pq
 
 from monitor.errors import InputFileError
-from monitor.fleet.health import TREND_P, Prognosis, health_index, prognosis
+from monitor.fleet.health import (
+    DRIFT_FLAG,
+    DRIFT_LOGS,
+    TREND_P,
+    Prognosis,
+    drift,
+    health_index,
+    prognosis,
+)
 from monitor.fleet.pipeline import threshold_note
 
 _COLOURS = {"fault": "tab:red", "sensor_fault": "tab:orange", "healthy": "tab:green",
@@ -39,14 +47,17 @@ def _fmt(x: float | None) -> str:
 def _table(
     per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis], notes: dict[str, str]
 ) -> list[str]:
-    out = ["| machine | logs | last verdict | health index (last max level) | trend per log "
-           "| predicted crossing of 1.0 | alarms | sensor faults | errors | model |",
-           "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    out = ["| machine | logs | last verdict | health index (last max level) | drift from "
+           "commissioning | trend per log | predicted crossing of 1.0 | alarms | sensor faults "
+           "| errors | model |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for mid, rows in per.items():
         p = progs[mid]
         last = rows[-1]
+        d = drift(rows)
+        d_text = "-" if d is None else f"{d:.1f} x{' (wearing?)' if d >= DRIFT_FLAG else ''}"
         out.append(
-            f"| {mid} | {len(rows)} | {last['verdict']} | {_fmt(p.last_index)} | "
+            f"| {mid} | {len(rows)} | {last['verdict']} | {_fmt(p.last_index)} | {d_text} | "
             f"{'-' if p.slope_per_log is None else f'{p.slope_per_log:+.3f}'} | {p.text} | "
             f"{sum(bool(r['alarm']) for r in rows)} | {sum(bool(r['sensor_fault']) for r in rows)}"
             f" | {sum(r['error'] is not None for r in rows)} | {last['model']}"
@@ -165,7 +176,9 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
              " eps0, which follows wear, scaled by the machine's peak-to-median ratio; the peak "
              "itself scatters with each log's manoeuvres), counted when Kendall's tau makes a "
              f"rise unlikely to be scatter (one-sided p < {TREND_P:g}, so at least 4 logs); "
-             "crossing: logs until the trend reaches 1.0 (90 % interval).", "",
+             "crossing: logs until the trend reaches 1.0 (90 % interval); drift from "
+             f"commissioning: median J of the last {DRIFT_LOGS} logs over the commissioning "
+             f"run's, whatever eps0 is ({DRIFT_FLAG:g} x and above: wearing?).", "",
              *_table(per, progs, notes), "", "![health index](health.png)", "",
              "![verdict timeline](timeline.png)", ""]  # fmt: skip
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]

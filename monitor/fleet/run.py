@@ -52,7 +52,8 @@ def _empty_row(machine: str, log: str, sha: str | None, model: str, error: str) 
             "alarm": False, "fault": None, "sensor_fault": False, "max_j_ratio": None,
             "p95_j_ratio": None, "judged_s": 0.0, "first_alarm_t": None, "frames": None,
             "rejected": "{}", "model": model, "error": error, "max_j": None, "eps0": None,
-            "samples": None, "max_level": None, "p50_j_ratio": None}  # fmt: skip
+            "samples": None, "max_level": None, "p50_j_ratio": None,
+            "p50_j_drift": None}  # fmt: skip
 
 
 class _Progress:

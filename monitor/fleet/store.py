@@ -30,6 +30,9 @@ LOG_SCHEMA = pa.schema([
     ("max_level", pa.float64()),
     # median J / eps0 of the log: what the prognosis trends (null in older results).
     ("p50_j_ratio", pa.float64()),
+    # median J of the log / median J of the model's own normal data (out of sample): the
+    # drift from commissioning, whatever eps0 is (null for models without it).
+    ("p50_j_drift", pa.float64()),
 ])  # fmt: skip
 EVENT_SCHEMA = pa.schema([
     ("machine", pa.string()), ("log", pa.string()), ("sha256", pa.string()),

@@ -191,6 +191,9 @@ def train(
         "bias": bias_note,
         "threshold_floor": floor_note,
         "threshold_one_event": event,
+        # The typical J of normal operation judged out of sample: a log's median J against
+        # it tells slow wear from the machine's own normal scatter (the fleet's drift).
+        "j_median": float(np.nanmedian(np.concatenate(j_parts))),
         "trained_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     return model
