@@ -67,7 +67,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "(per log and machine the health index, the largest alarm level max(J/eps0, B/b0), "
         "with max and p95 of J/eps0; the alarm threshold drawn at 1.0) and timeline.png. "
         "The trend is Theil-Sen over each machine's last K judged logs; the crossing is the "
-        "number of logs until it reaches 1.0, with its 90 % interval.",
+        "number of logs until it reaches 1.0, with its 90 % interval. The drift is the median "
+        "J of the last 3 logs over the commissioning run's, whatever eps0 is (3 x and above: "
+        "wearing?).",
     )
     rep.add_argument("results", type=Path, metavar="RESULTS")
     rep.add_argument("--out", type=Path, required=True, metavar="DIR")
