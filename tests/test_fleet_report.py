@@ -104,6 +104,8 @@ def test_report_writes_the_page_and_its_pictures(tmp_path):
     assert "M03/logs/day01.log`: unreadable: Permission denied" in page
     for png in ("health.png", "timeline.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # Results without drifts (written before the column): no empty drift picture.
+    assert not (out / "drift.png").exists() and "drift.png" not in page
 
 
 def test_drift_is_the_median_of_the_last_three_logs_and_flagged_from_three(tmp_path):
@@ -119,6 +121,8 @@ def test_drift_is_the_median_of_the_last_three_logs_and_flagged_from_three(tmp_p
     assert "| M01 | 5 | healthy | 0.30 | 4.0 x (wearing?) |" in page
     assert "| M02 | 3 | healthy | 0.30 | 1.1 x |" in page
     assert "| M03 | 3 | healthy | 0.30 | - |" in page
+    assert "![drift from commissioning](drift.png)" in page
+    assert (tmp_path / "page" / "drift.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_report_without_results_is_one_line_and_exit_2(tmp_path, capsys):

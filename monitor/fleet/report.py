@@ -123,6 +123,40 @@ def _health_png(
     plt.close(fig)
 
 
+def _drift_png(per: dict[str, list[dict[str, Any]]], path: Path) -> bool:
+    """Each machine's drift per log (log scale) with the 3 x mark; False when no row has a
+    drift (results from before it), and then no picture."""
+    series = {mid: [r.get("p50_j_drift") for r in rows] for mid, rows in per.items()}
+    series = {mid: v for mid, v in series.items() if any(x is not None for x in v)}
+    if not series:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for mid, v in series.items():
+        ax.plot(range(1, len(v) + 1), [float("nan") if x is None else x for x in v], "o-",
+                ms=3, label=mid)  # fmt: skip
+    ax.axhline(DRIFT_FLAG, color="tab:red", lw=1, ls="--", label=f"{DRIFT_FLAG:g} x: wearing?")
+    ax.axhline(1.0, color="0.4", lw=1)
+    ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("log (time order)")
+    ax.set_ylabel("median J / commissioning's")
+    ax.set_title("Drift from commissioning (1 = as commissioned)")
+    ax.grid(alpha=0.3, which="both")
+    if len(series) <= 12:
+        ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return True
+
+
 def _timeline_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
     import matplotlib
 
@@ -155,7 +189,8 @@ def _timeline_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
 
 
 def write_report(results: Path, out: Path, k: int = 6) -> Path:
-    """Write ``out/fleet.md``, ``out/health.png`` and ``out/timeline.png``; the page's path."""
+    """Write ``out/fleet.md``, ``out/health.png``, ``out/timeline.png`` and, when the
+    results have drifts, ``out/drift.png``; the page's path."""
     per = load_rows(results)
     progs = {mid: prognosis(mid, rows, k) for mid, rows in per.items()}
     # A threshold resting on one commissioning event makes a machine less sensitive to
@@ -169,6 +204,8 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     _health_png(per, progs, out / "health.png", k)
     _timeline_png(per, out / "timeline.png")
+    drift_pic = ["![drift from commissioning](drift.png)", ""] if _drift_png(
+        per, out / "drift.png") else []  # fmt: skip
     lines = ["# Fleet report", "",
              f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
              f"the largest alarm level of a log, max(J / eps0, B / b0) (1.0 raises the alarm); "
@@ -180,7 +217,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
              f"commissioning: median J of the last {DRIFT_LOGS} logs over the commissioning "
              f"run's, whatever eps0 is ({DRIFT_FLAG:g} x and above: wearing?).", "",
              *_table(per, progs, notes), "", "![health index](health.png)", "",
-             "![verdict timeline](timeline.png)", ""]  # fmt: skip
+             *drift_pic, "![verdict timeline](timeline.png)", ""]  # fmt: skip
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
     if errors:
         lines += ["## Logs that could not be judged", ""]
