@@ -40,6 +40,16 @@ def load_rows(results: Path) -> dict[str, list[dict[str, Any]]]:
     return dict(per)
 
 
+def _pyplot():  # noqa: ANN202 - matplotlib.pyplot, imported lazily
+    """pyplot on the file-only Agg backend (the report runs without a display)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def _fmt(x: float | None) -> str:
     return "-" if x is None else f"{x:.2f}"
 
@@ -81,10 +91,7 @@ def _trend_line(rows: list[dict[str, Any]], p: Prognosis, k: int):
 def _health_png(
     per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis], path: Path, k: int
 ) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
     from matplotlib.ticker import MaxNLocator
 
     n = len(per)
@@ -130,10 +137,7 @@ def _drift_png(per: dict[str, list[dict[str, Any]]], path: Path) -> bool:
     series = {mid: v for mid, v in series.items() if any(x is not None for x in v)}
     if not series:
         return False
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
     from matplotlib.ticker import MaxNLocator, ScalarFormatter
 
     fig, ax = plt.subplots(figsize=(8, 4))
@@ -158,10 +162,7 @@ def _drift_png(per: dict[str, list[dict[str, Any]]], path: Path) -> bool:
 
 
 def _timeline_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
     from matplotlib.ticker import MaxNLocator
 
     fig, ax = plt.subplots(figsize=(8, 0.5 * len(per) + 1.8))

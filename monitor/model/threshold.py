@@ -83,14 +83,7 @@ class ThresholdRule:
         ``rate_per_h`` and how many blocks it rests on."""
         from scipy.stats import gumbel_r
 
-        x = np.asarray(series, dtype=np.float64)
-        n = len(x) // block
-        maxima = []
-        for k in range(n):
-            part = x[k * block : (k + 1) * block]
-            ok = np.isfinite(part)
-            if ok.sum() * 2 >= block:
-                maxima.append(float(part[ok].max()))
+        maxima = [float(v.max()) for _, v in _blocks(series, block) if v.size * 2 >= block]
         if len(maxima) < MIN_BLOCKS:
             raise InputFileError(
                 f"the evt threshold needs at least {MIN_BLOCKS} held-out windows of "
@@ -118,19 +111,24 @@ class ThresholdRule:
                 "rate_per_h": self.rate_per_h}  # fmt: skip
 
 
+def _blocks(series: np.ndarray, block: int, partial: bool = False):  # noqa: ANN202
+    """(block number, its finite values) for each block of ``block`` samples; the last,
+    shorter block too when ``partial``."""
+    x = np.asarray(series, dtype=np.float64)
+    n = len(x) // block + (partial and len(x) % block > 0)
+    for k in range(n):
+        part = x[k * block : (k + 1) * block]
+        yield k, part[np.isfinite(part)]
+
+
 def one_event(parts: Sequence[np.ndarray], block: int) -> dict[str, float] | None:
     """Where J0 comes from one event: the part (index), the first sample of its block, its J
     and how many times it is every other block's largest outside the neighbouring blocks
     (a J window spans two blocks); None when no block stands out by ``ONE_EVENT_RATIO``.
     Such a threshold is that much less sensitive, unless the event is the machine's
     normal work: the engineer should know which minute it was."""
-    blocks = []  # (part, block number, max J)
-    for i, x in enumerate(parts):
-        x = np.asarray(x, dtype=np.float64)
-        for k in range(len(x) // block + (len(x) % block > 0)):
-            part = x[k * block : (k + 1) * block]
-            if np.isfinite(part).any():
-                blocks.append((i, k, float(np.nanmax(part))))
+    blocks = [(i, k, float(v.max())) for i, x in enumerate(parts)  # (part, block, max J)
+              for k, v in _blocks(x, block, partial=True) if v.size]  # fmt: skip
     if len(blocks) < 3:
         return None
     top = max(blocks, key=lambda b: b[2])
