@@ -299,7 +299,8 @@ def bias_statistic(e, regimes, scale, window, min_count):
     """The bias statistic B from its definition, recomputed from scratch at every sample: the
     last ``window`` samples whose residuals are all finite; per regime with at least
     ``min_count`` of them, z = mean * sqrt(count) / scale; B = mean over those regimes of the
-    outputs' mean z^2.  NaN at a sample with a missing residual and before any regime counts."""
+    outputs' mean z^2.  NaN at a sample with a missing residual, before ``window`` valid
+    samples have been seen, and before any regime counts."""
     e = np.asarray(e, dtype=float)
     n, n_out = e.shape
     out = np.full(n, np.nan)
@@ -308,6 +309,8 @@ def bias_statistic(e, regimes, scale, window, min_count):
         if not all(math.isfinite(v) for v in e[i]):
             continue
         valid.append(i)
+        if len(valid) < window:
+            continue
         last = valid[-window:]
         terms = []
         for r in range(scale.shape[0]):
