@@ -151,3 +151,20 @@ def test_no_pairs_are_fitted_when_the_best_single_does_not_explain_the_gap():
     ]
     assert singles[0].heldout_reduction > 0.5
     assert pair_plan(singles, lumpy, FLOOR, nominal, IDX) == []
+
+
+def test_no_pairs_are_fitted_when_the_best_leaves_less_than_a_material_share():
+    # A pair's gap is not negative, so it gains at most what the best leaves.  Nominal gap
+    # 0.4 per signal; the best at 0.025 leaves 0.015 (3.75 % of the gap, below PAIR_MATERIAL
+    # = 5 %) but twice the noise floor is 0.02: still above the noise, yet no pair could be
+    # named.  At 0.05 it leaves 0.04 (10 %): the three pairs are planned.
+    nominal = sums([0.41] * N_SEG)
+    names = ("valve_deadband", "sensor_lag", "spool_dynamics", "hose_compliance")
+    for best_mse, n_pairs in ((0.025, 0), (0.05, 3)):
+        left = [best_mse, 0.35, 0.38, 0.40]
+        singles = [
+            candidate((n,), sums([m] * N_SEG), nominal, float(i))
+            for i, (n, m) in enumerate(zip(names, left, strict=True))
+        ]
+        plan = pair_plan(singles, sums([best_mse] * N_SEG), FLOOR, nominal, IDX)
+        assert len(plan) == n_pairs

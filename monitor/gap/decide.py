@@ -94,11 +94,17 @@ def pair_plan(
     load that the calibration's viscous friction half absorbs does not.  When the best does
     not explain the gap, ``decide`` never looks at a pair (the verdict is ``unexplained``,
     ``none`` or the best on the structured gap alone), so none is fitted: three pair fits
-    were a fifth of an ``unexplained`` diagnosis's CPU."""
+    were a fifth of an ``unexplained`` diagnosis's CPU.  Nor when the best leaves less than
+    ``PAIR_MATERIAL`` of the gap: a pair cannot remove more than what is left (the gap is
+    not negative), so none could be named."""
     if within_noise(best_sums, floor) or not singles:
         return []
     best = singles[0].effects[0].name
     if best == SENSOR_ONLY or not explains(singles[0], best_sums, nominal, idx, floor):
+        return []
+    # The whole gap as ``decide`` reckons it for the material-share test.
+    gap0 = singles[0].heldout_gap / max(1.0 - singles[0].heldout_reduction, 1e-12)
+    if singles[0].heldout_gap < PAIR_MATERIAL * gap0:
         return []
     # A sensor calibration is fitted in closed form on its own, never inside a pair.
     others = [c for c in singles[1:] if c.effects[0].name != SENSOR_ONLY]
