@@ -86,7 +86,7 @@ def pair_plan(
     floor: np.ndarray,
     nominal: SegmentSums,
     idx: np.ndarray,
-):
+) -> list[tuple[str, str]]:
     """Name pairs worth fitting when the best single explains the gap (``explains``) and
     leaves a gap clearly above the noise: the best with each of the next few.  A pair's
     larger effect is the best single (a pair without it would have to beat it from two
