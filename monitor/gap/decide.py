@@ -67,16 +67,44 @@ def gain_share(before: SegmentSums, after: SegmentSums, idx: np.ndarray, floor: 
     return float(np.mean(boot_gap(before, idx, floor) - boot_gap(after, idx, floor) > 0))
 
 
-def pair_plan(singles: list[Candidate], best_sums: SegmentSums, floor: np.ndarray):
-    """Name pairs worth fitting when the best single leaves a gap clearly above the noise:
-    the best with each of the next few.  A pair's larger effect is the best single (a pair
-    without it would have to beat it from two weaker ones), and the partner need not remove
-    anything alone: friction under a lever load that the calibration's viscous friction
-    half absorbs does not."""
+def explains(
+    best: Candidate,
+    best_sums: SegmentSums,
+    nominal: SegmentSums,
+    idx: np.ndarray,
+    floor: np.ndarray,
+) -> bool:
+    """The best single effect removes at least ``EXPLAIN_MIN`` of the held-out gap and gains
+    over the calibrated simulator in at least ``SIGNIFICANT`` of the bootstrap resamples."""
+    gain = boot_gap(nominal, idx, floor) - boot_gap(best_sums, idx, floor)
+    return bool(best.heldout_reduction >= EXPLAIN_MIN and np.mean(gain > 0) >= SIGNIFICANT)
+
+
+def pair_plan(
+    singles: list[Candidate],
+    best_sums: SegmentSums,
+    floor: np.ndarray,
+    nominal: SegmentSums,
+    idx: np.ndarray,
+) -> list[tuple[str, str]]:
+    """Name pairs worth fitting when the best single explains the gap (``explains``) and
+    leaves a gap clearly above the noise: the best with each of the next few.  A pair's
+    larger effect is the best single (a pair without it would have to beat it from two
+    weaker ones), and the partner need not remove anything alone: friction under a lever
+    load that the calibration's viscous friction half absorbs does not.  When the best does
+    not explain the gap, ``decide`` never looks at a pair (the verdict is ``unexplained``,
+    ``none`` or the best on the structured gap alone), so none is fitted: three pair fits
+    were a fifth of an ``unexplained`` diagnosis's CPU.  Nor when the best leaves less than
+    ``PAIR_MATERIAL`` of the gap: a pair cannot remove more than what is left (the gap is
+    not negative), so none could be named."""
     if within_noise(best_sums, floor) or not singles:
         return []
     best = singles[0].effects[0].name
-    if best == SENSOR_ONLY:
+    if best == SENSOR_ONLY or not explains(singles[0], best_sums, nominal, idx, floor):
+        return []
+    # The whole gap as ``decide`` reckons it for the material-share test.
+    gap0 = singles[0].heldout_gap / max(1.0 - singles[0].heldout_reduction, 1e-12)
+    if singles[0].heldout_gap < PAIR_MATERIAL * gap0:
         return []
     # A sensor calibration is fitted in closed form on its own, never inside a pair.
     others = [c for c in singles[1:] if c.effects[0].name != SENSOR_ONLY]
@@ -104,12 +132,12 @@ def decide(
     best = singles[0]
     red_b = boot_reduction(nominal, sums[best.name], idx, floor)
     gain_b = boot_gap(nominal, idx, floor) - boot_gap(sums[best.name], idx, floor)
-    explains = best.heldout_reduction >= EXPLAIN_MIN and np.mean(gain_b > 0) >= SIGNIFICANT
-    if not explains and structured is not None:
+    named = explains(best, sums[best.name], nominal, idx, floor)
+    if not named and structured is not None:
         s_conf = _structured_share(best, structured, idx, floor)
         if s_conf is not None:
             return Decision(best.effects[0].name, None, best, s_conf)
-    if not explains:
+    if not named:
         if structured is not None and basemis.practically_small(
             structured[1], basemis.smoothed_floor(floor)
         ):

@@ -268,11 +268,12 @@ def _diagnose(
     lap("refine")
     noise_only = within_noise(base.nominal, floor)
 
-    # 3. Pairs, when the best alone leaves a gap clearly above the noise.
+    # 3. Pairs, when the best alone explains the gap but leaves some clearly above the noise.
+    idx = resamples(len(held))
     pairs: list[Candidate] = []
     if not noise_only:
         by_name = {c.effects[0].name: c for c in singles}
-        for a, b in pair_plan(singles, sums[singles[0].name], floor):
+        for a, b in pair_plan(singles, sums[singles[0].name], floor, base.nominal, idx):
             first, other = by_name[a], by_name[b]
             starts = [(first.factors, (*first.effects, *other.effects))]
             members = [m for x in (first, other) for m in (x.members or member_defaults(x))]
@@ -283,7 +284,6 @@ def _diagnose(
             say(f"pair {c.name}: held-out reduction {c.heldout_reduction:+.2f}")
     lap("pairs")
 
-    idx = resamples(len(held))
     d = decide(
         noise_only, singles, pairs, sums, base.nominal, idx, floor, (smooth, base.smooth_nominal)
     )
