@@ -19,7 +19,7 @@ from monitor.detection.plausibility import finding
 from monitor.detection.verdict import verdict
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
-from monitor.model.bias import alarm_level, bias_series
+from monitor.model.bias import alarm_level, bias_regimes, bias_series
 from monitor.model.dgrnn import predict_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
@@ -137,7 +137,7 @@ def detect(
     b = None
     if model.bias is not None:
         spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
-        b = bias_series(e, model.bias.regimes(spool), model.bias)
+        b = bias_series(e, bias_regimes(spool), model.bias)
     level = alarm_level(j, model.eps0, b, model.bias)
     # The alarm machine compares the level with 1: J against eps0, B against b0.
     decider = Decider(alarm, 1.0, make_isolator(model), model.window_n)

@@ -23,7 +23,7 @@ from monitor.detection.gating import Gate, GatingConfig
 from monitor.detection.offline import make_isolator
 from monitor.detection.opstate import OpState
 from monitor.errors import ModelFileError
-from monitor.model.bias import BiasWindow
+from monitor.model.bias import BiasWindow, bias_regime
 from monitor.model.dgrnn import TickPredictor
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import WindowJ
@@ -148,7 +148,7 @@ class Ticker:
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
         level = j / self.eps0
         if self.bias is not None:
-            b = self.b = self.bias.push(e, self.bias.bias.regime(spool))
+            b = self.b = self.bias.push(e, bias_regime(spool))
             if level == level and b == b and self._b0 == self._b0:  # neither is NaN
                 level = max(level, b / self._b0)
         stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))

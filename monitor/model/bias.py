@@ -4,9 +4,8 @@ J (eq. 9) is the mean *squared* residual, so a small fault's steady offset adds 
 the scatter every duty cycle already has.  A worn seal or a stroke-limited spool moves the
 *mean* of the residual in the operating regimes where it acts, and a mean over many samples
 averages the scatter away.  B therefore keeps, over the last ``window_n`` valid samples, the
-mean signed residual of every output in each spool regime (hold; raising and lowering, each
-split by command size at ``edges_pct``: a stroke limit only shows above the command the
-spool can no longer reach, so the largest commands have a regime of their own), turns
+mean signed residual of every output in each of five spool regimes (hold; raising and
+lowering at small and at large commands: a stroke limit only shows at large ones), turns
 each into a standard score with the long-run standard deviation ``scale`` learnt from
 held-out normal data, and averages the squared scores over the regimes seen often enough:
 
@@ -16,8 +15,8 @@ held-out normal data, and averages the squared scores over the regimes seen ofte
 On normal data B is about 1 (a chi-square per degree of freedom); it grows with a fault's
 offset squared and with the time the fault has been present.  Its threshold b0 comes from
 held-out normal B by the same rule as eps0 from J (``monitor.model.threshold``).  Like J, B
-is judged only on a full window: while it fills, fewer regimes count, so the average over
-them is not diluted and a single hold of a run's first seconds would read as a fault.
+is judged only on a full window: while the window fills, fewer regimes count, the average
+over them is not diluted, and the first hold of a run read as a fault.
 
 One step kernel (``_push``) serves the live ticker and the batch series, so both give the
 same numbers.  A NaN residual (a gated or missing sample) pauses the window, as for J.
@@ -32,12 +31,10 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
 
-#: Spool command (%) up to which the loop holds.
+#: Spool command edges (%) of the regimes: |s| <= 5 hold; 5 < |s| <= 60 small; above: large.
 HOLD_PCT = 5.0
-#: Command edges (%) splitting raising and lowering by size.  Model files written before
-#: the 80 % edge have (60,) and keep it.
-EDGES_PCT = (60.0, 80.0)
-LEGACY_EDGES_PCT = (60.0,)
+LARGE_PCT = 60.0
+N_BIAS_REGIMES = 5  # hold, raise small, raise large, lower small, lower large
 #: Long-run standard deviation estimated by means of batches this long (samples of one regime).
 BATCH = 500
 #: A regime's scale is at least this share of the output's largest scale over the regimes: a
@@ -46,28 +43,20 @@ BATCH = 500
 SCALE_FLOOR = 0.25
 
 
-def n_regimes(edges_pct: tuple[float, ...]) -> int:
-    """Hold, then raising and lowering in ``len(edges_pct) + 1`` sizes each."""
-    return 1 + 2 * (len(edges_pct) + 1)
-
-
-def bias_regime(spool_pct: float, edges_pct: tuple[float, ...] = EDGES_PCT) -> int:
-    """The regime of one sample: 0 hold (NaN too), then raising by size, then lowering."""
+def bias_regime(spool_pct: float) -> int:
+    """The regime of one sample (NaN counts as hold)."""
     a = abs(spool_pct)
     if not a > HOLD_PCT:
         return 0
-    size = sum(1 for edge in edges_pct if a > edge)
-    return (1 if spool_pct > 0 else 2 + len(edges_pct)) + size
+    return (1 if spool_pct > 0 else 3) + (1 if a > LARGE_PCT else 0)
 
 
-def bias_regimes(spool_pct: np.ndarray, edges_pct: tuple[float, ...] = EDGES_PCT) -> np.ndarray:
+def bias_regimes(spool_pct: np.ndarray) -> np.ndarray:
     """``bias_regime`` for a whole series."""
     s = np.asarray(spool_pct, dtype=np.float64)
     a = np.abs(s)
-    size = np.zeros(s.shape, dtype=np.int64)
-    for edge in edges_pct:
-        size += a > edge
-    out = np.where(s > 0, 1, 2 + len(edges_pct)) + size
+    large = (a > LARGE_PCT).astype(np.int64)
+    out = np.where(s > 0, 1, 3) + large
     return np.where(a > HOLD_PCT, out, 0).astype(np.int64)
 
 
@@ -77,9 +66,8 @@ class BiasModel:
 
     window_n: int  # samples (6000: 60 s at 100 Hz)
     min_count: int  # samples of a regime in the window before it counts
-    scale: np.ndarray  # (regimes, outputs), z-units x sqrt(samples)
+    scale: np.ndarray  # (N_BIAS_REGIMES, outputs), z-units x sqrt(samples)
     b0: float = float("nan")  # threshold; NaN: B is computed but never alarms
-    edges_pct: tuple[float, ...] = EDGES_PCT  # command sizes splitting the moving regimes
 
     def __post_init__(self) -> None:
         if self.window_n < 2 or not 1 <= self.min_count <= self.window_n:
@@ -87,22 +75,10 @@ class BiasModel:
                 f"bias window {self.window_n} and min_count {self.min_count} must satisfy "
                 "1 <= min_count <= window"
             )
-        edges = tuple(float(v) for v in self.edges_pct)
-        bounds = (HOLD_PCT, *edges, 100.0)
-        if any(not a < b for a, b in zip(bounds[:-1], bounds[1:], strict=True)):
-            raise ConfigError(f"bias regime edges must rise within {HOLD_PCT:g}..100 %: {edges}")
-        object.__setattr__(self, "edges_pct", edges)
         s = np.asarray(self.scale, dtype=np.float64)
-        n = n_regimes(edges)
-        if s.ndim != 2 or s.shape[0] != n or not np.all(s > 0):
-            raise ConfigError(f"bias scale must be ({n}, outputs) and positive")
+        if s.ndim != 2 or s.shape[0] != N_BIAS_REGIMES or not np.all(s > 0):
+            raise ConfigError(f"bias scale must be ({N_BIAS_REGIMES}, outputs) and positive")
         object.__setattr__(self, "scale", np.ascontiguousarray(s))
-
-    def regimes(self, spool_pct: np.ndarray) -> np.ndarray:
-        return bias_regimes(spool_pct, self.edges_pct)
-
-    def regime(self, spool_pct: float) -> int:
-        return bias_regime(spool_pct, self.edges_pct)
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -110,27 +86,22 @@ class BiasModel:
             "min_count": int(self.min_count),
             "scale": [[float(v) for v in row] for row in self.scale],
             "b0": float(self.b0),
-            "edges_pct": list(self.edges_pct),
         }
 
     @classmethod
     def from_dict(cls, d: dict[str, object]) -> BiasModel:
-        edges = tuple(d.get("edges_pct", LEGACY_EDGES_PCT))  # type: ignore[arg-type]
         return cls(int(d["window_n"]), int(d["min_count"]),  # type: ignore[arg-type]
-                   np.asarray(d["scale"], dtype=np.float64), float(d["b0"]),  # type: ignore[arg-type]
-                   edges)  # fmt: skip
+                   np.asarray(d["scale"], dtype=np.float64), float(d["b0"]))  # type: ignore[arg-type]  # fmt: skip
 
 
-def fit_scale(
-    residuals: list[np.ndarray], regimes: list[np.ndarray], n_regime: int = n_regimes(EDGES_PCT)
-) -> np.ndarray:
+def fit_scale(residuals: list[np.ndarray], regimes: list[np.ndarray]) -> np.ndarray:
     """Long-run standard deviation of the mean residual per regime and output, by batch means
     over held-out normal data (``BATCH`` consecutive samples of one regime per batch, so the
     residuals' autocorrelation is inside the batch).  A regime with fewer than three batches
     takes the output's largest scale; every scale is floored at ``SCALE_FLOOR`` of it."""
     n_out = residuals[0].shape[1]
-    scale = np.full((n_regime, n_out), np.nan)
-    for r in range(n_regime):
+    scale = np.full((N_BIAS_REGIMES, n_out), np.nan)
+    for r in range(N_BIAS_REGIMES):
         means = []
         for e, reg in zip(residuals, regimes, strict=True):
             x = e[(reg == r) & np.isfinite(e).all(axis=1)]
@@ -234,8 +205,8 @@ class BiasWindow:
         n_out = bias.scale.shape[1]
         self._ring_e = np.zeros((bias.window_n, n_out))
         self._ring_r = np.zeros(bias.window_n, dtype=np.int64)
-        self._sums = np.zeros(bias.scale.shape)
-        self._counts = np.zeros(bias.scale.shape[0])
+        self._sums = np.zeros((N_BIAS_REGIMES, n_out))
+        self._counts = np.zeros(N_BIAS_REGIMES)
         self._state = np.zeros(3, dtype=np.int64)
         self._resum = _resum(bias.window_n)
 

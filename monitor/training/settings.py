@@ -7,7 +7,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from monitor.errors import ConfigError
-from monitor.model.bias import EDGES_PCT
 from monitor.model.spec import PRESETS, DGRNNSpec
 from monitor.model.threshold import ThresholdRule
 
@@ -39,9 +38,6 @@ class TrainConfig:
     bias: bool | None = None
     bias_window_n: int = 6000  # 60 s: several raise/hold/lower phases of every regime
     bias_min_count: int = 300  # 3 s of a regime in the window before it counts
-    #: Spool command sizes (%) splitting raising and lowering into regimes of B
-    #: (``monitor.model.bias``): above 80 % a stroke-limited spool shows.
-    bias_edges_pct: tuple[float, ...] = EDGES_PCT
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:

@@ -10,7 +10,6 @@ own physics model), driven through the freshly trained DGRNN.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import math
 import time
@@ -21,7 +20,7 @@ import numpy as np
 from monitor.detection.alarm import N_REGIMES, AlarmConfig, Isolator
 from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
-from monitor.model.bias import BiasModel, bias_regimes, bias_series, fit_scale, n_regimes
+from monitor.model.bias import BiasModel, bias_regimes, bias_series, fit_scale
 from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
@@ -234,7 +233,7 @@ def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
     rb, mb = reference.bias, model.bias
     if rb is not None and mb is not None and rb.b0 > mb.b0:
         notes.append(f"b0 {mb.b0:.4g} -> {rb.b0:.4g}")
-        model.bias = dataclasses.replace(mb, b0=rb.b0)
+        model.bias = BiasModel(mb.window_n, mb.min_count, mb.scale, rb.b0)
     return ", ".join(notes) or "own thresholds already above the reference's"
 
 
@@ -251,13 +250,11 @@ def fit_bias(e_val: list[np.ndarray], spool_val: list[np.ndarray], cfg: TrainCon
             f"{MIN_BLOCKS * cfg.bias_window_n / 6000:g} min ({MIN_BLOCKS} windows): give more "
             "with --held-out"
         )
-    edges = cfg.bias_edges_pct
-    regimes = [bias_regimes(s, edges) for s in spool_val]
-    scale = fit_scale(e_val, regimes, n_regimes(edges))
-    bias = BiasModel(cfg.bias_window_n, cfg.bias_min_count, scale, edges_pct=edges)
+    regimes = [bias_regimes(s) for s in spool_val]
+    bias = BiasModel(cfg.bias_window_n, cfg.bias_min_count, fit_scale(e_val, regimes))
     b_val = np.concatenate([bias_series(e, r, bias) for e, r in zip(e_val, regimes, strict=True)])
     _, b0 = cfg.threshold.eps0(b_val, block=cfg.bias_window_n)
-    return dataclasses.replace(bias, b0=b0)
+    return BiasModel(bias.window_n, bias.min_count, bias.scale, b0)
 
 
 #: Severities the fault signatures are learnt at: one signature per fault and severity, since
