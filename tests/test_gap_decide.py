@@ -126,21 +126,26 @@ def test_pairs_are_the_best_with_each_of_the_next_three_above_the_noise():
     assert pair_plan(singles, best_in_noise, FLOOR, nominal, IDX) == []
 
 
+def _plan_with_best_at(best_mse: float) -> list:
+    """The pairs planned when the best of four singles leaves ``best_mse`` of a 0.41 gap
+    in every segment (the others leave 0.35-0.40)."""
+    nominal = sums([0.41] * N_SEG)
+    names = ("valve_deadband", "sensor_lag", "spool_dynamics", "hose_compliance")
+    left = [best_mse, 0.35, 0.38, 0.40]
+    singles = [
+        candidate((n,), sums([m] * N_SEG), nominal, float(i))
+        for i, (n, m) in enumerate(zip(names, left, strict=True))
+    ]
+    return pair_plan(singles, sums([best_mse] * N_SEG), FLOOR, nominal, IDX)
+
+
 def test_no_pairs_are_fitted_when_the_best_single_does_not_explain_the_gap():
     # decide() never names a pair whose best single leaves the gap unexplained, so none is
     # planned.  Best leaves 0.25 of a 0.4 gap in every segment: (0.4 - 0.24) / 0.4 = 40 %
     # removed, below EXPLAIN_MIN.  At 0.13 in every segment ((0.4 - 0.12) / 0.4 = 70 %
     # removed) the three pairs are planned.
-    nominal = sums([0.41] * N_SEG)
-    names = ("valve_deadband", "sensor_lag", "spool_dynamics", "hose_compliance")
     for best_mse, n_pairs in ((0.25, 0), (0.13, 3)):
-        left = [best_mse, 0.35, 0.38, 0.40]
-        singles = [
-            candidate((n,), sums([m] * N_SEG), nominal, float(i))
-            for i, (n, m) in enumerate(zip(names, left, strict=True))
-        ]
-        plan = pair_plan(singles, sums([best_mse] * N_SEG), FLOOR, nominal, IDX)
-        assert len(plan) == n_pairs
+        assert len(_plan_with_best_at(best_mse)) == n_pairs
     # 68 % removed on the whole, but carried by one segment of ten (a resample misses it
     # with probability 0.9**10 = 35 %): not significant, so no pair either.
     nominal = sums([2.0] + [0.1] * (N_SEG - 1))
@@ -158,13 +163,5 @@ def test_no_pairs_are_fitted_when_the_best_leaves_less_than_a_material_share():
     # 0.4 per signal; the best at 0.025 leaves 0.015 (3.75 % of the gap, below PAIR_MATERIAL
     # = 5 %) but twice the noise floor is 0.02: still above the noise, yet no pair could be
     # named.  At 0.05 it leaves 0.04 (10 %): the three pairs are planned.
-    nominal = sums([0.41] * N_SEG)
-    names = ("valve_deadband", "sensor_lag", "spool_dynamics", "hose_compliance")
     for best_mse, n_pairs in ((0.025, 0), (0.05, 3)):
-        left = [best_mse, 0.35, 0.38, 0.40]
-        singles = [
-            candidate((n,), sums([m] * N_SEG), nominal, float(i))
-            for i, (n, m) in enumerate(zip(names, left, strict=True))
-        ]
-        plan = pair_plan(singles, sums([best_mse] * N_SEG), FLOOR, nominal, IDX)
-        assert len(plan) == n_pairs
+        assert len(_plan_with_best_at(best_mse)) == n_pairs
