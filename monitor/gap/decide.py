@@ -62,22 +62,26 @@ def within_noise(sums: SegmentSums, floor: np.ndarray, ratio: float = NONE_RATIO
     return bool(np.all(sums.mse() < ratio * np.maximum(floor, 1e-12)))
 
 
+def boot_gain(before: SegmentSums, after: SegmentSums, idx: np.ndarray, floor: np.ndarray):
+    """Gap of ``before`` minus gap of ``after`` in each bootstrap resample."""
+    return boot_gap(before, idx, floor) - boot_gap(after, idx, floor)
+
+
 def gain_share(before: SegmentSums, after: SegmentSums, idx: np.ndarray, floor: np.ndarray):
     """Share of bootstrap resamples in which ``after`` has the smaller gap than ``before``."""
-    return float(np.mean(boot_gap(before, idx, floor) - boot_gap(after, idx, floor) > 0))
+    return float(np.mean(boot_gain(before, after, idx, floor) > 0))
 
 
-def explains(
-    best: Candidate,
-    best_sums: SegmentSums,
-    nominal: SegmentSums,
-    idx: np.ndarray,
-    floor: np.ndarray,
-) -> bool:
+def explains(best: Candidate, gain: np.ndarray) -> bool:
     """The best single effect removes at least ``EXPLAIN_MIN`` of the held-out gap and gains
-    over the calibrated simulator in at least ``SIGNIFICANT`` of the bootstrap resamples."""
-    gain = boot_gap(nominal, idx, floor) - boot_gap(best_sums, idx, floor)
+    over the calibrated simulator (``gain``: ``boot_gain`` from it to the best) in at least
+    ``SIGNIFICANT`` of the bootstrap resamples."""
     return bool(best.heldout_reduction >= EXPLAIN_MIN and np.mean(gain > 0) >= SIGNIFICANT)
+
+
+def whole_gap(c: Candidate) -> float:
+    """The calibrated simulator's held-out gap, from what ``c`` leaves and removes."""
+    return c.heldout_gap / max(1.0 - c.heldout_reduction, 1e-12)
 
 
 def pair_plan(
@@ -100,11 +104,9 @@ def pair_plan(
     if within_noise(best_sums, floor) or not singles:
         return []
     best = singles[0].effects[0].name
-    if best == SENSOR_ONLY or not explains(singles[0], best_sums, nominal, idx, floor):
+    if best == SENSOR_ONLY or not explains(singles[0], boot_gain(nominal, best_sums, idx, floor)):
         return []
-    # The whole gap as ``decide`` reckons it for the material-share test.
-    gap0 = singles[0].heldout_gap / max(1.0 - singles[0].heldout_reduction, 1e-12)
-    if singles[0].heldout_gap < PAIR_MATERIAL * gap0:
+    if singles[0].heldout_gap < PAIR_MATERIAL * whole_gap(singles[0]):
         return []
     # A sensor calibration is fitted in closed form on its own, never inside a pair.
     others = [c for c in singles[1:] if c.effects[0].name != SENSOR_ONLY]
@@ -131,8 +133,8 @@ def decide(
         return Decision("none", None, None, conf)
     best = singles[0]
     red_b = boot_reduction(nominal, sums[best.name], idx, floor)
-    gain_b = boot_gap(nominal, idx, floor) - boot_gap(sums[best.name], idx, floor)
-    named = explains(best, sums[best.name], nominal, idx, floor)
+    gain_b = boot_gain(nominal, sums[best.name], idx, floor)
+    named = explains(best, gain_b)
     if not named and structured is not None:
         s_conf = _structured_share(best, structured, idx, floor)
         if s_conf is not None:
@@ -149,7 +151,7 @@ def decide(
             conf = np.all(boot_mse(nominal, idx) < MARGINAL_RATIO * floor, axis=1)
             return Decision("none", None, None, float(np.mean(conf)))
         return Decision("unexplained", None, None, float(np.mean(red_b < EXPLAIN_MIN)))
-    gap0 = best.heldout_gap / max(1.0 - best.heldout_reduction, 1e-12)
+    gap0 = whole_gap(best)
     good = [
         p
         for p in pairs
@@ -194,7 +196,7 @@ def _structured_share(
     floor_s = basemis.smoothed_floor(floor)
     after = smooth[best.name]
     red = reduction(gap(nominal_s.mse(), floor_s), gap(after.mse(), floor_s))
-    gain = boot_gap(nominal_s, idx, floor_s) - boot_gap(after, idx, floor_s)
+    gain = boot_gain(nominal_s, after, idx, floor_s)
     if red < EXPLAIN_MIN or np.mean(gain > 0) < SIGNIFICANT:
         return None
     red_b = boot_reduction(nominal_s, after, idx, floor_s)
