@@ -11,6 +11,7 @@ from monitor.gap import where as W
 from monitor.gap.fit import Knob, fit
 from monitor.gap.predict import predict
 from monitor.gap.prepare import noise_variance, prepare
+from monitor.gap.rodflow import rod_from_flow, stalls
 from monitor.gap.score import SegmentSums, gap, normalised, segment_sums
 from monitor.gap.segments import make_segments, split
 from monitor.gap.shrink import boot_reduction, resamples
@@ -80,6 +81,29 @@ def test_rod_position_from_flow_when_rodpos_is_absent(clean):
     assert not prep.has_rodpos
     err = np.abs(prep.rod_mm - rec["RodPosTrue"])
     assert np.median(err) < 10.0  # mm, over a stroke of 500 mm
+
+
+def test_rod_from_flow_is_anchored_at_a_stall_when_the_rod_starts_mid_stroke():
+    # Integration from 0 with the rod really at 300 mm: clipping never catches an estimate
+    # that runs behind, so before the stall anchor it stayed 100-300 mm off all recording.
+    rec = simulate(make_cycle("boom", 60.0, 11), M, seed=None, rod_pos0_m=0.3)
+    x = rod_from_flow(rec["SpoolCmd"], rec["PP"], rec["PA"], rec["PB"], rec["QP"], M)
+    err = np.abs(x - rec["RodPosTrue"])
+    assert np.median(err) < 5.0 and err.max() < 20.0  # mm, over a stroke of 500 mm
+
+
+def test_a_stall_needs_the_opened_chamber_at_pump_pressure():
+    n = 30  # 0.3 s at 100 Hz
+    spool, pp, qp = np.full(n, 40.0), np.full(n, 195.0), np.zeros(n)
+    held = np.full(n, 58.0)  # an overlapped valve: no flow, the chamber keeps its load
+    assert not stalls(spool, pp, held, np.zeros(n), qp, M).any()
+    on_stop = stalls(spool, pp, np.full(n, 194.0), np.zeros(n), qp, M)
+    # Extension stalled from the 10th sample on (0.1 s), never before.
+    assert np.all(on_stop[:9] == 0) and np.all(on_stop[9:] == 1)
+    back = stalls(-spool, pp, np.zeros(n), np.full(n, 194.0), qp, M)
+    assert np.all(back[9:] == -1)
+    # Engine off: no pump pressure, nothing says where the rod is.
+    assert not stalls(spool, np.zeros(n), np.zeros(n), np.zeros(n), qp, M).any()
 
 
 def test_fit_recovers_a_known_minimum_inside_bounds():

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monitor.errors import InputFileError, NoHydraulicDataError
+from monitor.gap.rodflow import rod_from_flow
 from monitor.io.recording import Recording
 from monitor.signals import COMMAND_NAMES, MEASURED_NAMES, SAMPLE_PERIOD_S
 from monitor.sim.effects import SENSOR_CAL_SIGNALS
@@ -133,30 +134,6 @@ _DIFF[[0, -1]] = np.array([1.0, -1.0]) / (2 * ROD_VEL_HALF_SPAN * SAMPLE_PERIOD_
 ROD_VEL_NOISE_GAIN = float(np.sum(np.convolve(_SMOOTH, _DIFF) ** 2))
 
 
-def _rod_from_flow(
-    t: np.ndarray, spool: np.ndarray, qp_lpm: np.ndarray, machine: MachineParams
-) -> np.ndarray:
-    """Rod position (mm) from pump flow without RodPos: flow goes to the side the spool opens.
-
-    Clipping at the stroke re-anchors the estimate whenever the rod runs into an end stop
-    (flow continues into a stalled cylinder only through the compensator, which stops it).
-    """
-    q = np.nan_to_num(qp_lpm) * LPM
-    v = np.where(
-        spool > CENTRE_PCT,
-        q / machine.area_a_m2,
-        np.where(spool < -CENTRE_PCT, -q / machine.area_b_m2, 0.0),
-    )
-    x = np.empty_like(t)
-    pos = 0.0
-    dt = SAMPLE_PERIOD_S
-    stroke = machine.stroke_m
-    for i in range(len(t)):
-        x[i] = pos
-        pos = min(max(pos + v[i] * dt, 0.0), stroke)
-    return x * 1e3
-
-
 def prepare(rec: Recording, machine: MachineParams) -> Prepared:
     """Validate ``rec`` for the gap tool and resample it; raises a ``MonitorError``."""
     src = rec.source
@@ -206,7 +183,7 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         ok = np.isfinite(rod)
         rod = smooth_rod(np.interp(t, t[ok], rod[ok]))
     else:
-        rod = _rod_from_flow(t, spool, meas["QP"], machine)
+        rod = rod_from_flow(spool, meas["PP"], meas["PA"], meas["PB"], meas["QP"], machine)
     scale = {n: float(np.nanstd(v)) for n, v in meas.items()}
     for name, s in scale.items():
         if not s > 0:
