@@ -80,8 +80,12 @@ def rod_from_flow(
     machine: MachineParams,
 ) -> np.ndarray:
     """Rod position (mm) per sample from pump flow, set to the stroke's end at every stall
-    (``stalls``) and clipped to the stroke; before the first stall, integrated backwards
-    from it (the starting position is unknown; 0 when the recording has no stall)."""
+    (``stalls``) and clipped to the stroke.  Between two stalls the flow is integrated
+    forwards from the earlier and backwards from the later one, weighted by how near each
+    is (a leak or a flow meter's error drifts the integral apart; it has to arrive at the
+    stop when the rod does, or a segment that ends on the stop starts a rod that stalls
+    early or runs on); before the first stall backwards only, after the last forwards only
+    (from 0 when the recording has no stall: the starting position is unknown)."""
     q = np.nan_to_num(qp_lpm) * LPM
     v = np.where(
         spool > CENTRE_PCT,
@@ -91,17 +95,27 @@ def rod_from_flow(
     stall = stalls(spool, pp_bar, pa_bar, pb_bar, qp_lpm, machine)
     stroke = machine.stroke_m
     dt = SAMPLE_PERIOD_S
-    x = np.empty(v.size)
+    n = v.size
+    ahead, back = np.empty(n), np.empty(n)
     pos = 0.0
-    for i in range(v.size):
+    for i in range(n):
         if stall[i]:
             pos = stroke if stall[i] > 0 else 0.0
-        x[i] = pos
+        ahead[i] = pos
         pos = min(max(pos + v[i] * dt, 0.0), stroke)
     anchored = np.flatnonzero(stall)
-    if anchored.size:
-        pos = x[anchored[0]]
-        for i in range(anchored[0] - 1, -1, -1):
-            pos = min(max(pos - v[i] * dt, 0.0), stroke)
-            x[i] = pos
-    return x * 1e3
+    if anchored.size == 0:
+        return ahead * 1e3
+    for i in range(n - 1, -1, -1):
+        if stall[i]:
+            pos = stroke if stall[i] > 0 else 0.0
+        elif i > anchored[-1]:
+            pos = ahead[i]
+        back[i] = pos
+        if i > 0:
+            pos = min(max(pos - v[i - 1] * dt, 0.0), stroke)
+    idx = np.arange(n)
+    prev = np.maximum.accumulate(np.where(stall != 0, idx, -1))
+    nxt = np.minimum.accumulate(np.where(stall != 0, idx, n)[::-1])[::-1]
+    w = np.where(prev < 0, 0.0, np.where(nxt >= n, 1.0, (nxt - idx) / np.maximum(nxt - prev, 1)))
+    return (w * ahead + (1.0 - w) * back) * 1e3
