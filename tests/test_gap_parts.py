@@ -11,7 +11,7 @@ from monitor.gap import where as W
 from monitor.gap.fit import Knob, fit
 from monitor.gap.predict import predict
 from monitor.gap.prepare import noise_variance, prepare
-from monitor.gap.rodflow import rod_from_flow, stalls
+from monitor.gap.rodflow import arrivals, rod_from_flow, stalls
 from monitor.gap.score import SegmentSums, gap, normalised, segment_sums
 from monitor.gap.segments import make_segments, split
 from monitor.gap.shrink import boot_reduction, resamples
@@ -104,6 +104,15 @@ def test_a_stall_needs_the_opened_chamber_at_pump_pressure():
     assert np.all(back[9:] == -1)
     # Engine off: no pump pressure, nothing says where the rod is.
     assert not stalls(spool, np.zeros(n), np.zeros(n), np.zeros(n), qp, M).any()
+
+
+def test_the_moments_of_arrival_on_a_stop_are_not_compared_without_rodpos():
+    # A stall flagged from sample 60 began 0.1 s (10 samples) earlier, at 51: samples
+    # 36..61 (0.15 s before to 0.1 s after that onset) are left out, nothing else.
+    stall = np.zeros(200, dtype=np.int8)
+    stall[60:120] = 1
+    out = arrivals(stall)
+    assert np.flatnonzero(out).tolist() == list(range(36, 62))
 
 
 def test_fit_recovers_a_known_minimum_inside_bounds():

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monitor.errors import InputFileError, NoHydraulicDataError
-from monitor.gap.rodflow import rod_from_flow
+from monitor.gap.rodflow import arrivals, rod_from_flow, stalls
 from monitor.io.recording import Recording
 from monitor.signals import COMMAND_NAMES, MEASURED_NAMES, SAMPLE_PERIOD_S
 from monitor.sim.effects import SENSOR_CAL_SIGNALS
@@ -55,6 +55,9 @@ class Prepared:
     noise_var: dict[str, float]
     source: str
     stroke_mm: float
+    #: Samples not compared (``score.normalised`` leaves them out): without RodPos, the
+    #: moments the rod arrives on an end stop (``rodflow.arrivals``).  None: every sample.
+    unscored: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -177,13 +180,16 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         )
     _check_plausible(src, cols, machine)
     meas = {n: cols[n] for n in MEASURED_NAMES}
+    unscored = None
     has_rod = rec.has("RodPos") and np.isfinite(cols["RodPos"]).mean() >= MIN_VALID_SHARE
     if has_rod:
         rod = cols["RodPos"]
         ok = np.isfinite(rod)
         rod = smooth_rod(np.interp(t, t[ok], rod[ok]))
     else:
-        rod = rod_from_flow(spool, meas["PP"], meas["PA"], meas["PB"], meas["QP"], machine)
+        pressures = (meas["PP"], meas["PA"], meas["PB"], meas["QP"])
+        rod = rod_from_flow(spool, *pressures, machine)
+        unscored = arrivals(stalls(spool, *pressures, machine))
     scale = {n: float(np.nanstd(v)) for n, v in meas.items()}
     for name, s in scale.items():
         if not s > 0:
@@ -204,6 +210,7 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         noise_var=noise_var,
         source=src,
         stroke_mm=machine.stroke_m * 1e3,
+        unscored=unscored,
     )
 
 

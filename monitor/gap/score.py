@@ -26,8 +26,13 @@ def compared(prep: Prepared) -> tuple[str, ...]:
 
 
 def normalised(prep: Prepared, pred: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """(simulated - measured) / std(measured) per signal on the grid (NaN where unknown)."""
-    return {n: (pred[n] - prep.meas[n]) / prep.scale[n] for n in compared(prep)}
+    """(simulated - measured) / std(measured) per signal on the grid (NaN where unknown
+    or not compared, ``prep.unscored``)."""
+    out = {n: (pred[n] - prep.meas[n]) / prep.scale[n] for n in compared(prep)}
+    if prep.unscored is not None:
+        for v in out.values():
+            v[prep.unscored] = np.nan
+    return out
 
 
 def noise_floor(prep: Prepared) -> np.ndarray:
