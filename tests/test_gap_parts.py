@@ -11,7 +11,7 @@ from monitor.gap import where as W
 from monitor.gap.fit import Knob, fit
 from monitor.gap.predict import predict
 from monitor.gap.prepare import noise_variance, prepare
-from monitor.gap.rodflow import arrivals, rod_from_flow, stalls
+from monitor.gap.rodflow import arrivals, holds_on_stop, rod_from_flow, stalls
 from monitor.gap.score import SegmentSums, gap, normalised, segment_sums
 from monitor.gap.segments import make_segments, split
 from monitor.gap.shrink import boot_reduction, resamples
@@ -87,7 +87,7 @@ def test_rod_from_flow_is_anchored_at_a_stall_when_the_rod_starts_mid_stroke():
     # Integration from 0 with the rod really at 300 mm: clipping never catches an estimate
     # that runs behind, so before the stall anchor it stayed 100-300 mm off all recording.
     rec = simulate(make_cycle("boom", 60.0, 11), M, seed=None, rod_pos0_m=0.3)
-    x = rod_from_flow(rec["SpoolCmd"], rec["PP"], rec["PA"], rec["PB"], rec["QP"], M)
+    x, _ = rod_from_flow(rec["SpoolCmd"], rec["PP"], rec["PA"], rec["PB"], rec["QP"], M)
     err = np.abs(x - rec["RodPosTrue"])
     assert np.median(err) < 5.0 and err.max() < 20.0  # mm, over a stroke of 500 mm
 
@@ -107,12 +107,24 @@ def test_a_stall_needs_the_opened_chamber_at_pump_pressure():
 
 
 def test_the_moments_of_arrival_on_a_stop_are_not_compared_without_rodpos():
-    # A stall flagged from sample 60 began 0.1 s (10 samples) earlier, at 51: samples
+    # An arrival flagged at sample 60 began 0.1 s (10 samples) earlier, at 51: samples
     # 36..61 (0.15 s before to 0.1 s after that onset) are left out, nothing else.
-    stall = np.zeros(200, dtype=np.int8)
-    stall[60:120] = 1
-    out = arrivals(stall)
+    out = arrivals(np.array([60]), 200)
     assert np.flatnonzero(out).tolist() == list(range(36, 62))
+
+
+def test_a_centred_spool_holding_far_off_gravity_holds_the_rod_on_a_stop():
+    n = 30
+    spool = np.zeros(n)
+    area_a, area_b, grav = M.area_a_m2, M.area_b_m2, M.gravity_load_n
+    # Mid-stroke: PA carries the gravity load with PB at 5 bar (force = gravity).
+    pa_mid = (grav / 1e5 + 5.0 * area_b) / area_a
+    assert not holds_on_stop(spool, np.full(n, pa_mid), np.full(n, 5.0), M).any()
+    # ... and read 20 bar low by a miscalibrated sensor: still not a stop.
+    assert not holds_on_stop(spool, np.full(n, pa_mid - 20.0), np.full(n, 5.0), M).any()
+    # 90 bar trapped in A with B drained (the spool closed as the rod arrived): top stop.
+    top = holds_on_stop(spool, np.full(n, 90.0), np.zeros(n), M)
+    assert np.all(top[:9] == 0) and np.all(top[9:] == 1)
 
 
 def test_fit_recovers_a_known_minimum_inside_bounds():

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monitor.errors import InputFileError, NoHydraulicDataError
-from monitor.gap.rodflow import arrivals, rod_from_flow, stalls
+from monitor.gap.rodflow import rod_from_flow
 from monitor.io.recording import Recording
 from monitor.signals import COMMAND_NAMES, MEASURED_NAMES, SAMPLE_PERIOD_S
 from monitor.sim.effects import SENSOR_CAL_SIGNALS
@@ -188,8 +188,7 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         rod = smooth_rod(np.interp(t, t[ok], rod[ok]))
     else:
         pressures = (meas["PP"], meas["PA"], meas["PB"], meas["QP"])
-        rod = rod_from_flow(spool, *pressures, machine)
-        unscored = arrivals(stalls(spool, *pressures, machine))
+        rod, unscored = rod_from_flow(spool, *pressures, machine)
     scale = {n: float(np.nanstd(v)) for n, v in meas.items()}
     for name, s in scale.items():
         if not s > 0:

@@ -44,6 +44,17 @@ STALL_S = 0.1
 #: its segment a hundredfold.
 ARRIVAL_BEFORE_S = 0.15
 ARRIVAL_AFTER_S = 0.1
+#: A hold on a stop: the spool centred and the hydraulic force on the rod (PA A_A - PB A_B)
+#: off the gravity load by more than this multiple of it, for ``STALL_S``.  A rod held in
+#: mid-stroke balances gravity within its tolerance (15 %) and breakaway friction (up to
+#: 2 kN in the catalogue's range, a third of this boom's 6 kN), and a pressure sensor read
+#: up to 20 bar off (the largest offset ``sensor_calibration`` names) moves the computed
+#: force by 6 kN more; pressed on a stop it need not balance at all (a spool that closes
+#: as the rod arrives traps 90 bar in A: 22 kN off).
+HOLD_OFF_BALANCE = 1.5
+#: The rod has left a stop once the integral is this far from it (mm); found on the same
+#: stop again without leaving it (a hold after a stall), it has not arrived.
+ARRIVED_MM = 3.0
 
 
 def stalls(
@@ -70,16 +81,30 @@ def stalls(
     return np.where(_held(ext, need), 1, np.where(_held(ret, need), -1, 0)).astype(np.int8)
 
 
-def arrivals(stall: np.ndarray) -> np.ndarray:
-    """Per sample: True within ``ARRIVAL_BEFORE_S`` before to ``ARRIVAL_AFTER_S`` after
-    the onset of a stall (``stalls``; its condition began ``STALL_S`` before the flag)."""
+def holds_on_stop(
+    spool: np.ndarray, pa_bar: np.ndarray, pb_bar: np.ndarray, machine: MachineParams
+) -> np.ndarray:
+    """Per sample: +1 where a centred spool holds the rod on the top stop, -1 on the bottom
+    one (``HOLD_OFF_BALANCE``), 0 elsewhere."""
+    force = np.nan_to_num(pa_bar) * machine.area_a_m2 - np.nan_to_num(pb_bar) * machine.area_b_m2
+    off = force * BAR - machine.gravity_load_n
+    centred = np.abs(spool) < CENTRE_PCT
+    margin = HOLD_OFF_BALANCE * abs(machine.gravity_load_n)
     need = max(int(round(STALL_S / SAMPLE_PERIOD_S)), 1)
-    flag = stall != 0
-    first = np.flatnonzero(flag & ~np.concatenate(([False], flag[:-1])))
-    onset = first - (need - 1)
+    top = _held(centred & (off > margin), need)
+    bottom = _held(centred & (off < -margin), need)
+    return np.where(top, 1, np.where(bottom, -1, 0)).astype(np.int8)
+
+
+def arrivals(flagged: np.ndarray, n: int) -> np.ndarray:
+    """Per sample of ``n``: True within ``ARRIVAL_BEFORE_S`` before to ``ARRIVAL_AFTER_S``
+    after the onset of each arrival; ``flagged`` are the samples where an arrival was first
+    flagged (its condition began ``STALL_S`` before)."""
+    need = max(int(round(STALL_S / SAMPLE_PERIOD_S)), 1)
+    onset = np.asarray(flagged, dtype=np.int64) - (need - 1)
     before = int(round(ARRIVAL_BEFORE_S / SAMPLE_PERIOD_S))
     after = int(round(ARRIVAL_AFTER_S / SAMPLE_PERIOD_S))
-    out = np.zeros(stall.size, dtype=bool)
+    out = np.zeros(n, dtype=bool)
     for i in onset:
         out[max(i - before, 0) : i + after + 1] = True
     return out
@@ -100,9 +125,11 @@ def rod_from_flow(
     pb_bar: np.ndarray,
     qp_lpm: np.ndarray,
     machine: MachineParams,
-) -> np.ndarray:
-    """Rod position (mm) per sample from pump flow, set to the stroke's end at every stall
-    (``stalls``) and clipped to the stroke.  Between two stalls the flow is integrated
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rod position (mm) per sample from pump flow, and the samples not to compare (the
+    rod's arrivals on a stop, ``arrivals``).  The position is set to the stroke's end
+    wherever the recording shows the rod on a stop (``stalls``, ``holds_on_stop``) and
+    clipped to the stroke.  Between two stalls the flow is integrated
     forwards from the earlier and backwards from the later one, weighted by how near each
     is (a leak or a flow meter's error drifts the integral apart; it has to arrive at the
     stop when the rod does, or a segment that ends on the stop starts a rod that stalls
@@ -115,19 +142,28 @@ def rod_from_flow(
         np.where(spool < -CENTRE_PCT, -q / machine.area_b_m2, 0.0),
     )
     stall = stalls(spool, pp_bar, pa_bar, pb_bar, qp_lpm, machine)
+    stall = np.where(stall != 0, stall, holds_on_stop(spool, pa_bar, pb_bar, machine))
     stroke = machine.stroke_m
     dt = SAMPLE_PERIOD_S
     n = v.size
     ahead, back = np.empty(n), np.empty(n)
     pos = 0.0
+    arrived = []
+    last, away = 0, True  # the last stop found, and whether the rod has left it since
     for i in range(n):
         if stall[i]:
+            if stall[i] != last or away:
+                arrived.append(i)
+            last, away = int(stall[i]), False
             pos = stroke if stall[i] > 0 else 0.0
         ahead[i] = pos
         pos = min(max(pos + v[i] * dt, 0.0), stroke)
+        if last and abs(pos - (stroke if last > 0 else 0.0)) * 1e3 > ARRIVED_MM:
+            away = True
     anchored = np.flatnonzero(stall)
+    unscored = arrivals(np.array(arrived, dtype=np.int64), n)
     if anchored.size == 0:
-        return ahead * 1e3
+        return ahead * 1e3, unscored
     for i in range(n - 1, -1, -1):
         if stall[i]:
             pos = stroke if stall[i] > 0 else 0.0
@@ -140,4 +176,4 @@ def rod_from_flow(
     prev = np.maximum.accumulate(np.where(stall != 0, idx, -1))
     nxt = np.minimum.accumulate(np.where(stall != 0, idx, n)[::-1])[::-1]
     w = np.where(prev < 0, 0.0, np.where(nxt >= n, 1.0, (nxt - idx) / np.maximum(nxt - prev, 1)))
-    return (w * ahead + (1.0 - w) * back) * 1e3
+    return (w * ahead + (1.0 - w) * back) * 1e3, unscored
