@@ -90,10 +90,12 @@ def test_a_catalogue_effect_gets_no_suggestion():
 
 
 class _Prep:
-    """What the spectrum needs of a prepared recording: time, signals, their scales."""
+    """What the spectrum needs of a prepared recording: time, signals, their scales, every
+    sample compared."""
 
     def __init__(self, t: np.ndarray, meas: dict[str, np.ndarray]):
         self.t, self.meas, self.scale = t, meas, {n: 1.0 for n in meas}
+        self.unscored = None
 
     def __len__(self) -> int:
         return len(self.t)
