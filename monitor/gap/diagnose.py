@@ -298,6 +298,9 @@ def _diagnose(
             base.gap0,
             base.n_eff,
             held_base=base.pred0,
+            # A sensor check compares single terms; the partner of the best is tried only
+            # if the verdict ends ``unexplained`` (below).
+            pair=d.verdict == "unexplained",
         )
     if d.verdict == sensorcal.NAME and d.chosen is not None and lead is not None:
         # A sensor error moves one signal only: a plant term that explains more of the
@@ -307,6 +310,7 @@ def _diagnose(
             say(f"not a sensor error: {checked.term} explains more across the signals")
             d = Decision("unexplained", None, None, checked.plant_share)
     if d.verdict == "unexplained" and lead is not None:
+        lead.with_pair()
         say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
     if lead is not None:
         lap("suggest")
