@@ -317,7 +317,9 @@ def integrate(
     stroke = prm[STROKE]
     _record(rec, 0, y, inputs[0], prm, k1)
     r = 1
-    step = 0
+    left = record_every
+    hh = 0.5 * h
+    h6 = h / 6.0
     for k in range(n_in - 1):
         a = inputs[k]
         b = inputs[k + 1]
@@ -332,19 +334,20 @@ def integrate(
                 u1[i] = a[i] + f1 * d
             rhs(y, u0, prm, k1)
             for i in range(N_STATES):
-                yt[i] = y[i] + 0.5 * h * k1[i]
+                yt[i] = y[i] + hh * k1[i]
             rhs(yt, um, prm, k2)
             for i in range(N_STATES):
-                yt[i] = y[i] + 0.5 * h * k2[i]
+                yt[i] = y[i] + hh * k2[i]
             rhs(yt, um, prm, k3)
             for i in range(N_STATES):
                 yt[i] = y[i] + h * k3[i]
             rhs(yt, u1, prm, k4)
             for i in range(N_STATES):
-                y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+                y[i] += h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
             _project(y, stroke)
-            step += 1
-            if step % record_every == 0:
+            left -= 1
+            if left == 0:
+                left = record_every
                 _record(rec, r, y, u1, prm, k1)
                 r += 1
     return rec
