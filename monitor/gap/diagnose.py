@@ -63,6 +63,11 @@ REFINE_TOP = 2
 #: starts, the calibrated and the nominal tolerance among them): friction fitted after a
 #: calibration that pushed viscous friction to its bound ended in a worse local minimum.
 CONFOUNDED_LOCAL_STARTS = 2
+#: The effects that get those two local fits.  For the others the second never ended
+#: materially lower (at most 0.1 % of the fit cost on the development recordings) and
+#: cost a tenth of a diagnosis's simulations (docs/benchmarks.md, "every family's second
+#: local fit").
+TWO_LOCAL_FITS = ("cylinder_friction",)
 
 Progress = Callable[[str], None]
 
@@ -220,7 +225,7 @@ def _diagnose(
             c = scored(sensorcal.fit_candidate(prep, fit_segs, fit_ev.predict, base.factors))
         else:
             free = [k for k in tol if k.name in CONFOUNDED.get(name, ())]
-            local = CONFOUNDED_LOCAL_STARTS if free else 1
+            local = CONFOUNDED_LOCAL_STARTS if free and name in TWO_LOCAL_FITS else 1
             c = scored(
                 fit_family(
                     name, fit_ev.residual, base.factors, free, local, judge, base.cal.fit_cost
