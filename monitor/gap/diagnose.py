@@ -64,9 +64,8 @@ REFINE_TOP = 2
 #: calibration that pushed viscous friction to its bound ended in a worse local minimum.
 CONFOUNDED_LOCAL_STARTS = 2
 #: The effects that get those two local fits.  For the others the second never ended
-#: materially lower (at most 0.1 % of the fit cost on the development recordings) and
-#: cost a tenth of a diagnosis's simulations (docs/benchmarks.md, "every family's second
-#: local fit").
+#: materially lower on the held-out part (it once ended far worse there) and cost 6-9 %
+#: of a diagnosis's CPU (docs/benchmarks.md, "every family's second local fit").
 TWO_LOCAL_FITS = ("cylinder_friction",)
 
 Progress = Callable[[str], None]
