@@ -77,3 +77,16 @@ def test_oil_leaking_across_the_valve_clearances_is_named_with_that_member():
     best = d.singles[0]
     assert member_names(best)["oil_viscosity"] in ("seal_and_valve", "all_paths")
     assert best.effects[0].params["valve_leak_lpm_per_100bar"] == pytest.approx(0.3, rel=0.3)
+
+
+def test_entrained_air_on_a_machine_with_larger_volumes_is_found_with_one_local_fit():
+    # Air softens the oil as larger volumes do: the volumes are fitted with it, and since
+    # only friction keeps a second local fit (``TWO_LOCAL_FITS``), one local fit from the
+    # best start must still find the air that was put in.
+    M = load_machine()
+    machine = apply(M, {"volumes": 1.05, "mass": 0.97})
+    fx = Effect.make("entrained_air", air_fraction=0.02)
+    rec = simulate(make_cycle("boom", 120.0, 6), machine, effects=[fx], seed=6)
+    d = diagnose(rec, M, effects=("entrained_air", "hose_compliance", "load_variation"))
+    assert d.verdict == "entrained_air"
+    assert d.singles[0].effects[0].params["air_fraction"] == pytest.approx(0.02, rel=0.3)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from monitor.gap import score as S
+from monitor.gap import suggest as suggest_mod
 from monitor.gap.calibrate import apply
 from monitor.gap.diagnose import FIT_BUDGET_S, FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR, diagnose
 from monitor.gap.predict import SegmentPlant, sense
@@ -144,3 +145,37 @@ def test_the_suggestion_from_the_diagnosis_held_out_run_equals_one_from_its_own_
     assert own.ranked and own.ranked[0]["term"] == "force_periodic"
     assert shared.ranked == own.ranked
     assert shared.tried == own.tried
+
+
+def test_a_pair_left_for_later_is_the_pair_tried_at_once(monkeypatch):
+    """A sensor check needs the single terms only, so ``diagnose`` leaves the best term's
+    partner for later (``pair=False``) and tries it only if the verdict ends
+    ``unexplained``: the ranking then must be the one ``suggest`` gives at once."""
+    # Any partner that does not double the best's gap is ranked, so that the deferred step
+    # has a pair to find (which partner the thresholds admit is tested elsewhere).
+    monkeypatch.setattr(suggest_mod, "PAIR_GAIN", -1.0)
+    monkeypatch.setattr(suggest_mod, "PAIR_MATERIAL", -1.0)
+    corr = {"leak_at_lin": 1.0 * LPM / (100 * BAR)}
+    rec = simulate(make_cycle("boom", SECONDS, 3), apply(M, MACHINE_TOLERANCE), seed=3,
+                   corrections=corr)  # fmt: skip
+    prep = prepare(rec, M)
+    cal, held = split(make_segments(prep))
+    fit_segs = spread(cal, FIT_BUDGET_S)
+    fit_m = M.with_changes(step_s=M.step_s * FIT_STEP_FACTOR)
+    held_m = M.with_changes(step_s=M.step_s * HELDOUT_STEP_FACTOR)
+    held_plant = SegmentPlant(prep, held)
+    base = sense(prep, held, held_plant.traces(apply(held_m, MACHINE_TOLERANCE), ()), ())
+    floor = S.noise_floor(prep)
+    gap0 = S.gap(S.segment_sums(prep, held, base).mse(), floor)
+    n_eff = S.effective_n(prep, held, base)
+
+    def run(pair: bool):
+        return suggest(prep, (fit_segs, SegmentPlant(prep, fit_segs), fit_m),
+                       (held, held_plant, held_m), MACHINE_TOLERANCE, floor, gap0, n_eff,
+                       held_base=base, pair=pair)  # fmt: skip
+
+    now, later = run(True), run(False)
+    assert len(now.ranked) == 2
+    assert later.ranked == now.ranked[:1] and later.tried == now.tried
+    assert later.with_pair().ranked == now.ranked
+    assert later.with_pair().ranked == now.ranked  # a second call tries nothing new

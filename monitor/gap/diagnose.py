@@ -63,6 +63,10 @@ REFINE_TOP = 2
 #: starts, the calibrated and the nominal tolerance among them): friction fitted after a
 #: calibration that pushed viscous friction to its bound ended in a worse local minimum.
 CONFOUNDED_LOCAL_STARTS = 2
+#: The effects that get those two local fits.  For the others the second never ended
+#: materially lower on the held-out part (it once ended far worse there) and cost 6-9 %
+#: of a diagnosis's CPU (docs/benchmarks.md, "every family's second local fit").
+TWO_LOCAL_FITS = ("cylinder_friction",)
 
 Progress = Callable[[str], None]
 
@@ -220,7 +224,7 @@ def _diagnose(
             c = scored(sensorcal.fit_candidate(prep, fit_segs, fit_ev.predict, base.factors))
         else:
             free = [k for k in tol if k.name in CONFOUNDED.get(name, ())]
-            local = CONFOUNDED_LOCAL_STARTS if free else 1
+            local = CONFOUNDED_LOCAL_STARTS if free and name in TWO_LOCAL_FITS else 1
             c = scored(
                 fit_family(
                     name, fit_ev.residual, base.factors, free, local, judge, base.cal.fit_cost
@@ -298,6 +302,9 @@ def _diagnose(
             base.gap0,
             base.n_eff,
             held_base=base.pred0,
+            # A sensor check compares single terms; the partner of the best is tried only
+            # if the verdict ends ``unexplained`` (below).
+            pair=d.verdict == "unexplained",
         )
     if d.verdict == sensorcal.NAME and d.chosen is not None and lead is not None:
         # A sensor error moves one signal only: a plant term that explains more of the
@@ -307,6 +314,7 @@ def _diagnose(
             say(f"not a sensor error: {checked.term} explains more across the signals")
             d = Decision("unexplained", None, None, checked.plant_share)
     if d.verdict == "unexplained" and lead is not None:
+        lead.with_pair()
         say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
     if lead is not None:
         lap("suggest")

@@ -19,7 +19,7 @@ amplitude and phase are fitted (two linear coefficients).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -79,6 +79,16 @@ class Suggestions:
     ranked: list[dict]  # the contract's ``suggestion`` (one or two entries)
     tried: list[dict] = field(default_factory=list)  # every term scored on the held-out part
     singles: list[Fitted] = field(default_factory=list)  # scored single terms, best first
+    # The best term's partner, not yet tried (``suggest(..., pair=False)``): the ranking
+    # with it, computed on demand by ``with_pair``.
+    pending: Callable[[], list[dict]] | None = None
+
+    def with_pair(self) -> Suggestions:
+        """The ranking with the best term's partner tried, if that was left for later (a
+        sensor check needs the singles only; the pair counts only when no sensor is named)."""
+        if self.pending is not None:
+            self.ranked, self.pending = self.pending(), None
+        return self
 
 
 Terms = Sequence[tuple[PlantTerm | SensorTerm, np.ndarray]]
@@ -276,12 +286,14 @@ def suggest(
     gap0: float,
     n_eff: float,
     held_base: Pred | None = None,
+    pair: bool = True,
 ) -> Suggestions:
     """Ranked correction terms for an ``unexplained`` gap.  ``fit`` and ``held``: the
     segments, their plant and the nominal machine (at the fits' step and the configured
     step); ``factors`` the calibrated tolerances; ``gap0`` the calibrated simulator's
     held-out gap and ``n_eff`` its effective sample size (as for the effects);
-    ``held_base`` the held-out readings of the calibrated machine, if already simulated."""
+    ``held_base`` the held-out readings of the calibrated machine, if already simulated;
+    ``pair`` False leaves the best term's partner for ``Suggestions.with_pair``."""
     fit_runs, held_runs = _Runs(prep, *fit, factors), _Runs(prep, *held, factors, held_base)
     r0 = fit_runs.residual(())
     lines = periodic_frequencies_hz(prep, fit[0], fit_runs.base)
@@ -322,18 +334,24 @@ def suggest(
     tried = [_entry(f, f.terms[0], f.coefs[0], f.heldout_reduction) for f in singles]
     if best.heldout_reduction < SUGGEST_MIN:
         return Suggestions([], tried, singles)
-    ranked = [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
-    pair = _best_pair(fit_runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
-    if (
-        pair is not None
-        and pair.heldout_gap <= (1 - PAIR_GAIN) * best.heldout_gap
-        and best.heldout_gap - pair.heldout_gap >= PAIR_MATERIAL * gap0
-    ):
-        ranked = [
-            _entry(best, pair.terms[0], pair.coefs[0], best.heldout_reduction),
-            _entry(pair, pair.terms[1], pair.coefs[1], pair.heldout_reduction),
-        ]
-    return Suggestions(ranked, tried, singles)
+    alone = [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
+
+    def paired() -> list[dict]:
+        two = _best_pair(fit_runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
+        if (
+            two is not None
+            and two.heldout_gap <= (1 - PAIR_GAIN) * best.heldout_gap
+            and best.heldout_gap - two.heldout_gap >= PAIR_MATERIAL * gap0
+        ):
+            return [
+                _entry(best, two.terms[0], two.coefs[0], best.heldout_reduction),
+                _entry(two, two.terms[1], two.coefs[1], two.heldout_reduction),
+            ]
+        return alone
+
+    if not pair:
+        return Suggestions(alone, tried, singles, paired)
+    return Suggestions(paired(), tried, singles)
 
 
 def _best_pair(

@@ -57,6 +57,7 @@ R_PP, R_PA, R_PB, R_QP, R_X, R_V, R_XS = range(7)
 N_RECORD = 7
 
 P_ATM = 101325.0
+LOG_P_ATM = math.log(P_ATM)
 
 
 @jit(inline="always")
@@ -77,16 +78,21 @@ def _compliance(p: float, vol: float, hose_vol: float, prm: np.ndarray) -> float
     """Hydraulic capacitance dV/dp of a node (m^3/Pa) at gauge pressure p."""
     beta = prm[BETA]
     if prm[AIR_ON] > 0.0:
-        # Simscape's entrained-air modulus; p absolute, never below 1 kPa.
+        # Simscape's entrained-air modulus; p absolute, never below 1 kPa.  The air's
+        # softness is kept as 1/modulus (fewer divisions one after the other: air doubled
+        # the cost of a step) and its compression as exp(log): log(pabs) needs no division
+        # first.
         pabs = max(p + P_ATM, 1e3)
         n = prm[AIR_N]
-        r = (P_ATM / pabs) ** (1.0 / n)
+        r = math.exp((LOG_P_ATM - math.log(pabs)) / n)
         a = prm[AIR_ALPHA]
         if prm[AIR_LAW] > 0.0:
-            beta = _dissolving_air(beta, pabs, a, r, n, prm[AIR_PCRIT])
+            c = vol * _dissolving_air(beta, pabs, a, r, n, prm[AIR_PCRIT])
         else:
-            beta = beta * (1.0 + a * r) / (1.0 + a * r * beta / (n * pabs))
-    c = vol / beta
+            ar = a * r
+            c = vol * (1.0 + ar * beta / (n * pabs)) / (beta * (1.0 + ar))
+    else:
+        c = vol / beta
     if prm[HOSE_ON] > 0.0:
         c += hose_vol / prm[E_WALL]
     return c
@@ -94,16 +100,16 @@ def _compliance(p: float, vol: float, hose_vol: float, prm: np.ndarray) -> float
 
 @jit(inline="always")
 def _dissolving_air(beta: float, pabs: float, a: float, r: float, n: float, pcrit: float) -> float:
-    """Effective modulus (Pa) when the free air (fraction a at atmosphere, compressed
+    """Softness 1/modulus (1/Pa) when the free air (fraction a at atmosphere, compressed
     polytropically: r = (p0/p)^(1/n)) also dissolves, linearly in pressure from atmospheric
     (all free) to ``pcrit`` (none free).  Gas volume a*theta*r per liquid volume, so
     d(gas)/dp = a*(theta*r/(n p) + r/(pcrit - p0)) below pcrit; pure liquid above it."""
     if pabs >= pcrit:
-        return beta
+        return 1.0 / beta
     span = pcrit - P_ATM
     theta = _clip((pcrit - pabs) / span, 0.0, 1.0)
     soft = a * (theta * r / (n * pabs) + r / span)
-    return (1.0 + a * theta * r) / (1.0 / beta + soft)
+    return (1.0 / beta + soft) / (1.0 + a * theta * r)
 
 
 @jit(inline="always")
@@ -311,7 +317,9 @@ def integrate(
     stroke = prm[STROKE]
     _record(rec, 0, y, inputs[0], prm, k1)
     r = 1
-    step = 0
+    left = record_every
+    hh = 0.5 * h
+    h6 = h / 6.0
     for k in range(n_in - 1):
         a = inputs[k]
         b = inputs[k + 1]
@@ -326,19 +334,20 @@ def integrate(
                 u1[i] = a[i] + f1 * d
             rhs(y, u0, prm, k1)
             for i in range(N_STATES):
-                yt[i] = y[i] + 0.5 * h * k1[i]
+                yt[i] = y[i] + hh * k1[i]
             rhs(yt, um, prm, k2)
             for i in range(N_STATES):
-                yt[i] = y[i] + 0.5 * h * k2[i]
+                yt[i] = y[i] + hh * k2[i]
             rhs(yt, um, prm, k3)
             for i in range(N_STATES):
                 yt[i] = y[i] + h * k3[i]
             rhs(yt, u1, prm, k4)
             for i in range(N_STATES):
-                y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+                y[i] += h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
             _project(y, stroke)
-            step += 1
-            if step % record_every == 0:
+            left -= 1
+            if left == 0:
+                left = record_every
                 _record(rec, r, y, u1, prm, k1)
                 r += 1
     return rec
