@@ -117,11 +117,10 @@ def test_the_periodic_load_frequency_is_found_among_drift_and_noise():
     assert any(abs(f - 1.37) < 1 / 300 for f in found)
 
 
-def test_the_suggestion_from_the_diagnosis_held_out_run_equals_one_from_its_own_run():
-    """``diagnose`` hands ``suggest`` the calibrated machine's held-out readings it has
-    simulated already; the suggestion must be the one a fresh run of them gives."""
-    w = 2 * math.pi * 0.8
-    corr = {"force_cos": 500.0, "force_sin": 0.0, "force_omega": w}
+def _suggester(corr: dict):
+    """A +-5 % machine (seed 3) with the correction ``corr``, split, calibrated at the
+    machine's own tolerances (the calibration's place): ``suggest`` on it with keyword
+    arguments, and the calibrated machine's held-out readings."""
     rec = simulate(make_cycle("boom", SECONDS, 3), apply(M, MACHINE_TOLERANCE), seed=3,
                    corrections=corr)  # fmt: skip
     prep = prepare(rec, M)
@@ -129,19 +128,28 @@ def test_the_suggestion_from_the_diagnosis_held_out_run_equals_one_from_its_own_
     fit_segs = spread(cal, FIT_BUDGET_S)
     fit_m = M.with_changes(step_s=M.step_s * FIT_STEP_FACTOR)
     held_m = M.with_changes(step_s=M.step_s * HELDOUT_STEP_FACTOR)
-    factors = MACHINE_TOLERANCE  # the calibration's place: where the machine was made
     held_plant = SegmentPlant(prep, held)
-    base = sense(prep, held, held_plant.traces(apply(held_m, factors), ()), ())
+    base = sense(prep, held, held_plant.traces(apply(held_m, MACHINE_TOLERANCE), ()), ())
     floor = S.noise_floor(prep)
     gap0 = S.gap(S.segment_sums(prep, held, base).mse(), floor)
     n_eff = S.effective_n(prep, held, base)
 
-    def run(shared):
+    def run(**kw):
         return suggest(prep, (fit_segs, SegmentPlant(prep, fit_segs), fit_m),
-                       (held, held_plant, held_m), factors, floor, gap0, n_eff,
-                       held_base=shared)  # fmt: skip
+                       (held, held_plant, held_m), MACHINE_TOLERANCE, floor, gap0, n_eff,
+                       **kw)  # fmt: skip
 
-    own, shared = run(None), run(base)
+    return run, base
+
+
+def test_the_suggestion_from_the_diagnosis_held_out_run_equals_one_from_its_own_run():
+    """``diagnose`` hands ``suggest`` the calibrated machine's held-out readings it has
+    simulated already; the suggestion must be the one a fresh run of them gives."""
+    w = 2 * math.pi * 0.8
+    corr = {"force_cos": 500.0, "force_sin": 0.0, "force_omega": w}
+    run, base = _suggester(corr)
+
+    own, shared = run(held_base=None), run(held_base=base)
     assert own.ranked and own.ranked[0]["term"] == "force_periodic"
     assert shared.ranked == own.ranked
     assert shared.tried == own.tried
@@ -156,25 +164,8 @@ def test_a_pair_left_for_later_is_the_pair_tried_at_once(monkeypatch):
     monkeypatch.setattr(suggest_mod, "PAIR_GAIN", -1.0)
     monkeypatch.setattr(suggest_mod, "PAIR_MATERIAL", -1.0)
     corr = {"leak_at_lin": 1.0 * LPM / (100 * BAR)}
-    rec = simulate(make_cycle("boom", SECONDS, 3), apply(M, MACHINE_TOLERANCE), seed=3,
-                   corrections=corr)  # fmt: skip
-    prep = prepare(rec, M)
-    cal, held = split(make_segments(prep))
-    fit_segs = spread(cal, FIT_BUDGET_S)
-    fit_m = M.with_changes(step_s=M.step_s * FIT_STEP_FACTOR)
-    held_m = M.with_changes(step_s=M.step_s * HELDOUT_STEP_FACTOR)
-    held_plant = SegmentPlant(prep, held)
-    base = sense(prep, held, held_plant.traces(apply(held_m, MACHINE_TOLERANCE), ()), ())
-    floor = S.noise_floor(prep)
-    gap0 = S.gap(S.segment_sums(prep, held, base).mse(), floor)
-    n_eff = S.effective_n(prep, held, base)
-
-    def run(pair: bool):
-        return suggest(prep, (fit_segs, SegmentPlant(prep, fit_segs), fit_m),
-                       (held, held_plant, held_m), MACHINE_TOLERANCE, floor, gap0, n_eff,
-                       held_base=base, pair=pair)  # fmt: skip
-
-    now, later = run(True), run(False)
+    run, base = _suggester(corr)
+    now, later = run(held_base=base, pair=True), run(held_base=base, pair=False)
     assert len(now.ranked) == 2
     assert later.ranked == now.ranked[:1] and later.tried == now.tried
     assert later.with_pair().ranked == now.ranked

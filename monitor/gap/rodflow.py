@@ -59,6 +59,7 @@ HOLD_OFF_BALANCE = 1.5
 #: The rod has left a stop once the integral is this far from it (mm); found on the same
 #: stop again without leaving it (a hold after a stall), it has not arrived.
 ARRIVED_MM = 3.0
+_STALL_N = max(int(round(STALL_S / SAMPLE_PERIOD_S)), 1)  # samples a stall must last
 
 
 def stalls(
@@ -81,8 +82,7 @@ def stalls(
     )
     ext = common & (spool > STALL_SPOOL_PCT) & (np.nan_to_num(pa_bar) >= STALL_CHAMBER_SHARE * pp)
     ret = common & (spool < -STALL_SPOOL_PCT) & (np.nan_to_num(pb_bar) >= STALL_CHAMBER_SHARE * pp)
-    need = max(int(round(STALL_S / SAMPLE_PERIOD_S)), 1)
-    return np.where(_held(ext, need), 1, np.where(_held(ret, need), -1, 0)).astype(np.int8)
+    return np.where(_held(ext, _STALL_N), 1, np.where(_held(ret, _STALL_N), -1, 0)).astype(np.int8)
 
 
 def holds_on_stop(
@@ -94,9 +94,8 @@ def holds_on_stop(
     off = force * BAR - machine.gravity_load_n
     centred = np.abs(spool) < CENTRE_PCT
     margin = HOLD_OFF_BALANCE * abs(machine.gravity_load_n)
-    need = max(int(round(STALL_S / SAMPLE_PERIOD_S)), 1)
-    top = _held(centred & (off > margin), need)
-    bottom = _held(centred & (off < -margin), need)
+    top = _held(centred & (off > margin), _STALL_N)
+    bottom = _held(centred & (off < -margin), _STALL_N)
     return np.where(top, 1, np.where(bottom, -1, 0)).astype(np.int8)
 
 
@@ -104,8 +103,7 @@ def arrivals(flagged: np.ndarray, n: int) -> np.ndarray:
     """Per sample of ``n``: True within ``ARRIVAL_BEFORE_S`` before to ``ARRIVAL_AFTER_S``
     after the onset of each arrival; ``flagged`` are the samples where an arrival was first
     flagged (its condition began ``STALL_S`` before)."""
-    need = max(int(round(STALL_S / SAMPLE_PERIOD_S)), 1)
-    onset = np.asarray(flagged, dtype=np.int64) - (need - 1)
+    onset = np.asarray(flagged, dtype=np.int64) - (_STALL_N - 1)
     before = int(round(ARRIVAL_BEFORE_S / SAMPLE_PERIOD_S))
     after = int(round(ARRIVAL_AFTER_S / SAMPLE_PERIOD_S))
     out = np.zeros(n, dtype=bool)
