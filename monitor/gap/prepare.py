@@ -29,8 +29,6 @@ MIN_VALID_SHARE = 0.8
 #: Measured flow or pressure this far above what the configured machine can deliver means
 #: another machine (or other units): the simulator cannot be compared with it.
 PLAUSIBLE_MARGIN = 1.3
-#: Spool commands within this of centre count as closed (%).
-CENTRE_PCT = 1.0
 
 
 @dataclass

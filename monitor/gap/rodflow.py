@@ -28,7 +28,7 @@ import numpy as np
 from monitor.signals import SAMPLE_PERIOD_S
 from monitor.sim.machine import BAR, LPM, MachineParams
 
-#: Spool commands within this of centre count as closed (%), as in ``prepare``.
+#: Spool commands within this of centre count as closed (%); segments split holds by it too.
 CENTRE_PCT = 1.0
 #: A stall needs the spool opened by at least this (%) ...
 STALL_SPOOL_PCT = 10.0
