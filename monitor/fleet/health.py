@@ -164,7 +164,7 @@ class FirstWarning:
         f = self.forecast
         assert f is not None and f.logs_to_alarm is not None  # set together with warning_log
         lo, hi = f.logs_to_alarm_range or (float("nan"), float("inf"))
-        hi_s = "no bound" if hi == float("inf") else f"{hi:.0f}"
+        hi_s = "no bound" if not np.isfinite(hi) else f"{hi:.0f}"
         due = (
             "crossing due now"
             if f.logs_to_alarm <= 0
@@ -189,7 +189,8 @@ def first_warning(machine: str, rows: list[dict[str, Any]], k: int = 6) -> First
     alarm_i = next((i for i, r in enumerate(rows) if r["alarm"]), None)  # None: never
     before = rows if alarm_i is None else rows[:alarm_i]
     warn_i, forecast = None, None
-    for i, p in enumerate(replay(machine, before, k)):
+    for i in range(len(before)):  # as replay(), but stops at the first warning
+        p = prognosis(machine, before[: i + 1], k)
         if p.logs_to_alarm is not None:
             warn_i, forecast = i, p
             break
