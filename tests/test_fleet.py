@@ -71,6 +71,24 @@ def test_drift_is_the_logs_median_j_over_the_commissioning_runs(run1, tmp_path):
     assert r["p50_j_drift"] == pytest.approx(float(np.median(js)) / j_median, rel=1e-6)
 
 
+def test_the_page_of_a_simulated_fleet_says_whether_it_warned_before_the_alarm(run1, tmp_path):
+    # Two judged logs a machine are too few for any trend (a warning needs four), so each
+    # machine's column is "-" or no warning before its first alarming log.
+    _f, out, _err = run1
+    assert main(["fleet", "report", str(out), "--out", str(tmp_path / "page")]) == 0
+    page = (tmp_path / "page" / "fleet.md").read_text()
+    per: dict[str, list[dict]] = {}
+    for r in sorted(rows(out), key=lambda r: r["log"]):
+        per.setdefault(r["machine"], []).append(r)
+    assert any(r["alarm"] for m in per.values() for r in m)  # the wearing ones alarm
+    for mid, mine in per.items():
+        at = next((i for i, r in enumerate(mine, 1) if r["alarm"]), None)
+        name = None if at is None else mine[at - 1]["log"].rsplit("/", 1)[1].split(".")[0]
+        want = "-" if at is None else f"no warning before the alarm at log {at} ({name})"
+        line = next(ln for ln in page.splitlines() if ln.startswith(f"| {mid} |"))
+        assert f" | {want} | " in line
+
+
 def test_no_commissioning_uses_the_default_model_and_says_so(run1):
     _f, out, err = run1
     assert "M04: no commissioning data, judged with the default model" in err

@@ -16,11 +16,16 @@ upward trend.  A rise counts only when Kendall's tau says it is unlikely to be s
 (one-sided p < ``TREND_P``): three rising logs of a healthy machine happen by chance one time
 in six, and a service visit planned on them is wasted.  So a trend needs at least four
 judged logs.
+
+``first_warning`` replays the prognosis over a machine's history, as the page would have
+shown it each morning, to tell whether it warned before the machine's first alarm.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from pathlib import PurePosixPath
 from typing import Any
 
 import numpy as np
@@ -119,4 +124,92 @@ def prognosis(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Prognosis
     rng = (max(until(hi), 0.0), until(lo))
     return Prognosis(
         machine, y.size, last, float(slope), until(slope), rng, p_rise, basis, level
+    )
+
+
+def replay(machine: str, rows: list[dict[str, Any]], k: int = 6) -> list[Prognosis]:
+    """The prognosis as of each row (rows in time order): entry i is made from rows[:i+1]."""
+    return [prognosis(machine, rows[: i + 1], k) for i in range(len(rows))]
+
+
+def log_day(row: dict[str, Any]) -> int | None:
+    """The day number in the log's file name (``day03-1.log`` -> 3), None without one.
+
+    ``monitor simulate-fleet`` names logs so; uploaders' own names may carry no day."""
+    m = re.match(r"day(\d+)", PurePosixPath(row["log"]).name)
+    return int(m.group(1)) if m else None
+
+
+@dataclass(frozen=True)
+class FirstWarning:
+    """Whether a machine's page forecast a crossing before its first alarm.
+
+    Log numbers are 1-based positions in the machine's rows (time order), as on the plots."""
+
+    machine: str
+    warning_log: int | None  # the first log whose prognosis gave a crossing, no alarm yet
+    warning_name: str | None  # that log's file stem, e.g. "day03-1"
+    forecast: Prognosis | None  # the prognosis made at that log
+    alarm_log: int | None  # the first log with ``alarm``
+    alarm_name: str | None
+    lead_logs: int | None  # alarm_log - warning_log (None unless both)
+    lead_days: int | None  # the same in days, when both file names carry a day
+
+    @property
+    def text(self) -> str:
+        if self.warning_log is None:
+            if self.alarm_log is None:
+                return "-"
+            return f"no warning before the alarm at log {self.alarm_log} ({self.alarm_name})"
+        f = self.forecast
+        assert f is not None and f.logs_to_alarm is not None  # set together with warning_log
+        lo, hi = f.logs_to_alarm_range or (float("nan"), float("inf"))
+        hi_s = "no bound" if not np.isfinite(hi) else f"{hi:.0f}"
+        due = (
+            "crossing due now"
+            if f.logs_to_alarm <= 0
+            else f"crossing in {f.logs_to_alarm:.1f} logs ({lo:.0f}..{hi_s})"
+        )
+        head = f"log {self.warning_log} ({self.warning_name}): {due}"
+        if self.alarm_log is None:
+            return f"{head}; no alarm yet"
+        days = "" if self.lead_days is None else f", {self.lead_days} d"
+        return (
+            f"{head}; alarm at log {self.alarm_log} ({self.alarm_name}), "
+            f"{self.lead_logs} logs{days} later"
+        )
+
+
+def first_warning(machine: str, rows: list[dict[str, Any]], k: int = 6) -> FirstWarning:
+    """The first warning and first alarm of one machine (rows in time order).
+
+    A warning is a finite crossing (``logs_to_alarm`` not None, "due now" included) forecast
+    at a log when neither it nor any earlier log had alarmed: a forecast made with or after
+    the alarm told the service team nothing the alarm did not."""
+    alarm_i = next((i for i, r in enumerate(rows) if r["alarm"]), None)  # None: never
+    before = rows if alarm_i is None else rows[:alarm_i]
+    warn_i, forecast = None, None
+    for i in range(len(before)):  # as replay(), but stops at the first warning
+        p = prognosis(machine, before[: i + 1], k)
+        if p.logs_to_alarm is not None:
+            warn_i, forecast = i, p
+            break
+
+    def name(i: int | None) -> str | None:
+        return None if i is None else PurePosixPath(rows[i]["log"]).stem
+
+    lead_logs = lead_days = None
+    if warn_i is not None and alarm_i is not None:
+        lead_logs = alarm_i - warn_i
+        d0, d1 = log_day(rows[warn_i]), log_day(rows[alarm_i])
+        lead_days = None if d0 is None or d1 is None else d1 - d0
+    return FirstWarning(
+        machine,
+        None if warn_i is None else warn_i + 1,
+        name(warn_i),
+        forecast,
+        None if alarm_i is None else alarm_i + 1,
+        name(alarm_i),
+        lead_logs,
+        lead_days,
     )

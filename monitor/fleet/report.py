@@ -1,8 +1,9 @@
 """`monitor fleet report`: the fleet page (Markdown) with its pictures (PNG).
 
 A service manager's minute: the fleet table (last verdict, health index and its trend, the
-predicted crossing, sensor faults), the health index over time per machine with eps0 (1.0)
-drawn, and the verdict timeline (alarm, sensor fault, healthy, not judged, error per log).
+predicted crossing, whether the page warned before the first alarm, sensor faults), the
+health index over time per machine with eps0 (1.0) drawn, and the verdict timeline (alarm,
+sensor fault, healthy, not judged, error per log).
 """
 
 from __future__ import annotations
@@ -18,8 +19,10 @@ from monitor.fleet.health import (
     DRIFT_FLAG,
     DRIFT_LOGS,
     TREND_P,
+    FirstWarning,
     Prognosis,
     drift,
+    first_warning,
     health_index,
     prognosis,
 )
@@ -55,12 +58,15 @@ def _fmt(x: float | None) -> str:
 
 
 def _table(
-    per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis], notes: dict[str, str]
+    per: dict[str, list[dict[str, Any]]],
+    progs: dict[str, Prognosis],
+    warns: dict[str, FirstWarning],
+    notes: dict[str, str],
 ) -> list[str]:
     out = ["| machine | logs | last verdict | health index (last max level) | drift from "
-           "commissioning | trend per log | predicted crossing of 1.0 | alarms | sensor faults "
-           "| errors | model |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+           "commissioning | trend per log | predicted crossing of 1.0 | first warning | alarms "
+           "| sensor faults | errors | model |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for mid, rows in per.items():
         p = progs[mid]
         last = rows[-1]
@@ -69,8 +75,9 @@ def _table(
         out.append(
             f"| {mid} | {len(rows)} | {last['verdict']} | {_fmt(p.last_index)} | {d_text} | "
             f"{'-' if p.slope_per_log is None else f'{p.slope_per_log:+.3f}'} | {p.text} | "
-            f"{sum(bool(r['alarm']) for r in rows)} | {sum(bool(r['sensor_fault']) for r in rows)}"
-            f" | {sum(r['error'] is not None for r in rows)} | {last['model']}"
+            f"{warns[mid].text} | {sum(bool(r['alarm']) for r in rows)} | "
+            f"{sum(bool(r['sensor_fault']) for r in rows)} | "
+            f"{sum(r['error'] is not None for r in rows)} | {last['model']}"
             f"{'; ' + notes[mid] if mid in notes else ''} |"
         )
     return out
@@ -89,7 +96,11 @@ def _trend_line(rows: list[dict[str, Any]], p: Prognosis, k: int):
 
 
 def _health_png(
-    per: dict[str, list[dict[str, Any]]], progs: dict[str, Prognosis], path: Path, k: int
+    per: dict[str, list[dict[str, Any]]],
+    progs: dict[str, Prognosis],
+    warns: dict[str, FirstWarning],
+    path: Path,
+    k: int,
 ) -> None:
     plt = _pyplot()
     from matplotlib.ticker import MaxNLocator
@@ -113,6 +124,9 @@ def _health_png(
             ax.plot(*line, "-", color="tab:purple", lw=2, alpha=0.7, label="trend to 1.0")
             right = max(right, line[0][-1] + 0.5)
         ax.axhline(1.0, color="tab:red", lw=1, label="eps0 (alarm)")
+        w = warns[mid].warning_log
+        if w is not None:
+            ax.axvline(w, color="tab:purple", ls=":", lw=1.5, label="first warning")
         ax.set_title(mid)
         ax.set_xlim(0.5, right)
         top = max([v for v in index if v is not None] + [1.0])
@@ -123,7 +137,12 @@ def _health_png(
     for ax in axes.flat[n:]:
         ax.set_visible(False)
     axes[0][0].set_ylabel("level (1.0 = alarm)")
-    axes[0][0].legend(fontsize=7)
+    handles, _labels = axes[0][0].get_legend_handles_labels()
+    if any(w.warning_log is not None for w in warns.values()) and "first warning" not in _labels:
+        # The legend sits on the first machine, which may not have warned itself.
+        handles.append(plt.Line2D([], [], color="tab:purple", ls=":", lw=1.5,
+                                  label="first warning"))  # fmt: skip
+    axes[0][0].legend(handles=handles, fontsize=7)
     fig.suptitle("Health index per machine (1.0 = alarm threshold)")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -194,6 +213,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     results have drifts, ``out/drift.png``; the page's path."""
     per = load_rows(results)
     progs = {mid: prognosis(mid, rows, k) for mid, rows in per.items()}
+    warns = {mid: first_warning(mid, rows, k) for mid, rows in per.items()}
     # A threshold resting on one commissioning event makes a machine less sensitive to
     # slow wear than its neighbours: the page says so beside its model.
     notes = {}
@@ -203,7 +223,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
         if note:
             notes[mid] = note
     out.mkdir(parents=True, exist_ok=True)
-    _health_png(per, progs, out / "health.png", k)
+    _health_png(per, progs, warns, out / "health.png", k)
     _timeline_png(per, out / "timeline.png")
     drift_pic = ["![drift from commissioning](drift.png)", ""] if _drift_png(
         per, out / "drift.png") else []  # fmt: skip
@@ -216,8 +236,11 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
              f"rise unlikely to be scatter (one-sided p < {TREND_P:g}, so at least 4 logs); "
              "crossing: logs until the trend reaches 1.0 (90 % interval); drift from "
              f"commissioning: median J of the last {DRIFT_LOGS} logs over the commissioning "
-             f"run's, whatever eps0 is ({DRIFT_FLAG:g} x and above: wearing?).", "",
-             *_table(per, progs, notes), "", "![health index](health.png)", "",
+             f"run's, whatever eps0 is ({DRIFT_FLAG:g} x and above: wearing?); first warning: "
+             "the prognosis replayed log by log, the first log at which it forecast a crossing "
+             "while no log had alarmed yet (dotted line on the plot), its forecast, and how "
+             "many logs (days) later the first alarm came.", "",
+             *_table(per, progs, warns, notes), "", "![health index](health.png)", "",
              *drift_pic, "![verdict timeline](timeline.png)", ""]  # fmt: skip
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
     if errors:
