@@ -4,7 +4,8 @@
 # end-stop visits, the lever released anywhere around the stop so that trapped pressures are
 # covered), thresholds from 10 h of plain boom cycles held out (seeds 121-240):
 # eps0 = 2 x max normal J (N = 3000) and b0 = 2 x max normal B (60 s).
-# Default preset, p = 1, at most 6000 patterns (clusters).  About 20 minutes on 2 cores.
+# Default preset, p = 1, at most 6000 patterns (clusters); fault signatures from 8
+# simulated runs per fault and severity.  About 20 minutes on 2 cores.
 #   bash config/train_default_model.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -15,4 +16,4 @@ seq 1 120 | xargs -P "$(nproc)" -I{} monitor simulate --cycle boom-cover --durat
 seq 121 240 | xargs -P "$(nproc)" -I{} monitor simulate --duration 300 \
   --seed {} --out "$work/held_{}.csv" >/dev/null
 monitor train "$work"/fit_{1..120}.csv --held-out "$work"/held_{121..240}.csv \
-  --out "$here/boom_default.model.npz"
+  --isolation-runs 8 --out "$here/boom_default.model.npz"
