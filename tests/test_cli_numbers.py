@@ -19,6 +19,7 @@ from monitor.cli import main
         (["simulate", "--duration", "5", "--seed", "1.5"], "argument --seed: must be a whole number"),
         (["train", "rec.csv", "--window", "1e12"], "argument --window: must be within 1..360000, got 1e12"),
         (["train", "rec.csv", "--window", "0"], "argument --window: must be within 1..360000"),
+        (["train", "rec.csv", "--isolation-runs", "0"], "argument --isolation-runs: must be within 1..100, got 0"),
         (["encode", "x.csv", "--start-time", "nan"], "argument --start-time: must be a number within 0..4102444800 s"),
         (["encode", "x.csv", "--start-time", "1e20"], "argument --start-time: must be within 0..4102444800 s"),
         (["simulate", "--duration", "9" * 400], "argument --duration: must be a number"),

@@ -172,6 +172,21 @@ def test_train_and_detect_cli(tmp_path, capsys):
         assert s["first_alarm_t"] > 30.0  # never before the onset on this run
 
 
+def test_train_isolation_runs_sets_the_simulated_runs(tmp_path, capsys):
+    """``--isolation-runs N`` learns each fault's signature from N simulated runs per
+    severity: 3 faults x 4 severities x 1 run = 12 runs, not the default 2 x 12 = 24."""
+    p = tmp_path / "n.csv"
+    write_csv(p, simulate(make_cycle("boom", 150, 41), MACHINE, seed=41))
+    model = tmp_path / "m.npz"
+    argv = ["train", str(p), "--out", str(model), "--max-patterns", "200", "--window", "300"]
+    assert main([*argv, "--isolation-runs", "1"]) == 0
+    said = capsys.readouterr().err
+    assert "learning fault signatures from 12 simulated runs" in said
+    assert load_model(model).isolation_labels == tuple(
+        f for f in ("piston_wear", "spool_stroke", "spool_wear") for _ in range(4)
+    )
+
+
 def test_cli_user_errors_are_one_line(tmp_path, capsys):
     empty = tmp_path / "empty.csv"
     empty.write_text("")

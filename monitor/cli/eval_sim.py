@@ -19,9 +19,10 @@ if TYPE_CHECKING:
     from monitor.evaluation.sim_eval import EvalConfig
 
 _DESCRIPTION = """\
-Train DGRNN models afresh on normal simulated boom cycles (--presets, default
-default,paper; seeds --train-seeds, 300 s each: patterns from the first half, the
-thresholds from the second half held out, as config/train_default_model.sh) and/or
+Train DGRNN models afresh on normal simulated operation (--presets, default
+default,paper; seeds --train-seeds, 300 s each: patterns from boom-cover cycles of the first
+half, the thresholds from boom cycles of the second half held out, as
+config/train_default_model.sh does with seeds 1-240) and/or
 load model files (--model; 'shipped' = the model config/monitor.yaml names), then score
 simulated runs of other seeds: normal runs totalling --normal-hours (false alarms = entries
 into the fault state, per hour), and every fault x severity x onset (abrupt at --onset;

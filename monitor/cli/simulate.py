@@ -55,7 +55,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--cycle",
         choices=CYCLES,
         default="boom",
-        help="boom: raise/hold/lower duty cycles (default); ramp: slow spool "
+        help="boom: raise/hold/lower duty cycles (default); boom-cover: the same with twice "
+        "the end-stop visits and the lever released anywhere around the stop, so spools "
+        "close on trapped pressures (the shipped model's training data); ramp: slow spool "
         "triangles; step: spool steps",
     )
     p.add_argument("--fault", action="append", default=[], metavar="NAME:SEV[@ONSET_S[+RAMP_S]]")

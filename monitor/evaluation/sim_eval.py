@@ -107,6 +107,7 @@ class RunSpec:
     onset: str = "none"  # abrupt / gradual / none
     onset_s: float = math.nan
     ramp_s: float = 0.0
+    cycle: str = "boom"  # boom-cover for the training runs (monitor.sim.cycles)
 
 
 def normal_plan(cfg: EvalConfig) -> list[RunSpec]:
@@ -155,12 +156,12 @@ def planned_seeds(cfg: EvalConfig) -> set[int]:
 
 
 def simulate_run(spec: RunSpec) -> Recording:
-    """The seeded boom cycle with the run's fault (seed drives commands and sensor noise)."""
+    """The seeded duty cycle with the run's fault (seed drives commands and sensor noise)."""
     faults = []
     if spec.fault is not None:
         faults = [Fault(spec.fault, spec.severity, spec.onset_s, spec.ramp_s)]
     return simulate(
-        make_cycle("boom", spec.duration_s, spec.seed), _machine(), faults, seed=spec.seed
+        make_cycle(spec.cycle, spec.duration_s, spec.seed), _machine(), faults, seed=spec.seed
     )
 
 
@@ -175,20 +176,22 @@ def train_presets(
     duration_s: float,
     progress: Progress | None = None,
 ) -> list[ModelUnderTest]:
-    """Fresh models on normal boom cycles of ``seeds``, as config/train_default_model.sh:
-    patterns from the first half, thresholds from the second half held out (with fewer than
-    four seeds, the last quarter of them)."""
+    """Fresh models on normal operation of ``seeds``, as config/train_default_model.sh:
+    patterns from boom-cover cycles of the first half, thresholds from boom cycles of the
+    second half held out (with fewer than four seeds, no held-out part)."""
     say = progress or (lambda _msg: None)
     if not presets:
         return []
     say(f"simulating {len(seeds)} normal training run(s) of {duration_s:g} s")
-    recs = [simulate_run(RunSpec(s, duration_s)) for s in seeds]
-    fit, held = (recs[: len(recs) // 2], recs[len(recs) // 2 :]) if len(recs) >= 4 else (recs, [])
+    half = len(seeds) // 2 if len(seeds) >= 4 else len(seeds)
+    fit = [simulate_run(RunSpec(s, duration_s, cycle="boom-cover")) for s in seeds[:half]]
+    held = [simulate_run(RunSpec(s, duration_s)) for s in seeds[half:]]
     out = []
     for preset in presets:
         t0 = time.perf_counter()
         tag = f"[{preset}] "
-        model = train(fit, TrainConfig(preset=preset), progress=lambda m, tag=tag: say(tag + m),
+        model = train(fit, TrainConfig(preset=preset, isolation_runs=8),
+                      progress=lambda m, tag=tag: say(tag + m),
                       held_out=held or None)  # fmt: skip
         source = f"trained: preset {preset}, seeds {_seed_text(seeds)} x {duration_s:g} s"
         out.append(ModelUnderTest(preset, model, source, train_s=time.perf_counter() - t0))

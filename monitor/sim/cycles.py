@@ -12,11 +12,18 @@ from monitor.errors import ConfigError
 from monitor.io.recording import Recording
 from monitor.signals import SAMPLE_PERIOD_S
 
-CYCLES = ("boom", "ramp", "step")
+CYCLES = ("boom", "boom-cover", "ramp", "step")
 RATE_LIMIT_PCT_S = 200.0
 #: Share of boom-cycle moves that run into an end stop (normal operation; the detector must
 #: learn the stalled regime too).
 STOP_VISIT_PROBABILITY = 0.15
+#: Training cycles (``boom-cover``): twice the stop visits, and the lever released anywhere
+#: from 3 cm short of the stop to 5 cm past it.  A boom cycle releases it well past the stop,
+#: after the pressure has built up; an operator now and then releases it during the build-up,
+#: and the spool then traps whatever pressures the cylinder had (PA 38 / PB 158 bar at the
+#: bottom stop), states a model trained on boom cycles alone never saw.
+COVER_STOP_VISIT_PROBABILITY = 0.3
+COVER_OVERSHOOT_M = (-0.03, 0.05)
 ENGINE_RPM = 2200.0
 #: Rough rod speeds of the reference machine (m/s), used only to keep the boom cycle off
 #: its end stops: raising is pump-limited above ~35 % spool, lowering above ~55 %.
@@ -59,11 +66,18 @@ def _fill_phases(t: np.ndarray, phases: list[tuple[float, float]]) -> np.ndarray
     return out
 
 
-def boom_phases(duration_s: float, rng: np.random.Generator) -> list[tuple[float, float]]:
+def boom_phases(
+    duration_s: float,
+    rng: np.random.Generator,
+    stop_visits: float = STOP_VISIT_PROBABILITY,
+    overshoot_m: tuple[float, float] | None = None,
+) -> list[tuple[float, float]]:
     """Raise / hold / lower / hold, amplitudes 40-100 %, phases 1-4 s.
 
     The lengths aim the rod at a random target inside the stroke so a long run does not
-    sit on an end stop; an operator does the same by eye, and now and then runs into a stop.
+    sit on an end stop; an operator does the same by eye, and now and then (``stop_visits``
+    of the moves) runs into a stop, aiming 5 cm past it or, with ``overshoot_m``, anywhere
+    in that range of metres past it (negative: short of it).
     """
     phases: list[tuple[float, float]] = [(rng.uniform(1.0, 2.0), 0.0)]
     pos = 0.1
@@ -71,9 +85,11 @@ def boom_phases(duration_s: float, rng: np.random.Generator) -> list[tuple[float
     while total < duration_s:
         for direction in (1.0, -1.0):
             amp = rng.uniform(40.0, 100.0)
-            if rng.random() < STOP_VISIT_PROBABILITY:
+            if rng.random() < stop_visits:
                 # Now and then the operator drives into the stop and holds the lever a moment.
-                target = _STROKE_M + 0.05 if direction > 0 else -0.05
+                # (No draw without a range: a boom cycle's seed gives the same commands.)
+                over = 0.05 if overshoot_m is None else rng.uniform(*overshoot_m)
+                target = _STROKE_M + over if direction > 0 else -over
             elif direction > 0:
                 target = rng.uniform(0.3, 0.45)
             else:
@@ -91,13 +107,16 @@ def boom_phases(duration_s: float, rng: np.random.Generator) -> list[tuple[float
 
 
 def make_cycle(cycle: str, duration_s: float, seed: int) -> Recording:
-    """Commands for ``cycle`` (boom, ramp or step) over ``duration_s`` seconds."""
+    """Commands for ``cycle`` (boom, boom-cover, ramp or step) over ``duration_s`` seconds."""
     if cycle not in CYCLES:
         raise ConfigError(f"unknown cycle {cycle!r}; known: {', '.join(CYCLES)}")
     t = _time_axis(duration_s)
     rng = np.random.default_rng(seed)
     if cycle == "boom":
         spool = rate_limit(_fill_phases(t, boom_phases(duration_s, rng)), RATE_LIMIT_PCT_S)
+    elif cycle == "boom-cover":
+        phases = boom_phases(duration_s, rng, COVER_STOP_VISIT_PROBABILITY, COVER_OVERSHOOT_M)
+        spool = rate_limit(_fill_phases(t, phases), RATE_LIMIT_PCT_S)
     elif cycle == "ramp":
         # Slow triangles through the whole spool range: 10 %/s, alternating direction.
         period = 40.0
