@@ -79,3 +79,23 @@ def test_lent_patterns_predict_as_the_reference_where_the_machine_has_no_data() 
     assert np.abs(after_up - truth_up).max() < 2.0 * np.abs(ref_up - truth_up).max() + 1.0
     # Where the machine has its own data, nothing moves by more than 0.01 bar.
     np.testing.assert_allclose(_next_physical(own, own_norm, probe_down), before_down, atol=0.01)
+
+
+def test_a_model_with_lent_patterns_survives_its_file(tmp_path) -> None:
+    """Lent counts are whole numbers of rows (model files refuse anything else)."""
+    from monitor.model.modelfile import load_model, save_model
+
+    rng = np.random.default_rng(4)
+    reference, ref_norm = _fitted(_plant(np.repeat(rng.uniform(-100, 100, 200), 5)), 0.08)
+    own, own_norm = _fitted(_plant(np.repeat(rng.uniform(-100, -20, 150), 5)), 0.08)
+    reference.grnn.counts_ = np.full(reference.grnn.patterns_.shape[0], 7.0)  # 7 rows each
+    ref_model = MonitorModel(reference, ref_norm, 10, ThresholdRule(), 1.0, 2.0)
+    n_own = own.grnn.patterns_.shape[0]
+    lent = lend_patterns(own, own_norm, ref_model)
+    # About 750 own rows against 7 x 1000: 7 rows each weigh 0.75, kept as 1.
+    assert set(own.grnn.counts_[n_own:]) == {1.0} and lent > 0
+    path = tmp_path / "m.npz"
+    save_model(path, MonitorModel(own, own_norm, 10, ThresholdRule(), 1.0, 2.0))
+    back = load_model(path).dgrnn.grnn
+    np.testing.assert_array_equal(back.patterns_, own.grnn.patterns_)
+    np.testing.assert_array_equal(back.counts_, own.grnn.counts_)

@@ -9,8 +9,9 @@ as the reference does, which is a far better prediction than an extrapolation.  
 reference's patterns are added, in the machine's own scaling, only where none of the
 machine's own patterns lies within ``FILL_RADIUS_SIGMAS`` bandwidths: wherever the
 machine has data, its own patterns decide (a kernel 3 bandwidths away weighs 1 % of one
-on the spot).  Their counts are scaled by the ratio of the two models' training rows, so
-that an hour of reference data weighs what an hour of the machine's own would.
+on the spot).  Their counts are scaled by the ratio of the two models' training rows (and
+rounded, at least one), so that an hour of reference data weighs what an hour of the
+machine's own would.
 """
 
 from __future__ import annotations
@@ -59,7 +60,9 @@ def lend_patterns(dgrnn: DGRNN, normalizer: Normalizer, reference: MonitorModel)
     start = int(own.pattern_index_.max()) + own.exclude_neighbours_ + 1
     own.patterns_ = np.ascontiguousarray(np.vstack([own.patterns_, patterns[far]]))
     own.targets_ = np.ascontiguousarray(np.vstack([own.targets_, targets[far]]))
-    own.counts_ = np.concatenate([own.counts_, ref.counts_[far] * weight])
+    # Model files keep counts as whole numbers of rows: at least one each.
+    lent_counts = np.maximum(1.0, np.rint(ref.counts_[far] * weight))
+    own.counts_ = np.concatenate([own.counts_, lent_counts])
     own.pattern_index_ = np.concatenate(
         [own.pattern_index_, start + np.arange(n, dtype=np.int64)]
     )
