@@ -100,7 +100,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="a model of the same machine type trained on hours of normal data (`shipped`: "
         "the config's model): eps0 and b0 are raised to at least its thresholds, since "
         "minutes of commissioning cannot show the tail of hours (what `monitor fleet run` "
-        "does with its default model)",
+        "does with its default model); its patterns are also lent where this machine's own "
+        "data has none (--lend)",
     )
     p.add_argument(
         "--folds",
@@ -111,6 +112,14 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         f"{TrainConfig.fold_block_s:g} s blocks (needs 2K blocks, else the last "
         "--validation-fraction is held out); default 0: hold out the last "
         "--validation-fraction",
+    )
+    p.add_argument(
+        "--lend",
+        choices=("on", "off"),
+        default="on",
+        help="with --reference: add the reference's patterns where this machine's own data "
+        "has none, so that a manoeuvre the commissioning run missed is predicted as on the "
+        "reference machine instead of extrapolated (default on)",
     )
     p.add_argument(
         "--bias",
@@ -161,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
         folds=args.folds,
         isolation=args.isolation,
         isolation_runs=args.isolation_runs,
+        lend=args.lend == "on",
         bias=None if args.bias is None else args.bias == "on",
     )
     monitor_cfg = load_config(args.config)

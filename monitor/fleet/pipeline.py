@@ -70,8 +70,9 @@ def default_model_bytes(model_path: str | None, config_path: str | None) -> byte
 #: quarter of a warming run is its hottest oil).  Three simulated fleets: no false alarm
 #: in 258 healthy logs against 1 (docs/benchmarks.md, "Commissioning cross-fitted, J
 #: alone").  The bias statistic stays off: its per-regime scales from 20 minutes are too
-#: uncertain.  Recorded in each model's trained-from.json.
-COMMISSIONING = {"folds": 4, "bias": False}
+#: uncertain.  The default model lends its patterns where the machine's own data has none
+#: (``monitor.training.fill``).  Recorded in each model's trained-from.json.
+COMMISSIONING = {"folds": 4, "bias": False, "lend": True}
 
 
 def train_model_bytes(

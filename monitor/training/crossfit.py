@@ -64,13 +64,15 @@ def cross_fitted_residuals(
     block_n: int,
     residuals: Callable[[MonitorModel, Recording], np.ndarray],
     say: Callable[[str], None] = lambda _m: None,
+    lend: Callable[[DGRNN], int] | None = None,
 ) -> list[np.ndarray]:
     """Out-of-fold residuals (samples, outputs) per recording.
 
     ``model`` is the model fitted on everything: its spec, normalizer, bandwidth, pattern
     budget and J window are kept; only the patterns differ per fold.  ``tables_z`` are the
     recordings' z-scored variable tables (the training input), ``residuals`` computes a
-    model's gated residuals over a recording exactly as the detector does."""
+    model's gated residuals over a recording exactly as the detector does; ``lend`` (if
+    any) completes each fold's patterns as the full model's were completed."""
     spec, grnn = model.spec, model.dgrnn.grnn
     ids = fold_ids([len(z) for z in tables_z], folds, block_n)
     out = [np.full((len(z), len(spec.outputs)), np.nan) for z in tables_z]
@@ -78,13 +80,16 @@ def cross_fitted_residuals(
         parts = [z[a:b] for z, f in zip(tables_z, ids, strict=True) for a, b in _runs(f != k)]
         parts = [p for p in parts if len(p) > spec.max_lag + 1]
         fold_grnn = GRNN(**{**_params(grnn), "sigma": grnn.sigma_})
-        fold = MonitorModel(DGRNN(spec, fold_grnn).fit(parts), model.normalizer,
-                            model.window_n, model.threshold, model.j0, model.eps0)  # fmt: skip
+        fold_dgrnn = DGRNN(spec, fold_grnn).fit(parts)
+        lent = lend(fold_dgrnn) if lend is not None else 0
+        fold = MonitorModel(fold_dgrnn, model.normalizer, model.window_n, model.threshold,
+                            model.j0, model.eps0)  # fmt: skip
         for rec, f, e_out in zip(recordings, ids, out, strict=True):
             mine = f == k
             if mine.any():
                 e = residuals(fold, rec)
                 e_out[mine] = e[mine]
-        say(f"  fold {k + 1}/{folds}: {fold_grnn.patterns_.shape[0]} patterns from "
-            f"{sum(len(p) for p in parts)} samples")  # fmt: skip
+        say(f"  fold {k + 1}/{folds}: {fold_grnn.patterns_.shape[0] - lent} patterns from "
+            f"{sum(len(p) for p in parts)} samples"
+            + (f", {lent} lent by the reference" if lent else ""))  # fmt: skip
     return out

@@ -38,6 +38,9 @@ class TrainConfig:
     bias: bool | None = None
     bias_window_n: int = 6000  # 60 s: several raise/hold/lower phases of every regime
     bias_min_count: int = 300  # 3 s of a regime in the window before it counts
+    #: With a reference model: lend its patterns where this machine's own data has none
+    #: (``monitor.training.fill``), in the final model and in every cross-fitted fold.
+    lend: bool = True
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:

@@ -113,6 +113,15 @@ def train(
         f"  {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g} (LOO, +-"
         f"{cfg.exclude_neighbours} samples excluded) in {time.perf_counter() - started:.1f} s"
     )
+    lend = None
+    if reference is not None and cfg.lend:
+        from monitor.training.fill import lend_patterns
+
+        def lend(d: DGRNN) -> int:
+            return lend_patterns(d, normalizer, reference)
+
+        say(f"  {lend(dgrnn)} patterns lent by the reference model where this machine's own "
+            "data has none")  # fmt: skip
     model = MonitorModel(dgrnn, normalizer, cfg.window_n, cfg.threshold, math.nan, math.nan)
     # Held-out residuals once, unbounded; the bound (if any) is learnt from them and then
     # applied exactly as the detector applies it.
@@ -120,7 +129,7 @@ def train(
         say(f"  thresholds cross-fitted: {cfg.folds} folds of {cfg.fold_block_s:g} s blocks")
         e_val = cross_fitted_residuals(
             model, [normalizer.transform(t) for t in tables], val_part, cfg.folds, block_n,
-            normal_residuals, say)  # fmt: skip
+            normal_residuals, say, lend)  # fmt: skip
     else:
         e_val = [normal_residuals(model, r) for r in val_part]
     if cfg.residual_clip_quantile is not None:
