@@ -55,7 +55,7 @@ def test_a_straight_rise_warns_at_the_fourth_log_and_forecasts_the_alarm_log():
                       "(day04-4), 12 logs, 3 d later")  # fmt: skip
 
 
-def test_a_dip_before_the_rise_warns_once_the_window_of_six_has_left_most_of_it():
+def test_a_dip_before_the_rise_warns_once_the_forecast_is_bounded():
     # 0.50, 0.41, 0.32, then +0.04 a log.  Logs 4-6: the median pairwise slope is negative
     # (-0.068, -0.025, -0.0033 by hand): no upward trend.  Log 7 fits logs 2-7 (0.41, 0.32,
     # 0.36, 0.40, 0.44, 0.48): of the 15 pairs 3 are falling (0.41 before 0.32, 0.36, 0.40),
@@ -65,20 +65,25 @@ def test_a_dip_before_the_rise_warns_once_the_window_of_six_has_left_most_of_it(
     # median(x) = 0.405 - 0.1 = 0.305, so 0.505 at log 7 and (1 - 0.505) / 0.04 = 12.375
     # logs.  Sen's 90 % bounds are the sorted slopes at (15 -+ 1.645 x sqrt(6 x 5 x 17 / 18))
     # / 2, rounded (minus one for the lower): indices 2 and 12, -0.0033 and 0.04: the far
-    # end is unbounded.  The alarm at log 10 (day03-2) comes 3 logs and 1 day later.
+    # end is unbounded, so no warning yet.  Log 8 fits logs 3-8, a straight line of 0.04 a
+    # log: every slope 0.04, the interval a point, 0.52 at log 8, (1 - 0.52) / 0.04 = 12
+    # logs: the warning.  The alarm at log 10 (day03-2) comes 2 logs and 1 day later.
     levels = [0.50, 0.41, 0.32, 0.36, 0.40, 0.44, 0.48, 0.52, 0.56, 1.1]
     rows = _rows("V", levels, alarm_from=10)
-    slopes = [p.slope_per_log for p in replay("V", rows)[3:6]]
-    assert all(s < 0 for s in slopes)
+    progs = replay("V", rows)
+    assert all(p.slope_per_log < 0 for p in progs[3:6])
+    seven = progs[6]
+    assert seven.p_value == pytest.approx(49 / 720)
+    assert seven.slope_per_log == pytest.approx(0.04)
+    assert seven.level_now == pytest.approx(0.505)
+    assert seven.logs_to_alarm == pytest.approx(12.375)
+    assert seven.logs_to_alarm_range == pytest.approx((12.375, float("inf")))
     w = first_warning("V", rows)
-    assert (w.warning_log, w.warning_name) == (7, "day02-3")
-    assert w.forecast.p_value == pytest.approx(49 / 720)
-    assert w.forecast.slope_per_log == pytest.approx(0.04)
-    assert w.forecast.level_now == pytest.approx(0.505)
-    assert w.forecast.logs_to_alarm == pytest.approx(12.375)
-    assert w.forecast.logs_to_alarm_range == pytest.approx((12.375, float("inf")))
-    assert (w.alarm_log, w.lead_logs, w.lead_days) == (10, 3, 1)
-    assert w.text.startswith("log 7 (day02-3): crossing in 12.4 logs (12..no bound); alarm")
+    assert (w.warning_log, w.warning_name) == (8, "day02-4")
+    assert w.forecast.logs_to_alarm == pytest.approx(12.0)
+    assert w.forecast.logs_to_alarm_range == pytest.approx((12.0, 12.0))
+    assert (w.alarm_log, w.lead_logs, w.lead_days) == (10, 2, 1)
+    assert w.text.startswith("log 8 (day02-4): crossing in 12.0 logs (12..12); alarm")
 
 
 def test_a_machine_that_alarms_at_its_first_log_has_no_warning_whatever_follows():

@@ -183,15 +183,19 @@ class FirstWarning:
 def first_warning(machine: str, rows: list[dict[str, Any]], k: int = 6) -> FirstWarning:
     """The first warning and first alarm of one machine (rows in time order).
 
-    A warning is a finite crossing (``logs_to_alarm`` not None, "due now" included) forecast
-    at a log when neither it nor any earlier log had alarmed: a forecast made with or after
-    the alarm told the service team nothing the alarm did not."""
+    A warning is a bounded crossing forecast at a log when neither it nor any earlier log
+    had alarmed: ``logs_to_alarm`` set ("due now" included) and the far end of its interval
+    finite, i.e. even the slope's lower 90 % bound rises.  A forecast made with or after the
+    alarm told the service team nothing the alarm did not; one without a far end ("crossing
+    in 97 logs (27..no bound)") is the scatter of a healthy machine more often than wear: on
+    three simulated fleets 9 of 12 machines without wear had one at some log."""
     alarm_i = next((i for i, r in enumerate(rows) if r["alarm"]), None)  # None: never
     before = rows if alarm_i is None else rows[:alarm_i]
     warn_i, forecast = None, None
     for i in range(len(before)):  # as replay(), but stops at the first warning
         p = prognosis(machine, before[: i + 1], k)
-        if p.logs_to_alarm is not None:
+        bounded = p.logs_to_alarm_range is not None and np.isfinite(p.logs_to_alarm_range[1])
+        if p.logs_to_alarm is not None and bounded:
             warn_i, forecast = i, p
             break
 

@@ -238,8 +238,8 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
              f"commissioning: median J of the last {DRIFT_LOGS} logs over the commissioning "
              f"run's, whatever eps0 is ({DRIFT_FLAG:g} x and above: wearing?); first warning: "
              "the prognosis replayed log by log, the first log at which it forecast a crossing "
-             "while no log had alarmed yet (dotted line on the plot), its forecast, and how "
-             "many logs (days) later the first alarm came.", "",
+             "with a bounded interval while no log had alarmed yet (dotted line on the plot), "
+             "its forecast, and how many logs (days) later the first alarm came.", "",
              *_table(per, progs, warns, notes), "", "![health index](health.png)", "",
              *drift_pic, "![verdict timeline](timeline.png)", ""]  # fmt: skip
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
