@@ -174,7 +174,7 @@ def test_a_model_trained_with_other_settings_is_commissioned_again(run1, tmp_pat
     assert proc.returncode == 0, proc.stderr
     assert "reused" not in proc.stderr
     again = json.loads(meta_path.read_text())
-    assert again["train"] == {"folds": 4, "bias": False}
+    assert again["train"] == {"folds": 4, "bias": False, "lend": True}
     assert again["commissioning"] == meta["commissioning"]
 
 
