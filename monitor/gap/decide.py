@@ -10,6 +10,11 @@ that half of the resampled held-out parts do not show is tolerance or noise, not
 A second effect is named only when the pair's gain over the best single effect is
 significant in the same sense and removes a material share of the gap.
 
+A physical effect is not named when, added to the simulator, it makes some compared signal
+clearly worse (``consistency.py``): the machine's own physics moves every signal it acts
+on towards the recording, so a fit that trades one signal for the others stands in for a
+base mismatch (or something outside the catalogue) that lives where it gained.
+
 With the smoothed (structured) sums (``basemis.py``), the same two tests also run on the
 structured gap alone: an effect that removes most of what an effect can produce, but not
 the base mismatch above 5 Hz, is named; and a gap that no effect explains is ``none``
@@ -24,6 +29,7 @@ import numpy as np
 
 from monitor.gap import basemis
 from monitor.gap.candidates import Candidate
+from monitor.gap.consistency import Worse, worse_signal
 from monitor.gap.score import SegmentSums, gap, reduction
 from monitor.gap.shrink import boot_gap, boot_mse, boot_reduction
 
@@ -55,6 +61,8 @@ class Decision:
     also: str | None
     chosen: Candidate | None
     confidence: float
+    #: The best effect was not named because it made this signal clearly worse.
+    traded: tuple[str, Worse] | None = None
 
 
 def within_noise(sums: SegmentSums, floor: np.ndarray, ratio: float = NONE_RATIO) -> bool:
@@ -77,6 +85,16 @@ def explains(best: Candidate, gain: np.ndarray) -> bool:
     over the calibrated simulator (``gain``: ``boot_gain`` from it to the best) in at least
     ``SIGNIFICANT`` of the bootstrap resamples."""
     return bool(best.heldout_reduction >= EXPLAIN_MIN and np.mean(gain > 0) >= SIGNIFICANT)
+
+
+def trades_signals(
+    best: Candidate, before: SegmentSums, after: SegmentSums, idx: np.ndarray, floor: np.ndarray
+) -> Worse | None:
+    """The signal a physical effect makes clearly worse (``consistency.py``); None for a
+    sensor calibration, which its own check judges (``sensorphysics.py``)."""
+    if best.effects[0].name == SENSOR_ONLY:
+        return None
+    return worse_signal(before, after, idx, floor, SIGNIFICANT)
 
 
 def whole_gap(c: Candidate) -> float:
@@ -106,6 +124,8 @@ def pair_plan(
     best = singles[0].effects[0].name
     if best == SENSOR_ONLY or not explains(singles[0], boot_gain(nominal, best_sums, idx, floor)):
         return []
+    if trades_signals(singles[0], nominal, best_sums, idx, floor) is not None:
+        return []  # not named (``decide``), so no pair either
     if singles[0].heldout_gap < PAIR_MATERIAL * whole_gap(singles[0]):
         return []
     # A sensor calibration is fitted in closed form on its own, never inside a pair.
@@ -135,10 +155,21 @@ def decide(
     red_b = boot_reduction(nominal, sums[best.name], idx, floor)
     gain_b = boot_gain(nominal, sums[best.name], idx, floor)
     named = explains(best, gain_b)
+    # Whichever way it would be named, an effect that trades one signal for the others is
+    # not the machine's physics.
+    worse = trades_signals(best, nominal, sums[best.name], idx, floor) if named else None
     if not named and structured is not None:
         s_conf = _structured_share(best, structured, idx, floor)
         if s_conf is not None:
-            return Decision(best.effects[0].name, None, best, s_conf)
+            smooth, nominal_s = structured
+            floor_s = basemis.smoothed_floor(floor)
+            worse = trades_signals(best, nominal, sums[best.name], idx, floor) or trades_signals(
+                best, nominal_s, smooth[best.name], idx, floor_s
+            )
+            if worse is None:
+                return Decision(best.effects[0].name, None, best, s_conf)
+    traded = (best.effects[0].name, worse) if worse is not None else None
+    named = named and worse is None
     if not named:
         if structured is not None and basemis.practically_small(
             structured[1], basemis.smoothed_floor(floor)
@@ -146,11 +177,14 @@ def decide(
             # What is left is base mismatch and a structured part too small to matter.
             conf = boot_mse(structured[1], idx) - basemis.smoothed_floor(floor)
             small = np.sqrt(np.maximum(conf, 0.0)) < basemis.PRACTICAL_NRMSE
-            return Decision("none", None, None, float(np.mean(np.all(small, axis=1))))
+            return Decision("none", None, None, float(np.mean(np.all(small, axis=1))), traded)
         if within_noise(nominal, floor, MARGINAL_RATIO):
             conf = np.all(boot_mse(nominal, idx) < MARGINAL_RATIO * floor, axis=1)
-            return Decision("none", None, None, float(np.mean(conf)))
-        return Decision("unexplained", None, None, float(np.mean(red_b < EXPLAIN_MIN)))
+            return Decision("none", None, None, float(np.mean(conf)), traded)
+        # Unexplained: the best does not explain the gap in the resample, or (when it traded
+        # signals) the signal it makes worse grows in the resample.
+        conf = worse.share if worse is not None else float(np.mean(red_b < EXPLAIN_MIN))
+        return Decision("unexplained", None, None, conf, traded)
     gap0 = whole_gap(best)
     good = [
         p

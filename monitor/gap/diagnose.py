@@ -100,6 +100,9 @@ class Diagnosis:
     smooth_nominal: S.SegmentSums | None = None
     #: A sensor calibration's verdict against the best plant term (``sensorphysics.py``).
     sensor_check: dict | None = None
+    #: The best effect, not named because it made a signal clearly worse
+    #: (``consistency.py``): the JSON's ``trade_off``.
+    traded: dict | None = None
 
 
 class _Evaluator:
@@ -342,7 +345,24 @@ def _diagnose(
         smooth,
         base.smooth_nominal,
         checked.as_dict() if checked is not None else None,
+        _traded(d, singles, S.compared(prep)),
     )
+
+
+def _traded(d: Decision, singles: Sequence[Candidate], names: Sequence[str]) -> dict | None:
+    """The JSON ``trade_off``: which effect was not named, the signal it made worse."""
+    if d.traded is None:
+        return None
+    name, worse = d.traded
+    best = next(c for c in singles if c.effects[0].name == name)
+    return {
+        "effect": name,
+        "member": best.members[0].name if best.members else "default",
+        "heldout_reduction": round(float(best.heldout_reduction), 4),
+        "signal": names[worse.signal],
+        "growth_share": round(worse.growth, 4),
+        "bootstrap_share": round(worse.share, 3),
+    }
 
 
 def member_defaults(c: Candidate) -> list[Member]:

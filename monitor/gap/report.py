@@ -188,7 +188,18 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
             else {}
         ),
         **({"sensor_check": diag.sensor_check} if diag.sensor_check is not None else {}),
+        **({"trade_off": diag.traded} if diag.traded is not None else {}),
     }
+
+
+def _trade_line(t: dict) -> str:
+    """Why the best effect was not named (``consistency.py``)."""
+    return (
+        f"Not {t['effect']} ({t['member']}): it removes {100 * t['heldout_reduction']:.0f} % of "
+        f"the held-out gap but makes {t['signal']} clearly worse (+{100 * t['growth_share']:.0f} "
+        "% of the gap); the effect's physics would move every signal towards the recording, "
+        "so what it fitted is base mismatch or something outside the catalogue."
+    )
 
 
 def _sensor_line(check: dict) -> str:
@@ -271,10 +282,14 @@ def summary_text(report: dict) -> str:
             "with no effect explaining the rest), or what remains is base mismatch and a "
             "structured part below the practical level that no effect explains."
         )
+        if report.get("trade_off"):
+            lines.append(_trade_line(report["trade_off"]))
     elif v == "unexplained":
         best = report["ranking"][0]
         if report.get("sensor_check"):
             lines.append("Verdict: unexplained. " + _sensor_line(report["sensor_check"]))
+        elif report.get("trade_off"):
+            lines.append("Verdict: unexplained. " + _trade_line(report["trade_off"]))
         else:
             lines.append(
                 "Verdict: unexplained: no catalogue effect removes a clear share of the "
