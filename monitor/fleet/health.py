@@ -73,6 +73,12 @@ class Prognosis:
             return "no upward trend"
         if self.logs_to_alarm <= 0:
             return "due now (the trend line is at or above 1.0)"
+        return self.logs_text
+
+    @property
+    def logs_text(self) -> str:
+        """A finite crossing as "12.4 logs (9..52)" (the far end "no bound" when infinite)."""
+        assert self.logs_to_alarm is not None
         lo, hi = self.logs_to_alarm_range or (np.nan, np.inf)
         hi_s = "no bound" if not np.isfinite(hi) else f"{hi:.0f}"
         return f"{self.logs_to_alarm:.1f} logs ({lo:.0f}..{hi_s})"
@@ -163,13 +169,7 @@ class FirstWarning:
             return f"no warning before the alarm at log {self.alarm_log} ({self.alarm_name})"
         f = self.forecast
         assert f is not None and f.logs_to_alarm is not None  # set together with warning_log
-        lo, hi = f.logs_to_alarm_range or (float("nan"), float("inf"))
-        hi_s = "no bound" if not np.isfinite(hi) else f"{hi:.0f}"
-        due = (
-            "crossing due now"
-            if f.logs_to_alarm <= 0
-            else f"crossing in {f.logs_to_alarm:.1f} logs ({lo:.0f}..{hi_s})"
-        )
+        due = "crossing due now" if f.logs_to_alarm <= 0 else f"crossing in {f.logs_text}"
         head = f"log {self.warning_log} ({self.warning_name}): {due}"
         if self.alarm_log is None:
             return f"{head}; no alarm yet"

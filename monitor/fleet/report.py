@@ -137,8 +137,8 @@ def _health_png(
     for ax in axes.flat[n:]:
         ax.set_visible(False)
     axes[0][0].set_ylabel("level (1.0 = alarm)")
-    handles, _labels = axes[0][0].get_legend_handles_labels()
-    if any(w.warning_log is not None for w in warns.values()) and "first warning" not in _labels:
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    if any(w.warning_log is not None for w in warns.values()) and "first warning" not in labels:
         # The legend sits on the first machine, which may not have warned itself.
         handles.append(plt.Line2D([], [], color="tab:purple", ls=":", lw=1.5,
                                   label="first warning"))  # fmt: skip
