@@ -137,6 +137,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed-set", type=number(0, MAX_SEED_SET, whole=True), default=0,
                    metavar="K", help="test seeds shifted by K x 10,000,000: 0 (default) are "
                    "the development seeds; report a blind result on a set nobody tuned on")
+    p.add_argument("--no-twins", dest="twins", action="store_false",
+                   help="skip the noise-free twins of each fault run (with and without the "
+                   "fault) that give fault_j_ratio and the 'exercised' columns")  # fmt: skip
     p.add_argument("--quick", action="store_true",
                    help="the reduced set CI runs (~1 min); explicit options win")  # fmt: skip
     p.set_defaults(func=run)
@@ -168,6 +171,8 @@ def _rerun(
         parts.append(f"--config {args.config}")
     if cfg.seed_set:
         parts.append(f"--seed-set {cfg.seed_set}")
+    if not cfg.twins:
+        parts.append("--no-twins")
     return " ".join(parts) + " --json F"
 
 
@@ -200,6 +205,7 @@ def run(args: argparse.Namespace) -> int:
         horizon=args.horizon or conf.horizon,
         alarm=conf.alarm,
         seed_set=args.seed_set,
+        twins=args.twins,
     )
     presets = args.presets
     if presets is None:
