@@ -14,6 +14,7 @@ from monitor.cli._paths import output_file
 from monitor.errors import ConfigError
 from monitor.evaluation.plan import DEFAULT_SEVERITIES, MAX_SEED_SET, ONSETS
 from monitor.model.spec import PRESETS
+from monitor.signals import FAULT_NAMES
 
 if TYPE_CHECKING:
     from monitor.evaluation.sim_eval import EvalConfig
@@ -117,6 +118,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--severities", metavar="LIST", type=_floats, default=None,
         help="fault severities (default 0.1,0.2,...,1.0; --quick 0.5,1.0)",
     )  # fmt: skip
+    p.add_argument("--faults", metavar="LIST", type=_names(FAULT_NAMES), default=FAULT_NAMES,
+                   help=f"faults to simulate (default all: {','.join(FAULT_NAMES)})")  # fmt: skip
     p.add_argument("--onsets", metavar="LIST", type=_names(ONSETS), default=ONSETS,
                    help="abrupt,gradual (default both)")  # fmt: skip
     p.add_argument("--normal-hours", metavar="H", type=float, default=None,
@@ -162,6 +165,7 @@ def _rerun(
         f"--runs {cfg.runs}",
         f"--severities {','.join(f'{s:g}' for s in cfg.severities)}",
         f"--onsets {','.join(cfg.onsets)}",
+        *([f"--faults {','.join(cfg.faults)}"] if cfg.faults != FAULT_NAMES else []),
         f"--normal-hours {cfg.normal_hours:g}",
         f"--duration {cfg.duration_s:g} --onset {cfg.onset_s:g} --ramp {cfg.ramp_s:g}",
     ]
@@ -202,6 +206,7 @@ def run(args: argparse.Namespace) -> int:
         onset_s=args.onset,
         ramp_s=args.ramp,
         onsets=args.onsets,
+        faults=args.faults,
         horizon=args.horizon or conf.horizon,
         alarm=conf.alarm,
         seed_set=args.seed_set,

@@ -1,9 +1,11 @@
-"""Which fault runs the duty cycle exercised: detection split by the fault's own J.
+"""Which fault runs the duty cycle exercised: detection split by the fault's own statistics.
 
-A run is *exercised* when its ``fault_j_ratio`` (``monitor.evaluation.twins``: the J of the
-noise-free difference the fault made, over eps0) reached 1.  The plain detection rate stays
-the goal's measure; these counts tell "the detector missed it" (exercised, not detected)
-from "the duty cycle never moved the signals that far" (not exercised).
+A run is *exercised* when the fault alone, as the noise-free twin runs measure it
+(``monitor.evaluation.twins``), moved the detector's statistic to its threshold:
+``fault_j_ratio`` >= 1 (J, the paper's statistic) or ``fault_level_ratio`` >= 1 (J or the
+bias statistic B, what the alarm compares with 1).  The plain detection rate stays the
+goal's measure; these counts tell "the detector missed it" (exercised, not detected) from
+"the duty cycle never moved the signals that far" (not exercised).
 """
 
 from __future__ import annotations
@@ -11,28 +13,31 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-#: fault_j_ratio at or above this: the fault alone moved J to the threshold.
+#: A fault ratio at or above this: the fault alone moved the statistic to its threshold.
 EXERCISED_RATIO = 1.0
+#: Run key -> the prefix of its counts in a cell: J alone, and the alarm level (J or B).
+MEASURES = (("fault_j_ratio", "exercised"), ("fault_level_ratio", "exercised_level"))
 
 
 def exercised_cell(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Counts for one cell of runs; empty when any run lacks its twins (``--no-twins``)."""
-    if not runs or any(r.get("fault_j_ratio") is None for r in runs):
-        return {}
-    hit = [r for r in runs if r["fault_j_ratio"] >= EXERCISED_RATIO]
-    rest = [r for r in runs if r["fault_j_ratio"] < EXERCISED_RATIO]
-    hit_det = sum(bool(r["detected"]) for r in hit)
-    rest_det = sum(bool(r["detected"]) for r in rest)
-    return {
-        "exercised": len(hit),
-        "detected_exercised": hit_det,
-        "detection_rate_exercised": hit_det / len(hit) if hit else None,
-        "detected_not_exercised": rest_det,
-        "detection_rate_not_exercised": rest_det / len(rest) if rest else None,
-    }
+    out: dict[str, Any] = {}
+    for key, name in MEASURES:
+        if not runs or any(r.get(key) is None for r in runs):
+            continue
+        hit = [r for r in runs if r[key] >= EXERCISED_RATIO]
+        rest = [r for r in runs if r[key] < EXERCISED_RATIO]
+        hit_det = sum(bool(r["detected"]) for r in hit)
+        rest_det = sum(bool(r["detected"]) for r in rest)
+        out[name] = len(hit)
+        out[f"detected_{name}"] = hit_det
+        out[f"detection_rate_{name}"] = hit_det / len(hit) if hit else None
+        out[f"detected_not_{name}"] = rest_det
+        out[f"detection_rate_not_{name}"] = rest_det / len(rest) if rest else None
+    return out
 
 
-def _rate(detected: int, runs: int) -> str:
+def _of(detected: int, runs: int) -> str:
     return "-" if runs == 0 else f"{detected}/{runs}"
 
 
@@ -43,19 +48,25 @@ def exercised_markdown(per_severity: Sequence[dict[str, Any]]) -> list[str]:
         return []
     out = [
         "",
-        "Could a detector see it (noise-free twin runs; exercised = the fault's own J reached "
-        "eps0; onsets pooled):",
+        "Could a detector see it (noise-free twin runs, onsets pooled). Exercised: the fault's "
+        "own J (noise-free faulty minus healthy outputs) reached eps0; J or B: its J or its "
+        "bias statistic reached the threshold. Detected x/y: x of the y runs of that column.",
         "",
-        "| fault | severity | runs | detected | exercised | detected, exercised | "
+        "| fault | severity | detected | exercised (J) | detected, exercised | "
+        "detected, not exercised | exercised (J or B) | detected, exercised | "
         "detected, not exercised |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         c = row["all"]
         n = c["runs"]
-        out.append(
-            f"| {row['fault']} | {row['severity']:g} | {n} | {_rate(c['detected'], n)} | "
-            f"{c['exercised']} | {_rate(c['detected_exercised'], c['exercised'])} | "
-            f"{_rate(c['detected_not_exercised'], n - c['exercised'])} |"
-        )
+        cells = [_of(c["detected"], n)]
+        for _, name in MEASURES:
+            k = c.get(name)
+            if k is None:
+                cells += ["-", "-", "-"]
+                continue
+            cells += [str(k), _of(c[f"detected_{name}"], k),
+                      _of(c[f"detected_not_{name}"], n - k)]  # fmt: skip
+        out.append(f"| {row['fault']} | {row['severity']:g} | " + " | ".join(cells) + " |")
     return out

@@ -85,7 +85,8 @@ def fault_view(
     others pause the windows here too, so both statistics see the same samples.  Keys:
     ``fault_j_ratio`` (max fault J at or after ``onset_s`` / eps0; None before any full
     window), ``fault_j_above_eps0_s`` (seconds of fault J >= eps0), ``fault_b_ratio`` (max
-    fault B / b0, None without a bias model or a full window), ``fault_signal_share`` and
+    fault B / b0, None without a bias model or a full window), ``fault_level_ratio`` (the
+    larger of the two: the fault's own alarm level), ``fault_signal_share`` and
     ``fault_regime_share`` (shares of the squared difference after the onset by output and
     by hold / raise / lower; None when the fault changed nothing).
     """
@@ -108,6 +109,9 @@ def fault_view(
         b_after = b[after & np.isfinite(b)]
         if b_after.size:
             out["fault_b_ratio"] = round(float(b_after.max()) / model.bias.b0, 4)
+    # What the alarm compares with 1 (max(J / eps0, B / b0)), for the fault alone.
+    ratios = [v for v in (out["fault_j_ratio"], out["fault_b_ratio"]) if v is not None]
+    out["fault_level_ratio"] = max(ratios) if ratios else None
     rows = after & np.isfinite(e).all(axis=1)
     sq = e[rows] ** 2
     total = float(sq.sum())
