@@ -115,28 +115,28 @@ def test_unjudged_samples_pause_the_window(model: MonitorModel) -> None:
     assert view["fault_j_ratio"] is None
 
 
-def _run(ratio: float, level: float, detected: bool) -> dict:
+def _run(ratio: float, detected: bool) -> dict:
     return {"fault": "spool_stroke", "severity": 0.3, "onset": "abrupt", "detected": detected,
-            "fault_j_ratio": ratio, "fault_level_ratio": level}  # fmt: skip
+            "fault_j_ratio": ratio}  # fmt: skip
 
 
 def test_exercised_counts_on_hand_made_runs() -> None:
     runs = [
-        _run(2.0, 2.0, True),  # J exercised, found
-        _run(1.0, 3.0, False),  # J exactly at eps0 counts as exercised; missed
-        _run(0.5, 4.0, True),  # B only
-        _run(0.2, 0.3, False),  # neither
-        _run(0.9, 0.9, True),  # found although the fault alone stayed below both
+        _run(2.0, True),  # exercised, found
+        _run(1.0, False),  # exactly at eps0 counts as exercised; missed
+        _run(0.5, True),  # found (by B, say) though the fault alone kept J below eps0
+        _run(0.2, False),  # neither
+        _run(0.0, False),  # the fault changed nothing
     ]
     c = exercised_cell(runs)
     assert c["exercised"] == 2 and c["detected_exercised"] == 1
     assert c["detection_rate_exercised"] == 0.5
-    assert c["detected_not_exercised"] == 2 and c["detection_rate_not_exercised"] == 2 / 3
-    assert c["exercised_level"] == 3 and c["detected_exercised_level"] == 2
-    assert c["detected_not_exercised_level"] == 1
-    row = {"fault": "spool_stroke", "severity": 0.3, "all": {"runs": 5, "detected": 3, **c}}
+    assert c["detected_not_exercised"] == 1 and c["detection_rate_not_exercised"] == 1 / 3
+    row = {"fault": "spool_stroke", "severity": 0.3, "all": {"runs": 5, "detected": 2, **c}}
     text = "\n".join(exercised_markdown([row]))
-    assert "| spool_stroke | 0.3 | 3/5 | 2 | 1/2 | 2/3 | 3 | 2/3 | 1/2 |" in text
+    assert "| spool_stroke | 0.3 | 2/5 | 2 | 1/2 | 1/3 |" in text
+    none = exercised_cell([_run(0.5, False)])
+    assert none["exercised"] == 0 and none["detection_rate_exercised"] is None
 
 
 def test_no_twins_no_counts() -> None:

@@ -1,11 +1,10 @@
-"""Which fault runs the duty cycle exercised: detection split by the fault's own statistics.
+"""Which fault runs the duty cycle exercised: detection split by the fault's own J.
 
 A run is *exercised* when the fault alone, as the noise-free twin runs measure it
-(``monitor.evaluation.twins``), moved the detector's statistic to its threshold:
-``fault_j_ratio`` >= 1 (J, the paper's statistic) or ``fault_level_ratio`` >= 1 (J or the
-bias statistic B, what the alarm compares with 1).  The plain detection rate stays the
-goal's measure; these counts tell "the detector missed it" (exercised, not detected) from
-"the duty cycle never moved the signals that far" (not exercised).
+(``monitor.evaluation.twins``), moved J to eps0: ``fault_j_ratio`` >= 1.  The plain
+detection rate stays the goal's measure; these counts tell "the detector missed it"
+(exercised, not detected) from "the duty cycle never moved the signals that far in J" (not
+exercised; the bias statistic B, a mean, may still find such a run).
 """
 
 from __future__ import annotations
@@ -15,8 +14,8 @@ from typing import Any
 
 #: A fault ratio at or above this: the fault alone moved the statistic to its threshold.
 EXERCISED_RATIO = 1.0
-#: Run key -> the prefix of its counts in a cell: J alone, and the alarm level (J or B).
-MEASURES = (("fault_j_ratio", "exercised"), ("fault_level_ratio", "exercised_level"))
+#: Run key -> the prefix of its counts in a cell.
+MEASURES = (("fault_j_ratio", "exercised"),)
 
 
 def exercised_cell(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -49,13 +48,12 @@ def exercised_markdown(per_severity: Sequence[dict[str, Any]]) -> list[str]:
     out = [
         "",
         "Could a detector see it (noise-free twin runs, onsets pooled). Exercised: the fault's "
-        "own J (noise-free faulty minus healthy outputs) reached eps0; J or B: its J or its "
-        "bias statistic reached the threshold. Detected x/y: x of the y runs of that column.",
+        "own J (noise-free faulty minus healthy outputs, z-scored as the model does) reached "
+        "eps0. Detected x/y: x of the y runs of that column.",
         "",
-        "| fault | severity | detected | exercised (J) | detected, exercised | "
-        "detected, not exercised | exercised (J or B) | detected, exercised | "
+        "| fault | severity | detected | exercised | detected, exercised | "
         "detected, not exercised |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         c = row["all"]

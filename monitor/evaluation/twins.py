@@ -27,7 +27,6 @@ import numpy as np
 
 from monitor.detection.alarm import regimes_of
 from monitor.io.recording import Recording
-from monitor.model.bias import bias_regimes, bias_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
 from monitor.model.spec import table
@@ -84,10 +83,8 @@ def fault_view(
     ``judged``: samples the detector judged on the noisy run (its residual finite); the
     others pause the windows here too, so both statistics see the same samples.  Keys:
     ``fault_j_ratio`` (max fault J at or after ``onset_s`` / eps0; None before any full
-    window), ``fault_j_above_eps0_s`` (seconds of fault J >= eps0), ``fault_b_ratio`` (max
-    fault B / b0, None without a bias model or a full window), ``fault_level_ratio`` (the
-    larger of the two: the fault's own alarm level), ``fault_signal_share`` and
-    ``fault_regime_share`` (shares of the squared difference after the onset by output and
+    window), ``fault_j_above_eps0_s`` (seconds of fault J >= eps0), ``fault_signal_share``
+    and ``fault_regime_share`` (shares of the squared difference after the onset by output and
     by hold / raise / lower; None when the fault changed nothing).
     """
     e = twin_residual(model, twins)
@@ -101,17 +98,11 @@ def fault_view(
     out: dict[str, Any] = {
         "fault_j_ratio": round(float(j_after.max()) / model.eps0, 4) if j_after.size else None,
         "fault_j_above_eps0_s": round(float(np.sum(j_after >= model.eps0)) * period_s, 2),
-        "fault_b_ratio": None,
     }
+    # No fault B here: B's scales are those of the one-step residual, which follows a level
+    # offset of PA and PB (predicted as increments); applied to the outputs' difference they
+    # read a small trapped-pressure change as tens of b0 (docs/explanation/evaluation.md).
     spool = twins.faulty["SpoolCmd"]
-    if model.bias is not None and model.bias.b0 == model.bias.b0:
-        b = bias_series(e, bias_regimes(spool), model.bias)
-        b_after = b[after & np.isfinite(b)]
-        if b_after.size:
-            out["fault_b_ratio"] = round(float(b_after.max()) / model.bias.b0, 4)
-    # What the alarm compares with 1 (max(J / eps0, B / b0)), for the fault alone.
-    ratios = [v for v in (out["fault_j_ratio"], out["fault_b_ratio"]) if v is not None]
-    out["fault_level_ratio"] = max(ratios) if ratios else None
     rows = after & np.isfinite(e).all(axis=1)
     sq = e[rows] ** 2
     total = float(sq.sum())
