@@ -17,7 +17,7 @@ import pytest
 
 from monitor.cli import main
 from monitor.evaluation.exercised import exercised_cell, exercised_markdown
-from monitor.evaluation.twins import fault_view, simulate_twins, twin_residual
+from monitor.evaluation.twins import fault_view, predictor_view, simulate_twins, twin_residual
 from monitor.io.recording import Recording
 from monitor.model.modelfile import MonitorModel, load_model
 from monitor.resources import resource_path
@@ -65,6 +65,10 @@ def test_severity_zero_changes_nothing(model: MonitorModel, name: str) -> None:
     view = fault_view(model, twins, 5.0)
     assert view["fault_j_ratio"] == 0.0 and view["fault_j_above_eps0_s"] == 0.0
     assert view["fault_signal_share"] is None and view["fault_regime_share"] is None
+    # The same inputs give the predictor the same predictions: no residual change either.
+    passed = predictor_view(model, twins, 5.0, np.ones(len(twins.faulty), dtype=bool))
+    assert passed["fault_residual_j_ratio"] == 0.0
+    assert passed["fault_residual_level_ratio"] == 0.0
 
 
 @pytest.mark.parametrize("name", FAULT_NAMES)
@@ -89,6 +93,8 @@ def test_stroke_limit_never_reached_gives_ratio_zero(model: MonitorModel) -> Non
     twins = simulate_twins(commands, load_machine(), [Fault("spool_stroke", 0.5, 0.5)], None)
     assert np.all(twin_residual(model, twins) == 0.0)
     assert fault_view(model, twins, 0.5)["fault_j_ratio"] == 0.0
+    judged = np.ones(len(twins.faulty), dtype=bool)
+    assert predictor_view(model, twins, 0.5, judged)["fault_residual_level_ratio"] == 0.0
 
 
 def test_full_lowering_past_the_limit_gives_ratio_above_zero(model: MonitorModel) -> None:
@@ -105,6 +111,9 @@ def test_full_lowering_past_the_limit_gives_ratio_above_zero(model: MonitorModel
     assert 0.0 < lowered(twins.faulty) < lowered(twins.healthy)
     view = fault_view(model, twins, 0.5)
     assert view["fault_j_ratio"] > 0.0
+    passed = predictor_view(model, twins, 0.5, np.ones(len(t), dtype=bool))
+    assert passed["fault_residual_j_ratio"] > 0.0
+    assert passed["fault_residual_level_ratio"] >= passed["fault_residual_j_ratio"]
 
 
 def test_unjudged_samples_pause_the_window(model: MonitorModel) -> None:
@@ -139,6 +148,16 @@ def test_exercised_counts_on_hand_made_runs() -> None:
     assert none["exercised"] == 0 and none["detection_rate_exercised"] is None
 
 
+def test_passed_columns_when_the_residual_view_is_there() -> None:
+    runs = [{**_run(0.5, True), "fault_residual_level_ratio": 1.5},
+            {**_run(0.5, False), "fault_residual_level_ratio": 0.5}]  # fmt: skip
+    c = exercised_cell(runs)
+    assert c["exercised"] == 0 and c["passed"] == 1 and c["detected_passed"] == 1
+    row = {"fault": "piston_wear", "severity": 0.1, "all": {"runs": 2, "detected": 1, **c}}
+    text = "\n".join(exercised_markdown([row]))
+    assert "| piston_wear | 0.1 | 1/2 | 0 | - | 1/2 | 1 | 1/1 | 0/1 |" in text
+
+
 def test_no_twins_no_counts() -> None:
     runs = [{"fault": "spool_stroke", "severity": 0.3, "detected": True}]
     assert exercised_cell(runs) == {}
@@ -161,3 +180,9 @@ def test_cli_twins_and_no_twins(tmp_path: Path) -> None:
     }
     assert "--no-twins" in b["rerun"] and "--faults spool_stroke" in a["rerun"]
     assert "Could a detector see it" in md.read_text()
+
+
+def test_cli_twin_residuals_need_the_twins(tmp_path: Path) -> None:
+    argv = ["eval-sim", "--model", "shipped", "--no-twins", "--twin-residuals",
+            "--json", str(tmp_path / "x.json")]  # fmt: skip
+    assert main(argv) == 2

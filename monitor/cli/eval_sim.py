@@ -35,6 +35,8 @@ Twin runs: every fault run is also simulated noise-free with and without the fau
 J of the difference (the model's z-units and window) over eps0 is the run's fault_j_ratio,
 and a run whose ratio reached 1 counts as exercised (the report splits detection by it).
 They add one plant run per fault run (~0.16 s per 120 s run); --no-twins skips them.
+--twin-residuals also runs each model on both twins: the alarm level the fault alone gives
+this detector's residual (fault_residual_level_ratio; "passed" in the report).
 
 Cost: a 300 s normal run simulates in ~1.4 s and is scored in ~0.5 s per model (default
 preset, 6000 patterns, p=1).  The full default evaluation (600 fault runs, 100 h normal, two
@@ -148,6 +150,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-twins", dest="twins", action="store_false",
                    help="skip the noise-free twins of each fault run (with and without the "
                    "fault) that give fault_j_ratio and the 'exercised' columns")  # fmt: skip
+    p.add_argument("--twin-residuals", action="store_true",
+                   help="also run each model on both twins: fault_residual_level_ratio, the "
+                   "alarm level the fault alone gives this detector (two more predictions per "
+                   "fault run and model)")  # fmt: skip
     p.add_argument("--quick", action="store_true",
                    help="the reduced set CI runs (~1 min); explicit options win")  # fmt: skip
     p.set_defaults(func=run)
@@ -182,6 +188,8 @@ def _rerun(
         parts.append(f"--seed-set {cfg.seed_set}")
     if not cfg.twins:
         parts.append("--no-twins")
+    if cfg.twin_residuals:
+        parts.append("--twin-residuals")
     return " ".join(parts) + " --json F"
 
 
@@ -216,6 +224,7 @@ def run(args: argparse.Namespace) -> int:
         alarm=conf.alarm,
         seed_set=args.seed_set,
         twins=args.twins,
+        twin_residuals=args.twin_residuals,
     )
     presets = args.presets
     if presets is None:

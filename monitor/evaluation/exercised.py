@@ -14,14 +14,19 @@ from typing import Any
 
 #: A fault ratio at or above this: the fault alone moved the statistic to its threshold.
 EXERCISED_RATIO = 1.0
-#: Run key -> the prefix of its counts in a cell.
-MEASURES = (("fault_j_ratio", "exercised"),)
+#: Run key -> the prefix of its counts in a cell, and its report heading.  Exercised: the
+#: fault's own J over the outputs' difference; passed: the alarm level (J or B) of the
+#: change the fault makes in this model's residual (``--twin-residuals``).
+MEASURES = (
+    ("fault_j_ratio", "exercised", "exercised"),
+    ("fault_residual_level_ratio", "passed", "passed"),
+)
 
 
 def exercised_cell(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Counts for one cell of runs; empty when any run lacks its twins (``--no-twins``)."""
+    """Counts for one cell of runs, per measure every run has (none with ``--no-twins``)."""
     out: dict[str, Any] = {}
-    for key, name in MEASURES:
+    for key, name, _ in MEASURES:
         if not runs or any(r.get(key) is None for r in runs):
             continue
         hit = [r for r in runs if r[key] >= EXERCISED_RATIO]
@@ -45,25 +50,26 @@ def exercised_markdown(per_severity: Sequence[dict[str, Any]]) -> list[str]:
     rows = [r for r in per_severity if r["all"].get("exercised") is not None]
     if not rows:
         return []
+    names = [(n, h) for _, n, h in MEASURES if all(r["all"].get(n) is not None for r in rows)]
+    head = "| fault | severity | detected |" + "".join(
+        f" {h} | detected, {h} | detected, not {h} |" for _, h in names
+    )
     out = [
         "",
         "Could a detector see it (noise-free twin runs, onsets pooled). Exercised: the fault's "
         "own J (noise-free faulty minus healthy outputs, z-scored as the model does) reached "
-        "eps0. Detected x/y: x of the y runs of that column.",
+        "eps0. Passed (--twin-residuals): the change the fault made in this model's residual "
+        "reached the alarm level (J or B). Detected x/y: x of the y runs of that column.",
         "",
-        "| fault | severity | detected | exercised | detected, exercised | "
-        "detected, not exercised |",
-        "|---|---:|---:|---:|---:|---:|",
+        head,
+        "|---|---:|---:|" + "---:|---:|---:|" * len(names),
     ]
     for row in rows:
         c = row["all"]
         n = c["runs"]
         cells = [_of(c["detected"], n)]
-        for _, name in MEASURES:
-            k = c.get(name)
-            if k is None:
-                cells += ["-", "-", "-"]
-                continue
+        for name, _ in names:
+            k = c[name]
             cells += [str(k), _of(c[f"detected_{name}"], k),
                       _of(c[f"detected_not_{name}"], n - k)]  # fmt: skip
         out.append(f"| {row['fault']} | {row['severity']:g} | " + " | ".join(cells) + " |")

@@ -29,7 +29,7 @@ from monitor.detection.alarm import AlarmConfig, State
 from monitor.detection.offline import Detection, detect
 from monitor.errors import ConfigError
 from monitor.evaluation.plan import DEFAULT_SEVERITIES, MAX_SEED_SET, ONSETS, SEED_SET_STRIDE
-from monitor.evaluation.twins import fault_view, simulate_twins
+from monitor.evaluation.twins import fault_view, predictor_view, simulate_twins
 from monitor.io.recording import Recording
 from monitor.model.modelfile import MonitorModel
 from monitor.signals import FAULT_NAMES
@@ -70,6 +70,9 @@ class EvalConfig:
     #: Noise-free twins of every fault run, with and without the fault (``twins``): each
     #: fault row gets ``fault_j_ratio``, how far the fault alone moved J.
     twins: bool = True
+    #: Also run the model on both twins (two predictions per fault run and model): each
+    #: fault row gets ``fault_residual_level_ratio``, the alarm level of the fault alone.
+    twin_residuals: bool = False
 
     def __post_init__(self) -> None:
         if not self.severities or any(not 0.0 < s <= 1.0 for s in self.severities):
@@ -91,6 +94,8 @@ class EvalConfig:
         bad = [f for f in self.faults if f not in FAULT_NAMES]
         if bad or not self.faults:
             raise ConfigError(f"faults must be among {', '.join(FAULT_NAMES)}")
+        if self.twin_residuals and not self.twins:
+            raise ConfigError("the twins' residuals need the twins (drop --no-twins)")
         if not 0 <= self.seed_set <= MAX_SEED_SET:
             raise ConfigError(f"seed set must be within 0..{MAX_SEED_SET}, got {self.seed_set}")
 
@@ -297,6 +302,8 @@ def score_spec(
         if twins is not None:
             judged = np.isfinite(det.residual).all(axis=1)
             row.update(fault_view(m.model, twins, spec.onset_s, judged))
+            if cfg.twin_residuals:
+                row.update(predictor_view(m.model, twins, spec.onset_s, judged, cfg.horizon))
         det_s.append(time.perf_counter() - t0)
         rows.append(row)
     return rows, sim_s, det_s

@@ -26,7 +26,9 @@ from typing import Any
 import numpy as np
 
 from monitor.detection.alarm import regimes_of
+from monitor.detection.offline import residual_series
 from monitor.io.recording import Recording
+from monitor.model.bias import bias_regimes, bias_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
 from monitor.model.spec import table
@@ -96,7 +98,7 @@ def fault_view(
     j = window_j(e, model.window_n)
     j_after = j[after & np.isfinite(j)]
     out: dict[str, Any] = {
-        "fault_j_ratio": round(float(j_after.max()) / model.eps0, 4) if j_after.size else None,
+        "fault_j_ratio": _peak_ratio(j, after, model.eps0),
         "fault_j_above_eps0_s": round(float(np.sum(j_after >= model.eps0)) * period_s, 2),
     }
     # No fault B here: B's scales are those of the one-step residual, which follows a level
@@ -119,3 +121,47 @@ def fault_view(
     else:
         out["fault_signal_share"] = out["fault_regime_share"] = None
     return out
+
+
+def predictor_view(
+    model: MonitorModel,
+    twins: Twins,
+    onset_s: float,
+    judged: np.ndarray,
+    horizon: int | None = None,
+) -> dict[str, Any]:
+    """The fault as this model's predictor passes it on: J and B of the residual on the
+    noise-free faulty twin minus the residual on the healthy twin (two predictions).
+
+    Unlike ``fault_view`` this sees what the predictor does with the fault (a level offset
+    of an output predicted as an increment mostly vanishes; changed inputs can move another
+    output's prediction), so B's scales fit it.  Keys: ``fault_residual_j_ratio`` (max J /
+    eps0 at or after ``onset_s``), ``fault_residual_b_ratio`` (max B / b0; None without a
+    bias model or a full window) and ``fault_residual_level_ratio``, the larger of the two:
+    the alarm level the fault alone would give this detector.
+    """
+    ok = np.asarray(judged, dtype=bool)
+    _, ef = residual_series(model, twins.faulty, ~ok, horizon)
+    _, eh = residual_series(model, twins.healthy, ~ok, horizon)
+    d = ef - eh
+    d[~ok] = np.nan
+    t = twins.faulty.t - twins.faulty.t[0]
+    after = t >= onset_s - 1e-9
+    j_ratio = _peak_ratio(window_j(d, model.window_n), after, model.eps0)
+    b_ratio = None
+    bias = model.bias
+    if bias is not None and bias.b0 == bias.b0:
+        b = bias_series(d, bias_regimes(twins.faulty["SpoolCmd"]), bias)
+        b_ratio = _peak_ratio(b, after, bias.b0)
+    ratios = [v for v in (j_ratio, b_ratio) if v is not None]
+    return {
+        "fault_residual_j_ratio": j_ratio,
+        "fault_residual_b_ratio": b_ratio,
+        "fault_residual_level_ratio": max(ratios) if ratios else None,
+    }
+
+
+def _peak_ratio(series: np.ndarray, after: np.ndarray, threshold: float) -> float | None:
+    """Largest finite value where ``after`` over ``threshold``; None if there is none."""
+    v = series[after & np.isfinite(series)]
+    return round(float(v.max()) / threshold, 4) if v.size else None
