@@ -11,7 +11,9 @@ number here comes from data that set the patterns or the threshold:
   alarm before the onset is a false alarm of its own, counted separately.
 
 Every recording is simulated once and scored by every model, so presets are compared on the
-very same traces.  Aggregation and the markdown tables live in ``evaluation_report``.
+very same traces.  A fault run also gets noise-free twins with and without the fault
+(``monitor.evaluation.twins``): how far the fault alone moved J (``fault_j_ratio``).
+Aggregation and the markdown tables live in ``evaluation_report``.
 """
 
 from __future__ import annotations
