@@ -11,6 +11,7 @@ import statistics
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+from monitor.evaluation.exercised import exercised_cell, exercised_markdown
 from monitor.evaluation.rates import poisson_rate_upper
 from monitor.evaluation.sim_eval import EvalConfig, ModelUnderTest
 from monitor.signals import FAULT_NAMES
@@ -33,6 +34,7 @@ def _cell(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "max_delay_s": max(delays) if delays else None,
         "isolation_accuracy": correct / len(detected) if detected else None,
         "pre_onset_false_alarms": sum(r["pre_onset_alarms"] for r in runs),
+        **exercised_cell(runs),
     }
 
 
@@ -163,6 +165,7 @@ def model_markdown(label: str, r: dict[str, Any], onsets: Sequence[str]) -> list
             for o in onsets
         )
         out.append(f"| {row['fault']} | {row['severity']:g} |{cells}")
+    out += exercised_markdown(r["per_severity"])
     cols = r["confusion"]["columns"]
     for name, matrix in r["confusion"].items():
         if name == "columns":

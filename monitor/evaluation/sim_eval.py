@@ -11,7 +11,9 @@ number here comes from data that set the patterns or the threshold:
   alarm before the onset is a false alarm of its own, counted separately.
 
 Every recording is simulated once and scored by every model, so presets are compared on the
-very same traces.  Aggregation and the markdown tables live in ``evaluation_report``.
+very same traces.  A fault run also gets noise-free twins with and without the fault
+(``monitor.evaluation.twins``): how far the fault alone moved J (``fault_j_ratio``).
+Aggregation and the markdown tables live in ``evaluation_report``.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from monitor.detection.alarm import AlarmConfig, State
 from monitor.detection.offline import Detection, detect
 from monitor.errors import ConfigError
 from monitor.evaluation.plan import DEFAULT_SEVERITIES, MAX_SEED_SET, ONSETS, SEED_SET_STRIDE
+from monitor.evaluation.twins import fault_view, predictor_view, simulate_twins
 from monitor.io.recording import Recording
 from monitor.model.modelfile import MonitorModel
 from monitor.signals import FAULT_NAMES
@@ -66,6 +69,12 @@ class EvalConfig:
     #: Added to every test seed x SEED_SET_STRIDE: 0 are the development seeds; a result
     #: meant to be blind uses a set nobody has tuned on (and says which).
     seed_set: int = 0
+    #: Noise-free twins of every fault run, with and without the fault (``twins``): each
+    #: fault row gets ``fault_j_ratio``, how far the fault alone moved J.
+    twins: bool = True
+    #: Also run the model on both twins (two predictions per fault run and model): each
+    #: fault row gets ``fault_residual_level_ratio``, the alarm level of the fault alone.
+    twin_residuals: bool = False
 
     def __post_init__(self) -> None:
         if not self.severities or any(not 0.0 < s <= 1.0 for s in self.severities):
@@ -87,6 +96,8 @@ class EvalConfig:
         bad = [f for f in self.faults if f not in FAULT_NAMES]
         if bad or not self.faults:
             raise ConfigError(f"faults must be among {', '.join(FAULT_NAMES)}")
+        if self.twin_residuals and not self.twins:
+            raise ConfigError("the twins' residuals need the twins (drop --no-twins)")
         if not 0 <= self.seed_set <= MAX_SEED_SET:
             raise ConfigError(f"seed set must be within 0..{MAX_SEED_SET}, got {self.seed_set}")
 
@@ -157,12 +168,16 @@ def planned_seeds(cfg: EvalConfig) -> set[int]:
 
 def simulate_run(spec: RunSpec) -> Recording:
     """The seeded duty cycle with the run's fault (seed drives commands and sensor noise)."""
-    faults = []
-    if spec.fault is not None:
-        faults = [Fault(spec.fault, spec.severity, spec.onset_s, spec.ramp_s)]
     return simulate(
-        make_cycle(spec.cycle, spec.duration_s, spec.seed), _machine(), faults, seed=spec.seed
-    )
+        make_cycle(spec.cycle, spec.duration_s, spec.seed), _machine(), _faults(spec),
+        seed=spec.seed,
+    )  # fmt: skip
+
+
+def _faults(spec: RunSpec) -> list[Fault]:
+    if spec.fault is None:
+        return []
+    return [Fault(spec.fault, spec.severity, spec.onset_s, spec.ramp_s)]
 
 
 @functools.cache
@@ -273,14 +288,26 @@ def score_spec(
     """One planned run simulated once and scored by every model: (one row per model,
     simulation seconds, detection seconds per model)."""
     t0 = time.perf_counter()
-    rec = simulate_run(spec)
+    twins = None
+    if spec.fault is not None and cfg.twins:
+        commands = make_cycle(spec.cycle, spec.duration_s, spec.seed)
+        twins = simulate_twins(commands, _machine(), _faults(spec), spec.seed)
+        rec = twins.noisy  # the very recording simulate_run gives
+    else:
+        rec = simulate_run(spec)
     sim_s = time.perf_counter() - t0
     rows, det_s = [], []
     for m in models:
         t0 = time.perf_counter()
         det = detect(m.model, rec, cfg.alarm, cfg.horizon)
+        row = score_run(det, spec)
+        if twins is not None:
+            judged = np.isfinite(det.residual).all(axis=1)
+            row.update(fault_view(m.model, twins, spec.onset_s, judged))
+            if cfg.twin_residuals:
+                row.update(predictor_view(m.model, twins, spec.onset_s, judged, cfg.horizon))
         det_s.append(time.perf_counter() - t0)
-        rows.append(score_run(det, spec))
+        rows.append(row)
     return rows, sim_s, det_s
 
 

@@ -133,11 +133,25 @@ def simulate(
     Columns: the commands (quantised as on the bus), PP, PA, PB (bar), QP (L/min), RodPos
     (mm), plus the true internal states SpoolPos (%), RodPosTrue (mm) and RodVel (mm/s).
     """
-    sensors = sensors or SensorParams()
     names = [e.name for e in effects]
     if len(set(names)) != len(names):
         raise ConfigError(f"an effect is given twice: {', '.join(names)}")
     trace = run_plant(commands, machine, faults, effects, rod_pos0_m, corrections=corrections)
+    return sense(commands, trace, machine, faults, effects, seed, sensors)
+
+
+def sense(
+    commands: Recording,
+    trace: PlantTrace,
+    machine: MachineParams,
+    faults: list[Fault] | tuple[Fault, ...] = (),
+    effects: list[Effect] | tuple[Effect, ...] = (),
+    seed: int | None = 0,
+    sensors: SensorParams | None = None,
+) -> Recording:
+    """The contract signals of a plant trace (``simulate``'s second half): one plant run can
+    be read with noise (``seed``) and without (``None``), e.g. for a noise-free twin."""
+    sensors = sensors or SensorParams()
     rng = np.random.default_rng(seed) if seed is not None else None
     delay_s = tau_s = 0.0
     cal: dict[str, tuple[float, float]] = {}  # signal: (gain, offset in its unit)
