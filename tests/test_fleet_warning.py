@@ -137,3 +137,39 @@ def test_the_page_has_the_first_warning_column(tmp_path):
     assert "| no upward trend | - | 0 |" in page
     assert "| no warning before the alarm at log 1 (day01-1) | 8 |" in page
     assert (out / "health.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _with_drift(rows: list[dict], drifts: list[float | None]) -> list[dict]:
+    for r, d in zip(rows, drifts, strict=True):
+        r["p50_j_drift"] = d
+    return rows
+
+
+def test_a_commissioned_machine_warns_when_its_drift_reaches_two():
+    # Drift at a log = median of the last three logs' p50_j_drift: logs 1-4 give 1.0, 1.05,
+    # 1.1, 1.2 (median of 1.1, 1.2, 2.5); log 5 the median of 1.2, 2.5, 2.6 = 2.5 >= 2: the
+    # warning, 3 logs and 0 days (day02-1 -> day02-4) before the alarm at log 8.
+    drifts = [1.0, 1.1, 1.2, 2.5, 2.6, 2.7, 3.0, 3.2]
+    rows = _with_drift(_rows("D", [0.4] * 8, alarm_from=8), drifts)
+    w = first_warning("D", rows)
+    assert (w.warning_log, w.warning_name, w.forecast) == (5, "day02-1", None)
+    assert w.drift == pytest.approx(2.5)
+    assert (w.alarm_log, w.lead_logs, w.lead_days) == (8, 3, 0)
+    assert w.text == "log 5 (day02-1): drift 2.5 x; alarm at log 8 (day02-4), 3 logs, 0 d later"
+
+
+def test_one_odd_log_does_not_warn_and_a_commissioned_machine_is_not_warned_by_its_trend():
+    # One log at 5 x among logs at 1 x: every median of three is 1.0.  The level rises
+    # straight (the forecast alone would warn at log 4, first test above), but a machine
+    # with a drift is warned by its drift only.
+    drifts = [1.0, 1.0, 5.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]
+    w = first_warning("E", _with_drift(_rows("E", RISE[:10]), drifts))
+    assert (w.warning_log, w.drift, w.text) == (None, None, "-")
+
+
+def test_a_warning_is_never_read_from_the_alarmed_logs():
+    # The drift reaches 2 only at the alarmed log 4 (median of 1.0, 2.2, 2.4): no warning.
+    drifts = [1.0, 1.0, 2.2, 2.4, 2.6]
+    w = first_warning("F", _with_drift(_rows("F", [0.4] * 5, alarm_from=4), drifts))
+    assert (w.warning_log, w.alarm_log) == (None, 4)
+    assert w.text == "no warning before the alarm at log 4 (day01-4)"

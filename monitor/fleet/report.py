@@ -150,7 +150,7 @@ def _health_png(
 
 
 def _drift_png(per: dict[str, list[dict[str, Any]]], path: Path) -> bool:
-    """Each machine's drift per log (log scale) with the 3 x mark; False when no row has a
+    """Each machine's drift per log (log scale) with the flag's mark; False when no row has a
     drift (results from before it), and then no picture."""
     series = {mid: [r.get("p50_j_drift") for r in rows] for mid, rows in per.items()}
     series = {mid: v for mid, v in series.items() if any(x is not None for x in v)}
@@ -237,9 +237,10 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
              "crossing: logs until the trend reaches 1.0 (90 % interval); drift from "
              f"commissioning: median J of the last {DRIFT_LOGS} logs over the commissioning "
              f"run's, whatever eps0 is ({DRIFT_FLAG:g} x and above: wearing?); first warning: "
-             "the prognosis replayed log by log, the first log at which it forecast a crossing "
-             "with a bounded interval while no log had alarmed yet (dotted line on the plot), "
-             "its forecast, and how many logs (days) later the first alarm came.", "",
+             "the page replayed log by log, the first log, before any alarm, at which the "
+             f"drift reached {DRIFT_FLAG:g} x (machines without a commissioning run: at which "
+             "the prognosis forecast a crossing with a bounded interval; dotted line on the "
+             "plot), and how many logs (days) later the first alarm came.", "",
              *_table(per, progs, warns, notes), "", "![health index](health.png)", "",
              *drift_pic, "![verdict timeline](timeline.png)", ""]  # fmt: skip
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
