@@ -80,10 +80,10 @@ def fault_view(
     onset_s: float,
     judged: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """The fault's own J and B over a run, against the model's thresholds.
+    """The fault's own J over a run, against the model's threshold eps0.
 
     ``judged``: samples the detector judged on the noisy run (its residual finite); the
-    others pause the windows here too, so both statistics see the same samples.  Keys:
+    others pause the window here too, so J sees the samples the detector saw.  Keys:
     ``fault_j_ratio`` (max fault J at or after ``onset_s`` / eps0; None before any full
     window), ``fault_j_above_eps0_s`` (seconds of fault J >= eps0), ``fault_signal_share``
     and ``fault_regime_share`` (shares of the squared difference after the onset by output and
