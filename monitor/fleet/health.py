@@ -129,9 +129,7 @@ def prognosis(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Prognosis
         return float((1.0 - level) / s) if s > 0 else float("inf")
 
     rng = (max(until(hi), 0.0), until(lo))
-    return Prognosis(
-        machine, y.size, last, float(slope), until(slope), rng, p_rise, basis, level
-    )
+    return Prognosis(machine, y.size, last, float(slope), until(slope), rng, p_rise, basis, level)
 
 
 def replay(machine: str, rows: list[dict[str, Any]], k: int = 6) -> list[Prognosis]:
@@ -185,6 +183,28 @@ class FirstWarning:
         )
 
 
+def _drift_warning(rows: list[dict[str, Any]]) -> tuple[int | None, float | None]:
+    """The first row (0-based) at which the drift reached ``DRIFT_FLAG``, and that drift."""
+    for i in range(len(rows)):
+        d = drift(rows[: i + 1])
+        if d is not None and d >= DRIFT_FLAG:
+            return i, d
+    return None, None
+
+
+def _forecast_warning(
+    machine: str, rows: list[dict[str, Any]], k: int
+) -> tuple[int | None, Prognosis | None]:
+    """The first row (0-based) whose prognosis gave a bounded crossing, and that prognosis
+    (as ``replay``, but stopping there)."""
+    for i in range(len(rows)):
+        p = prognosis(machine, rows[: i + 1], k)
+        bounded = p.logs_to_alarm_range is not None and np.isfinite(p.logs_to_alarm_range[1])
+        if p.logs_to_alarm is not None and bounded:
+            return i, p
+    return None, None
+
+
 def first_warning(machine: str, rows: list[dict[str, Any]], k: int = 6) -> FirstWarning:
     """The first warning and first alarm of one machine (rows in time order).
 
@@ -201,20 +221,11 @@ def first_warning(machine: str, rows: list[dict[str, Any]], k: int = 6) -> First
       a far end is the scatter of a healthy machine more often than wear."""
     alarm_i = next((i for i, r in enumerate(rows) if r["alarm"]), None)  # None: never
     before = rows if alarm_i is None else rows[:alarm_i]
-    by_drift = any(r.get("p50_j_drift") is not None for r in rows)
-    warn_i, forecast, warn_drift = None, None, None
-    for i in range(len(before)):  # as replay(), but stops at the first warning
-        if by_drift:
-            d = drift(before[: i + 1])
-            if d is not None and d >= DRIFT_FLAG:
-                warn_i, warn_drift = i, d
-                break
-            continue
-        p = prognosis(machine, before[: i + 1], k)
-        bounded = p.logs_to_alarm_range is not None and np.isfinite(p.logs_to_alarm_range[1])
-        if p.logs_to_alarm is not None and bounded:
-            warn_i, forecast = i, p
-            break
+    forecast = warn_drift = None
+    if any(r.get("p50_j_drift") is not None for r in rows):
+        warn_i, warn_drift = _drift_warning(before)
+    else:
+        warn_i, forecast = _forecast_warning(machine, before, k)
 
     def name(i: int | None) -> str | None:
         return None if i is None else PurePosixPath(rows[i]["log"]).stem
