@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from monitor.fleet.health import DRIFT_FLAG, DRIFT_LOGS
+
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -68,9 +70,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "with max and p95 of J/eps0; the alarm threshold drawn at 1.0) and timeline.png. "
         "The trend is Theil-Sen over each machine's last K judged logs; the crossing is the "
         "number of logs until it reaches 1.0, with its 90 % interval. The drift is the median "
-        "J of the last 3 logs over the commissioning run's, whatever eps0 is (2 x and above: "
-        "wearing?). The first warning is the first log, before any alarm, at which the drift "
-        "reached 2 x (machines without a commissioning run: a bounded crossing forecast).",
+        f"J of the last {DRIFT_LOGS} logs over the commissioning run's, whatever eps0 is "
+        f"({DRIFT_FLAG:g} x and above: wearing?). The first warning is the first log, before "
+        f"any alarm, at which the drift reached {DRIFT_FLAG:g} x (machines without a "
+        "commissioning run: a bounded crossing forecast).",
     )
     rep.add_argument("results", type=Path, metavar="RESULTS")
     rep.add_argument("--out", type=Path, required=True, metavar="DIR")
