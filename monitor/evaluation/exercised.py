@@ -14,19 +14,19 @@ from typing import Any
 
 #: A fault ratio at or above this: the fault alone moved the statistic to its threshold.
 EXERCISED_RATIO = 1.0
-#: Run key -> the prefix of its counts in a cell, and its report heading.  Exercised: the
+#: Run key -> the name of its counts in a cell and its report heading.  Exercised: the
 #: fault's own J over the outputs' difference; passed: the alarm level (J or B) of the
 #: change the fault makes in this model's residual (``--twin-residuals``).
 MEASURES = (
-    ("fault_j_ratio", "exercised", "exercised"),
-    ("fault_residual_level_ratio", "passed", "passed"),
+    ("fault_j_ratio", "exercised"),
+    ("fault_residual_level_ratio", "passed"),
 )
 
 
 def exercised_cell(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Counts for one cell of runs, per measure every run has (none with ``--no-twins``)."""
     out: dict[str, Any] = {}
-    for key, name, _ in MEASURES:
+    for key, name in MEASURES:
         if not runs or any(r.get(key) is None for r in runs):
             continue
         hit = [r for r in runs if r[key] >= EXERCISED_RATIO]
@@ -50,9 +50,9 @@ def exercised_markdown(per_severity: Sequence[dict[str, Any]]) -> list[str]:
     rows = [r for r in per_severity if r["all"].get("exercised") is not None]
     if not rows:
         return []
-    names = [(n, h) for _, n, h in MEASURES if all(r["all"].get(n) is not None for r in rows)]
+    names = [n for _, n in MEASURES if all(r["all"].get(n) is not None for r in rows)]
     head = "| fault | severity | detected |" + "".join(
-        f" {h} | detected, {h} | detected, not {h} |" for _, h in names
+        f" {n} | detected, {n} | detected, not {n} |" for n in names
     )
     out = [
         "",
@@ -68,7 +68,7 @@ def exercised_markdown(per_severity: Sequence[dict[str, Any]]) -> list[str]:
         c = row["all"]
         n = c["runs"]
         cells = [_of(c["detected"], n)]
-        for name, _ in names:
+        for name in names:
             k = c[name]
             cells += [str(k), _of(c[f"detected_{name}"], k),
                       _of(c[f"detected_not_{name}"], n - k)]  # fmt: skip
