@@ -38,7 +38,9 @@ def simulate_all(diag: Diagnosis, machine: MachineParams) -> Traces:
     corrected = None
     if diag.chosen is not None:
         m = cal_mod.apply(machine, diag.chosen.factors)
-        corrected = predict(prep, segs, m, diag.chosen.effects)
+        # Started from the rod path the hypothesis reads (``reread.py``), if its own.
+        own = diag.chosen.prep if diag.chosen.prep is not None else prep
+        corrected = predict(own, segs, m, diag.chosen.effects)
     return Traces(nominal, corrected)
 
 
