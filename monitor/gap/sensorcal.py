@@ -7,6 +7,9 @@ calibration part.  Two things a reading error does reach beyond its own signal a
 followed with a few plant runs more: a pressure or RodPos reading also sets the segments'
 start states (they are re-run from the start read through the inverse calibration), and a
 RodPos offset shows only there (the compared rod velocity has no offset), so it is searched.
+Without RodPos a QP error reaches the rod path too (integrated from QP, anchored on the
+stalls a QP offset hides): the QP hypothesis is fitted again on the recording reread
+through it (``reread.py``), the same readings and samples, so its cost stays comparable.
 The signal whose hypothesis fits the calibration part best is the candidate, scored on the
 held-out part like every other.
 
