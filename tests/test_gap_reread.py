@@ -8,7 +8,7 @@ import pytest
 from monitor.gap.diagnose import diagnose
 from monitor.gap.prepare import prepare
 from monitor.gap.report import build_report, simulate_all
-from monitor.gap.reread import reread, rereads, true_flow_lpm
+from monitor.gap.reread import reread, rereads, true_flow_lpm, without_arrivals_of
 from monitor.gap.rodflow import rod_from_flow, stalls
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
@@ -54,6 +54,8 @@ def test_only_a_flow_calibration_without_rodpos_rereads(clean):
     assert not rereads(with_rod, qp)  # the rod path is read, not integrated
     assert not rereads(without, pa)
     assert reread(with_rod, qp, M) is None and reread(without, pa, M) is None
+    assert without_arrivals_of(with_rod, qp, M) is with_rod
+    assert without_arrivals_of(without, pa, M) is without
 
 
 @pytest.mark.parametrize(("gain", "offset"), [(1.0, OFFSET_LPM), (1.08, 0.0), (0.9, -1.0)])
@@ -91,6 +93,12 @@ def test_a_flow_offset_hides_the_stalls_the_reread_finds(clean):
     # (as ``test_rod_from_flow_is_anchored_at_a_stall...``), where the offset, integrated,
     # had run it to the stops.
     assert err_after < 5.0 < err_before
+    # The arrivals on the stalls it finds are left out of the comparison, besides the ones
+    # the prepared recording left out: those of the true flow's rod path.
+    _, true_arrivals = rod_from_flow(*args, clean["QP"], M)
+    common = without_arrivals_of(prep, cal, M)
+    np.testing.assert_array_equal(common.unscored, prep.unscored | true_arrivals)
+    assert common.unscored.sum() > prep.unscored.sum()
 
 
 def test_a_flow_offset_without_rodpos_is_named_and_the_pressures_follow():

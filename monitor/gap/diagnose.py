@@ -33,7 +33,7 @@ from monitor.gap.decide import Decision, decide, pair_plan, within_noise
 from monitor.gap.families import fit_family
 from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sense
 from monitor.gap.prepare import Prepared, prepare
-from monitor.gap.reread import reread
+from monitor.gap.reread import reread, without_arrivals_of
 from monitor.gap.segments import Segment, make_segments, split, spread
 from monitor.gap.shrink import resamples
 from monitor.gap.suggest import suggest
@@ -224,6 +224,14 @@ def _diagnose(
 
     # 1. Tolerances first.
     tol_fit = fit_candidate([], fit_ev.residual, {}, tol, [({}, ())], CAL_ITERATIONS)
+    # Without RodPos, the arrivals the rod path read through a first QP calibration finds
+    # are left out for every candidate, before any is scored (``reread.py``: fairness).
+    guess = sensorcal.fit_signal(prep, fit_segs, fit_ev.predict(tol_fit.factors, ()), "QP")
+    common = prep if guess is None else without_arrivals_of(prep, guess, machine)
+    if common is not prep:
+        prep = common
+        readings = _Readings(prep, (fit_segs, fit_machine), (held, held_machine))
+        fit_ev, held_ev = readings.fit(None), readings.held(None)
     floor = S.noise_floor(prep)
     sums: dict[str, S.SegmentSums] = {}
     smooth: dict[str, S.SegmentSums] = {}
