@@ -17,6 +17,7 @@ import numpy as np
 
 from monitor.gap.calibrate import TOLERANCES
 from monitor.gap.fit import MAX_ITERATIONS, Knob, default_starts, fit
+from monitor.gap.prepare import Prepared
 from monitor.sim.effects import CATALOGUE, Effect
 
 #: Fitted parameters per effect; the others keep their catalogue defaults (weakly
@@ -128,6 +129,10 @@ class Candidate:
     heldout_gap: float = 0.0
     heldout_reduction: float = 0.0
     criterion: float = 0.0
+    #: The recording as this hypothesis reads it, when that differs from the diagnosis's
+    #: (a QP calibration without RodPos rereads the rod path: ``reread.py``); None: as
+    #: prepared.
+    prep: Prepared | None = None
 
     @property
     def name(self) -> str:

@@ -33,6 +33,7 @@ from monitor.gap.decide import Decision, decide, pair_plan, within_noise
 from monitor.gap.families import fit_family
 from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sense
 from monitor.gap.prepare import Prepared, prepare
+from monitor.gap.reread import reread, without_arrivals_of
 from monitor.gap.segments import Segment, make_segments, split, spread
 from monitor.gap.shrink import resamples
 from monitor.gap.suggest import suggest
@@ -143,6 +144,28 @@ class _Evaluator:
         )
 
 
+class _Readings:
+    """Evaluators of the fit and held-out segments, per reading of the recording: as
+    prepared (None) and as hypotheses reread it (``reread.py``), built when first asked."""
+
+    def __init__(self, prep: Prepared, fit: tuple, held: tuple):
+        self.prep, self._parts = prep, {"fit": fit, "held": held}
+        self._made: dict[tuple[str, int], _Evaluator] = {}
+
+    def _get(self, part: str, prep: Prepared | None) -> _Evaluator:
+        p = self.prep if prep is None else prep
+        key = (part, id(p))  # the evaluator keeps ``p`` alive: its id stays its own
+        if key not in self._made:
+            self._made[key] = _Evaluator(p, *self._parts[part])
+        return self._made[key]
+
+    def fit(self, prep: Prepared | None) -> _Evaluator:
+        return self._get("fit", prep)
+
+    def held(self, prep: Prepared | None) -> _Evaluator:
+        return self._get("held", prep)
+
+
 def _score(c: Candidate, sums: S.SegmentSums, floor: np.ndarray, gap0: float, n_eff: float):
     c.heldout_mse = sums.mse()
     c.heldout_gap = S.gap(c.heldout_mse, floor)
@@ -189,13 +212,26 @@ def _diagnose(
         f"{len(held)} held out; RodPos {'measured' if prep.has_rodpos else 'from flow'}"
     )
     fit_machine = machine.with_changes(step_s=machine.step_s * FIT_STEP_FACTOR)
-    fit_ev = _Evaluator(prep, fit_segs, fit_machine)
     held_machine = machine.with_changes(step_s=machine.step_s * HELDOUT_STEP_FACTOR)
-    held_ev = _Evaluator(prep, held, held_machine)
+    readings = _Readings(prep, (fit_segs, fit_machine), (held, held_machine))
+    fit_ev, held_ev = readings.fit(None), readings.held(None)
+
+    def reread_for(effect: Effect) -> tuple[Prepared, sensorcal.Predict] | None:
+        other = reread(prep, effect, machine)
+        return None if other is None else (other, readings.fit(other).predict)
+
     tol = cal_mod.knobs()
 
     # 1. Tolerances first.
     tol_fit = fit_candidate([], fit_ev.residual, {}, tol, [({}, ())], CAL_ITERATIONS)
+    # Without RodPos, the arrivals the rod path read through a first QP calibration finds
+    # are left out for every candidate, before any is scored (``reread.py``: fairness).
+    guess = sensorcal.fit_signal(prep, fit_segs, fit_ev.predict(tol_fit.factors, ()), "QP")
+    common = prep if guess is None else without_arrivals_of(prep, guess, machine)
+    if common is not prep:
+        prep = common
+        readings = _Readings(prep, (fit_segs, fit_machine), (held, held_machine))
+        fit_ev, held_ev = readings.fit(None), readings.held(None)
     floor = S.noise_floor(prep)
     sums: dict[str, S.SegmentSums] = {}
     smooth: dict[str, S.SegmentSums] = {}
@@ -207,7 +243,8 @@ def _diagnose(
 
     def scored(c: Candidate) -> Candidate:
         kept = member_sums.pop(id(c), None)
-        both = kept if kept is not None else held_ev.both_sums(c.factors, c.effects)
+        ev = readings.held(c.prep)  # the recording as ``c`` reads it (same samples)
+        both = kept if kept is not None else ev.both_sums(c.factors, c.effects)
         sums[c.name], smooth[c.name] = both
         _score(c, sums[c.name], floor, base.gap0, base.n_eff)
         return c
@@ -224,7 +261,8 @@ def _diagnose(
     for i, name in enumerate(effects):
         t0 = time.perf_counter()
         if name == sensorcal.NAME:
-            c = scored(sensorcal.fit_candidate(prep, fit_segs, fit_ev.predict, base.factors))
+            c = sensorcal.fit_candidate(prep, fit_segs, fit_ev.predict, base.factors, reread_for)
+            c = scored(c)
         else:
             free = [k for k in tol if k.name in CONFOUNDED.get(name, ())]
             local = CONFOUNDED_LOCAL_STARTS if free and name in TWO_LOCAL_FITS else 1
@@ -246,7 +284,9 @@ def _diagnose(
             starts = [(c.factors, c.effects), ({}, c.effects)]
             kept = sums[c.name], smooth[c.name]
             if c.name == sensorcal.NAME:
-                r = sensorcal.refit_with_tolerances(prep, fit_segs, fit_ev.predict, c, tol)
+                own = c.prep if c.prep is not None else prep
+                predict = readings.fit(c.prep).predict
+                r = sensorcal.refit_with_tolerances(own, fit_segs, predict, c, tol)
             else:
                 r = fit_candidate(
                     [c.effects[0].name],

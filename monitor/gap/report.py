@@ -17,6 +17,7 @@ from monitor.gap import where as W
 from monitor.gap.candidates import Candidate, default_member
 from monitor.gap.diagnose import Diagnosis
 from monitor.gap.predict import predict
+from monitor.gap.prepare import Prepared
 from monitor.gap.score import compared, normalised
 from monitor.gap.shrink import shrink_report
 from monitor.signals import MEASURED_NAMES, UNITS
@@ -38,8 +39,19 @@ def simulate_all(diag: Diagnosis, machine: MachineParams) -> Traces:
     corrected = None
     if diag.chosen is not None:
         m = cal_mod.apply(machine, diag.chosen.factors)
-        corrected = predict(prep, segs, m, diag.chosen.effects)
+        # Started from the rod path the hypothesis reads (``reread.py``), if its own.
+        own = diag.chosen.prep if diag.chosen.prep is not None else prep
+        corrected = predict(own, segs, m, diag.chosen.effects)
     return Traces(nominal, corrected)
+
+
+def _rodpos(prep: Prepared, chosen: Candidate | None) -> str:
+    """Where the rod path came from: the recording's ``recording.rodpos``."""
+    if prep.has_rodpos:
+        return "measured"
+    if chosen is not None and chosen.prep is not None:  # ``reread.py``
+        return "integrated from QP read through the fitted QP calibration"
+    return "integrated from QP"
 
 
 def effect_params(effect: Effect, fitted: set[str] | None = None) -> dict[str, dict]:
@@ -176,7 +188,7 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
         "recording": {
             "source": prep.source,
             "duration_s": round(duration, 2),
-            "rodpos": "measured" if prep.has_rodpos else "integrated from QP",
+            "rodpos": _rodpos(prep, chosen),
             "segments": len(diag.segments),
             "calibration_s": round(sum(s.duration_s() for s in diag.calibration), 1),
             "heldout_s": round(sum(s.duration_s() for s in diag.heldout), 1),

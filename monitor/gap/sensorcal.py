@@ -7,6 +7,9 @@ calibration part.  Two things a reading error does reach beyond its own signal a
 followed with a few plant runs more: a pressure or RodPos reading also sets the segments'
 start states (they are re-run from the start read through the inverse calibration), and a
 RodPos offset shows only there (the compared rod velocity has no offset), so it is searched.
+Without RodPos a QP error reaches the rod path too (integrated from QP, anchored on the
+stalls a QP offset hides): the QP hypothesis is fitted again on the recording reread
+through it (``reread.py``), the same readings and samples, so its cost stays comparable.
 The signal whose hypothesis fits the calibration part best is the candidate, scored on the
 held-out part like every other.
 
@@ -257,15 +260,27 @@ def kinematically_consistent(
     return after <= KINEMATIC_TOLERANCE or after <= before
 
 
+#: The recording reread through a hypothesis, with the predictor of its segments
+#: (``reread.py``); None where the hypothesis reads the recording as prepared.
+Reread = Callable[[Effect], tuple[Prepared, Predict] | None]
+#: Rereadings of a hypothesis, each from the gain and offset fitted on the last: the first
+#: finds the stalls the offset hid, after which the fit moves the offset by hundredths of a
+#: L/min, far inside ``rodflow.STALL_FLOW_LPM``.
+REREADS = 1
+
+
 def _hypotheses(
     prep: Prepared,
     segments: Sequence[Segment],
     predict: Predict,
     factors: dict[str, float],
-) -> list[tuple[float, Effect]]:
-    """(calibration cost, effect) per signal: gain and offset in closed form on the
-    calibrated nominal's plant runs, refitted from corrected start states where the
-    signal sets them (a RodPos offset is searched: the velocity does not show it)."""
+    reread: Reread | None = None,
+) -> list[tuple[float, Effect, Prepared | None]]:
+    """(calibration cost, effect, the recording as the effect reads it or None) per signal:
+    gain and offset in closed form on the calibrated nominal's plant runs, refitted from
+    corrected start states where the signal sets them (a RodPos offset is searched: the
+    velocity does not show it), and on the recording reread through the effect where it
+    changes how the recording is read (``reread``)."""
     base = predict(factors, ())
     out = []
     for signal in SENSOR_CAL_SIGNALS:
@@ -275,9 +290,29 @@ def _hypotheses(
         if signal == "RodPos":
             effect = _rod_offset(prep, segments, predict, factors, effect.params["gain"])
         effect, pred = _refined(prep, segments, predict, factors, effect)
+        own: Prepared | None = None
+        for _ in range(REREADS if reread is not None else 0):
+            reading = reread(effect)
+            found = _fitted_on(reading, segments, factors, signal) if reading else None
+            if found is None:
+                break
+            own, (effect, pred) = reading[0], found
         if kinematically_consistent(prep, segments, base, effect):
-            out.append((float(np.mean(S.stacked(prep, segments, pred) ** 2)), effect))
+            # The same readings and samples either way (``reread.py``): costs comparable.
+            out.append((float(np.mean(S.stacked(prep, segments, pred) ** 2)), effect, own))
     return out
+
+
+def _fitted_on(
+    reading: tuple[Prepared, Predict],
+    segments: Sequence[Segment],
+    factors: dict[str, float],
+    signal: str,
+) -> tuple[Effect, dict[str, np.ndarray]] | None:
+    """``signal``'s gain and offset fitted on a reread recording, with the prediction."""
+    prep, predict = reading
+    effect = fit_signal(prep, segments, predict(factors, ()), signal)
+    return None if effect is None else _refined(prep, segments, predict, factors, effect)
 
 
 #: Refits of gain and offset from plant runs started from the corrected state (a pressure
@@ -312,12 +347,14 @@ def fit_candidate(
     segments: Sequence[Segment],
     predict: Predict,
     factors: dict[str, float],
+    reread: Reread | None = None,
 ) -> Candidate:
     """The candidate on the calibrated machine (``factors``): the signal whose hypothesis
     fits the calibration part best (a few linear fits and a few dozen plant runs of the
-    fit segments, for the signals that set the start states)."""
-    cost, effect = min(_hypotheses(prep, segments, predict, factors), key=lambda h: h[0])
-    return Candidate((effect,), dict(factors), cost)
+    fit segments, for the signals that set the start states or reread the recording)."""
+    hyps = _hypotheses(prep, segments, predict, factors, reread)
+    cost, effect, own = min(hyps, key=lambda h: h[0])
+    return Candidate((effect,), dict(factors), cost, prep=own)
 
 
 def refit_with_tolerances(
@@ -329,7 +366,7 @@ def refit_with_tolerances(
 ) -> Candidate:
     """The tolerances fitted jointly with the candidate's signal (gain and offset solved in
     closed form at every step: the first calibration may have bent the machine towards
-    the sensor error)."""
+    the sensor error).  ``prep`` and ``predict``: the recording as ``first`` reads it."""
     current = first.effects[0]
 
     def residual(values: dict[str, float]) -> np.ndarray:
@@ -349,4 +386,4 @@ def refit_with_tolerances(
     factors = {**first.factors, **result.values}
     effect, pred = _refined(prep, segments, predict, factors, current)
     cost = float(np.mean(S.stacked(prep, segments, pred) ** 2))
-    return Candidate((effect,), factors, cost)
+    return Candidate((effect,), factors, cost, prep=first.prep)
