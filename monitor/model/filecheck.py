@@ -85,3 +85,12 @@ def check_header(header: Any) -> None:
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
                 raise ValueError(f"header bias.{key} must be a whole number 1..{MAX_WINDOW_N}")
         _number(bias, "b0", 0.0, strict=True)
+    lever = header.get("lever")
+    if lever is not None:
+        if not isinstance(lever, dict):
+            raise ValueError("header lever must be an object")
+        for key in ("window_n", "min_count"):
+            v = lever.get(key)
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
+                raise ValueError(f"header lever.{key} must be a whole number 1..{MAX_WINDOW_N}")
+        _number(lever, "l0", 0.0, strict=True)
