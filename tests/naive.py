@@ -326,3 +326,37 @@ def bias_statistic(e, regimes, scale, window, min_count):
         if terms:
             out[i] = sum(terms) / len(terms)
     return out
+
+
+def lever_statistic(e, spool_pct, output, scale, window, min_count):
+    """The full-lever statistic L from its definition, recomputed from scratch at every
+    sample: direction 1 (raising) where SpoolCmd > 80 %, 2 (lowering) where < -80 %, else 0;
+    the last ``window`` samples whose residuals are all finite; per direction d with at least
+    ``min_count`` of them, v_d = |mean of e[:, output] over them| / scale[d - 1]; L = the
+    larger v_d.  NaN at a sample with a missing residual, before ``window`` valid samples
+    have been seen, and where neither direction counts."""
+    e = np.asarray(e, dtype=float)
+    out = np.full(len(e), np.nan)
+    valid = []  # indices of the valid samples so far
+    for i in range(len(e)):
+        if not all(math.isfinite(v) for v in e[i]):
+            continue
+        valid.append(i)
+        if len(valid) < window:
+            continue
+        last = valid[-window:]
+        values = []
+        for d in (1, 2):
+            members = []
+            for k in last:
+                s = float(spool_pct[k])
+                direction = 1 if s > 80.0 else 2 if s < -80.0 else 0
+                if direction == d:
+                    members.append(k)
+            if len(members) < min_count:
+                continue
+            mean = math.fsum(e[k, output] for k in members) / len(members)
+            values.append(abs(mean) / scale[d - 1])
+        if values:
+            out[i] = max(values)
+    return out

@@ -125,7 +125,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--bias",
         choices=("on", "off"),
         default=None,
-        help="the bias statistic B beside J (default: on, off for --preset paper)",
+        help="the bias statistic B beside J (default: on, off for --preset paper); with it "
+        "the full-lever statistic L (PP's mean residual with the lever beyond 80 %%), when "
+        "the held-out data holds the lever there",
     )
 
     p.add_argument(

@@ -33,8 +33,9 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
         ax_e.plot(t, det.residual[:, k], lw=0.5, label=name)
     ax_e.set_ylabel("residual e [z]")
     ax_e.legend(loc="upper right", fontsize=7, ncol=len(outputs))
-    # J and the bias statistic B, each over its own threshold: the alarm is raised when
-    # either stays above 1 (max(J / eps0, B / b0) is the level the alarm machine sees).
+    # J, the bias statistic B and the full-lever statistic L, each over its own threshold:
+    # the alarm is raised when one stays above 1 (max(J / eps0, B / b0, L / l0) is the level
+    # the alarm machine sees).
     ax_j = axes[-1]
     eps0, b0 = det.summary["threshold"], det.summary.get("bias_threshold")
     j = np.where(det.j > 0, det.j, np.nan)
@@ -42,6 +43,10 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
     if det.b is not None and b0:
         b = np.where(det.b > 0, det.b, np.nan)
         ax_j.semilogy(t, b / b0, lw=0.8, color="tab:green", label=f"B / b0 (b0 = {b0:.3g})")
+    l0 = det.summary.get("lever_threshold")
+    if det.lever is not None and l0:
+        lv = np.where(det.lever > 0, det.lever, np.nan)
+        ax_j.semilogy(t, lv / l0, lw=0.8, color="tab:purple", label=f"L / l0 (l0 = {l0:.3g})")
     ax_j.axhline(1.0, color="tab:red", ls="--", lw=1, label="alarm threshold")
     ax_j.set_ylabel("level (1 = alarm)")
     ax_j.set_ylim(bottom=1e-2)  # below a hundredth of the threshold nothing is close

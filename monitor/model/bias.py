@@ -218,13 +218,21 @@ class BiasWindow:
 
 
 def alarm_level(
-    j: np.ndarray, eps0: float, b: np.ndarray | None, bias: BiasModel | None
+    j: np.ndarray,
+    eps0: float,
+    b: np.ndarray | None,
+    bias: BiasModel | None,
+    lever: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
-    """What the alarm compares with 1: max(J / eps0, B / b0), J / eps0 alone while B is
-    NaN or without a bias model; NaN while J is (the window warms up or pauses)."""
+    """What the alarm compares with 1: max(J / eps0, B / b0, L / l0), J / eps0 alone while B
+    and L are NaN or without them (``lever``: the full-lever statistic's series and l0, see
+    ``monitor.model.lever``); NaN while J is (the window warms up or pauses)."""
     level = np.asarray(j, dtype=np.float64) / eps0
-    if b is None or bias is None or bias.b0 != bias.b0:
-        return level
+    others = [] if b is None or bias is None or bias.b0 != bias.b0 else [(b, bias.b0)]
+    if lever is not None and lever[1] == lever[1]:
+        others.append(lever)
     with np.errstate(invalid="ignore"):
-        both = np.isfinite(level) & np.isfinite(b)
-        return np.where(both, np.maximum(level, b / bias.b0), level)
+        for series, threshold in others:
+            both = np.isfinite(level) & np.isfinite(series)
+            level = np.where(both, np.maximum(level, series / threshold), level)
+    return level

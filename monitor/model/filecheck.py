@@ -76,12 +76,15 @@ def check_header(header: Any) -> None:
                 and c > 0 for c in clip)  # fmt: skip
     ):
         raise ValueError("header residual_clip must be null or a list of finite numbers > 0")
-    bias = header.get("bias")
-    if bias is not None:
-        if not isinstance(bias, dict):
-            raise ValueError("header bias must be an object")
+    # The optional statistics beside J: a window, a count and a threshold each.
+    for name, threshold in (("bias", "b0"), ("lever", "l0")):
+        stat = header.get(name)
+        if stat is None:
+            continue
+        if not isinstance(stat, dict):
+            raise ValueError(f"header {name} must be an object")
         for key in ("window_n", "min_count"):
-            v = bias.get(key)
+            v = stat.get(key)
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
-                raise ValueError(f"header bias.{key} must be a whole number 1..{MAX_WINDOW_N}")
-        _number(bias, "b0", 0.0, strict=True)
+                raise ValueError(f"header {name}.{key} must be a whole number 1..{MAX_WINDOW_N}")
+        _number(stat, threshold, 0.0, strict=True)

@@ -27,6 +27,7 @@ from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import Envelope, envelope_from_patterns
 from monitor.model.filecheck import check_header, read_members
 from monitor.model.grnn import GRNN
+from monitor.model.lever import LeverModel
 from monitor.model.spec import DGRNNSpec, Normalizer
 from monitor.model.threshold import ThresholdRule
 from monitor.signals import SIGNAL_NAMES
@@ -37,7 +38,8 @@ MODEL_FORMAT = "hydraulic-monitor-dgrnn"
 # 2: patterns carry member counts (Specht's clustered GRNN).  The optional header key
 # ``validity`` (the training envelope) was added without a version bump: readers that do
 # not know it ignore it, and files without it get an envelope derived from their patterns.
-# Likewise ``bias`` (the bias statistic's window, scales and threshold): without it, J alone.
+# Likewise ``bias`` (the bias statistic's window, scales and threshold): without it, J alone;
+# and ``lever`` (the full-lever statistic L's): without it, no L.
 MODEL_VERSION = 2
 _ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
 
@@ -62,6 +64,8 @@ class MonitorModel:
     envelope: Envelope | None = None
     #: The bias statistic B beside J (None: J alone, as the paper; see ``monitor.model.bias``).
     bias: BiasModel | None = None
+    #: The full-lever statistic L (None: none; see ``monitor.model.lever``).
+    lever: LeverModel | None = None
 
     @property
     def spec(self) -> DGRNNSpec:
@@ -94,6 +98,8 @@ class MonitorModel:
             head["validity"] = self.envelope.to_dict()
         if self.bias is not None:
             head["bias"] = self.bias.to_dict()
+        if self.lever is not None:
+            head["lever"] = self.lever.to_dict()
         return head
 
 
@@ -220,6 +226,7 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
         training=header["training"],
         envelope=Envelope.from_dict(header["validity"]) if "validity" in header else None,
         bias=_bias(header, len(spec.outputs)),
+        lever=_lever(header, len(spec.outputs)),
     )
 
 
@@ -230,3 +237,12 @@ def _bias(header: dict[str, Any], n_out: int) -> BiasModel | None:
     if bias.scale.shape[1] != n_out:
         raise ValueError(f"bias scale has {bias.scale.shape[1]} outputs, the model {n_out}")
     return bias
+
+
+def _lever(header: dict[str, Any], n_out: int) -> LeverModel | None:
+    if header.get("lever") is None:
+        return None
+    lever = LeverModel.from_dict(header["lever"])
+    if lever.output >= n_out:
+        raise ValueError(f"lever output {lever.output} is not among the model's {n_out} outputs")
+    return lever

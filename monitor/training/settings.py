@@ -38,6 +38,9 @@ class TrainConfig:
     bias: bool | None = None
     bias_window_n: int = 6000  # 60 s: several raise/hold/lower phases of every regime
     bias_min_count: int = 300  # 3 s of a regime in the window before it counts
+    #: The full-lever statistic L (``monitor.model.lever``), on with B, over B's window:
+    #: 1 s of lever beyond full in one direction before that direction counts.
+    lever_min_count: int = 100
     #: With a reference model: lend its patterns where this machine's own data has none
     #: (``monitor.training.fill``), in the final model and in every cross-fitted fold.
     lend: bool = True
@@ -58,6 +61,8 @@ class TrainConfig:
             raise ConfigError(f"residual clip quantile must be within 0.9..1, got {q}")
         if not 1 <= self.bias_min_count <= self.bias_window_n:
             raise ConfigError("bias min_count must be within 1..bias window")
+        if not 1 <= self.lever_min_count <= self.bias_window_n:
+            raise ConfigError("lever min_count must be within 1..bias window")
         if self.isolation not in ("sim", "none"):
             raise ConfigError(f"isolation must be 'sim' or 'none', got {self.isolation!r}")
 

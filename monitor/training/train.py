@@ -24,6 +24,13 @@ from monitor.model.bias import BiasModel, bias_regimes, bias_series, fit_scale
 from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
+from monitor.model.lever import (
+    LEVER_OUTPUT,
+    LeverModel,
+    fit_lever_scale,
+    lever_directions,
+    lever_series,
+)
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
 from monitor.model.spec import DGRNNSpec, Normalizer, table
@@ -158,6 +165,18 @@ def train(
             # Short commissioning data cannot support the bias threshold: J alone, said.
             bias_note = f"off: {exc}"
             say(f"  bias statistic {bias_note}")
+    lever_note = "off (with the bias statistic, on a model that predicts PP)"
+    if model.bias is not None and LEVER_OUTPUT in spec.outputs:
+        try:
+            model.lever = fit_lever(
+                e_val, [r["SpoolCmd"] for r in val_part], spec.outputs.index(LEVER_OUTPUT), cfg
+            )
+            lever_note = "on"
+            say(f"  full-lever statistic L over {cfg.bias_window_n / 100:g} s, l0 "
+                f"{model.lever.l0:.4g}: {cfg.threshold.describe()}")  # fmt: skip
+        except InputFileError as exc:
+            lever_note = f"off: {exc}"
+            say(f"  full-lever statistic {lever_note}")
     floor_note = None
     if reference is not None:
         floor_note = floor_thresholds(model, reference)
@@ -198,6 +217,7 @@ def train(
         "isolation": cfg.isolation,
         "threshold": cfg.threshold.describe(),
         "bias": bias_note,
+        "lever": lever_note,
         "threshold_floor": floor_note,
         "threshold_one_event": event,
         # The typical J of normal operation judged out of sample: a log's median J against
@@ -264,6 +284,20 @@ def fit_bias(e_val: list[np.ndarray], spool_val: list[np.ndarray], cfg: TrainCon
     b_val = np.concatenate([bias_series(e, r, bias) for e, r in zip(e_val, regimes, strict=True)])
     _, b0 = cfg.threshold.eps0(b_val, block=cfg.bias_window_n)
     return BiasModel(bias.window_n, bias.min_count, bias.scale, b0)
+
+
+def fit_lever(
+    e_val: list[np.ndarray], spool_val: list[np.ndarray], output: int, cfg: TrainConfig
+) -> LeverModel:
+    """The full-lever statistic's per-direction scales and threshold l0 from held-out normal
+    residuals (``InputFileError`` when they never hold the lever near full)."""
+    directions = [lever_directions(s) for s in spool_val]
+    scale = fit_lever_scale(e_val, directions, cfg.bias_window_n, cfg.lever_min_count, output)
+    lever = LeverModel(cfg.bias_window_n, cfg.lever_min_count, output, scale)
+    series = np.concatenate([lever_series(e, d, lever) for e, d in zip(e_val, directions,
+                                                                        strict=True)])  # fmt: skip
+    _, l0 = cfg.threshold.eps0(series, block=cfg.bias_window_n)
+    return LeverModel(lever.window_n, lever.min_count, output, scale, l0)
 
 
 #: Severities the fault signatures are learnt at: one signature per fault and severity, since

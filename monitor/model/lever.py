@@ -1,0 +1,197 @@
+"""The full-lever statistic L: the pump pressure's mean residual while the lever is near
+full stroke, beside J and B.
+
+A spool whose stroke is limited (a bent linkage, a pilot pressure too low, a stop screw)
+acts only when the operator asks for more than it can open: on an excavator's boom cycle a
+limit at 82 % of stroke is reached in a few seconds of a minute.  J, a 30 s mean of
+squares over every output, dilutes those seconds about sixfold; B averages them with the
+other regimes and outputs.  Yet in those seconds the pump pressure PP sits far from what
+the healthy model predicts (an open-centre valve keeps its bypass partly open), some ten
+times its normal scatter.  L keeps, over the last ``window_n`` valid samples, PP's mean
+signed residual for the samples with the lever beyond ``FULL_PCT`` in each direction
+(raising, lowering), and scales each by the largest such mean seen in held-out normal
+operation:
+
+    L = max over directions d with n_d >= min_count of |mean_d(e_PP)| / scale[d]
+
+On the held-out data L is at most 1 by construction; its threshold l0 comes from the held-out
+L by the same rule as eps0 from J (twice the largest, by default).  Like J and B, L is
+judged only on a full window and a NaN residual pauses it.  One step kernel (``_push``)
+serves the live ticker and the batch series.  Measured in docs/benchmarks.md ("The
+full-lever statistic L").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.errors import ConfigError, InputFileError
+from monitor.jit import jit
+
+#: Lever command (%) beyond which a sample counts for L: near full stroke, where a stroke
+#: limit of severity 0.3 (82 %) or more acts on every sample that counts.
+FULL_PCT = 80.0
+#: The output L watches: the pump pressure, near-algebraic in the metering opening.
+LEVER_OUTPUT = "PP"
+N_DIRECTIONS = 2  # raising, lowering
+
+
+def lever_directions(spool_pct: np.ndarray) -> np.ndarray:
+    """Per sample: 0 (not counted), 1 (raising beyond ``FULL_PCT``), 2 (lowering beyond)."""
+    s = np.asarray(spool_pct, dtype=np.float64)
+    return np.where(s > FULL_PCT, 1, np.where(s < -FULL_PCT, 2, 0)).astype(np.int64)
+
+
+def lever_direction(spool_pct: float) -> int:
+    """``lever_directions`` for one sample (NaN: not counted)."""
+    return 1 if spool_pct > FULL_PCT else 2 if spool_pct < -FULL_PCT else 0
+
+
+@dataclass(frozen=True)
+class LeverModel:
+    """What the detector needs for L: window, the output, per-direction scales, l0."""
+
+    window_n: int  # samples (6000: 60 s at 100 Hz)
+    min_count: int  # samples beyond FULL_PCT in one direction before it counts
+    output: int  # index of LEVER_OUTPUT among the model's outputs
+    scale: np.ndarray  # (N_DIRECTIONS,), z-units: the largest held-out |mean|
+    l0: float = float("nan")  # threshold; NaN: L is computed but never alarms
+
+    def __post_init__(self) -> None:
+        if self.window_n < 2 or not 1 <= self.min_count <= self.window_n or self.output < 0:
+            raise ConfigError(
+                f"lever window {self.window_n}, min_count {self.min_count} and output "
+                f"{self.output} must satisfy 1 <= min_count <= window, output >= 0"
+            )
+        s = np.asarray(self.scale, dtype=np.float64)
+        if s.shape != (N_DIRECTIONS,) or not np.all(s > 0):
+            raise ConfigError(f"lever scale must be {N_DIRECTIONS} positive numbers, got {s}")
+        object.__setattr__(self, "scale", np.ascontiguousarray(s))
+
+    def to_dict(self) -> dict[str, object]:
+        return {"window_n": int(self.window_n), "min_count": int(self.min_count),
+                "output": int(self.output), "scale": [float(v) for v in self.scale],
+                "l0": float(self.l0)}  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, d: dict[str, object]) -> LeverModel:
+        return cls(int(d["window_n"]), int(d["min_count"]), int(d["output"]),  # type: ignore[arg-type]
+                   np.asarray(d["scale"], dtype=np.float64), float(d["l0"]))  # type: ignore[arg-type]  # fmt: skip
+
+
+# State vector layout of the step kernel.
+_POS, _COUNT, _PUSHES = 0, 1, 2
+
+
+@jit(aot=True)
+def _push(ring_e, ring_d, sums, counts, state, e, direction, output, scale, min_count,
+          resum_every):  # pragma: no cover - numba
+    """One sample into the window; returns L (NaN: paused, window not full, or no direction
+    counted)."""
+    for o in range(e.shape[0]):
+        if np.isnan(e[o]):
+            return np.nan
+    size = ring_d.shape[0]
+    pos = state[_POS]
+    if state[_COUNT] == size:  # full: the oldest sample leaves
+        old = ring_d[pos]
+        counts[old] -= 1.0
+        sums[old] -= ring_e[pos]
+    else:
+        state[_COUNT] += 1
+    ring_e[pos] = e[output]
+    ring_d[pos] = direction
+    sums[direction] += e[output]
+    counts[direction] += 1.0
+    state[_POS] = pos + 1 if pos + 1 < size else 0
+    state[_PUSHES] += 1
+    if state[_PUSHES] == resum_every:  # exact re-summation: add/subtract would drift
+        state[_PUSHES] = 0
+        sums[:] = 0.0
+        for i in range(state[_COUNT]):
+            sums[ring_d[i]] += ring_e[i]
+    if state[_COUNT] < size:
+        return np.nan
+    out = np.nan
+    for d in range(1, sums.shape[0]):  # 0: samples that do not count
+        k = counts[d]
+        if k >= min_count:
+            v = abs(sums[d] / k) / scale[d - 1]
+            if not v <= out:  # NaN-safe max
+                out = v
+    return out
+
+
+@jit(aot=True)
+def _series(e, directions, output, scale, window, min_count, resum_every):  # pragma: no cover
+    n = e.shape[0]
+    out = np.empty(n)
+    ring_e = np.zeros(window)
+    ring_d = np.zeros(window, dtype=np.int64)
+    sums = np.zeros(N_DIRECTIONS + 1)
+    counts = np.zeros(N_DIRECTIONS + 1)
+    state = np.zeros(3, dtype=np.int64)
+    for i in range(n):
+        out[i] = _push(ring_e, ring_d, sums, counts, state, e[i], directions[i], output, scale,
+                       min_count, resum_every)  # fmt: skip
+    return out
+
+
+def _resum(window: int) -> int:
+    return max(1000, 10 * window)
+
+
+def lever_series(e: np.ndarray, directions: np.ndarray, lever: LeverModel) -> np.ndarray:
+    """L at every sample of residuals (samples, outputs) and their lever directions."""
+    a = np.ascontiguousarray(e, dtype=np.float64)
+    if a.ndim != 2 or not 0 <= lever.output < a.shape[1]:
+        raise InputFileError(f"residuals {a.shape} have no output {lever.output} for L")
+    d = np.ascontiguousarray(directions, dtype=np.int64)
+    return _series(a, d, lever.output, lever.scale, lever.window_n, lever.min_count,
+                   _resum(lever.window_n))  # fmt: skip
+
+
+def fit_lever_scale(
+    residuals: list[np.ndarray], directions: list[np.ndarray], window_n: int, min_count: int,
+    output: int,
+) -> np.ndarray:
+    """Per direction, the largest |window mean| of the output's residual over held-out normal
+    data (the statistic's own windows: L's series with unit scales).  ``InputFileError``
+    when a direction never counts: the held-out data never held the lever that far."""
+    unit = LeverModel(window_n, min_count, output, np.ones(N_DIRECTIONS))
+    top = np.zeros(N_DIRECTIONS)
+    for e, d in zip(residuals, directions, strict=True):
+        for k in range(N_DIRECTIONS):
+            only = np.where(d == k + 1, d, 0)  # the other direction's samples do not count
+            series = lever_series(e, only, unit)
+            if np.isfinite(series).any():
+                top[k] = max(top[k], float(np.nanmax(series)))
+    if not np.all(top > 0):
+        raise InputFileError(
+            f"the held-out normal data never has {min_count / 100:g} s of lever beyond "
+            f"{FULL_PCT:g} % in both directions within {window_n / 100:g} s: the full-lever "
+            "statistic needs such data"
+        )
+    return top
+
+
+class LeverWindow:
+    """L kept up to date one tick at a time (the live ticker's; same kernel as the series)."""
+
+    def __init__(self, lever: LeverModel) -> None:
+        self.lever = lever
+        self._ring_e = np.zeros(lever.window_n)
+        self._ring_d = np.zeros(lever.window_n, dtype=np.int64)
+        self._sums = np.zeros(N_DIRECTIONS + 1)
+        self._counts = np.zeros(N_DIRECTIONS + 1)
+        self._state = np.zeros(3, dtype=np.int64)
+        self._resum = _resum(lever.window_n)
+
+    def push(self, e: np.ndarray, direction: int) -> float:
+        """One sample's residuals (outputs) and lever direction; returns L."""
+        lv = self.lever
+        value = _push(self._ring_e, self._ring_d, self._sums, self._counts, self._state, e,
+                      direction, lv.output, lv.scale, lv.min_count, self._resum)  # fmt: skip
+        return float(value)
