@@ -159,7 +159,7 @@ def detect(
         "threshold": model.eps0,
         "J0": model.j0,
         # The bias statistic (null without one): its largest value and threshold, and the
-        # largest alarm level max(J / eps0, B / b0), 1 being the alarm threshold.
+        # largest alarm level max(J / eps0, B / b0, L / l0), 1 being the alarm threshold.
         "max_B": float(np.max(b[b_finite])) if b_finite.any() else None,
         "bias_threshold": model.bias.b0 if model.bias is not None else None,
         # The full-lever statistic L likewise (``monitor.model.lever``).
