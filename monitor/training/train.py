@@ -14,6 +14,7 @@ import hashlib
 import math
 import time
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -154,29 +155,16 @@ def train(
     own_eps0 = model.eps0
     bias_note = "off (--bias off, or the paper preset)"
     if cfg.with_bias:
-        try:
-            model.bias = fit_bias(
-                e_val, [r["SpoolCmd"] if r.has("SpoolCmd") else None for r in val_part], cfg
-            )
-            bias_note = "on"
-            say(f"  bias statistic over {cfg.bias_window_n / 100:g} s, b0 {model.bias.b0:.4g}: "
-                f"{cfg.threshold.describe()}")  # fmt: skip
-        except InputFileError as exc:
-            # Short commissioning data cannot support the bias threshold: J alone, said.
-            bias_note = f"off: {exc}"
-            say(f"  bias statistic {bias_note}")
+        spools = [r["SpoolCmd"] if r.has("SpoolCmd") else None for r in val_part]
+        # Short commissioning data cannot support the bias threshold: J alone, said.
+        model.bias, bias_note = _optional("bias statistic", "b0", cfg, say,
+                                          lambda: fit_bias(e_val, spools, cfg))  # fmt: skip
     lever_note = "off (with the bias statistic, on a model that predicts PP)"
     if model.bias is not None and LEVER_OUTPUT in spec.outputs:
-        try:
-            model.lever = fit_lever(
-                e_val, [r["SpoolCmd"] for r in val_part], spec.outputs.index(LEVER_OUTPUT), cfg
-            )
-            lever_note = "on"
-            say(f"  full-lever statistic L over {cfg.bias_window_n / 100:g} s, l0 "
-                f"{model.lever.l0:.4g}: {cfg.threshold.describe()}")  # fmt: skip
-        except InputFileError as exc:
-            lever_note = f"off: {exc}"
-            say(f"  full-lever statistic {lever_note}")
+        out = spec.outputs.index(LEVER_OUTPUT)
+        model.lever, lever_note = _optional(
+            "full-lever statistic L", "l0", cfg, say,
+            lambda: fit_lever(e_val, [r["SpoolCmd"] for r in val_part], out, cfg))  # fmt: skip
     floor_note = None
     if reference is not None:
         floor_note = floor_thresholds(model, reference)
@@ -264,6 +252,20 @@ def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
         notes.append(f"b0 {mb.b0:.4g} -> {rb.b0:.4g}")
         model.bias = BiasModel(mb.window_n, mb.min_count, mb.scale, rb.b0)
     return ", ".join(notes) or "own thresholds already above the reference's"
+
+
+def _optional(label: str, threshold: str, cfg: TrainConfig, say: Progress,
+              fit: Callable[[], Any]) -> tuple[Any, str]:  # fmt: skip
+    """A statistic beside J fitted by ``fit``, or None when the held-out data cannot support
+    it (``InputFileError``), with the model file's note ("on" or "off: why"); said."""
+    try:
+        stat = fit()
+    except InputFileError as exc:
+        say(f"  {label} off: {exc}")
+        return None, f"off: {exc}"
+    say(f"  {label} over {cfg.bias_window_n / 100:g} s, {threshold} "
+        f"{getattr(stat, threshold):.4g}: {cfg.threshold.describe()}")  # fmt: skip
+    return stat, "on"
 
 
 def fit_bias(e_val: list[np.ndarray], spool_val: list[np.ndarray], cfg: TrainConfig) -> BiasModel:
