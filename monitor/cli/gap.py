@@ -28,7 +28,8 @@ heldout_reduction}; for `unexplained` also suggestion (what to model next: one o
 terms with term, signal, description, coefficient, unit, heldout_reduction).
 A `sensor_calibration` verdict (gain and offset of one measured signal) has
 params.sensor_calibration keyed by the signal: PA_gain, PA_offset_bar, QP_offset_lpm,
-RodPos_offset_mm, ...
+RodPos_offset_mm, ...  lag_check: how QP and PP follow the engine's speed ripple
+(prompt: not a sensor lag; late: a sensor lag), when sensor_lag was in question.
 
 exit status: 0 diagnosed (whatever the verdict), 2 bad argument/config/file or commands
 missing, 3 a recording the tool cannot use (too short, no hydraulic signals, no motion,

@@ -151,6 +151,10 @@ def decide(
         # Share of resamples in which every signal stays within the noise band.
         conf = float(np.mean(np.all(boot_mse(nominal, idx) < NONE_RATIO * floor, axis=1)))
         return Decision("none", None, None, conf)
+    if not singles:
+        # Every candidate was ruled out (``lagcheck.py`` withdrew the only one of a reduced
+        # list): nothing in the catalogue explains the gap.
+        return Decision("unexplained", None, None, 1.0)
     best = singles[0]
     red_b = boot_reduction(nominal, sums[best.name], idx, floor)
     gain_b = boot_gain(nominal, sums[best.name], idx, floor)

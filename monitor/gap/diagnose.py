@@ -16,7 +16,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from monitor.errors import NoHydraulicDataError
-from monitor.gap import basemis, sensorcal, sensorphysics
+from monitor.gap import basemis, lagcheck, sensorcal, sensorphysics
 from monitor.gap import calibrate as cal_mod
 from monitor.gap import score as S
 from monitor.gap.candidates import (
@@ -29,7 +29,14 @@ from monitor.gap.candidates import (
     fit_candidate,
     n_params,
 )
-from monitor.gap.decide import Decision, decide, pair_plan, within_noise
+from monitor.gap.decide import (
+    Decision,
+    boot_gain,
+    decide,
+    explains,
+    pair_plan,
+    within_noise,
+)
 from monitor.gap.families import fit_family
 from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sense
 from monitor.gap.prepare import Prepared, prepare
@@ -104,6 +111,9 @@ class Diagnosis:
     #: The best effect, not named because it made a signal clearly worse
     #: (``consistency.py``): the JSON's ``trade_off``.
     traded: dict | None = None
+    #: A ``sensor_lag`` verdict checked against the engine's ripple (``lagcheck.py``): the
+    #: JSON's ``lag_check``.
+    lag_check: dict | None = None
 
 
 class _Evaluator:
@@ -334,6 +344,13 @@ def _diagnose(
     d = decide(
         noise_only, singles, pairs, sums, base.nominal, idx, floor, (smooth, base.smooth_nominal)
     )
+    d, lag_checked = _check_lag(d, singles, pairs, sums, base, idx, floor, smooth, noise_only,
+                                readings, held)  # fmt: skip
+    if lag_checked is not None:
+        say(
+            f"sensor lag against the engine's speed ripple: readings {lag_checked['readings']}"
+            f"; verdict {lag_checked['verdict_without_check']} -> {d.verdict}"
+        )
     lead = checked = None
     if d.verdict in ("unexplained", sensorcal.NAME):
         lead = suggest(
@@ -386,7 +403,52 @@ def _diagnose(
         base.smooth_nominal,
         checked.as_dict() if checked is not None else None,
         _traded(d, singles, S.compared(prep)),
+        lag_checked,
     )
+
+
+def _check_lag(
+    d: Decision,
+    singles: list[Candidate],
+    pairs: list[Candidate],
+    sums: dict[str, S.SegmentSums],
+    base: _Baseline,
+    idx: np.ndarray,
+    floor: np.ndarray,
+    smooth: dict[str, S.SegmentSums],
+    noise_only: bool,
+    readings: _Readings,
+    held: Sequence[Segment],
+) -> tuple[Decision, dict | None]:
+    """The verdict after ``lagcheck``: a lagged sensor reports the engine's speed ripple
+    late, a slow spool (or any plant effect) leaves it prompt.  Checked when ``sensor_lag``
+    is the verdict (prompt readings: decided again without it) or explains the gap alone
+    without being the verdict (late readings: it is named, if it explains the gap alone).
+    Returns the decision and the JSON's ``lag_check`` (None: not checked)."""
+    lag_c = next((c for c in singles if c.effects[0].name == lagcheck.NAME), None)
+    if noise_only or lag_c is None:
+        return d, None
+    structured = (smooth, base.smooth_nominal)
+    if d.verdict != lagcheck.NAME and not explains(
+        lag_c, boot_gain(base.nominal, sums[lag_c.name], idx, floor)
+    ):
+        return d, None
+    lagged = readings.held(lag_c.prep).predict(lag_c.factors, lag_c.effects)
+    chk = lagcheck.check(readings.prep, held, base.pred0, lagged)
+    before = d.verdict
+    if d.verdict == lagcheck.NAME and chk.prompt:
+        rest = [c for c in singles if c is not lag_c]
+        plain = [p for p in pairs if all(e.name != lagcheck.NAME for e in p.effects)]
+        d = decide(False, rest, plain, sums, base.nominal, idx, floor, structured)
+    elif d.verdict != lagcheck.NAME and chk.late:
+        alone = decide(False, [lag_c], [], sums, base.nominal, idx, floor, structured)
+        if alone.verdict == lagcheck.NAME:
+            d = alone
+    return d, {
+        **chk.as_dict(),
+        "verdict_without_check": before,
+        "sensor_named": d.verdict == lagcheck.NAME,
+    }
 
 
 def _traded(d: Decision, singles: Sequence[Candidate], names: Sequence[str]) -> dict | None:

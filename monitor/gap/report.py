@@ -201,6 +201,7 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
         ),
         **({"sensor_check": diag.sensor_check} if diag.sensor_check is not None else {}),
         **({"trade_off": diag.traded} if diag.traded is not None else {}),
+        **({"lag_check": diag.lag_check} if diag.lag_check is not None else {}),
     }
 
 
@@ -212,6 +213,38 @@ def _trade_line(t: dict) -> str:
         "% of the gap); the effect's physics would move every signal towards the recording, "
         "so what it fitted is base mismatch or something outside the catalogue."
     )
+
+
+def _lag_line(check: dict) -> str:
+    """How the readings followed the engine's speed ripple (``lagcheck``)."""
+    if check["readings"] == "undecided":
+        return (
+            "Sensor lag checked against the engine's speed ripple: undecided (too little "
+            "ripple, or a fitted lag too short, to tell a late reading from a prompt one)."
+        )
+    qp = next((r for r in check["signals"] if r["signal"] == "QP"), None)
+    where = (
+        f" (QP at {qp['position']:.2f} of the way from late to prompt)"
+        if qp and qp["position"] is not None
+        else ""
+    )
+    if check["readings"] == "prompt":
+        if check["verdict_without_check"] != "sensor_lag":
+            return (
+                f"Sensor lag ruled out: QP and PP follow the engine's speed ripple promptly{where}."
+            )
+        return (
+            "Not a sensor lag: QP and PP follow the engine's speed ripple promptly"
+            f"{where}, z {check['prompt_z']:.1f}; a late reading would show it late.  The "
+            "delay is in the plant (what the spool drives)."
+        )
+    late = (
+        f"QP and PP follow the engine's speed ripple as late as the fitted sensor lag{where}, "
+        f"z {check['late_z']:.1f}; a slow spool would leave it prompt"
+    )
+    if check["sensor_named"]:
+        return f"Sensor lag: {late}."
+    return f"Readings late: {late}, but the sensor lag alone does not explain the gap."
 
 
 def _sensor_line(check: dict) -> str:
@@ -296,6 +329,8 @@ def summary_text(report: dict) -> str:
         )
         if report.get("trade_off"):
             lines.append(_trade_line(report["trade_off"]))
+        if report.get("lag_check"):
+            lines.append(_lag_line(report["lag_check"]))
     elif v == "unexplained":
         best = report["ranking"][0]
         if report.get("sensor_check"):
@@ -307,11 +342,15 @@ def summary_text(report: dict) -> str:
                 "Verdict: unexplained: no catalogue effect removes a clear share of the "
                 f"held-out gap (best: {best['effect']}, {100 * best['heldout_reduction']:.0f} %)."
             )
+        if report.get("lag_check"):
+            lines.append(_lag_line(report["lag_check"]))
         lines += _what_next(report.get("suggestion") or [], report.get("suggestion_tried") or [])
     else:
         lines.append(f"Verdict: {v} ({_fmt_params(report['params'])})")
         if report.get("sensor_check"):
             lines.append(_sensor_line(report["sensor_check"]))
+        if report.get("lag_check"):
+            lines.append(_lag_line(report["lag_check"]))
         if report.get("member") not in (None, "default"):
             lines.append(f"Formulation: {report['member']} (of the {v} family)")
         if report["also"]:
