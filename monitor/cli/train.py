@@ -127,7 +127,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="the bias statistic B beside J (default: on, off for --preset paper); with it "
         "the full-lever statistic L (PP's mean residual with the lever beyond 80 %%), when "
-        "the held-out data holds the lever there",
+        "the held-out data holds the lever there, and the hold statistic H (PA's and PB's "
+        "mean residual in holds settled for 2 s), when it holds the lever that long",
     )
 
     p.add_argument(
