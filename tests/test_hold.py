@@ -384,13 +384,22 @@ def boom_runs():
     return _boom_runs(range(1, 9))
 
 
-def _train(fit, held_out):
+def _train(fit, held_out, hold: bool = True):
     from monitor.training.settings import TrainConfig
     from monitor.training.train import train
 
     said: list[str] = []
-    cfg = TrainConfig(isolation="none", max_patterns=400)
+    cfg = TrainConfig(isolation="none", max_patterns=400, hold=hold)
     return train(fit, cfg, said.append, held_out=held_out), said
+
+
+def test_h_is_off_unless_asked_for(boom_runs) -> None:
+    """H is opt-in (``--hold on``): by default the model has B and no H, and says why."""
+    m, said = _train(boom_runs[:2], boom_runs[2:], hold=False)
+    assert m.bias is not None
+    assert m.hold is None
+    assert m.training["hold"] == "off (not asked for: --hold on)"
+    assert not any("hold statistic H" in line for line in said)
 
 
 def test_training_puts_h0_at_twice_the_held_out_max(boom_runs) -> None:

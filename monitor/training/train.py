@@ -166,8 +166,11 @@ def train(
         model.lever, lever_note = _optional(
             "full-lever statistic L", "l0", cfg, say,
             lambda: fit_lever(e_val, [r["SpoolCmd"] for r in val_part], out, cfg))  # fmt: skip
-    hold_note = "off (with the bias statistic, on a model that predicts PA and PB)"
-    if model.bias is not None and all(o in spec.outputs for o in HOLD_OUTPUTS):
+    hold_note = (
+        "off (with the bias statistic, on a model that predicts PA and PB)"
+        if cfg.hold else "off (not asked for: --hold on)"
+    )
+    if cfg.hold and model.bias is not None and all(o in spec.outputs for o in HOLD_OUTPUTS):
         outs = tuple(spec.outputs.index(o) for o in HOLD_OUTPUTS)
         model.hold, hold_note = _optional(
             "hold statistic H", "h0", cfg, say,
