@@ -360,3 +360,37 @@ def lever_statistic(e, spool_pct, output, scale, window, min_count):
         if values:
             out[i] = max(values)
     return out
+
+
+def hold_statistic(e, spool_pct, outputs, scale, window, settle, min_count):
+    """The hold statistic H from its definition, recomputed from scratch at every sample.
+
+    A sample is valid when all its residuals are finite; an invalid one gives NaN.  A valid
+    sample is a hold when |SpoolCmd| <= 5 % (NaN is not).  Its age is the number of
+    consecutive valid hold samples ending with it, counting back until a non-hold sample or
+    an invalid sample (0 for a non-hold sample); it counts when its age exceeds ``settle``.
+    Over the last ``window`` valid samples, with n of them counted and n >= ``min_count``:
+    H = max over k of |sum of e[:, outputs[k]] over the counted| / n / scale[k].  NaN before
+    ``window`` valid samples have been seen, and while n < ``min_count``."""
+    e = np.asarray(e, dtype=float)
+    out = np.full(len(e), np.nan)
+    counted = np.zeros(len(e), dtype=bool)
+    valid = []
+    for i in range(len(e)):
+        if not all(math.isfinite(v) for v in e[i]):
+            continue
+        age = 0
+        j = i
+        while j >= 0 and all(math.isfinite(v) for v in e[j]) and abs(float(spool_pct[j])) <= 5.0:
+            age += 1
+            j -= 1
+        counted[i] = age > settle
+        valid.append(i)
+        if len(valid) < window:
+            continue
+        members = [k for k in valid[-window:] if counted[k]]
+        if len(members) < min_count:
+            continue
+        out[i] = max(abs(math.fsum(e[k, o] for k in members)) / len(members) / scale[q]
+                     for q, o in enumerate(outputs))  # fmt: skip
+    return out

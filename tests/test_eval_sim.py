@@ -18,6 +18,7 @@ import pytest
 from monitor.cli import main
 from monitor.detection.alarm import State
 from monitor.detection.offline import Detection
+from monitor.errors import ConfigError
 from monitor.evaluation.report import ISOLATION_LABELS
 from monitor.evaluation.sim_eval import (
     FAULT_SEED_BASE,
@@ -215,3 +216,13 @@ def test_seed_sets_are_disjoint() -> None:
     assert not planned_seeds(dev) & planned_seeds(blind)
     assert len(planned_seeds(blind)) == len(planned_seeds(dev))
     assert min(planned_seeds(blind)) == NORMAL_SEED_BASE + 30_000_000
+
+
+def test_the_largest_seed_set_keeps_every_seed_below_2_to_the_32() -> None:
+    from monitor.evaluation.plan import MAX_SEED_SET
+
+    top = EvalConfig(runs=100, normal_hours=100.0, seed_set=MAX_SEED_SET)
+    assert max(planned_seeds(top)) < 2**32
+    assert EvalConfig(seed_set=266).seed_set == 266  # a set drawn above the old cap of 200
+    with pytest.raises(ConfigError):
+        EvalConfig(seed_set=MAX_SEED_SET + 1)

@@ -129,6 +129,15 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "the full-lever statistic L (PP's mean residual with the lever beyond 80 %%), when "
         "the held-out data holds the lever there",
     )
+    p.add_argument(
+        "--hold",
+        choices=("on", "off"),
+        default="off",
+        help="with B: the hold statistic H beside it (PA's and PB's mean residual in holds "
+        "settled for 2 s), when the held-out data holds the lever that long (default off: it "
+        "finds slight piston wear sooner but false-alarmed on bottom end-stop holds, 6 in "
+        "100 h of blind normal runs; see docs/benchmarks.md)",
+    )
 
     p.add_argument(
         "--loop",
@@ -174,6 +183,7 @@ def run(args: argparse.Namespace) -> int:
         isolation_runs=args.isolation_runs,
         lend=args.lend == "on",
         bias=None if args.bias is None else args.bias == "on",
+        hold=args.hold == "on",
     )
     monitor_cfg = load_config(args.config)
     recordings = []

@@ -21,6 +21,7 @@ from monitor.errors import InputFileError
 from monitor.io.recording import Recording
 from monitor.model.bias import alarm_level, bias_regimes, bias_series
 from monitor.model.dgrnn import predict_series
+from monitor.model.hold import hold_flags, hold_series
 from monitor.model.lever import lever_directions, lever_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
@@ -40,8 +41,9 @@ class Detection:
     summary: dict[str, Any] = field(default_factory=dict)
     gates: GateSeries | None = None  # operating state, sensor findings, out of range
     b: np.ndarray | None = None  # the bias statistic B per sample (None: the model has none)
-    level: np.ndarray | None = None  # max(J / eps0, B / b0, L / l0): what the alarm compares with 1
+    level: np.ndarray | None = None  # max(J / eps0, B / b0, L / l0, H / h0): compared with 1
     lever: np.ndarray | None = None  # the full-lever statistic L per sample (None: no model)
+    hold: np.ndarray | None = None  # the hold statistic H per sample (None: no model)
 
 
 def make_isolator(model: MonitorModel) -> Isolator | None:
@@ -142,8 +144,13 @@ def detect(
     if model.lever is not None:
         lev = lever_series(e, lever_directions(spool), model.lever)
         lever_pair = (lev, model.lever.l0)
-    level = alarm_level(j, model.eps0, b, model.bias, lever_pair)
-    # The alarm machine compares the level with 1: J against eps0, B against b0, L against l0.
+    hst, hold_pair = None, None
+    if model.hold is not None:
+        hst = hold_series(e, hold_flags(spool), model.hold)
+        hold_pair = (hst, model.hold.h0)
+    level = alarm_level(j, model.eps0, b, model.bias, lever_pair, hold_pair)
+    # The alarm machine compares the level with 1: J against eps0, B against b0, L against l0,
+    # H against h0.
     decider = Decider(alarm, 1.0, make_isolator(model), model.window_n)
     run = _decide_all(decider, model, rec, gate, g, e, j, level, missing)
     finite = np.isfinite(j)
@@ -159,12 +166,16 @@ def detect(
         "threshold": model.eps0,
         "J0": model.j0,
         # The bias statistic (null without one): its largest value and threshold, and the
-        # largest alarm level max(J / eps0, B / b0, L / l0), 1 being the alarm threshold.
+        # largest alarm level max(J / eps0, B / b0, L / l0, H / h0), 1 being the alarm
+        # threshold.
         "max_B": float(np.max(b[b_finite])) if b_finite.any() else None,
         "bias_threshold": model.bias.b0 if model.bias is not None else None,
         # The full-lever statistic L likewise (``monitor.model.lever``).
         "max_L": _largest(lev),
         "lever_threshold": model.lever.l0 if model.lever is not None else None,
+        # The hold statistic H likewise (``monitor.model.hold``).
+        "max_H": _largest(hst),
+        "hold_threshold": model.hold.h0 if model.hold is not None else None,
         "max_level": float(np.nanmax(level)) if np.isfinite(level).any() else None,
         "threshold_rule": model.threshold.rule,
         "window_n": model.window_n,
@@ -183,7 +194,7 @@ def detect(
     summary["rejected"] = rejected_counts(rec)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)
     return Detection(rec.t, y_hat, e, j, states, run.events, summary, gates=g, b=b, level=level,
-                     lever=lev)  # fmt: skip
+                     lever=lev, hold=hst)  # fmt: skip
 
 
 def _largest(x: np.ndarray | None) -> float | None:

@@ -33,9 +33,9 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
         ax_e.plot(t, det.residual[:, k], lw=0.5, label=name)
     ax_e.set_ylabel("residual e [z]")
     ax_e.legend(loc="upper right", fontsize=7, ncol=len(outputs))
-    # J, the bias statistic B and the full-lever statistic L, each over its own threshold:
-    # the alarm is raised when one stays above 1 (max(J / eps0, B / b0, L / l0) is the level
-    # the alarm machine sees).
+    # J, the bias statistic B, the full-lever statistic L and the hold statistic H, each over
+    # its own threshold: the alarm is raised when one stays above 1 (max(J / eps0, B / b0,
+    # L / l0, H / h0) is the level the alarm machine sees).
     ax_j = axes[-1]
     eps0, b0 = det.summary["threshold"], det.summary.get("bias_threshold")
     j = np.where(det.j > 0, det.j, np.nan)
@@ -47,6 +47,10 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
     if det.lever is not None and l0:
         lv = np.where(det.lever > 0, det.lever, np.nan)
         ax_j.semilogy(t, lv / l0, lw=0.8, color="tab:purple", label=f"L / l0 (l0 = {l0:.3g})")
+    h0 = det.summary.get("hold_threshold")
+    if det.hold is not None and h0:
+        hv = np.where(det.hold > 0, det.hold, np.nan)
+        ax_j.semilogy(t, hv / h0, lw=0.8, color="tab:brown", label=f"H / h0 (h0 = {h0:.3g})")
     ax_j.axhline(1.0, color="tab:red", ls="--", lw=1, label="alarm threshold")
     ax_j.set_ylabel("level (1 = alarm)")
     ax_j.set_ylim(bottom=1e-2)  # below a hundredth of the threshold nothing is close

@@ -25,6 +25,7 @@ from monitor.detection.opstate import OpState
 from monitor.errors import ModelFileError
 from monitor.model.bias import BiasWindow, bias_regime
 from monitor.model.dgrnn import TickPredictor
+from monitor.model.hold import HoldWindow, hold_flag
 from monitor.model.lever import LeverWindow, lever_direction
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import WindowJ
@@ -48,7 +49,7 @@ class Tick:
     raised: bool = False  # a new alarm episode starts at this row
     stale_signal: str | None = None  # the first model signal missing, when inputs are not ok
     episode_open: bool = False  # an alarm episode is open (fault, or a short gap within one)
-    level: float = math.nan  # what the alarm compares with 1: max(J / eps0, B / b0, L / l0)
+    level: float = math.nan  # compared with 1: max(J / eps0, B / b0, L / l0, H / h0)
 
 
 class Ticker:
@@ -97,7 +98,10 @@ class Ticker:
         self.lever = LeverWindow(model.lever) if model.lever is not None else None
         self._l0 = model.lever.l0 if model.lever is not None else math.nan
         self.lev = math.nan  # the full-lever statistic L of the last tick (NaN: none or not yet)
-        # The alarm machine compares the level max(J / eps0, B / b0, L / l0) with 1.
+        self.hold = HoldWindow(model.hold) if model.hold is not None else None
+        self._h0 = model.hold.h0 if model.hold is not None else math.nan
+        self.hst = math.nan  # the hold statistic H of the last tick (NaN: none or not yet)
+        # The alarm machine compares the level max(J / eps0, B / b0, L / l0, H / h0) with 1.
         self.decider = Decider(self.alarm, 1.0, make_isolator(model), model.window_n)
         self.machine = self.decider.machine
         self.eps0 = float(model.eps0)
@@ -159,6 +163,10 @@ class Ticker:
             lv = self.lev = self.lever.push(e, lever_direction(spool))
             if level == level and lv == lv and self._l0 == self._l0:  # neither is NaN
                 level = max(level, lv / self._l0)
+        if self.hold is not None:
+            hv = self.hst = self.hold.push(e, hold_flag(spool))
+            if level == level and hv == hv and self._h0 == self._h0:  # neither is NaN
+                level = max(level, hv / self._h0)
         stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))
         d = self.decider.decide(level, inputs_ok, engine, e, regime_of(spool), gate.op_state,
                                 gate.oor, gate.check, gate.sensor)  # fmt: skip

@@ -234,6 +234,7 @@ def score_run(det: Detection, spec: RunSpec) -> dict[str, Any]:
     max_j = det.summary["max_J"]
     max_b, b0 = det.summary.get("max_B"), det.summary.get("bias_threshold")
     max_l, l0 = det.summary.get("max_L"), det.summary.get("lever_threshold")
+    max_h, h0 = det.summary.get("max_H"), det.summary.get("hold_threshold")
     level = det.summary.get("max_level")
     out: dict[str, Any] = {
         "seed": spec.seed,
@@ -241,6 +242,7 @@ def score_run(det: Detection, spec: RunSpec) -> dict[str, Any]:
         "max_J_over_eps0": None if max_j is None else round(max_j / eps0, 4),
         "max_B_over_b0": None if max_b is None or b0 is None else round(max_b / b0, 4),
         "max_L_over_l0": None if max_l is None or l0 is None else round(max_l / l0, 4),
+        "max_H_over_h0": None if max_h is None or h0 is None else round(max_h / h0, 4),
         "max_level": None if level is None else round(level, 4),
         "sensor_fault": bool(det.summary["sensor_fault"]),
     }

@@ -86,8 +86,9 @@ class Prognosis:
 
 
 def health_index(row: dict[str, Any]) -> float | None:
-    """A log's health index: the largest alarm level max(J / eps0, B / b0, L / l0), 1.0 = alarm;
-    max J / eps0 for rows from models without the bias statistic or older results."""
+    """A log's health index: the largest alarm level max(J / eps0, B / b0, L / l0, H / h0),
+    1.0 = alarm; max J / eps0 for rows from models without the bias statistic or older
+    results."""
     level = row.get("max_level")
     return level if level is not None else row.get("max_j_ratio")
 

@@ -229,8 +229,8 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
         per, out / "drift.png") else []  # fmt: skip
     lines = ["# Fleet report", "",
              f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
-             "the largest alarm level of a log, max(J / eps0, B / b0, L / l0) (1.0 raises the "
-             "alarm); "
+             "the largest alarm level of a log, max(J / eps0, B / b0, L / l0, H / h0) (1.0 "
+             "raises the alarm); "
              f"trend: Theil-Sen over the last {k} judged logs of their typical level (median J /"
              " eps0, which follows wear, scaled by the machine's peak-to-median ratio; the peak "
              "itself scatters with each log's manoeuvres), counted when Kendall's tau makes a "

@@ -25,8 +25,9 @@ LOG_SCHEMA = pa.schema([
     ("judged_s", pa.float64()), ("first_alarm_t", pa.float64()), ("frames", pa.int64()),
     ("rejected", pa.string()), ("model", pa.string()), ("error", pa.string()),
     ("max_j", pa.float64()), ("eps0", pa.float64()), ("samples", pa.int64()),
-    # max(J / eps0, B / b0, L / l0): the level the alarm compares with 1 (results written before it
-    # existed read it as null; the health index then falls back to max_j_ratio).
+    # max(J / eps0, B / b0, L / l0, H / h0): the level the alarm compares with 1 (results
+    # written before it existed read it as null; the health index then falls back to
+    # max_j_ratio).
     ("max_level", pa.float64()),
     # median J / eps0 of the log: what the prognosis trends (null in older results).
     ("p50_j_ratio", pa.float64()),

@@ -223,14 +223,17 @@ def alarm_level(
     b: np.ndarray | None,
     bias: BiasModel | None,
     lever: tuple[np.ndarray, float] | None = None,
+    hold: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
-    """What the alarm compares with 1: max(J / eps0, B / b0, L / l0), J / eps0 alone while B
-    and L are NaN or without them (``lever``: the full-lever statistic's series and l0, see
-    ``monitor.model.lever``); NaN while J is (the window warms up or pauses)."""
+    """What the alarm compares with 1: max(J / eps0, B / b0, L / l0, H / h0), J / eps0 alone
+    while B, L and H are NaN or without them (``lever``, ``hold``: the full-lever and the hold
+    statistic's series and threshold, see ``monitor.model.lever`` and ``monitor.model.hold``);
+    NaN while J is (the window warms up or pauses)."""
     level = np.asarray(j, dtype=np.float64) / eps0
     others = [] if b is None or bias is None or bias.b0 != bias.b0 else [(b, bias.b0)]
-    if lever is not None and lever[1] == lever[1]:
-        others.append(lever)
+    for pair in (lever, hold):
+        if pair is not None and pair[1] == pair[1]:
+            others.append(pair)
     with np.errstate(invalid="ignore"):
         for series, threshold in others:
             both = np.isfinite(level) & np.isfinite(series)

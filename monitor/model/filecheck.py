@@ -77,7 +77,7 @@ def check_header(header: Any) -> None:
     ):
         raise ValueError("header residual_clip must be null or a list of finite numbers > 0")
     # The optional statistics beside J: a window, a count and a threshold each.
-    for name, threshold in (("bias", "b0"), ("lever", "l0")):
+    for name, threshold in (("bias", "b0"), ("lever", "l0"), ("hold", "h0")):
         stat = header.get(name)
         if stat is None:
             continue
@@ -88,3 +88,8 @@ def check_header(header: Any) -> None:
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
                 raise ValueError(f"header {name}.{key} must be a whole number 1..{MAX_WINDOW_N}")
         _number(stat, threshold, 0.0, strict=True)
+    hold = header.get("hold")
+    if hold is not None:  # H's settling, beside the window and count checked above
+        v = hold.get("settle_n")
+        if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= MAX_WINDOW_N:
+            raise ValueError(f"header hold.settle_n must be a whole number 0..{MAX_WINDOW_N}")

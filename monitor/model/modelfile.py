@@ -27,6 +27,7 @@ from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import Envelope, envelope_from_patterns
 from monitor.model.filecheck import check_header, read_members
 from monitor.model.grnn import GRNN
+from monitor.model.hold import HoldModel
 from monitor.model.lever import LeverModel
 from monitor.model.spec import DGRNNSpec, Normalizer
 from monitor.model.threshold import ThresholdRule
@@ -39,7 +40,8 @@ MODEL_FORMAT = "hydraulic-monitor-dgrnn"
 # ``validity`` (the training envelope) was added without a version bump: readers that do
 # not know it ignore it, and files without it get an envelope derived from their patterns.
 # Likewise ``bias`` (the bias statistic's window, scales and threshold): without it, J alone;
-# and ``lever`` (the full-lever statistic L's): without it, no L.
+# ``lever`` (the full-lever statistic L's): without it, no L; and ``hold`` (the hold
+# statistic H's): without it, no H.
 MODEL_VERSION = 2
 _ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
 
@@ -66,6 +68,8 @@ class MonitorModel:
     bias: BiasModel | None = None
     #: The full-lever statistic L (None: none; see ``monitor.model.lever``).
     lever: LeverModel | None = None
+    #: The hold statistic H (None: none; see ``monitor.model.hold``).
+    hold: HoldModel | None = None
 
     @property
     def spec(self) -> DGRNNSpec:
@@ -100,6 +104,8 @@ class MonitorModel:
             head["bias"] = self.bias.to_dict()
         if self.lever is not None:
             head["lever"] = self.lever.to_dict()
+        if self.hold is not None:
+            head["hold"] = self.hold.to_dict()
         return head
 
 
@@ -227,6 +233,7 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
         envelope=Envelope.from_dict(header["validity"]) if "validity" in header else None,
         bias=_bias(header, len(spec.outputs)),
         lever=_lever(header, len(spec.outputs)),
+        hold=_hold(header, len(spec.outputs)),
     )
 
 
@@ -246,3 +253,12 @@ def _lever(header: dict[str, Any], n_out: int) -> LeverModel | None:
     if lever.output >= n_out:
         raise ValueError(f"lever output {lever.output} is not among the model's {n_out} outputs")
     return lever
+
+
+def _hold(header: dict[str, Any], n_out: int) -> HoldModel | None:
+    if header.get("hold") is None:
+        return None
+    hold = HoldModel.from_dict(header["hold"])
+    if max(hold.outputs) >= n_out:
+        raise ValueError(f"hold outputs {hold.outputs} are not among the model's {n_out} outputs")
+    return hold

@@ -25,6 +25,7 @@ from monitor.model.bias import BiasModel, bias_regimes, bias_series, fit_scale
 from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
+from monitor.model.hold import HOLD_OUTPUTS, HoldModel, fit_hold_scale, hold_flags, hold_series
 from monitor.model.lever import (
     LEVER_OUTPUT,
     LeverModel,
@@ -165,6 +166,15 @@ def train(
         model.lever, lever_note = _optional(
             "full-lever statistic L", "l0", cfg, say,
             lambda: fit_lever(e_val, [r["SpoolCmd"] for r in val_part], out, cfg))  # fmt: skip
+    hold_note = (
+        "off (with the bias statistic, on a model that predicts PA and PB)"
+        if cfg.hold else "off (not asked for: --hold on)"
+    )
+    if cfg.hold and model.bias is not None and all(o in spec.outputs for o in HOLD_OUTPUTS):
+        outs = tuple(spec.outputs.index(o) for o in HOLD_OUTPUTS)
+        model.hold, hold_note = _optional(
+            "hold statistic H", "h0", cfg, say,
+            lambda: fit_hold(e_val, [r["SpoolCmd"] for r in val_part], outs, cfg))  # fmt: skip
     floor_note = None
     if reference is not None:
         floor_note = floor_thresholds(model, reference)
@@ -206,6 +216,7 @@ def train(
         "threshold": cfg.threshold.describe(),
         "bias": bias_note,
         "lever": lever_note,
+        "hold": hold_note,
         "threshold_floor": floor_note,
         "threshold_one_event": event,
         # The typical J of normal operation judged out of sample: a log's median J against
@@ -300,6 +311,21 @@ def fit_lever(
                                                                         strict=True)])  # fmt: skip
     _, l0 = cfg.threshold.eps0(series, block=cfg.bias_window_n)
     return LeverModel(lever.window_n, lever.min_count, output, scale, l0)
+
+
+def fit_hold(
+    e_val: list[np.ndarray], spool_val: list[np.ndarray], outputs: tuple[int, ...],
+    cfg: TrainConfig,
+) -> HoldModel:
+    """The hold statistic's per-output scales and threshold h0 from held-out normal residuals
+    (``InputFileError`` when they never hold the lever long enough)."""
+    flags = [hold_flags(s) for s in spool_val]
+    scale = fit_hold_scale(e_val, flags, cfg.bias_window_n, cfg.hold_min_count,
+                           cfg.hold_settle_n, outputs)  # fmt: skip
+    hold = HoldModel(cfg.bias_window_n, cfg.hold_min_count, cfg.hold_settle_n, outputs, scale)
+    series = np.concatenate([hold_series(e, f, hold) for e, f in zip(e_val, flags, strict=True)])
+    _, h0 = cfg.threshold.eps0(series, block=cfg.bias_window_n)
+    return HoldModel(hold.window_n, hold.min_count, hold.settle_n, outputs, scale, h0)
 
 
 #: Severities the fault signatures are learnt at: one signature per fault and severity, since
