@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+from model_support import craft_model, set_key
 from naive import hold_statistic
 
 from monitor.errors import ConfigError, InputFileError, ModelFileError
@@ -22,10 +23,7 @@ from monitor.model.hold import (
     hold_flags,
     hold_series,
 )
-from monitor.model.modelfile import _checksum, load_model, save_model
-from monitor.resources import resource_path
-
-SHIPPED = resource_path("config", "boom_default.model.npz")
+from monitor.model.modelfile import load_model, save_model
 
 
 def _data(seed: int, n: int = 900, n_out: int = 4):
@@ -274,27 +272,12 @@ def test_model_file_keeps_h(tmp_path, model) -> None:
     assert again.hold is None and "hold" not in again.header()
 
 
-def _craft(tmp_path, hold_header):
-    with np.load(SHIPPED, allow_pickle=False) as npz:
-        data = {k: npz[k] for k in npz.files}
-    header = json.loads(data["header"].tobytes())
-    header["hold"] = hold_header
-    hb = json.dumps(header).encode()
-    arrays = {k: v for k, v in data.items() if k not in ("header", "checksum")}
-    out = tmp_path / "crafted.npz"
-    with out.open("wb") as fh:
-        np.savez(fh, header=np.frombuffer(hb, np.uint8),
-                 checksum=np.frombuffer(_checksum(hb, arrays).encode(), np.uint8),
-                 **arrays)  # fmt: skip
-    return out
-
-
 GOOD = {"window_n": 6000, "min_count": 300, "settle_n": 200, "outputs": [1, 2],
         "scale": [0.3, 0.7], "h0": 2.0}  # fmt: skip
 
 
 def test_crafted_good_hold_header_loads(tmp_path) -> None:
-    m = load_model(_craft(tmp_path, GOOD))
+    m = load_model(craft_model(tmp_path, set_key("hold", GOOD)))
     assert m.hold is not None and m.hold.to_dict() == GOOD
 
 
@@ -305,13 +288,13 @@ def test_crafted_good_hold_header_loads(tmp_path) -> None:
 )
 def test_a_malformed_hold_header_is_a_model_file_error_naming_hold(tmp_path, change) -> None:
     with pytest.raises(ModelFileError, match="hold") as exc:
-        load_model(_craft(tmp_path, {**GOOD, **change}))
+        load_model(craft_model(tmp_path, set_key("hold", {**GOOD, **change})))
     assert "crafted.npz" in str(exc.value) and "\n" not in str(exc.value)
 
 
 def test_a_hold_header_that_is_no_object_is_a_model_file_error(tmp_path) -> None:
     with pytest.raises(ModelFileError, match="hold"):
-        load_model(_craft(tmp_path, [1, 2]))
+        load_model(craft_model(tmp_path, set_key("hold", [1, 2])))
 
 
 def test_detect_summary_has_max_h_and_hold_threshold(model) -> None:

@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+from model_support import craft_model, set_key
 from naive import lever_statistic
 
 from monitor.errors import ConfigError, InputFileError, ModelFileError
@@ -21,10 +22,7 @@ from monitor.model.lever import (
     lever_directions,
     lever_series,
 )
-from monitor.model.modelfile import _checksum, load_model, save_model
-from monitor.resources import resource_path
-
-SHIPPED = resource_path("config", "boom_default.model.npz")
+from monitor.model.modelfile import load_model, save_model
 
 
 def _data(seed: int, n: int = 800, n_out: int = 4):
@@ -285,26 +283,11 @@ def test_model_file_keeps_the_lever(tmp_path, model) -> None:
     assert again.lever is None and "lever" not in again.header()
 
 
-def _craft(tmp_path, lever_header):
-    with np.load(SHIPPED, allow_pickle=False) as npz:
-        data = {k: npz[k] for k in npz.files}
-    header = json.loads(data["header"].tobytes())
-    header["lever"] = lever_header
-    hb = json.dumps(header).encode()
-    arrays = {k: v for k, v in data.items() if k not in ("header", "checksum")}
-    out = tmp_path / "crafted.npz"
-    with out.open("wb") as fh:
-        np.savez(fh, header=np.frombuffer(hb, np.uint8),
-                 checksum=np.frombuffer(_checksum(hb, arrays).encode(), np.uint8),
-                 **arrays)  # fmt: skip
-    return out
-
-
 GOOD = {"window_n": 6000, "min_count": 100, "output": 0, "scale": [0.3, 0.7], "l0": 2.0}
 
 
 def test_crafted_good_lever_header_loads(tmp_path) -> None:
-    m = load_model(_craft(tmp_path, GOOD))
+    m = load_model(craft_model(tmp_path, set_key("lever", GOOD)))
     assert m.lever is not None and m.lever.to_dict()["window_n"] == 6000
 
 
@@ -314,7 +297,7 @@ def test_crafted_good_lever_header_loads(tmp_path) -> None:
 )
 def test_a_malformed_lever_header_is_a_model_file_error_naming_lever(tmp_path, change) -> None:
     with pytest.raises(ModelFileError, match="lever") as exc:
-        load_model(_craft(tmp_path, {**GOOD, **change}))
+        load_model(craft_model(tmp_path, set_key("lever", {**GOOD, **change})))
     assert "crafted.npz" in str(exc.value) and "\n" not in str(exc.value)
 
 

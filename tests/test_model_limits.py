@@ -4,68 +4,41 @@ ModelFileError naming the file, never a detector that cannot alarm or a 3 GB loa
 
 from __future__ import annotations
 
-import json
 import zipfile
 
 import numpy as np
 import pytest
+from model_support import SHIPPED, craft_model, set_key
 
 from monitor.errors import ModelFileError
 from monitor.model import filecheck
-from monitor.model.modelfile import _checksum, load_model
-from monitor.resources import resource_path
-
-SHIPPED = resource_path("config", "boom_default.model.npz")
-
-
-def _craft(tmp_path, header_change=None, arrays_change=None, raw_header=None, extra=None):
-    with np.load(SHIPPED, allow_pickle=False) as npz:
-        data = {k: npz[k] for k in npz.files}
-    header = json.loads(data["header"].tobytes())
-    if header_change:
-        header_change(header)
-    hb = raw_header if raw_header is not None else json.dumps(header).encode()
-    arrays = {k: v for k, v in data.items() if k not in ("header", "checksum")}
-    if arrays_change:
-        arrays_change(arrays)
-    out = tmp_path / "crafted.npz"
-    with out.open("wb") as fh:
-        np.savez(fh, header=np.frombuffer(hb, np.uint8),
-                 checksum=np.frombuffer(_checksum(hb, arrays).encode(), np.uint8),
-                 **arrays, **(extra or {}))  # fmt: skip
-    return out
-
-
-def _set(key, value):
-    def change(h):
-        h[key] = value
-    return change
+from monitor.model.modelfile import load_model
 
 
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        (_set("eps0", float("nan")), "header eps0 must be a finite number"),
-        (_set("eps0", float("inf")), "header eps0 must be a finite number"),
-        (_set("eps0", 0.0), "header eps0 must be > 0"),
-        (_set("j0", -1.0), "header j0 must be >= 0"),
-        (_set("sigma", "s"), "header sigma must be a finite number"),
-        (_set("window_n", 0), "header window_n must be a whole number 1..360000"),
-        (_set("window_n", 10**11), "header window_n must be a whole number"),
-        (_set("residual_clip", [float("nan")]), "residual_clip must be null or a list"),
-        (_set("threshold", []), "header threshold must be an object"),
+        (set_key("eps0", float("nan")), "header eps0 must be a finite number"),
+        (set_key("eps0", float("inf")), "header eps0 must be a finite number"),
+        (set_key("eps0", 0.0), "header eps0 must be > 0"),
+        (set_key("j0", -1.0), "header j0 must be >= 0"),
+        (set_key("sigma", "s"), "header sigma must be a finite number"),
+        (set_key("window_n", 0), "header window_n must be a whole number 1..360000"),
+        (set_key("window_n", 10**11), "header window_n must be a whole number"),
+        (set_key("residual_clip", [float("nan")]), "residual_clip must be null or a list"),
+        (set_key("threshold", []), "header threshold must be an object"),
     ],
 )
 def test_header_values_are_typed_and_ranged(tmp_path, change, message) -> None:
     with pytest.raises(ModelFileError, match="crafted.npz: inconsistent model file") as exc:
-        load_model(_craft(tmp_path, header_change=change))
+        load_model(craft_model(tmp_path, header_change=change))
     assert message in str(exc.value)
 
 
 @pytest.mark.parametrize("raw", [b"[]", b'"s"', b"[" * 100_000 + b"]" * 100_000])
 def test_a_header_that_is_not_an_object_is_corrupt(tmp_path, raw: bytes) -> None:
     with pytest.raises(ModelFileError, match="crafted.npz: corrupt model header"):
-        load_model(_craft(tmp_path, raw_header=raw))
+        load_model(craft_model(tmp_path, raw_header=raw))
 
 
 @pytest.mark.parametrize("dtype", [np.int8, np.complex128, np.float32])
@@ -74,11 +47,11 @@ def test_arrays_of_another_dtype_are_refused(tmp_path, dtype) -> None:
         arrays["patterns"] = arrays["patterns"].astype(dtype)
 
     with pytest.raises(ModelFileError, match="array patterns is"):
-        load_model(_craft(tmp_path, arrays_change=change))
+        load_model(craft_model(tmp_path, arrays_change=change))
 
 
 def test_a_huge_extra_array_is_not_unpacked(tmp_path, monkeypatch) -> None:
-    path = _craft(tmp_path)
+    path = craft_model(tmp_path)
     # 64 MB of zeros compress to ~64 kB; an unknown member is neither read nor counted.
     with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as zf, zf.open(
         "patterns_extra.npy", "w", force_zip64=True
@@ -113,5 +86,5 @@ def _rename_first_scaled(h):
 def test_spec_and_normalizer_disagreeing_is_one_short_line(tmp_path, change, message) -> None:
     """Found by tests/test_fuzz.py: a bare ValueError (traceback), a message quoting the spec."""
     with pytest.raises(ModelFileError, match=message) as exc:
-        load_model(_craft(tmp_path, header_change=change))
+        load_model(craft_model(tmp_path, header_change=change))
     assert "\n" not in str(exc.value) and len(str(exc.value)) < len(str(tmp_path)) + 250
