@@ -52,6 +52,14 @@ class Tick:
     level: float = math.nan  # compared with 1: max(J / eps0, B / b0, L / l0, H / h0)
 
 
+def _with(level: float, value: float, threshold: float) -> float:
+    """The alarm level with one more statistic: max(level, value / threshold) where none of
+    the three is NaN, else ``level`` unchanged (``alarm_level``'s rule, one tick at a time)."""
+    if level == level and value == value and threshold == threshold:  # none is NaN
+        return max(level, value / threshold)
+    return level
+
+
 class Ticker:
     def __init__(
         self,
@@ -156,17 +164,14 @@ class Ticker:
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
         level = j / self.eps0
         if self.bias is not None:
-            b = self.b = self.bias.push(e, bias_regime(spool))
-            if level == level and b == b and self._b0 == self._b0:  # neither is NaN
-                level = max(level, b / self._b0)
+            self.b = self.bias.push(e, bias_regime(spool))
+            level = _with(level, self.b, self._b0)
         if self.lever is not None:
-            lv = self.lev = self.lever.push(e, lever_direction(spool))
-            if level == level and lv == lv and self._l0 == self._l0:  # neither is NaN
-                level = max(level, lv / self._l0)
+            self.lev = self.lever.push(e, lever_direction(spool))
+            level = _with(level, self.lev, self._l0)
         if self.hold is not None:
-            hv = self.hst = self.hold.push(e, hold_flag(spool))
-            if level == level and hv == hv and self._h0 == self._h0:  # neither is NaN
-                level = max(level, hv / self._h0)
+            self.hst = self.hold.push(e, hold_flag(spool))
+            level = _with(level, self.hst, self._h0)
         stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))
         d = self.decider.decide(level, inputs_ok, engine, e, regime_of(spool), gate.op_state,
                                 gate.oor, gate.check, gate.sensor)  # fmt: skip
