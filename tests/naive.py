@@ -394,3 +394,37 @@ def hold_statistic(e, spool_pct, outputs, scale, window, settle, min_count):
         out[i] = max(abs(math.fsum(e[k, o] for k in members)) / len(members) / scale[q]
                      for q, o in enumerate(outputs))  # fmt: skip
     return out
+
+
+def near_stop(spool_pct, qp_lpm, volume_up_l, volume_down_l, margin, q_stall_lpm, n_stall,
+              period_s=0.01):
+    """The end-stop estimate from its definition, with the rod's possible places as a set.
+
+    The rod's possible stroke fractions are kept as the pair (lowest, highest), both 0..1.
+    A NaN command or flow: anywhere (0, 1).  A lever out (|SpoolCmd| > 5 %) with QP below
+    ``q_stall_lpm`` for ``n_stall`` samples in a row: on the stop in the lever's direction
+    (1 up, 0 down).  Otherwise a lever out moves both ends of the pair by the travel
+    QP * period / 60 / volume (up for a positive command, down for a negative one) and cuts
+    them at 0 and 1.  Returns 1 per sample where the pair comes within ``margin`` of an
+    end (lowest < margin or highest > 1 - margin)."""
+    low, high, run = 0.0, 1.0, 0
+    out = []
+    for s, q in zip(spool_pct, qp_lpm, strict=True):
+        s, q = float(s), float(q)
+        if math.isnan(s) or math.isnan(q):
+            low, high, run = 0.0, 1.0, 0
+        elif abs(s) > 5.0:
+            run = run + 1 if q < q_stall_lpm else 0
+            if run >= n_stall:
+                low = high = 1.0 if s > 0 else 0.0
+            else:
+                up = s > 0
+                travel = max(q, 0.0) * period_s / 60.0 / (volume_up_l if up else volume_down_l)
+                if up:
+                    low, high = min(1.0, low + travel), min(1.0, high + travel)
+                else:
+                    low, high = max(0.0, low - travel), max(0.0, high - travel)
+        else:
+            run = 0
+        out.append(1 if low < margin or high > 1.0 - margin else 0)
+    return np.array(out, dtype=np.int64)

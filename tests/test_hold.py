@@ -19,7 +19,6 @@ from monitor.model.hold import (
     HoldModel,
     HoldWindow,
     fit_hold_scale,
-    hold_flag,
     hold_flags,
     hold_series,
 )
@@ -70,7 +69,7 @@ def test_live_window_gives_the_series_numbers() -> None:
     hold = HoldModel(90, 10, 4, (1, 2), scale, 1.0)
     flags = hold_flags(spool)
     live = HoldWindow(hold)
-    pushed = np.array([live.push(e[i], hold_flag(float(spool[i]))) for i in range(len(e))])
+    pushed = np.array([live.push(e[i], float(spool[i]), np.nan) for i in range(len(e))])
     series = hold_series(e, flags, hold)
     assert np.array_equal(np.isnan(pushed), np.isnan(series))
     ok = np.isfinite(series)
@@ -84,7 +83,6 @@ def test_hold_is_within_5_percent() -> None:
     got = hold_flags(spool)
     assert got.dtype == np.int64
     assert list(got) == want
-    assert [hold_flag(float(s)) for s in spool] == want
 
 
 # Worked on paper: window 4, settle 1, min_count 2, outputs (0, 1), scale (1, 2).
@@ -127,7 +125,7 @@ def test_hand_worked_sequence() -> None:
     np.testing.assert_array_equal(got, np.array(want))
     np.testing.assert_array_equal(hold_statistic(e, spool, (0, 1), [1.0, 2.0], 4, 1, 2), want)
     live = HoldWindow(hold)
-    pushed = [live.push(e[i], hold_flag(float(spool[i]))) for i in range(len(e))]
+    pushed = [live.push(e[i], float(spool[i]), np.nan) for i in range(len(e))]
     np.testing.assert_array_equal(np.array(pushed), np.array(want))
 
 

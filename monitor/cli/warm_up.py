@@ -120,8 +120,9 @@ def _hold() -> None:
     """H's kernels (series and live push) once on a few zero residuals."""
     import numpy as np
 
-    from monitor.model.hold import HoldModel, HoldWindow, hold_series
+    from monitor.model.endstop import StrokeModel
+    from monitor.model.hold import HoldModel, HoldWindow, counted_holds, hold_series
 
-    hold = HoldModel(2, 1, 0, (1, 2), np.ones(2))
-    hold_series(np.zeros((4, 4)), np.ones(4, dtype=np.int64), hold)
-    HoldWindow(hold).push(np.zeros(4), 1)
+    hold = HoldModel(2, 1, 0, (1, 2), np.ones(2), stroke=StrokeModel(1.0, 1.0))
+    hold_series(np.zeros((4, 4)), counted_holds(np.zeros(4), np.zeros(4), hold.stroke), hold)
+    HoldWindow(hold).push(np.zeros(4), 0.0, 0.0)

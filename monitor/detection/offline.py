@@ -21,7 +21,7 @@ from monitor.errors import InputFileError
 from monitor.io.recording import Recording
 from monitor.model.bias import alarm_level, bias_regimes, bias_series
 from monitor.model.dgrnn import predict_series
-from monitor.model.hold import hold_flags, hold_series
+from monitor.model.hold import counted_holds, hold_series
 from monitor.model.lever import lever_directions, lever_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
@@ -146,7 +146,8 @@ def detect(
         lever_pair = (lev, model.lever.l0)
     hst, hold_pair = None, None
     if model.hold is not None:
-        hst = hold_series(e, hold_flags(spool), model.hold)
+        qp = rec["QP"] if rec.has("QP") else np.full(len(rec), np.nan)
+        hst = hold_series(e, counted_holds(spool, qp, model.hold.stroke), model.hold)
         hold_pair = (hst, model.hold.h0)
     level = alarm_level(j, model.eps0, b, model.bias, lever_pair, hold_pair)
     # The alarm machine compares the level with 1: J against eps0, B against b0, L against l0,

@@ -25,7 +25,7 @@ from monitor.detection.opstate import OpState
 from monitor.errors import ModelFileError
 from monitor.model.bias import BiasWindow, bias_regime
 from monitor.model.dgrnn import TickPredictor
-from monitor.model.hold import HoldWindow, hold_flag
+from monitor.model.hold import HoldWindow
 from monitor.model.lever import LeverWindow, lever_direction
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import WindowJ
@@ -82,6 +82,7 @@ class Ticker:
         self._names = tuple(spec.variables)
         self._engine_col = 1 + columns.index("EngineSpeed")
         self._spool_col = 1 + columns.index("SpoolCmd") if "SpoolCmd" in columns else -1
+        self._qp_col = 1 + columns.index("QP") if "QP" in columns else -1  # H's end stops
         norm_cols = [model.normalizer.names_.index(v) for v in spec.variables]
         self._mean = np.ascontiguousarray(model.normalizer.mean_[norm_cols])
         self._std = np.ascontiguousarray(model.normalizer.std_[norm_cols])
@@ -170,7 +171,8 @@ class Ticker:
             self.lev = self.lever.push(e, lever_direction(spool))
             level = _with(level, self.lev, self._l0)
         if self.hold is not None:
-            self.hst = self.hold.push(e, hold_flag(spool))
+            qp = float(row[self._qp_col]) if self._qp_col >= 0 else math.nan
+            self.hst = self.hold.push(e, spool, qp)
             level = _with(level, self.hst, self._h0)
         stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))
         d = self.decider.decide(level, inputs_ok, engine, e, regime_of(spool), gate.op_state,

@@ -93,3 +93,22 @@ def check_header(header: Any) -> None:
         v = hold.get("settle_n")
         if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= MAX_WINDOW_N:
             raise ValueError(f"header hold.settle_n must be a whole number 0..{MAX_WINDOW_N}")
+        if hold.get("stroke") is not None:
+            _check_stroke(hold["stroke"])
+
+
+def _check_stroke(stroke: Any) -> None:
+    """H's end-stop estimate (``monitor.model.endstop``): volumes, margin and stall rule."""
+    if not isinstance(stroke, dict):
+        raise ValueError("header hold.stroke must be an object")
+    for key, low, strict in (("volume_up_l", 0.0, True), ("volume_down_l", 0.0, True),
+                             ("margin", 0.0, False), ("q_stall_lpm", 0.0, True)):  # fmt: skip
+        try:
+            _number(stroke, key, low, strict)
+        except ValueError as exc:
+            raise ValueError(str(exc).replace("header ", "header hold.stroke.", 1)) from None
+    if stroke["margin"] >= 0.5:
+        raise ValueError(f"header hold.stroke.margin must be < 0.5, got {stroke['margin']:g}")
+    v = stroke.get("n_stall")
+    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
+        raise ValueError(f"header hold.stroke.n_stall must be a whole number 1..{MAX_WINDOW_N}")

@@ -40,6 +40,7 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
 from monitor.model.bias import HOLD_PCT
+from monitor.model.endstop import StopTracker, StrokeModel, near_stop_series
 
 #: The outputs H watches: the cylinder chamber pressures, between which the piston leaks.
 HOLD_OUTPUTS = ("PA", "PB")
@@ -52,9 +53,14 @@ def hold_flags(spool_pct: np.ndarray) -> np.ndarray:
         return (np.abs(s) <= HOLD_PCT).astype(np.int64)  # NaN compares False: not a hold
 
 
-def hold_flag(spool_pct: float) -> int:
-    """``hold_flags`` for one sample."""
-    return 1 if abs(spool_pct) <= HOLD_PCT else 0
+def counted_holds(spool_pct: np.ndarray, qp_lpm: np.ndarray, stroke: StrokeModel | None
+                  ) -> np.ndarray:
+    """Per sample: 1 where the lever is in hold and the rod is surely off the end stops
+    (``monitor.model.endstop``; every hold when ``stroke`` is None), else 0."""
+    flags = hold_flags(spool_pct)
+    if stroke is None:
+        return flags
+    return flags & (1 - near_stop_series(spool_pct, qp_lpm, stroke))
 
 
 @dataclass(frozen=True)
@@ -67,6 +73,9 @@ class HoldModel:
     outputs: tuple[int, ...]  # indices of HOLD_OUTPUTS among the model's outputs
     scale: np.ndarray  # (len(outputs),), z-units: the largest held-out |mean|
     h0: float = float("nan")  # threshold; NaN: H is computed but never alarms
+    #: The end-stop estimate whose holds H leaves out (None: every hold counts; models
+    #: trained before it existed).
+    stroke: StrokeModel | None = None
 
     def __post_init__(self) -> None:
         if self.window_n < 2 or not 1 <= self.min_count <= self.window_n or self.settle_n < 0:
@@ -86,13 +95,15 @@ class HoldModel:
     def to_dict(self) -> dict[str, object]:
         return {"window_n": int(self.window_n), "min_count": int(self.min_count),
                 "settle_n": int(self.settle_n), "outputs": list(self.outputs),
-                "scale": [float(v) for v in self.scale], "h0": float(self.h0)}  # fmt: skip
+                "scale": [float(v) for v in self.scale], "h0": float(self.h0),
+                **({} if self.stroke is None else {"stroke": self.stroke.to_dict()})}  # fmt: skip
 
     @classmethod
     def from_dict(cls, d: dict[str, object]) -> HoldModel:
         return cls(int(d["window_n"]), int(d["min_count"]), int(d["settle_n"]),  # type: ignore[arg-type]
                    tuple(int(o) for o in d["outputs"]),  # type: ignore[attr-defined]
-                   np.asarray(d["scale"], dtype=np.float64), float(d["h0"]))  # type: ignore[arg-type]  # fmt: skip
+                   np.asarray(d["scale"], dtype=np.float64), float(d["h0"]),  # type: ignore[arg-type]
+                   None if d.get("stroke") is None else StrokeModel.from_dict(d["stroke"]))  # type: ignore[arg-type]  # fmt: skip
 
 
 # State vector layout of the step kernel.
@@ -204,6 +215,7 @@ class HoldWindow:
 
     def __init__(self, hold: HoldModel) -> None:
         self.hold = hold
+        self._stops = None if hold.stroke is None else StopTracker(hold.stroke)
         self._ring_e = np.zeros((hold.window_n, len(hold.outputs)))
         self._ring_c = np.zeros(hold.window_n, dtype=np.int64)
         self._sums = np.zeros(len(hold.outputs))
@@ -211,9 +223,12 @@ class HoldWindow:
         self._outputs = np.asarray(hold.outputs, dtype=np.int64)
         self._resum = _resum(hold.window_n)
 
-    def push(self, e: np.ndarray, flag: int) -> float:
-        """One sample's residuals (outputs) and hold flag; returns H."""
+    def push(self, e: np.ndarray, spool_pct: float, qp_lpm: float) -> float:
+        """One sample's residuals (outputs), SpoolCmd (%) and QP (L/min); returns H."""
         h = self.hold
+        # The tracker sees every sample, a hold or not: the rod's travel is in the moves.
+        near = 0 if self._stops is None else self._stops.push(spool_pct, qp_lpm)
+        flag = 1 if abs(spool_pct) <= HOLD_PCT and not near else 0
         value = _push(self._ring_e, self._ring_c, self._sums, self._state, e, flag,
                       self._outputs, h.scale, h.settle_n, h.min_count, self._resum)  # fmt: skip
         return float(value)

@@ -23,9 +23,10 @@ from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.model.bias import BiasModel, bias_regimes, bias_series, fit_scale
 from monitor.model.dgrnn import DGRNN
+from monitor.model.endstop import StrokeModel, fit_stroke
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
-from monitor.model.hold import HOLD_OUTPUTS, HoldModel, fit_hold_scale, hold_flags, hold_series
+from monitor.model.hold import HOLD_OUTPUTS, HoldModel, counted_holds, fit_hold_scale, hold_series
 from monitor.model.lever import (
     LEVER_OUTPUT,
     LeverModel,
@@ -174,7 +175,9 @@ def train(
         outs = tuple(spec.outputs.index(o) for o in HOLD_OUTPUTS)
         model.hold, hold_note = _optional(
             "hold statistic H", "h0", cfg, say,
-            lambda: fit_hold(e_val, [r["SpoolCmd"] for r in val_part], outs, cfg))  # fmt: skip
+            lambda: fit_hold(e_val, [r["SpoolCmd"] for r in val_part],
+                             [r["QP"] for r in val_part], outs, cfg,
+                             _stroke(recordings, held_out)))  # fmt: skip
     floor_note = None
     if reference is not None:
         floor_note = floor_thresholds(model, reference)
@@ -279,6 +282,14 @@ def _optional(label: str, threshold: str, cfg: TrainConfig, say: Progress,
     return stat, "on"
 
 
+def _stroke(recordings: Sequence[Recording], held_out: Sequence[Recording] | None
+            ) -> StrokeModel:
+    """The boom cylinder's swept volumes from every normal recording given: geometry, not a
+    threshold, so the training part counts too (``monitor.model.endstop``)."""
+    every = [*recordings, *(held_out or ())]
+    return fit_stroke([r["SpoolCmd"] for r in every], [r["QP"] for r in every])
+
+
 def fit_bias(e_val: list[np.ndarray], spool_val: list[np.ndarray], cfg: TrainConfig) -> BiasModel:
     """The bias statistic's scales and threshold b0 from held-out normal residuals
     (``InputFileError`` when they are too short to support them)."""
@@ -314,18 +325,22 @@ def fit_lever(
 
 
 def fit_hold(
-    e_val: list[np.ndarray], spool_val: list[np.ndarray], outputs: tuple[int, ...],
-    cfg: TrainConfig,
+    e_val: list[np.ndarray], spool_val: list[np.ndarray], qp_val: list[np.ndarray],
+    outputs: tuple[int, ...], cfg: TrainConfig, stroke: StrokeModel,
 ) -> HoldModel:
-    """The hold statistic's per-output scales and threshold h0 from held-out normal residuals
-    (``InputFileError`` when they never hold the lever long enough)."""
-    flags = [hold_flags(s) for s in spool_val]
+    """The hold statistic's per-output scales and threshold h0 from held-out normal data:
+    residuals, SpoolCmd (%) and QP (L/min), the holds on an end stop (``stroke``'s estimate)
+    left out (``InputFileError`` when they never hold the lever long enough)."""
+    # Holds on an end stop are left out: the healthy model predicts them badly, and a
+    # machine lowered into its stop raised false alarms (``monitor.model.endstop``).
+    flags = [counted_holds(s, q, stroke) for s, q in zip(spool_val, qp_val, strict=True)]
     scale = fit_hold_scale(e_val, flags, cfg.bias_window_n, cfg.hold_min_count,
                            cfg.hold_settle_n, outputs)  # fmt: skip
-    hold = HoldModel(cfg.bias_window_n, cfg.hold_min_count, cfg.hold_settle_n, outputs, scale)
+    hold = HoldModel(cfg.bias_window_n, cfg.hold_min_count, cfg.hold_settle_n, outputs, scale,
+                     stroke=stroke)  # fmt: skip
     series = np.concatenate([hold_series(e, f, hold) for e, f in zip(e_val, flags, strict=True)])
     _, h0 = cfg.threshold.eps0(series, block=cfg.bias_window_n)
-    return HoldModel(hold.window_n, hold.min_count, hold.settle_n, outputs, scale, h0)
+    return HoldModel(hold.window_n, hold.min_count, hold.settle_n, outputs, scale, h0, stroke)
 
 
 #: Severities the fault signatures are learnt at: one signature per fault and severity, since
