@@ -134,9 +134,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         choices=("on", "off"),
         default="off",
         help="with B: the hold statistic H beside it (PA's and PB's mean residual in holds "
-        "settled for 2 s), when the held-out data holds the lever that long (default off: it "
-        "finds slight piston wear sooner but false-alarmed on bottom end-stop holds, 6 in "
-        "100 h of blind normal runs; see docs/benchmarks.md)",
+        "settled for 2 s, holds on an end stop left out), when the data runs the boom from "
+        "stop to stop at least twice each way and holds the lever that long (default off: "
+        "its scales are the held-out data's largest, measured on hours of it; the shipped "
+        "model has H; see docs/benchmarks.md)",
     )
 
     p.add_argument(

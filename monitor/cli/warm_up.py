@@ -58,8 +58,8 @@ def run(args: argparse.Namespace) -> int:
         ("per-tick detector", lambda: _ticks(Ticker(model, cfg.alarm, cfg.horizon,
                                                     gating=cfg.gating))),
         ("simulator", lambda: simulate(make_cycle("boom", 2.0, 1), load_machine(), seed=1)),
-        # H is opt-in (``monitor train --hold on``): typed here whatever the shipped model
-        # carries, so a model trained with it finds its kernels ahead of time too.
+        # H is opt-in for `monitor train` (``--hold on``): typed here whatever the
+        # configured model carries, so any model with H finds its kernels ahead of time.
         ("hold statistic", _hold),
     ]  # fmt: skip
     for name, step in steps:

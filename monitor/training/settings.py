@@ -43,9 +43,10 @@ class TrainConfig:
     lever_min_count: int = 100
     #: The hold statistic H (``monitor.model.hold``), over B's window and only with B: a
     #: hold's samples count once it has lasted 2 s (the move's pressure transients have died
-    #: out), 3 s of such samples in the window before H is judged.  Off by default: on blind
-    #: seed set 266 it found piston wear 0.3 in 20 of 20 runs but raised 6 false alarms in
-    #: 100 h, all on bottom end-stop holds (docs/benchmarks.md, 2026-11-27).
+    #: out), 3 s of such samples in the window before H is judged, holds on an end stop
+    #: left out.  Off by default: its scales are the held-out data's largest values, and
+    #: they were measured on hours of it (the shipped model's 10 h), not on minutes of
+    #: commissioning (docs/benchmarks.md, 2026-11-27).
     hold: bool = False
     hold_settle_n: int = 200
     hold_min_count: int = 300
