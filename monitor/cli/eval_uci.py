@@ -100,7 +100,10 @@ def run(args: argparse.Namespace) -> int:
     ch = result["model"]
     print(
         f"default: {result['default_preset']} (N={ch['window_N']}, sigma={ch['sigma']:.4g}, "
-        f"J0={ch['J0']:.4g}, eps0={ch['eps0']:.4g}); {result['split']['test_cycles']} test "
+        f"J0={ch['J0']:.4g}, eps0={ch['eps0']:.4g}, "
+        + (f"B over {ch['bias_phase_s']} s phases, b0={ch['b0']:.3g}" if ch["bias_phase_s"]
+           else "J alone")
+        + f"); {result['split']['test_cycles']} test "
         f"cycles; {result['runtime_s']:.0f} s; -> {args.json}"
     )
     return 0

@@ -19,7 +19,9 @@ separate 1 Hz recording (loaded by :mod:`monitor.evaluation.uci_data`).  Method,
   within a cycle the 1 Hz samples of a steady load phase are near copies.
 - J = eq. 9 per cycle with window N (chosen from ``WINDOWS``); a cycle alarms when its
   largest J exceeds eps0 = 2 J0, J0 = the largest per-cycle J on held-out healthy cycles
-  (the ``max`` rule of :mod:`monitor.model.threshold`).
+  (the ``max`` rule of :mod:`monitor.model.threshold`), or when the bias statistic B, each
+  output's mean residual over each load phase (:mod:`monitor.evaluation.uci_bias`),
+  exceeds b0.  The phase length (or none: J alone) is chosen with N on --train.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import ConfigError
+from monitor.evaluation.uci_bias import PHASES_S, CycleRule, cycle_b, phase_means
 from monitor.evaluation.uci_data import (
     HEALTHY,
     J0_EVERY,
@@ -162,19 +165,21 @@ def score(rc: RigCycles, alarms: np.ndarray) -> dict[str, Any]:
 
 
 def _selection(
-    jmax: np.ndarray, rc: RigCycles, j0_idx: np.ndarray, rule: ThresholdRule
+    jmax: np.ndarray, means: np.ndarray | None, rc: RigCycles, j0_idx: np.ndarray,
+    rule: ThresholdRule,
 ) -> dict[str, Any]:
     """Held-out score on --train: detection on its faulty cycles (never used for patterns or
-    J0) and a two-fold false-alarm rate on the J0 cycles (J0 from one half, alarms counted
-    on the other).  Youden's index = detection - false-alarm rate."""
-    _, eps0 = rule.eps0(jmax[j0_idx])
+    J0) and a two-fold false-alarm rate on the J0 cycles (thresholds from one half, alarms
+    counted on the other).  Youden's index = detection - false-alarm rate."""
     faulty = ~rc.healthy
-    det = float((jmax[faulty] > eps0).mean()) if faulty.any() else math.nan
+    alarms = CycleRule.fit(jmax, means, j0_idx, rule).alarms(jmax, means)
+    det = float(alarms[faulty].mean()) if faulty.any() else math.nan
     halves = (j0_idx[0::2], j0_idx[1::2])
     fa = []
     if len(halves[1]):
         for a, b in (halves, halves[::-1]):
-            fa.append(float((jmax[b] > rule.eps0(jmax[a])[1]).mean()))
+            on_b = CycleRule.fit(jmax, means, a, rule).alarms(jmax, means)[b]
+            fa.append(float(on_b.mean()))
     far = float(np.mean(fa)) if fa else math.nan
     return {
         "fault_cycles": int(faulty.sum()),
@@ -227,19 +232,27 @@ def evaluate(
     results: dict[str, Any] = {}
     best: tuple[float, str, int] | None = None
     jtests: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    e_by: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name in presets:
         t0 = time.perf_counter()
         spec = UCI_PRESETS[name]
         model, norm = fit(spec, train, pat_idx)
         e_train = cycle_residuals(model, norm, train)
         e_test = cycle_residuals(model, norm, test)
+        e_by[name] = (e_train, e_test)
         sel = {}
         for N in windows:
             jm = max_j(cycle_j(e_train, N))
-            sel[str(N)] = _selection(jm, train, j0_idx, rule)
-            if best is None or sel[str(N)]["score"] > best[0] + 1e-12:
-                best = (sel[str(N)]["score"], name, N)
             jtests[f"{name}/{N}"] = (jm, cycle_j(e_test, N))
+            # J alone first: on a tie the simpler rule stays.  The paper preset is the
+            # paper's J alone, as `monitor train --preset paper` has no B.
+            for phase in (None,) if name == "paper" else (None, *PHASES_S):
+                key = str(N) if phase is None else f"{N}+B{phase}s"
+                means = None if phase is None else phase_means(e_train, phase)
+                sel[key] = {"window_N": N, "bias_phase_s": phase,
+                            **_selection(jm, means, train, j0_idx, rule)}  # fmt: skip
+                if best is None or sel[key]["score"] > best[0] + 1e-12:
+                    best = (sel[key]["score"], name, N)
         g = model.grnn
         results[name] = {
             "spec": spec.to_dict(),
@@ -262,17 +275,31 @@ def evaluate(
     for name in presets:
         # Each preset is also scored with its own best N, so both are reported side by side.
         sel = results[name]["selection_on_train"]
-        N = int(max(sel, key=lambda k: (sel[k]["score"], -int(k))))
+        # The best score; on a tie the first tried (smaller N, J alone before B).
+        pick = sel[max(sel, key=lambda k: (sel[k]["score"], -list(sel).index(k)))]
+        N, phase = pick["window_N"], pick["bias_phase_s"]
         jm_train, j_test = jtests[f"{name}/{N}"]
         jm_test = max_j(j_test)
+        e_train, e_test = e_by[name]
+        m_train = None if phase is None else phase_means(e_train, phase)
+        m_test = None if phase is None else phase_means(e_test, phase)
+        cr = CycleRule.fit(jm_train, m_train, j0_idx, rule)
         j0, eps0 = rule.eps0(jm_train[j0_idx])
         results[name]["window_N"] = N
+        results[name]["bias_phase_s"] = phase
         results[name]["J0"], results[name]["eps0"] = j0, eps0
-        t = results[name]["test"] = score(test, jm_test > eps0)
+        results[name]["b0"] = None if phase is None else cr.b0
+        t = results[name]["test"] = score(test, cr.alarms(jm_test, m_test))
         # How close the healthy test cycles came to the threshold (1.0 = at eps0).
         t["max_J_healthy_over_eps0"] = float(np.max(jm_test[test.healthy], initial=0) / eps0)
-        # Detection delay within the cycle: J needs N + 1 residuals, so >= max_lag + N s.
-        fa = first_alarm_s(j_test, eps0)[~test.healthy]
+        t["max_B_healthy_over_b0"] = None if m_test is None else float(
+            np.max(cycle_b(m_test[test.healthy], cr.scale), initial=0) / cr.b0)  # fmt: skip
+        # Detection delay within the cycle: J needs N + 1 residuals, so >= max_lag + N s; B
+        # is judged at the end of a phase.
+        fa = first_alarm_s(j_test, eps0)
+        if m_test is not None:
+            fa = np.fmin(fa, cr.first_b_alarm_s(m_test, phase))
+        fa = fa[~test.healthy]
         t["median_first_alarm_s_in_cycle"] = (
             float(np.nanmedian(fa)) if np.isfinite(fa).any() else None
         )
@@ -296,11 +323,15 @@ def evaluate(
             "window_N": ch["window_N"],
             "J0": ch["J0"],
             "eps0": ch["eps0"],
+            "bias_phase_s": ch["bias_phase_s"],
+            "b0": ch["b0"],
             "threshold_rule": {
                 **rule.to_dict(),
                 "J0_over": "largest J of each held-out healthy --train cycle",
             },
-            "alarm": "a cycle alarms when its largest J (eq. 9, window N+1 s) exceeds eps0",
+            "alarm": "a cycle alarms when its largest J (eq. 9, window N+1 s) exceeds eps0, or "
+            "(with bias_phase_s) when B, an output's mean residual over a load phase over "
+            "its largest held-out healthy value, exceeds b0",
         },
         "presets": results,
         "split": {
