@@ -129,6 +129,18 @@ def test_nominal_recording_is_none():
     assert d.verdict == "none" and d.chosen is None and d.also is None
 
 
+def test_a_machine_13_percent_off_in_valve_gain_and_gravity_is_calibrated_and_none():
+    # A healthy machine of a +-15 % tolerance: the calibration follows its valve gain and
+    # gravity load to where they are (a +-10 % band stopped at 1.10 and 0.90 and left a gap
+    # that the deadband or the load slope, which trade off against them, took up).
+    off = {**MACHINE_TOLERANCE, "valve_gain": 1.13, "gravity_load": 0.87}
+    rec = simulate(make_cycle("boom", 60.0, 25), apply(M, off), seed=25)
+    d = diagnose(rec, M, effects=("valve_deadband", "load_variation"))
+    assert d.factors["valve_gain"] == pytest.approx(1.13, abs=0.015)
+    assert d.factors["gravity_load"] == pytest.approx(0.87, abs=0.015)
+    assert d.verdict == "none" and d.chosen is None
+
+
 def test_unusable_recordings_exit_with_one_line(tmp_path):
     short = _recording([], seed=24, seconds=20.0)
     write_csv(tmp_path / "short.csv", short)
