@@ -92,6 +92,9 @@ def test_report_keeps_the_contract_keys(deadband_run):
     bm = rep["base_mismatch"]
     assert second.startswith(f"Base mismatch: {100 * bm['share']:.0f} % of the gap")
     assert 0.0 <= bm["share"] <= 1.0 and set(bm["signals"]) == compared
+    # What the named deadband removes from the structured gap: above the practical level.
+    assert bm["best_removed_nrmse"]["effect"] == "valve_deadband"
+    assert bm["best_removed_nrmse"]["nrmse"] >= bm["practical_nrmse"]
 
 
 def test_a_tolerance_at_its_bound_is_said_in_the_json_and_the_first_lines(deadband_run):

@@ -19,6 +19,12 @@ With the smoothed (structured) sums (``basemis.py``), the same two tests also ru
 structured gap alone: an effect that removes most of what an effect can produce, but not
 the base mismatch above 5 Hz, is named; and a gap that no effect explains is ``none``
 when its structured part is below the practical level on every signal.
+
+By either test, an effect is named only when what it removes from the structured gap
+reaches that practical level (``basemis.removes_practical``): a healthy machine's base
+mismatch is partly slow too, and an effect can take a share of it (a third to a half, on
+machines whose tolerances the calibration could not follow) while changing the simulator
+by less than what would make it ``none`` had it been the whole structured gap.
 """
 
 from __future__ import annotations
