@@ -22,9 +22,9 @@ when its structured part is below the practical level on every signal.
 
 By either test, an effect is named only when what it removes from the structured gap
 reaches that practical level (``basemis.removes_practical``): a healthy machine's base
-mismatch is partly slow too, and an effect can take a share of it (a third to a half, on
-machines whose tolerances the calibration could not follow) while changing the simulator
-by less than what would make it ``none`` had it been the whole structured gap.
+mismatch is partly slow too, and an effect can take a share of it (entrained air, 18-26 %
+of a held-out gap, through the structured test on machines without RodPos) while changing
+the simulator by less than what would make it ``none`` had it been the whole structured gap.
 """
 
 from __future__ import annotations
