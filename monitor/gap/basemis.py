@@ -74,6 +74,26 @@ def practically_small(smooth_nominal: SegmentSums, floor_s: np.ndarray) -> bool:
     return bool(np.all(np.sqrt(excess) < PRACTICAL_NRMSE))
 
 
+def removed_nrmse(
+    smooth_nominal: SegmentSums, smooth_after: SegmentSums, floor_s: np.ndarray
+) -> float:
+    """The NRMSE of what an effect removes from the structured gap: the square root of the
+    drop of the smoothed residual's excess over the noise, summed over the signals like the
+    gap (the effect's own contribution, when it is what the simulator missed: r0 = e + b,
+    r1 = b, |r0|^2 - |r1|^2 ~ |e|^2)."""
+    ex0 = np.maximum(smooth_nominal.mse() - floor_s, 0.0).sum()
+    ex1 = np.maximum(smooth_after.mse() - floor_s, 0.0).sum()
+    return float(np.sqrt(max(ex0 - ex1, 0.0)))
+
+
+def removes_practical(
+    smooth_nominal: SegmentSums, smooth_after: SegmentSums, floor_s: np.ndarray
+) -> bool:
+    """What an effect removes reaches ``PRACTICAL_NRMSE``: the level below which a
+    structured residual is ``none`` is also the least an effect must change to be named."""
+    return removed_nrmse(smooth_nominal, smooth_after, floor_s) >= PRACTICAL_NRMSE
+
+
 def _fast(whole: SegmentSums, smoothed: SegmentSums, floor: np.ndarray) -> np.ndarray:
     """Per signal: the gap the moving average removes (above the noise it removes)."""
     total = np.maximum(whole.mse() - floor, 0.0)

@@ -28,11 +28,14 @@ class Tolerance:
         return Knob(self.name, 1.0 - self.band, 1.0 + self.band)
 
 
+#: Gravity load and valve gain cover a machine of +-15 %, like mass and volumes: with
+#: +-10 %, healthy machines whose valve gain was 12-14 % off the nominal were left with a
+#: gap the bands could not follow, which an effect then took (or none explained).
 TOLERANCES: tuple[Tolerance, ...] = (
     Tolerance("mass", ("mass_kg",), "kg", 1.0, 0.15),
-    Tolerance("gravity_load", ("gravity_load_n",), "N", 1.0, 0.10),
+    Tolerance("gravity_load", ("gravity_load_n",), "N", 1.0, 0.15),
     Tolerance("viscous_friction", ("viscous_friction_n_s_m",), "N s/m", 1.0, 0.30),
-    Tolerance("valve_gain", ("valve_rated_flow_m3_s",), "L/min at rated dp", 6e4, 0.10),
+    Tolerance("valve_gain", ("valve_rated_flow_m3_s",), "L/min at rated dp", 6e4, 0.15),
     Tolerance(
         "volumes",
         ("dead_volume_a_m3", "dead_volume_b_m3", "line_volume_m3"),

@@ -7,6 +7,7 @@ JSON keys (issue 6, other tools read them): ``verdict``, ``also``, ``params``,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,7 +19,7 @@ from monitor.gap.candidates import Candidate, default_member
 from monitor.gap.diagnose import Diagnosis
 from monitor.gap.predict import predict
 from monitor.gap.prepare import Prepared
-from monitor.gap.score import compared, normalised
+from monitor.gap.score import SegmentSums, compared, normalised
 from monitor.gap.shrink import shrink_report
 from monitor.signals import MEASURED_NAMES, UNITS
 from monitor.sim.effects import CATALOGUE, Effect
@@ -174,17 +175,7 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
         "ranking": [_candidate_row(c) for c in diag.singles],
         "pairs": [_candidate_row(c) for c in diag.pairs],
         "shrink": shrink,
-        "base_mismatch": (
-            basemis.report(
-                diag.nominal,
-                diag.smooth_nominal,
-                diag.floor,
-                compared(prep),
-                (after, diag.smooth[chosen.name]) if chosen is not None else None,
-            )
-            if diag.smooth_nominal is not None
-            else None
-        ),
+        "base_mismatch": _base_mismatch(diag, compared(prep), after, chosen),
         "recording": {
             "source": prep.source,
             "duration_s": round(duration, 2),
@@ -288,6 +279,28 @@ def _what_next(suggestion: list[dict], tried: list[dict]) -> list[str]:
             f"{100 * s['heldout_reduction']:.0f} % of the held-out gap{plus}"
         )
     return out
+
+
+def _base_mismatch(
+    diag: Diagnosis, names: Sequence[str], after: SegmentSums, chosen: Candidate | None
+) -> dict | None:
+    """The JSON ``base_mismatch`` block, with ``best_removed_nrmse``: what the best single
+    effect removes from the structured gap (``decide``: named only from 0.02 on)."""
+    if diag.smooth_nominal is None:
+        return None
+    bm = basemis.report(
+        diag.nominal,
+        diag.smooth_nominal,
+        diag.floor,
+        names,
+        (after, diag.smooth[chosen.name]) if chosen is not None else None,
+    )
+    best = diag.singles[0] if diag.singles else None
+    if best is not None and best.name in diag.smooth:
+        floor_s = basemis.smoothed_floor(diag.floor)
+        removed = basemis.removed_nrmse(diag.smooth_nominal, diag.smooth[best.name], floor_s)
+        bm["best_removed_nrmse"] = {"effect": best.effects[0].name, "nrmse": round(removed, 5)}
+    return bm
 
 
 def _base_line(bm: dict) -> str:
