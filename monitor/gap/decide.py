@@ -232,8 +232,9 @@ def _practical(
     structured: tuple[dict[str, SegmentSums], SegmentSums] | None,
     floor: np.ndarray,
 ) -> bool:
-    """What ``best`` removes from the structured residual reaches the practical level on
-    some signal (``basemis.removes_practical``); True when not judged (no smoothed sums)."""
+    """What ``best`` removes from the structured residual, summed over the signals, reaches
+    the practical level (``basemis.removes_practical``); True when not judged (no smoothed
+    sums)."""
     if structured is None or best.name not in structured[0]:
         return True
     smooth, nominal_s = structured
