@@ -17,7 +17,9 @@ H keeps, over the last ``window_n`` valid samples, the mean signed residual of e
 output (PA, PB) over the *settled hold* samples, and scales each by the largest such mean
 seen in held-out normal operation.  Definition, per valid sample i (every output finite):
 
-    hold_i    = |SpoolCmd_i| <= HOLD_PCT (a NaN command is not a hold)
+    hold_i    = |SpoolCmd_i| <= HOLD_PCT (a NaN command is not a hold), and, with the
+                model's ``stroke``, the rod surely off the end stops (``monitor.model.endstop``:
+                there the stop carries the load and the healthy model predicts badly)
     age_i     = consecutive valid hold samples up to and including i (0 when not hold_i)
     counted_i = age_i > settle_n
     n         = number of counted samples among the window's samples
