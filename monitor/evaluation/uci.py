@@ -232,25 +232,29 @@ def evaluate(
     results: dict[str, Any] = {}
     best: tuple[float, str, int] | None = None
     jtests: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    e_by: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    # Per preset and phase length: B's phase means on --train and --test (None: J alone).
+    means_by: dict[str, dict[int | None, tuple[Any, Any]]] = {}
     for name in presets:
         t0 = time.perf_counter()
         spec = UCI_PRESETS[name]
         model, norm = fit(spec, train, pat_idx)
         e_train = cycle_residuals(model, norm, train)
         e_test = cycle_residuals(model, norm, test)
-        e_by[name] = (e_train, e_test)
+        # J alone first: on a tie the simpler rule stays.  The paper preset is the paper's
+        # J alone, as `monitor train --preset paper` has no B.
+        phases = (None,) if name == "paper" else (None, *PHASES_S)
+        means = means_by[name] = {
+            p: (None, None) if p is None else (phase_means(e_train, p), phase_means(e_test, p))
+            for p in phases
+        }
         sel = {}
         for N in windows:
             jm = max_j(cycle_j(e_train, N))
             jtests[f"{name}/{N}"] = (jm, cycle_j(e_test, N))
-            # J alone first: on a tie the simpler rule stays.  The paper preset is the
-            # paper's J alone, as `monitor train --preset paper` has no B.
-            for phase in (None,) if name == "paper" else (None, *PHASES_S):
+            for phase in phases:
                 key = str(N) if phase is None else f"{N}+B{phase}s"
-                means = None if phase is None else phase_means(e_train, phase)
                 sel[key] = {"window_N": N, "bias_phase_s": phase,
-                            **_selection(jm, means, train, j0_idx, rule)}  # fmt: skip
+                            **_selection(jm, means[phase][0], train, j0_idx, rule)}  # fmt: skip
                 if best is None or sel[key]["score"] > best[0] + 1e-12:
                     best = (sel[key]["score"], name, N)
         g = model.grnn
@@ -280,9 +284,7 @@ def evaluate(
         N, phase = pick["window_N"], pick["bias_phase_s"]
         jm_train, j_test = jtests[f"{name}/{N}"]
         jm_test = max_j(j_test)
-        e_train, e_test = e_by[name]
-        m_train = None if phase is None else phase_means(e_train, phase)
-        m_test = None if phase is None else phase_means(e_test, phase)
+        m_train, m_test = means_by[name][phase]
         cr = CycleRule.fit(jm_train, m_train, j0_idx, rule)
         j0, eps0 = rule.eps0(jm_train[j0_idx])
         results[name]["window_N"] = N

@@ -44,17 +44,23 @@ def phase_means(e: np.ndarray, phase_s: int) -> np.ndarray:
 def phase_scale(means: np.ndarray) -> np.ndarray:
     """(phases, outputs): the largest |mean| over the given cycles; NaN where it is not
     positive (a phase never predicted, or always exact): such an entry is never judged."""
+    if not means.shape[0]:
+        return np.full(means.shape[1:], np.nan)
     with np.errstate(invalid="ignore"):
-        top = np.nanmax(np.abs(means), axis=0) if means.shape[0] else np.full(means.shape[1:],
-                                                                              np.nan)  # fmt: skip
+        top = np.nanmax(np.abs(means), axis=0)
     return np.where(top > 0, top, np.nan)
+
+
+def _ratios(means: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """|m| / scale per cycle, phase and output; 0 where not judged (no scale, no mean)."""
+    with np.errstate(invalid="ignore"):
+        ratio = np.abs(means) / scale
+    return np.where(np.isfinite(ratio), ratio, 0.0)
 
 
 def cycle_b(means: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """B of each cycle (cycles,); 0 for a cycle with no judged entry."""
-    with np.errstate(invalid="ignore"):
-        ratio = np.abs(means) / scale
-    ratio = np.where(np.isfinite(ratio), ratio, 0.0)
+    ratio = _ratios(means, scale)
     return ratio.max(axis=(1, 2)) if ratio.size else np.zeros(means.shape[0])
 
 
@@ -80,9 +86,7 @@ class CycleRule:
 
     def first_b_alarm_s(self, means: np.ndarray, phase_s: int) -> np.ndarray:
         """Per cycle: the last second of the first phase whose B exceeds b0 (NaN: none)."""
-        with np.errstate(invalid="ignore"):
-            ratio = np.abs(means) / self.scale
-        above = (np.where(np.isfinite(ratio), ratio, 0.0) > self.b0).any(axis=2)
+        above = (_ratios(means, self.scale) > self.b0).any(axis=2)
         first = np.argmax(above, axis=1)
         return np.where(above.any(axis=1), (first + 1) * phase_s - 1.0, np.nan)
 

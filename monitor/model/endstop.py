@@ -114,10 +114,9 @@ def _step(state, spool, qp, inv_up, inv_down, margin, q_stall, n_stall, per_min,
 
 
 @jit(aot=True)
-def _series(spool, qp, inv_up, inv_down, margin, q_stall, n_stall, per_min,
+def _series(spool, qp, state, inv_up, inv_down, margin, q_stall, n_stall, per_min,
             hold_pct):  # pragma: no cover - numba
     out = np.empty(spool.shape[0], dtype=np.int64)
-    state = np.array([0.0, 1.0, 0.0])
     for i in range(spool.shape[0]):
         out[i] = _step(state, spool[i], qp[i], inv_up, inv_down, margin, q_stall, n_stall,
                        per_min, hold_pct)  # fmt: skip
@@ -136,7 +135,7 @@ def near_stop_series(spool_pct: np.ndarray, qp_lpm: np.ndarray, stroke: StrokeMo
     q = np.ascontiguousarray(qp_lpm, dtype=np.float64)
     if s.shape != q.shape or s.ndim != 1:
         raise InputFileError(f"SpoolCmd {s.shape} and QP {q.shape} must be one series each")
-    return _series(s, q, *_args(stroke))
+    return _series(s, q, new_state(), *_args(stroke))
 
 
 class StopTracker:
@@ -152,15 +151,14 @@ class StopTracker:
 
 
 @jit
-def _stall_ends(spool, qp, q_stall, n_stall, hold_pct):  # pragma: no cover - numba
-    """Per sample: +1 / -1 while stalled at the top / bottom stop, 0 otherwise (the
-    tracker's own rule: its interval collapses exactly there)."""
+def _stall_ends(spool, qp, state, q_stall, n_stall, hold_pct):  # pragma: no cover - numba
+    """Per sample: +1 / -1 while stalled at the top / bottom stop, 0 otherwise: the
+    tracker's own step, without travel, read where its interval collapses."""
     out = np.zeros(spool.shape[0], dtype=np.int64)
-    run = 0
     for i in range(spool.shape[0]):
-        run = run + 1 if abs(spool[i]) > hold_pct and qp[i] < q_stall else 0  # NaN: False
-        if run >= n_stall:
-            out[i] = 1 if spool[i] > 0 else -1
+        _step(state, spool[i], qp[i], 0.0, 0.0, 0.0, q_stall, n_stall, 1.0, hold_pct)
+        if state[_RUN] >= n_stall:
+            out[i] = 1 if state[_LO] > 0.5 else -1
     return out
 
 
@@ -170,8 +168,8 @@ def stroke_equations(spool_pct: np.ndarray, qp_lpm: np.ndarray) -> tuple[np.ndar
     A gap (NaN command or flow) between two stalls drops that pair."""
     s = np.asarray(spool_pct, dtype=np.float64)
     q = np.asarray(qp_lpm, dtype=np.float64)
-    ends = _stall_ends(np.ascontiguousarray(s), np.ascontiguousarray(q), Q_STALL_LPM, N_STALL,
-                       HOLD_PCT)  # fmt: skip
+    ends = _stall_ends(np.ascontiguousarray(s), np.ascontiguousarray(q), new_state(),
+                       Q_STALL_LPM, float(N_STALL), HOLD_PCT)  # fmt: skip
     with np.errstate(invalid="ignore"):
         litres = np.where(np.isfinite(q), np.maximum(q, 0.0), 0.0) * SAMPLE_PERIOD_S / 60.0
         up = np.where((s > HOLD_PCT) & (ends == 0), litres, 0.0)

@@ -43,6 +43,7 @@ from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
 from monitor.model.bias import HOLD_PCT
 from monitor.model.endstop import StopTracker, StrokeModel, near_stop_series
+from monitor.model.residual import largest_finite
 
 #: The outputs H watches: the cylinder chamber pressures, between which the piston leaks.
 HOLD_OUTPUTS = ("PA", "PB")
@@ -196,13 +197,10 @@ def fit_hold_scale(
     data (the statistic's own windows: H's series with that output alone, unit scale).
     ``InputFileError`` when no window has ``min_count`` settled hold samples: the held-out
     data never held the lever long enough."""
-    top = np.zeros(len(outputs))
-    for k, o in enumerate(outputs):
-        unit = HoldModel(window_n, min_count, settle_n, (o,), np.ones(1))
-        for e, f in zip(residuals, flags, strict=True):
-            series = hold_series(e, f, unit)
-            if np.isfinite(series).any():
-                top[k] = max(top[k], float(np.nanmax(series)))
+    units = [HoldModel(window_n, min_count, settle_n, (o,), np.ones(1)) for o in outputs]
+    top = np.array([largest_finite(hold_series(e, f, unit)
+                                   for e, f in zip(residuals, flags, strict=True))
+                    for unit in units])  # fmt: skip
     if not np.all(top > 0):
         raise InputFileError(
             f"the held-out normal data never has {min_count / 100:g} s of holds settled for "

@@ -29,6 +29,7 @@ import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
+from monitor.model.residual import largest_finite
 
 #: Lever command (%) beyond which a sample counts for L: near full stroke, where a stroke
 #: limit of severity 0.3 (82 %) or more acts on every sample that counts.
@@ -161,13 +162,10 @@ def fit_lever_scale(
     data (the statistic's own windows: L's series with unit scales).  ``InputFileError``
     when a direction never counts: the held-out data never held the lever that far."""
     unit = LeverModel(window_n, min_count, output, np.ones(N_DIRECTIONS))
-    top = np.zeros(N_DIRECTIONS)
-    for e, d in zip(residuals, directions, strict=True):
-        for k in range(N_DIRECTIONS):
-            only = np.where(d == k + 1, d, 0)  # the other direction's samples do not count
-            series = lever_series(e, only, unit)
-            if np.isfinite(series).any():
-                top[k] = max(top[k], float(np.nanmax(series)))
+    # One direction at a time: the other direction's samples do not count.
+    top = np.array([largest_finite(lever_series(e, np.where(d == k + 1, d, 0), unit)
+                                   for e, d in zip(residuals, directions, strict=True))
+                    for k in range(N_DIRECTIONS)])  # fmt: skip
     if not np.all(top > 0):
         raise InputFileError(
             f"the held-out normal data never has {min_count / 100:g} s of lever beyond "

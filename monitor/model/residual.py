@@ -22,6 +22,7 @@ runs the same algorithm in numba, so both give the same numbers (to rounding).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,16 @@ def residuals(y_hat: Any, y: Any) -> np.ndarray:
     if a.shape != b.shape:
         raise InputFileError(f"predictions {a.shape} and measurements {b.shape} differ in shape")
     return a - b
+
+
+def largest_finite(series: Iterable[np.ndarray]) -> float:
+    """The largest finite value over several series of a statistic (0.0 when none has one):
+    the held-out maximum a statistic's scale is fitted to."""
+    top = 0.0
+    for s in series:
+        if np.isfinite(s).any():
+            top = max(top, float(np.nanmax(s)))
+    return top
 
 
 def squared_residual(e: Any) -> np.ndarray:
