@@ -30,6 +30,7 @@ import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
+from monitor.model.residual import resum_interval
 
 #: Spool command edges (%) of the regimes: |s| <= 5 hold; 5 < |s| <= 60 small; above: large.
 HOLD_PCT = 5.0
@@ -184,17 +185,13 @@ def _series(e, regimes, scale, window, min_count, resum_every):  # pragma: no co
     return out
 
 
-def _resum(window: int) -> int:
-    return max(1000, 10 * window)
-
-
 def bias_series(e: np.ndarray, regimes: np.ndarray, bias: BiasModel) -> np.ndarray:
     """B at every sample of a series of residuals (samples, outputs) and their regimes."""
     a = np.ascontiguousarray(e, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != bias.scale.shape[1]:
         raise InputFileError(f"residuals {a.shape} do not fit the bias scale {bias.scale.shape}")
     r = np.ascontiguousarray(regimes, dtype=np.int64)
-    return _series(a, r, bias.scale, bias.window_n, bias.min_count, _resum(bias.window_n))
+    return _series(a, r, bias.scale, bias.window_n, bias.min_count, resum_interval(bias.window_n))
 
 
 class BiasWindow:
@@ -208,7 +205,7 @@ class BiasWindow:
         self._sums = np.zeros((N_BIAS_REGIMES, n_out))
         self._counts = np.zeros(N_BIAS_REGIMES)
         self._state = np.zeros(3, dtype=np.int64)
-        self._resum = _resum(bias.window_n)
+        self._resum = resum_interval(bias.window_n)
 
     def push(self, e: np.ndarray, regime: int) -> float:
         """One sample's residuals (outputs) and bias regime; returns B."""

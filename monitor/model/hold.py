@@ -43,7 +43,7 @@ from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
 from monitor.model.bias import HOLD_PCT
 from monitor.model.endstop import StopTracker, StrokeModel, near_stop_series
-from monitor.model.residual import largest_finite
+from monitor.model.residual import largest_finite, resum_interval
 
 #: The outputs H watches: the cylinder chamber pressures, between which the piston leaks.
 HOLD_OUTPUTS = ("PA", "PB")
@@ -174,10 +174,6 @@ def _series(e, flags, outputs, scale, window, settle_n, min_count,
     return out
 
 
-def _resum(window: int) -> int:
-    return max(1000, 10 * window)
-
-
 def hold_series(e: np.ndarray, flags: np.ndarray, hold: HoldModel) -> np.ndarray:
     """H at every sample of residuals (samples, outputs) and their hold flags."""
     a = np.ascontiguousarray(e, dtype=np.float64)
@@ -186,7 +182,7 @@ def hold_series(e: np.ndarray, flags: np.ndarray, hold: HoldModel) -> np.ndarray
     f = np.ascontiguousarray(flags, dtype=np.int64)
     outs = np.asarray(hold.outputs, dtype=np.int64)
     return _series(a, f, outs, hold.scale, hold.window_n, hold.settle_n, hold.min_count,
-                   _resum(hold.window_n))  # fmt: skip
+                   resum_interval(hold.window_n))  # fmt: skip
 
 
 def fit_hold_scale(
@@ -221,7 +217,7 @@ class HoldWindow:
         self._sums = np.zeros(len(hold.outputs))
         self._state = np.zeros(_STATE, dtype=np.int64)
         self._outputs = np.asarray(hold.outputs, dtype=np.int64)
-        self._resum = _resum(hold.window_n)
+        self._resum = resum_interval(hold.window_n)
 
     def push(self, e: np.ndarray, spool_pct: float, qp_lpm: float) -> float:
         """One sample's residuals (outputs), SpoolCmd (%) and QP (L/min); returns H."""

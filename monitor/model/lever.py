@@ -29,7 +29,7 @@ import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
-from monitor.model.residual import largest_finite
+from monitor.model.residual import largest_finite, resum_interval
 
 #: Lever command (%) beyond which a sample counts for L: near full stroke, where a stroke
 #: limit of severity 0.3 (82 %) or more acts on every sample that counts.
@@ -140,10 +140,6 @@ def _series(e, directions, output, scale, window, min_count, resum_every):  # pr
     return out
 
 
-def _resum(window: int) -> int:
-    return max(1000, 10 * window)
-
-
 def lever_series(e: np.ndarray, directions: np.ndarray, lever: LeverModel) -> np.ndarray:
     """L at every sample of residuals (samples, outputs) and their lever directions."""
     a = np.ascontiguousarray(e, dtype=np.float64)
@@ -151,7 +147,7 @@ def lever_series(e: np.ndarray, directions: np.ndarray, lever: LeverModel) -> np
         raise InputFileError(f"residuals {a.shape} have no output {lever.output} for L")
     d = np.ascontiguousarray(directions, dtype=np.int64)
     return _series(a, d, lever.output, lever.scale, lever.window_n, lever.min_count,
-                   _resum(lever.window_n))  # fmt: skip
+                   resum_interval(lever.window_n))  # fmt: skip
 
 
 def fit_lever_scale(
@@ -185,7 +181,7 @@ class LeverWindow:
         self._sums = np.zeros(N_DIRECTIONS + 1)
         self._counts = np.zeros(N_DIRECTIONS + 1)
         self._state = np.zeros(3, dtype=np.int64)
-        self._resum = _resum(lever.window_n)
+        self._resum = resum_interval(lever.window_n)
 
     def push(self, e: np.ndarray, direction: int) -> float:
         """One sample's residuals (outputs) and lever direction; returns L."""

@@ -67,8 +67,14 @@ def _check_window(N: int) -> int:
     return n
 
 
+def resum_interval(window: int) -> int:
+    """Pushes between exact re-summations of a running window sum of ``window`` samples:
+    add/subtract drifts in floating point, a full re-sum now and then does not."""
+    return max(1000, 10 * window)
+
+
 def _default_resum(N: int) -> int:
-    return max(1000, 10 * (N + 1))
+    return resum_interval(N + 1)
 
 
 @jit(aot=True)
