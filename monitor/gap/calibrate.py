@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from monitor.gap.fit import Knob
 from monitor.sim.machine import MachineParams
 
@@ -64,6 +66,14 @@ def knobs() -> list[Knob]:
 #: A factor this close to the edge of its band (as a share of the band) ended at its bound.
 AT_BOUND_SHARE = 0.98
 
+BY_NAME = {t.name: t for t in TOLERANCES}
+
+
+def bound_side(name: str, factor: float) -> int:
+    """+1 or -1 when tolerance ``name``'s factor ended at its upper or lower bound, else 0."""
+    excess = factor - 1.0
+    return int(np.sign(excess)) if abs(excess) >= AT_BOUND_SHARE * BY_NAME[name].band else 0
+
 
 def describe(machine: MachineParams, factors: dict[str, float]) -> dict[str, dict]:
     """The JSON form: value, unit, nominal, change in percent per tolerance, and whether the
@@ -80,6 +90,6 @@ def describe(machine: MachineParams, factors: dict[str, float]) -> dict[str, dic
             "nominal": round(nominal, 6),
             "change_pct": round(100 * (f - 1), 2),
             "band_pct": round(100 * tol.band, 1),
-            "at_bound": bool(abs(f - 1.0) >= AT_BOUND_SHARE * tol.band),
+            "at_bound": bound_side(tol.name, f) != 0,
         }
     return out

@@ -114,6 +114,8 @@ class Diagnosis:
     #: A ``sensor_lag`` verdict checked against the engine's ripple (``lagcheck.py``): the
     #: JSON's ``lag_check``.
     lag_check: dict | None = None
+    #: Per candidate name: the calibration absorbed it (``_absorbed``).
+    absorbed: dict[str, Absorbed] = field(default_factory=dict)
 
 
 class _Evaluator:
@@ -341,11 +343,21 @@ def _diagnose(
             say(f"pair {c.name}: held-out reduction {c.heldout_reduction:+.2f}")
     lap("pairs")
 
+    absorbed = {} if noise_only else _absorbed(singles, base.factors, readings)
+    against = {name: a.sums for name, a in absorbed.items()}
     d = decide(
-        noise_only, singles, pairs, sums, base.nominal, idx, floor, (smooth, base.smooth_nominal)
+        noise_only,
+        singles,
+        pairs,
+        sums,
+        base.nominal,
+        idx,
+        floor,
+        (smooth, base.smooth_nominal),
+        against,
     )
     d, lag_checked = _check_lag(d, singles, pairs, sums, base, idx, floor, smooth, noise_only,
-                                readings, held)  # fmt: skip
+                                readings, held, against)  # fmt: skip
     if lag_checked is not None:
         say(
             f"sensor lag against the engine's speed ripple: readings {lag_checked['readings']}"
@@ -404,6 +416,7 @@ def _diagnose(
         checked.as_dict() if checked is not None else None,
         _traded(d, singles, S.compared(prep)),
         lag_checked,
+        absorbed,
     )
 
 
@@ -419,6 +432,7 @@ def _check_lag(
     noise_only: bool,
     readings: _Readings,
     held: Sequence[Segment],
+    against: dict[str, tuple[S.SegmentSums, S.SegmentSums]],
 ) -> tuple[Decision, dict | None]:
     """The verdict after ``lagcheck``: a lagged sensor reports the engine's speed ripple
     late, a slow spool (or any plant effect) leaves it prompt.  Checked when ``sensor_lag``
@@ -439,9 +453,9 @@ def _check_lag(
     if d.verdict == lagcheck.NAME and chk.prompt:
         rest = [c for c in singles if c is not lag_c]
         plain = [p for p in pairs if all(e.name != lagcheck.NAME for e in p.effects)]
-        d = decide(False, rest, plain, sums, base.nominal, idx, floor, structured)
+        d = decide(False, rest, plain, sums, base.nominal, idx, floor, structured, against)
     elif d.verdict != lagcheck.NAME and chk.late:
-        alone = decide(False, [lag_c], [], sums, base.nominal, idx, floor, structured)
+        alone = decide(False, [lag_c], [], sums, base.nominal, idx, floor, structured, against)
         if alone.verdict == lagcheck.NAME:
             d = alone
     return d, {
@@ -449,6 +463,37 @@ def _check_lag(
         "verdict_without_check": before,
         "sensor_named": d.verdict == lagcheck.NAME,
     }
+
+
+@dataclass
+class Absorbed:
+    """A calibration that took a tolerance an effect trades off against to its bound, where
+    the effect's own fit moved it off: the bound stood in for the effect (``decide.py``)."""
+
+    #: Per tolerance: its factor in the calibration and in the effect's fit.
+    tolerances: dict[str, tuple[float, float]]
+    #: Held-out whole and smoothed sums of the effect's tolerances without the effect.
+    sums: tuple[S.SegmentSums, S.SegmentSums]
+
+
+def _absorbed(
+    singles: Sequence[Candidate], factors: dict[str, float], readings: _Readings
+) -> dict[str, Absorbed]:
+    """Per physical single effect whose fit moved a confounded tolerance off the bound the
+    calibration (``factors``) left it at: what its own tolerances do without it (one held-out
+    simulation each; none on a machine whose calibration is inside its bands)."""
+    out = {}
+    for c in singles:
+        name = c.effects[0].name
+        moved = {
+            t: (factors.get(t, 1.0), c.factors.get(t, 1.0))
+            for t in CONFOUNDED.get(name, ())
+            if (side := cal_mod.bound_side(t, factors.get(t, 1.0))) != 0
+            and cal_mod.bound_side(t, c.factors.get(t, 1.0)) != side
+        }
+        if moved and len(c.effects) == 1:
+            out[c.name] = Absorbed(moved, readings.held(c.prep).both_sums(c.factors, ()))
+    return out
 
 
 def _traded(d: Decision, singles: Sequence[Candidate], names: Sequence[str]) -> dict | None:

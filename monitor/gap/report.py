@@ -19,7 +19,7 @@ from monitor.gap.candidates import Candidate, default_member
 from monitor.gap.diagnose import Diagnosis
 from monitor.gap.predict import predict
 from monitor.gap.prepare import Prepared
-from monitor.gap.score import SegmentSums, compared, normalised
+from monitor.gap.score import SegmentSums, compared, gap, normalised, reduction
 from monitor.gap.shrink import shrink_report
 from monitor.signals import MEASURED_NAMES, UNITS
 from monitor.sim.effects import CATALOGUE, Effect
@@ -193,7 +193,44 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
         **({"sensor_check": diag.sensor_check} if diag.sensor_check is not None else {}),
         **({"trade_off": diag.traded} if diag.traded is not None else {}),
         **({"lag_check": diag.lag_check} if diag.lag_check is not None else {}),
+        **_absorbed(diag),
     }
+
+
+def _absorbed(diag: Diagnosis) -> dict:
+    """The JSON ``absorbed``: the named effect's tolerances that the calibration had taken to
+    their bound in its place (``diagnose._absorbed``), and how much of the held-out gap of
+    its own tolerances without it the effect removes (what it was judged on)."""
+    a = diag.absorbed.get(diag.chosen.name) if diag.chosen is not None else None
+    if a is None or diag.verdict not in {e.name for e in diag.chosen.effects}:
+        return {}
+    without = gap(a.sums[0].mse(), diag.floor)
+    return {
+        "absorbed": {
+            "effect": diag.chosen.effects[0].name,
+            "tolerances": {
+                t: {
+                    "calibration_pct": round(100 * (f0 - 1), 2),
+                    "with_effect_pct": round(100 * (f1 - 1), 2),
+                }
+                for t, (f0, f1) in a.tolerances.items()
+            },
+            "heldout_reduction": round(reduction(without, diag.chosen.heldout_gap), 4),
+        }
+    }
+
+
+def _absorbed_line(a: dict) -> str:
+    """Which tolerances stood in for the named effect, and what it was judged on."""
+    moved = "; ".join(
+        f"{t} {v['calibration_pct']:+.0f} % (its bound), {v['with_effect_pct']:+.0f} % when "
+        "fitted with the effect"
+        for t, v in a["tolerances"].items()
+    )
+    return (
+        f"Calibration alone: {moved}. Against those tolerances without it, {a['effect']} "
+        f"removes {100 * a['heldout_reduction']:.0f} % of the held-out gap."
+    )
 
 
 def _trade_line(t: dict) -> str:
@@ -364,6 +401,8 @@ def summary_text(report: dict) -> str:
             lines.append(_sensor_line(report["sensor_check"]))
         if report.get("lag_check"):
             lines.append(_lag_line(report["lag_check"]))
+        if report.get("absorbed"):
+            lines.append(_absorbed_line(report["absorbed"]))
         if report.get("member") not in (None, "default"):
             lines.append(f"Formulation: {report['member']} (of the {v} family)")
         if report["also"]:
