@@ -165,3 +165,26 @@ def test_no_pairs_are_fitted_when_the_best_leaves_less_than_a_material_share():
     # named.  At 0.05 it leaves 0.04 (10 %): the three pairs are planned.
     for best_mse, n_pairs in ((0.025, 0), (0.05, 3)):
         assert len(_plan_with_best_at(best_mse)) == n_pairs
+
+
+def test_an_effect_the_calibration_absorbed_is_judged_against_its_own_tolerances():
+    # The calibrated simulator (a tolerance at its bound standing in for the effect) leaves
+    # a gap of 0.1 per signal; the effect removes (0.1 - 0.07) / 0.1 = 30 % of it: not
+    # named.  Its own tolerances without it leave 0.2 per signal, of which it removes
+    # (0.2 - 0.07) / 0.2 = 65 %, in every segment: named, with full confidence.
+    calibrated = sums([0.11] * N_SEG)
+    own_without = sums([0.21] * N_SEG)
+    best = sums([0.08] * N_SEG)
+    c = candidate(("cylinder_friction",), best, calibrated, 1.0)
+    assert abs(c.heldout_reduction - 0.3) < 1e-9
+    all_sums = {"cylinder_friction": best}
+    plain = decide(False, [c], [], all_sums, calibrated, IDX, FLOOR)
+    assert plain.verdict == "unexplained"
+    against = {"cylinder_friction": (own_without, own_without)}
+    d = decide(False, [c], [], all_sums, calibrated, IDX, FLOOR, against=against)
+    assert (d.verdict, d.chosen, d.confidence) == ("cylinder_friction", c, 1.0)
+    # Only the best is judged that way: the same simulator given for another effect
+    # changes nothing.
+    other = decide(False, [c], [], all_sums, calibrated, IDX, FLOOR,
+                   against={"entrained_air": (own_without, own_without)})  # fmt: skip
+    assert other.verdict == "unexplained"

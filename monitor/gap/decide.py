@@ -27,9 +27,9 @@ of a held-out gap, through the structured test on machines without RodPos) while
 the simulator by less than what would make it ``none`` had it been the whole structured gap.
 
 When the calibration took a tolerance the best effect trades off against to its bound and
-the effect's own fit moved it off (``diagnose._absorbed``), the bound was standing in for
-the effect: the effect is judged against the simulator with its own tolerances and without
-it (``against``), not against the calibrated one that had already soaked part of it up.
+the effect's own fit moved it off (``diagnose.calibration_absorbed``), the bound stood in
+for the effect: the effect is judged against the simulator with its own tolerances and
+without it (``against``), not against the calibrated one that had soaked part of it up.
 A 400-700 N Coulomb friction removed 0.010-0.019 NRMSE from the structured gap of a
 simulator whose viscous friction sat at +30 %, 0.022-0.036 from its own tolerances'.
 """
@@ -176,9 +176,9 @@ def decide(
     best = singles[0]
     # The simulator the best is judged against: the calibrated one, unless it absorbed it.
     before, judged = nominal, structured
-    if against is not None and best.name in against and structured is not None:
+    if against is not None and best.name in against:
         before, before_s = against[best.name]
-        judged = (structured[0], before_s)
+        judged = None if structured is None else (structured[0], before_s)
     red_b = boot_reduction(before, sums[best.name], idx, floor)
     gain_b = boot_gain(before, sums[best.name], idx, floor)
     # Either way, an effect whose own structured part is below the practical level is not

@@ -75,6 +75,10 @@ CONFOUNDED_LOCAL_STARTS = 2
 #: materially lower on the held-out part (it once ended far worse there) and cost 6-9 %
 #: of a diagnosis's CPU (docs/benchmarks.md, "every family's second local fit").
 TWO_LOCAL_FITS = ("cylinder_friction",)
+#: An effect's fit moved a tolerance off the bound the calibration left it at when it moved
+#: it by this share of the band (a friction's fit took viscous friction from +30 % to +19 %
+#: or below; a hose's left volumes at +14.3-14.6 % of +15 %, where nothing stood in).
+MOVED_OFF = 0.25
 
 Progress = Callable[[str], None]
 
@@ -114,7 +118,7 @@ class Diagnosis:
     #: A ``sensor_lag`` verdict checked against the engine's ripple (``lagcheck.py``): the
     #: JSON's ``lag_check``.
     lag_check: dict | None = None
-    #: Per candidate name: the calibration absorbed it (``_absorbed``).
+    #: Per candidate name: the calibration absorbed it (``calibration_absorbed``).
     absorbed: dict[str, Absorbed] = field(default_factory=dict)
 
 
@@ -343,7 +347,7 @@ def _diagnose(
             say(f"pair {c.name}: held-out reduction {c.heldout_reduction:+.2f}")
     lap("pairs")
 
-    absorbed = {} if noise_only else _absorbed(singles, base.factors, readings)
+    absorbed = {} if noise_only else calibration_absorbed(singles, base.factors, readings)
     against = {name: a.sums for name, a in absorbed.items()}
     d = decide(
         noise_only,
@@ -476,20 +480,21 @@ class Absorbed:
     sums: tuple[S.SegmentSums, S.SegmentSums]
 
 
-def _absorbed(
+def calibration_absorbed(
     singles: Sequence[Candidate], factors: dict[str, float], readings: _Readings
 ) -> dict[str, Absorbed]:
     """Per physical single effect whose fit moved a confounded tolerance off the bound the
-    calibration (``factors``) left it at: what its own tolerances do without it (one held-out
-    simulation each; none on a machine whose calibration is inside its bands)."""
+    calibration (``factors``) left it at (by ``MOVED_OFF`` of the band): what its own
+    tolerances do without it (one held-out simulation each; none on a machine whose
+    calibration is inside its bands)."""
     out = {}
     for c in singles:
         name = c.effects[0].name
         moved = {
-            t: (factors.get(t, 1.0), c.factors.get(t, 1.0))
+            t: (f0, f1)
             for t in CONFOUNDED.get(name, ())
-            if (side := cal_mod.bound_side(t, factors.get(t, 1.0))) != 0
-            and cal_mod.bound_side(t, c.factors.get(t, 1.0)) != side
+            if cal_mod.bound_side(t, f0 := factors.get(t, 1.0)) != 0
+            and abs((f1 := c.factors.get(t, 1.0)) - f0) >= MOVED_OFF * cal_mod.BY_NAME[t].band
         }
         if moved and len(c.effects) == 1:
             out[c.name] = Absorbed(moved, readings.held(c.prep).both_sums(c.factors, ()))

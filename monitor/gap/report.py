@@ -198,9 +198,10 @@ def build_report(diag: Diagnosis, machine: MachineParams, traces: Traces) -> dic
 
 
 def _absorbed(diag: Diagnosis) -> dict:
-    """The JSON ``absorbed``: the named effect's tolerances that the calibration had taken to
-    their bound in its place (``diagnose._absorbed``), and how much of the held-out gap of
-    its own tolerances without it the effect removes (what it was judged on)."""
+    """The JSON ``absorbed``: the named effect's tolerances that the calibration had taken
+    to their bound in its place (``diagnose.calibration_absorbed``), and the share of the
+    held-out gap of its own tolerances without it that the effect removes (what it was
+    judged on)."""
     a = diag.absorbed.get(diag.chosen.name) if diag.chosen is not None else None
     if a is None or diag.verdict not in {e.name for e in diag.chosen.effects}:
         return {}
