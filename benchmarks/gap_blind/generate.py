@@ -92,6 +92,14 @@ def record(p, post, rng, duration_s, temps, with_rodpos):
     return table
 
 
+def rodpos_column(rng, post: dict) -> bool:
+    """Whether the recording carries RodPos: 70 % of them do; every one whose sensor error is
+    on RodPos does (without the column the error cannot be seen: that recording is a
+    healthy machine's).  One draw either way, so the other recordings stay the same."""
+    drawn = bool(rng.random() > 0.3)
+    return drawn or post.get("signal") == "RodPos"
+
+
 def write_csv(path: Path, table: dict) -> None:
     names = list(table)
     data = np.column_stack([table[k] for k in names])
@@ -125,7 +133,7 @@ def generate(out: Path, seed: int, n_per_effect: int, tolerances, duration_s=300
         elif eff == "unexplained":
             fn, expected = OUT_OF_CATALOGUE[form]
             fn(rng, p, temps)
-        with_rodpos = bool(rng.random() > 0.3)
+        with_rodpos = rodpos_column(rng, post)
         name = f"r{i:03d}_{eff}_{form}_tol{tol}.csv"
         write_csv(out / name, record(p, post, rng, duration_s, temps, with_rodpos))
         keys.append({"file": name, "effect": eff, "formulation": form,
