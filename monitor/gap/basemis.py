@@ -36,6 +36,7 @@ from scipy.ndimage import uniform_filter1d
 from monitor.gap.prepare import Prepared
 from monitor.gap.score import SegmentSums, gap, segment_sums
 from monitor.gap.segments import Segment
+from monitor.gap.shrink import boot_mse
 from monitor.signals import SAMPLE_RATE_HZ
 
 #: Width of the moving average that keeps the structured part (s): first null at 5 Hz.
@@ -72,6 +73,13 @@ def practically_small(smooth_nominal: SegmentSums, floor_s: np.ndarray) -> bool:
     """Every signal's structured residual (above the noise) below ``PRACTICAL_NRMSE``."""
     excess = np.maximum(smooth_nominal.mse() - floor_s, 0.0)
     return bool(np.all(np.sqrt(excess) < PRACTICAL_NRMSE))
+
+
+def small_share(smooth_nominal: SegmentSums, idx: np.ndarray, floor_s: np.ndarray) -> float:
+    """Share of block-bootstrap resamples (``idx``) of the held-out segments in which every
+    signal's structured residual is below ``PRACTICAL_NRMSE``."""
+    excess = np.maximum(boot_mse(smooth_nominal, idx) - floor_s, 0.0)
+    return float(np.mean(np.all(np.sqrt(excess) < PRACTICAL_NRMSE, axis=1)))
 
 
 def removed_nrmse(
