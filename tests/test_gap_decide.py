@@ -188,3 +188,24 @@ def test_an_effect_the_calibration_absorbed_is_judged_against_its_own_tolerances
     other = decide(False, [c], [], all_sums, calibrated, IDX, FLOOR,
                    against={"entrained_air": (own_without, own_without)})  # fmt: skip
     assert other.verdict == "unexplained"
+
+
+def test_a_runner_up_the_calibration_absorbed_is_named_when_it_ties_the_calibration():
+    # The calibration's bound did all the effect's work: the effect, refitted with its own
+    # tolerances, about ties the calibrated simulator (gap 0.099 per signal against 0.1, so
+    # ranked behind a sensor term that removes (0.1 - 0.085) / 0.1 = 15 %, too little to
+    # name).  Against its own tolerances without it (0.2 per signal) it removes
+    # (0.2 - 0.099) / 0.2 = 50.5 % in every segment: named.  The same runner-up clearly
+    # worse than the calibrated simulator (0.15 per signal) is not.
+    calibrated = sums([0.11] * N_SEG)
+    own_without = sums([0.21] * N_SEG)
+    sensor = sums([0.095] * N_SEG)
+    for friction_mse, verdict in ((0.109, "cylinder_friction"), (0.16, "unexplained")):
+        friction = sums([friction_mse] * N_SEG)
+        s = candidate(("sensor_lag",), sensor, calibrated, 1.0)
+        f = candidate(("cylinder_friction",), friction, calibrated, 2.0)
+        all_sums = {"sensor_lag": sensor, "cylinder_friction": friction}
+        against = {"cylinder_friction": (own_without, own_without)}
+        d = decide(False, [s, f], [], all_sums, calibrated, IDX, FLOOR, against=against)
+        assert d.verdict == verdict
+        assert d.chosen is (f if verdict == "cylinder_friction" else None)
