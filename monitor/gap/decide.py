@@ -34,7 +34,7 @@ the effect's own fit moved it off (``diagnose.calibration_absorbed``), the bound
 for the effect: the effect is judged against the simulator with its own tolerances and
 without it (``against``), not against the calibrated one that had soaked part of it up.
 A 400-700 N Coulomb friction removed 0.010-0.019 NRMSE from the structured gap of a
-simulator whose viscous friction sat at +30 %, 0.022-0.036 from its own tolerances'.
+simulator whose viscous friction sat at +30 %, 0.022-0.036 from its own tolerances.
 When the best is not named, a runner-up the calibration absorbed that does as well as the
 calibrated simulator is judged that way too (``_absorbed_runner``).
 """
