@@ -70,3 +70,37 @@ def test_nothing_is_absorbed_inside_the_bands_or_where_the_effect_keeps_the_boun
     for singles, calibration in cases:
         assert calibration_absorbed(singles, calibration, readings) == {}
     assert readings.calls == []
+
+
+def test_the_json_and_summary_say_which_bound_stood_in_and_what_the_effect_removed():
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from monitor.gap.diagnose import Absorbed
+    from monitor.gap.report import _absorbed, _absorbed_line
+    from monitor.gap.score import SegmentSums
+
+    floor = np.array([0.01, 0.01])
+    # Its own tolerances without it: mean squared residual 0.21 per signal, a gap of 0.4;
+    # the effect leaves 0.1: it removes 75 % of that gap.
+    without = SegmentSums(np.full((1, 2), 21.0), np.full((1, 2), 100.0))
+    friction = _c("cylinder_friction", viscous_friction=0.8)
+    friction.heldout_gap = 0.1
+    diag = SimpleNamespace(
+        verdict="cylinder_friction",
+        chosen=friction,
+        floor=floor,
+        absorbed={friction.name: Absorbed({"viscous_friction": (1.3, 0.8)}, (without, without))},
+    )
+    block = _absorbed(diag)["absorbed"]
+    assert block == {
+        "effect": "cylinder_friction",
+        "tolerances": {"viscous_friction": {"calibration_pct": 30.0, "with_effect_pct": -20.0}},
+        "heldout_reduction": 0.75,
+    }
+    line = _absorbed_line(block)
+    assert "viscous_friction +30 % (its bound), -20 % when fitted" in line and "75 %" in line
+    # Nothing to say when the verdict is another effect, or nothing was absorbed.
+    assert _absorbed(SimpleNamespace(**{**vars(diag), "verdict": "none", "chosen": None})) == {}
+    assert _absorbed(SimpleNamespace(**{**vars(diag), "absorbed": {}})) == {}
