@@ -6,8 +6,14 @@ is at its bound."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
+import numpy as np
+
 from monitor.gap.candidates import Candidate
-from monitor.gap.diagnose import calibration_absorbed
+from monitor.gap.diagnose import Absorbed, calibration_absorbed
+from monitor.gap.report import _absorbed, _absorbed_line
+from monitor.gap.score import SegmentSums
 from monitor.sim.effects import Effect
 
 
@@ -73,14 +79,6 @@ def test_nothing_is_absorbed_inside_the_bands_or_where_the_effect_keeps_the_boun
 
 
 def test_the_json_and_summary_say_which_bound_stood_in_and_what_the_effect_removed():
-    from types import SimpleNamespace
-
-    import numpy as np
-
-    from monitor.gap.diagnose import Absorbed
-    from monitor.gap.report import _absorbed, _absorbed_line
-    from monitor.gap.score import SegmentSums
-
     floor = np.array([0.01, 0.01])
     # Its own tolerances without it: mean squared residual 0.21 per signal, a gap of 0.4;
     # the effect leaves 0.1: it removes 75 % of that gap.

@@ -276,7 +276,7 @@ def _absorbed_runner(
             or gain_share(nominal, sums[c.name], idx, floor) <= 1 - SIGNIFICANT
         ):
             continue
-        d = decide(False, [c], [], sums, nominal, idx, floor, structured, {c.name: against[c.name]})
+        d = decide(False, [c], [], sums, nominal, idx, floor, structured, against)
         if d.chosen is not None:
             return d
     return None

@@ -202,8 +202,9 @@ def _absorbed(diag: Diagnosis) -> dict:
     to their bound in its place (``diagnose.calibration_absorbed``), and the share of the
     held-out gap of its own tolerances without it that the effect removes (what it was
     judged on)."""
+    # Keyed by single effects: a pair or no verdict has none.
     a = diag.absorbed.get(diag.chosen.name) if diag.chosen is not None else None
-    if a is None or diag.verdict not in {e.name for e in diag.chosen.effects}:
+    if a is None:
         return {}
     without = gap(a.sums[0].mse(), diag.floor)
     return {
