@@ -321,7 +321,12 @@ class BusReader:
             self.recovery.reopen_attempts += 1
             log.warning("CAN bus %s (%s); reopening in %.3g s",
                         "off" if self.link == BUS_OFF else "down", detail, delay)  # fmt: skip
-            if self._sleep(delay) or self.opener is None:
+            stopping = self._sleep(delay)
+            # A send that failed before this outage was known reported it too: it is the
+            # same outage (nothing is sent while the bus is down), not a new one.
+            while not self._reports.empty():
+                self._reports.get_nowait()
+            if stopping or self.opener is None:
                 return  # stopping, or a bus we cannot reopen: try it again as it is
             try:
                 self.bus.shutdown()
