@@ -50,6 +50,34 @@ def test_a_straight_load_keeps_the_linear_member_when_size_has_a_price():
     assert n_params(c.effects, c.members) == 1
 
 
+def _hose_residual(cylinder_cm3_bar: float, line_cm3_bar: float):
+    """Capacitance errors (cm^3/bar x 100) on a cylinder line and the pump line.  A series
+    wall modulus E adds 0.3 L / E = 0.03 / E_GPa cm^3/bar to a cylinder line and
+    0.5 L / E = 0.05 / E_GPa to the pump line (the nominal volumes)."""
+
+    def residual(factors, effects):
+        e = effects[0]
+        if e.labels["law"] == "added_capacitance":
+            cyl, line = (e.params["cylinder_capacitance_cm3_per_bar"],
+                         e.params["line_capacitance_cm3_per_bar"])  # fmt: skip
+        else:
+            cyl, line = 0.03 / e.params["wall_modulus_gpa"], 0.05 / e.params["wall_modulus_gpa"]
+        return 100.0 * np.array([cyl - cylinder_cm3_bar, line - line_cm3_bar])
+
+    return residual
+
+
+def test_cylinder_hoses_are_kept_only_above_their_floor():
+    c = fit_family("hose_compliance", _hose_residual(0.03, 0.0), {})
+    assert member_names(c) == {"hose_compliance": "cylinder_hoses"}
+    assert c.effects[0].params["cylinder_capacitance_cm3_per_bar"] == pytest.approx(0.03, 1e-3)
+    # Less than the least hose (0.01 cm^3/bar): that member fits better (0.006 off against
+    # the series' 0.010 and 0.017 at 3 GPa) but ends on its floor, so the series stands.
+    c = fit_family("hose_compliance", _hose_residual(0.004, 0.0), {})
+    assert member_names(c) == {"hose_compliance": "series_modulus"}
+    assert c.effects[0].params["wall_modulus_gpa"] == pytest.approx(3.0, rel=1e-3)
+
+
 def test_every_member_knob_is_a_catalogue_parameter_within_its_range():
     from monitor.sim.effects import CATALOGUE
 
@@ -90,3 +118,23 @@ def test_entrained_air_on_a_machine_with_larger_volumes_is_found_with_one_local_
     d = diagnose(rec, M, effects=("entrained_air", "hose_compliance", "load_variation"))
     assert d.verdict == "entrained_air"
     assert d.singles[0].effects[0].params["air_fraction"] == pytest.approx(0.02, rel=0.3)
+
+
+def test_hoses_on_the_cylinder_lines_are_named_with_the_cylinder_hoses_member():
+    # Hoses that add a capacitance of their own to the cylinder lines and none to the pump
+    # line: the series modulus softens every volume in proportion to it, the pump line's
+    # most, and cannot draw that; the family's second member can.
+    M = load_machine()
+    machine = apply(M, {"mass": 0.97, "valve_gain": 1.02})
+    fx = Effect.make(
+        "hose_compliance", law="added_capacitance", line_capacitance_cm3_per_bar=0.0,
+        cylinder_capacitance_cm3_per_bar=0.03,
+    )  # fmt: skip
+    rec = simulate(make_cycle("boom", 120.0, 8), machine, effects=[fx], seed=8)
+    d = diagnose(rec, M, effects=("entrained_air", "hose_compliance", "load_variation"))
+    assert d.verdict == "hose_compliance"
+    best = d.singles[0]
+    assert member_names(best)["hose_compliance"] == "cylinder_hoses"
+    p = best.effects[0].params
+    assert p["cylinder_capacitance_cm3_per_bar"] == pytest.approx(0.03, rel=0.3)
+    assert p["line_capacitance_cm3_per_bar"] == 0.0

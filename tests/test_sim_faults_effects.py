@@ -229,6 +229,47 @@ def test_hose_compliance_lowers_the_natural_frequency():
     assert soft < 0.9 * f_peak([])
 
 
+def _added(line_cm3_bar: float, cylinder_cm3_bar: float) -> Effect:
+    return Effect.make("hose_compliance", law="added_capacitance",
+                       line_capacitance_cm3_per_bar=line_cm3_bar,
+                       cylinder_capacitance_cm3_per_bar=cylinder_cm3_bar)  # fmt: skip
+
+
+def test_hoses_as_added_capacitances_match_the_series_modulus_they_stand_for():
+    # A wall modulus E adds V/E to each node: 0.5 L / 0.5 GPa = 1e-12 m^3/Pa = 0.1 cm^3/bar
+    # on the pump line, 0.3 L / 0.5 GPa = 0.06 cm^3/bar on each cylinder line.
+    assert M.line_volume_m3 == 0.5e-3 and M.dead_volume_a_m3 == M.dead_volume_b_m3 == 0.3e-3
+    cmds = commands([(0.5, 1.5, 60.0), (3.0, 3.8, -50.0)], 5.0)
+    series = simulate(cmds, M, effects=[Effect.make("hose_compliance", wall_modulus_gpa=0.5)],
+                      seed=None)  # fmt: skip
+    added = simulate(cmds, M, effects=[_added(0.1, 0.06)], seed=None)
+    for sig in ("PP", "PA", "PB", "QP", "RodPosTrue"):
+        assert np.allclose(added[sig], series[sig], rtol=1e-9, atol=1e-9), sig
+    nominal = simulate(cmds, M, seed=None)
+    assert np.abs(series["PA"] - nominal["PA"]).max() > 1.0  # the hoses do show in PA
+
+
+def test_only_the_cylinder_lines_capacitance_softens_the_closed_cylinder():
+    # Spool pulsed, then closed: the rod rings against its chambers' oil alone, so a hose
+    # on the pump line leaves that ring where it was and one on the cylinder lines lowers
+    # it.  By hand at the rod's 0.25 m: chamber volumes 1.079 and 0.825 L, oil capacitances
+    # V/beta 0.0720 and 0.0550 cm^3/bar; stiffness A^2/C summed over the chambers falls by
+    # 0.520 with 0.06 cm^3/bar more on each, so the frequency by sqrt(0.520) = 0.721 (and
+    # by 0.985 with the 0.002 cm^3/bar left on them).
+    cmds = commands([(0.1, 0.13, 10.0)], 1.5)
+
+    def f_peak(effects):
+        tr = run_plant(cmds, M, effects=effects, rod_pos0_m=0.25, record_period_s=None)
+        keep = tr.t_s > 0.3
+        v = tr.rod_vel_m_s[keep] - tr.rod_vel_m_s[keep].mean()
+        n = 16 * len(v)
+        return np.fft.rfftfreq(n, tr.t_s[1] - tr.t_s[0])[np.abs(np.fft.rfft(v, n)).argmax()]
+
+    bare = f_peak([])
+    assert f_peak([_added(0.1, 0.002)]) / bare == pytest.approx(0.985, abs=0.02)
+    assert f_peak([_added(0.002, 0.06)]) / bare == pytest.approx(0.721, abs=0.03)
+
+
 def test_cylinder_friction_needs_more_pressure_to_move():
     cmds = commands([(0.5, 3.0, 15.0)], 3.0)
     nominal = simulate(cmds, M, seed=None)

@@ -72,6 +72,16 @@ class Member:
     name: str
     knobs: tuple[Knob, ...]
     fixed: tuple[tuple[str, float | str], ...] = ()
+    #: A knob whose lower bound is the least this formulation stands for: a fit that ends
+    #: there asked for less, which the family's default answers (``families.fit_family``).
+    floor: str | None = None
+
+    def at_floor(self, effect: Effect) -> bool:
+        """Whether ``effect`` (fitted with this member) ended on the floor knob's bound."""
+        if self.floor is None:
+            return False
+        low = next(k.low for k in self.knobs if k.name == self.floor)
+        return float(effect.params[self.floor]) <= low * (1.0 + 1e-6)
 
 
 #: Name of the formulation ``KNOBS`` fits, per effect (the catalogue's defaults otherwise).
@@ -80,6 +90,7 @@ DEFAULT_MEMBER: dict[str, str] = {
     "oil_viscosity": "pump_leak",
     "cylinder_friction": "stribeck",
     "load_variation": "linear",
+    "hose_compliance": "series_modulus",
 }
 
 

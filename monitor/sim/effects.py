@@ -218,6 +218,31 @@ CATALOGUE: dict[str, EffectSpec] = {
                     3.0,
                     "effective wall modulus of the hoses; 1/beta = 1/beta_oil + 1/E_wall",
                 ),
+                ParamSpec(
+                    "line_capacitance_cm3_per_bar",
+                    "cm^3/bar",
+                    0.05,
+                    0.0,
+                    5.0,
+                    "law added_capacitance: hose capacitance on the pump line",
+                ),
+                ParamSpec(
+                    "cylinder_capacitance_cm3_per_bar",
+                    "cm^3/bar",
+                    0.05,
+                    0.0,
+                    5.0,
+                    "law added_capacitance: hose capacitance on each cylinder line (A and B)",
+                ),
+            ),
+            (
+                ChoiceSpec(
+                    "law",
+                    ("series_modulus", "added_capacitance"),
+                    "series_modulus",
+                    "series_modulus: the walls soften each volume's oil (wall_modulus_gpa); "
+                    "added_capacitance: hoses add a capacitance of their own per line",
+                ),
             ),
         ),
         EffectSpec(

@@ -32,7 +32,8 @@ PISTON_LEAK, VALVE_LEAK = 40, 41  # m^3/(s Pa) at 40 degC, laminar: divided by n
 STRIBECK_EXP = 42  # -, exp(-|v/vs|^e): 2 Gaussian (default), 1 exponential
 CURV = 43  # N/m^2, gravity load curvature about XREF
 AIR_LAW, AIR_PCRIT = 44, 45  # 0 free air (Simscape), 1 air dissolving up to AIR_PCRIT (Pa abs)
-# 46-49 free.
+HOSE_C_LINE, HOSE_C_CYL = 46, 47  # m^3/Pa, hose law added_capacitance
+# 48-49 free.
 # 50-69: data-driven corrections (monitor/sim/corrections.py, the ``suggestion`` of an
 # ``unexplained`` diagnosis).  Every one is zero in the nominal model, and a zero one
 # leaves the simulation bit-identical (its arithmetic is skipped).
@@ -74,8 +75,9 @@ def _clip(v: float, lo: float, hi: float) -> float:
 
 
 @jit(inline="always")
-def _compliance(p: float, vol: float, hose_vol: float, prm: np.ndarray) -> float:
-    """Hydraulic capacitance dV/dp of a node (m^3/Pa) at gauge pressure p."""
+def _compliance(p: float, vol: float, hose_vol: float, hose_c: float, prm: np.ndarray) -> float:
+    """Hydraulic capacitance dV/dp of a node (m^3/Pa) at gauge pressure p; with hoses, the
+    walls' share of ``hose_vol`` and the hose's own capacitance ``hose_c``."""
     beta = prm[BETA]
     if prm[AIR_ON] > 0.0:
         # Simscape's entrained-air modulus; p absolute, never below 1 kPa.  The air's
@@ -94,7 +96,7 @@ def _compliance(p: float, vol: float, hose_vol: float, prm: np.ndarray) -> float
     else:
         c = vol / beta
     if prm[HOSE_ON] > 0.0:
-        c += hose_vol / prm[E_WALL]
+        c += hose_vol / prm[E_WALL] + hose_c
     return c
 
 
@@ -239,7 +241,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
     q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
     if prm[CORR_ON] > 0.0:
         q_relief += _leak(prm[LEAK_PT_LIN], prm[LEAK_PT_SQRT], pp - ptank, dpl)
-    dy[S_PP] = (qp - q_relief - q_pa - q_pb) / _compliance(pp, prm[V_LINE], prm[V_LINE], prm)
+    c_line = _compliance(pp, prm[V_LINE], prm[V_LINE], prm[HOSE_C_LINE], prm)
+    dy[S_PP] = (qp - q_relief - q_pa - q_pb) / c_line
 
     # Rod: pressure force against gravity (optionally position dependent) and friction.
     f_hyd = pa * prm[AA] - pb * prm[AB]
@@ -268,8 +271,10 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
 
     vol_a = prm[V0A] + prm[AA] * x
     vol_b = prm[V0B] + prm[AB] * (stroke - x)
-    dy[S_PA] = (q_pa - q_at - q_il - prm[AA] * v) / _compliance(pa, vol_a, prm[V0A], prm)
-    dy[S_PB] = (q_pb - q_bt + q_il + prm[AB] * v) / _compliance(pb, vol_b, prm[V0B], prm)
+    c_a = _compliance(pa, vol_a, prm[V0A], prm[HOSE_C_CYL], prm)
+    c_b = _compliance(pb, vol_b, prm[V0B], prm[HOSE_C_CYL], prm)
+    dy[S_PA] = (q_pa - q_at - q_il - prm[AA] * v) / c_a
+    dy[S_PB] = (q_pb - q_bt + q_il + prm[AB] * v) / c_b
     return qp
 
 

@@ -112,7 +112,12 @@ def _pack_effect(prm: np.ndarray, effect: Effect) -> None:
         prm[K.TAU_PUMP] = p["time_constant_ms"] * 1e-3
     elif name == "hose_compliance":
         prm[K.HOSE_ON] = 1.0
-        prm[K.E_WALL] = p["wall_modulus_gpa"] * 1e9
+        if effect.labels.get("law", "series_modulus") == "added_capacitance":
+            prm[K.E_WALL] = math.inf  # no wall term: the lines' own capacitances instead
+            prm[K.HOSE_C_LINE] = p["line_capacitance_cm3_per_bar"] * 1e-6 / BAR
+            prm[K.HOSE_C_CYL] = p["cylinder_capacitance_cm3_per_bar"] * 1e-6 / BAR
+        else:
+            prm[K.E_WALL] = p["wall_modulus_gpa"] * 1e9
     elif name == "load_variation":
         prm[K.SLOPE] = p["slope_n_per_mm"] * 1e3
         prm[K.CURV] = p["curvature_n_per_mm2"] * 1e6
