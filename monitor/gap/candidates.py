@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.gap.calibrate import TOLERANCES
+from monitor.gap.calibrate import AT_BOUND_SHARE, TOLERANCES
 from monitor.gap.fit import MAX_ITERATIONS, Knob, default_starts, fit
 from monitor.gap.prepare import Prepared
 from monitor.sim.effects import CATALOGUE, Effect
@@ -77,11 +77,12 @@ class Member:
     floor: str | None = None
 
     def at_floor(self, effect: Effect) -> bool:
-        """Whether ``effect`` (fitted with this member) ended on the floor knob's bound."""
+        """Whether ``effect`` (fitted with this member) ended on the floor knob's bound (as
+        close to it as a tolerance at its bound: the solver stops just inside)."""
         if self.floor is None:
             return False
-        low = next(k.low for k in self.knobs if k.name == self.floor)
-        return float(effect.params[self.floor]) <= low * (1.0 + 1e-6)
+        knob = next(k for k in self.knobs if k.name == self.floor)
+        return knob.unit(float(effect.params[self.floor])) <= 1.0 - AT_BOUND_SHARE
 
 
 #: Name of the formulation ``KNOBS`` fits, per effect (the catalogue's defaults otherwise).
