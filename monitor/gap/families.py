@@ -136,8 +136,10 @@ def fit_family(
     """Fit effect ``name`` (with the ``tolerances`` knobs jointly): every member is scored
     at its starting points, the ``LOCAL_MEMBERS`` best are fitted, and the one ``judge``
     rates lowest is kept (the held-out criterion in a diagnosis: on the fitted part the
-    members of a friction differed by less than its noise; default: the fit cost).  The
-    candidate carries its member.  ``base_cost``: the fit cost without the effect."""
+    members of a friction differed by less than its noise; default: the fit cost).  A
+    member whose fit ends on its floor (``Member.floor``) is not kept, and the default is
+    fitted when no other is left.  The candidate carries its member.  ``base_cost``: the fit
+    cost without the effect."""
     family = members_of(name)
     if len(family) == 1:
         return fit_candidate([name], residual, factors, tolerances, None, local_starts=local_starts)
