@@ -124,7 +124,7 @@ def test_dissolving_air_is_stiff_above_its_pressure_and_softer_below():
         p, h = p_bar * 1e5, 10.0
         dg = (g(p + h) - g(p - h)) / (2 * h)
         expected = (1 / beta - dg) / (1 + g(p))
-        assert K._compliance(p, 1.0, 0.0, prm) == pytest.approx(expected, rel=1e-5)
-    assert K._compliance(40e5, 1.0, 0.0, prm) == pytest.approx(1 / beta, rel=1e-12)
+        assert K._compliance(p, 1.0, 0.0, 0.0, prm) == pytest.approx(expected, rel=1e-5)
+    assert K._compliance(40e5, 1.0, 0.0, 0.0, prm) == pytest.approx(1 / beta, rel=1e-12)
     free = pack_params(M, [Effect.make("entrained_air", air_fraction=a, polytropic_index=n)])
-    assert K._compliance(10e5, 1.0, 0.0, prm) > K._compliance(10e5, 1.0, 0.0, free)
+    assert K._compliance(10e5, 1.0, 0.0, 0.0, prm) > K._compliance(10e5, 1.0, 0.0, 0.0, free)
