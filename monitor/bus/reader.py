@@ -231,12 +231,7 @@ class BusReader:
             self._reports.put(f"send: {exc}")
 
     def take_events(self) -> list[BusEvent]:
-        out = []
-        while True:
-            try:
-                out.append(self.events.get_nowait())
-            except queue.Empty:
-                return out
+        return _drain(self.events)
 
     def _run(self) -> None:
         counts, put = self.counts, self.queue.put_nowait
@@ -324,8 +319,7 @@ class BusReader:
             stopping = self._sleep(delay)
             # A send that failed before this outage was known reported it too: it is the
             # same outage (nothing is sent while the bus is down), not a new one.
-            while not self._reports.empty():
-                self._reports.get_nowait()
+            _drain(self._reports)
             if stopping or self.opener is None:
                 return  # stopping, or a bus we cannot reopen: try it again as it is
             try:
@@ -357,3 +351,13 @@ def _bring_up_hint(channel: str, bitrate: int) -> str:
         return (f"`sudo modprobe vcan && sudo ip link add dev {channel} type vcan && "
                 f"sudo ip link set {channel} up`")  # fmt: skip
     return f"`sudo ip link set {channel} up type can bitrate {bitrate}`"
+
+
+def _drain(q: queue.Queue) -> list:
+    """Everything queued right now, without waiting."""
+    out = []
+    while True:
+        try:
+            out.append(q.get_nowait())
+        except queue.Empty:
+            return out
