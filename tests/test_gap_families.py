@@ -90,17 +90,23 @@ def test_every_member_knob_is_a_catalogue_parameter_within_its_range():
                 assert spec.low <= k.low < k.high <= spec.high, (name, m.name, k.name)
 
 
+def _diagnosed(changes: dict[str, float], fx: Effect, seed: int, effects: tuple[str, ...]):
+    """A diagnosis, among ``effects``, of 120 s of boom cycles from the reference machine
+    with the tolerance ``changes`` and effect ``fx``."""
+    M = load_machine()
+    rec = simulate(make_cycle("boom", 120.0, seed), apply(M, changes), effects=[fx], seed=seed)
+    return diagnose(rec, M, effects=effects)
+
+
 def test_oil_leaking_across_the_valve_clearances_is_named_with_that_member():
     # Thin oil leaking across the spool's clearances (no pump leakage): the pump-leak
     # formulation alone cannot make the held pressure's drift; the family's can.
-    M = load_machine()
-    machine = apply(M, {"mass": 1.03, "viscous_friction": 0.96, "valve_gain": 1.02})
     fx = Effect.make(
         "oil_viscosity", pump_leak_lpm_per_100bar=0.0, friction_share=0.0,
         valve_leak_lpm_per_100bar=0.3,
     )  # fmt: skip
-    rec = simulate(make_cycle("boom", 120.0, 4), machine, effects=[fx], seed=4)
-    d = diagnose(rec, M, effects=("oil_viscosity", "spool_dynamics", "load_variation"))
+    d = _diagnosed({"mass": 1.03, "viscous_friction": 0.96, "valve_gain": 1.02}, fx, 4,
+                   ("oil_viscosity", "spool_dynamics", "load_variation"))  # fmt: skip
     assert d.verdict == "oil_viscosity"
     best = d.singles[0]
     assert member_names(best)["oil_viscosity"] in ("seal_and_valve", "all_paths")
@@ -111,11 +117,9 @@ def test_entrained_air_on_a_machine_with_larger_volumes_is_found_with_one_local_
     # Air softens the oil as larger volumes do: the volumes are fitted with it, and since
     # only friction keeps a second local fit (``TWO_LOCAL_FITS``), one local fit from the
     # best start must still find the air that was put in.
-    M = load_machine()
-    machine = apply(M, {"volumes": 1.05, "mass": 0.97})
     fx = Effect.make("entrained_air", air_fraction=0.02)
-    rec = simulate(make_cycle("boom", 120.0, 6), machine, effects=[fx], seed=6)
-    d = diagnose(rec, M, effects=("entrained_air", "hose_compliance", "load_variation"))
+    d = _diagnosed({"volumes": 1.05, "mass": 0.97}, fx, 6,
+                   ("entrained_air", "hose_compliance", "load_variation"))  # fmt: skip
     assert d.verdict == "entrained_air"
     assert d.singles[0].effects[0].params["air_fraction"] == pytest.approx(0.02, rel=0.3)
 
@@ -124,14 +128,12 @@ def test_hoses_on_the_cylinder_lines_are_named_with_the_cylinder_hoses_member():
     # Hoses that add a capacitance of their own to the cylinder lines and none to the pump
     # line: the series modulus softens every volume in proportion to it, the pump line's
     # most, and cannot draw that; the family's second member can.
-    M = load_machine()
-    machine = apply(M, {"mass": 0.97, "valve_gain": 1.02})
     fx = Effect.make(
         "hose_compliance", law="added_capacitance", line_capacitance_cm3_per_bar=0.0,
         cylinder_capacitance_cm3_per_bar=0.03,
     )  # fmt: skip
-    rec = simulate(make_cycle("boom", 120.0, 8), machine, effects=[fx], seed=8)
-    d = diagnose(rec, M, effects=("entrained_air", "hose_compliance", "load_variation"))
+    d = _diagnosed({"mass": 0.97, "valve_gain": 1.02}, fx, 8,
+                   ("entrained_air", "hose_compliance", "load_variation"))  # fmt: skip
     assert d.verdict == "hose_compliance"
     best = d.singles[0]
     assert member_names(best)["hose_compliance"] == "cylinder_hoses"
