@@ -255,8 +255,8 @@ def test_only_the_cylinder_lines_capacitance_softens_the_closed_cylinder():
     # on the pump line leaves that ring where it was and one on the cylinder lines lowers
     # it.  By hand at the rod's 0.25 m: chamber volumes 1.079 and 0.825 L, oil capacitances
     # V/beta 0.0720 and 0.0550 cm^3/bar; stiffness A^2/C summed over the chambers falls to
-    # 0.520 of itself with 0.06 cm^3/bar more on each, so the frequency to sqrt(0.520) = 0.721 (and
-    # to 0.985 with the 0.002 cm^3/bar left on them).
+    # 0.520 of itself with 0.06 cm^3/bar more on each, so the frequency falls to
+    # sqrt(0.520) = 0.721 (and to 0.985 with the 0.002 cm^3/bar left on them).
     bare = _ring_hz([])
     assert _ring_hz([_added(0.1, 0.002)]) / bare == pytest.approx(0.985, abs=0.02)
     assert _ring_hz([_added(0.002, 0.06)]) / bare == pytest.approx(0.721, abs=0.03)
