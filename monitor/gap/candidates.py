@@ -75,6 +75,18 @@ class Member:
     #: A knob whose lower bound is the least this formulation stands for: a fit that ends
     #: there asked for less, which the family's default answers (``families.fit_family``).
     floor: str | None = None
+    #: Starting points (knob values in their units, in ``knobs``' order) instead of the
+    #: fit's default low-middle-high ones: for objectives with many minima along a knob,
+    #: such as a ringing's frequency.
+    starts: tuple[tuple[float, ...], ...] = ()
+
+    def start_units(self) -> list[np.ndarray]:
+        """The starting points in the unit interval of each knob."""
+        if not self.starts:
+            return default_starts(len(self.knobs))
+        return [
+            np.array([k.unit(v) for k, v in zip(self.knobs, p, strict=True)]) for p in self.starts
+        ]
 
     def at_floor(self, effect: Effect) -> bool:
         """Whether ``effect`` (fitted with this member) ended on the floor knob's bound (as
@@ -92,6 +104,7 @@ DEFAULT_MEMBER: dict[str, str] = {
     "cylinder_friction": "stribeck",
     "load_variation": "linear",
     "hose_compliance": "series_modulus",
+    "pump_control_dynamics": "first_order",
 }
 
 
@@ -186,17 +199,19 @@ def fit_candidate(
         return f, fx
 
     start_points = None
-    if starts is None and tolerances:
+    own_starts = len(mem) == 1 and bool(mem[0].starts)
+    if starts is None and (tolerances or own_starts):
         # The effect's default starts with the tolerances both where the calibration put
         # them and at nominal: a calibration that pushed a tolerance to its bound to mimic
         # the effect would otherwise start every fit in the effect's shadow.
+        units = mem[0].start_units() if own_starts else default_starts(len(eff_knobs))
         start_points = [
             {
                 **{k.name: (factors.get(k.name, 1.0) if at_cal else 1.0) for k in tolerances},
                 **{k.name: k.value(float(x)) for k, x in zip(eff_knobs, u, strict=True)},
             }
-            for at_cal in (True, False)
-            for u in default_starts(len(eff_knobs))
+            for at_cal in ((True, False) if tolerances else (True,))
+            for u in units
         ]
     elif starts is not None:
         start_points = []

@@ -79,6 +79,21 @@ MEMBERS: dict[str, tuple[Member, ...]] = {
             floor="cylinder_capacitance_cm3_per_bar",
         ),
     ),
+    "pump_control_dynamics": (
+        default_member("pump_control_dynamics"),  # a first-order lag
+        # A swashplate and its control piston as a mass-spring-damper (Merritt's servo
+        # pump): an underdamped one rings at a few hertz after each command step, a gap
+        # above 5 Hz that no lag can fill (the other team's second-order pumps: 18-48 %
+        # of their held-out gap with the lag alone).
+        Member(
+            "second_order",
+            (Knob("natural_freq_hz", 1.0, 30.0, log=True), Knob("damping_ratio", 0.1, 1.5)),
+            (("law", "second_order"),),
+            # A grid of ringing frequencies: the misfit has a minimum near every one whose
+            # period is a whole fraction of the true one, so the fit must start near it.
+            starts=tuple((f, z) for f in (3.0, 5.0, 8.0, 12.0, 18.0) for z in (0.3, 0.7)),
+        ),
+    ),
     "load_variation": (
         default_member("load_variation"),  # linear slope
         Member("curved", (*_SLOPE, Knob("curvature_n_per_mm2", -0.1, 0.1))),

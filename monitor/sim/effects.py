@@ -203,8 +203,36 @@ CATALOGUE: dict[str, EffectSpec] = {
         ),
         EffectSpec(
             "pump_control_dynamics",
-            "pump displacement (and so the compensator) follows its target with a first-order lag",
-            (ParamSpec("time_constant_ms", "ms", 80.0, 5.0, 500.0, "displacement time constant"),),
+            "pump displacement (and so the compensator) follows its target with a lag: "
+            "first order, or second order (a swashplate and its control piston that ring)",
+            (
+                ParamSpec("time_constant_ms", "ms", 80.0, 5.0, 500.0, "displacement time constant"),
+                ParamSpec(
+                    "natural_freq_hz",
+                    "Hz",
+                    5.0,
+                    0.5,
+                    50.0,
+                    "law second_order: natural frequency of the displacement control",
+                ),
+                ParamSpec(
+                    "damping_ratio",
+                    "-",
+                    0.7,
+                    0.05,
+                    2.0,
+                    "law second_order: damping ratio of the displacement control",
+                ),
+            ),
+            (
+                ChoiceSpec(
+                    "law",
+                    ("first_order", "second_order"),
+                    "first_order",
+                    "first_order: a lag (time_constant_ms); second_order: a mass-spring-damper "
+                    "response (natural_freq_hz, damping_ratio)",
+                ),
+            ),
         ),
         EffectSpec(
             "hose_compliance",

@@ -3,7 +3,7 @@
 Everything here is SI (Pa, m^3/s, m, kg, N, s).  Parameters travel as one float64 vector
 (indices below; ``pack.py`` fills it) so the sim-to-real tool can vary any of them without
 recompiling.  States: pump line pressure, chamber pressures, rod position and velocity,
-spool position and velocity, pump displacement fraction.
+spool position and velocity, pump displacement fraction and its rate.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ STRIBECK_EXP = 42  # -, exp(-|v/vs|^e): 2 Gaussian (default), 1 exponential
 CURV = 43  # N/m^2, gravity load curvature about XREF
 AIR_LAW, AIR_PCRIT = 44, 45  # 0 free air (Simscape), 1 air dissolving up to AIR_PCRIT (Pa abs)
 HOSE_C_LINE, HOSE_C_CYL = 46, 47  # m^3/Pa, hose law added_capacitance
-# 48-49 free.
+PUMP_WN, PUMP_ZETA = 48, 49  # rad/s, -: pump law second_order (PUMP_WN 0: first order)
 # 50-69: data-driven corrections (monitor/sim/corrections.py, the ``suggestion`` of an
 # ``unexplained`` diagnosis).  Every one is zero in the nominal model, and a zero one
 # leaves the simulation bit-identical (its arithmetic is skipped).
@@ -50,8 +50,8 @@ IN_TIME = 7  # the recording's time (s): a periodic correction is periodic in it
 N_INPUTS = 8
 
 # --- states ------------------------------------------------------------------------------
-S_PP, S_PA, S_PB, S_X, S_V, S_XS, S_VS, S_DISP = range(8)
-N_STATES = 8
+S_PP, S_PA, S_PB, S_X, S_V, S_XS, S_VS, S_DISP, S_DISP_RATE = range(9)
+N_STATES = 9
 
 # --- recorded outputs ----------------------------------------------------------------------
 R_PP, R_PA, R_PB, R_QP, R_X, R_V, R_XS = range(7)
@@ -128,7 +128,8 @@ def _pump_flow(y: np.ndarray, u: np.ndarray, prm: np.ndarray, target: float) -> 
     """Pump outlet flow QP (m^3/s) at displacement ``target`` (the lagged state instead with
     pump dynamics), less the viscosity-dependent internal leakage."""
     pp = max(y[S_PP], 0.0)
-    disp = y[S_DISP] if prm[PUMPDYN_ON] > 0.0 else target
+    # A ringing swashplate overshoots its target but not its stops.
+    disp = _clip(y[S_DISP], 0.0, 1.0) if prm[PUMPDYN_ON] > 0.0 else target
     qp = disp * prm[DISP_MAX] * u[IN_SPEED_RPS]
     if prm[VISC_ON] > 0.0:
         qp -= prm[LEAK_K] * pp / u[IN_VISC_RATIO]  # nu(OilTemp) / nu40, precomputed per sample
@@ -232,7 +233,12 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
 
     # Pump: displacement command times the compensator's destroke, optionally lagged.
     target = _disp_target(pp, u, prm)
-    if prm[PUMPDYN_ON] > 0.0:
+    dy[S_DISP_RATE] = 0.0
+    if prm[PUMPDYN_ON] > 0.0 and prm[PUMP_WN] > 0.0:
+        wp, rate = prm[PUMP_WN], y[S_DISP_RATE]
+        dy[S_DISP] = rate
+        dy[S_DISP_RATE] = wp * wp * (target - y[S_DISP]) - 2.0 * prm[PUMP_ZETA] * wp * rate
+    elif prm[PUMPDYN_ON] > 0.0:
         dy[S_DISP] = (target - y[S_DISP]) / prm[TAU_PUMP]
     else:
         dy[S_DISP] = 0.0

@@ -110,6 +110,9 @@ def _pack_effect(prm: np.ndarray, effect: Effect) -> None:
     elif name == "pump_control_dynamics":
         prm[K.PUMPDYN_ON] = 1.0
         prm[K.TAU_PUMP] = p["time_constant_ms"] * 1e-3
+        if effect.labels.get("law", "first_order") == "second_order":
+            prm[K.PUMP_WN] = 2 * math.pi * p["natural_freq_hz"]
+            prm[K.PUMP_ZETA] = p["damping_ratio"]
     elif name == "hose_compliance":
         prm[K.HOSE_ON] = 1.0
         if effect.labels.get("law", "series_modulus") == "added_capacitance":
