@@ -88,6 +88,9 @@ def test_every_member_knob_is_a_catalogue_parameter_within_its_range():
                     continue
                 spec = CATALOGUE[name].param(k.name)
                 assert spec.low <= k.low < k.high <= spec.high, (name, m.name, k.name)
+            for point in m.starts:
+                for k, v in zip(m.knobs, point, strict=True):
+                    assert k.low <= v <= k.high, (name, m.name, k.name, v)
 
 
 def _diagnosed(changes: dict[str, float], fx: Effect, seed: int, effects: tuple[str, ...]):
@@ -140,3 +143,17 @@ def test_hoses_on_the_cylinder_lines_are_named_with_the_cylinder_hoses_member():
     p = best.effects[0].params
     assert p["cylinder_capacitance_cm3_per_bar"] == pytest.approx(0.03, rel=0.3)
     assert p["line_capacitance_cm3_per_bar"] == 0.0
+
+
+def test_a_ringing_pump_is_named_with_the_second_order_member_and_its_frequency():
+    # A swashplate that rings at 7 Hz after every command step (zeta 0.4): a first-order lag
+    # cannot swing back, and a spool's ringing moves the cylinder's flow, not the pump's.
+    fx = Effect.make("pump_control_dynamics", law="second_order", natural_freq_hz=7.0,
+                     damping_ratio=0.4)  # fmt: skip
+    d = _diagnosed({"mass": 1.02, "valve_gain": 0.98}, fx, 9,
+                   ("pump_control_dynamics", "spool_dynamics", "sensor_lag"))  # fmt: skip
+    assert d.verdict == "pump_control_dynamics"
+    best = d.singles[0]
+    assert member_names(best)["pump_control_dynamics"] == "second_order"
+    assert best.effects[0].params["natural_freq_hz"] == pytest.approx(7.0, rel=0.15)
+    assert best.effects[0].params["damping_ratio"] == pytest.approx(0.4, rel=0.3)
