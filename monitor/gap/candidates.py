@@ -81,9 +81,7 @@ class Member:
     starts: tuple[tuple[float, ...], ...] = ()
 
     def start_units(self) -> list[np.ndarray]:
-        """The starting points in the unit interval of each knob."""
-        if not self.starts:
-            return default_starts(len(self.knobs))
+        """``starts`` in the unit interval of each knob."""
         return [
             np.array([k.unit(v) for k, v in zip(self.knobs, p, strict=True)]) for p in self.starts
         ]
