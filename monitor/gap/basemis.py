@@ -75,11 +75,17 @@ def practically_small(smooth_nominal: SegmentSums, floor_s: np.ndarray) -> bool:
     return bool(np.all(np.sqrt(excess) < PRACTICAL_NRMSE))
 
 
+def small_each(smooth_sums: SegmentSums, idx: np.ndarray, floor_s: np.ndarray) -> np.ndarray:
+    """Per block-bootstrap resample (``idx``) of the held-out segments: every signal's
+    structured residual is below ``PRACTICAL_NRMSE``."""
+    excess = np.maximum(boot_mse(smooth_sums, idx) - floor_s, 0.0)
+    return np.all(np.sqrt(excess) < PRACTICAL_NRMSE, axis=1)
+
+
 def small_share(smooth_nominal: SegmentSums, idx: np.ndarray, floor_s: np.ndarray) -> float:
     """Share of block-bootstrap resamples (``idx``) of the held-out segments in which every
     signal's structured residual is below ``PRACTICAL_NRMSE``."""
-    excess = np.maximum(boot_mse(smooth_nominal, idx) - floor_s, 0.0)
-    return float(np.mean(np.all(np.sqrt(excess) < PRACTICAL_NRMSE, axis=1)))
+    return float(np.mean(small_each(smooth_nominal, idx, floor_s)))
 
 
 def removed_nrmse(

@@ -28,6 +28,10 @@ reaches that practical level (``basemis.removes_practical``): a healthy machine'
 mismatch is partly slow too, and an effect can take a share of it (entrained air, 18-26 %
 of a held-out gap, through the structured test on machines without RodPos) while changing
 the simulator by less than what would make it ``none`` had it been the whole structured gap.
+An effect that removes that much, with a significant gain, and leaves the structured
+residual below the practical level on every signal is named even below ``EXPLAIN_MIN``
+(``_settles``): the rest is base mismatch that does not change what the simulator is good
+for; what the effect removed did.
 
 When the calibration took a tolerance the best effect trades off against to its bound and
 the effect's own fit moved it off (``diagnose.calibration_absorbed``), the bound stood in
@@ -195,6 +199,8 @@ def decide(
     worse = trades_signals(best, before, sums[best.name], idx, floor) if named else None
     if not named and large and judged is not None:
         s_conf = _structured_share(best, judged, idx, floor)
+        if s_conf is None:
+            s_conf = _settles(best, judged, gain_b, idx, floor)
         if s_conf is not None:
             smooth, before_s = judged
             floor_s = basemis.smoothed_floor(floor)
@@ -294,6 +300,31 @@ def _practical(
         return True
     smooth, nominal_s = structured
     return basemis.removes_practical(nominal_s, smooth[best.name], basemis.smoothed_floor(floor))
+
+
+def _settles(
+    best: Candidate,
+    structured: tuple[dict[str, SegmentSums], SegmentSums],
+    gain: np.ndarray,
+    idx: np.ndarray,
+    floor: np.ndarray,
+) -> float | None:
+    """Confidence that ``best`` leaves nothing that matters (None: it does not).
+
+    Named when (beside removing a practical amount, ``_practical``) its gain is significant
+    and it leaves the structured residual below the practical level on every signal, even
+    if that was less than ``EXPLAIN_MIN`` of the gap: what is left does not change what
+    the simulator is good for, what it removed did.  Under the other team's base mismatch
+    a 360-600 N Coulomb friction removed 47-50 % of the structured gap of the simulator at
+    its own tolerances."""
+    smooth, _ = structured
+    if best.name not in smooth or np.mean(gain > 0) < SIGNIFICANT:
+        return None
+    floor_s = basemis.smoothed_floor(floor)
+    if not basemis.practically_small(smooth[best.name], floor_s):
+        return None
+    small = basemis.small_each(smooth[best.name], idx, floor_s)
+    return float(np.mean(small & (gain > 0)))
 
 
 def _structured_share(
