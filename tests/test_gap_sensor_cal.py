@@ -7,11 +7,13 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from monitor.gap.calibrate import apply
 from monitor.gap.diagnose import diagnose
 from monitor.gap.predict import _Start, _true_start
+from monitor.gap.prepare import prepare
 from monitor.gap.report import build_report, simulate_all, summary_text
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
@@ -85,6 +87,25 @@ def test_a_flow_offset_is_named_with_its_value():
     fitted = rep["params"]["sensor_calibration"]
     assert set(fitted) == {"QP_gain", "QP_offset_lpm"}
     assert fitted["QP_offset_lpm"] == pytest.approx(1.5, abs=0.3)
+    assert fitted["QP_gain"] == pytest.approx(1.0, abs=0.02)
+    assert rep["shrink"]["heldout_reduction"] > 0.8
+
+
+def test_a_flow_sensor_that_reads_below_zero_is_named_with_its_offset():
+    # Another maker's flow sensor with a -3 L/min offset reads -3 at rest, where the
+    # contract's (ours) clips at 0: its noise-free flow, minus 3, plus its own 0.1 L/min
+    # noise, by hand.  Read as clipping, the fitted offset explained the flowing rows only
+    # (47 % of such a gap on a +-15 % machine of the other team).
+    rec = _recording([], seed=44)
+    true = simulate(make_cycle("boom", SECONDS, 44), apply(M, MACHINE_TOLERANCE), seed=None)
+    noise = np.random.default_rng(44).normal(0.0, 0.1, len(rec))
+    rec.columns["QP"] = true["QP"] - 3.0 + noise
+    assert np.mean(rec["QP"] < -1.0) > 0.2  # at rest half of the time
+    assert prepare(rec, M).below_zero == {"QP"}
+    rep = _report(rec)
+    assert rep["verdict"] == "sensor_calibration"
+    fitted = rep["params"]["sensor_calibration"]
+    assert fitted["QP_offset_lpm"] == pytest.approx(-3.0, abs=0.3)
     assert fitted["QP_gain"] == pytest.approx(1.0, abs=0.02)
     assert rep["shrink"]["heldout_reduction"] > 0.8
 

@@ -222,8 +222,8 @@ def sense(
             out[name][rows] = lag(rel, values, delay_s, tau_s)[idx] / unit
             if name == cal_signal:
                 # The contract's pressure and flow sensors clip at zero (a negative offset
-                # reads 0 at rest, not the offset).
-                out[name][rows] = np.maximum(gain * out[name][rows] + offset, 0.0)
+                # reads 0 at rest, not the offset), unless this recording's reads below it.
+                out[name][rows] = prep.reading(name, gain * out[name][rows] + offset)
         if ROD_VEL in out:
             # The simulated and the measured rod position filtered alike within the segment
             # (same edges), so the residual is the filtered difference of the two rods.  The

@@ -29,6 +29,14 @@ MIN_VALID_SHARE = 0.8
 #: Measured flow or pressure this far above what the configured machine can deliver means
 #: another machine (or other units): the simulator cannot be compared with it.
 PLAUSIBLE_MARGIN = 1.3
+#: Measured pressure (bar) or flow (L/min) at or below this may be a sensor clipping at
+#: zero, as the contract's sensors do (a drained chamber, a dead-headed pump) ...
+ZERO_MARGIN = 1.0
+#: ... unless this share of the signal's samples reads below ``-ZERO_MARGIN``: then its
+#: sensor reads below zero (the other team's flow sensor with a -3.3 L/min offset read
+#: that at rest, where ours would read 0), far more often than its noise would (1 %: a
+#: zero-mean noise of up to 0.4 of the margin stays above it).
+BELOW_ZERO_SHARE = 0.01
 
 
 @dataclass
@@ -56,9 +64,30 @@ class Prepared:
     #: Samples not compared (``score.normalised`` leaves them out): without RodPos, the
     #: moments the rod arrives on an end stop (``rodflow.arrivals``).  None: every sample.
     unscored: np.ndarray | None = None
+    #: Signals whose sensor reads below zero in this recording (``reads_below_zero``).
+    below_zero: frozenset[str] = frozenset()
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
+
+    def reading(self, name: str, values: np.ndarray) -> np.ndarray:
+        """Simulated values of ``name`` as its sensor shows them after a gain or offset:
+        clipped at zero, unless it reads below zero in this recording."""
+        return values if name in self.below_zero else np.maximum(values, 0.0)
+
+    def maybe_clipped(self, name: str, measured: np.ndarray) -> np.ndarray:
+        """Rows where ``measured`` (of ``name``) may be its sensor clipping at zero."""
+        if name in self.below_zero:
+            return np.zeros(measured.shape, bool)
+        return ~(measured > ZERO_MARGIN)
+
+
+def reads_below_zero(meas: dict[str, np.ndarray]) -> frozenset[str]:
+    """The signals in ``meas`` whose readings go below ``-ZERO_MARGIN`` in at least
+    ``BELOW_ZERO_SHARE`` of their samples."""
+    return frozenset(
+        n for n, v in meas.items() if np.mean(v[np.isfinite(v)] < -ZERO_MARGIN) >= BELOW_ZERO_SHARE
+    )
 
 
 def _resample(rec: Recording) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
@@ -85,17 +114,11 @@ def _resample(rec: Recording) -> tuple[np.ndarray, dict[str, np.ndarray], np.nda
     return grid, cols, ~in_gap
 
 
-#: Samples this close to zero are left out of the noise estimate: the sensors clip at 0, which
-#: hides half of the noise there (QP of a dead-headed pump, a drained chamber).
-NOISE_CLIP_MARGIN = 1.0
-
-
 def noise_variance(x: np.ndarray) -> float:
     """White-noise variance from the second difference (var = 6 sigma^2), robust to motion."""
     d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
-    away = (
-        (x[:-2] > NOISE_CLIP_MARGIN) & (x[1:-1] > NOISE_CLIP_MARGIN) & (x[2:] > NOISE_CLIP_MARGIN)
-    )
+    # Near zero a sensor that clips there hides half of its noise.
+    away = (x[:-2] > ZERO_MARGIN) & (x[1:-1] > ZERO_MARGIN) & (x[2:] > ZERO_MARGIN)
     d2 = d2[np.isfinite(d2) & away]
     if d2.size < 10:
         return 0.0
@@ -208,6 +231,7 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         source=src,
         stroke_mm=machine.stroke_m * 1e3,
         unscored=unscored,
+        below_zero=reads_below_zero({n: meas[n] for n in MEASURED_NAMES}),
     )
 
 

@@ -83,7 +83,7 @@ def _recalibrated(
     base = _base(prep, segments, col)
     raw = (pred[col] - base - _shown_offset(old)) / old.params["gain"]
     out = base + new.params["gain"] * raw + _shown_offset(new)
-    return {**pred, col: out if col == ROD_VEL else np.maximum(out, 0.0)}  # as predict.sense
+    return {**pred, col: out if col == ROD_VEL else prep.reading(col, out)}  # as predict.sense
 
 
 def _linear(x: np.ndarray, y: np.ndarray, with_offset: bool) -> tuple[float, float]:
@@ -108,10 +108,11 @@ def fit_signal(
     None); None if the signal is not compared.
 
     Rows where the measured signal sits at the sensor's zero are left out: a negative
-    offset reads 0 there (the sensor clips), not the offset.  A RodPos gain is the ratio of
-    measured to simulated rod speed per pump flow where that is known (extension, clear of
-    the stops): fitted to the rod velocity's residual, it came out low when the reading
-    clips at the top of its range, and it would soak up physics through the start states."""
+    offset reads 0 there (the sensor clips), not the offset (``Prepared.maybe_clipped``).
+    A RodPos gain is the ratio of measured to simulated rod speed per pump flow where that
+    is known (extension, clear of the stops): fitted to the rod velocity's residual, it came
+    out low when the reading clips at the top of its range, and it would soak up physics
+    through the start states."""
     col = compared_column(signal)
     if col not in pred:
         return None
@@ -123,7 +124,7 @@ def fit_signal(
     y = prep.meas[col][rows] - base
     ok = np.isfinite(x) & np.isfinite(y)
     if signal != "RodPos":
-        ok &= y > _ZERO_MARGIN
+        ok &= ~prep.maybe_clipped(col, y)
     if ok.sum() < 10:
         return None
     if signal == "RodPos":  # the velocity has no offset: keep the one the plant ran with
@@ -136,10 +137,6 @@ def fit_signal(
     gain = min(max(gain, g_spec.low), g_spec.high)
     offset = min(max(offset, -o_spec.max_offset), o_spec.max_offset)
     return Effect.make(NAME, signal=signal, gain=gain, offset=offset)
-
-
-#: Measured values at or below this (bar, L/min) may be the sensor clipping at zero.
-_ZERO_MARGIN = 1.0
 
 
 def _offset(effect: Effect | None) -> float:

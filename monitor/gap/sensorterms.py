@@ -2,8 +2,9 @@
 fitted on the calibrated simulator's readings alone (no plant runs: a reading error does
 not change the physics).
 
-The sensors clip at zero (as ``predict.sense`` models them), so rows where the recording
-reads at the sensor's zero are left out of the gain and offset fits.
+The sensors clip at zero (as ``predict.sense`` models them, unless the recording reads below
+it), so rows where the recording reads at the sensor's zero are left out of the gain and
+offset fits.
 """
 
 from __future__ import annotations
@@ -20,8 +21,6 @@ from monitor.signals import MEASURED_NAMES, UNITS
 #: Delays tried (s): 0 to 150 ms in 5 ms steps (a grid: the objective is not smooth in a
 #: delay shorter than the 10 ms sample period).
 DELAYS_S = np.arange(1, 31) * 5e-3
-#: Measured values at or below this (bar, L/min) may be the sensor clipping at zero.
-_ZERO_MARGIN = 1.0
 GAIN_RANGE = (0.5, 1.5)
 
 
@@ -52,9 +51,9 @@ class SensorTerm:
         """``pred`` (simulated readings) as this sensor would read them."""
         x = pred[self.signal]
         if self.kind == "sensor_gain":
-            y = np.maximum(self.coefficient * x, 0.0)
+            y = prep.reading(self.signal, self.coefficient * x)
         elif self.kind == "sensor_offset":
-            y = np.maximum(x + self.coefficient, 0.0)
+            y = prep.reading(self.signal, x + self.coefficient)
         else:
             y = _delayed(prep, segments, x, self.coefficient * 1e-3)
         return {**pred, self.signal: y}
@@ -85,7 +84,7 @@ def fit_sensor_terms(
     out = []
     for signal in MEASURED_NAMES:
         x, y = pred[signal][rows], prep.meas[signal][rows]
-        ok = np.isfinite(x) & np.isfinite(y) & (y > _ZERO_MARGIN)
+        ok = np.isfinite(x) & np.isfinite(y) & ~prep.maybe_clipped(signal, y)
         if ok.sum() < 10:
             continue
         xx = float(x[ok] @ x[ok])
