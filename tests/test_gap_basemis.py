@@ -9,7 +9,7 @@ import pytest
 
 from monitor.gap import basemis
 from monitor.gap.candidates import Candidate
-from monitor.gap.decide import decide
+from monitor.gap.decide import Decision, decide
 from monitor.gap.score import SegmentSums, gap, reduction
 from monitor.gap.shrink import resamples
 from monitor.sim.effects import Effect
@@ -128,22 +128,28 @@ def test_what_an_effect_removes_is_summed_over_the_signals_like_the_gap():
     assert basemis.removed_nrmse(after, before, floor_s) == 0.0  # worse: removes nothing
 
 
-def test_a_modest_share_of_a_base_mismatch_gap_below_the_practical_level_is_not_an_effect():
-    # Whole gap 0.04 per signal, nearly all base mismatch; the effect removes 60 % of the
-    # structured excess (above EXPLAIN_MIN: named by the structured test before).  Excess
-    # 0.0003 per signal: it removes 0.6 * 0.0006 = 0.00036 in all, NRMSE 0.019, below the
-    # practical 0.02, and the structured part (0.017 per signal) is practically small: none.
-    # Four times the excess: it removes NRMSE sqrt(0.00144) = 0.038, and is named.
+def _structured_case(name: str, excess: float, removed: float) -> tuple[Candidate, Decision]:
+    """Whole residual 0.05 per signal (gap 0.04, nearly all base mismatch) with a structured
+    excess over the noise of ``excess`` per signal, of which effect ``name`` removes the
+    share ``removed`` (from the whole residual as well)."""
     floor_s = basemis.smoothed_floor(FLOOR)[0]
+    nominal, nominal_s = _sums([0.05] * N_SEG), _sums([excess + floor_s] * N_SEG)
+    after = _sums([0.05 - removed * excess] * N_SEG)
+    after_s = _sums([(1 - removed) * excess + floor_s] * N_SEG)
+    c = _candidate(name, after, nominal)
+    d = decide(False, [c], [], {c.name: after}, nominal, IDX, FLOOR, ({c.name: after_s}, nominal_s))
+    return c, d
+
+
+def test_a_modest_share_of_a_base_mismatch_gap_below_the_practical_level_is_not_an_effect():
+    # The effect removes 60 % of the structured excess (above EXPLAIN_MIN: named by the
+    # structured test before).  Excess 0.0003 per signal: it removes 0.6 * 0.0006 = 0.00036
+    # in all, NRMSE 0.019, below the practical 0.02, and the structured part (0.017 per
+    # signal) is practically small: none.  Four times the excess: it removes NRMSE
+    # sqrt(0.00144) = 0.038, and is named.
     for excess, verdict in ((0.0003, "none"), (0.0012, "load_variation")):
-        nominal, nominal_s = _sums([0.05] * N_SEG), _sums([excess + floor_s] * N_SEG)
-        after = _sums([0.05 - 0.6 * excess] * N_SEG)
-        after_s = _sums([0.4 * excess + floor_s] * N_SEG)
-        c = _candidate("load_variation", after, nominal)
+        c, d = _structured_case("load_variation", excess, 0.6)
         assert c.heldout_reduction < 0.5  # judged on the structured gap only
-        d = decide(
-            False, [c], [], {c.name: after}, nominal, IDX, FLOOR, ({c.name: after_s}, nominal_s)
-        )
         assert d.verdict == verdict
 
 
@@ -172,22 +178,13 @@ def test_a_structured_part_not_clearly_above_the_practical_level_is_none_not_une
 
 
 def test_an_effect_that_leaves_nothing_practical_is_named_below_half_the_gap():
-    # Whole gap 0.04 per signal, nearly all base mismatch.  Structured excess 0.0006 per
-    # signal (NRMSE 0.0245, above the practical 0.02); the effect removes 45 % of it:
-    # 0.00027 per signal, NRMSE sqrt(0.00054) = 0.023 in all (practical), and leaves
-    # 0.00033 (NRMSE 0.018, below 0.02 on both signals): named, though below EXPLAIN_MIN.
-    # From an excess of 0.0009 (NRMSE 0.03) the same share leaves 0.000495 (NRMSE 0.022):
-    # something that matters is left, and no effect explains it.
-    floor_s = basemis.smoothed_floor(FLOOR)[0]
+    # Structured excess 0.0006 per signal (NRMSE 0.0245, above the practical 0.02); the
+    # effect removes 45 % of it: 0.00027 per signal, NRMSE sqrt(0.00054) = 0.023 in all
+    # (practical), and leaves 0.00033 (NRMSE 0.018, below 0.02 on both signals): named,
+    # though below EXPLAIN_MIN.  From an excess of 0.0009 (NRMSE 0.03) the same share leaves
+    # 0.000495 (NRMSE 0.022): something that matters is left, and no effect explains it.
     for excess, verdict in ((0.0006, "cylinder_friction"), (0.0009, "unexplained")):
-        nominal, nominal_s = _sums([0.05] * N_SEG), _sums([excess + floor_s] * N_SEG)
-        after = _sums([0.05 - 0.45 * excess] * N_SEG)
-        after_s = _sums([0.55 * excess + floor_s] * N_SEG)
-        c = _candidate("cylinder_friction", after, nominal)
-        assert basemis.removes_practical(nominal_s, after_s, basemis.smoothed_floor(FLOOR))
-        d = decide(
-            False, [c], [], {c.name: after}, nominal, IDX, FLOOR, ({c.name: after_s}, nominal_s)
-        )
+        c, d = _structured_case("cylinder_friction", excess, 0.45)
         assert (d.verdict, d.chosen is c) == (verdict, verdict != "unexplained")
         if d.chosen is not None:
             assert d.confidence == 1.0

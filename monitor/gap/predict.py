@@ -222,7 +222,7 @@ def sense(
             out[name][rows] = lag(rel, values, delay_s, tau_s)[idx] / unit
             if name == cal_signal:
                 # The contract's pressure and flow sensors clip at zero (a negative offset
-                # reads 0 at rest, not the offset), unless this recording's reads below it.
+                # reads 0 at rest, not the offset), unless the recording shows it reading below.
                 out[name][rows] = prep.reading(name, gain * out[name][rows] + offset)
         if ROD_VEL in out:
             # The simulated and the measured rod position filtered alike within the segment
