@@ -75,11 +75,13 @@ class Prepared:
         clipped at zero, unless it reads below zero in this recording."""
         return values if name in self.below_zero else np.maximum(values, 0.0)
 
-    def maybe_clipped(self, name: str, measured: np.ndarray) -> np.ndarray:
-        """Rows where ``measured`` (of ``name``) may be its sensor clipping at zero."""
+    def off_zero(self, name: str, measured: np.ndarray) -> np.ndarray:
+        """Rows where ``measured`` (of ``name``) cannot be its sensor clipping at zero:
+        every finite row of a sensor that reads below zero, else those above
+        ``ZERO_MARGIN``."""
         if name in self.below_zero:
-            return np.zeros(measured.shape, bool)
-        return ~(measured > ZERO_MARGIN)
+            return np.isfinite(measured)
+        return measured > ZERO_MARGIN
 
 
 def reads_below_zero(meas: dict[str, np.ndarray]) -> frozenset[str]:

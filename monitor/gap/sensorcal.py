@@ -108,7 +108,7 @@ def fit_signal(
     None); None if the signal is not compared.
 
     Rows where the measured signal sits at the sensor's zero are left out: a negative
-    offset reads 0 there (the sensor clips), not the offset (``Prepared.maybe_clipped``).
+    offset reads 0 there (the sensor clips), not the offset (``Prepared.off_zero``).
     A RodPos gain is the ratio of measured to simulated rod speed per pump flow where that
     is known (extension, clear of the stops): fitted to the rod velocity's residual, it came
     out low when the reading clips at the top of its range, and it would soak up physics
@@ -124,7 +124,7 @@ def fit_signal(
     y = prep.meas[col][rows] - base
     ok = np.isfinite(x) & np.isfinite(y)
     if signal != "RodPos":
-        ok &= ~prep.maybe_clipped(col, y)
+        ok &= prep.off_zero(col, y)
     if ok.sum() < 10:
         return None
     if signal == "RodPos":  # the velocity has no offset: keep the one the plant ran with

@@ -84,7 +84,7 @@ def fit_sensor_terms(
     out = []
     for signal in MEASURED_NAMES:
         x, y = pred[signal][rows], prep.meas[signal][rows]
-        ok = np.isfinite(x) & np.isfinite(y) & ~prep.maybe_clipped(signal, y)
+        ok = np.isfinite(x) & np.isfinite(y) & prep.off_zero(signal, y)
         if ok.sum() < 10:
             continue
         xx = float(x[ok] @ x[ok])
