@@ -1,4 +1,7 @@
-"""The signal contract of DESIGN.md: names, units and the CSV columns other tools rely on."""
+"""The signal contract: names, units and the CSV columns other tools rely on.
+
+The user's page of it is docs/reference/contracts.md.
+"""
 
 from __future__ import annotations
 

@@ -133,7 +133,7 @@ def _decoded(run: dict[str, Any], message: str) -> list[tuple[float, dict[str, f
 
 
 def test_each_loop_has_its_own_alarm_frame(run) -> None:
-    codes = {"piston_wear": 1, "spool_stroke": 2, "spool_wear": 3}  # DESIGN value table
+    codes = {"piston_wear": 1, "spool_stroke": 2, "spool_wear": 3}  # MON_Alarm's value table
     messages = {"boom": "MON_Alarm", "stick": "MON_Alarm_Stick", "bucket": "MON_Alarm_Bucket",
                 "swing": "MON_Alarm_Swing"}  # fmt: skip
     for loop, message in messages.items():

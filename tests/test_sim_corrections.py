@@ -1,5 +1,5 @@
 """The simulator's data-driven correction terms (``monitor.sim.corrections``) against values
-worked out by hand from DESIGN.md's reference machine."""
+worked out by hand from the reference machine (docs/reference/contracts.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""The nominal boom loop against values worked out by hand from DESIGN.md's reference machine."""
+"""The nominal boom loop against values worked out by hand from the reference machine.
+
+Its nominal values are in docs/reference/contracts.md.
+"""
 
 from __future__ import annotations
 

@@ -36,7 +36,7 @@ P_ATM = 101325.0
 
 
 def nominal(tol: dict[str, float] | None = None) -> np.ndarray:
-    """The reference machine (DESIGN.md) with optional multiplicative tolerances."""
+    """The reference machine (docs/reference/contracts.md), optional multiplicative tolerances."""
     t = {"mass": 1.0, "gravity": 1.0, "friction": 1.0, "valve": 1.0, "vol_a": 1.0,
          "vol_b": 1.0, "vol_line": 1.0, **(tol or {})}  # fmt: skip
     p = np.zeros(N_P)

@@ -1,4 +1,4 @@
-"""Reference boom loop (DESIGN.md nominal table), own physics, fixed-step numba integrator.
+"""Reference boom loop (docs/reference/contracts.md), own physics, fixed-step numba integrator.
 
 Textbook sources: Merritt (1967) orifice and chamber pressure equations; Jelali & Kroll (2003)
 valve/pump models; Canudas de Wit et al. (1995) LuGre; Armstrong-Helouvry (1994) Stribeck;
@@ -32,7 +32,7 @@ LPM = 1.0 / 60000.0
 
 
 def nominal() -> np.ndarray:
-    """The reference machine of DESIGN.md as a parameter vector (SI)."""
+    """The reference machine (docs/reference/contracts.md) as a parameter vector (SI)."""
     p = np.zeros(len(NAMES))
     ac = np.pi / 4 * 0.063**2
     ar = ac - np.pi / 4 * 0.036**2

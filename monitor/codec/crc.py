@@ -1,4 +1,5 @@
-"""CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, xorout 0xFF, not reflected) of DESIGN.md.
+"""CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, xorout 0xFF, not reflected): the frame
+contract of docs/reference/contracts.md.
 
 Every frame of the DBC carries this CRC in byte 7, computed over bytes 0-6.  The
 algorithm comes from the ``crc`` package's catalogue (``Crc8.SAEJ1850``, check value

@@ -1,7 +1,8 @@
 """Per-frame work: physical signals <-> 8 data bytes with alive counter and CRC.
 
-The frame rules of DESIGN.md: every frame is 8 bytes, byte 6 low nibble is an alive
-counter (+1 mod 16 per frame of that message), byte 7 a CRC-8/SAE-J1850 over bytes 0-6.
+The frame rules of docs/reference/contracts.md: every frame is 8 bytes, byte 6 low
+nibble is an alive counter (+1 mod 16 per frame of that message), byte 7 a
+CRC-8/SAE-J1850 over bytes 0-6.
 ``FrameCodec`` precompiles what it needs per message once, so encode/decode only do
 the per-frame arithmetic.  It never raises for bad bus data: a decode returns either
 the physical values or a rejection reason.  Loading the DBC lives in ``monitor.codec.dbc``.

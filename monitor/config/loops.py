@@ -2,9 +2,10 @@
 
 Each loop has its own model, its own sensor signals on the bus and its own MON_Alarm frame
 and J1939 address; all share the bus, the clock and the signals a loop does not rename
-(EngineSpeed and OilTemp, typically).  ``signals`` maps a contract name (DESIGN.md: PP, PA,
-PB, QP, SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp, RodPos) to the DBC signal that carries
-it for this loop; a contract name not listed is read from the DBC signal of the same name,
+(EngineSpeed and OilTemp, typically).  ``signals`` maps a contract name
+(docs/reference/contracts.md: PP, PA, PB, QP, SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp,
+RodPos) to the DBC signal that carries it for this loop; a contract name not listed is read
+from the DBC signal of the same name,
 and ``RodPos: null`` says the loop has no rod position (a swing motor).
 
 Without a ``loops`` section the daemon monitors one loop, ``boom``: the top-level ``model``,

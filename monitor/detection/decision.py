@@ -4,7 +4,7 @@ Given a sample's J, its residual and what the gating found, one ``Decider.decide
 alarm machine (``monitor.detection.alarm``) and says whether the monitor's status (alarm
 state and gating status) changed, i.e. whether the sample makes an event.  ``event_record``
 is the one event-log line both write (``monitor detect --events`` and the daemon's log share
-its schema, DESIGN.md).
+its schema, docs/reference/events.md).
 """
 
 from __future__ import annotations

@@ -58,7 +58,7 @@ from monitor.model.residual import window_j
 from monitor.model.spec import DGRNNSpec, Normalizer
 from monitor.model.threshold import ThresholdRule
 
-#: The rig's sensors that play the paper's signal roles (DESIGN.md names).
+#: The rig's sensors that play the paper's signal roles (the contract's names).
 ROLES = {"PP": "PS1", "QP": "FS1", "PA": "PS2", "PB": "PS3"}
 
 Progress = Callable[[str], None]

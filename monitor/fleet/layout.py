@@ -1,4 +1,4 @@
-"""The fleet input layout of DESIGN.md (Fleet): what is there, in time order, with hashes.
+"""The fleet input layout (docs/reference/contracts.md): what is there, in time order, with hashes.
 
 FLEET/<machine_id>/commissioning/*.log|*.csv   normal operation (optional)
 FLEET/<machine_id>/logs/*.log|*.csv           operating logs; file-name order is time order

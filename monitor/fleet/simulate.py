@@ -1,4 +1,6 @@
-"""A simulated fleet in the DESIGN.md layout, with its answer key (`monitor simulate-fleet`).
+"""A simulated fleet in the fleet layout, with its answer key (`monitor simulate-fleet`).
+
+The layout is that of docs/reference/contracts.md.
 
 Each machine's parameters are drawn within +-tolerance of the reference; each day has one oil
 temperature within 35-55 degC (the oil-viscosity effect makes it matter), and the

@@ -22,7 +22,7 @@ from monitor.sim.machine import BAR, LPM, MachineParams
 #: Shortest recording worth diagnosing: calibration and held-out parts need a few duty
 #: cycles each.
 MIN_DURATION_S = 40.0
-#: A row gap longer than this is missing data (DESIGN.md: more than 3 periods).
+#: A row gap longer than this is missing data (the CSV contract: more than 3 periods).
 MAX_GAP_S = 3.5 * SAMPLE_PERIOD_S
 #: Share of finite samples a measured signal needs.
 MIN_VALID_SHARE = 0.8

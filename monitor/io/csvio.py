@@ -1,4 +1,6 @@
-"""The contract CSV of DESIGN.md: ``t`` (s) and the physical signals, one row per sample.
+"""The contract CSV: ``t`` (s) and the physical signals, one row per sample.
+
+The contract is in docs/reference/contracts.md.
 
 Reading is strict about the file's shape (header, field count, numbers, increasing ``t``)
 and lenient about the data: an empty field is a missing sample (NaN), which downstream

@@ -9,7 +9,7 @@ what.  Rules:
 - ``quantile``: J0 is a high quantile (``quantile``, e.g. 0.999) of normal J: tighter, at the
   price of rare false alarms on transients the validation set barely covers.
 - ``mean``: the literal reading, J0 = mean of normal J.  Ordinary duty-cycle transients then
-  exceed eps0 (DESIGN.md); kept for comparison with the paper.
+  exceed eps0 (docs/explanation/method.md); kept for comparison with the paper.
 - ``evt``: a threshold with a stated false-alarm rate.  The held-out series is cut into
   blocks one window long (so neighbouring maxima are nearly independent), a Gumbel
   distribution is fitted to the block maxima (scipy, maximum likelihood), and eps0 is its

@@ -1,4 +1,6 @@
-"""Faults of the boom loop with a severity 0..1, abrupt or ramped, as DESIGN.md defines them.
+"""Faults of the boom loop with a severity 0..1, abrupt or ramped.
+
+As docs/reference/contracts.md defines them:
 
 - ``piston_wear``: internal leakage C_il (PA - PB), C_il = s * 5e-12 m^3/(s Pa).
 - ``spool_stroke``: the spool opening is limited to (1 - 0.6 s) of full stroke.

@@ -17,7 +17,7 @@ from monitor.resources import resource_path
 
 @dataclass(frozen=True)
 class SensorParams:
-    """Noise (rms) and ranges of DESIGN.md's reference sensors."""
+    """Noise (rms) and ranges of the reference machine's sensors (docs/reference/contracts.md)."""
 
     pressure_noise_bar: float = 0.3
     flow_noise_lpm: float = 0.1
