@@ -4,6 +4,7 @@ and the README keeps its two set-up commands."""
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
 from monitor.cli import _subcommand_modules
@@ -59,3 +60,24 @@ def test_frame_ids_the_docs_give_are_the_dbcs() -> None:
             if (frame_id >> 16) & 0xFF == 0xFF and frame_id not in masks | ids:
                 wrong.append(f"{doc.relative_to(REPO)}: {token}")
     assert not wrong, wrong
+
+
+def test_benchmarks_page_is_generated_from_its_records() -> None:
+    """docs/benchmarks.md is built from the dated records in docs/benchmarks/: a figure added
+    to the page by hand, or a record never rendered, fails here."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "benchmarks_page", REPO / "docs" / "hooks" / "benchmarks_page.py"
+    )
+    assert spec is not None and spec.loader is not None
+    page = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = page  # dataclasses look their module up
+    spec.loader.exec_module(page)
+    records = [page.read_record(p) for p in sorted(page.RECORDS.glob("*.md"))]
+    assert len(records) >= 50
+    assert (REPO / "docs" / "benchmarks.md").read_text() == page.render(records), (
+        "docs/benchmarks.md is out of date: run python docs/hooks/benchmarks_page.py"
+    )
+    # Each area shows its current figures on top.
+    assert {r.area for r in records if r.current} == set(page.AREAS)
