@@ -71,6 +71,16 @@ def test_log_needing_more_rows_than_the_limit_is_refused(tmp_path, reader) -> No
     assert "split it" in msg
 
 
+def _refusals(log: Path) -> list[str]:
+    """The messages both candump paths (bulk, frame by frame) refuse ``log`` with."""
+    errors = []
+    for reader in (recording_from_candump_bulk, recording_from_candump):
+        with pytest.raises(InputFileError) as err:
+            reader(log)
+        errors.append(str(err.value))
+    return errors
+
+
 def test_shuffled_log_is_refused_the_same_by_both_paths(tmp_path) -> None:
     """A shuffled log (every frame out of order) makes the clock resync again and again."""
     lines = resource_path("replay", "spool_wear.log").read_text().splitlines(keepends=True)
@@ -78,17 +88,31 @@ def test_shuffled_log_is_refused_the_same_by_both_paths(tmp_path) -> None:
     random.Random(0).shuffle(head)
     log = tmp_path / "shuf.log"
     log.write_text("".join(head))
-    errors = []
-    for reader in (recording_from_candump_bulk, recording_from_candump):
-        with pytest.raises(InputFileError) as err:
-            reader(log)
-        errors.append(str(err.value))
+    errors = _refusals(log)
     assert errors[0] == errors[1]
     assert f"for {len(head)} frames" in errors[0]
     assert "limit of 360000" in errors[0]  # an hour (20 per frame is less)
     assert "resyncs): fix or sort its timestamps" in errors[0]
     rows = int(errors[0].split("would need ")[1].split()[0])
     assert rows > 360_000
+
+
+def test_reversed_log_is_refused_like_a_shuffled_one(tmp_path) -> None:
+    """A time-reversed log needs few rows (its clock resyncs after every few frames) but
+    every frame comes older than the one before it: refused, not judged with a counter jump
+    at every frame."""
+    lines = resource_path("replay", "spool_wear.log").read_text().splitlines(keepends=True)
+    head = lines[:8000]
+    log = tmp_path / "rev.log"
+    log.write_text("".join(reversed(head)))
+    errors = _refusals(log)
+    assert errors[0] == errors[1]
+    assert errors[0].startswith(f"{log}: its clock runs backwards: ")
+    assert f"for {len(head)} frames" in errors[0]
+    assert errors[0].endswith("a reversed log? fix or sort its timestamps")
+    # The log in its own order is read.
+    log.write_text("".join(head))
+    assert len(recording_from_candump_bulk(log)) > 0
 
 
 @pytest.mark.parametrize("path", REPLAY, ids=lambda p: p.name)

@@ -2,14 +2,16 @@
 
 The contract is in docs/reference/contracts.md.
 
-Reading is strict about the file's shape (header, field count, numbers, increasing ``t``)
-and lenient about the data: an empty field is a missing sample (NaN), which downstream
-tools treat as a stale sensor, not a file error.  Every error names file, line and column.
+Reading is strict about the file's shape (header, field count, numbers, a time column
+``monitor.io.timebase`` can trust; rows at another rate are resampled to 100 Hz) and
+lenient about the data: an empty field is a missing sample (NaN), which downstream tools treat
+as a stale sensor, not a file error.  Every error names file, line and column.
 """
 
 from __future__ import annotations
 
 import csv
+import logging
 import math
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -19,7 +21,10 @@ import numpy as np
 
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
+from monitor.io.timebase import check_time, resample, resample_note
 from monitor.signals import CSV_COLUMNS
+
+log = logging.getLogger("monitor")
 
 _MISSING = ("", "nan", "NaN", "NAN")
 
@@ -92,7 +97,9 @@ def read_csv(path: str | Path) -> Recording:
     columns (such as ``RodPos``) are kept; extra columns holding text (labels, notes)
     are left out and listed in ``meta["dropped_columns"]``.  Blank lines are skipped.
     Raises ``InputFileError`` naming file, line and column for missing required columns,
-    text where a number belongs, a wrong number of fields, a missing or non-increasing ``t``.
+    text where a number belongs, a wrong number of fields, a missing ``t`` or one that
+    ``check_time`` refuses.  Rows at another rate than 100 Hz are resampled to it
+    (``meta["resampled_from_hz"]``, and a warning saying so).
     """
     p = Path(path)
     try:
@@ -156,13 +163,13 @@ def read_csv(path: str | Path) -> Recording:
     if np.isnan(t).any():
         i = int(np.flatnonzero(np.isnan(t))[0])
         raise InputFileError(f"{p}:{lines[i]}: column 't': time is missing")
-    steps = np.diff(t)
-    if (steps <= 0).any():
-        i = int(np.flatnonzero(steps <= 0)[0]) + 1
-        raise InputFileError(
-            f"{p}:{lines[i]}: column 't': {t[i]!r} s is not after the previous {t[i - 1]!r} s"
-        )
+    base = check_time(t, str(p), lines)
     meta: dict[str, object] = {"format": "csv"}
+    if base.resample:
+        n_rows = t.size
+        t, columns = resample(t, columns, base.step_s)
+        meta["resampled_from_hz"] = base.rate_hz
+        log.warning(resample_note(str(p), n_rows, base.step_s, t.size))
     if dropped:
         meta["dropped_columns"] = dropped
     return Recording(t=t, columns=columns, source=str(p), meta=meta)

@@ -39,6 +39,7 @@ from monitor.sampling.sampler import (
     hydraulic_messages,
     no_hydraulic_data,
     row_limit,
+    runs_backwards,
     too_many_rows,
 )
 from monitor.signals import ROD_POS
@@ -135,6 +136,9 @@ def recording_from_candump_bulk(
     n_rows = max(int(first_row[-1]), math.floor((newest + _EPS_S) / period) + 1)
     if n_rows > row_limit(len(frames)):  # before a row is allocated
         raise too_many_rows(path, n_rows, len(frames), float(ts.max() - ts.min()), int(tc[2]))
+    time_counts = TimeCounts(*(int(v) for v in tc))
+    if err := runs_backwards(path, ts.size, time_counts.as_dict()):
+        raise err
     inst = np.arange(n_rows) * period
     # Outages (OUTAGE_S of silence): from the first row after each, staleness restarts at
     # the time of the frame that ended it (the sampler's ``_resumed``).
@@ -164,7 +168,6 @@ def recording_from_candump_bulk(
             col[np.flatnonzero(have)[fresh]] = vals[li[fresh]]
         if name != ROD_POS.name or name in seen:
             columns[name] = col
-    time_counts = TimeCounts(*(int(v) for v in tc))
     meta: dict[str, object] = {
         "format": "candump",
         "start_time_s": float(ts[0]),

@@ -87,6 +87,26 @@ def too_many_rows(
     )
 
 
+#: Share of a log's frames that may be older than the newest before them (jitter of merged
+#: interfaces stays far below; a reversed log has them all, some replayed twice).
+MAX_BACKWARDS_SHARE = 0.75
+
+
+def runs_backwards(path: str | Path, frames: int, counts: dict[str, Any]) -> InputFileError | None:
+    """The error for a log whose clock runs backwards (a reversed log): more than
+    ``MAX_BACKWARDS_SHARE`` of its ``frames`` fed to the clock older than the newest one
+    before them.  Its clock would resync every few frames and its counters jump at every
+    frame; like a shuffled log, it is refused rather than judged."""
+    back = int(counts["time_backwards"])
+    if back <= MAX_BACKWARDS_SHARE * frames:
+        return None
+    return InputFileError(
+        f"{path}: its clock runs backwards: {back} times a frame older than the newest before"
+        f" it, for {frames} frames ({counts['time_resyncs']} resyncs); a reversed log? fix or"
+        " sort its timestamps"
+    )
+
+
 @dataclass
 class TimeCounts:
     """How often the sampler had to deal with a misbehaving clock."""
@@ -303,10 +323,12 @@ def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) ->
     chunks: list[np.ndarray] = []
     decode, feed = codec.decode_message, sampler.feed
     first, last = math.inf, -math.inf
+    fed = 0
     for msg in read_candump(path):
         d = decode(msg)
         if d.rejection is None and d.name in hydraulic:
             feed(msg.timestamp, d.name, d.values)  # type: ignore[arg-type]
+            fed += 1
             first, last = min(first, msg.timestamp), max(last, msg.timestamp)
             if sampler.pending >= 8192:  # lists of floats cost more memory than arrays
                 rows = sampler.take()
@@ -321,6 +343,8 @@ def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) ->
     frames = counts["frames"]
     if sampler.rows > row_limit(frames):
         raise too_many_rows(path, sampler.rows, frames, last - first, counts["time_resyncs"])
+    if err := runs_backwards(path, fed, counts):
+        raise err
     rows = np.concatenate(chunks)
     columns = {
         name: rows[:, 1 + i]
