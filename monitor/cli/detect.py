@@ -109,14 +109,19 @@ def _write_lines(lines: list[dict[str, Any]], fh: TextIO) -> None:
 def run(args: argparse.Namespace) -> int:
     from monitor.config.settings import load_config
     from monitor.detection.offline import detect
-    from monitor.live.loops import read_loop
+    from monitor.live.loops import check_loop_model, read_loop
     from monitor.model.modelfile import load_model
 
     cfg = load_config(args.config)
+    loop = next((lc for lc in cfg.monitored_loops if lc.name == args.loop), None)
+    if args.loop is not None and loop is None:
+        rec = read_loop(args.recording, cfg, args.loop)  # says which loops there are
+    loop = loop or cfg.monitored_loops[0]
+    model_path = args.model or (loop.model if args.loop else cfg.model)
+    model = load_model(model_path)
+    check_loop_model(model, loop, cfg, model_path)  # before the recording is read
     rec = read_loop(args.recording, cfg, args.loop)
     tag = {} if args.loop is None else {"loop": args.loop}
-    loop_model = next((lc.model for lc in cfg.monitored_loops if lc.name == args.loop), None)
-    model = load_model(args.model or loop_model or cfg.model)
     horizon = args.horizon or cfg.horizon
     det = detect(model, rec, cfg.alarm, horizon, gating=cfg.gating)
     det.summary.update(tag)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from monitor.cli._numbers import WINDOW_MAX, number
 from monitor.cli._paths import output_file
@@ -12,6 +13,10 @@ from monitor.errors import MonitorError
 from monitor.model.spec import PRESETS
 from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule
 from monitor.training.settings import TrainConfig
+
+if TYPE_CHECKING:
+    from monitor.config.settings import MonitorConfig
+    from monitor.model.machinecard import ModelCard
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -166,6 +171,23 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _card(monitor_cfg: MonitorConfig, loop_name: str | None, recordings: list) -> ModelCard:
+    """The loop trained (``--loop``, or the config's first) and its configured machine; the
+    recordings must be ones that machine can produce (checked before training)."""
+    import numpy as np
+
+    from monitor.model.machinecard import card_for, check_seen
+
+    loop = next(lc for lc in monitor_cfg.monitored_loops if loop_name in (None, lc.name))
+    where = f"{monitor_cfg.source} (machine {loop.machine_source})"
+    for rec in recordings if loop.machine is not None else ():
+        seen = {s: float(np.nanmax(rec[s], initial=0.0)) for s in ("PP", "PA", "PB", "QP")
+                if rec.has(s)}  # fmt: skip
+        check_seen(seen, loop.machine, f"{rec.source}: shows", where)
+    source = None if loop.machine_source is None else str(loop.machine_source)
+    return card_for(loop.name, loop.machine, source)
+
+
 def run(args: argparse.Namespace) -> int:
     from monitor.config.settings import load_config
     from monitor.live.loops import read_loop
@@ -197,12 +219,14 @@ def run(args: argparse.Namespace) -> int:
         rec = read_loop(path, monitor_cfg, args.loop)
         print(f"read {path} (held out): {len(rec)} samples", file=sys.stderr)
         held_out.append(rec)
+    card = _card(monitor_cfg, args.loop, recordings)
     reference = None
     if args.reference is not None:
         shipped = args.reference == "shipped"
         reference = load_model(monitor_cfg.model if shipped else Path(args.reference))
     model = train(recordings, cfg, progress=lambda msg: print(msg, file=sys.stderr),
                   held_out=held_out or None, reference=reference)  # fmt: skip
+    model.card = card
     try:
         save_model(args.out, model)
     except OSError as exc:

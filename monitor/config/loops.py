@@ -26,11 +26,12 @@ from monitor.errors import ConfigError
 from monitor.sampling.sampler import ROW_COLUMNS
 from monitor.schema.sections import key_text, shown
 from monitor.signals import ROD_POS
+from monitor.sim.machine import MachineParams, load_machine
 
 DEFAULT_LOOP = "boom"
 ALARM_MESSAGE = "MON_Alarm"
 _NAME = re.compile(r"^[a-z][a-z0-9_]{0,31}$")  # goes into file names and event lines
-_KEYS = ("name", "model", "signals", "alarm_message", "source_address")
+_KEYS = ("name", "model", "signals", "alarm_message", "source_address", "machine")
 
 
 @dataclass(frozen=True)
@@ -40,15 +41,25 @@ class LoopConfig:
     signals: dict[str, str | None] = field(default_factory=dict)  # contract -> DBC signal
     alarm_message: str = ALARM_MESSAGE  # this loop's MON_Alarm-layout message in the DBC
     source_address: int = 0xA0  # J1939 address of this loop's DM1/DM2 (one per loop)
+    #: The loop's machine (its ``machine:`` simulator YAML, None: not named), checked against
+    #: the one its model was trained on.
+    machine: MachineParams | None = None
+    machine_source: Path | None = None
 
     def dbc_signal(self, contract: str) -> str | None:
         """The DBC signal carrying ``contract`` for this loop (None: the loop has none)."""
         return self.signals.get(contract, contract)
 
 
-def default_loops(model: Path, source_address: int) -> tuple[LoopConfig, ...]:
-    """The single loop of a config without ``loops``."""
-    return (LoopConfig(DEFAULT_LOOP, model, source_address=source_address),)
+def default_loops(
+    model: Path,
+    source_address: int,
+    machine: MachineParams | None = None,
+    machine_source: Path | None = None,
+) -> tuple[LoopConfig, ...]:
+    """The single loop of a config without ``loops`` (``machine``: the top-level key's)."""
+    return (LoopConfig(DEFAULT_LOOP, model, source_address=source_address, machine=machine,
+                       machine_source=machine_source),)  # fmt: skip
 
 
 def parse_loops(
@@ -113,4 +124,6 @@ def _loop(
     if isinstance(sa, bool) or not isinstance(sa, int) or not 0 <= sa <= 253:
         raise ConfigError(f"{source}: {where}.source_address must be a whole number 0..253, "
                           f"got {shown(sa)}")  # fmt: skip
-    return LoopConfig(name, path_of(item["model"], f"{where}.model"), dict(signals), alarm, sa)
+    machine = None if item.get("machine") is None else path_of(item["machine"], f"{where}.machine")
+    return LoopConfig(name, path_of(item["model"], f"{where}.model"), dict(signals), alarm, sa,
+                      None if machine is None else load_machine(machine), machine)  # fmt: skip

@@ -7,7 +7,9 @@ Sections: ``dbc`` and ``model`` (input files, relative to the config file's fold
 starts in, so a config shipped inside the installed package never writes into it), and
 ``storage`` (their disk quota and the disk-writer queue).
 ``operating``, ``plausibility`` and ``validity`` say which samples
-the detector judges; ``loops`` (optional, ``monitor.config.loops``) lists several loops.
+the detector judges; ``loops`` (optional, ``monitor.config.loops``) lists several loops;
+``machine`` (optional) names the simulator YAML of the machine of a config without loops,
+against which a model's recorded machine is checked (``monitor.model.machinecard``).
 
 Every problem (unknown key, wrong type, missing input file, impossible value) is one
 ``ConfigError`` naming the file and the key; the CLI turns it into exit 2.
@@ -31,6 +33,7 @@ from monitor.model.envelope import ValidityConfig
 from monitor.resources import resource_path
 from monitor.schema.sections import keys_text, setting, shown, typed
 from monitor.schema.yamlfile import read_yaml
+from monitor.sim.machine import MachineParams, load_machine
 
 
 def _POSITIVE(v: float) -> bool:  # noqa: N802 - a constant-like check
@@ -171,6 +174,10 @@ class MonitorConfig:
     plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
     validity: ValidityConfig = field(default_factory=ValidityConfig)
     loops: tuple[LoopConfig, ...] = ()  # as written in the file; empty: no ``loops`` section
+    #: The simulator YAML of the machine of the one loop of a config without ``loops``, and
+    #: its parameters.
+    machine: Path | None = None
+    machine_params: MachineParams | None = None
 
     @property
     def gating(self) -> GatingConfig:
@@ -179,7 +186,8 @@ class MonitorConfig:
     @property
     def monitored_loops(self) -> tuple[LoopConfig, ...]:
         """The loops the daemon monitors: ``loops``, or the one ``boom`` loop of ``model``."""
-        return self.loops or default_loops(self.model, self.j1939.source_address)
+        return self.loops or default_loops(self.model, self.j1939.source_address,
+                                           self.machine_params, self.machine)  # fmt: skip
 
 
 _TOP_KEYS = {
@@ -187,7 +195,7 @@ _TOP_KEYS = {
     "storage",
     "j1939",
     "operating", "plausibility", "validity",
-    "loops",
+    "loops", "machine",
 }  # fmt: skip
 
 
@@ -233,6 +241,8 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             "rotated file must fit"
         )
     j1939 = section(J1939Config, "j1939")
+    machine = None if data.get("machine") is None else _path(data["machine"], "machine", base,
+                                                             source)  # fmt: skip
     loops: tuple[LoopConfig, ...] = ()
     if "loops" in data:
         loops = parse_loops(data["loops"], source, lambda v, k: _path(v, k, base, source),
@@ -256,4 +266,6 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
         plausibility=section(PlausibilityConfig, "plausibility"),
         validity=section(ValidityConfig, "validity"),
         loops=loops,
+        machine=machine,
+        machine_params=None if machine is None else load_machine(machine),
     )

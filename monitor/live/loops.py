@@ -31,6 +31,7 @@ from monitor.errors import ConfigError, InputFileError, NoHydraulicDataError
 from monitor.io.recording import Recording
 from monitor.live.dm1 import Diagnostics
 from monitor.live.outputs import AlarmFrames
+from monitor.model.machinecard import check_model_for_loop
 from monitor.model.modelfile import MonitorModel, load_model
 from monitor.sampling.bulk import recording_from_candump_bulk
 from monitor.sampling.read import read_recording
@@ -114,8 +115,10 @@ class Loop:
     def load(
         lc: LoopConfig, cfg: MonitorConfig, view: tuple[str, ...]
     ) -> tuple[MonitorModel, Ticker]:
-        """The loop's model and a fresh ticker (raises on a bad model file)."""
+        """The loop's model and a fresh ticker (raises on a bad model file, or one of
+        another loop or machine)."""
         model = load_model(lc.model)
+        check_loop_model(model, lc, cfg)
         return model, Ticker(model, cfg.alarm, cfg.horizon, columns=view, gating=cfg.gating)
 
     def swap(
@@ -222,6 +225,17 @@ def wide_recording(cfg: MonitorConfig, recordings: dict[str, Recording]) -> Reco
             if name is not None and rec.has(contract) and name not in columns:
                 columns[name] = rec[contract]
     return Recording(t=first.t, columns=columns, source="+".join(recordings), meta={})
+
+
+def check_loop_model(model: MonitorModel, lc: LoopConfig, cfg: MonitorConfig,
+                     path: str | Path | None = None) -> None:
+    """Refuse ``model`` (from ``path``, default the loop's) for loop ``lc`` of ``cfg`` when
+    it was trained on another loop or machine (``monitor.model.machinecard``)."""
+    where = f"{cfg.source}: loops[{cfg.loops.index(lc)}]" if lc in cfg.loops else str(cfg.source)
+    if lc.machine_source is not None:
+        where += f" (machine {lc.machine_source.name})"
+    check_model_for_loop(model.card, model.envelope, path or lc.model, lc.name, lc.machine,
+                         where)  # fmt: skip
 
 
 def file_digest(path: str | Path) -> str:

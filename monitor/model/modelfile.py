@@ -29,6 +29,7 @@ from monitor.model.filecheck import check_header, read_members
 from monitor.model.grnn import GRNN
 from monitor.model.hold import HoldModel
 from monitor.model.lever import LeverModel
+from monitor.model.machinecard import ModelCard
 from monitor.model.spec import DGRNNSpec, Normalizer
 from monitor.model.threshold import ThresholdRule
 from monitor.signals import SIGNAL_NAMES
@@ -41,7 +42,8 @@ MODEL_FORMAT = "hydraulic-monitor-dgrnn"
 # not know it ignore it, and files without it get an envelope derived from their patterns.
 # Likewise ``bias`` (the bias statistic's window, scales and threshold): without it, J alone;
 # ``lever`` (the full-lever statistic L's): without it, no L; and ``hold`` (the hold
-# statistic H's): without it, no H.
+# statistic H's): without it, no H; ``machine`` (the loop and machine trained on): without it,
+# unknown.
 MODEL_VERSION = 2
 _ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
 
@@ -70,6 +72,8 @@ class MonitorModel:
     lever: LeverModel | None = None
     #: The hold statistic H (None: none; see ``monitor.model.hold``).
     hold: HoldModel | None = None
+    #: The loop and machine trained on (None: not recorded; see ``monitor.model.machinecard``).
+    card: ModelCard | None = None
 
     @property
     def spec(self) -> DGRNNSpec:
@@ -106,6 +110,8 @@ class MonitorModel:
             head["lever"] = self.lever.to_dict()
         if self.hold is not None:
             head["hold"] = self.hold.to_dict()
+        if self.card is not None:
+            head["machine"] = self.card.to_dict()
         return head
 
 
@@ -234,6 +240,7 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
         bias=_bias(header, len(spec.outputs)),
         lever=_lever(header, len(spec.outputs)),
         hold=_hold(header, len(spec.outputs)),
+        card=ModelCard.from_dict(header["machine"]) if "machine" in header else None,
     )
 
 
