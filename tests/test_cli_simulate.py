@@ -54,7 +54,7 @@ def test_simulate_log_decodes_back_to_the_same_signals(tmp_path):
 @pytest.mark.parametrize(
     "args, fragment",
     [
-        (["--duration", "-1"], "--duration: must be within 0.01..86400 s, got -1"),
+        (["--duration", "-1"], "--duration: must be within 0.01..7200 s, got -1"),
         (["--duration", "5", "--fault", "piston_wear:2"], "outside 0..1"),
         (["--duration", "5", "--fault", "broken_pump:0.5"], "unknown fault 'broken_pump'"),
         (["--duration", "5", "--effect", "magic"], "unknown effect 'magic'"),
@@ -104,3 +104,20 @@ def test_simulate_help_lists_faults_effects_and_parameter_units(capsys):
         "range 0..100",
     ):
         assert word in text
+
+
+def test_a_day_of_simulation_is_refused_before_any_work(capsys) -> None:
+    """A run is held in memory (6 h peaked at 2.29 GB): --duration beyond 7,200 s is a usage
+    error while the command line is parsed (checked on the parser alone, so that the
+    previous release, which accepted it, fails here instead of simulating a day)."""
+    from monitor.cli import build_parser
+
+    parser = build_parser("simulate")
+    with pytest.raises(SystemExit) as exc:
+        parser.parse_args(["simulate", "--duration", "86400", "--out", "x.csv"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.endswith("argument --duration: must be within 0.01..7200 s, got 86400 (the run "
+                        "is held in memory, some 0.3 GB a simulated hour; simulate longer spans "
+                        "as several runs with other seeds)")  # fmt: skip
+    assert parser.parse_args(["simulate", "--duration", "7200", "--out", "x.csv"]).duration == 7200

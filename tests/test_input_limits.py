@@ -225,7 +225,8 @@ def test_sparse_file_is_refused_reading_a_little_of_it(tmp_path, read) -> None:
 
 def test_csv_with_nul_bytes_is_refused(tmp_path) -> None:
     path = tmp_path / "r.csv"
-    path.write_bytes(b"t,SpoolCmd\n0.0,1\0\n")
+    # A full header: the header is checked before any row is read.
+    path.write_bytes(b"t,SpoolCmd,PumpDispCmd,EngineSpeed,OilTemp,PP,PA,PB,QP\n0.0,1\0\n")
     with pytest.raises(InputFileError, match=r"r\.csv:2: NUL bytes, not a text file"):
         read_csv(path)
 

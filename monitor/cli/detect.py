@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     loop = next((lc for lc in cfg.monitored_loops if lc.name == args.loop), None)
     if args.loop is not None and loop is None:
-        rec = read_loop(args.recording, cfg, args.loop)  # says which loops there are
+        read_loop(args.recording, cfg, args.loop)  # raises, naming the file or the loops
     loop = loop or cfg.monitored_loops[0]
     model_path = args.model or (loop.model if args.loop else cfg.model)
     model = load_model(model_path)

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from monitor.cli._numbers import DURATION_MAX_S, SEED_MAX, number
+from monitor.cli._numbers import DURATION_MAX_S, DURATION_WHY, SEED_MAX, number
 from monitor.cli._paths import output_file
 from monitor.errors import ConfigError, MonitorError
 from monitor.sim.cycles import CYCLES, make_cycle
@@ -42,8 +42,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--duration", type=number(0.01, DURATION_MAX_S, unit="s"), required=True,
-                   metavar="S", help=f"length in seconds (at most {DURATION_MAX_S:g})")  # fmt: skip
+    p.add_argument("--duration", type=number(0.01, DURATION_MAX_S, unit="s", why=DURATION_WHY),
+                   required=True, metavar="S",
+                   help=f"length in seconds (at most {DURATION_MAX_S:g}: "
+                   f"{DURATION_WHY})")  # fmt: skip
     p.add_argument(
         "--seed",
         type=number(0, SEED_MAX, whole=True),

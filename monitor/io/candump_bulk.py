@@ -17,13 +17,15 @@ so it means what it means in ``read_candump``, and a malformed line raises the s
 The file is read in chunks, each checked before the next: a line longer than
 ``MAX_LINE_BYTES`` or a NUL byte in a whole line stops the read there (a binary file, a
 2 GB sparse file), so refusing it costs one chunk of memory, not the file.  (So the line
-named may come after a malformed line that ``read_candump`` would name first.)
+named may come after a malformed line that ``read_candump`` would name first.)  The lines
+are parsed a block at a time, so the memory beyond the frames kept is one block's.
 """
 
 from __future__ import annotations
 
 import io
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -72,12 +74,24 @@ class Frames:
 
 
 def read_candump_frames(path: str | Path) -> Frames:
-    """All frames of a candump -L log; ``InputFileError`` for a missing file or a bad line."""
+    """All frames of a candump -L log; ``InputFileError`` for a missing file or a bad line.
+
+    The file is parsed block by block (``_BLOCK`` bytes of whole lines), so the memory
+    spent beyond the frames kept is one block's, whatever the number of lines (8 MB of blank
+    lines took 765 MB read whole)."""
     p = Path(path)
+    parts: list[Frames] = []
     try:
-        raw = _read_text(p)
+        for raw, first, last in _read_blocks(p):
+            parts.append(_block_frames(raw, first, last, p))
     except OSError as exc:
         raise InputFileError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    return _concat(parts)
+
+
+def _block_frames(raw: bytearray, first: int, last: bool, p: Path) -> Frames:
+    """The frames of one block of whole lines (the file's last block if ``last``); ``first``
+    is the number of lines before it, for messages."""
     buf = np.frombuffer(raw, dtype=np.uint8)
     starts, ends, sp1, sp2, hs, ok = _scan_lines(buf)
     fast = np.flatnonzero(ok)
@@ -85,18 +99,35 @@ def read_candump_frames(path: str | Path) -> Frames:
     fields, good = _parse_fast(buf, starts[fast], ends[fast], pos)
     is_fast = np.zeros(starts.size, dtype=bool)
     is_fast[fast[good]] = True
-    slow = _parse_slow(raw, starts, ends, np.flatnonzero(~is_fast), p)
+    others = np.flatnonzero(~is_fast & (ends > starts))  # an empty line is skipped here
+    slow = _parse_slow(raw, starts, ends, others, p, first, last)
     return _merge({k: v[good] for k, v in fields.items()}, fast[good], slow)
 
 
-_CHUNK = 1 << 20
+def _concat(parts: list[Frames]) -> Frames:
+    if len(parts) == 1:
+        return parts[0]
+    width = max(f.data.shape[1] for f in parts)
+    data = np.concatenate([np.pad(f.data, ((0, 0), (0, width - f.data.shape[1])))
+                           for f in parts])  # fmt: skip
+    cols = [np.concatenate([getattr(f, k) for f in parts])
+            for k in ("timestamp", "can_id", "extended", "remote", "error", "length")]  # fmt: skip
+    return Frames(*cols, data)
 
 
-def _read_text(p: Path) -> bytearray:
-    """The file's bytes, read chunk by chunk and refused at the first line longer than
-    ``MAX_LINE_BYTES`` or the first whole line with a NUL byte (``InputFileError`` naming
-    it).  NULs in an unterminated last line are left to the torn-line rule."""
+_CHUNK = 1 << 18
+#: Bytes of whole lines parsed at a time: the per-line work arrays (some 50 bytes a line)
+#: are one block's.
+_BLOCK = 1 << 18
+
+
+def _read_blocks(p: Path) -> Iterator[tuple[bytearray, int, bool]]:
+    """(bytes of whole lines, lines before them, whether they end the file), read chunk by
+    chunk and refused at the first line longer than ``MAX_LINE_BYTES`` or the first whole
+    line with a NUL byte (``InputFileError`` naming it).  NULs in an unterminated last line
+    are left to the torn-line rule."""
     data = bytearray()
+    given = 0  # lines in the blocks handed out
     lines_before = 0  # newlines before the current chunk
     line_len = 0  # bytes of the current line before the current chunk
     pending_nul = 0  # line number of a NUL not yet followed by a newline
@@ -125,9 +156,14 @@ def _read_text(p: Path) -> bytearray:
             lines_before += nl.size
             line_len = int(tail)
             data += chunk
-    if line_len > MAX_LINE_BYTES and data[-1] != 13:  # the unterminated last line
+            if len(data) >= _BLOCK and nl.size:
+                cut = len(data) - int(tail)  # after the last newline
+                yield data[:cut], given, False
+                given = lines_before
+                del data[:cut]
+    if line_len > MAX_LINE_BYTES and (not data or data[-1] != 13):  # the unterminated last line
         raise too_long_line(p, lines_before + 1)
-    return data
+    yield data, given, True
 
 
 @jit(aot=True)
@@ -270,8 +306,11 @@ def _fields(buf, starts, ends, sp1, sp2, hs, hexval, pow10, width, max_whole):  
     return value, exact, ts, can_id, length, data, good
 
 
-def _parse_slow(raw: bytes | bytearray, starts, ends, lines: np.ndarray, path: Path) -> list:
-    """(line index, Message) for the other lines, through the line check and python-can."""
+def _parse_slow(
+    raw: bytes | bytearray, starts, ends, lines: np.ndarray, path: Path, first: int, last: bool
+) -> list:
+    """(line index, Message) for the other lines, through the line check and python-can;
+    ``first`` lines come before ``raw`` in the file, ``last``: ``raw`` ends the file."""
     out = []
     for i in lines.tolist():
         text = raw[starts[i] : ends[i]].decode("utf-8", errors="replace").strip()
@@ -279,13 +318,14 @@ def _parse_slow(raw: bytes | bytearray, starts, ends, lines: np.ndarray, path: P
             continue
         problem = line_problem(text)
         if problem:
-            unterminated = i == len(starts) - 1 and not raw.endswith(b"\n")
-            skip_odd_line(text, path, i + 1, unterminated, problem)
+            unterminated = last and i == len(starts) - 1 and not raw.endswith(b"\n")
+            skip_odd_line(text, path, first + i + 1, unterminated, problem)
             continue
         try:
             msgs = list(CanutilsLogReader(io.StringIO(text)))
         except (ValueError, IndexError) as exc:
-            raise InputFileError(f"{path}:{i + 1}: unreadable candump line: {exc}") from None
+            where = f"{path}:{first + i + 1}"
+            raise InputFileError(f"{where}: unreadable candump line: {exc}") from None
         out.extend((i, m) for m in msgs)
     return out
 

@@ -15,7 +15,7 @@ import logging
 import math
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -90,6 +90,88 @@ def _to_float(path: Path, name: str, values: list[str], lines: list[int]) -> np.
     return arr
 
 
+#: Rows held as text at a time: each block becomes float64 columns before the next is read,
+#: so reading costs the columns kept (8 bytes a value), not the file's lines as strings.
+BLOCK_ROWS = 16_384
+
+
+def _header(reader: Any, p: Path) -> list[str]:
+    """The header row of ``reader`` (a ``csv.reader``), checked (duplicates, required
+    columns) before any data row is read."""
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise InputFileError(f"{p}:1: empty file, expected a CSV header") from None
+    except csv.Error as exc:
+        raise InputFileError(f"{p}:1: {exc}") from None
+    line = reader.line_num
+    dupes = sorted({h for h in header if header.count(h) > 1})
+    if dupes:
+        raise InputFileError(f"{p}:{line}: duplicate column(s) {_shown(', '.join(dupes))}")
+    missing = [c for c in CSV_COLUMNS if c not in header]
+    if missing:
+        raise InputFileError(
+            f"{p}:{line}: missing required column(s) {', '.join(missing)}"
+            f" (header: {_shown(','.join(header))})"
+        )
+    return header
+
+
+def _rows(
+    reader: Any, p: Path, header: list[str]
+) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
+    """(float64 column per kept column, file line of each row, text columns dropped), the
+    rows converted ``BLOCK_ROWS`` at a time; blank lines skipped."""
+    ncol = len(header)
+    parts: dict[str, list[np.ndarray]] = {name: [] for name in header}
+    line_parts: list[np.ndarray] = []
+    dropped: set[str] = set()
+    rows: list[list[str]] = []
+    lines: list[int] = []
+    try:
+        for row in reader:
+            if len(row) != ncol:
+                if not row or (len(row) == 1 and not row[0].strip()):
+                    continue  # blank line
+                raise InputFileError(
+                    f"{p}:{reader.line_num}: {len(row)} fields, the header has {ncol}"
+                )
+            rows.append(row)
+            lines.append(reader.line_num)
+            if len(rows) == BLOCK_ROWS:
+                _convert(p, header, rows, lines, parts, dropped)
+                line_parts.append(np.array(lines, dtype=np.int64))
+                rows, lines = [], []
+    except csv.Error as exc:
+        raise InputFileError(f"{p}:{reader.line_num}: {exc}") from None
+    if rows:
+        _convert(p, header, rows, lines, parts, dropped)
+        line_parts.append(np.array(lines, dtype=np.int64))
+    if not line_parts:
+        raise InputFileError(f"{p}: no data rows after the header")
+    columns = {name: np.concatenate(v) for name, v in parts.items() if name not in dropped}
+    return columns, np.concatenate(line_parts), [h for h in header if h in dropped]
+
+
+def _convert(
+    p: Path, header: list[str], rows: list[list[str]], lines: list[int],
+    parts: dict[str, list[np.ndarray]], dropped: set[str],
+) -> None:  # fmt: skip
+    """One block of rows onto ``parts``; a column holding text is dropped (``dropped``)
+    unless it is required (``InputFileError`` naming its line)."""
+    required = set(CSV_COLUMNS)
+    for name, values in zip(header, zip(*rows, strict=True), strict=True):
+        if name in dropped:
+            continue
+        try:
+            parts[name].append(_to_float(p, name, list(values), lines))
+        except InputFileError:
+            if name in required:
+                raise
+            dropped.add(name)  # an extra text column: tools ignore what they do not need
+            parts[name].clear()
+
+
 def read_csv(path: str | Path) -> Recording:
     """Read a contract CSV into a ``Recording`` (``t`` in s, signals in contract units).
 
@@ -105,60 +187,12 @@ def read_csv(path: str | Path) -> Recording:
     try:
         with p.open(newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(_lines(fh, p))
-            try:
-                header = next(reader)
-            except StopIteration:
-                raise InputFileError(f"{p}:1: empty file, expected a CSV header") from None
-            except csv.Error as exc:
-                raise InputFileError(f"{p}:1: {exc}") from None
-            header = [h.strip() for h in header]
-            header_line = reader.line_num
-            rows: list[list[str]] = []
-            lines: list[int] = []
-            ncol = len(header)
-            try:
-                for row in reader:
-                    if len(row) != ncol:
-                        if not row or (len(row) == 1 and not row[0].strip()):
-                            continue  # blank line
-                        raise InputFileError(
-                            f"{p}:{reader.line_num}: {len(row)} fields, the header has {ncol}"
-                        )
-                    rows.append(row)
-                    lines.append(reader.line_num)
-            except csv.Error as exc:
-                raise InputFileError(f"{p}:{reader.line_num}: {exc}") from None
+            header = _header(reader, p)
+            columns, lines, dropped = _rows(reader, p, header)
     except UnicodeDecodeError as exc:
         raise InputFileError(f"{p}: not a UTF-8 text file ({exc.reason})") from None
     except OSError as exc:
         raise InputFileError(f"{p}: cannot read: {exc.strerror or exc}") from None
-
-    dupes = sorted({h for h in header if header.count(h) > 1})
-    if dupes:
-        raise InputFileError(
-            f"{p}:{header_line}: duplicate column(s) {_shown(', '.join(dupes))}"
-        )
-    missing = [c for c in CSV_COLUMNS if c not in header]
-    if missing:
-        raise InputFileError(
-            f"{p}:{header_line}: missing required column(s) {', '.join(missing)}"
-            f" (header: {_shown(','.join(header))})"
-        )
-    if not rows:
-        raise InputFileError(f"{p}: no data rows after the header")
-
-    by_column = list(zip(*rows, strict=True))
-    columns: dict[str, np.ndarray] = {}
-    dropped: list[str] = []
-    required = set(CSV_COLUMNS)
-    for name, values in zip(header, by_column, strict=True):
-        values = list(values)
-        try:
-            columns[name] = _to_float(p, name, values, lines)
-        except InputFileError:
-            if name in required:
-                raise
-            dropped.append(name)  # an extra text column: tools ignore what they do not need
     t = columns.pop("t")
     if np.isnan(t).any():
         i = int(np.flatnonzero(np.isnan(t))[0])
@@ -201,12 +235,15 @@ def write_csv(
         for name in extras:
             rec[name]  # raises InputFileError naming the missing column
     names = [*CSV_COLUMNS, *[n for n in extras if n not in CSV_COLUMNS]]
-    formatted = [_format_column(rec.t, "%.6f")]
-    formatted += [_format_column(rec[n], "%.10g") for n in names[1:]]
     p = Path(path)
     try:
         with p.open("w", newline="", encoding="utf-8") as fh:
             fh.write(",".join(names) + "\n")
-            fh.writelines(",".join(row) + "\n" for row in zip(*formatted, strict=True))
+            # BLOCK_ROWS rows formatted at a time: the text of a day's rows is not held whole.
+            for a in range(0, len(rec), BLOCK_ROWS):
+                cut = slice(a, a + BLOCK_ROWS)
+                formatted = [_format_column(rec.t[cut], "%.6f")]
+                formatted += [_format_column(rec[n][cut], "%.10g") for n in names[1:]]
+                fh.writelines(",".join(row) + "\n" for row in zip(*formatted, strict=True))
     except OSError as exc:
         raise InputFileError(f"{p}: cannot write: {exc.strerror or exc}") from None
