@@ -205,7 +205,11 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
             if math.isnan(val):
                 continue
             lo, hi = lim[s]
-            if lo <= val <= hi:
+            # A transducer may read a share of full scale below its range (offset, noise);
+            # one at full scale is pinned there.
+            in_range = (lo - cfg.range_tolerance_fs * (hi - lo) <= val < hi if s in sensors
+                        else lo <= val <= hi)  # fmt: skip
+            if in_range:
                 out_of_range_run[s] = 0
                 latched[("signal_range", s)] = False
             else:

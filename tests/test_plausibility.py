@@ -143,9 +143,14 @@ def test_out_of_range_value_is_named_and_clears(normal_run) -> None:
     # Configured limits tighter than the DBC's: 250 bar on a 0..400 bar channel.
     pp = normal_run["PP"].copy()
     pp[k : k + 20] = 260.0
-    pp[k + 20 : k + 40] = 250.0  # at the limit is in range
+    pp[k + 20 : k + 40] = 249.99  # just below the limit is in range
     found, _, _ = findings_of(edited(normal_run, PP=pp), PlausibilityConfig(pressure_max_bar=250))
     assert found == {("PP", "signal_range"): 20.09}
+    # At the limit a transducer is pinned at full scale: out of range.
+    pp[k + 20 : k + 40] = 250.0
+    cfg = PlausibilityConfig(pressure_max_bar=250)
+    found, check, _ = findings_of(edited(normal_run, PP=pp), cfg)
+    assert found == {("PP", "signal_range"): 20.09} and check[k + 39] != 0
 
 
 def test_port_reading_high_is_named_against_the_pump(normal_run) -> None:

@@ -4,8 +4,17 @@ Checks (``plausibility:`` in config/monitor.yaml; times in seconds of 100 Hz sam
 
 * ``signal_range``: a signal outside the sensor's range (the DBC ranges by default; the
   pressure and flow limits are configurable) for ``range_s``.  On the bus the decoder already
-  rejects a frame whose value lies outside the DBC range (the signal then goes stale); this
-  names the signal for CSV input and for configured limits tighter than the DBC's.
+  rejects a frame whose value lies outside the DBC range (the signal then goes stale: the
+  DBC's range stays the decoder's hard limit); this names the signal for CSV input, for a
+  DBC wider than the sensor (signed pressures) and for configured limits tighter than the
+  DBC's.  The transducers PP, PA, PB and QP get a field tolerance at the low end: a 4-20 mA
+  transducer sits up to +-0.5 % of full scale off zero and its noise crosses zero, and zero
+  (tank pressure, no flow) is where the loop rests, so a healthy sensor reads down to
+  ``range_tolerance_fs`` of full scale below its lower limit (1 %: 4 bar on 0..400 bar,
+  0.6 L/min on 0..60 L/min).  Full scale is never an operating point (the relief valve
+  sits well below it), so a transducer reading at its upper limit or above is saturated,
+  pinned there (a short to supply, an over-range): out of range.  Commands, EngineSpeed and
+  OilTemp keep their limits exactly (a full spool command is normal).
 * ``frozen``: PP, PA, PB or QP repeat the very same value for ``frozen_s`` while the engine
   runs: a live sensor always shows noise (0.3 bar / 0.1 L/min rms on the reference machine,
   far above the 0.01 resolution), so a variance of exactly zero is a frozen filter or a
@@ -91,6 +100,8 @@ class PlausibilityConfig:
     pressure_min_bar: float = 0.0  # PP, PA, PB sensor range (default: the DBC's)
     pressure_max_bar: float = 400.0
     flow_max_lpm: float = 60.0  # QP sensor range upper end (lower end 0)
+    # 4-20 mA transducers sit +-0.5 % FS off zero and their noise crosses zero.
+    range_tolerance_fs: float = 0.01  # share of full scale PP/PA/PB/QP may read below range
     range_s: float = 0.1
     frozen_s: float = 1.0
     stuck_s: float = 20.0
@@ -112,13 +123,28 @@ class PlausibilityConfig:
             raise ConfigError("plausibility.pressure_max_bar must be above pressure_min_bar")
         if self.flow_max_lpm <= 0:
             raise ConfigError("plausibility.flow_max_lpm must be > 0")
+        if not self.range_tolerance_fs <= 0.1:
+            raise ConfigError(f"plausibility.range_tolerance_fs is a share of full scale "
+                              f"within 0..0.1 (0.01 = 1 %), got "
+                              f"{self.range_tolerance_fs}")  # fmt: skip
 
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) sensor range per column (COLUMNS order)."""
         lo = np.array([DBC_RANGES[n][0] for n in COLUMNS])
         hi = np.array([DBC_RANGES[n][1] for n in COLUMNS])
         for c in (_PP, _PA, _PB):
             lo[c], hi[c] = self.pressure_min_bar, self.pressure_max_bar
         hi[_QP] = self.flow_max_lpm
+        return lo, hi
+
+    def range_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lowest, highest) reading per column that is in range: the transducers (PP, PA,
+        PB, QP) down to ``range_tolerance_fs`` of full scale below their lower limit and
+        strictly below full scale (a reading at it is pinned); the others their limits."""
+        lo, hi = self.limits()
+        for c in (_PP, _PA, _PB, _QP):
+            lo[c] -= self.range_tolerance_fs * (hi[c] - lo[c])
+            hi[c] = np.nextafter(hi[c], -np.inf)
         return lo, hi
 
     def params(self) -> np.ndarray:
@@ -141,9 +167,10 @@ class PlausibilityConfig:
 # misc[0] rest run (engine off, spool centred).
 @jit(aot=True)
 def _run(  # pragma: no cover - numba
-    x, cols, lo, hi, p, counters, ref, last, active, misc, min_rpm, out_check, out_sig
+    x, cols, lo, hi, rlo, rhi, p, counters, ref, last, active, misc, min_rpm, out_check, out_sig
 ):
-    # x[i, cols[c]] is column c (COLUMNS order) of sample i.
+    # x[i, cols[c]] is column c (COLUMNS order) of sample i; lo/hi the sensor range (frozen
+    # check), rlo/rhi the readings in range (``range_limits``).
     n, m = x.shape[0], cols.shape[0]
     range_n, frozen_n, stuck_n = p[P_RANGE_N], p[P_FROZEN_N], p[P_STUCK_N]
     band_bar, band_lpm = p[P_BAND_BAR], p[P_BAND_LPM]
@@ -165,7 +192,7 @@ def _run(  # pragma: no cover - numba
             if np.isnan(v):
                 continue  # staleness is the sampler's verdict; no evidence either way
             # signal_range
-            if v < lo[c] or v > hi[c]:
+            if v < rlo[c] or v > rhi[c]:
                 counters[0, c] += 1
                 if range_n > 0 and counters[0, c] >= range_n:
                     active[0, c] = True
@@ -243,6 +270,7 @@ class Plausibility:
         self.cfg = cfg
         self.min_engine_rpm = float(min_engine_rpm)
         self._lo, self._hi = cfg.limits()
+        self._rlo, self._rhi = cfg.range_limits()
         self._p = cfg.params()
         m = len(COLUMNS)
         self._counters = np.zeros((4, m), dtype=np.int64)
@@ -273,8 +301,9 @@ class Plausibility:
         return self.check
 
     def _kernel(self, x: np.ndarray, cols: np.ndarray, check: np.ndarray, sig: np.ndarray) -> None:
-        _run(x, cols, self._lo, self._hi, self._p, self._counters, self._ref, self._last,
-             self._active, self._misc, self.min_engine_rpm, check, sig)  # fmt: skip
+        _run(x, cols, self._lo, self._hi, self._rlo, self._rhi, self._p, self._counters,
+             self._ref, self._last, self._active, self._misc, self.min_engine_rpm, check,
+             sig)  # fmt: skip
 
 
 #: The gate's finding after the kernel's checks (``monitor.detection.gating``): EngineSpeed
