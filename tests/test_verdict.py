@@ -135,3 +135,25 @@ def test_a_sensor_fault_from_missing_frames_names_the_signal(tmp_path: Path) -> 
     stale = [c for c in s["sensor_checks"] if c["check"] == "stale"]
     assert [c["sensor"] for c in stale] == ["QP"]
     assert 50.0 <= stale[0]["first_t"] < 50.1
+
+
+def test_not_judged_names_the_signal_outside_the_trained_range(tmp_path: Path, model) -> None:
+    """Oil at 110 degC throughout, far above anything the shipped model was trained on: the
+    "not judged" line names OilTemp, the temperature the log showed and the trained range."""
+    rec = read_recording(resource_path("replay", "normal.log"))
+    cols = {k: v.copy() for k, v in rec.columns.items()}
+    cols["OilTemp"][:] = 110.0
+    log = tmp_path / "hot.log"
+    write_candump(log, Recording(rec.t - rec.t[0], cols, "hot"))
+    lo, hi = model.envelope.range_of("OilTemp")
+    assert hi + 5.0 < 110.0  # beyond the range and its margin (5 degC at least)
+    rc, s, err, _ = detect_cli(log, tmp_path)
+    assert rc == 3, err
+    assert s["verdict"] == "not_judged"
+    trained = f"trained {lo:.4g}-{hi:.4g} degC"
+    expected = f"outside the trained range 100% of the time (OilTemp 110 degC, {trained})"
+    assert expected in s["not_judged_why"]
+    assert f"not judged: {expected}" in err
+    assert s["out_of_range_values"] == {"OilTemp": {
+        "samples": s["out_of_range_samples"], "min": 110.0, "max": 110.0,
+        "trained_min": round(lo, 3), "trained_max": round(hi, 3), "unit": "degC"}}  # fmt: skip

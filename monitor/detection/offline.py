@@ -15,6 +15,7 @@ from monitor.detection.alarm import AlarmConfig, Isolator, State, regimes_of
 from monitor.detection.decision import Decider, event_record
 from monitor.detection.gating import Gate, GateSeries, GatingConfig
 from monitor.detection.opstate import OpState
+from monitor.detection.outofrange import describe, out_of_range_values
 from monitor.detection.plausibility import finding
 from monitor.detection.verdict import verdict
 from monitor.errors import InputFileError
@@ -188,9 +189,11 @@ def detect(
         "source": rec.source,
     }
     period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
+    summary["out_of_range_values"] = out_of_range_values(gate.validity_values(rec), g.oor,
+                                                         gate.validity)  # fmt: skip
     summary["verdict"], summary["judged_s"], summary["not_judged_why"] = verdict(
         summary, states, j, g.op_state, g.oor, inputs_ok, rec["EngineSpeed"], model.window_n,
-        period,
+        period, describe(summary["out_of_range_values"]),
     )
     summary["rejected"] = rejected_counts(rec)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)

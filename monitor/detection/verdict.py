@@ -47,8 +47,10 @@ def verdict(
     engine_rpm: np.ndarray,
     window_n: int,
     period_s: float,
+    oor_named: str = "",
 ) -> tuple[str, float, str | None]:
-    """(verdict, judged seconds, why not judged or None) of one recording."""
+    """(verdict, judged seconds, why not judged or None) of one recording; ``oor_named``
+    says which signal lay outside the trained range, and where (``outofrange.describe``)."""
     judged = judged_mask(states, j)
     judged_s = round(float(judged.sum()) * period_s, 3)
     if summary["alarm"]:
@@ -59,7 +61,7 @@ def verdict(
     if judged.any():
         return "healthy", judged_s, None
     return "not_judged", judged_s, _why(states, op_state, oor, inputs_ok, engine_rpm, window_n,
-                                        period_s)  # fmt: skip
+                                        period_s, oor_named)  # fmt: skip
 
 
 def _why(
@@ -70,6 +72,7 @@ def _why(
     engine_rpm: np.ndarray,
     window_n: int,
     period_s: float,
+    oor_named: str = "",
 ) -> str:
     n = len(states)
     if n and not np.isfinite(engine_rpm).any():
@@ -83,7 +86,8 @@ def _why(
         "outside the trained range": np.mean((op_state == OpState.NORMAL) & (oor >= 0)),
         "model signals missing": np.mean((op_state == OpState.NORMAL) & (oor < 0) & ~inputs_ok),
     }
-    shares = [f"{name} {share:.0%} of the time" for name, share in
+    named = {"outside the trained range": f" ({oor_named})" if oor_named else ""}
+    shares = [f"{name} {share:.0%} of the time{named.get(name, '')}" for name, share in
               sorted(reasons.items(), key=lambda kv: -kv[1]) if share > 0]  # fmt: skip
     if not shares:
         return f"no full J window ({window_n * period_s:.1f} s) of judged samples"
