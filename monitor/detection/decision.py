@@ -86,11 +86,13 @@ class Decider:
         """Step the alarm machine on one sample: ``inputs_ok`` every model signal present,
         ``check`` the plausibility finding (a finding is a sensor fault), ``op_state`` the
         operating state (warm-up counts as not operating, like the engine off).  A ``STALE``
-        finding (EngineSpeed silent, the pump working) counts the engine as running."""
+        finding (EngineSpeed silent, the pump working) counts the engine as running.  The
+        engine runs or stops as ``op_state`` reports, which waits for more than one frame of
+        evidence (``monitor.detection.evidence``), not as one EngineSpeed reading says."""
         sensor_ok = inputs_ok and check == 0
-        state = self.machine.step(
-            j, sensor_ok, engine_rpm, e, regime, op_state != OpState.WARM_UP, check == STALE
-        )
+        on = check == STALE or op_state != OpState.ENGINE_OFF
+        state = self.machine.step(j, sensor_ok, engine_rpm if on else math.nan, e, regime,
+                                  op_state != OpState.WARM_UP, on)  # fmt: skip
         status = Status(state, int(op_state), int(oor), int(check), int(sensor))
         prev = self.status
         self.status = status

@@ -11,6 +11,10 @@ The model is trained on a running, warm machine, so detection runs only in ``nor
 * ``normal``: otherwise.  A missing OilTemp keeps the last decision; before the first
   reading the machine counts as warm (no evidence of a cold start).
 
+The OilTemp these rules see is the one believed under a rate-of-change limit, and a change
+of the state reported needs the evidence of more than one frame
+(``monitor.detection.evidence``).
+
 A missing EngineSpeed is not always an engine off: when the message that carries it
 (HYD_Commands) falls silent, or its frames are rejected, while the pump shows a working
 machine, the source is silent, not the machine (``silent_source``).  The finding starts once
@@ -60,6 +64,10 @@ class OperatingConfig:
     # Long enough that the whole bus going quiet at key-off is not taken for it: messages
     # stop a cycle or so apart, and the pump stops delivering as the engine spins down.
     silent_settle_s: float = 1.0  # EngineSpeed missing this long, pump working: sensor fault
+    # One frame is not evidence (``monitor.detection.evidence``); 0 switches each off.
+    oil_rate_max_c_per_s: float = 2.0  # OilTemp moving faster is not believed (one frame)
+    engine_confirm_s: float = 0.05  # engine start/stop reported after this (EngineSpeed 10 ms)
+    oil_confirm_s: float = 1.5  # warm-up start/end after this (OilTemp once a second)
 
     def __post_init__(self) -> None:
         if not -40.0 <= self.warmup_oil_c <= 150.0:
@@ -70,6 +78,13 @@ class OperatingConfig:
         if not 0.0 <= self.silent_settle_s <= 60.0:
             raise ConfigError(f"operating.silent_settle_s must be within 0..60 s, got "
                               f"{self.silent_settle_s}")  # fmt: skip
+        if not self.oil_rate_max_c_per_s >= 0:
+            raise ConfigError(f"operating.oil_rate_max_c_per_s must be >= 0 (0: off), got "
+                              f"{self.oil_rate_max_c_per_s}")  # fmt: skip
+        for name in ("engine_confirm_s", "oil_confirm_s"):
+            if not 0.0 <= getattr(self, name) <= 60.0:
+                raise ConfigError(f"operating.{name} must be within 0..60 s, got "
+                                  f"{getattr(self, name)}")  # fmt: skip
 
 
 def op_states(
