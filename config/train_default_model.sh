@@ -17,5 +17,7 @@ seq 1 120 | xargs -P "$(nproc)" -I{} monitor simulate --cycle boom-cover --durat
   --seed {} --out "$work/fit_{}.csv" >/dev/null
 seq 121 240 | xargs -P "$(nproc)" -I{} monitor simulate --duration 300 \
   --seed {} --out "$work/held_{}.csv" >/dev/null
+# --fault-check off: the data is simulated normal operation by construction, and checking
+# 20 h of it against the previous model would add about as long again.
 monitor train "$work"/fit_{1..120}.csv --held-out "$work"/held_{121..240}.csv \
-  --isolation-runs 8 --hold on --out "$here/boom_default.model.npz"
+  --isolation-runs 8 --hold on --fault-check off --out "$here/boom_default.model.npz"

@@ -16,7 +16,9 @@ from monitor.training.settings import TrainConfig
 
 if TYPE_CHECKING:
     from monitor.config.settings import MonitorConfig
+    from monitor.io.recording import Recording
     from monitor.model.machinecard import ModelCard
+    from monitor.model.modelfile import MonitorModel
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -168,6 +170,16 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="simulated faulty runs per fault and severity for the signatures (default "
         f"{TrainConfig.isolation_runs}; the shipped model uses 8: fewer misname slight faults)",
     )
+    p.add_argument(
+        "--fault-check",
+        choices=("refuse", "warn", "off"),
+        default="warn",
+        help="run every recording through the reference model (--reference, else the "
+        "config's model) first and name each one it raises an alarm on, isolated as a known "
+        "fault. warn (default): name it and train on it anyway, since a healthy machine "
+        "that differs from the reference's by 5-15 %% looks like a fault to it too; refuse: "
+        "exit 2 before any fitting (for a reference of this very machine); off: skip",
+    )
     p.set_defaults(func=run)
 
 
@@ -186,6 +198,48 @@ def _card(monitor_cfg: MonitorConfig, loop_name: str | None, recordings: list) -
         check_seen(seen, loop.machine, f"{rec.source}: shows", where)
     source = None if loop.machine_source is None else str(loop.machine_source)
     return card_for(loop.name, loop.machine, source)
+def _check_input(
+    args: argparse.Namespace,
+    monitor_cfg: MonitorConfig,
+    recordings: list[Recording],
+    held_out: list[Recording],
+    reference: MonitorModel | None,
+) -> None:
+    """The training-input checks (``monitor.training.inputcheck``), before any fitting."""
+    from monitor.model.modelfile import load_model
+    from monitor.training.inputcheck import (
+        SuspectRecordingError,
+        envelope_warnings,
+        fault_suspects,
+    )
+
+    for line in envelope_warnings(recordings, monitor_cfg.gating):
+        print(f"warning: {line}", file=sys.stderr)
+    if args.fault_check == "off":
+        return
+    if reference is not None:
+        name = "shipped" if args.reference == "shipped" else args.reference
+    else:
+        loop_model = next((lc.model for lc in monitor_cfg.monitored_loops
+                           if lc.name == args.loop), None)  # fmt: skip
+        name = str(loop_model or monitor_cfg.model)
+        reference = load_model(loop_model or monitor_cfg.model)
+    paths = [*args.recordings, *(args.held_out or ())]
+    print(f"checking {len(paths)} recording(s) against the reference model {name} "
+          "(--fault-check off skips)", file=sys.stderr)  # fmt: skip
+    suspects = fault_suspects([*recordings, *held_out], paths, reference, name,
+                              monitor_cfg.alarm, monitor_cfg.horizon, monitor_cfg.gating)
+    if args.fault_check == "warn":
+        for s in suspects:
+            print(f"warning: {s.message()}, unless this machine differs from the reference "
+                  "model's: check the recording, leave it out if faulty (trained on it; "
+                  "--fault-check refuse stops here)", file=sys.stderr)  # fmt: skip
+    elif suspects:
+        more = f" (and {len(suspects) - 1} more)" if len(suspects) > 1 else ""
+        raise SuspectRecordingError(
+            f"{suspects[0].message()}{more}. Leave it out; if it is healthy (this machine "
+            "differs from the reference model's), train with --fault-check warn"
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -224,6 +278,7 @@ def run(args: argparse.Namespace) -> int:
     if args.reference is not None:
         shipped = args.reference == "shipped"
         reference = load_model(monitor_cfg.model if shipped else Path(args.reference))
+    _check_input(args, monitor_cfg, recordings, held_out, reference)
     model = train(recordings, cfg, progress=lambda msg: print(msg, file=sys.stderr),
                   held_out=held_out or None, reference=reference)  # fmt: skip
     model.card = card
