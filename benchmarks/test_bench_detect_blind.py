@@ -144,3 +144,42 @@ def test_a_recording_has_the_contract_columns_and_oil_temperature_at_1_hz(tmp_pa
     path = tmp_path / "r.csv"
     records.write_csv(path, rows)
     assert path.read_text().splitlines()[0] == ",".join(records.COLUMNS)
+
+
+@pytest.mark.parametrize("k", [0, 1, 3, 10])
+def test_poisson_upper_bound_matches_the_chi_square_form(k):
+    from scipy.stats import chi2
+
+    from benchmarks.detect_blind.metrics import poisson_upper, rate_per_hour
+
+    assert poisson_upper(k) == pytest.approx(chi2.ppf(0.95, 2 * k + 2) / 2, rel=1e-9)
+    assert rate_per_hour(0, 20.0)["upper95_per_h"] == pytest.approx(-np.log(0.05) / 20.0)
+
+
+def test_an_alarm_before_the_onset_is_early_not_a_detection():
+    from benchmarks.detect_blind.metrics import detection
+
+    def row(t, named):
+        return {"alarm": t is not None, "first_alarm_t": t, "onset_s": 100.0,
+                "fault": "spool_wear", "fault_named": named}
+
+    d = detection([row(130.0, "spool_wear"), row(50.0, "spool_wear"), row(None, None),
+                   row(190.0, "piston_wear")])
+    assert (d["runs"], d["detected"], d["early_alarms"], d["isolated"]) == (4, 2, 1, 1)
+    assert d["median_delay_s"] == pytest.approx(60.0)
+
+
+def test_seeds_give_the_same_plan_and_different_seeds_differ():
+    from benchmarks.detect_blind.generate import Scale, fleet_plan, type_plan
+
+    scale = Scale(normal_hours=0.5)
+    a, b, c = type_plan(1, scale), type_plan(1, scale), type_plan(2, scale)
+    assert [x[3] for x in a] == [x[3] for x in b]
+    assert [x[3] for x in a] != [x[3] for x in c]
+    assert np.array_equal(a[0][1].params, b[0][1].params)
+    fleet = fleet_plan(1, scale)
+    machines = {x[1].name for x in fleet}
+    commissioned = {x[1].name for x in fleet if x[2] == "commissioning"}
+    assert len(machines) == 6 and len(commissioned) == 5
+    wear = [x[3].severity for x in fleet if x[2] == "wear"]
+    assert max(wear) == pytest.approx(0.6) and min(wear) == 0.0
