@@ -79,7 +79,10 @@ def detect(data: Path, work: Path, entry: dict, model: Path, resume: bool) -> di
             "first_alarm_t": s.get("first_alarm_t"), "fault_named": s.get("fault"),
             "sensor_fault": bool(s.get("sensor_fault")), "judged_s": s.get("judged_s") or 0.0,
             "max_J": s.get("max_J"), "threshold": s.get("threshold"),
-            "episodes": alarm_episodes(events), "error": None if s else f"exit {rc}"}
+            "episodes": s.get("alarm_episodes", alarm_episodes(events)),
+            "not_judged_why": s.get("not_judged_why"),
+            "out_of_range_signals": s.get("out_of_range_signals"),
+            "error": None if s else f"exit {rc}"}
 
 
 def score_types(data: Path, work: Path, key: dict, resume: bool, progress) -> dict:
