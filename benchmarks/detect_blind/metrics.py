@@ -43,7 +43,8 @@ def detection(rows: list[dict]) -> dict:
     """Detection rate, median delay and isolation over fault runs.
 
     A run is detected when its first alarm comes at or after the onset; an alarm before the
-    onset is an early alarm (a false alarm on the run's healthy part), not a detection.
+    onset is an early alarm (a false alarm on the run's healthy part), not a detection. A run
+    the monitor did not judge (verdict not_judged) counts as not detected, and apart.
     """
     detected = [r for r in rows if r["alarm"] and r["first_alarm_t"] is not None
                 and r["first_alarm_t"] >= r["onset_s"]]
@@ -51,10 +52,14 @@ def detection(rows: list[dict]) -> dict:
              and r["first_alarm_t"] < r["onset_s"]]
     delays = [r["first_alarm_t"] - r["onset_s"] for r in detected]
     named = [r for r in detected if r["fault_named"] == r["fault"]]
+    unjudged = [r for r in rows if r.get("verdict") == "not_judged"]
+    judged = len(rows) - len(unjudged)
     return {
         "runs": len(rows),
+        "not_judged": len(unjudged),
         "detected": len(detected),
         "rate": len(detected) / len(rows) if rows else None,
+        "rate_of_judged": len(detected) / judged if judged else None,
         "early_alarms": len(early),
         "median_delay_s": median(delays) if delays else None,
         "isolated": len(named),

@@ -67,12 +67,13 @@ def markdown(result: dict) -> str:
                      f"{_fmt(fa['per_h'])} | {_fmt(fa['upper95_per_h'])} | "
                      f"{t['sensor_fault_normal_logs']} / {t['sensor_fault_logs']} | "
                      f"{t['normal_not_judged']} | {_fmt(t['isolation_all'], '.0%')} |")
-    lines += ["", "| type | fault @ severity | detected | early alarms | median delay s "
-              "| named right | named |", "|---|---|---|---|---|---|---|"]
+    lines += ["", "| type | fault @ severity | detected | not judged | early alarms "
+              "| median delay s | named right | named |", "|---|---|---|---|---|---|---|---|"]
     for tname, t in result["types"].items():
         for name, d in t["faults"].items():
             lines.append(f"| {tname} | {name} | {d['detected']}/{d['runs']} | "
-                         f"{d['early_alarms']} | {_fmt(d['median_delay_s'], '.0f')} | "
+                         f"{d['not_judged']} | {d['early_alarms']} | "
+                         f"{_fmt(d['median_delay_s'], '.0f')} | "
                          f"{d['isolated']}/{d['detected']} | {', '.join(d['named'])} |")
     fleet = result.get("fleet")
     if fleet and "rows" in fleet:

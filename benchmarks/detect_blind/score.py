@@ -132,18 +132,20 @@ def summarise_type(rows: list[dict], trains: dict) -> dict:
     }
 
 
-def score_fleet(data: Path, work: Path, key: dict, progress) -> dict | None:
+def score_fleet(data: Path, work: Path, key: dict, resume: bool, progress) -> dict | None:
     """`monitor fleet run --workers 1` on the fleet folder and its verdicts against the key."""
     if not (data / "fleet").exists():
         return None
     import pandas as pd
 
     results = work / "fleet_results"
-    shutil.rmtree(results, ignore_errors=True)
-    rc = run_monitor(["fleet", "run", str(data / "fleet"), "--out", str(results),
-                      "--workers", "1"], work / "fleet_run.txt")
-    progress(f"score: fleet run exit {rc}")
     table = results / "logs.parquet"
+    rc = 0
+    if not (resume and table.exists()):
+        shutil.rmtree(results, ignore_errors=True)
+        rc = run_monitor(["fleet", "run", str(data / "fleet"), "--out", str(results),
+                          "--workers", "1"], work / "fleet_run.txt")
+        progress(f"score: fleet run exit {rc}")
     if not table.exists():
         return {"exit": rc, "error": "no logs.parquet"}
     df = pd.read_parquet(table)
@@ -172,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     key = generate(args.seed, data, scale, progress)
     result = {"seed": args.seed, "blind": args.seed > DEV_SEEDS_MAX, "scale": key["scale"],
               "types": score_types(data, args.work, key, args.resume, progress),
-              "fleet": score_fleet(data, args.work, key, progress)}
+              "fleet": score_fleet(data, args.work, key, args.resume, progress)}
     args.json.write_text(json.dumps(result, indent=1, default=str))
     args.md.write_text(report.markdown(result))
     print(args.md.read_text())
