@@ -31,6 +31,15 @@ def poisson_upper(k: int, confidence: float = 0.95) -> float:
     return 0.5 * (lo + hi)
 
 
+J_WINDOW_S = 30.0  # the monitor's default J window: less judged than that is no verdict
+
+
+def unjudged(row: dict) -> bool:
+    """A log the monitor did not judge: verdict not_judged, or less than one J window judged
+    (a log outside the trained range that also tripped a sensor check says sensor_fault)."""
+    return row.get("verdict") == "not_judged" or (row.get("judged_s") or 0.0) < J_WINDOW_S
+
+
 def rate_per_hour(events: int, hours: float) -> dict:
     """Events per hour and the 95 % upper bound of the rate."""
     if hours <= 0:
@@ -52,11 +61,11 @@ def detection(rows: list[dict]) -> dict:
              and r["first_alarm_t"] < r["onset_s"]]
     delays = [r["first_alarm_t"] - r["onset_s"] for r in detected]
     named = [r for r in detected if r["fault_named"] == r["fault"]]
-    unjudged = [r for r in rows if r.get("verdict") == "not_judged"]
-    judged = len(rows) - len(unjudged)
+    skipped = [r for r in rows if unjudged(r)]
+    judged = len(rows) - len(skipped)
     return {
         "runs": len(rows),
-        "not_judged": len(unjudged),
+        "not_judged": len(skipped),
         "detected": len(detected),
         "rate": len(detected) / len(rows) if rows else None,
         "rate_of_judged": len(detected) / judged if judged else None,

@@ -121,7 +121,7 @@ def summarise_type(rows: list[dict], trains: dict) -> dict:
         "normal_hours_recorded": sum(r["duration_s"] for r in normal) / 3600.0,
         "false_alarms": metrics.rate_per_hour(episodes, hours),
         "normal_logs_alarming": sum(r["alarm"] for r in normal),
-        "normal_not_judged": sum(r["verdict"] == "not_judged" for r in normal),
+        "normal_not_judged": sum(metrics.unjudged(r) for r in normal),
         "sensor_fault_logs": sum(r["sensor_fault"] for r in rows),
         "sensor_fault_normal_logs": sum(r["sensor_fault"] for r in normal),
         "errors": sum(r["error"] is not None for r in rows),
