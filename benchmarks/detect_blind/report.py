@@ -58,14 +58,15 @@ def markdown(result: dict) -> str:
     seed = result["seed"]
     lines = [f"# detect_blind, seed {seed} ({'blind' if result['blind'] else 'development'})",
              "", "| type | normal h judged | false alarms | per h | 95 % upper per h "
-             "| sensor-fault logs (normal / all) | not judged | isolation |",
+             "| sensor-fault logs: normal, all | normal not judged | isolation |",
              "|---|---|---|---|---|---|---|---|"]
     for tname, t in result["types"].items():
         fa = t["false_alarms"]
         lines.append(f"| {tname} | {_fmt(fa['hours'])} | {fa['events']} "
                      f"({t['normal_logs_alarming']}/{t['normal_logs']} logs) | "
                      f"{_fmt(fa['per_h'])} | {_fmt(fa['upper95_per_h'])} | "
-                     f"{t['sensor_fault_normal_logs']} / {t['sensor_fault_logs']} | "
+                     f"{t['sensor_fault_normal_logs']}/{t['normal_logs']}, "
+                     f"{t['sensor_fault_logs']}/{t['logs']} | "
                      f"{t['normal_not_judged']} | {_fmt(t['isolation_all'], '.0%')} |")
     lines += ["", "| type | fault @ severity | detected | not judged | early alarms "
               "| median delay s | named right | named |", "|---|---|---|---|---|---|---|---|"]

@@ -117,6 +117,7 @@ def summarise_type(rows: list[dict], trains: dict) -> dict:
                 and (r["first_alarm_t"] or 0) >= r["onset_s"]]
     return {
         "train_exit": trains,
+        "logs": len(rows),
         "normal_logs": len(normal),
         "normal_hours_recorded": sum(r["duration_s"] for r in normal) / 3600.0,
         "false_alarms": metrics.rate_per_hour(episodes, hours),
