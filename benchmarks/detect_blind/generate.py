@@ -127,13 +127,16 @@ def write_item(out: Path, rel: str, machine: Machine, spec: RunSpec) -> None:
     """Simulate one recording and write it (CSV, or a candump log through `monitor encode`)."""
     path = out / rel
     rows = record(machine, spec)
-    if path.suffix == ".csv":
-        write_csv(path, rows)
-        return
+    # Written aside and renamed: a file that exists is whole (a rerun skips it).
     csv = path.with_suffix(".tmp.csv")
     write_csv(csv, rows)
-    _encode(csv, path)
+    if path.suffix == ".csv":
+        csv.replace(path)
+        return
+    part = path.with_suffix(".tmp" + path.suffix)
+    _encode(csv, part)
     csv.unlink()
+    part.replace(path)
 
 
 def generate(seed: int, out: Path, scale: Scale, progress=print) -> dict:
