@@ -341,13 +341,13 @@ def test_live_ticker_gives_the_offline_h_and_events(model) -> None:
     hs, events = np.empty(len(rec)), []
     for i, row in enumerate(rows_of(rec)):
         tick = ticker.tick(row)
-        hs[i] = ticker.hst
+        hs[i] = ticker.value("H")
         if tick.changed:
             events.append(event(tick, ticker.fault, ticker.eps0, rec.meta.get("start_time_s")))
-    assert np.array_equal(np.isnan(hs), np.isnan(det.hold))
-    ok = np.isfinite(det.hold)
+    assert np.array_equal(np.isnan(hs), np.isnan(det.series["H"]))
+    ok = np.isfinite(det.series["H"])
     assert ok.sum() > 1000
-    np.testing.assert_allclose(hs[ok], det.hold[ok], rtol=1e-9)
+    np.testing.assert_allclose(hs[ok], det.series["H"][ok], rtol=1e-9)
     assert_same_events(events, det)
 
 

@@ -20,13 +20,10 @@ from monitor.detection.plausibility import finding
 from monitor.detection.verdict import verdict
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
-from monitor.model.bias import alarm_level, bias_regimes, bias_series
 from monitor.model.dgrnn import predict_series
-from monitor.model.hold import counted_holds, hold_series
-from monitor.model.lever import lever_directions, lever_series
 from monitor.model.modelfile import MonitorModel
-from monitor.model.residual import window_j
 from monitor.model.spec import table
+from monitor.model.statistic import active, level_series, statistic_keys, statistics_entries
 
 
 @dataclass
@@ -41,10 +38,10 @@ class Detection:
     events: list[dict[str, Any]] = field(default_factory=list)
     summary: dict[str, Any] = field(default_factory=dict)
     gates: GateSeries | None = None  # operating state, sensor findings, out of range
-    b: np.ndarray | None = None  # the bias statistic B per sample (None: the model has none)
-    level: np.ndarray | None = None  # max(J / eps0, B / b0, L / l0, H / h0): compared with 1
-    lever: np.ndarray | None = None  # the full-lever statistic L per sample (None: no model)
-    hold: np.ndarray | None = None  # the hold statistic H per sample (None: no model)
+    level: np.ndarray | None = None  # the largest statistic / its threshold: compared with 1
+    #: Each statistic of the model per sample, by name (``J``, ``B``, ...; see
+    #: ``monitor.model.statistic``); a statistic the model lacks has none.
+    series: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def make_isolator(model: MonitorModel) -> Isolator | None:
@@ -138,25 +135,13 @@ def detect(
     gated = gate.gated(g, inputs_ok)
     y_hat, e = residual_series(model, rec, gated, horizon, exact)
     e[gated] = np.nan
-    j = window_j(e, model.window_n)
-    spool = rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(len(rec))
-    b = None if model.bias is None else bias_series(e, bias_regimes(spool), model.bias)
-    lev, lever_pair = None, None
-    if model.lever is not None:
-        lev = lever_series(e, lever_directions(spool), model.lever)
-        lever_pair = (lev, model.lever.l0)
-    hst, hold_pair = None, None
-    if model.hold is not None:
-        qp = rec["QP"] if rec.has("QP") else np.full(len(rec), np.nan)
-        hst = hold_series(e, counted_holds(spool, qp, model.hold.stroke), model.hold)
-        hold_pair = (hst, model.hold.h0)
-    level = alarm_level(j, model.eps0, b, model.bias, lever_pair, hold_pair)
-    # The alarm machine compares the level with 1: J against eps0, B against b0, L against l0,
-    # H against h0.
+    stats = active(model)  # J first: the level rests on it
+    series = {s.name: s.series(e, rec) for s in stats}
+    j = series["J"]
+    # The alarm machine compares the level with 1: each statistic against its threshold.
+    level = level_series([(series[s.name], s.threshold_) for s in stats])
     decider = Decider(alarm, 1.0, make_isolator(model), model.window_n)
     run = _decide_all(decider, model, rec, gate, g, e, j, level, missing)
-    finite = np.isfinite(j)
-    b_finite = np.isfinite(b) if b is not None else np.zeros(0, dtype=bool)
     states = run.states
     summary = {
         "alarm": run.first_alarm_t is not None,
@@ -164,20 +149,9 @@ def detect(
         "alarm_episodes": run.episodes,
         "fault": run.first_fault,
         "sensor_fault": bool(np.any(states == State.SENSOR_FAULT)),
-        "max_J": float(np.max(j[finite])) if finite.any() else None,
-        "threshold": model.eps0,
-        "J0": model.j0,
-        # The bias statistic (null without one): its largest value and threshold, and the
-        # largest alarm level max(J / eps0, B / b0, L / l0, H / h0), 1 being the alarm
-        # threshold.
-        "max_B": float(np.max(b[b_finite])) if b_finite.any() else None,
-        "bias_threshold": model.bias.b0 if model.bias is not None else None,
-        # The full-lever statistic L likewise (``monitor.model.lever``).
-        "max_L": _largest(lev),
-        "lever_threshold": model.lever.l0 if model.lever is not None else None,
-        # The hold statistic H likewise (``monitor.model.hold``).
-        "max_H": _largest(hst),
-        "hold_threshold": model.hold.h0 if model.hold is not None else None,
+        # Each statistic's largest value and threshold (null for one the model lacks), and
+        # the largest alarm level, 1 being the alarm threshold.
+        **statistic_keys(model, series),
         "max_level": float(np.nanmax(level)) if np.isfinite(level).any() else None,
         "threshold_rule": model.threshold.rule,
         "window_n": model.window_n,
@@ -196,16 +170,10 @@ def detect(
         period, describe(summary["out_of_range_values"]),
     )
     summary["rejected"] = rejected_counts(rec)
+    summary["statistics"] = statistics_entries(model)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)
-    return Detection(rec.t, y_hat, e, j, states, run.events, summary, gates=g, b=b, level=level,
-                     lever=lev, hold=hst)  # fmt: skip
-
-
-def _largest(x: np.ndarray | None) -> float | None:
-    """The largest finite value of a statistic's series (None: none, or never judged)."""
-    if x is None or not np.isfinite(x).any():
-        return None
-    return float(np.nanmax(x))
+    return Detection(rec.t, y_hat, e, j, states, run.events, summary, gates=g, level=level,
+                     series=series)  # fmt: skip
 
 
 @dataclass

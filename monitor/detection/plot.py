@@ -1,4 +1,5 @@
-"""The picture of a detection run: signals and predictions, residuals, J / eps0 and B / b0."""
+"""The picture of a detection run: signals and predictions, residuals, each statistic over
+its threshold."""
 
 from __future__ import annotations
 
@@ -9,12 +10,14 @@ import numpy as np
 from monitor.detection.alarm import State
 from monitor.detection.offline import Detection
 from monitor.io.recording import Recording
+from monitor.model.statistic import registry
 from monitor.signals import UNITS
 
 _STATE_COLOURS = {State.FAULT: "tab:red", State.SENSOR_FAULT: "tab:orange", State.INACTIVE: "0.8"}
 
 
 def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], path: Path) -> None:
+    """Measured and predicted outputs, residuals, and each statistic over its threshold."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -33,24 +36,18 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
         ax_e.plot(t, det.residual[:, k], lw=0.5, label=name)
     ax_e.set_ylabel("residual e [z]")
     ax_e.legend(loc="upper right", fontsize=7, ncol=len(outputs))
-    # J, the bias statistic B, the full-lever statistic L and the hold statistic H, each over
-    # its own threshold: the alarm is raised when one stays above 1 (max(J / eps0, B / b0,
-    # L / l0, H / h0) is the level the alarm machine sees).
+    # Every statistic of the family over its own threshold: the alarm is raised when one
+    # stays above 1 (the largest ratio is the level the alarm machine sees).
     ax_j = axes[-1]
-    eps0, b0 = det.summary["threshold"], det.summary.get("bias_threshold")
-    j = np.where(det.j > 0, det.j, np.nan)
-    ax_j.semilogy(t, j / eps0, lw=0.8, color="k", label=f"J / eps0 (eps0 = {eps0:.3g} z^2)")
-    if det.b is not None and b0:
-        b = np.where(det.b > 0, det.b, np.nan)
-        ax_j.semilogy(t, b / b0, lw=0.8, color="tab:green", label=f"B / b0 (b0 = {b0:.3g})")
-    l0 = det.summary.get("lever_threshold")
-    if det.lever is not None and l0:
-        lv = np.where(det.lever > 0, det.lever, np.nan)
-        ax_j.semilogy(t, lv / l0, lw=0.8, color="tab:purple", label=f"L / l0 (l0 = {l0:.3g})")
-    h0 = det.summary.get("hold_threshold")
-    if det.hold is not None and h0:
-        hv = np.where(det.hold > 0, det.hold, np.nan)
-        ax_j.semilogy(t, hv / h0, lw=0.8, color="tab:brown", label=f"H / h0 (h0 = {h0:.3g})")
+    entries = det.summary.get("statistics", {})
+    for stat in registry():
+        values, threshold = det.series.get(stat.name), entries.get(stat.name, {}).get("threshold")
+        if values is None or not threshold:  # none, or a threshold that never alarms
+            continue
+        v = np.where(values > 0, values, np.nan)
+        name, thr = stat.name, stat.threshold_key
+        ax_j.semilogy(t, v / threshold, lw=0.8, color=stat.colour,
+                      label=f"{name} / {thr} ({thr} = {threshold:.3g}{stat.unit})")  # fmt: skip
     ax_j.axhline(1.0, color="tab:red", ls="--", lw=1, label="alarm threshold")
     ax_j.set_ylabel("level (1 = alarm)")
     ax_j.set_ylim(bottom=1e-2)  # below a hundredth of the threshold nothing is close

@@ -5,8 +5,9 @@ on the bus as at a desk: z-score with the model's F0 statistics; a row outside n
 operation (engine off, warm-up), with a model signal missing, a sensor finding active or an
 operating signal out of the trained range is gated (``monitor.detection.gating``: NaN before
 prediction, so it never feeds one, and its residual is NaN); e = y_hat - y in z units,
-clipped to the model's residual bound; J by the incremental window (eq. 9); one
-``AlarmMachine.step`` per row.  Nothing is allocated per tick beyond numpy scalars.
+clipped to the model's residual bound; J by the incremental window (eq. 9) and every other
+statistic of the family (``monitor.model.statistic``) by its own; one ``AlarmMachine.step``
+per row.  Nothing is allocated per tick beyond numpy scalars.
 """
 
 from __future__ import annotations
@@ -23,12 +24,9 @@ from monitor.detection.gating import Gate, GatingConfig
 from monitor.detection.offline import make_isolator
 from monitor.detection.opstate import OpState
 from monitor.errors import ModelFileError
-from monitor.model.bias import BiasWindow, bias_regime
 from monitor.model.dgrnn import TickPredictor
-from monitor.model.hold import HoldWindow
-from monitor.model.lever import LeverWindow, lever_direction
 from monitor.model.modelfile import MonitorModel
-from monitor.model.residual import WindowJ
+from monitor.model.statistic import active, raise_level
 from monitor.sampling.ring import RowRing
 from monitor.sampling.sampler import ROW_COLUMNS
 
@@ -49,15 +47,7 @@ class Tick:
     raised: bool = False  # a new alarm episode starts at this row
     stale_signal: str | None = None  # the first model signal missing, when inputs are not ok
     episode_open: bool = False  # an alarm episode is open (fault, or a short gap within one)
-    level: float = math.nan  # compared with 1: max(J / eps0, B / b0, L / l0, H / h0)
-
-
-def _with(level: float, value: float, threshold: float) -> float:
-    """The alarm level with one more statistic: max(level, value / threshold) where none of
-    the three is NaN, else ``level`` unchanged (``alarm_level``'s rule, one tick at a time)."""
-    if level == level and value == value and threshold == threshold:  # none is NaN
-        return max(level, value / threshold)
-    return level
+    level: float = math.nan  # compared with 1: each statistic's value / threshold, the largest
 
 
 class Ticker:
@@ -82,7 +72,6 @@ class Ticker:
         self._names = tuple(spec.variables)
         self._engine_col = 1 + columns.index("EngineSpeed")
         self._spool_col = 1 + columns.index("SpoolCmd") if "SpoolCmd" in columns else -1
-        self._qp_col = 1 + columns.index("QP") if "QP" in columns else -1  # H's end stops
         norm_cols = [model.normalizer.names_.index(v) for v in spec.variables]
         self._mean = np.ascontiguousarray(model.normalizer.mean_[norm_cols])
         self._std = np.ascontiguousarray(model.normalizer.std_[norm_cols])
@@ -92,25 +81,20 @@ class Ticker:
         self._z_out = self._z[:nout]  # a view made once, not per tick
         self._yz = np.empty(nout)
         self._e = np.empty(nout)
-        self._sq = np.empty((1, nout))  # e^2 as one row, reduced as the batch path does
-        self._v = np.empty(1)
         clip = model.residual_clip
         self._clip = None if clip is None else np.asarray(clip, dtype=np.float64)
         self.ring = RowRing(self.rows_needed, nvar)
         # Compile (or load from numba's cache) the kernel now, not on the first live frame:
         # a first-call compile of seconds would back the bus queue up.
         self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
-        self.window = WindowJ(model.window_n)
-        self.bias = BiasWindow(model.bias) if model.bias is not None else None
-        self._b0 = model.bias.b0 if model.bias is not None else math.nan
-        self.b = math.nan  # the bias statistic B of the last tick (NaN: none or not yet)
-        self.lever = LeverWindow(model.lever) if model.lever is not None else None
-        self._l0 = model.lever.l0 if model.lever is not None else math.nan
-        self.lev = math.nan  # the full-lever statistic L of the last tick (NaN: none or not yet)
-        self.hold = HoldWindow(model.hold) if model.hold is not None else None
-        self._h0 = model.hold.h0 if model.hold is not None else math.nan
-        self.hst = math.nan  # the hold statistic H of the last tick (NaN: none or not yet)
-        # The alarm machine compares the level max(J / eps0, B / b0, L / l0, H / h0) with 1.
+        # The statistics of the family (J first: the level rests on it), each with its window
+        # over these rows; the alarm machine compares the level, their largest ratio
+        # value / threshold, with 1.
+        self.stats = active(model)
+        self._steps = tuple(s.window(columns, nout).step for s in self.stats)
+        self._thresholds = tuple(s.threshold_ for s in self.stats)
+        self._index = {s.name: k for k, s in enumerate(self.stats)}
+        self._values = np.full(len(self.stats), math.nan)  # each statistic at the last tick
         self.decider = Decider(self.alarm, 1.0, make_isolator(model), model.window_n)
         self.machine = self.decider.machine
         self.eps0 = float(model.eps0)
@@ -128,6 +112,12 @@ class Ticker:
     @property
     def residual(self) -> np.ndarray:
         return self._e
+
+    def value(self, name: str) -> float:
+        """Statistic ``name`` (``J``, ``B``, ...) at the last tick (NaN: not judged, not yet,
+        or the model has none)."""
+        k = self._index.get(name)
+        return math.nan if k is None else float(self._values[k])
 
     def carry_over(self, old: Ticker) -> None:
         """A reload: this ticker (a new model or new settings) goes on from ``old``'s alarm
@@ -159,21 +149,15 @@ class Ticker:
             np.clip(e, -self._clip, self._clip, out=e)
         if gated:
             e[:] = np.nan
-        np.multiply(e, e, out=self._sq[0])
-        np.mean(self._sq, axis=1, out=self._v)
-        j = self.window.push_squared(float(self._v[0]))
+        values, steps, thresholds = self._values, self._steps, self._thresholds
+        j = steps[0](e, row)
+        values[0] = j
+        level = j / thresholds[0]
+        for k in range(1, len(steps)):
+            v = steps[k](e, row)
+            values[k] = v
+            level = raise_level(level, v, thresholds[k])
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
-        level = j / self.eps0
-        if self.bias is not None:
-            self.b = self.bias.push(e, bias_regime(spool))
-            level = _with(level, self.b, self._b0)
-        if self.lever is not None:
-            self.lev = self.lever.push(e, lever_direction(spool))
-            level = _with(level, self.lev, self._l0)
-        if self.hold is not None:
-            qp = float(row[self._qp_col]) if self._qp_col >= 0 else math.nan
-            self.hst = self.hold.push(e, spool, qp)
-            level = _with(level, self.hst, self._h0)
         stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))
         d = self.decider.decide(level, inputs_ok, engine, e, regime_of(spool), gate.op_state,
                                 gate.oor, gate.check, gate.sensor)  # fmt: skip

@@ -24,18 +24,31 @@ same numbers.  A NaN residual (a gated or missing sample) pauses the window, as 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
+from monitor.io.recording import Recording
 from monitor.jit import jit
 from monitor.model.residual import resum_interval
+from monitor.model.statistic import (
+    HeldOut,
+    Statistic,
+    column,
+    level_series,
+    register,
+    signal,
+)
+from monitor.model.threshold import MIN_BLOCKS
 
 #: Spool command edges (%) of the regimes: |s| <= 5 hold; 5 < |s| <= 60 small; above: large.
 HOLD_PCT = 5.0
 LARGE_PCT = 60.0
 N_BIAS_REGIMES = 5  # hold, raise small, raise large, lower small, lower large
+REGIME_NAMES = ("hold", "raise_small", "raise_large", "lower_small", "lower_large")
 #: Long-run standard deviation estimated by means of batches this long (samples of one regime).
 BATCH = 500
 #: A regime's scale is at least this share of the output's largest scale over the regimes: a
@@ -197,8 +210,9 @@ def bias_series(e: np.ndarray, regimes: np.ndarray, bias: BiasModel) -> np.ndarr
 class BiasWindow:
     """B kept up to date one tick at a time (the live ticker's; same kernel as the series)."""
 
-    def __init__(self, bias: BiasModel) -> None:
+    def __init__(self, bias: BiasModel, spool_col: int = -1) -> None:
         self.bias = bias
+        self._spool_col = spool_col  # SpoolCmd in a sampler row (-1: none, always hold)
         n_out = bias.scale.shape[1]
         self._ring_e = np.zeros((bias.window_n, n_out))
         self._ring_r = np.zeros(bias.window_n, dtype=np.int64)
@@ -213,6 +227,14 @@ class BiasWindow:
         return float(_push(self._ring_e, self._ring_r, self._sums, self._counts, self._state,
                            e, regime, b.scale, b.min_count, self._resum))  # fmt: skip
 
+    def step(self, e: np.ndarray, row: np.ndarray) -> float:
+        """One sampler row's residuals; the regime from its SpoolCmd; returns B."""
+        spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
+        b = self.bias
+        return float(_push(self._ring_e, self._ring_r, self._sums, self._counts, self._state,
+                           e, bias_regime(spool), b.scale, b.min_count,
+                           self._resum))  # fmt: skip
+
 
 def alarm_level(
     j: np.ndarray,
@@ -222,17 +244,74 @@ def alarm_level(
     lever: tuple[np.ndarray, float] | None = None,
     hold: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
-    """What the alarm compares with 1: max(J / eps0, B / b0, L / l0, H / h0), J / eps0 alone
-    while B, L and H are NaN or without them (``lever``, ``hold``: the full-lever and the hold
-    statistic's series and threshold, see ``monitor.model.lever`` and ``monitor.model.hold``);
-    NaN while J is (the window warms up or pauses)."""
-    level = np.asarray(j, dtype=np.float64) / eps0
-    others = [] if b is None or bias is None or bias.b0 != bias.b0 else [(b, bias.b0)]
-    for pair in (lever, hold):
-        if pair is not None and pair[1] == pair[1]:
-            others.append(pair)
-    with np.errstate(invalid="ignore"):
-        for series, threshold in others:
-            both = np.isfinite(level) & np.isfinite(series)
-            level = np.where(both, np.maximum(level, series / threshold), level)
-    return level
+    """max(J / eps0, B / b0, L / l0, H / h0) from the series given, J / eps0 alone while the
+    others are NaN or without them; NaN while J is.  The detector takes the level over every
+    statistic of the family (``monitor.model.statistic.level_series``); this form names
+    J, B, L and H for callers that hold their series apart."""
+    pairs = [(j, eps0)]
+    if b is not None and bias is not None:
+        pairs.append((b, bias.b0))
+    pairs += [p for p in (lever, hold) if p is not None]
+    return level_series(pairs)
+
+
+@register
+class Bias(Statistic):
+    """B as a member of the family: five spool regimes' mean residuals, standard scores."""
+
+    name = "B"
+    key = "bias"
+    threshold_key = "b0"
+    title = "bias statistic"
+    colour = "tab:green"
+    order = 1
+    carries_over = True  # a standard score: a reference's b0 carries over to the type
+
+    def __init__(self, window_n: int = 6000, min_count: int = 300) -> None:
+        self.window_n_setting = window_n
+        self.min_count = min_count
+
+    @classmethod
+    def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Bias | str:
+        if not settings.with_bias:
+            return "off (--bias off, or the paper preset)"
+        return cls(settings.bias_window_n, settings.bias_min_count)
+
+    def unscaled(self, held: HeldOut) -> BiasModel:
+        if any(not r.has("SpoolCmd") for r in held.recordings):
+            raise InputFileError("the held-out recordings have no SpoolCmd")
+        judged = sum(int(np.isfinite(e).all(axis=1).sum()) for e in held.residuals)
+        if judged < MIN_BLOCKS * self.window_n_setting:
+            # Its threshold must rest on several of its own windows, not on one or two.
+            raise InputFileError(
+                f"{judged / 6000:.1f} min of held-out normal data; the bias statistic needs "
+                f"{MIN_BLOCKS * self.window_n_setting / 6000:g} min ({MIN_BLOCKS} windows): "
+                "give more with --held-out"
+            )
+        regimes = [bias_regimes(r["SpoolCmd"]) for r in held.recordings]
+        scale = fit_scale(list(held.residuals), regimes)
+        return BiasModel(self.window_n_setting, self.min_count, scale)
+
+    def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
+        return bias_series(e, bias_regimes(signal(rec, "SpoolCmd", 0.0)), self.params_)
+
+    def window(self, columns: Sequence[str], n_out: int) -> BiasWindow:
+        return BiasWindow(self.params_, column(columns, "SpoolCmd"))
+
+    def coverage(self, held: HeldOut) -> dict[str, Any]:
+        """Judged held-out samples per spool regime."""
+        counts = np.zeros(N_BIAS_REGIMES, dtype=np.int64)
+        for e, rec in zip(held.residuals, held.recordings, strict=True):
+            ok = np.isfinite(e).all(axis=1)
+            counts += np.bincount(bias_regimes(rec["SpoolCmd"])[ok], minlength=N_BIAS_REGIMES)
+        return {"regime_samples": dict(zip(REGIME_NAMES, (int(c) for c in counts),
+                                           strict=True))}  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> BiasModel:
+        return BiasModel.from_dict(d)
+
+    @classmethod
+    def check_outputs(cls, params: BiasModel, n_out: int) -> None:
+        if params.scale.shape[1] != n_out:
+            raise ValueError(f"bias scale has {params.scale.shape[1]} outputs, the model {n_out}")

@@ -46,12 +46,21 @@ def read_members(path: Path) -> dict[str, np.ndarray]:
     return data
 
 
-def _number(header: dict[str, Any], key: str, low: float, strict: bool) -> None:
+def check_number(header: dict[str, Any], key: str, low: float, strict: bool) -> None:
+    """ValueError unless ``header[key]`` is a finite number >= ``low`` (> when ``strict``)."""
     v = header.get(key)
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ValueError(f"header {key} must be a finite number, got {str(v)[:40]}")
     if v < low or (strict and v == low):
         raise ValueError(f"header {key} must be {'>' if strict else '>='} {low:g}, got {v:g}")
+
+
+def check_whole(section: dict[str, Any], key: str, low: int, high: int, prefix: str = "") -> None:
+    """ValueError unless ``section[key]`` is a whole number in ``low..high`` (``prefix``: the
+    section's name in the message, e.g. ``"hold."``)."""
+    v = section.get(key)
+    if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
+        raise ValueError(f"header {prefix}{key} must be a whole number {low}..{high}")
 
 
 def check_header(header: Any) -> None:
@@ -61,14 +70,8 @@ def check_header(header: Any) -> None:
     for key in ("spec", "normalizer", "threshold", "isolation"):
         if not isinstance(header.get(key), dict):
             raise ValueError(f"header {key} must be an object")
-    window = header.get("window_n")
-    if isinstance(window, bool) or not isinstance(window, int) or not 1 <= window <= MAX_WINDOW_N:
-        raise ValueError(f"header window_n must be a whole number 1..{MAX_WINDOW_N}, "
-                         f"got {str(window)[:40]}")  # fmt: skip
-    _number(header, "sigma", 0.0, strict=True)
-    _number(header, "j0", 0.0, strict=False)
-    _number(header, "eps0", 0.0, strict=True)
-    _number(header["isolation"], "min_similarity", -1.0, strict=False)
+    check_number(header, "sigma", 0.0, strict=True)
+    check_number(header["isolation"], "min_similarity", -1.0, strict=False)
     clip = header.get("residual_clip")
     if clip is not None and not (
         isinstance(clip, list)
@@ -76,39 +79,10 @@ def check_header(header: Any) -> None:
                 and c > 0 for c in clip)  # fmt: skip
     ):
         raise ValueError("header residual_clip must be null or a list of finite numbers > 0")
-    # The optional statistics beside J: a window, a count and a threshold each.
-    for name, threshold in (("bias", "b0"), ("lever", "l0"), ("hold", "h0")):
-        stat = header.get(name)
-        if stat is None:
-            continue
-        if not isinstance(stat, dict):
-            raise ValueError(f"header {name} must be an object")
-        for key in ("window_n", "min_count"):
-            v = stat.get(key)
-            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
-                raise ValueError(f"header {name}.{key} must be a whole number 1..{MAX_WINDOW_N}")
-        _number(stat, threshold, 0.0, strict=True)
-    hold = header.get("hold")
-    if hold is not None:  # H's settling, beside the window and count checked above
-        v = hold.get("settle_n")
-        if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= MAX_WINDOW_N:
-            raise ValueError(f"header hold.settle_n must be a whole number 0..{MAX_WINDOW_N}")
-        if hold.get("stroke") is not None:
-            _check_stroke(hold["stroke"])
+    # The statistics (J's window and threshold, B's, L's, H's and any other member's
+    # section): each member checks its own (``monitor.model.statistic``).
+    from monitor.model.statistic import registry
 
+    for stat in registry():
+        stat.check_header(header)
 
-def _check_stroke(stroke: Any) -> None:
-    """H's end-stop estimate (``monitor.model.endstop``): volumes, margin and stall rule."""
-    if not isinstance(stroke, dict):
-        raise ValueError("header hold.stroke must be an object")
-    for key, low, strict in (("volume_up_l", 0.0, True), ("volume_down_l", 0.0, True),
-                             ("margin", 0.0, False), ("q_stall_lpm", 0.0, True)):  # fmt: skip
-        try:
-            _number(stroke, key, low, strict)
-        except ValueError as exc:
-            raise ValueError(str(exc).replace("header ", "header hold.stroke.", 1)) from None
-    if stroke["margin"] >= 0.5:
-        raise ValueError(f"header hold.stroke.margin must be < 0.5, got {stroke['margin']:g}")
-    v = stroke.get("n_stall")
-    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
-        raise ValueError(f"header hold.stroke.n_stall must be a whole number 1..{MAX_WINDOW_N}")

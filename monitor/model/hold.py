@@ -35,15 +35,20 @@ batch series.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
+from monitor.io.recording import Recording
 from monitor.jit import jit
 from monitor.model.bias import HOLD_PCT
-from monitor.model.endstop import StopTracker, StrokeModel, near_stop_series
+from monitor.model.endstop import StopTracker, StrokeModel, fit_stroke, near_stop_series
+from monitor.model.filecheck import MAX_WINDOW_N, check_number, check_whole
 from monitor.model.residual import largest_finite, resum_interval
+from monitor.model.statistic import HeldOut, Statistic, column, register, signal
 
 #: The outputs H watches: the cylinder chamber pressures, between which the piston leaks.
 HOLD_OUTPUTS = ("PA", "PB")
@@ -209,8 +214,9 @@ def fit_hold_scale(
 class HoldWindow:
     """H kept up to date one tick at a time (the live ticker's; same kernel as the series)."""
 
-    def __init__(self, hold: HoldModel) -> None:
+    def __init__(self, hold: HoldModel, spool_col: int = -1, qp_col: int = -1) -> None:
         self.hold = hold
+        self._spool_col, self._qp_col = spool_col, qp_col  # in a sampler row (-1: none)
         self._stops = None if hold.stroke is None else StopTracker(hold.stroke)
         self._ring_e = np.zeros((hold.window_n, len(hold.outputs)))
         self._ring_c = np.zeros(hold.window_n, dtype=np.int64)
@@ -228,3 +234,99 @@ class HoldWindow:
         value = _push(self._ring_e, self._ring_c, self._sums, self._state, e, flag,
                       self._outputs, h.scale, h.settle_n, h.min_count, self._resum)  # fmt: skip
         return float(value)
+
+    def step(self, e: np.ndarray, row: np.ndarray) -> float:
+        """One sampler row's residuals, its SpoolCmd (0 without) and QP (NaN without)."""
+        spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
+        qp = float(row[self._qp_col]) if self._qp_col >= 0 else np.nan
+        return self.push(e, spool, qp)
+
+
+@register
+class Hold(Statistic):
+    """H as a member of the family: PA's and PB's mean residual in settled holds."""
+
+    name = "H"
+    key = "hold"
+    threshold_key = "h0"
+    title = "hold statistic H"
+    colour = "tab:brown"
+    order = 3
+
+    def __init__(self, window_n: int = 6000, min_count: int = 300, settle_n: int = 200,
+                 outputs: tuple[int, ...] = (1, 2)) -> None:  # fmt: skip
+        self.window_n_setting = window_n
+        self.min_count = min_count
+        self.settle_n = settle_n
+        self.outputs = outputs
+
+    @classmethod
+    def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Hold | str:
+        if not settings.hold:
+            return "off (not asked for: --hold on)"
+        if "B" not in on or not all(o in outputs for o in HOLD_OUTPUTS):
+            return "off (with the bias statistic, on a model that predicts PA and PB)"
+        return cls(settings.bias_window_n, settings.hold_min_count, settings.hold_settle_n,
+                   tuple(outputs.index(o) for o in HOLD_OUTPUTS))  # fmt: skip
+
+    def unscaled(self, held: HeldOut) -> HoldModel:
+        # The boom cylinder's swept volumes from every normal recording given: geometry,
+        # not a threshold, so the training part counts too.  Holds on an end stop are left
+        # out: the healthy model predicts them badly, and a machine lowered into its stop
+        # raised false alarms (``monitor.model.endstop``).
+        every = held.every or held.recordings
+        stroke = fit_stroke([r["SpoolCmd"] for r in every], [r["QP"] for r in every])
+        flags = [counted_holds(r["SpoolCmd"], r["QP"], stroke) for r in held.recordings]
+        scale = fit_hold_scale(list(held.residuals), flags, self.window_n_setting,
+                               self.min_count, self.settle_n, self.outputs)  # fmt: skip
+        return HoldModel(self.window_n_setting, self.min_count, self.settle_n, self.outputs,
+                         scale, stroke=stroke)  # fmt: skip
+
+    def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
+        flags = counted_holds(signal(rec, "SpoolCmd", 0.0), signal(rec, "QP", np.nan),
+                              self.params_.stroke)  # fmt: skip
+        return hold_series(e, flags, self.params_)
+
+    def window(self, columns: Sequence[str], n_out: int) -> HoldWindow:
+        return HoldWindow(self.params_, column(columns, "SpoolCmd"), column(columns, "QP"))
+
+    def coverage(self, held: HeldOut) -> dict[str, Any]:
+        """Judged held-out samples in holds off the end stops."""
+        n = 0
+        for e, rec in zip(held.residuals, held.recordings, strict=True):
+            flags = counted_holds(rec["SpoolCmd"], rec["QP"], self.params_.stroke)
+            n += int(np.sum(flags[np.isfinite(e).all(axis=1)]))
+        return {"hold_samples": n}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> HoldModel:
+        return HoldModel.from_dict(d)
+
+    @classmethod
+    def check_outputs(cls, params: HoldModel, n_out: int) -> None:
+        if max(params.outputs) >= n_out:
+            raise ValueError(f"hold outputs {params.outputs} are not among the model's {n_out} "
+                             "outputs")  # fmt: skip
+
+    @classmethod
+    def check_more(cls, section: dict[str, Any]) -> None:
+        check_whole(section, "settle_n", 0, MAX_WINDOW_N, "hold.")
+        if section.get("stroke") is not None:
+            _check_stroke(section["stroke"])
+
+
+def _check_stroke(stroke: Any) -> None:
+    """H's end-stop estimate (``monitor.model.endstop``): volumes, margin and stall rule."""
+    if not isinstance(stroke, dict):
+        raise ValueError("header hold.stroke must be an object")
+    for key, low, strict in (("volume_up_l", 0.0, True), ("volume_down_l", 0.0, True),
+                             ("margin", 0.0, False), ("q_stall_lpm", 0.0, True)):  # fmt: skip
+        try:
+            check_number(stroke, key, low, strict)
+        except ValueError as exc:
+            raise ValueError(str(exc).replace("header ", "header hold.stroke.", 1)) from None
+    if stroke["margin"] >= 0.5:
+        raise ValueError(f"header hold.stroke.margin must be < 0.5, got {stroke['margin']:g}")
+    v = stroke.get("n_stall")
+    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
+        raise ValueError(f"header hold.stroke.n_stall must be a whole number 1..{MAX_WINDOW_N}")

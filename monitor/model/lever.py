@@ -23,13 +23,17 @@ full-lever statistic L").
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
+from monitor.io.recording import Recording
 from monitor.jit import jit
 from monitor.model.residual import largest_finite, resum_interval
+from monitor.model.statistic import HeldOut, Statistic, column, register, signal
 
 #: Lever command (%) beyond which a sample counts for L: near full stroke, where a stroke
 #: limit of severity 0.3 (82 %) or more acts on every sample that counts.
@@ -174,8 +178,9 @@ def fit_lever_scale(
 class LeverWindow:
     """L kept up to date one tick at a time (the live ticker's; same kernel as the series)."""
 
-    def __init__(self, lever: LeverModel) -> None:
+    def __init__(self, lever: LeverModel, spool_col: int = -1) -> None:
         self.lever = lever
+        self._spool_col = spool_col  # SpoolCmd in a sampler row (-1: none, never counted)
         self._ring_e = np.zeros(lever.window_n)
         self._ring_d = np.zeros(lever.window_n, dtype=np.int64)
         self._sums = np.zeros(N_DIRECTIONS + 1)
@@ -189,3 +194,67 @@ class LeverWindow:
         value = _push(self._ring_e, self._ring_d, self._sums, self._counts, self._state, e,
                       direction, lv.output, lv.scale, lv.min_count, self._resum)  # fmt: skip
         return float(value)
+
+    def step(self, e: np.ndarray, row: np.ndarray) -> float:
+        """One sampler row's residuals; the direction from its SpoolCmd; returns L."""
+        spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
+        lv = self.lever
+        value = _push(self._ring_e, self._ring_d, self._sums, self._counts, self._state, e,
+                      lever_direction(spool), lv.output, lv.scale, lv.min_count,
+                      self._resum)  # fmt: skip
+        return float(value)
+
+
+@register
+class Lever(Statistic):
+    """L as a member of the family: PP's mean residual with the lever near full stroke."""
+
+    name = "L"
+    key = "lever"
+    threshold_key = "l0"
+    title = "full-lever statistic L"
+    colour = "tab:purple"
+    order = 2
+
+    def __init__(self, window_n: int = 6000, min_count: int = 100, output: int = 0) -> None:
+        self.window_n_setting = window_n
+        self.min_count = min_count
+        self.output = output
+
+    @classmethod
+    def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Lever | str:
+        if "B" not in on or LEVER_OUTPUT not in outputs:
+            return "off (with the bias statistic, on a model that predicts PP)"
+        return cls(settings.bias_window_n, settings.lever_min_count,
+                   outputs.index(LEVER_OUTPUT))  # fmt: skip
+
+    def unscaled(self, held: HeldOut) -> LeverModel:
+        directions = [lever_directions(r["SpoolCmd"]) for r in held.recordings]
+        scale = fit_lever_scale(list(held.residuals), directions, self.window_n_setting,
+                                self.min_count, self.output)  # fmt: skip
+        return LeverModel(self.window_n_setting, self.min_count, self.output, scale)
+
+    def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
+        return lever_series(e, lever_directions(signal(rec, "SpoolCmd", 0.0)), self.params_)
+
+    def window(self, columns: Sequence[str], n_out: int) -> LeverWindow:
+        return LeverWindow(self.params_, column(columns, "SpoolCmd"))
+
+    def coverage(self, held: HeldOut) -> dict[str, Any]:
+        """Judged held-out samples with the lever beyond full, per direction."""
+        counts = np.zeros(N_DIRECTIONS + 1, dtype=np.int64)
+        for e, rec in zip(held.residuals, held.recordings, strict=True):
+            ok = np.isfinite(e).all(axis=1)
+            counts += np.bincount(lever_directions(rec["SpoolCmd"])[ok],
+                                  minlength=N_DIRECTIONS + 1)  # fmt: skip
+        return {"full_lever_samples": {"raise": int(counts[1]), "lower": int(counts[2])}}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> LeverModel:
+        return LeverModel.from_dict(d)
+
+    @classmethod
+    def check_outputs(cls, params: LeverModel, n_out: int) -> None:
+        if params.output >= n_out:
+            raise ValueError(f"lever output {params.output} is not among the model's {n_out} "
+                             "outputs")  # fmt: skip

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import math
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +32,7 @@ from monitor.model.hold import HoldModel
 from monitor.model.lever import LeverModel
 from monitor.model.machinecard import ModelCard
 from monitor.model.spec import DGRNNSpec, Normalizer
+from monitor.model.statistic import registry
 from monitor.model.threshold import ThresholdRule
 from monitor.signals import SIGNAL_NAMES
 
@@ -40,10 +42,9 @@ MODEL_FORMAT = "hydraulic-monitor-dgrnn"
 # 2: patterns carry member counts (Specht's clustered GRNN).  The optional header key
 # ``validity`` (the training envelope) was added without a version bump: readers that do
 # not know it ignore it, and files without it get an envelope derived from their patterns.
-# Likewise ``bias`` (the bias statistic's window, scales and threshold): without it, J alone;
-# ``lever`` (the full-lever statistic L's): without it, no L; and ``hold`` (the hold
-# statistic H's): without it, no H; ``machine`` (the loop and machine trained on): without it,
-# unknown.
+# Likewise each statistic's section beside J (``bias``, ``lever``, ``hold``, any member of
+# ``monitor.model.statistic``'s registry): a file without it has no such statistic; and
+# ``machine`` (the loop and machine trained on): without it, unknown.
 MODEL_VERSION = 2
 _ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
 
@@ -74,6 +75,9 @@ class MonitorModel:
     hold: HoldModel | None = None
     #: The loop and machine trained on (None: not recorded; see ``monitor.model.machinecard``).
     card: ModelCard | None = None
+    #: Any other statistic of the family by its key (``monitor.model.statistic``): what its
+    #: member keeps in the model file.
+    statistics: dict[str, Any] = field(default_factory=dict)
 
     @property
     def spec(self) -> DGRNNSpec:
@@ -91,11 +95,8 @@ class MonitorModel:
             "loo_error": float(g.loo_error_),
             "exclude_neighbours": int(g.exclude_neighbours_),
             "thinning": g.thinning_,
-            "window_n": int(self.window_n),
             "residual_clip": None if self.residual_clip is None else list(self.residual_clip),
             "threshold": self.threshold.to_dict(),
-            "j0": float(self.j0),
-            "eps0": float(self.eps0),
             "isolation": {
                 "labels": list(self.isolation_labels),
                 "min_similarity": float(self.isolation_min_similarity),
@@ -104,12 +105,10 @@ class MonitorModel:
         }
         if self.envelope is not None:
             head["validity"] = self.envelope.to_dict()
-        if self.bias is not None:
-            head["bias"] = self.bias.to_dict()
-        if self.lever is not None:
-            head["lever"] = self.lever.to_dict()
-        if self.hold is not None:
-            head["hold"] = self.hold.to_dict()
+        for stat in registry():  # J's window and thresholds, each other member's section
+            params = stat.get(self)
+            if params is not None:
+                stat.write(head, params)
         if self.card is not None:
             head["machine"] = self.card.to_dict()
         return head
@@ -224,48 +223,21 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
     centroids = data["isolation_centroids"]
     if len(iso["labels"]) != centroids.shape[0]:
         raise ValueError("isolation labels and centroids disagree")
-    return MonitorModel(
+    model = MonitorModel(
         dgrnn=dgrnn,
         normalizer=normalizer,
-        window_n=int(header["window_n"]),
+        window_n=0,
         threshold=ThresholdRule(**header["threshold"]),
-        j0=float(header["j0"]),
-        eps0=float(header["eps0"]),
+        j0=math.nan,
+        eps0=math.nan,
         isolation_labels=tuple(iso["labels"]),
         isolation_centroids=centroids,
         isolation_min_similarity=float(iso["min_similarity"]),
         residual_clip=None if header["residual_clip"] is None else tuple(header["residual_clip"]),
         training=header["training"],
         envelope=Envelope.from_dict(header["validity"]) if "validity" in header else None,
-        bias=_bias(header, len(spec.outputs)),
-        lever=_lever(header, len(spec.outputs)),
-        hold=_hold(header, len(spec.outputs)),
         card=ModelCard.from_dict(header["machine"]) if "machine" in header else None,
     )
-
-
-def _bias(header: dict[str, Any], n_out: int) -> BiasModel | None:
-    if header.get("bias") is None:
-        return None
-    bias = BiasModel.from_dict(header["bias"])
-    if bias.scale.shape[1] != n_out:
-        raise ValueError(f"bias scale has {bias.scale.shape[1]} outputs, the model {n_out}")
-    return bias
-
-
-def _lever(header: dict[str, Any], n_out: int) -> LeverModel | None:
-    if header.get("lever") is None:
-        return None
-    lever = LeverModel.from_dict(header["lever"])
-    if lever.output >= n_out:
-        raise ValueError(f"lever output {lever.output} is not among the model's {n_out} outputs")
-    return lever
-
-
-def _hold(header: dict[str, Any], n_out: int) -> HoldModel | None:
-    if header.get("hold") is None:
-        return None
-    hold = HoldModel.from_dict(header["hold"])
-    if max(hold.outputs) >= n_out:
-        raise ValueError(f"hold outputs {hold.outputs} are not among the model's {n_out} outputs")
-    return hold
+    for stat in registry():  # J's window and thresholds, each other member's section
+        stat.put(model, stat.read(header, len(spec.outputs)))
+    return model

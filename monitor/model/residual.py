@@ -22,13 +22,18 @@ runs the same algorithm in numba, so both give the same numbers (to rounding).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
+from monitor.io.recording import Recording
 from monitor.jit import jit
+from monitor.model.filecheck import MAX_WINDOW_N, check_number
+from monitor.model.statistic import HeldOut, Statistic, largest, register
 
 
 def residuals(y_hat: Any, y: Any) -> np.ndarray:
@@ -180,3 +185,109 @@ class WindowJ:
             return float("nan")
         self.value = self._total / self.size
         return self.value
+
+
+@dataclass(frozen=True)
+class JModel:
+    """What J keeps in the model file: its window N, J0 and the threshold eps0 (eq. 10)."""
+
+    window_n: int
+    j0: float
+    eps0: float
+
+
+class _JWindow:
+    """J over sampler rows: e^2 averaged over outputs as ``squared_residual`` does (one row
+    reduced by numpy, so live and batch round alike), then eq. 9's running window."""
+
+    def __init__(self, window_n: int, n_out: int) -> None:
+        self._sq = np.empty((1, n_out))
+        self._v = np.empty(1)
+        self._window = WindowJ(window_n)
+
+    def step(self, e: np.ndarray, row: np.ndarray) -> float:
+        np.multiply(e, e, out=self._sq[0])
+        np.mean(self._sq, axis=1, out=self._v)
+        return self._window.push_squared(float(self._v[0]))
+
+
+@register
+class J(Statistic):
+    """The paper's windowed mean squared residual, eq. 9: the level rests on it (NaN while
+    its window warms up or pauses), the others only raise it.  Its file keys are the
+    header's own (``window_n``, ``j0``, ``eps0``), as before the family existed."""
+
+    name = "J"
+    key = "j"
+    threshold_key = "eps0"
+    title = "J"
+    colour = "k"
+    unit = " z^2"
+    order = 0
+    carries_over = True
+
+    def __init__(self, window_n: int = 3000) -> None:
+        self.window_n_setting = window_n
+
+    @classmethod
+    def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> J | str:
+        return cls(settings.window_n)
+
+    def unscaled(self, held: HeldOut) -> JModel:
+        return JModel(_check_window(self.window_n_setting), math.nan, math.nan)
+
+    def with_threshold(self, threshold: float, reference: float = math.nan) -> JModel:
+        return JModel(self.params_.window_n, reference, threshold)
+
+    def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
+        return window_j(e, self.window_n)
+
+    def window(self, columns: Sequence[str], n_out: int) -> _JWindow:
+        return _JWindow(self.window_n, n_out)
+
+    def summary(self, series: np.ndarray | None) -> dict[str, Any]:
+        return {"max_J": largest(series), "threshold": self.threshold_,
+                "J0": float(self.params_.j0)}  # fmt: skip
+
+    @classmethod
+    def absent(cls) -> dict[str, Any]:
+        return {"max_J": None, "threshold": None, "J0": None}
+
+    @classmethod
+    def known_support(cls, training: dict[str, Any]) -> dict[str, Any]:
+        out = super().known_support(training)
+        if "support" not in training and training.get("threshold_one_event"):
+            out["one_event"] = training["threshold_one_event"]  # J0 rests on one event
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> JModel:
+        return JModel(int(d["window_n"]), float(d["j0"]), float(d["eps0"]))
+
+    @classmethod
+    def get(cls, model: Any) -> JModel:
+        return JModel(int(model.window_n), float(model.j0), float(model.eps0))
+
+    @classmethod
+    def put(cls, model: Any, params: JModel) -> None:
+        model.window_n, model.j0, model.eps0 = params.window_n, params.j0, params.eps0
+
+    @classmethod
+    def write(cls, header: dict[str, Any], params: JModel) -> None:
+        header.update(window_n=int(params.window_n), j0=float(params.j0),
+                      eps0=float(params.eps0))  # fmt: skip
+
+    @classmethod
+    def read(cls, header: dict[str, Any], n_out: int) -> JModel:
+        return cls.from_dict(header)
+
+    @classmethod
+    def check_header(cls, header: dict[str, Any]) -> None:
+        window = header.get("window_n")
+        if isinstance(window, bool) or not isinstance(window, int) or not (
+            1 <= window <= MAX_WINDOW_N
+        ):
+            raise ValueError(f"header window_n must be a whole number 1..{MAX_WINDOW_N}, "
+                             f"got {str(window)[:40]}")  # fmt: skip
+        check_number(header, "j0", 0.0, strict=False)
+        check_number(header, "eps0", 0.0, strict=True)
