@@ -34,6 +34,7 @@ from monitor.evaluation.plan import DEFAULT_SEVERITIES, MAX_SEED_SET, ONSETS, SE
 from monitor.evaluation.twins import fault_view, predictor_view, simulate_twins
 from monitor.io.recording import Recording
 from monitor.model.modelfile import MonitorModel
+from monitor.model.statistic import registry
 from monitor.signals import FAULT_NAMES
 from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
@@ -220,6 +221,10 @@ def _seed_text(seeds: Sequence[int]) -> str:
     return ",".join(map(str, s))
 
 
+def _rounded(x: float | None) -> float | None:
+    return None if x is None else round(x, 4)
+
+
 def alarm_entries(det: Detection) -> np.ndarray:
     """Sample indices where the alarm machine enters FAULT (one per alarm episode)."""
     fault = det.state == int(State.FAULT)
@@ -230,19 +235,13 @@ def score_run(det: Detection, spec: RunSpec) -> dict[str, Any]:
     """One run's outcome; every field is derived from the detector's public output."""
     t = det.t - det.t[0]
     entries = alarm_entries(det)
-    eps0 = det.summary["threshold"]
-    max_j = det.summary["max_J"]
-    max_b, b0 = det.summary.get("max_B"), det.summary.get("bias_threshold")
-    max_l, l0 = det.summary.get("max_L"), det.summary.get("lever_threshold")
-    max_h, h0 = det.summary.get("max_H"), det.summary.get("hold_threshold")
     level = det.summary.get("max_level")
     out: dict[str, Any] = {
         "seed": spec.seed,
         "duration_s": round(float(t[-1]), 2),
-        "max_J_over_eps0": None if max_j is None else round(max_j / eps0, 4),
-        "max_B_over_b0": None if max_b is None or b0 is None else round(max_b / b0, 4),
-        "max_L_over_l0": None if max_l is None or l0 is None else round(max_l / l0, 4),
-        "max_H_over_h0": None if max_h is None or h0 is None else round(max_h / h0, 4),
+        # Each statistic's largest value over its threshold (max_J_over_eps0, ...).
+        **{f"max_{s.name}_over_{s.threshold_key}": _rounded(s.peak_ratio(det.summary))
+           for s in registry()},  # fmt: skip
         "max_level": None if level is None else round(level, 4),
         "sensor_fault": bool(det.summary["sensor_fault"]),
     }

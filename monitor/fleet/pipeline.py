@@ -120,6 +120,15 @@ def threshold_note(model_path: Path) -> str | None:
             f"{Path(event['source']).name} at {event['t_s'] / 60:.1f} min)")  # fmt: skip
 
 
+def statistic_ratios(summary: dict[str, Any]) -> dict[str, float | None]:
+    """A summary's largest value over the threshold of every statistic of the family, by
+    its column in the logs table (None: not in the model, or never judged)."""
+    from monitor.fleet.store import ratio_column
+    from monitor.model.statistic import registry
+
+    return {ratio_column(stat.name): stat.peak_ratio(summary) for stat in registry()}
+
+
 def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> Judged:
     """`monitor detect PATH --model M --j-every 0`: its summary as row keys, its events."""
     from monitor.detection.offline import detect
@@ -139,7 +148,8 @@ def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
         "alarm": bool(s["alarm"]),
         "fault": s["fault"],
         "sensor_fault": bool(s["sensor_fault"]),
-        "max_j_ratio": None if s["max_J"] is None else s["max_J"] / eps0,
+        # Each statistic's largest value over its threshold: max_j_ratio, max_b_ratio, ...
+        **statistic_ratios(s),
         "p95_j_ratio": float(np.percentile(j, 95)) / eps0 if j.size else None,
         "judged_s": float(s["judged_s"]),
         "first_alarm_t": s["first_alarm_t"],

@@ -35,6 +35,24 @@ LOG_SCHEMA = pa.schema([
     # drift from commissioning, whatever eps0 is (null for models without it).
     ("p50_j_drift", pa.float64()),
 ])  # fmt: skip
+
+
+def ratio_column(name: str) -> str:
+    """The logs table's column of a statistic's largest value over its threshold:
+    ``max_j_ratio`` (J / eps0), ``max_b_ratio`` (B / b0), ..."""
+    return f"max_{name.lower()}_ratio"
+
+
+def log_schema() -> pa.Schema:
+    """``LOG_SCHEMA`` and a ratio column for every other statistic of the family
+    (``monitor.model.statistic``; null for a model without it)."""
+    from monitor.model.statistic import registry
+
+    more = [ratio_column(s.name) for s in registry()]
+    return pa.schema([*LOG_SCHEMA, *((c, pa.float64()) for c in more
+                                     if c not in LOG_SCHEMA.names)])  # fmt: skip
+
+
 EVENT_SCHEMA = pa.schema([
     ("machine", pa.string()), ("log", pa.string()), ("sha256", pa.string()),
     ("t", pa.float64()), ("time", pa.string()), ("state", pa.string()), ("J", pa.float64()),
@@ -132,7 +150,7 @@ class ResultStore:
         for r in rows.values():
             latest[r["log"]] = r
         keep = {_key(r["log"], r["sha256"]) for r in latest.values()}
-        table = pa.Table.from_pylist(sorted(latest.values(), key=lambda r: r["log"]), LOG_SCHEMA)
+        table = pa.Table.from_pylist(sorted(latest.values(), key=lambda r: r["log"]), log_schema())
         ev = [e for e in events if _key(e["log"], e["sha256"]) in keep]
         ev.sort(key=lambda e: (e["log"], e["t"]))
         self._write_table(self.root / "logs.parquet", table)

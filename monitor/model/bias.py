@@ -266,6 +266,7 @@ class Bias(Statistic):
     colour = "tab:green"
     order = 1
     carries_over = True  # a standard score: a reference's b0 carries over to the type
+    counts = ("window_n", "min_count")
 
     def __init__(self, window_n: int = 6000, min_count: int = 300) -> None:
         self.window_n_setting = window_n

@@ -251,6 +251,7 @@ class Hold(Statistic):
     threshold_key = "h0"
     title = "hold statistic H"
     colour = "tab:brown"
+    counts = ("window_n", "min_count")
     order = 3
 
     def __init__(self, window_n: int = 6000, min_count: int = 300, settle_n: int = 200,

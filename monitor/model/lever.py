@@ -214,6 +214,7 @@ class Lever(Statistic):
     threshold_key = "l0"
     title = "full-lever statistic L"
     colour = "tab:purple"
+    counts = ("window_n", "min_count")
     order = 2
 
     def __init__(self, window_n: int = 6000, min_count: int = 100, output: int = 0) -> None:

@@ -33,7 +33,7 @@ from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.jit import jit
 from monitor.model.filecheck import MAX_WINDOW_N, check_number
-from monitor.model.statistic import HeldOut, Statistic, largest, register
+from monitor.model.statistic import HeldOut, Statistic, register
 
 
 def residuals(y_hat: Any, y: Any) -> np.ndarray:
@@ -225,6 +225,7 @@ class J(Statistic):
     unit = " z^2"
     order = 0
     carries_over = True
+    optional = False
 
     def __init__(self, window_n: int = 3000) -> None:
         self.window_n_setting = window_n
@@ -236,8 +237,9 @@ class J(Statistic):
     def unscaled(self, held: HeldOut) -> JModel:
         return JModel(_check_window(self.window_n_setting), math.nan, math.nan)
 
-    def with_threshold(self, threshold: float, reference: float = math.nan) -> JModel:
-        return JModel(self.params_.window_n, reference, threshold)
+    def with_threshold(self, threshold: float, reference: float | None = None) -> JModel:
+        j0 = self.params_.j0 if reference is None else reference  # J0 (eq. 10)
+        return JModel(self.params_.window_n, j0, threshold)
 
     def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
         return window_j(e, self.window_n)
@@ -245,13 +247,16 @@ class J(Statistic):
     def window(self, columns: Sequence[str], n_out: int) -> _JWindow:
         return _JWindow(self.window_n, n_out)
 
+    @classmethod
+    def summary_keys(cls) -> tuple[str, str]:
+        return "max_J", "threshold"  # the contract's names, from before the family
+
     def summary(self, series: np.ndarray | None) -> dict[str, Any]:
-        return {"max_J": largest(series), "threshold": self.threshold_,
-                "J0": float(self.params_.j0)}  # fmt: skip
+        return super().summary(series) | {"J0": float(self.params_.j0)}
 
     @classmethod
     def absent(cls) -> dict[str, Any]:
-        return {"max_J": None, "threshold": None, "J0": None}
+        return super().absent() | {"J0": None}
 
     @classmethod
     def known_support(cls, training: dict[str, Any]) -> dict[str, Any]:

@@ -141,6 +141,10 @@ class Statistic(ABC):
     #: A reference model's threshold floors this one's (a standard score, or J: a model
     #: fitted on minutes predicts no better than one fitted on hours).
     carries_over: ClassVar[bool] = False
+    #: Training may leave it out when the held-out data cannot support it (J: never).
+    optional: ClassVar[bool] = True
+    #: Whole numbers of samples in its header section, checked 1..MAX_WINDOW_N.
+    counts: ClassVar[tuple[str, ...]] = ("window_n",)
     params_: Any
 
     # -- a member's own maths ------------------------------------------------------------
@@ -182,8 +186,9 @@ class Statistic(ABC):
         self.support_ = self.support(held, parts)
         return self
 
-    def with_threshold(self, threshold: float, reference: float = math.nan) -> Any:
-        """``params_`` with this threshold (``reference``: the held-out value it came from)."""
+    def with_threshold(self, threshold: float, reference: float | None = None) -> Any:
+        """``params_`` with this threshold (``reference``: the held-out value it came from,
+        None: as it was)."""
         return dataclasses.replace(self.params_, **{self.threshold_key: threshold})
 
     def support(self, held: HeldOut, parts: Sequence[np.ndarray]) -> dict[str, Any]:
@@ -229,14 +234,28 @@ class Statistic(ABC):
         """Samples in the statistic's window: one block of its threshold's fit."""
         return int(self.params_.window_n)
 
+    @classmethod
+    def summary_keys(cls) -> tuple[str, str]:
+        """Its keys in ``monitor detect``'s summary: the largest value, the threshold."""
+        return f"max_{cls.name}", f"{cls.key}_threshold"
+
     def summary(self, series: np.ndarray | None) -> dict[str, Any]:
         """``monitor detect``'s summary keys: the largest value and the threshold."""
-        return {f"max_{self.name}": largest(series), f"{self.key}_threshold": self.threshold_}
+        top, threshold = self.summary_keys()
+        return {top: largest(series), threshold: self.threshold_}
+
+    @classmethod
+    def peak_ratio(cls, summary: dict[str, Any]) -> float | None:
+        """Its largest value over its threshold, read from a summary (None: the model has
+        no such statistic, its window was never judged, or its threshold never alarms)."""
+        top, threshold = cls.summary_keys()
+        value, limit = summary.get(top), summary.get(threshold)
+        return None if value is None or not limit else value / limit
 
     @classmethod
     def absent(cls) -> dict[str, Any]:
         """The summary keys of a model without this member."""
-        return {f"max_{cls.name}": None, f"{cls.key}_threshold": None}
+        return dict.fromkeys(cls.summary_keys())
 
     # -- the model and its file ----------------------------------------------------------
     @classmethod
@@ -276,14 +295,14 @@ class Statistic(ABC):
 
     @classmethod
     def check_header(cls, header: dict[str, Any]) -> None:
-        """Types and ranges of the member's header section (ValueError): a window, a count
-        and a finite positive threshold, and what :meth:`check_more` adds."""
+        """Types and ranges of the member's header section (ValueError): its window and
+        ``counts``, a finite positive threshold, and what :meth:`check_more` adds."""
         stat = header.get(cls.key)
         if stat is None:
             return
         if not isinstance(stat, dict):
             raise ValueError(f"header {cls.key} must be an object")
-        for key in ("window_n", "min_count"):
+        for key in cls.counts:
             check_whole(stat, key, 1, MAX_WINDOW_N, f"{cls.key}.")
         check_number(stat, cls.threshold_key, 0.0, strict=True)
         cls.check_more(stat)

@@ -35,7 +35,7 @@ def _stats(norm: Normalizer, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
 def lend_patterns(dgrnn: DGRNN, normalizer: Normalizer, reference: MonitorModel) -> int:
     """Add ``reference``'s patterns to the fitted ``dgrnn`` (scaled by ``normalizer``)
     where the machine's own are more than ``FILL_RADIUS_SIGMAS`` bandwidths away; the
-    number lent.  The models must share a spec (``train.check_reference``)."""
+    number lent.  The models must share a spec (``monitor.training.statistics.check_reference``)."""
     from scipy.spatial import cKDTree
 
     spec, own, ref = dgrnn.spec, dgrnn.grnn, reference.dgrnn.grnn

@@ -14,33 +14,24 @@ import hashlib
 import math
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
 
 import numpy as np
 
 from monitor.detection.alarm import N_REGIMES, AlarmConfig, Isolator
-from monitor.errors import ConfigError, InputFileError
+from monitor.errors import InputFileError
 from monitor.io.recording import Recording
-from monitor.model.bias import BiasModel, bias_regimes, bias_series, fit_scale
 from monitor.model.dgrnn import DGRNN
-from monitor.model.endstop import StrokeModel, fit_stroke
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
-from monitor.model.hold import HOLD_OUTPUTS, HoldModel, counted_holds, fit_hold_scale, hold_series
-from monitor.model.lever import (
-    LEVER_OUTPUT,
-    LeverModel,
-    fit_lever_scale,
-    lever_directions,
-    lever_series,
-)
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
-from monitor.model.spec import DGRNNSpec, Normalizer, table
-from monitor.model.threshold import MIN_BLOCKS, one_event
+from monitor.model.spec import Normalizer, table
+from monitor.model.statistic import HeldOut
+from monitor.model.threshold import one_event
 from monitor.signals import FAULT_NAMES
 from monitor.training.crossfit import cross_fitted_residuals, n_blocks
 from monitor.training.settings import TrainConfig
+from monitor.training.statistics import check_reference, fit_statistics, floor_thresholds
 
 Progress = Callable[[str], None]
 
@@ -147,42 +138,18 @@ def train(
         model.residual_clip = tuple(float(c) for c in clip)
         say(f"  residual bound |e| <= {', '.join(f'{c:.3g}' for c in clip)} (z, per output)")
         e_val = [np.clip(e, -clip, clip) for e in e_val]
-    j_parts = [window_j(e, cfg.window_n) for e in e_val]
-    model.j0, model.eps0 = cfg.threshold.eps0(np.concatenate(j_parts), block=cfg.window_n)
-    say(
-        f"  J0 {model.j0:.4g} ({cfg.threshold.rule} of J on {len(val_part)} "
-        f"{'cross-fitted' if crossfit else 'held-out'} part(s)),"
-        f" eps0 {model.eps0:.4g}: {cfg.threshold.describe()}"
-    )
+    validation = (f"cross-fitted, {cfg.folds} folds of {cfg.fold_block_s:g} s blocks"
+                  if crossfit else "held out")  # fmt: skip
+    everything = [*recordings, *(held_out or ())]
+    held = HeldOut(e_val, val_part, spec.outputs, everything, validation)
+    notes, support = fit_statistics(model, held, cfg, say)
     own_eps0 = model.eps0
-    bias_note = "off (--bias off, or the paper preset)"
-    if cfg.with_bias:
-        spools = [r["SpoolCmd"] if r.has("SpoolCmd") else None for r in val_part]
-        # Short commissioning data cannot support the bias threshold: J alone, said.
-        model.bias, bias_note = _optional("bias statistic", "b0", cfg, say,
-                                          lambda: fit_bias(e_val, spools, cfg))  # fmt: skip
-    lever_note = "off (with the bias statistic, on a model that predicts PP)"
-    if model.bias is not None and LEVER_OUTPUT in spec.outputs:
-        out = spec.outputs.index(LEVER_OUTPUT)
-        model.lever, lever_note = _optional(
-            "full-lever statistic L", "l0", cfg, say,
-            lambda: fit_lever(e_val, [r["SpoolCmd"] for r in val_part], out, cfg))  # fmt: skip
-    hold_note = (
-        "off (with the bias statistic, on a model that predicts PA and PB)"
-        if cfg.hold else "off (not asked for: --hold on)"
-    )
-    if cfg.hold and model.bias is not None and all(o in spec.outputs for o in HOLD_OUTPUTS):
-        outs = tuple(spec.outputs.index(o) for o in HOLD_OUTPUTS)
-        model.hold, hold_note = _optional(
-            "hold statistic H", "h0", cfg, say,
-            lambda: fit_hold(e_val, [r["SpoolCmd"] for r in val_part],
-                             [r["QP"] for r in val_part], outs, cfg,
-                             _stroke(recordings, held_out)))  # fmt: skip
     floor_note = None
     if reference is not None:
         floor_note = floor_thresholds(model, reference)
         say(f"  thresholds floored by the reference model: {floor_note}")
     # Said only when the event sets the threshold (not when the reference's floor does).
+    j_parts = [window_j(e, cfg.window_n) for e in e_val]
     event = one_event(j_parts, cfg.window_n) if model.eps0 == own_eps0 else None
     if event is not None:
         rec = val_part[int(event.pop("part"))]
@@ -194,7 +161,6 @@ def train(
             "then")  # fmt: skip
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
-    everything = [*recordings, *(held_out or ())]
     model.envelope = envelope_from_recordings(everything, AlarmConfig().min_engine_rpm)
     env = model.envelope
     say("  trained envelope: " + ", ".join(
@@ -203,8 +169,6 @@ def train(
     if cfg.isolation == "sim":
         labels, centroids = simulated_signatures(model, cfg, say)
         model.isolation_labels, model.isolation_centroids = labels, centroids
-    validation = (f"cross-fitted, {cfg.folds} folds of {cfg.fold_block_s:g} s blocks"
-                  if crossfit else "held out")  # fmt: skip
     model.training = {
         "sources": [r.source for r in everything],
         "patterns_from": [r.source for r in fit_part],
@@ -217,9 +181,8 @@ def train(
         "residual_clip_quantile": cfg.residual_clip_quantile,
         "isolation": cfg.isolation,
         "threshold": cfg.threshold.describe(),
-        "bias": bias_note,
-        "lever": lever_note,
-        "hold": hold_note,
+        **{key: note for key, note in notes.items() if key != "j"},
+        "support": support,
         "threshold_floor": floor_note,
         "threshold_one_event": event,
         # The typical J of normal operation judged out of sample: a log's median J against
@@ -228,119 +191,6 @@ def train(
         "trained_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     return model
-
-
-def check_reference(reference: MonitorModel, spec: DGRNNSpec, window_n: int) -> None:
-    """ConfigError naming both when ``reference`` is not a model of this spec and window."""
-    if reference.spec == spec and reference.window_n == window_n:
-        return
-
-    def what(s: DGRNNSpec, n: int) -> str:
-        return (f"{'/'.join(s.outputs)} from {'/'.join(s.variables)}, horizon {s.horizon}, "
-                f"J window {n}")  # fmt: skip
-
-    raise ConfigError(
-        f"the reference model ({what(reference.spec, reference.window_n)}) does not match the "
-        f"model to train ({what(spec, window_n)}): train with the reference's preset, "
-        "--horizon and --window"
-    )
-
-
-def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
-    """Raise eps0 and b0 to at least the reference model's; what was done, in one line.
-
-    Minutes of commissioning cannot show the tail of hours: on simulated machines the
-    largest B of 20 cross-fitted minutes (3.5 to 9) stayed far below what 2 hours of the
-    same duty cycle reach (17), so thresholds set on it alone raised false alarms.  B is a
-    standard score, so the
-    reference's b0, set on hours of held-out data, carries over to another machine of the
-    type; and a model fitted on minutes predicts no better than the reference fitted on
-    hours, so the reference's eps0 is a lower bound for its J."""
-    check_reference(reference, model.spec, model.window_n)
-    notes = []
-    if reference.eps0 > model.eps0:
-        notes.append(f"eps0 {model.eps0:.4g} -> {reference.eps0:.4g}")
-        model.eps0 = reference.eps0
-    rb, mb = reference.bias, model.bias
-    if rb is not None and mb is not None and rb.b0 > mb.b0:
-        notes.append(f"b0 {mb.b0:.4g} -> {rb.b0:.4g}")
-        model.bias = BiasModel(mb.window_n, mb.min_count, mb.scale, rb.b0)
-    return ", ".join(notes) or "own thresholds already above the reference's"
-
-
-def _optional(label: str, threshold: str, cfg: TrainConfig, say: Progress,
-              fit: Callable[[], Any]) -> tuple[Any, str]:  # fmt: skip
-    """A statistic beside J fitted by ``fit``, or None when the held-out data cannot support
-    it (``InputFileError``), with the model file's note ("on" or "off: why"); said."""
-    try:
-        stat = fit()
-    except InputFileError as exc:
-        say(f"  {label} off: {exc}")
-        return None, f"off: {exc}"
-    say(f"  {label} over {cfg.bias_window_n / 100:g} s, {threshold} "
-        f"{getattr(stat, threshold):.4g}: {cfg.threshold.describe()}")  # fmt: skip
-    return stat, "on"
-
-
-def _stroke(recordings: Sequence[Recording], held_out: Sequence[Recording] | None
-            ) -> StrokeModel:
-    """The boom cylinder's swept volumes from every normal recording given: geometry, not a
-    threshold, so the training part counts too (``monitor.model.endstop``)."""
-    every = [*recordings, *(held_out or ())]
-    return fit_stroke([r["SpoolCmd"] for r in every], [r["QP"] for r in every])
-
-
-def fit_bias(e_val: list[np.ndarray], spool_val: list[np.ndarray], cfg: TrainConfig) -> BiasModel:
-    """The bias statistic's scales and threshold b0 from held-out normal residuals
-    (``InputFileError`` when they are too short to support them)."""
-    if any(s is None for s in spool_val):
-        raise InputFileError("the held-out recordings have no SpoolCmd")
-    judged = sum(int(np.isfinite(e).all(axis=1).sum()) for e in e_val)
-    if judged < MIN_BLOCKS * cfg.bias_window_n:
-        # Its threshold must rest on several of its own windows, not on one or two.
-        raise InputFileError(
-            f"{judged / 6000:.1f} min of held-out normal data; the bias statistic needs "
-            f"{MIN_BLOCKS * cfg.bias_window_n / 6000:g} min ({MIN_BLOCKS} windows): give more "
-            "with --held-out"
-        )
-    regimes = [bias_regimes(s) for s in spool_val]
-    bias = BiasModel(cfg.bias_window_n, cfg.bias_min_count, fit_scale(e_val, regimes))
-    b_val = np.concatenate([bias_series(e, r, bias) for e, r in zip(e_val, regimes, strict=True)])
-    _, b0 = cfg.threshold.eps0(b_val, block=cfg.bias_window_n)
-    return BiasModel(bias.window_n, bias.min_count, bias.scale, b0)
-
-
-def fit_lever(
-    e_val: list[np.ndarray], spool_val: list[np.ndarray], output: int, cfg: TrainConfig
-) -> LeverModel:
-    """The full-lever statistic's per-direction scales and threshold l0 from held-out normal
-    residuals (``InputFileError`` when they never hold the lever near full)."""
-    directions = [lever_directions(s) for s in spool_val]
-    scale = fit_lever_scale(e_val, directions, cfg.bias_window_n, cfg.lever_min_count, output)
-    lever = LeverModel(cfg.bias_window_n, cfg.lever_min_count, output, scale)
-    series = np.concatenate([lever_series(e, d, lever) for e, d in zip(e_val, directions,
-                                                                        strict=True)])  # fmt: skip
-    _, l0 = cfg.threshold.eps0(series, block=cfg.bias_window_n)
-    return LeverModel(lever.window_n, lever.min_count, output, scale, l0)
-
-
-def fit_hold(
-    e_val: list[np.ndarray], spool_val: list[np.ndarray], qp_val: list[np.ndarray],
-    outputs: tuple[int, ...], cfg: TrainConfig, stroke: StrokeModel,
-) -> HoldModel:
-    """The hold statistic's per-output scales and threshold h0 from held-out normal data:
-    residuals, SpoolCmd (%) and QP (L/min), the holds on an end stop (``stroke``'s estimate)
-    left out (``InputFileError`` when they never hold the lever long enough)."""
-    # Holds on an end stop are left out: the healthy model predicts them badly, and a
-    # machine lowered into its stop raised false alarms (``monitor.model.endstop``).
-    flags = [counted_holds(s, q, stroke) for s, q in zip(spool_val, qp_val, strict=True)]
-    scale = fit_hold_scale(e_val, flags, cfg.bias_window_n, cfg.hold_min_count,
-                           cfg.hold_settle_n, outputs)  # fmt: skip
-    hold = HoldModel(cfg.bias_window_n, cfg.hold_min_count, cfg.hold_settle_n, outputs, scale,
-                     stroke=stroke)  # fmt: skip
-    series = np.concatenate([hold_series(e, f, hold) for e, f in zip(e_val, flags, strict=True)])
-    _, h0 = cfg.threshold.eps0(series, block=cfg.bias_window_n)
-    return HoldModel(hold.window_n, hold.min_count, hold.settle_n, outputs, scale, h0, stroke)
 
 
 #: Severities the fault signatures are learnt at: one signature per fault and severity, since

@@ -1,0 +1,105 @@
+"""`monitor train`'s statistics: every member of the family fitted on the held-out residuals.
+
+Each member says from the settings whether it is asked for (``Statistic.configure``), fits its
+scales and threshold on held-out normal data (``Statistic.fit``), or is off with the reason
+(data too short to support it); the model file keeps the note and what each threshold rests
+on.  A reference model of the machine type floors the thresholds that carry over to another
+machine of it (J's, B's): see :func:`floor_thresholds`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from monitor.errors import ConfigError, InputFileError
+from monitor.model.modelfile import MonitorModel
+from monitor.model.spec import DGRNNSpec
+from monitor.model.statistic import HeldOut, Statistic, registry
+from monitor.model.threshold import ThresholdRule
+
+Progress = Callable[[str], None]
+
+
+def fit_statistics(
+    model: MonitorModel, held: HeldOut, settings: Any, say: Progress
+) -> tuple[dict[str, str], dict[str, Any]]:
+    """Every member as ``settings`` (a ``TrainConfig``) ask, into ``model``: J always (its
+    failure is the training's), the others off with the reason when the held-out data
+    cannot support them.  Returns the notes ("on" or "off...") by member key and what
+    each fitted threshold rests on by member name."""
+    rule: ThresholdRule = settings.threshold
+    notes: dict[str, str] = {}
+    support: dict[str, Any] = {}
+    on: set[str] = set()
+    for cls in registry():
+        stat = cls.configure(settings, held.outputs, on)
+        if isinstance(stat, str):
+            cls.put(model, None)
+            notes[cls.key] = stat
+            continue
+        try:
+            stat.fit(held, rule)
+        except InputFileError as exc:
+            if not cls.optional:
+                raise
+            say(f"  {cls.title} off: {exc}")  # short commissioning data: said, and left out
+            cls.put(model, None)
+            notes[cls.key] = f"off: {exc}"
+            continue
+        cls.put(model, stat.params_)
+        on.add(cls.name)
+        notes[cls.key] = "on"
+        support[cls.name] = stat.support_
+        say(said(stat, held, rule))
+    return notes, support
+
+
+def said(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str:
+    """One line on a fitted statistic for ``monitor train``'s progress."""
+    if not stat.optional:  # J: J0 and eps0 (eq. 10)
+        kind = "cross-fitted" if held.validation.startswith("cross") else "held-out"
+        return (f"  J0 {stat.params_.j0:.4g} ({rule.rule} of J on {len(held.recordings)} "
+                f"{kind} part(s)), eps0 {stat.threshold_:.4g}: {rule.describe()}")  # fmt: skip
+    return (f"  {stat.title} over {stat.window_n / 100:g} s, {stat.threshold_key} "
+            f"{stat.threshold_:.4g}: {rule.describe()}")  # fmt: skip
+
+
+def check_reference(reference: MonitorModel, spec: DGRNNSpec, window_n: int) -> None:
+    """ConfigError naming both when ``reference`` is not a model of this spec and window."""
+    if reference.spec == spec and reference.window_n == window_n:
+        return
+
+    def what(s: DGRNNSpec, n: int) -> str:
+        return (f"{'/'.join(s.outputs)} from {'/'.join(s.variables)}, horizon {s.horizon}, "
+                f"J window {n}")  # fmt: skip
+
+    raise ConfigError(
+        f"the reference model ({what(reference.spec, reference.window_n)}) does not match the "
+        f"model to train ({what(spec, window_n)}): train with the reference's preset, "
+        "--horizon and --window"
+    )
+
+
+def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
+    """Raise each threshold that carries over (eps0, b0) to at least the reference model's;
+    what was done, in one line.
+
+    Minutes of commissioning cannot show the tail of hours: on simulated machines the
+    largest B of 20 cross-fitted minutes (3.5 to 9) stayed far below what 2 hours of the
+    same duty cycle reach (17), so thresholds set on it alone raised false alarms.  B is a
+    standard score, so the reference's b0, set on hours of held-out data, carries over to
+    another machine of the type; and a model fitted on minutes predicts no better than the
+    reference fitted on hours, so the reference's eps0 is a lower bound for its J."""
+    check_reference(reference, model.spec, model.window_n)
+    notes = []
+    for cls in registry():
+        ours, theirs = cls.get(model), cls.get(reference)
+        if not cls.carries_over or ours is None or theirs is None:
+            continue
+        own, ref = cls().use(ours), cls().use(theirs)
+        if ref.threshold_ > own.threshold_:
+            notes.append(f"{cls.threshold_key} {own.threshold_:.4g} -> {ref.threshold_:.4g}")
+            cls.put(model, own.with_threshold(ref.threshold_))
+    return ", ".join(notes) or "own thresholds already above the reference's"
+
