@@ -28,10 +28,10 @@ import numpy as np
 from monitor.detection.alarm import regimes_of
 from monitor.detection.offline import residual_series
 from monitor.io.recording import Recording
-from monitor.model.bias import bias_regimes, bias_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import window_j
 from monitor.model.spec import table
+from monitor.model.statistic import active
 from monitor.sim.faults import Fault
 from monitor.sim.machine import MachineParams
 from monitor.sim.simulate import run_plant, sense, simulate
@@ -130,15 +130,17 @@ def predictor_view(
     judged: np.ndarray,
     horizon: int | None = None,
 ) -> dict[str, Any]:
-    """The fault as this model's predictor passes it on: J and B of the residual on the
-    noise-free faulty twin minus the residual on the healthy twin (two predictions).
+    """The fault as this model's predictor passes it on: each statistic of the model on the
+    residual on the noise-free faulty twin minus the residual on the healthy twin (two
+    predictions).
 
     Unlike ``fault_view`` this sees what the predictor does with the fault (a level offset
     of an output predicted as an increment mostly vanishes; changed inputs can move another
-    output's prediction), so B's scales fit it.  Keys: ``fault_residual_j_ratio`` (max J /
-    eps0 at or after ``onset_s``), ``fault_residual_b_ratio`` (max B / b0; None without a
-    bias model or a full window) and ``fault_residual_level_ratio``, the larger of the two:
-    the alarm level the fault alone would give this detector.
+    output's prediction), so the scales of B, L and H fit it.  Keys:
+    ``fault_residual_<name>_ratio`` per statistic (``j``: max J / eps0 at or after
+    ``onset_s``, ``b``: max B / b0, ...; None without a full window, ``b`` None without a
+    bias model) and ``fault_residual_level_ratio``, the largest: the alarm level the fault
+    alone would give this detector.
     """
     ok = np.asarray(judged, dtype=bool)
     _, ef = residual_series(model, twins.faulty, ~ok, horizon)
@@ -147,18 +149,16 @@ def predictor_view(
     d[~ok] = np.nan
     t = twins.faulty.t - twins.faulty.t[0]
     after = t >= onset_s - 1e-9
-    j_ratio = _peak_ratio(window_j(d, model.window_n), after, model.eps0)
-    b_ratio = None
-    bias = model.bias
-    if bias is not None and bias.b0 == bias.b0:
-        b = bias_series(d, bias_regimes(twins.faulty["SpoolCmd"]), bias)
-        b_ratio = _peak_ratio(b, after, bias.b0)
-    ratios = [v for v in (j_ratio, b_ratio) if v is not None]
-    return {
-        "fault_residual_j_ratio": j_ratio,
-        "fault_residual_b_ratio": b_ratio,
-        "fault_residual_level_ratio": max(ratios) if ratios else None,
-    }
+    out: dict[str, Any] = {}
+    for stat in active(model):  # J, B, L, H, ...: each against its threshold
+        threshold = stat.threshold_
+        if threshold == threshold:
+            peak = _peak_ratio(stat.series(d, twins.faulty), after, threshold)
+            out[f"fault_residual_{stat.name.lower()}_ratio"] = peak
+    out.setdefault("fault_residual_b_ratio", None)  # the key stays without B
+    ratios = [v for v in out.values() if v is not None]
+    out["fault_residual_level_ratio"] = max(ratios) if ratios else None
+    return out
 
 
 def _peak_ratio(series: np.ndarray, after: np.ndarray, threshold: float) -> float | None:

@@ -120,10 +120,23 @@ def threshold_note(model_path: Path) -> str | None:
             f"{Path(event['source']).name} at {event['t_s'] / 60:.1f} min)")  # fmt: skip
 
 
+def ratio_column(name: str) -> str:
+    """The logs table's column of a statistic's largest value over its threshold:
+    ``max_j_ratio`` (J / eps0), ``max_b_ratio`` (B / b0), ..."""
+    return f"max_{name.lower()}_ratio"
+
+
+def statistics() -> list[tuple[str, str, str]]:
+    """Every statistic of the family (``monitor.model.statistic``) as (name, its threshold's
+    name, its column in the logs table), J first."""
+    from monitor.model.statistic import registry
+
+    return [(s.name, s.threshold_key, ratio_column(s.name)) for s in registry()]
+
+
 def statistic_ratios(summary: dict[str, Any]) -> dict[str, float | None]:
     """A summary's largest value over the threshold of every statistic of the family, by
     its column in the logs table (None: not in the model, or never judged)."""
-    from monitor.fleet.store import ratio_column
     from monitor.model.statistic import registry
 
     return {ratio_column(stat.name): stat.peak_ratio(summary) for stat in registry()}

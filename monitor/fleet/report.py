@@ -26,7 +26,7 @@ from monitor.fleet.health import (
     health_index,
     prognosis,
 )
-from monitor.fleet.pipeline import threshold_note
+from monitor.fleet.pipeline import statistics, threshold_note
 
 _COLOURS = {"fault": "tab:red", "sensor_fault": "tab:orange", "healthy": "tab:green",
             "not_judged": "0.6"}  # fmt: skip
@@ -95,6 +95,11 @@ def _trend_line(rows: list[dict[str, Any]], p: Prognosis, k: int):
     return x, [start, p.level_now, p.level_now + p.slope_per_log * ahead]
 
 
+def _ratios() -> str:
+    """The statistics' ratios the alarm level is the largest of: "J / eps0, B / b0, ..."."""
+    return ", ".join(f"{name} / {threshold}" for name, threshold, _ in statistics())
+
+
 def _health_png(
     per: dict[str, list[dict[str, Any]]],
     progs: dict[str, Prognosis],
@@ -116,7 +121,10 @@ def _health_png(
         index = [health_index(r) for r in rows]
         ax.plot(x, index, "o-", label="health index (max level)")
         if any(r.get("max_level") not in (None, r["max_j_ratio"]) for r in rows):
-            ax.plot(x, [r["max_j_ratio"] for r in rows], ".:", label="max J/eps0")
+            for name, threshold, column in statistics():  # which one set the index, by log
+                peaks = [r.get(column) for r in rows]
+                if any(v is not None for v in peaks):
+                    ax.plot(x, peaks, ".:", label=f"max {name}/{threshold}")
         ax.plot(x, [r.get("p50_j_ratio") for r in rows], "s--", ms=3, label="median J/eps0")
         right = len(rows) + 0.5
         line = _trend_line(rows, progs[mid], k)
@@ -229,8 +237,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
         per, out / "drift.png") else []  # fmt: skip
     lines = ["# Fleet report", "",
              f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
-             "the largest alarm level of a log, max(J / eps0, B / b0, L / l0, H / h0) (1.0 "
-             "raises the alarm); "
+             f"the largest alarm level of a log, max({_ratios()}) (1.0 raises the alarm); "
              f"trend: Theil-Sen over the last {k} judged logs of their typical level (median J /"
              " eps0, which follows wear, scaled by the machine's peak-to-median ratio; the peak "
              "itself scatters with each log's manoeuvres), counted when Kendall's tau makes a "

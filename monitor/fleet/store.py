@@ -37,18 +37,12 @@ LOG_SCHEMA = pa.schema([
 ])  # fmt: skip
 
 
-def ratio_column(name: str) -> str:
-    """The logs table's column of a statistic's largest value over its threshold:
-    ``max_j_ratio`` (J / eps0), ``max_b_ratio`` (B / b0), ..."""
-    return f"max_{name.lower()}_ratio"
-
-
 def log_schema() -> pa.Schema:
     """``LOG_SCHEMA`` and a ratio column for every other statistic of the family
-    (``monitor.model.statistic``; null for a model without it)."""
-    from monitor.model.statistic import registry
+    (``max_b_ratio``, ...; null for a model without it)."""
+    from monitor.fleet.pipeline import statistics
 
-    more = [ratio_column(s.name) for s in registry()]
+    more = [column for _, _, column in statistics()]
     return pa.schema([*LOG_SCHEMA, *((c, pa.float64()) for c in more
                                      if c not in LOG_SCHEMA.names)])  # fmt: skip
 
