@@ -228,3 +228,40 @@ def test_summary_says_which_statistics_were_on_and_why(model) -> None:
     off = dataclasses.replace(model, bias=None, training=dict(model.training, bias="off: short"))
     assert statistics_entries(off)["B"] == {"on": False, "threshold": None, "why": "off: short",
                                             "support": {}}
+
+
+def test_eval_sim_and_fleet_carry_a_fifth_statistic(shift, model, normal_e, tmp_path) -> None:
+    """eval-sim's run score and the fleet's logs table get M's peak ratio, read from the very
+    summary `monitor detect` writes; a model without M gives null."""
+    import pyarrow.parquet as pq
+
+    from monitor.evaluation.sim_eval import RunSpec, score_run
+    from monitor.fleet.pipeline import judge_log, model_to_bytes
+    from monitor.fleet.store import ResultStore
+    from monitor.resources import resource_path
+
+    m, stat = _with_shift(model, normal_e)
+    log = str(resource_path("replay", "normal.log"))
+    judged = judge_log(model_to_bytes(m), log)
+    s = judged.row
+    assert s["max_m_ratio"] == pytest.approx(1.0 / stat.threshold_, rel=1e-9)  # max M is 1
+    assert judged_without_m(model, log) is None
+    store = ResultStore(tmp_path / "results")
+    store.add({**s, "machine": "M01", "log": "M01/logs/a.log", "sha256": "x", "model": "own",
+               "error": None}, judged.events)  # fmt: skip
+    store.compact()
+    table = pq.read_table(tmp_path / "results" / "logs.parquet").to_pylist()
+    assert table[0]["max_m_ratio"] == pytest.approx(s["max_m_ratio"])
+    from monitor.config.settings import load_config
+    from monitor.detection.offline import detect
+
+    cfg = load_config()
+    det = detect(m, normal_e[0], cfg.alarm, cfg.horizon, gating=cfg.gating)
+    run = score_run(det, RunSpec(seed=1, duration_s=90.0))
+    assert run["max_M_over_m0"] == pytest.approx(round(1.0 / stat.threshold_, 4))
+
+
+def judged_without_m(model, log: str) -> float | None:
+    from monitor.fleet.pipeline import judge_log, model_to_bytes
+
+    return judge_log(model_to_bytes(model), log).row["max_m_ratio"]

@@ -4,6 +4,7 @@ its threshold."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,23 +37,7 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
         ax_e.plot(t, det.residual[:, k], lw=0.5, label=name)
     ax_e.set_ylabel("residual e [z]")
     ax_e.legend(loc="upper right", fontsize=7, ncol=len(outputs))
-    # Every statistic of the family over its own threshold: the alarm is raised when one
-    # stays above 1 (the largest ratio is the level the alarm machine sees).
-    ax_j = axes[-1]
-    entries = det.summary.get("statistics", {})
-    for stat in registry():
-        values, threshold = det.series.get(stat.name), entries.get(stat.name, {}).get("threshold")
-        if values is None or not threshold:  # none, or a threshold that never alarms
-            continue
-        v = np.where(values > 0, values, np.nan)
-        name, thr = stat.name, stat.threshold_key
-        ax_j.semilogy(t, v / threshold, lw=0.8, color=stat.colour,
-                      label=f"{name} / {thr} ({thr} = {threshold:.3g}{stat.unit})")  # fmt: skip
-    ax_j.axhline(1.0, color="tab:red", ls="--", lw=1, label="alarm threshold")
-    ax_j.set_ylabel("level (1 = alarm)")
-    ax_j.set_ylim(bottom=1e-2)  # below a hundredth of the threshold nothing is close
-    ax_j.set_xlabel("time from first sample [s]")
-    ax_j.legend(loc="upper left", fontsize=7)
+    _levels(axes[-1], t, det)
     for state, colour in _STATE_COLOURS.items():
         mask = det.state == state
         if mask.any():
@@ -67,6 +52,7 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
                     alpha=0.15,
                     lw=0,
                 )
+    ax_j = axes[-1]
     if det.gates is not None and np.any(det.gates.oor >= 0):
         # Outside the training envelope: not judged (hatched, so it reads over a state colour).
         oor = det.gates.oor >= 0
@@ -86,3 +72,22 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _levels(ax: Any, t: np.ndarray, det: Detection) -> None:
+    """Every statistic of the family over its own threshold: the alarm is raised when one
+    stays above 1 (the largest ratio is the level the alarm machine sees)."""
+    entries = det.summary.get("statistics", {})
+    for stat in registry():
+        values, threshold = det.series.get(stat.name), entries.get(stat.name, {}).get("threshold")
+        if values is None or not threshold:  # none, or a threshold that never alarms
+            continue
+        v = np.where(values > 0, values, np.nan)
+        name, thr = stat.name, stat.threshold_key
+        ax.semilogy(t, v / threshold, lw=0.8, color=stat.colour,
+                    label=f"{name} / {thr} ({thr} = {threshold:.3g}{stat.unit})")  # fmt: skip
+    ax.axhline(1.0, color="tab:red", ls="--", lw=1, label="alarm threshold")
+    ax.set_ylabel("level (1 = alarm)")
+    ax.set_ylim(bottom=1e-2)  # below a hundredth of the threshold nothing is close
+    ax.set_xlabel("time from first sample [s]")
+    ax.legend(loc="upper left", fontsize=7)
