@@ -111,11 +111,13 @@ def unregister(name: str) -> None:
 
 
 def registry() -> tuple[type[Statistic], ...]:
-    """Every member, J first (the level rests on it), then by ``order`` and registration."""
+    """Every member: J first (not ``optional``: the level rests on it), then by ``order``
+    and registration."""
     for module in BUILTIN:
         importlib.import_module(module)
     names = list(_REGISTRY)
-    return tuple(sorted(_REGISTRY.values(), key=lambda c: (c.order, names.index(c.name))))
+    return tuple(sorted(_REGISTRY.values(),
+                        key=lambda c: (c.optional, c.order, names.index(c.name))))  # fmt: skip
 
 
 def active(model: Any) -> list[Statistic]:
