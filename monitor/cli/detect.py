@@ -142,7 +142,8 @@ def run(args: argparse.Namespace) -> int:
         raise MonitorError(f"cannot write output: {exc.strerror or exc} ({exc.filename})") from None
     s = det.summary
     max_j = "n/a" if s["max_J"] is None else f"{s['max_J']:.4g}"
-    # The alarm compares max(J / eps0, B / b0) with 1: its largest value says how close.
+    # The alarm compares the level (each statistic over its threshold, the largest) with 1:
+    # its largest value says how close.
     level = "" if s["max_level"] is None else f", max level {s['max_level']:.3g} (1 = alarm)"
     print(f"{args.recording}: {_result_line(s)} (max J {max_j}, eps0 {s['threshold']:.4g}"
           f"{level}, judged {s['judged_s']:.1f} s)", file=sys.stderr)  # fmt: skip

@@ -94,7 +94,7 @@ class Ticker:
         self._steps = tuple(s.window(columns, nout).step for s in self.stats)
         self._thresholds = tuple(s.threshold_ for s in self.stats)
         self._index = {s.name: k for k, s in enumerate(self.stats)}
-        self._values = np.full(len(self.stats), math.nan)  # each statistic at the last tick
+        self._values = [math.nan] * len(self.stats)  # each statistic at the last tick
         self.decider = Decider(self.alarm, 1.0, make_isolator(model), model.window_n)
         self.machine = self.decider.machine
         self.eps0 = float(model.eps0)

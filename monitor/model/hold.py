@@ -239,7 +239,12 @@ class HoldWindow:
         """One sampler row's residuals, its SpoolCmd (0 without) and QP (NaN without)."""
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
         qp = float(row[self._qp_col]) if self._qp_col >= 0 else np.nan
-        return self.push(e, spool, qp)
+        h = self.hold  # ``push``'s body, one call less per tick
+        near = 0 if self._stops is None else self._stops.push(spool, qp)
+        flag = 1 if abs(spool) <= HOLD_PCT and not near else 0
+        return float(_push(self._ring_e, self._ring_c, self._sums, self._state, e, flag,
+                           self._outputs, h.scale, h.settle_n, h.min_count,
+                           self._resum))  # fmt: skip
 
 
 @register
