@@ -261,7 +261,7 @@ class J(Statistic):
     @classmethod
     def known_support(cls, training: dict[str, Any]) -> dict[str, Any]:
         out = super().known_support(training)
-        if "support" not in training and training.get("threshold_one_event"):
+        if training.get("threshold_one_event"):
             out["one_event"] = training["threshold_one_event"]  # J0 rests on one event
         return out
 

@@ -334,12 +334,10 @@ class Statistic(ABC):
 
     @classmethod
     def known_support(cls, training: dict[str, Any]) -> dict[str, Any]:
-        """What the model file knows of the held-out data the threshold rests on: what
-        training recorded for this statistic (``support``), else how the data was held out,
-        how many parts, the rule, and a reference model's floor when it set the threshold."""
-        recorded = training.get("support")
-        if isinstance(recorded, dict) and isinstance(recorded.get(cls.name), dict):
-            return dict(recorded[cls.name])
+        """What the model file knows of the held-out data the threshold rests on: how it
+        was held out, how many parts, the rule, what training recorded for this statistic
+        (``support``: hours, windows, oil temperatures, its coverage) when it did, and a
+        reference model's floor when that set the threshold."""
         out: dict[str, Any] = {}
         if isinstance(training.get("validation"), str):
             out["validation"] = training["validation"]
@@ -347,6 +345,9 @@ class Statistic(ABC):
             out["parts"] = len(training["validation_from"])
         if isinstance(training.get("threshold"), str):
             out["rule"] = training["threshold"]
+        recorded = training.get("support")
+        if isinstance(recorded, dict) and isinstance(recorded.get(cls.name), dict):
+            out |= recorded[cls.name]
         floor = training.get("threshold_floor")
         if isinstance(floor, str) and f"{cls.threshold_key} " in floor:
             out["floor"] = floor
