@@ -58,9 +58,10 @@ def run(args: argparse.Namespace) -> int:
         ("per-tick detector", lambda: _ticks(Ticker(model, cfg.alarm, cfg.horizon,
                                                     gating=cfg.gating))),
         ("simulator", lambda: simulate(make_cycle("boom", 2.0, 1), load_machine(), seed=1)),
-        # H is opt-in for `monitor train` (``--hold on``): typed here whatever the
-        # configured model carries, so any model with H finds its kernels ahead of time.
-        ("hold statistic", _hold),
+        # A statistic may be opt-in for `monitor train` (H: ``--hold on``): each member's
+        # kernels typed here whatever the configured model carries, so any model with it
+        # finds them ahead of time.
+        ("statistics", _statistics),
     ]  # fmt: skip
     for name, step in steps:
         t0 = time.perf_counter()
@@ -116,13 +117,9 @@ def _ticks(ticker: object) -> None:
     ticker.tick(np.zeros(1 + len(ROW_COLUMNS)))  # type: ignore[attr-defined]
 
 
-def _hold() -> None:
-    """H's kernels (series and live push) once on a few zero residuals."""
-    import numpy as np
+def _statistics() -> None:
+    """Every statistic's kernels once on a tiny example (``Statistic.warm``)."""
+    from monitor.model.statistic import registry
 
-    from monitor.model.endstop import StrokeModel
-    from monitor.model.hold import HoldModel, HoldWindow, counted_holds, hold_series
-
-    hold = HoldModel(2, 1, 0, (1, 2), np.ones(2), stroke=StrokeModel(1.0, 1.0))
-    hold_series(np.zeros((4, 4)), counted_holds(np.zeros(4), np.zeros(4), hold.stroke), hold)
-    HoldWindow(hold).push(np.zeros(4), 0.0, 0.0)
+    for stat in registry():
+        stat.warm()

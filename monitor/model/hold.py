@@ -305,6 +305,13 @@ class Hold(Statistic):
         return {"hold_samples": n}
 
     @classmethod
+    def warm(cls) -> None:
+        # H is opt-in for `monitor train` (``--hold on``): the configured model may lack it.
+        hold = HoldModel(2, 1, 0, (1, 2), np.ones(2), stroke=StrokeModel(1.0, 1.0))
+        hold_series(np.zeros((4, 4)), counted_holds(np.zeros(4), np.zeros(4), hold.stroke), hold)
+        HoldWindow(hold).push(np.zeros(4), 0.0, 0.0)
+
+    @classmethod
     def from_dict(cls, d: dict[str, Any]) -> HoldModel:
         return HoldModel.from_dict(d)
 

@@ -221,6 +221,13 @@ class Statistic(ABC):
         """The member's own coverage of the held-out data (regimes, directions, holds)."""
         return {}
 
+    @classmethod
+    def warm(cls) -> None:
+        """Its kernels once on a tiny example, so that numba types them before a model that
+        carries it is first used (``monitor warm-up``); nothing for a member whose kernels
+        every model's ticks reach anyway."""
+        return None
+
     # -- the fitted statistic ------------------------------------------------------------
     def use(self, params: Any) -> Statistic:
         """This member judging with ``params`` (from a model file); returns self."""

@@ -181,7 +181,7 @@ def train(
         "residual_clip_quantile": cfg.residual_clip_quantile,
         "isolation": cfg.isolation,
         "threshold": cfg.threshold.describe(),
-        **{key: note for key, note in notes.items() if key != "j"},
+        **notes,  # each statistic: "on", or "off..." and why
         "support": support,
         "threshold_floor": floor_note,
         "threshold_one_event": event,
