@@ -11,6 +11,7 @@ import pytest
 
 from monitor.detection.alarm import AlarmConfig, AlarmMachine, State, regime_of
 from monitor.detection.offline import detect, gated_residuals, make_isolator
+from monitor.detection.opstate import OperatingConfig
 from monitor.evaluation.sim_eval import EvalConfig, fault_plan, normal_plan, simulate_run
 from monitor.model.bias import bias_regimes, bias_series
 from monitor.model.grnn import GRNN
@@ -194,10 +195,20 @@ def test_detect_fast_forward_equals_stepping_every_sample(shipped):
     both = np.isfinite(level) & np.isfinite(b)
     level[both] = np.maximum(level[both], b[both] / shipped.bias.b0)
     m = AlarmMachine(alarm, 1.0, make_isolator(shipped), shipped.window_n)
+    # An engine stop or start is reported once it has held for engine_confirm_s (0.05 s:
+    # 5 samples, more than one EngineSpeed frame); until then the machine sees the engine
+    # as it was reported.
+    confirm_n = round(OperatingConfig().engine_confirm_s / 0.01)
+    rpm = rec["EngineSpeed"]
+    off_reported, run = bool(rpm[0] < alarm.min_engine_rpm), 0
     states, faults = [], []
     for i in range(len(rec)):
-        s = m.step(level[i], bool(inputs_ok[i]), rec["EngineSpeed"][i], e[i],
-                   regime_of(rec["SpoolCmd"][i]))  # fmt: skip
+        off_now = bool(rpm[i] < alarm.min_engine_rpm)
+        run = run + 1 if off_now != off_reported else 0
+        if run >= confirm_n:
+            off_reported, run = off_now, 0
+        rpm_seen = 0.0 if off_reported else max(rpm[i], alarm.min_engine_rpm)
+        s = m.step(level[i], bool(inputs_ok[i]), rpm_seen, e[i], regime_of(rec["SpoolCmd"][i]))
         states.append(int(s))
         faults.append(m.fault if s is State.FAULT else None)
     np.testing.assert_array_equal(det.state, states)
