@@ -1,0 +1,148 @@
+"""Seeded duty cycles of the whole machine at 100 Hz, as an operator runs them.
+
+``truck-loading``: dig (stick in and bucket curl against the soil, the bucket filling),
+lift and swing 90-180 deg to the truck with the boom rising, dump (stick out, bucket open),
+swing back with the boom lowering, a pause.  ``lifting``: idling, then a load hung on the
+bucket raised slowly, held for a long time, swung 30-90 deg, held, lowered.  ``mixed``:
+blocks of both.  Operator variability: every move's lever amplitude, the overlap of the
+functions (each starts with a random delay after the last), pauses, swing angles.
+
+The operator aims at rod positions by eye: each move's length comes from a rough speed
+(rated section flow x lever over the fed area, no flow sharing), so positions drift and now
+and then reach a stop, as in real work.  Returns a ``Recording`` with every loop's spool
+command (the DBC's names), EngineSpeed, OilTemp, and the loads the kernel needs:
+``DigForce`` (N at the bucket tip) and ``Payload`` (kg in the bucket), never written out.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from monitor.errors import ConfigError
+from monitor.io.recording import Recording
+from monitor.sim.cycles import RATE_LIMIT_PCT_S, _oil_temp, _time_axis, rate_limit
+from monitor.sim.whole.params import CYLINDERS, WholeMachine
+
+WHOLE_CYCLES = ("mixed", "truck-loading", "lifting")
+SPOOL_SIGNALS = {
+    "boom": "SpoolCmd",
+    "stick": "Stick_SpoolCmd",
+    "bucket": "Bucket_SpoolCmd",
+    "swing": "Swing_SpoolCmd",
+}
+LOAD_COLUMNS = ("DigForce", "Payload")
+
+
+class _Operator:
+    """Lays out lever moves on a timeline and keeps the estimated pose."""
+
+    def __init__(self, machine: WholeMachine, rng: np.random.Generator, n: int, dt: float):
+        self.m = machine
+        self.rng = rng
+        self.dt = dt
+        self.n = n
+        self.t = 1.0
+        self.spool = {loop: np.zeros(n) for loop in SPOOL_SIGNALS}
+        self.dig = np.zeros(n)
+        self.payload = np.zeros(n)
+        self.pos = {loop: 0.3 * machine.stroke_m(loop) for loop in CYLINDERS}
+        self.load_kg = 0.0
+
+    def _span(self, start: float, dur: float) -> slice:
+        return slice(min(int(start / self.dt), self.n), min(int((start + dur) / self.dt), self.n))
+
+    def move(self, loop: str, start: float, target_frac: float, amp: float) -> float:
+        """Move a cylinder toward ``target_frac`` of its stroke; return the move's end."""
+        stroke = self.m.stroke_m(loop)
+        target = float(np.clip(target_frac, 0.0, 1.05)) * stroke
+        delta = target - self.pos[loop]
+        area = self.m.area_a_m2(loop) if delta > 0 else self.m.area_b_m2(loop)
+        speed = amp / 100.0 * self.m.rated_flow_m3_s(loop) / area
+        dur = float(np.clip(abs(delta) / speed, 0.4, 6.0))
+        self.spool[loop][self._span(start, dur)] = math.copysign(amp, delta)
+        self.pos[loop] = float(np.clip(self.pos[loop] + math.copysign(speed * dur, delta), 0, stroke))
+        return start + dur
+
+    def swing(self, start: float, angle_rad: float, amp: float) -> float:
+        omega = amp / 100.0 * self.m.rated_flow_m3_s("swing") / self.m.swing_disp_m3_rad
+        dur = abs(angle_rad) / omega + 0.3  # the house's run-up
+        self.spool["swing"][self._span(start, dur)] = math.copysign(amp, angle_rad)
+        return start + dur
+
+    def set_payload(self, start: float, dur: float, kg: float) -> None:
+        span = self._span(start, dur)
+        k = span.stop - span.start
+        if k > 0:
+            self.payload[span] = np.linspace(self.load_kg, kg, k)
+        self.payload[span.stop :] = kg
+        self.load_kg = kg
+
+    def lag(self) -> float:
+        return float(self.rng.uniform(0.0, 0.8))
+
+    def truck_loading(self) -> None:
+        r = self.rng
+        t = self.t
+        # Dig: stick in and bucket curl against the soil while the bucket fills.
+        t_s = t + self.lag()
+        end_s = self.move("stick", t_s, r.uniform(0.6, 0.85), r.uniform(50, 100))
+        end_k = self.move("bucket", t + self.lag(), r.uniform(0.7, 0.95), r.uniform(40, 90))
+        dig_end = max(end_s, end_k)
+        self.dig[self._span(t_s, dig_end - t_s)] = r.uniform(1500.0, 4500.0)
+        self.set_payload(t_s, dig_end - t_s, r.uniform(45.0, 75.0))
+        # Lift and swing to the truck, overlapping.
+        t = dig_end + r.uniform(-0.3, 0.3)
+        end_b = self.move("boom", t, r.uniform(0.6, 0.9), r.uniform(60, 100))
+        angle = math.radians(r.uniform(90.0, 180.0)) * (1 if r.random() < 0.5 else -1)
+        end_w = self.swing(t + r.uniform(0.2, 1.2), angle, r.uniform(60, 100))
+        # Dump: stick out, bucket open, the load leaving.
+        t = max(end_b, end_w) + r.uniform(0.0, 0.6)
+        end_s = self.move("stick", t + self.lag(), r.uniform(0.2, 0.4), r.uniform(50, 100))
+        end_k = self.move("bucket", t, r.uniform(0.05, 0.2), r.uniform(60, 100))
+        self.set_payload(t, end_k - t, 0.0)
+        # Return: swing back with the boom lowering.
+        t = max(end_s, end_k) + r.uniform(0.0, 0.5)
+        end_w = self.swing(t, -angle, r.uniform(60, 100))
+        end_b = self.move("boom", t + self.lag(), r.uniform(0.1, 0.3), r.uniform(40, 90))
+        self.t = max(end_w, end_b) + r.uniform(0.3, 3.0)
+
+    def lifting(self) -> None:
+        r = self.rng
+        t = self.t + r.uniform(5.0, 30.0)  # idling
+        self.set_payload(t, 2.0, r.uniform(100.0, 300.0))  # a load hung on the bucket
+        t = self.move("boom", t + 2.5, r.uniform(0.5, 0.8), r.uniform(25, 50))
+        t += r.uniform(10.0, 60.0)  # hold
+        t = self.swing(t, math.radians(r.uniform(30.0, 90.0)) * r.choice([-1, 1]), r.uniform(30, 50))
+        t += r.uniform(5.0, 30.0)  # hold
+        t = self.move("boom", t, r.uniform(0.2, 0.4), r.uniform(20, 40))
+        self.set_payload(t + 1.0, 2.0, 0.0)
+        self.t = t + 3.5 + r.uniform(2.0, 20.0)
+
+
+def make_whole_cycle(cycle: str, duration_s: float, seed: int, machine: WholeMachine) -> Recording:
+    """Commands and loads of ``cycle`` over ``duration_s`` seconds."""
+    if cycle not in WHOLE_CYCLES:
+        raise ConfigError(f"unknown cycle {cycle!r} of the whole machine; known: "
+                          f"{', '.join(WHOLE_CYCLES)}")  # fmt: skip
+    t = _time_axis(duration_s)
+    dt = float(t[1] - t[0])
+    rng = np.random.default_rng(seed)
+    op = _Operator(machine, rng, len(t), dt)
+    while op.t < duration_s:
+        if cycle == "truck-loading":
+            op.truck_loading()
+        elif cycle == "lifting":
+            op.lifting()
+        else:  # mixed: a few truck loads, now and then a lift
+            for _ in range(int(rng.integers(2, 8))):
+                op.truck_loading()
+            if rng.random() < 0.5:
+                op.lifting()
+    cols = {SPOOL_SIGNALS[loop]: rate_limit(op.spool[loop], RATE_LIMIT_PCT_S) for loop in op.spool}
+    cols["EngineSpeed"] = np.full_like(t, machine["pump"]["engine_rpm"])
+    cols["OilTemp"] = _oil_temp(t, rng)
+    cols["DigForce"] = op.dig
+    cols["Payload"] = op.payload
+    return Recording(t, cols, source=f"excavator4 {cycle} cycle, seed {seed}")

@@ -1,0 +1,289 @@
+"""The whole machine's numba kernel: one load-sensing pump, four post-compensated sections
+(boom, stick, bucket cylinders and the swing motor), a planar boom-stick-bucket chain.
+
+SI inside (Pa, m^3/s, m, rad, kg, N, s).  Parameters travel as one float64 vector and the
+per-sample inputs as rows (indices below; ``params.py`` and ``simulate.py`` fill them).
+The orifice rule is the reference loop's (``monitor.sim.kernel._orifice``); the rest of a
+section (spool openings with the stroke limit and the worn edges' underlap, piston leakage,
+end stops, chamber compressibility) follows the boom loop's formulation in
+``monitor.sim.kernel.rhs`` with a compensated meter-in edge.
+
+Flow sharing (why post-compensated): each section's pressure compensator sits after its
+spool's meter-in edge and is piloted by the highest load pressure PLS, so every open spool
+sees the same drop PP - PLS.  A section's flow is Kv * opening * sqrt(PP - PLS): while the
+pump keeps up, the drop is the LS margin and each section gets its own demand whatever its
+load; when the demand exceeds the pump's flow, PP falls, the common drop shrinks, and every
+section's flow is scaled by the same factor, sqrt(drop / margin) = pump flow / total demand.
+Nothing stalls: the heaviest function slows in proportion instead of stopping, which is why
+load-sensing mini excavators (and this simulator) use post-compensation ("flow sharing",
+LUDV).  A pre-compensated valve would starve the highest load under saturation; negative
+flow control on an open-centre valve (``NEGATIVE_FLOW_CONTROL``) is named for later.
+
+The pump is a proportional LS regulator: displacement = (PLS + margin - PP) / band, limited
+to 0..1 and cut off between cutoff_start and cutoff_full, less a leakage (``pump_wear``).
+Anti-cavitation: ideal make-up checks from tank (no port falls below tank pressure; the
+projection after each step is that check).  Main relief on the pump line, crossover reliefs
+A<->B on the swing motor.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from monitor.jit import jit
+from monitor.sim.kernel import _clip, _orifice
+
+#: Named for later: an open-centre valve with negative flow control (issue 39).
+NEGATIVE_FLOW_CONTROL = "negative_flow_control"
+LOOPS = ("boom", "stick", "bucket", "swing")
+N_LOOPS = 4
+SWING = 3
+
+# --- parameter vector ----------------------------------------------------------------------
+BETA, V_LINE, DISP_MAX, LS_MARGIN, LS_BAND, CUT_START, CUT_FULL = 0, 1, 2, 3, 4, 5, 6
+RELIEF_CRACK, RELIEF_GAIN, DP_LAM, PTANK, GRAV = 7, 8, 9, 10, 11
+XR_CRACK, XR_GAIN, MOTOR_LEAK, V_EPS_DIG = 12, 13, 14, 15
+# the chain: link lengths, masses, moment arms, angle offsets (boom absolute, others relative)
+L1, L2, L3, M1, M2, M3, R1, R2, R3, A1, A2, A3 = range(16, 28)
+LOOP0, NL = 28, 8  # per loop block: LOOP0 + NL * loop + one of:
+P_KV, P_AA, P_AB, P_STROKE, P_V0A, P_V0B, P_MASS, P_CVISC = range(8)
+N_PARAMS = LOOP0 + NL * N_LOOPS
+
+# --- input columns -------------------------------------------------------------------------
+IN_SPEED_RPS, IN_DIG_N, IN_PAYLOAD_KG, IN_PUMP_LEAK = 0, 1, 2, 3
+IN0, NI = 4, 4  # per loop block: IN0 + NI * loop + one of:
+I_SPOOL, I_STROKE_LIM, I_UNDERLAP, I_LEAK = range(4)
+N_INPUTS = IN0 + NI * N_LOOPS
+
+# --- states: PP, then per loop PA, PB, X (rod m / house rad), V (m/s / rad/s) ---------------
+S_PP = 0
+S0, NS = 1, 4
+X_PA, X_PB, X_X, X_V = range(4)
+N_STATES = S0 + NS * N_LOOPS
+
+# --- recorded (100 Hz): PP, pump flow, per loop PA, PB, section flow, X, V -----------------
+R_PP, R_QP = 0, 1
+R0, NR = 2, 5
+N_RECORD = R0 + NR * N_LOOPS
+
+# --- auxiliary outputs of the right-hand side ---------------------------------------------
+AUX_QP, AUX_PLS = 0, 1
+AUX_Q0 = 2  # + loop: the section's supply flow (P->A plus P->B)
+N_AUX = AUX_Q0 + N_LOOPS
+
+
+@jit(inline="always")
+def chain_forces(y: np.ndarray, u: np.ndarray, prm: np.ndarray) -> tuple[float, float, float]:
+    """Gravity and digging forces on the boom, stick and bucket cylinders (N, positive
+    against extension) from the pose: potential energy V(x), force dV/dx = (dtheta/dx)
+    dV/dtheta with a constant moment arm per cylinder (dtheta/dx = +-1/R)."""
+    a1 = prm[A1] + y[S0 + X_X] / prm[R1]
+    a2 = a1 + prm[A2] - y[S0 + NS + X_X] / prm[R2]  # extending the stick curls it in
+    a3 = a2 + prm[A3] - y[S0 + 2 * NS + X_X] / prm[R3]  # extending the bucket curls it
+    c1, c2, c3 = math.cos(a1), math.cos(a2), math.cos(a3)
+    p1x = prm[L1] * c1
+    p1y = prm[L1] * math.sin(a1)
+    p2x = p1x + prm[L2] * c2
+    p2y = p1y + prm[L2] * math.sin(a2)
+    g1 = 0.5 * prm[L1] * c1
+    g2 = p1x + 0.5 * prm[L2] * c2
+    g3 = p2x + 0.5 * prm[L3] * c3
+    m3 = prm[M3] + u[IN_PAYLOAD_KG]
+    g = prm[GRAV]
+    t1 = g * (prm[M1] * g1 + prm[M2] * g2 + m3 * g3)
+    t2 = g * (prm[M2] * (g2 - p1x) + m3 * (g3 - p1x))
+    t3 = g * m3 * (g3 - p2x)
+    f0 = t1 / prm[R1]
+    f1 = -t2 / prm[R2]
+    f2 = -t3 / prm[R3]
+    # Digging: a tip force against the curl, resisting stick and bucket while they move
+    # (like friction: soil does not push a standing bucket back).
+    dig = u[IN_DIG_N]
+    if dig != 0.0:
+        tipx = p2x + prm[L3] * c3
+        tipy = p2y + prm[L3] * math.sin(a3)
+        r2 = math.sqrt((tipx - p1x) ** 2 + (tipy - p1y) ** 2)
+        ve = prm[V_EPS_DIG]
+        f1 += dig * r2 / prm[R2] * math.tanh(y[S0 + NS + X_V] / ve)
+        f2 += dig * prm[L3] / prm[R3] * math.tanh(y[S0 + 2 * NS + X_V] / ve)
+    return f0, f1, f2
+
+
+@jit(inline="always")
+def _opening(u: np.ndarray, j: int) -> tuple[float, float, float]:
+    """Signed spool s and the P->A/B->T and P->B/A->T openings (boom loop's rule)."""
+    b = IN0 + NI * j
+    lim = u[b + I_STROKE_LIM]
+    s = _clip(u[b + I_SPOOL], -lim, lim)
+    ul = u[b + I_UNDERLAP]
+    return s, _clip(s + ul, 0.0, 1.0), _clip(-s + ul, 0.0, 1.0)
+
+
+@jit
+def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.ndarray) -> None:
+    """Write dy/dt into ``dy`` and the pump flow, PLS and section flows into ``aux``."""
+    pp = max(y[S_PP], 0.0)
+    ptank = prm[PTANK]
+    dpl = prm[DP_LAM]
+    # Load-sense pressure: the feeding port of every spool that is commanded open.
+    pls = 0.0
+    for j in range(N_LOOPS):
+        s = _clip(u[IN0 + NI * j + I_SPOOL], -1.0, 1.0)
+        if s > 0.0:
+            pls = max(pls, y[S0 + NS * j + X_PA])
+        elif s < 0.0:
+            pls = max(pls, y[S0 + NS * j + X_PB])
+    fg = chain_forces(y, u, prm)
+    q_supply = 0.0
+    for j in range(N_LOOPS):
+        b = S0 + NS * j
+        p = LOOP0 + NL * j
+        pa = max(y[b + X_PA], 0.0)
+        pb = max(y[b + X_PB], 0.0)
+        x = y[b + X_X]
+        v = y[b + X_V]
+        s, o_pos, o_neg = _opening(u, j)
+        kv = prm[p + P_KV]
+        # Compensated meter-in: the drop is PP - max(PLS, port); the load-holding check
+        # closes the edge when the port is above the compensator's outlet.
+        dpa = pp - max(pls, pa)
+        dpb = pp - max(pls, pb)
+        q_pa = _orifice(kv * o_pos, dpa, dpl) if dpa > 0.0 else 0.0
+        q_pb = _orifice(kv * o_neg, dpb, dpl) if dpb > 0.0 else 0.0
+        q_bt = _orifice(kv * o_pos, pb - ptank, dpl)
+        q_at = _orifice(kv * o_neg, pa - ptank, dpl)
+        q_il = u[IN0 + NI * j + I_LEAK] * (pa - pb)
+        aa = prm[p + P_AA]
+        ab = prm[p + P_AB]
+        if j == SWING:
+            q_il += prm[MOTOR_LEAK] * (pa - pb)
+            dpx = pa - pb
+            if dpx > prm[XR_CRACK]:
+                q_il += prm[XR_GAIN] * (dpx - prm[XR_CRACK])
+            elif -dpx > prm[XR_CRACK]:
+                q_il -= prm[XR_GAIN] * (-dpx - prm[XR_CRACK])
+            vol_a = prm[p + P_V0A]
+            vol_b = prm[p + P_V0B]
+            dy[b + X_V] = (aa * pa - ab * pb - prm[p + P_CVISC] * v) / prm[p + P_MASS]
+        else:
+            stroke = prm[p + P_STROKE]
+            drive = pa * aa - pb * ab - fg[j]
+            if (x <= 0.0 and v <= 0.0 and drive <= 0.0) or (
+                x >= stroke and v >= 0.0 and drive >= 0.0
+            ):
+                v = 0.0
+                dy[b + X_V] = 0.0
+            else:
+                dy[b + X_V] = (drive - prm[p + P_CVISC] * v) / prm[p + P_MASS]
+            vol_a = prm[p + P_V0A] + aa * x
+            vol_b = prm[p + P_V0B] + ab * (stroke - x)
+        dy[b + X_X] = v
+        dy[b + X_PA] = (q_pa - q_at - q_il - aa * v) * prm[BETA] / vol_a
+        dy[b + X_PB] = (q_pb - q_bt + q_il + ab * v) * prm[BETA] / vol_b
+        aux[AUX_Q0 + j] = q_pa + q_pb
+        q_supply += q_pa + q_pb
+    # The LS pump: proportional regulator, pressure cut-off, leakage of a worn pump.
+    disp = _clip((pls + prm[LS_MARGIN] - pp) / prm[LS_BAND], 0.0, 1.0)
+    disp *= _clip((prm[CUT_FULL] - pp) / (prm[CUT_FULL] - prm[CUT_START]), 0.0, 1.0)
+    qp = disp * prm[DISP_MAX] * u[IN_SPEED_RPS] - u[IN_PUMP_LEAK] * pp
+    q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
+    dy[S_PP] = (qp - q_relief - q_supply) * prm[BETA] / prm[V_LINE]
+    aux[AUX_QP] = qp
+    aux[AUX_PLS] = pls
+
+
+@jit(inline="always")
+def _project(y: np.ndarray, prm: np.ndarray) -> None:
+    """No port below tank (the make-up checks), rods within their stops."""
+    if y[S_PP] < 0.0:
+        y[S_PP] = 0.0
+    for j in range(N_LOOPS):
+        b = S0 + NS * j
+        if y[b + X_PA] < 0.0:
+            y[b + X_PA] = 0.0
+        if y[b + X_PB] < 0.0:
+            y[b + X_PB] = 0.0
+        if j == SWING:
+            continue
+        stroke = prm[LOOP0 + NL * j + P_STROKE]
+        if y[b + X_X] < 0.0:
+            y[b + X_X] = 0.0
+            y[b + X_V] = max(y[b + X_V], 0.0)
+        elif y[b + X_X] > stroke:
+            y[b + X_X] = stroke
+            y[b + X_V] = min(y[b + X_V], 0.0)
+
+
+@jit(inline="always")
+def _record(rec: np.ndarray, r: int, y: np.ndarray, u: np.ndarray, prm: np.ndarray,
+            dy: np.ndarray, aux: np.ndarray) -> None:  # fmt: skip
+    rhs(y, u, prm, dy, aux)
+    rec[r, R_PP] = y[S_PP]
+    rec[r, R_QP] = aux[AUX_QP]
+    for j in range(N_LOOPS):
+        b = S0 + NS * j
+        c = R0 + NR * j
+        rec[r, c] = y[b + X_PA]
+        rec[r, c + 1] = y[b + X_PB]
+        rec[r, c + 2] = aux[AUX_Q0 + j]
+        rec[r, c + 3] = y[b + X_X]
+        rec[r, c + 4] = y[b + X_V]
+
+
+@jit
+def integrate(y0: np.ndarray, inputs: np.ndarray, n_sub: int, input_dt: float,
+              prm: np.ndarray, record_every: int) -> np.ndarray:  # fmt: skip
+    """Classic RK4 at h = input_dt / n_sub, inputs linear between their samples (as the
+    boom loop's ``monitor.sim.kernel.integrate``); a row every ``record_every`` steps."""
+    n_in = inputs.shape[0]
+    n_steps = (n_in - 1) * n_sub
+    rec = np.empty((n_steps // record_every + 1, N_RECORD))
+    y = y0.copy()
+    k1 = np.empty(N_STATES)
+    k2 = np.empty(N_STATES)
+    k3 = np.empty(N_STATES)
+    k4 = np.empty(N_STATES)
+    yt = np.empty(N_STATES)
+    aux = np.empty(N_AUX)
+    u0 = np.empty(N_INPUTS)
+    um = np.empty(N_INPUTS)
+    u1 = np.empty(N_INPUTS)
+    h = input_dt / n_sub
+    hh = 0.5 * h
+    h6 = h / 6.0
+    _record(rec, 0, y, inputs[0], prm, k1, aux)
+    r = 1
+    left = record_every
+    for k in range(n_in - 1):
+        a = inputs[k]
+        bb = inputs[k + 1]
+        for j in range(n_sub):
+            f0 = j / n_sub
+            f1 = (j + 1) / n_sub
+            fm = 0.5 * (f0 + f1)
+            for i in range(N_INPUTS):
+                d = bb[i] - a[i]
+                u0[i] = a[i] + f0 * d
+                um[i] = a[i] + fm * d
+                u1[i] = a[i] + f1 * d
+            rhs(y, u0, prm, k1, aux)
+            for i in range(N_STATES):
+                yt[i] = y[i] + hh * k1[i]
+            rhs(yt, um, prm, k2, aux)
+            for i in range(N_STATES):
+                yt[i] = y[i] + hh * k2[i]
+            rhs(yt, um, prm, k3, aux)
+            for i in range(N_STATES):
+                yt[i] = y[i] + h * k3[i]
+            rhs(yt, u1, prm, k4, aux)
+            for i in range(N_STATES):
+                y[i] += h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            _project(y, prm)
+            left -= 1
+            if left == 0:
+                left = record_every
+                _record(rec, r, y, u1, prm, k1, aux)
+                r += 1
+    return rec
