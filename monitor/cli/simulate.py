@@ -1,4 +1,5 @@
-"""``monitor simulate``: traces of the reference boom loop with faults and effects."""
+"""``monitor simulate``: traces of the reference boom loop with faults and effects, or of the
+whole excavator (``--machine excavator4``: every loop of dbc/excavator4.dbc)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,9 @@ from monitor.sim.cycles import CYCLES, make_cycle
 from monitor.sim.effects import describe_catalogue, parse_effect
 from monitor.sim.faults import parse_fault
 from monitor.sim.machine import load_machine
+from monitor.sim.whole.cycles import WHOLE_CYCLES
+
+MACHINES = ("excavator4",)
 
 _EPILOG = f"""\
 faults (--fault NAME:SEV[@ONSET_S[+RAMP_S]], severity 0..1, abrupt at ONSET_S or ramped
@@ -25,10 +29,21 @@ linearly over RAMP_S seconds; repeatable):
 effects (--effect NAME[:param=value,...], off unless given; repeatable):
 {describe_catalogue()}
 
+whole machine (--machine excavator4: boom, stick, bucket and swing on one load-sensing pump,
+every loop's signals of dbc/excavator4.dbc; --cycle mixed (default), truck-loading, lifting):
+  --fault LOOP.FAULT:SEV[@ONSET_S[+RAMP_S]], LOOP.FAULT one of
+    boom, stick, bucket: piston_wear, spool_stroke, spool_wear (as above)
+    swing: spool_stroke, spool_wear, motor_leakage
+    pump: pump_wear
+  motor_leakage  swing motor internal leakage A<->B, up to 7e-12 m^3/(s Pa)
+  pump_wear      leakage of the pump every loop shares, up to 8.3e-12 m^3/(s Pa)
+
 examples:
   monitor simulate --duration 600 --seed 1 --out normal.csv
   monitor simulate --duration 120 --seed 2 --fault piston_wear:0.5@60 --out wear.log
   monitor simulate --duration 60 --seed 3 --effect spool_dynamics:natural_freq_hz=8 --out s.csv
+  monitor simulate --machine excavator4 --duration 600 --seed 4 --cycle truck-loading \\
+      --fault stick.piston_wear:0.5@300 --out whole.log
 """
 
 
@@ -38,7 +53,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="simulate the boom loop (CSV or candump log at 100 Hz)",
         description="Simulate the reference excavator boom loop driven by a seeded command "
         "profile; write the contract CSV (.csv, with RodPos and internal states) or a candump "
-        "log through the DBC (.log).",
+        "log through the DBC (.log); with --machine excavator4, the whole machine's loops.",
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -54,20 +69,28 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="seed of the command profile and sensor noise (default 0)",
     )
     p.add_argument(
+        "--machine",
+        choices=MACHINES,
+        default=None,
+        help="simulate the whole machine (excavator4: boom, stick, bucket, swing on one "
+        "load-sensing pump, the frames of dbc/excavator4.dbc) instead of the boom loop",
+    )
+    p.add_argument(
         "--cycle",
-        choices=CYCLES,
-        default="boom",
+        choices=CYCLES + WHOLE_CYCLES,
+        default=None,
         help="boom: raise/hold/lower duty cycles (default); boom-cover: the same with twice "
         "the end-stop visits and the lever released anywhere around the stop, so spools "
         "close on trapped pressures (the shipped model's training data); ramp: slow spool "
-        "triangles; step: spool steps",
+        "triangles; step: spool steps.  With --machine: mixed (default: blocks of both), "
+        "truck-loading, lifting",
     )
     p.add_argument("--fault", action="append", default=[], metavar="NAME:SEV[@ONSET_S[+RAMP_S]]")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[:param=value,...]")
     p.add_argument(
         "--rod-pos",
         type=float,
-        default=100.0,
+        default=None,
         metavar="MM",
         help="initial rod position in mm from fully retracted (default 100)",
     )
@@ -77,7 +100,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         metavar="FILE",
-        help="simulator YAML (default: the shipped config/simulator.yaml)",
+        help="simulator YAML (default: the shipped config/simulator.yaml; with --machine "
+        "config/excavator4_sim.yaml)",
     )
     p.add_argument("--out", type=output_file, required=True, metavar="FILE", help=".csv or .log")
     p.set_defaults(func=run)
@@ -89,6 +113,16 @@ def run(args: argparse.Namespace) -> int:
     suffix = args.out.suffix.lower()
     if suffix not in (".csv", ".log"):
         raise ConfigError(f"--out {args.out}: expected a .csv or .log file name")
+    if args.machine is not None:
+        return _run_machine(args, suffix)
+    if args.cycle is None:
+        args.cycle = "boom"
+    elif args.cycle not in CYCLES:
+        raise ConfigError(
+            f"--cycle {args.cycle} is a whole-machine cycle: add --machine excavator4"
+        )
+    if args.rod_pos is None:
+        args.rod_pos = 100.0
     faults = [parse_fault(text) for text in args.fault]
     effects = [parse_effect(text) for text in args.effect]
     machine = load_machine(args.config)
@@ -126,6 +160,57 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"simulated {args.duration:g} s ({args.cycle}, seed {args.seed}) in {elapsed:.2f} s; "
         f"wrote {what} to {args.out}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _run_machine(args: argparse.Namespace, suffix: str) -> int:
+    """``--machine excavator4``: every loop's DBC signals in one CSV or candump log."""
+    from monitor.resources import resource_path
+    from monitor.sim.whole.cycles import make_whole_cycle
+    from monitor.sim.whole.faults import parse_machine_fault
+    from monitor.sim.whole.params import load_whole_machine
+    from monitor.sim.whole.simulate import simulate_whole
+
+    if args.cycle is None:
+        args.cycle = "mixed"
+    elif args.cycle not in WHOLE_CYCLES:
+        raise ConfigError(
+            f"--cycle {args.cycle} is a boom-loop cycle; the whole machine "
+            f"runs {', '.join(WHOLE_CYCLES)}"
+        )
+    if args.effect:
+        raise ConfigError("--effect is not available with --machine yet (the boom loop's only)")
+    if args.rod_pos is not None:
+        raise ConfigError("--rod-pos is the boom loop's; the whole machine starts at 30 % stroke")
+    faults = [parse_machine_fault(text) for text in args.fault]
+    for fault in faults:
+        if fault.onset_s > args.duration:
+            raise ConfigError(f"--fault {fault.label}: onset {fault.onset_s:g} s is after the end")
+    machine = load_whole_machine(args.config)
+    start = time.perf_counter()
+    commands = make_whole_cycle(args.cycle, args.duration, args.seed, machine)
+    rec = simulate_whole(commands, machine, faults, seed=None if args.no_noise else args.seed)
+    elapsed = time.perf_counter() - start
+    try:
+        if suffix == ".csv":
+            from monitor.io.csvio import write_csv
+
+            write_csv(args.out, rec)
+            what = f"{len(rec)} rows"
+        else:
+            from monitor.codec.frames import FrameCodec
+            from monitor.codec.logwrite import write_candump
+
+            codec = FrameCodec.from_dbc(resource_path("dbc", "excavator4.dbc"))
+            counts = write_candump(args.out, rec, codec=codec)
+            what = f"{sum(counts.values())} frames"
+    except OSError as exc:
+        raise MonitorError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    print(
+        f"simulated {args.duration:g} s of excavator4 ({args.cycle}, seed {args.seed}) in "
+        f"{elapsed:.2f} s; wrote {what} to {args.out}",
         file=sys.stderr,
     )
     return 0

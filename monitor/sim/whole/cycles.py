@@ -62,7 +62,9 @@ class _Operator:
         speed = amp / 100.0 * self.m.rated_flow_m3_s(loop) / area
         dur = float(np.clip(abs(delta) / speed, 0.4, 6.0))
         self.spool[loop][self._span(start, dur)] = math.copysign(amp, delta)
-        self.pos[loop] = float(np.clip(self.pos[loop] + math.copysign(speed * dur, delta), 0, stroke))
+        self.pos[loop] = float(
+            np.clip(self.pos[loop] + math.copysign(speed * dur, delta), 0, stroke)
+        )
         return start + dur
 
     def swing(self, start: float, angle_rad: float, amp: float) -> float:
@@ -114,7 +116,9 @@ class _Operator:
         self.set_payload(t, 2.0, r.uniform(100.0, 300.0))  # a load hung on the bucket
         t = self.move("boom", t + 2.5, r.uniform(0.5, 0.8), r.uniform(25, 50))
         t += r.uniform(10.0, 60.0)  # hold
-        t = self.swing(t, math.radians(r.uniform(30.0, 90.0)) * r.choice([-1, 1]), r.uniform(30, 50))
+        t = self.swing(
+            t, math.radians(r.uniform(30.0, 90.0)) * r.choice([-1, 1]), r.uniform(30, 50)
+        )
         t += r.uniform(5.0, 30.0)  # hold
         t = self.move("boom", t, r.uniform(0.2, 0.4), r.uniform(20, 40))
         self.set_payload(t + 1.0, 2.0, 0.0)
@@ -124,8 +128,9 @@ class _Operator:
 def make_whole_cycle(cycle: str, duration_s: float, seed: int, machine: WholeMachine) -> Recording:
     """Commands and loads of ``cycle`` over ``duration_s`` seconds."""
     if cycle not in WHOLE_CYCLES:
-        raise ConfigError(f"unknown cycle {cycle!r} of the whole machine; known: "
-                          f"{', '.join(WHOLE_CYCLES)}")  # fmt: skip
+        raise ConfigError(
+            f"unknown cycle {cycle!r} of the whole machine; known: {', '.join(WHOLE_CYCLES)}"
+        )
     t = _time_axis(duration_s)
     dt = float(t[1] - t[0])
     rng = np.random.default_rng(seed)

@@ -217,8 +217,15 @@ def _project(y: np.ndarray, prm: np.ndarray) -> None:
 
 
 @jit(inline="always")
-def _record(rec: np.ndarray, r: int, y: np.ndarray, u: np.ndarray, prm: np.ndarray,
-            dy: np.ndarray, aux: np.ndarray) -> None:  # fmt: skip
+def _record(
+    rec: np.ndarray,
+    r: int,
+    y: np.ndarray,
+    u: np.ndarray,
+    prm: np.ndarray,
+    dy: np.ndarray,
+    aux: np.ndarray,
+) -> None:
     rhs(y, u, prm, dy, aux)
     rec[r, R_PP] = y[S_PP]
     rec[r, R_QP] = aux[AUX_QP]
@@ -233,8 +240,14 @@ def _record(rec: np.ndarray, r: int, y: np.ndarray, u: np.ndarray, prm: np.ndarr
 
 
 @jit
-def integrate(y0: np.ndarray, inputs: np.ndarray, n_sub: int, input_dt: float,
-              prm: np.ndarray, record_every: int) -> np.ndarray:  # fmt: skip
+def integrate(
+    y0: np.ndarray,
+    inputs: np.ndarray,
+    n_sub: int,
+    input_dt: float,
+    prm: np.ndarray,
+    record_every: int,
+) -> np.ndarray:
     """Classic RK4 at h = input_dt / n_sub, inputs linear between their samples (as the
     boom loop's ``monitor.sim.kernel.integrate``); a row every ``record_every`` steps."""
     n_in = inputs.shape[0]

@@ -211,7 +211,9 @@ def pack_params(m: WholeMachine) -> np.ndarray:
     prm[K.CUT_START] = p["cutoff_start_bar"] * BAR
     prm[K.CUT_FULL] = p["cutoff_full_bar"] * BAR
     prm[K.RELIEF_CRACK] = p["relief_crack_bar"] * BAR
-    prm[K.RELIEF_GAIN] = m.pump_flow_max_m3_s / ((p["relief_full_bar"] - p["relief_crack_bar"]) * BAR)
+    prm[K.RELIEF_GAIN] = m.pump_flow_max_m3_s / (
+        (p["relief_full_bar"] - p["relief_crack_bar"]) * BAR
+    )
     prm[K.DP_LAM] = v["laminar_dp_bar"] * BAR
     prm[K.PTANK] = v["tank_bar"] * BAR
     prm[K.GRAV] = GRAVITY_M_S2

@@ -54,8 +54,12 @@ def pack_inputs(commands: Recording, faults: list[MachineFault] | tuple = ()) ->
     return u
 
 
-def rest_state(machine: WholeMachine, prm: np.ndarray, u0: np.ndarray,
-               fractions: dict[str, float] | None = None) -> np.ndarray:  # fmt: skip
+def rest_state(
+    machine: WholeMachine,
+    prm: np.ndarray,
+    u0: np.ndarray,
+    fractions: dict[str, float] | None = None,
+) -> np.ndarray:
     """At rest: PP at standby (the LS margin), every cylinder holding its gravity load at
     ``fractions`` of its stroke with 2 bar on the side that does not hold it."""
     y = np.zeros(K.N_STATES)
@@ -77,9 +81,13 @@ def rest_state(machine: WholeMachine, prm: np.ndarray, u0: np.ndarray,
     return y
 
 
-def run_whole(commands: Recording, machine: WholeMachine,
-              faults: list[MachineFault] | tuple = (), y0: np.ndarray | None = None,
-              prm: np.ndarray | None = None) -> WholeTrace:  # fmt: skip
+def run_whole(
+    commands: Recording,
+    machine: WholeMachine,
+    faults: list[MachineFault] | tuple = (),
+    y0: np.ndarray | None = None,
+    prm: np.ndarray | None = None,
+) -> WholeTrace:
     """Integrate the whole machine driven by ``commands`` (a uniform axis), recorded at
     the commands' samples."""
     prm = pack_params(machine) if prm is None else prm
@@ -92,15 +100,18 @@ def run_whole(commands: Recording, machine: WholeMachine,
     return WholeTrace(commands.t.copy(), rec)
 
 
-def sense(commands: Recording, trace: WholeTrace, seed: int | None,
-          sensors: SensorParams | None = None) -> Recording:  # fmt: skip
+def sense(
+    commands: Recording, trace: WholeTrace, seed: int | None, sensors: SensorParams | None = None
+) -> Recording:
     """Every loop's DBC signals; ``seed=None``: noise-free (still quantised)."""
     s = sensors or SensorParams()
     rng = np.random.default_rng(seed) if seed is not None else None
     t = commands.t
     out: dict[str, np.ndarray] = {}
     out["EngineSpeed"] = quantise("EngineSpeed", commands["EngineSpeed"])
-    out["OilTemp"] = quantise("OilTemp", sample_hold(t - t[0], commands["OilTemp"], s.oil_temp_period_s))
+    out["OilTemp"] = quantise(
+        "OilTemp", sample_hold(t - t[0], commands["OilTemp"], s.oil_temp_period_s)
+    )
     pp = trace.rec[:, K.R_PP] / BAR
     for loop in K.LOOPS:
         pre = PREFIX[loop]
@@ -119,11 +130,19 @@ def sense(commands: Recording, trace: WholeTrace, seed: int | None,
             out[pre + "RodPos"] = measure(
                 "RodPos", trace.loop(loop, 3) * 1e3, s.rodpos_noise_mm, s.rodpos_range_mm, rng
             )
-    return Recording(t.copy(), out, source=f"whole-machine simulation of {commands.source}",
-                     meta={"machine": "excavator4", "seed": seed})  # fmt: skip
+    return Recording(
+        t.copy(),
+        out,
+        source=f"whole-machine simulation of {commands.source}",
+        meta={"machine": "excavator4", "seed": seed},
+    )
 
 
-def simulate_whole(commands: Recording, machine: WholeMachine,
-                   faults: list[MachineFault] | tuple = (), seed: int | None = 0) -> Recording:  # fmt: skip
+def simulate_whole(
+    commands: Recording,
+    machine: WholeMachine,
+    faults: list[MachineFault] | tuple = (),
+    seed: int | None = 0,
+) -> Recording:
     """Commands (``cycles.make_whole_cycle``) to every loop's DBC signals at 100 Hz."""
     return sense(commands, run_whole(commands, machine, faults), seed)

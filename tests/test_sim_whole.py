@@ -1,0 +1,209 @@
+"""The whole-machine simulator (``monitor simulate --machine excavator4``): physics checked by
+hand, and the CLI's files on dbc/excavator4.dbc.
+
+Values used by hand below (config/excavator4_sim.yaml): pump 18 cc/rev x 2200 rpm = 39.6
+L/min; LS margin 20 bar; rated section flows at full stroke and the margin: boom 24, stick
+22, bucket 18, swing 14 L/min; swing motor 19.5 cc/rev x gear 80 = 1560 cc per house turn;
+house J = 1000 kg x 0.75^2 + 240 = 802.5 kg m^2.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from monitor.cli import main
+from monitor.codec.frames import FrameCodec
+from monitor.io.candump import read_candump
+from monitor.io.csvio import read_csv
+from monitor.io.recording import Recording
+from monitor.resources import resource_path
+from monitor.sim.whole import kernel as K
+from monitor.sim.whole.cycles import SPOOL_SIGNALS, make_whole_cycle
+from monitor.sim.whole.faults import parse_machine_fault
+from monitor.sim.whole.params import load_whole_machine, pack_params
+from monitor.sim.whole.simulate import pack_inputs, rest_state, run_whole, simulate_whole
+
+LPM = 1e-3 / 60.0
+BAR = 1e5
+
+
+@pytest.fixture(scope="module")
+def machine():
+    return load_whole_machine()
+
+
+def _commands(duration_s: float, dt: float = 0.01, payload: float = 0.0, **spool_pct: float):
+    t = np.arange(int(round(duration_s / dt)) + 1) * dt
+    cols = {sig: np.full_like(t, spool_pct.get(loop, 0.0)) for loop, sig in SPOOL_SIGNALS.items()}
+    cols["EngineSpeed"] = np.full_like(t, 2200.0)
+    cols["OilTemp"] = np.full_like(t, 50.0)
+    cols["Payload"] = np.full_like(t, payload)
+    return Recording(t, cols, source="test commands")
+
+
+def test_flow_sharing_under_saturation_scales_every_section_alike(machine):
+    # Boom 100 %, stick 80 %, bucket 60 % extend: demand 24 + 17.6 + 10.8 = 52.4 L/min, above
+    # the pump's 39.6 L/min.  Post-compensated (flow sharing): every section gets its demand
+    # x 39.6 / 52.4 = 0.7557 of it: boom 18.14, stick 13.30, bucket 8.16 L/min; the pump at
+    # full displacement.  At every instant the split is exact (one drop PP - PLS across every
+    # spool: shares 24/52.4 = 0.4580, 0.3359, 0.2061), while the total rings about the
+    # pump's flow with the boom's oscillation (the line's compliance), so over 0.4-1.0 s.
+    trace = run_whole(_commands(1.0, boom=100, stick=80, bucket=60), machine)
+    rows = slice(40, 101)  # 0.4-1.0 s: past the start's transient, before any end stop
+    demand = {"boom": 24.0, "stick": 0.8 * 22.0, "bucket": 0.6 * 18.0}
+    total = sum(trace.loop(loop, 2)[rows] for loop in demand)
+    factor = 39.6 / sum(demand.values())
+    for loop, want in demand.items():
+        got = trace.loop(loop, 2)[rows]
+        assert np.allclose(got / total, want / sum(demand.values()), rtol=1e-3), loop
+        assert got.mean() / LPM == pytest.approx(want * factor, rel=0.015), loop
+    assert np.allclose(trace.rec[rows, K.R_QP] / LPM, 39.6, rtol=1e-3)
+    assert trace.loop("swing", 2)[rows].max() == 0.0
+
+
+def test_a_held_load_stays(machine):
+    # Closed spools, no leakage fault: every cylinder holds its gravity load (and a 150 kg
+    # payload) where it is, the house does not turn, for 10 s.
+    cmd = _commands(10.0, payload=150.0)
+    trace = run_whole(cmd, machine)
+    for loop in ("boom", "stick", "bucket", "swing"):
+        x = trace.loop(loop, 3)
+        assert np.ptp(x) < 1e-6, (loop, np.ptp(x))  # less than a micrometre (a microradian)
+    assert np.allclose(trace.rec[:, K.R_PP] / BAR, 20.0, atol=0.1)  # standby
+
+
+def test_swing_acceleration_is_torque_over_inertia(machine):
+    # 100 bar across the motor, spools closed, house at rest: torque = 1560e-6 m^3/rev x 1e7 Pa
+    # / (2 pi) = 2482.8 N m; alpha = 2482.8 / 802.5 = 3.094 rad/s^2; after 1 ms omega =
+    # 3.094e-3 rad/s (leakage moves 0.08 bar and friction 0.04 % in that time).
+    prm = pack_params(machine)
+    cmd = _commands(0.001, dt=0.001)
+    u = pack_inputs(cmd)
+    y0 = rest_state(machine, prm, u[0])
+    b = K.S0 + K.NS * K.SWING
+    y0[b + K.X_PA] = 100 * BAR
+    y0[b + K.X_PB] = 0.0
+    trace = run_whole(cmd, machine, y0=y0, prm=prm)
+    torque = 19.5e-6 * 80 * 100 * BAR / (2 * math.pi)
+    inertia = 1000 * 0.75**2 + 240
+    assert torque / inertia == pytest.approx(3.094, rel=1e-3)
+    omega = trace.loop("swing", 4)[-1]
+    assert omega / 0.001 == pytest.approx(torque / inertia, rel=5e-3)
+
+
+@pytest.mark.parametrize("loop", ["boom", "stick", "bucket", "swing"])
+def test_each_loop_steady_speed_is_its_flow_over_its_area(machine, loop):
+    # One lever at 50 %, the others closed: v = Q / A_cap (extending cylinders), omega = Q /
+    # (1560e-6 / 2 pi) for the house.  Q itself is about 0.5 x rated x sqrt(18.5 / 20): the LS
+    # regulator's 5 bar band leaves the margin 1.5 bar short at 30 % of the pump's flow.
+    duration = 3.0 if loop == "swing" else 1.0
+    trace = run_whole(_commands(duration, **{loop: 50.0}), machine)
+    rows = slice(-50, None)  # the last 0.5 s
+    q = trace.loop(loop, 2)[rows]
+    v = trace.loop(loop, 4)[rows]
+    area = 19.5e-6 * 80 / (2 * math.pi) if loop == "swing" else machine.area_a_m2(loop)
+    assert v.mean() == pytest.approx(q.mean() / area, rel=0.01)
+    rated = {"boom": 24.0, "stick": 22.0, "bucket": 18.0, "swing": 14.0}[loop]
+    assert q.mean() / LPM == pytest.approx(0.5 * rated * math.sqrt(18.5 / 20), rel=0.03)
+
+
+def test_faults_name_their_loop_and_pump_wear_slows_a_saturated_machine(machine):
+    assert parse_machine_fault("stick.piston_wear:0.5@10+5").label == "stick.piston_wear"
+    for text, fragment in (
+        ("swing.piston_wear:0.5", "not one of the swing loop's"),
+        ("arm.spool_wear:0.5", "unknown loop"),
+        ("pump_wear:0.5", "LOOP.FAULT"),
+        ("pump.pump_wear:1.5", "outside 0..1"),
+    ):
+        with pytest.raises(Exception, match=fragment):
+            parse_machine_fault(text)
+    # Pump wear at 1 leaks 8.3e-12 m^3/(s Pa) x PP.  Saturated (three levers full: 64 L/min
+    # asked of 39.6) the regulator has no displacement left to make up for it: the pump
+    # delivers 39.6 L/min less the leak (about 2 L/min at 40 bar), and the sections share less.
+    cmd = _commands(1.0, boom=100, stick=100, bucket=100)
+    healthy = run_whole(cmd, machine)
+    worn = run_whole(cmd, machine, [parse_machine_fault("pump.pump_wear:1")])
+    rows = slice(20, None)
+    pp = worn.rec[rows, K.R_PP]
+    assert np.allclose(healthy.rec[rows, K.R_QP] / LPM, 39.6, rtol=1e-6)
+    assert np.allclose(worn.rec[rows, K.R_QP], 39.6 * LPM - 8.3e-12 * pp, rtol=1e-6)
+    q_h = sum(healthy.loop(loop, 2) for loop in ("boom", "stick", "bucket"))[rows].mean()
+    q_w = sum(worn.loop(loop, 2) for loop in ("boom", "stick", "bucket"))[rows].mean()
+    assert q_w == pytest.approx(q_h - 8.3e-12 * pp.mean(), rel=0.01)
+
+
+def test_a_duty_cycle_is_seeded_and_moves_every_function(machine):
+    a = make_whole_cycle("truck-loading", 60, 3, machine)
+    b = make_whole_cycle("truck-loading", 60, 3, machine)
+    for sig in SPOOL_SIGNALS.values():
+        assert np.array_equal(a[sig], b[sig])
+        assert (np.abs(a[sig]) > 30).any() and (a[sig] > 0).any() and (a[sig] < 0).any()
+    assert a["DigForce"].max() > 0 and a["Payload"].max() > 0
+    lift = make_whole_cycle("lifting", 120, 3, machine)
+    assert (lift["SpoolCmd"] == 0).mean() > 0.5  # long holds and idling
+    rec = simulate_whole(a, machine, seed=None)
+    assert all(np.isfinite(rec[n]).all() for n in rec.columns)
+
+
+def _dbc_signals() -> list[str]:
+    codec = FrameCodec.from_dbc(resource_path("dbc", "excavator4.dbc"))
+    return [n for m in codec.messages.values() if m.name.startswith("HYD_") for n in m.signal_names]
+
+
+def test_cli_writes_a_csv_with_the_dbc_names_and_a_log_the_dbc_decodes(tmp_path, capsys):
+    csv, log = tmp_path / "whole.csv", tmp_path / "whole.log"
+    args = [
+        "simulate",
+        "--machine",
+        "excavator4",
+        "--duration",
+        "20",
+        "--seed",
+        "5",
+        "--cycle",
+        "truck-loading",
+        "--fault",
+        "stick.piston_wear:0.5@5",
+    ]
+    assert main([*args, "--out", str(csv)]) == 0
+    assert main([*args, "--out", str(log)]) == 0
+    rec = read_csv(csv)
+    names = _dbc_signals()
+    assert sorted(rec.columns) == sorted(set(names) - {"Swing_RodPos"})
+    assert len(rec) == 2001
+    codec = FrameCodec.from_dbc(resource_path("dbc", "excavator4.dbc"))
+    seen: dict[str, list[float]] = {}
+    for msg in read_candump(log):
+        d = codec.decode_message(msg)
+        assert d.values is not None and not d.counter_jump, d
+        for k, v in d.values.items():
+            seen.setdefault(k, []).append(v)
+    assert codec.counts.rejected_total == 0 and codec.counts.counter_jumps == 0
+    assert codec.counts.ignored == 0
+    for name in rec.columns:
+        got = np.array(seen[name])
+        if name == "OilTemp":
+            continue  # one frame a second
+        assert len(got) == 2001, name
+        assert np.allclose(got, rec[name], atol=0.006), name
+    assert "excavator4" in capsys.readouterr().err
+
+
+def test_cli_help_lists_the_machine_and_bad_machine_arguments_exit_2(tmp_path, capsys):
+    assert main(["simulate", "--help"]) == 0
+    text = capsys.readouterr().out
+    for word in ("--machine", "excavator4", "truck-loading", "motor_leakage", "pump_wear"):
+        assert word in text
+    out = str(tmp_path / "x.csv")
+    for args, fragment in (
+        (["--cycle", "truck-loading"], "add --machine excavator4"),
+        (["--machine", "excavator4", "--cycle", "boom"], "boom-loop cycle"),
+        (["--machine", "excavator4", "--fault", "piston_wear:0.5"], "LOOP.FAULT"),
+        (["--machine", "excavator4", "--duration", "7201"], "7200"),
+    ):
+        full = ["simulate", "--duration", "5", *args, "--out", out]
+        assert main(full) == 2, args
+        assert fragment in capsys.readouterr().err, args
