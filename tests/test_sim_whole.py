@@ -135,6 +135,24 @@ def test_faults_name_their_loop_and_pump_wear_slows_a_saturated_machine(machine)
     assert q_w == pytest.approx(q_h - 8.3e-12 * pp.mean(), rel=0.01)
 
 
+@pytest.mark.parametrize(
+    "fault, loop", [("boom.spool_wear:1", "boom"), ("stick.piston_wear:1", "stick")]
+)
+def test_a_loop_fault_moves_its_own_held_load_only(machine, fault, loop):
+    # Closed spools for 5 s: a worn boom spool lets the boom's held load (PA about 31 bar)
+    # out through the A->T land's underlap of 0.1, so the boom sinks; the stick's piston leak
+    # (5e-12 m^3/(s Pa) across the cylinder) lets it move.  The others move only as their
+    # gravity load follows the changed pose (their oil's compression: 33 um of the stick
+    # while the boom sinks 76 mm), under a fiftieth of the faulty loop's motion; the house
+    # not at all.
+    trace = run_whole(_commands(5.0), machine, [parse_machine_fault(fault)])
+    own = np.ptp(trace.loop(loop, 3))
+    assert own > 1e-3  # more than a millimetre
+    for other in ("boom", "stick", "bucket", "swing"):
+        if other != loop:
+            assert np.ptp(trace.loop(other, 3)) < min(own / 50, 1e-4), other
+
+
 def test_a_duty_cycle_is_seeded_and_moves_every_function(machine):
     a = make_whole_cycle("truck-loading", 60, 3, machine)
     b = make_whole_cycle("truck-loading", 60, 3, machine)
