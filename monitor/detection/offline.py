@@ -42,6 +42,8 @@ class Detection:
     #: Each statistic of the model per sample, by name (``J``, ``B``, ...; see
     #: ``monitor.model.statistic``); a statistic the model lacks has none.
     series: dict[str, np.ndarray] = field(default_factory=dict)
+    # Each alarm episode, named once from the isolation votes over all of it (see _Run).
+    episodes: list[dict[str, Any]] = field(default_factory=list)
 
 
 def make_isolator(model: MonitorModel) -> Isolator | None:
@@ -173,7 +175,7 @@ def detect(
     summary["statistics"] = statistics_entries(model)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)
     return Detection(rec.t, y_hat, e, j, states, run.events, summary, gates=g, level=level,
-                     series=series)  # fmt: skip
+                     series=series, episodes=run.named)  # fmt: skip
 
 
 @dataclass
@@ -183,6 +185,10 @@ class _Run:
     first_alarm_t: float | None
     first_fault: str | None  # the label held longest over the first alarm episode
     episodes: int
+    # Every alarm episode: start_t and end_t (s from the first sample; end_t None while
+    # open at the end of the log), fault (named once, from the votes of the whole episode,
+    # as ``first_fault``) and votes (fault samples per isolation label).
+    named: list[dict[str, Any]] = field(default_factory=list)
 
 
 def _decide_all(
@@ -211,6 +217,7 @@ def _decide_all(
     # (it firms up as evidence accumulates, and may waver on the way).
     votes: dict[str, int] = {}
     in_first = False
+    ep_votes: dict[str, int] = {}
     i = 0
     while i < n:
         if quiet[i] and decider.quiet():
@@ -227,6 +234,13 @@ def _decide_all(
         if d.raised and run.first_alarm_t is None:
             run.first_alarm_t = float(t_rel[i])
             in_first = True
+        if d.raised:
+            ep_votes = {}
+            run.named.append({"start_t": float(t_rel[i]), "end_t": None, "votes": ep_votes})
+        if d.state is State.FAULT and run.named:
+            ep_votes[decider.fault] = ep_votes.get(decider.fault, 0) + 1
+        if run.named and run.named[-1]["end_t"] is None and not d.episode_open:
+            run.named[-1]["end_t"] = float(t_rel[i])
         if in_first:  # the first episode, short gaps included
             if d.state is State.FAULT:
                 votes[decider.fault] = votes.get(decider.fault, 0) + 1
@@ -238,9 +252,18 @@ def _decide_all(
                 sensor, model.spec.variables[stale[i]] if stale[i] >= 0 else None,
             ))  # fmt: skip
         i += 1
-    known = {k: v for k, v in votes.items() if k != "unknown"}
-    run.first_fault = max(known or votes, key=(known or votes).get) if votes else None
+    run.first_fault = vote_name(votes)
+    for ep in run.named:
+        ep["fault"] = vote_name(ep["votes"])
     return run
+
+
+def vote_name(votes: dict[str, int]) -> str | None:
+    """The fault an episode's isolation votes name: the label held for the most samples,
+    a known fault before ``unknown`` (None: no votes)."""
+    known = {k: v for k, v in votes.items() if k != "unknown"}
+    pool = known or votes
+    return max(pool, key=pool.get) if pool else None
 
 
 def stale_checks(

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from monitor.fleet.episodes import log_episodes
+
 # Columns of RESULTS/events.parquet besides machine and log; the whole event is in `event`.
 EVENT_KEYS = ("t", "time", "state", "J", "threshold", "fault")
 
@@ -176,4 +178,32 @@ def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
         "p50_j_drift": _drift(j, model.training.get("j_median")),
     }
     events = [json.loads(json.dumps(dict(e, event="state"))) for e in det.events]
+    end_s = float(rec.t[-1] - rec.t[0]) if len(rec) else 0.0
+    row["episodes"] = log_episodes(det.episodes, events, end_s, cfg.j1939)
     return Judged(row, events)
+
+
+#: Signals the fleet page plots around an alarm (those a log has).
+TRACE_SIGNALS = ("PP", "PA", "PB", "QP", "SpoolCmd", "OilTemp", "EngineSpeed")
+
+
+def trace_log(model_bytes: bytes, path: str, config_path: str | None = None) -> dict[str, Any]:
+    """A log judged again as `monitor detect` does, for the fleet page's plot around an
+    alarm: t (s from the first sample), the signals of ``TRACE_SIGNALS`` it has, J / eps0,
+    the alarm level (1.0 = alarm) and the state per sample (its label)."""
+    from monitor.detection.alarm import State
+    from monitor.detection.offline import detect
+    from monitor.live.loops import read_loop
+
+    cfg = _config(config_path)
+    model = model_from_bytes(model_bytes)
+    rec = read_loop(path, cfg, None)
+    det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+    labels = {int(s): s.label for s in State}
+    return {
+        "t": rec.t - rec.t[0],
+        "signals": {s: np.asarray(rec[s], float) for s in TRACE_SIGNALS if rec.has(s)},
+        "j_ratio": det.j / model.eps0,
+        "level": det.level,
+        "state": [labels[int(x)] for x in det.state],
+    }

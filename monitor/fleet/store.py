@@ -34,6 +34,9 @@ LOG_SCHEMA = pa.schema([
     # median J of the log / median J of the model's own normal data (out of sample): the
     # drift from commissioning, whatever eps0 is (null for models without it).
     ("p50_j_drift", pa.float64()),
+    # JSON text: the log's alarm episodes (monitor.fleet.episodes), each with kind, start_t,
+    # end_t, duration_s, name, check, votes, spn, fmi (null in older results).
+    ("episodes", pa.string()),
 ])  # fmt: skip
 
 
