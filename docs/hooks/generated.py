@@ -7,6 +7,7 @@ A page asks for a table with a marker line; the hook replaces it when the site i
     <!-- generated: dbc -->      the frames and signals of dbc/monitor.dbc (cantools)
     <!-- generated: dtc -->      the default J1939 SPN/FMI of each fault and sensor
     <!-- generated: errors -->   the error classes and their exit codes
+    <!-- generated: actions -->  the fleet page's action text per fault and sensor check
 """
 
 from __future__ import annotations
@@ -148,4 +149,11 @@ def _errors() -> str:
     return "\n".join(out)
 
 
-_GENERATORS = {"cli": _cli, "config": _config, "dbc": _dbc, "dtc": _dtc, "errors": _errors}
+def _actions() -> str:
+    from monitor.fleet.actions import markdown_table
+
+    return markdown_table()
+
+
+_GENERATORS = {"cli": _cli, "config": _config, "dbc": _dbc, "dtc": _dtc, "errors": _errors,
+               "actions": _actions}  # fmt: skip
