@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from monitor.cli import _fleet_web
 from monitor.fleet.health import DRIFT_FLAG, DRIFT_LOGS
 
 
@@ -64,8 +65,11 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     r.set_defaults(func=run)
     rep = sub.add_parser(
         "report",
-        help="the fleet page: table, health index over time, verdict timeline",
-        description="Read RESULTS/logs.parquet and write DIR/fleet.md with health.png "
+        help="the fleet page: Markdown (--out) and the web page (--html)",
+        description="Read RESULTS/logs.parquet. --html DIR: the fleet web page, static "
+        "files (DIR/index.html, a page per machine, the alarm list, plotly.min.js) that open "
+        "from disk or any web server without a network connection. --out DIR: DIR/fleet.md "
+        "with health.png "
         "(per log and machine the health index, the largest alarm level max(J/eps0, B/b0), "
         "with max and p95 of J/eps0; the alarm threshold drawn at 1.0) and timeline.png. "
         "The trend is Theil-Sen over each machine's last K judged logs; the crossing is the "
@@ -76,11 +80,17 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "commissioning run: a bounded crossing forecast).",
     )
     rep.add_argument("results", type=Path, metavar="RESULTS")
-    rep.add_argument("--out", type=Path, required=True, metavar="DIR")
+    rep.add_argument("--out", type=Path, default=None, metavar="DIR",
+                     help="the Markdown page with PNG pictures into DIR")
+    rep.add_argument("--html", type=Path, default=None, metavar="DIR",
+                     help="the web page into DIR (index.html)")
     rep.add_argument(
         "--last", type=int, default=6, metavar="K", help="logs in the trend (default 6)"
     )
+    _fleet_web.add_page_options(rep)
     rep.set_defaults(func=report)
+    _fleet_web.add_serve(sub)
+    _fleet_web.add_query(sub)
     b = sub.add_parser(
         "bench",
         help="logs/s and frames/s: one process against Dask with 1 and 2 workers",
@@ -122,8 +132,13 @@ def report(args: argparse.Namespace) -> int:
 
     if args.last < 3:
         raise ConfigError("--last must be at least 3 logs")
-    page = write_report(args.results, args.out, args.last)
-    print(f"wrote {page}", file=sys.stderr)
+    if args.out is None and args.html is None:
+        raise ConfigError("give --out DIR (Markdown page) or --html DIR (web page), or both")
+    if args.out is not None:
+        page = write_report(args.results, args.out, args.last)
+        print(f"wrote {page}", file=sys.stderr)
+    if args.html is not None:
+        print(f"wrote {_fleet_web.write_html(args)}", file=sys.stderr)
     return 0
 
 
