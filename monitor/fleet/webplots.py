@@ -65,7 +65,9 @@ def fleet_plot(views: list[Any]) -> str:
                   annotation_text="alarm threshold (1.0)")  # fmt: skip
     fig.update_layout(title="Health index of every machine per log (1.0 = alarm)",
                       title_font_size=13, height=360, xaxis_title="log number (time order)",
-                      yaxis_title="level (1.0 = alarm)", xaxis_tickformat="d")  # fmt: skip
+                      yaxis_title="level (1.0 = alarm)")  # fmt: skip
+    if max((len(v.rows) for v in views), default=0) <= 30:
+        fig.update_xaxes(tickmode="linear", dtick=1)  # whole log numbers only
     return _div(fig, "fleet-health")
 
 
