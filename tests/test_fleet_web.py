@@ -247,3 +247,30 @@ def test_a_bad_query_is_one_line_and_a_non_zero_exit(tmp_path, capsys):
     assert main(["fleet", "query", str(res), "SELECT nope FROM logs"]) != 0
     err = capsys.readouterr().err
     assert "query:" in err and "nope" in err and "Traceback" not in err
+
+
+def test_a_judged_log_names_its_episode_from_every_fault_sample_of_it():
+    # The shipped piston-wear demo log with the shipped model: one episode from the alarm
+    # to the end of the log.  Its votes are its fault samples, counted apart from the
+    # detector's state per sample; the name and DM1 code are piston_wear's (by hand above).
+    import numpy as np
+
+    from monitor.detection.alarm import State
+    from monitor.detection.offline import detect
+    from monitor.fleet.pipeline import judge_log
+    from monitor.model.modelfile import load_model
+    from monitor.resources import resource_path
+    from monitor.sampling.sampler import recording_from_candump
+
+    model_path, log = resource_path("config", "boom_default.model.npz"), resource_path(
+        "replay", "piston_wear.log")  # fmt: skip
+    judged = judge_log(model_path.read_bytes(), str(log))
+    (ep,) = json.loads(judged.row["episodes"])
+    raised = [e for e in judged.events if e["state"] == "fault"]
+    assert ep["start_t"] == raised[0]["t"] and ep["open"] is True
+    det = detect(load_model(model_path), recording_from_candump(log))
+    t = det.t - det.t[0]
+    in_fault = int(np.sum((det.state == State.FAULT) & (t >= ep["start_t"])))
+    assert sum(ep["votes"].values()) == in_fault > 0
+    assert (ep["name"], ep["spn"], ep["fmi"]) == ("piston_wear", *PISTON)
+    assert ep["end_t"] == pytest.approx(t[-1]) and judged.row["fault"] == ep["name"]
