@@ -82,14 +82,16 @@ last {{ v.last_seen }}){% endif %}{% if v.evidence %}; {{ v.evidence }}{% endif 
 (median J of the last 3 logs over the commissioning run's; 2 x and above: wearing?)</p>
 {{ health_plot|safe }}
 <h2>Alarm episodes</h2>
-{% if v.alarms %}<table id="episodes"><tr><th>log</th><th>start [s]</th><th>end [s]</th>
+{% if v.alarms %}<table id="episodes"><tr><th>log</th><th>start [s into the log]</th>
+<th>end [s]</th>
 <th>duration [s]</th><th>fault / sensor</th><th>isolation votes</th><th>DM1 SPN</th><th>FMI</th>
 <th>status</th></tr>
 {% for a in v.alarms %}<tr><td>{{ a.log }}</td><td class="num">{{ '%.1f'|format(a.start_t) }}</td>
 <td class="num">{{ '%.1f'|format(a.end_t) }}{% if a.open %} (open at the end of the log){% endif
 %}</td>
 <td class="num">{{ '%.1f'|format(a.duration_s) }}</td><td>{{ a.what }}</td>
-<td>{{ a.votes_text }}</td><td class="num">{{ a.spn }}</td><td class="num">{{ a.fmi }}</td>
+<td>{{ a.votes_text or "- (sensor check)" }}</td><td class="num">{{ a.spn }}</td>
+<td class="num">{{ a.fmi }}</td>
 <td>{{ acks[a.id].text if a.id in acks else 'active' }}</td></tr>
 {% endfor %}</table>{% else %}<p>No alarm episodes.</p>{% endif %}
 <h2>Signals around alarms</h2>
@@ -114,7 +116,8 @@ note, then the button. Shelving hides it for {{ shelve_days }} days. Kept in
 {% else %}<p class="banner">This is the static page: it shows the acknowledgements kept in
 <code>{{ ack_file }}</code> when it was written. To acknowledge or shelve alarms, run
 <code>monitor fleet serve RESULTS</code> and open the address it prints.</p>{% endif %}
-<table id="alarms"><tr><th>machine</th><th>log</th><th>start [s]</th><th>duration [s]</th>
+<table id="alarms"><tr><th>machine</th><th>log</th><th>start [s into the log]</th>
+<th>duration [s]</th>
 <th>fault / sensor</th><th>DM1 SPN / FMI</th><th>what to do</th><th>status</th>
 {% if live %}<th>acknowledge / shelve</th>{% endif %}</tr>
 {% for a in alarms %}<tr id="alarm-{{ loop.index }}" data-alarm="{{ a.id }}">
