@@ -125,6 +125,9 @@ def test_serve_drills_down_and_acknowledges_an_alarm_into_the_file(judged, brows
         assert re.match(r"acknowledged by Ana Field at \d{4}-\d\d-\d\d \d\d:\d\d: sensor ordered",
                         status), status  # fmt: skip
         browser.save_screenshot(str(tmp_path / "alarms.png"))
+        # The machine page shows it too (made anew on each request).
+        browser.find_element(By.CSS_SELECTOR, f'tr[data-alarm="{alarm}"] a').click()
+        assert "acknowledged by Ana Field" in browser.find_element(By.ID, "episodes").text
     finally:
         kill(proc)
         log.close()

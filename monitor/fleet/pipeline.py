@@ -189,9 +189,8 @@ TRACE_SIGNALS = ("PP", "PA", "PB", "QP", "SpoolCmd", "OilTemp", "EngineSpeed")
 
 def trace_log(model_bytes: bytes, path: str, config_path: str | None = None) -> dict[str, Any]:
     """A log judged again as `monitor detect` does, for the fleet page's plot around an
-    alarm: t (s from the first sample), the signals of ``TRACE_SIGNALS`` it has, J / eps0,
-    the alarm level (1.0 = alarm) and the state per sample (its label)."""
-    from monitor.detection.alarm import State
+    alarm: t (s from the first sample), the signals of ``TRACE_SIGNALS`` it has, J / eps0
+    and the alarm level (1.0 = alarm)."""
     from monitor.detection.offline import detect
     from monitor.live.loops import read_loop
 
@@ -199,11 +198,9 @@ def trace_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
     model = model_from_bytes(model_bytes)
     rec = read_loop(path, cfg, None)
     det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
-    labels = {int(s): s.label for s in State}
     return {
         "t": rec.t - rec.t[0],
         "signals": {s: np.asarray(rec[s], float) for s in TRACE_SIGNALS if rec.has(s)},
         "j_ratio": det.j / model.eps0,
         "level": det.level,
-        "state": [labels[int(x)] for x in det.state],
     }

@@ -1,8 +1,9 @@
 """`monitor fleet serve`: the fleet web page live on localhost (Python's http.server).
 
 The pages are written once at start into a temporary folder (the machine pages judge logs
-again for their signal plots) and served from there; the index and the alarm list are made
-anew on every request, so an acknowledgement shows at once.  POST /ack (a plain HTML form:
+again for their signal plots, kept in memory) and served from there; the index, the alarm
+list and the machine pages are made anew on every request, so an acknowledgement shows at
+once.  POST /ack (a plain HTML form:
 alarm, action, by, note) appends to RESULTS/alarm-acks.jsonl and redirects to the list.
 """
 
@@ -44,6 +45,8 @@ def _handler(site: Any, root: Path, lock: Lock) -> type[SimpleHTTPRequestHandler
                 self._page(site.index_html())
             elif path == "/alarms.html":
                 self._page(site.alarms_html(live=True))
+            elif site.view(path.lstrip("/")) is not None:
+                self._page(site.machine_html(site.view(path.lstrip("/"))))
             else:
                 super().do_GET()
 

@@ -66,6 +66,11 @@ class Site:
     def __post_init__(self) -> None:
         self.views = fleet_views(self.per, self.k)
         self._env = _env()
+        self._plots: dict[str, tuple[list[str], str]] = {}  # per machine, made once
+
+    def view(self, page: str) -> MachineView | None:
+        """The machine whose page is ``page`` (``machine-M01.html``), None for none."""
+        return next((v for v in self.views if v.page == page), None)
 
     @property
     def subtitle(self) -> str:
@@ -101,7 +106,9 @@ class Site:
     def machine_html(self, v: MachineView) -> str:
         from monitor.fleet.webplots import health_plot
 
-        plots, note = self._signal_plots(v)
+        if v.machine not in self._plots:
+            self._plots[v.machine] = self._signal_plots(v)
+        plots, note = self._plots[v.machine]
         return self._render("machine", title=f"{v.machine}", plots=True, v=v,
                             acks=read_acks(self.results), signal_plots=plots,
                             signals_note=note,
