@@ -154,6 +154,11 @@ def test_the_html_page_names_state_fault_since_and_action_and_loads_nothing_remo
     machine = (out / "machine-M01.html").read_text()
     assert "isolation votes" in machine and "spool_wear 75 %, piston_wear 25 %" in machine
     assert "--fleet FLEET" in machine  # no fleet folder given: says how to get the signals
+    # An episode named otherwise says so, and what to do follows the machine's name.
+    alarms = (out / "alarms.html").read_text()
+    odd = alarms[alarms.index('data-alarm="M01/logs/day04.log#fault@50.00"'):].split("</tr>")[0]
+    assert "worn valve spool suspected (this episode); the machine: piston seal suspected" in odd
+    assert "inspect the boom cylinder" in odd
     assert "monitor fleet serve RESULTS" in (out / "alarms.html").read_text()
 
 

@@ -129,6 +129,12 @@ def machine_view(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Machin
     """One machine's line of the fleet table (rows in time order)."""
     alarms = [_alarm(r, ep) for r in rows for ep in row_episodes(r)]
     fault = machine_fault(rows)
+    for a in alarms:
+        if a.kind == "fault" and fault.name is not None and a.name != fault.name:
+            # One episode's evidence does not rename the machine: say both, act on the
+            # machine's name.
+            what, a.action = fault_action(fault.name)
+            a.what = f"{a.what} (this episode); the machine: {what}"
     finding, evidence, since, last_seen, action = _finding(rows, alarms, fault)
     last = rows[-1]
     d = drift(rows)
