@@ -50,7 +50,9 @@ its alarms.</p>
 <th>first warning</th><th>what to do</th><th>health index<br>(newest log, 1.0 = alarm)</th>
 <th>logs</th><th>alarm episodes</th></tr>
 {% for v in views %}<tr id="row-{{ v.machine }}">
-<td><a href="{{ v.page }}">{{ v.machine }}</a></td><td>{{ state(v.state) }}</td>
+<td><a href="{{ v.page }}">{{ v.machine }}</a>{% if v.rows[-1].model.startswith('default') %}
+<br><span class="note">default model: no commissioning data</span>{% endif %}</td>
+<td>{{ state(v.state) }}</td>
 <td>{{ v.finding or '-' }}{% if v.evidence %}<br>
 <span class="note">{{ v.evidence }}</span>{% endif %}</td>
 <td>{{ v.since or '-' }}</td><td>{{ v.warning.text }}</td><td>{{ v.what_to_do }}</td>

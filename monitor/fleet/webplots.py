@@ -61,12 +61,17 @@ def fleet_plot(views: list[Any]) -> str:
                                  y=[health_index(r) for r in v.rows], mode="lines+markers",
                                  name=v.machine, text=[r["log"] for r in v.rows],
                                  hovertemplate="%{text}: %{y:.2f}<extra></extra>"))  # fmt: skip
-    fig.add_hline(y=1.0, line={"color": "#d62728", "width": 1},
-                  annotation_text="alarm threshold (1.0)")  # fmt: skip
+    n = max((len(v.rows) for v in views), default=1)
+    # The threshold as a legend entry (an hline's label is misplaced on a log axis).
+    fig.add_trace(go.Scatter(x=[1, n], y=[1.0, 1.0], mode="lines", name="alarm threshold (1.0)",
+                             line={"color": "#d62728", "width": 1}, hoverinfo="skip"))
     fig.update_layout(title="Health index of every machine per log (1.0 = alarm)",
                       title_font_size=13, height=360, xaxis_title="log number (time order)",
                       yaxis_title="level (1.0 = alarm)")  # fmt: skip
-    if max((len(v.rows) for v in views), default=0) <= 30:
+    top = max((health_index(r) or 0.0 for v in views for r in v.rows), default=0.0)
+    if top > 5:  # one machine far above the rest would flatten them: a log scale
+        fig.update_yaxes(type="log")
+    if n <= 30:
         fig.update_xaxes(tickmode="linear", dtick=1)  # whole log numbers only
     return _div(fig, "fleet-health")
 
