@@ -279,3 +279,16 @@ def test_a_judged_log_names_its_episode_from_every_fault_sample_of_it():
     assert sum(ep["votes"].values()) == in_fault > 0
     assert (ep["name"], ep["spn"], ep["fmi"]) == ("piston_wear", *PISTON)
     assert ep["end_t"] == pytest.approx(t[-1]) and judged.row["fault"] == ep["name"]
+
+
+def test_an_episode_of_hours_is_plotted_thinned_and_a_short_one_sample_by_sample():
+    import numpy as np
+
+    from monitor.fleet.webplots import AROUND_S, MAX_POINTS, _window
+
+    t = np.arange(0, 8 * 3600, 0.01)  # an 8-hour log at 100 Hz
+    long = t[_window(t, 600.0, 600.0 + 3 * 3600)]  # a 3-hour episode
+    assert len(long) <= MAX_POINTS and long[0] == pytest.approx(600.0 - AROUND_S)
+    assert long[-1] == pytest.approx(600.0 + 3 * 3600 + AROUND_S, abs=(long[1] - long[0]))
+    short = t[_window(t, 100.0, 110.0)]  # 10 s and 20 s either side: every sample
+    assert len(short) == 5000 and np.all(np.diff(short) == pytest.approx(0.01))

@@ -13,6 +13,9 @@ _VERDICT_COLOURS = {"fault": "#d62728", "sensor_fault": "#ff7f0e", "healthy": "#
                     "not_judged": "#999999"}  # fmt: skip
 #: Seconds shown before and after an alarm episode in the signal plot.
 AROUND_S = 20.0
+#: Samples drawn per signal at most (a minute at 100 Hz; an episode of hours is thinned:
+#: the page stays a few MB, and the plot's zoom shows the shape, not single samples).
+MAX_POINTS = 6000
 
 
 def _div(fig: Any, div_id: str) -> str:
@@ -78,8 +81,8 @@ def fleet_plot(views: list[Any]) -> str:
 
 def _window(t: np.ndarray, start: float, end: float) -> slice:
     lo = int(np.searchsorted(t, start - AROUND_S))
-    hi = int(np.searchsorted(t, end + AROUND_S))
-    return slice(lo, max(hi, lo + 1))
+    hi = max(int(np.searchsorted(t, end + AROUND_S)), lo + 1)
+    return slice(lo, hi, -(-(hi - lo) // MAX_POINTS))  # every k-th sample, k >= 1
 
 
 def signal_plot(trace: dict[str, Any], alarm: Any, div_id: str) -> str:
@@ -92,19 +95,23 @@ def signal_plot(trace: dict[str, Any], alarm: Any, div_id: str) -> str:
     t = np.asarray(trace["t"], float)
     w = _window(t, alarm.start_t, alarm.end_t)
     tw = t[w]
+
+    def y(x: np.ndarray) -> np.ndarray:  # float32: 7 digits are plenty on a plot
+        return np.asarray(x[w], np.float32)
+
     fig = make_subplots(rows=3, cols=1, shared_xaxes=True, vertical_spacing=0.06,
                         subplot_titles=("pressures [bar]", "flow QP [L/min], spool command "
                                         "[%]", "statistics (1.0 = alarm)"))  # fmt: skip
     sig = trace["signals"]
     for name in ("PP", "PA", "PB"):
         if name in sig:
-            fig.add_trace(go.Scatter(x=tw, y=sig[name][w], name=f"{name} [bar]"), row=1, col=1)
+            fig.add_trace(go.Scatter(x=tw, y=y(sig[name]), name=f"{name} [bar]"), row=1, col=1)
     for name, unit in (("QP", "L/min"), ("SpoolCmd", "%")):
         if name in sig:
-            fig.add_trace(go.Scatter(x=tw, y=sig[name][w], name=f"{name} [{unit}]"), row=2, col=1)
-    fig.add_trace(go.Scatter(x=tw, y=trace["j_ratio"][w], name="J / eps0"), row=3, col=1)
+            fig.add_trace(go.Scatter(x=tw, y=y(sig[name]), name=f"{name} [{unit}]"), row=2, col=1)
+    fig.add_trace(go.Scatter(x=tw, y=y(trace["j_ratio"]), name="J / eps0"), row=3, col=1)
     if trace.get("level") is not None:
-        fig.add_trace(go.Scatter(x=tw, y=trace["level"][w], name="alarm level",
+        fig.add_trace(go.Scatter(x=tw, y=y(trace["level"]), name="alarm level",
                                  line={"dash": "dot"}), row=3, col=1)  # fmt: skip
     fig.add_hline(y=1.0, line={"color": "#d62728", "width": 1}, row=3, col=1)
     colour = "#d62728" if alarm.kind == "fault" else "#ff7f0e"
