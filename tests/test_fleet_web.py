@@ -292,3 +292,14 @@ def test_an_episode_of_hours_is_plotted_thinned_and_a_short_one_sample_by_sample
     assert long[-1] == pytest.approx(600.0 + 3 * 3600 + AROUND_S, abs=(long[1] - long[0]))
     short = t[_window(t, 100.0, 110.0)]  # 10 s and 20 s either side: every sample
     assert len(short) == 5000 and np.all(np.diff(short) == pytest.approx(0.01))
+
+
+def test_results_from_before_episodes_say_their_alarms_are_missing(tmp_path):
+    rows = [_row("M01", 1), _row("M01", 2, "fault", 2.0, fault="piston_wear")]
+    rows[1]["episodes"] = None  # written before the column
+    pq.write_table(pa.Table.from_pylist(rows, LOG_SCHEMA), tmp_path / "logs.parquet")
+    assert main(["fleet", "report", str(tmp_path), "--html", str(tmp_path / "h")]) == 0
+    index = (tmp_path / "h" / "index.html").read_text()
+    assert "1 logs with an alarm or sensor fault were judged\nbefore" in index
+    # The machine is still named from the row's own fault.
+    assert "piston_wear: piston seal suspected" in _table_row(index, "M01")

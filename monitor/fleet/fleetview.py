@@ -111,7 +111,12 @@ class MachineView:
 def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFault):
     """(finding, evidence, since, last seen, action) of the newest kind of episode."""
     if not alarms:
-        return "", "", "", "", ""
+        if fault.name is None:
+            return "", "", "", "", ""
+        # Older results without episodes: the rows' own fault names.
+        what, action = fault_action(fault.name)
+        named = [log_name(r) for r in rows if r.get("alarm") and r.get("fault")]
+        return f"{fault.name}: {what}", "", named[0], named[-1], action
     newest = alarms[-1]
     if newest.kind == "fault":
         what, action = fault_action(fault.name)

@@ -61,6 +61,10 @@ its alarms.</p>
 {% endfor %}</table>
 <p><a href="alarms.html">Alarm list</a>: {{ unacked }} alarm episodes not acknowledged or
 shelved.</p>
+{% if older %}<p class="banner">{{ older }} logs with an alarm or sensor fault were judged
+before the results kept alarm episodes: their episodes, codes and names are missing here.
+Judge them again into a new results folder (<code>monitor fleet run FLEET --out NEW</code>).
+</p>{% endif %}
 {{ fleet_plot|safe }}
 <h2>Fault codes (DM1 SPN/FMI) per period</h2>
 <p class="note">Alarm episodes per J1939 trouble code and period (the day in the log's file

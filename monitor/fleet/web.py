@@ -87,9 +87,12 @@ class Site:
         acks = read_acks(self.results)
         unacked = sum(a.id not in acks for v in self.views for a in v.alarms)
         errors = [r for v in self.views for r in v.rows if r.get("error")]
+        # Rows judged before episodes were kept: their alarms are in no list below.
+        older = sum(r.get("episodes") is None and bool(r["alarm"] or r["sensor_fault"])
+                    for v in self.views for r in v.rows)  # fmt: skip
         return self._render("index", title="Fleet", plots=True, views=self.views,
                             n_logs=sum(len(v.rows) for v in self.views), groups=groups,
-                            periods=periods, unacked=unacked, errors=errors,
+                            periods=periods, unacked=unacked, errors=errors, older=older,
                             fleet_plot=fleet_plot(self.views))  # fmt: skip
 
     def alarms_html(self, live: bool) -> str:
