@@ -303,3 +303,12 @@ def test_results_from_before_episodes_say_their_alarms_are_missing(tmp_path):
     assert "1 logs with an alarm or sensor fault were judged\nbefore" in index
     # The machine is still named from the row's own fault.
     assert "piston_wear: piston seal suspected" in _table_row(index, "M01")
+
+
+def test_a_sensor_finding_reads_as_signal_and_what_is_wrong():
+    from monitor.fleet.actions import sensor_label
+
+    assert sensor_label("QP", "frozen") == "QP frozen"
+    assert sensor_label("PA", "stale") == "PA silent (no frames)"
+    assert sensor_label("unknown", None) == "a sensor (not named) faulty"
+    assert sensor_label("PB", "a_check_added_later") == "PB faulty"

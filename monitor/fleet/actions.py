@@ -23,21 +23,21 @@ FAULT_ACTIONS: dict[str, tuple[str, str]] = {
                 "the alarm, then check cylinder, valve and pump"),
 }  # fmt: skip
 
-#: sensor check -> (what is wrong with the signal, what to do)
+#: sensor check -> (what is wrong, read after the signal's name: "QP frozen"; what to do)
 SENSOR_ACTIONS: dict[str, tuple[str, str]] = {
-    "frozen": ("sensor frozen", "check the sensor and its wiring; its reading no longer "
-               "changes while the engine runs"),
-    "stuck": ("sensor stuck", "check the sensor: it no longer follows the loop while the "
-              "machine moves"),
-    "signal_range": ("reading out of range", "check the sensor, its supply and wiring "
-                     "(open or short circuit)"),
-    "pump_below_port": ("pressure offset", "calibrate or replace the pressure sensor: a "
-                        "port reads above the pump while the valve feeds it"),
-    "rest_offset": ("offset at rest", "calibrate or replace the sensor: it reads away "
-                    "from tank pressure with the engine off"),
-    "stale": ("no data", "check the sensor's CAN node, connector and bus wiring: its "
-              "frames stopped"),
-    "unknown": ("sensor fault", "check the machine's sensors and CAN wiring"),
+    "frozen": ("frozen", "check the sensor and its wiring; its reading no longer changes "
+               "while the engine runs"),
+    "stuck": ("stuck", "check the sensor: it no longer follows the loop while the machine "
+              "moves"),
+    "signal_range": ("out of range", "check the sensor, its supply and wiring (open or "
+                     "short circuit)"),
+    "pump_below_port": ("offset (reads above the pump)", "calibrate or replace the pressure "
+                        "sensor: a port reads above the pump while the valve feeds it"),
+    "rest_offset": ("offset at rest", "calibrate or replace the sensor: it reads away from "
+                    "tank pressure with the engine off"),
+    "stale": ("silent (no frames)", "check the sensor's CAN node, connector and bus wiring: "
+              "its frames stopped"),
+    "unknown": ("faulty", "check the machine's sensors and CAN wiring"),
 }  # fmt: skip
 
 #: The machine states of the fleet table, with what to do when nothing is named.
@@ -59,9 +59,15 @@ def sensor_action(check: str | None) -> tuple[str, str]:
     return SENSOR_ACTIONS.get(check or "unknown", SENSOR_ACTIONS["unknown"])
 
 
+def sensor_label(signal: str, check: str | None) -> str:
+    """What the page says of a sensor finding: ``QP frozen``, ``PA silent (no frames)``."""
+    who = "a sensor (not named)" if signal == "unknown" else signal
+    return f"{who} {sensor_action(check)[0]}"
+
+
 def markdown_table() -> str:
     """The action table as Markdown (the docs render it)."""
-    lines = ["| finding | name | means | what to do |", "|---|---|---|---|"]
+    lines = ["| finding | name | the page says | what to do |", "|---|---|---|---|"]
     lines += [f"| fault | `{k}` | {a} | {b} |" for k, (a, b) in FAULT_ACTIONS.items()]
     lines += [f"| sensor check | `{k}` | {a} | {b} |" for k, (a, b) in SENSOR_ACTIONS.items()]
     return "\n".join(lines)

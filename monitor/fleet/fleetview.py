@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import PurePosixPath
 from typing import Any
 
-from monitor.fleet.actions import STATE_ACTIONS, fault_action, sensor_action
+from monitor.fleet.actions import STATE_ACTIONS, fault_action, sensor_action, sensor_label
 from monitor.fleet.episodes import MachineFault, machine_fault, row_episodes
 from monitor.fleet.health import (
     DRIFT_FLAG,
@@ -79,8 +79,7 @@ def _alarm(row: dict[str, Any], ep: dict[str, Any]) -> Alarm:
     if ep["kind"] == "fault":
         what, action = fault_action(ep["name"])
     else:
-        what, action = sensor_action(ep.get("check"))
-        what = f"{ep['name']} {what[len('sensor '):] if what.startswith('sensor ') else what}"
+        what, action = sensor_label(ep["name"], ep.get("check")), sensor_action(ep.get("check"))[1]
     return Alarm(alarm_id(row, ep), row["machine"], log_name(row), period(row), ep["kind"],
                  ep["name"], ep.get("check"), ep["start_t"], ep["end_t"], ep["duration_s"],
                  bool(ep.get("open")), ep["spn"], ep["fmi"], ep.get("votes") or {}, what,
@@ -125,9 +124,8 @@ def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFaul
     same = [a for a in alarms if a.kind == "sensor_fault" and a.name == newest.name]
     checks = [a for a in same if a.check]
     check = checks[-1].check if checks else None
-    what, action = sensor_action(check)
-    label = f"{newest.name} {check}" if check else f"{newest.name}: {what}"
-    return label, "", same[0].log, same[-1].log, action
+    return (sensor_label(newest.name, check), "", same[0].log, same[-1].log,
+            sensor_action(check)[1])  # fmt: skip
 
 
 def machine_view(machine: str, rows: list[dict[str, Any]], k: int = 6) -> MachineView:
