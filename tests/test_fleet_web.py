@@ -312,3 +312,17 @@ def test_a_sensor_finding_reads_as_signal_and_what_is_wrong():
     assert sensor_label("PA", "stale") == "PA silent (no frames)"
     assert sensor_label("unknown", None) == "a sensor (not named) faulty"
     assert sensor_label("PB", "a_check_added_later") == "PB faulty"
+
+
+def test_a_machine_in_fault_is_named_by_its_fault_though_a_sensor_episode_came_later():
+    from monitor.fleet.fleetview import machine_view
+
+    rows = [_row("M05", 1, "fault", 2.0, [
+        _ep("fault", 5.0, 30.0, "piston_wear", {"piston_wear": 40}),
+        _ep("sensor_fault", 40.0, 50.0, "QP", check="frozen", spn_fmi=QP_FROZEN)])]
+    v = machine_view("M05", rows)
+    assert (v.state, v.finding) == ("fault", "piston_wear: piston seal suspected")
+    assert v.what_to_do.startswith("inspect the boom cylinder")
+    v = machine_view("M05", [*rows, _row("M05", 2, "sensor_fault", 0.3, [
+        _ep("sensor_fault", 1.0, 9.0, "QP", check="frozen", spn_fmi=QP_FROZEN)])])
+    assert (v.state, v.finding, v.since) == ("sensor_fault", "QP frozen", "day01")

@@ -107,8 +107,10 @@ class MachineView:
         return f"machine-{self.machine}.html"
 
 
-def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFault):
-    """(finding, evidence, since, last seen, action) of the newest kind of episode."""
+def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFault,
+             state: str):  # fmt: skip
+    """(finding, evidence, since, last seen, action): of the kind of the machine's state
+    (fault or sensor fault) when it has such episodes, else of the newest episode's kind."""
     if not alarms:
         if fault.name is None:
             return "", "", "", "", ""
@@ -117,6 +119,8 @@ def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFaul
         named = [log_name(r) for r in rows if r.get("alarm") and r.get("fault")]
         return f"{fault.name}: {what}", "", named[0], named[-1], action
     newest = alarms[-1]
+    kinds = [a for a in alarms if a.kind == state]
+    newest = kinds[-1] if kinds else newest
     if newest.kind == "fault":
         what, action = fault_action(fault.name)
         same = [a for a in alarms if a.kind == "fault"]
@@ -138,7 +142,6 @@ def machine_view(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Machin
             # machine's name.
             what, a.action = fault_action(fault.name)
             a.what = f"{a.what} (this episode); the machine: {what}"
-    finding, evidence, since, last_seen, action = _finding(rows, alarms, fault)
     last = rows[-1]
     d = drift(rows)
     if last.get("error"):
@@ -147,6 +150,7 @@ def machine_view(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Machin
         state = "wearing?"
     else:
         state = last["verdict"]
+    finding, evidence, since, last_seen, action = _finding(rows, alarms, fault, state)
     if state == "fault":
         todo = action or fault_action(None)[1]
     elif state == "sensor_fault":
