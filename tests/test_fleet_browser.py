@@ -152,7 +152,8 @@ def test_serve_drills_down_and_acknowledges_an_alarm_into_the_file(judged, brows
                         status), status  # fmt: skip
         browser.save_screenshot(str(tmp_path / "alarms.png"))
         # The machine page shows it too (made anew on each request).
-        browser.find_element(By.CSS_SELECTOR, f'tr[data-alarm="{alarm}"] a').click()
+        link = browser.find_element(By.CSS_SELECTOR, f'tr[data-alarm="{alarm}"] a')
+        browser.get(link.get_attribute("href"))
         assert "acknowledged by Ana Field" in _text_after_click(browser, "#episodes",
                                                                  "acknowledged")  # fmt: skip
     finally:
