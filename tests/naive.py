@@ -432,3 +432,47 @@ def near_stop(spool_pct, qp_lpm, volume_up_l, volume_down_l, margin, q_stall_lpm
             run = 0
         out.append(1 if low < margin or high > 1.0 - margin else 0)
     return np.array(out, dtype=np.int64)
+
+
+def sample_clock(ts, period, max_gap, resync, eps, outage):
+    """The sample clock's time rule written as the prose of ``monitor.sampling.clock`` says,
+    recursively: (sampler time per frame or NaN when skipped, frames in application order,
+    whether each applied frame ended an outage, [backwards, skipped, resyncs, gaps])."""
+    ts = [float(t) for t in ts]
+    st_out = [math.nan] * len(ts)
+    order, resumes, counts = [], [], [0, 0, 0, 0]
+    clock = {"offset": -ts[0] if ts else 0.0, "newest": -math.inf}
+    held: list[int] = []
+
+    def feed(f):
+        st = ts[f] + clock["offset"]
+        newest = clock["newest"]
+        if st < newest - eps:
+            counts[0] += 1
+            if newest - st <= period:
+                st = newest
+            else:
+                held.append(f)
+                if len(held) == resync:
+                    clock["offset"] = newest + period - ts[held[0]]
+                    counts[2] += 1
+                    replay = held[:]
+                    held.clear()
+                    for g in replay:
+                        feed(g)
+                return
+        elif held:
+            counts[1] += len(held)
+            held.clear()
+        if newest > -math.inf and st - newest > max_gap:
+            clock["offset"] -= st - newest - max_gap
+            st = newest + max_gap
+            counts[3] += 1
+        st_out[f] = st
+        order.append(f)
+        resumes.append(st - newest >= outage)
+        clock["newest"] = st
+
+    for f in range(len(ts)):
+        feed(f)
+    return np.array(st_out), np.array(order, dtype=np.int64), np.array(resumes), counts

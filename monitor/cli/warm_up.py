@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
         ("offline prediction on one thread", lambda: _serial_prediction(model)),
         ("per-tick detector", lambda: _ticks(Ticker(model, cfg.alarm, cfg.horizon,
                                                     gating=cfg.gating))),
+        ("live sample clock", _sample_clock),
         ("simulator", lambda: simulate(make_cycle("boom", 2.0, 1), load_machine(), seed=1)),
         # A statistic may be opt-in for `monitor train` (H: ``--hold on``): each member's
         # kernels typed here whatever the configured model carries, so any model with it
@@ -115,6 +116,15 @@ def _ticks(ticker: object) -> None:
     from monitor.sampling.sampler import ROW_COLUMNS
 
     ticker.tick(np.zeros(1 + len(ROW_COLUMNS)))  # type: ignore[attr-defined]
+
+
+def _sample_clock() -> None:
+    """Two frames through the daemon's sampler: the clock's step kernel, called per frame."""
+    from monitor.sampling.sampler import Sampler
+
+    sampler = Sampler({"PP": 0.01})
+    for k in range(2):
+        sampler.feed(k * 0.01, "HYD_Pressures", {"PP": 1.0})
 
 
 def _statistics() -> None:

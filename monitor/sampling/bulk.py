@@ -5,14 +5,14 @@ Same result as ``monitor.sampling.sampler.recording_from_candump`` (python-can r
 
 1. ``read_candump_frames``: the log as arrays of frames (``monitor.io.candump_bulk``);
 2. ``decode_frames``: checks and physical values per message ID (``monitor.codec.bulk``);
-3. the sample clock.  The sampler's time rules (reordering jitter, skipped strays, clock
-   resync after ``resync_frames`` older frames, forward gaps shortened to ``max_gap_s``)
-   depend on every frame before, so a small serial numba kernel replays them and gives each
-   applied frame its sampler time st.  Applied times never decrease, and a frame is
-   visible from row ``K = max over frames so far of ceil((st - eps) / period)`` on (the rows
-   the sampler emits before applying it), so each signal's value in row k is that of its
-   last frame with K <= k (one ``searchsorted``), or NaN when older than its staleness
-   (counted from the end of the last outage when that is later, as the sampler does).
+3. the sample clock.  Its time rules (``monitor.sampling.clock``) depend on every frame
+   before, so a small serial numba kernel runs the sampler's own step kernel, ``clock_step``,
+   over the frames and gives each applied frame its sampler time st.  Applied times never
+   decrease, and a frame is visible from row ``K = max over frames so far of
+   ceil((st - eps) / period)`` on (the rows the sampler emits before applying it), so each
+   signal's value in row k is that of its last frame with K <= k (one ``searchsorted``), or
+   NaN when older than its staleness (counted from the end of the last outage when that is
+   later, as the sampler does).
 
 The kernel uses plain IEEE arithmetic (no fast-math), so every time is the float the
 frame-by-frame sampler computes.
@@ -30,6 +30,7 @@ from monitor.codec.frames import FrameCodec
 from monitor.io.candump_bulk import read_candump_frames
 from monitor.io.recording import Recording
 from monitor.jit import jit
+from monitor.sampling.clock import N_STATE, S_HELD, S_NEWEST, S_OFFSET, S_RESUMES, clock_step
 from monitor.sampling.sampler import (
     _EPS_S,
     OUTAGE_S,
@@ -46,65 +47,56 @@ from monitor.signals import ROD_POS
 
 
 @jit(aot=True, fastmath=False)
-def _clock(ts, period, max_gap, resync, eps):  # pragma: no cover - numba
-    """Sampler time of every frame (NaN: skipped) and the counts, as ``Sampler.feed``.
-
-    Frames held back as possibly older are replayed through a stack in the order the
-    recursive ``feed`` replays them.
-    """
+def _clock(ts, period, max_gap, resync, eps, outage):  # pragma: no cover - numba
+    """``clock_step`` over every frame: the sampler time of each (NaN: skipped), the applied
+    frames in application order, whether each ended an outage, the counts and the newest
+    time.  Held frames are replayed through a stack in the order ``Sampler.feed`` replays
+    them."""
     n = ts.shape[0]
     st_out = np.full(n, np.nan)
     order = np.empty(n + 1, np.int64)  # applied frames in application order
+    resumes = np.zeros(n + 1, np.bool_)
     n_applied = 0
     behind = np.empty(resync, np.int64)
     nb = 0
     stack = np.empty(2 * resync + 2, np.int64)
-    counts = np.zeros(4, np.int64)  # backwards, skipped, resyncs, gaps
-    offset = -ts[0]
-    newest = -np.inf
+    state = np.zeros(N_STATE)
+    state[S_OFFSET] = -ts[0]
+    state[S_NEWEST] = -np.inf
+    counts = np.zeros(4, np.int64)
     for f0 in range(n):
         sp = 1
         stack[0] = f0
         while sp > 0:
             sp -= 1
             f = stack[sp]
-            st = ts[f] + offset
-            if st < newest - eps:
-                counts[0] += 1
-                if newest - st <= period:
-                    st = newest  # reordering jitter
-                else:
-                    behind[nb] = f
-                    nb += 1
-                    if nb < resync:
-                        continue
-                    offset = newest + period - ts[behind[0]]
-                    counts[2] += 1
+            st = clock_step(ts[f], state, counts, period, max_gap, resync, eps, outage)
+            if st != st:  # held back
+                behind[nb] = f
+                nb += 1
+                if state[S_HELD] == 0:  # a resync: replay them in order
                     if sp + nb > stack.shape[0]:
                         grown = np.empty(stack.shape[0] * 2, np.int64)
                         grown[:sp] = stack[:sp]
                         stack = grown
-                    for k in range(nb - 1, -1, -1):  # replay in order
+                    for k in range(nb - 1, -1, -1):
                         stack[sp] = behind[k]
                         sp += 1
                     nb = 0
-                    continue
-            elif nb > 0:
-                counts[1] += nb  # the older ones were strays, not a clock reset
-                nb = 0
-            if newest > -np.inf and st - newest > max_gap:
-                offset -= st - newest - max_gap
-                st = newest + max_gap
-                counts[3] += 1
+                continue
+            nb = np.int64(state[S_HELD])  # strays dropped by the clock
             st_out[f] = st
             if n_applied == order.shape[0]:
                 grown = np.empty(order.shape[0] * 2, np.int64)
                 grown[:n_applied] = order
                 order = grown
+                grown_r = np.zeros(resumes.shape[0] * 2, np.bool_)
+                grown_r[:n_applied] = resumes
+                resumes = grown_r
             order[n_applied] = f
+            resumes[n_applied] = state[S_RESUMES] != 0.0
             n_applied += 1
-            newest = st
-    return st_out, order[:n_applied], counts, newest
+    return st_out, order[:n_applied], resumes[:n_applied], counts, state[S_NEWEST]
 
 
 def recording_from_candump_bulk(
@@ -130,7 +122,8 @@ def recording_from_candump_bulk(
     rows, msg_of, pos_in_msg = rows[by_time], msg_of[by_time], pos_in_msg[by_time]
     ts = np.ascontiguousarray(frames.timestamp[rows])
     period = sampler.period_s
-    st, applied, tc, newest = _clock(ts, period, sampler.max_gap_s, sampler.resync_frames, _EPS_S)
+    st, applied, resumes, tc, newest = _clock(ts, period, sampler.max_gap_s,
+                                              sampler.resync_frames, _EPS_S, OUTAGE_S)
     # Rows emitted before each applied frame: a running maximum over application order.
     first_row = np.maximum.accumulate(np.ceil((st[applied] - _EPS_S) / period)).astype(np.int64)
     n_rows = max(int(first_row[-1]), math.floor((newest + _EPS_S) / period) + 1)
@@ -140,16 +133,16 @@ def recording_from_candump_bulk(
     if err := runs_backwards(path, ts.size, time_counts.as_dict()):
         raise err
     inst = np.arange(n_rows) * period
-    # Outages (OUTAGE_S of silence): from the first row after each, staleness restarts at
-    # the time of the frame that ended it (the sampler's ``_resumed``).
+    # Outages (the clock's rule): from the first row after each, staleness restarts at the
+    # time of the frame that ended it (the sampler's ``_resumed``).
     st_applied = st[applied]
-    ends = np.flatnonzero(np.diff(st_applied) >= OUTAGE_S) + 1
+    ends = np.flatnonzero(resumes)
     back_at = np.searchsorted(first_row[ends], np.arange(n_rows), side="right") - 1
     resumed = np.append(st_applied[ends], -np.inf)[back_at]  # -1: no outage yet, -inf
 
     seen: set[str] = set()
     columns: dict[str, np.ndarray] = {}
-    stale = dict(zip(sampler.columns, sampler._stale_s, strict=True))
+    stale = dict(zip(sampler.columns, sampler.stale_s, strict=True))
     for name in sampler.columns:
         carriers = [k for k, p in enumerate(parts) if name in p.values]
         sel = np.flatnonzero(np.isin(msg_of[applied], carriers))

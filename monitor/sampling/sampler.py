@@ -8,16 +8,9 @@ its message's GenMsgCycleTime (30 ms for 10 ms frames, 3 s for the 1 Hz oil temp
 or it never arrived.  Stale data is a sensor fault downstream, never a hydraulic one.
 Row ``t`` is seconds from the first frame (``start_time_s`` keeps the absolute time).
 
-Time that goes backwards (merged interfaces, a clock reset in the logger) must not break
-the clock.  The rule:
-
-* a frame at most one sample period older than the newest frame is reordering jitter and
-  is applied at the newest frame's time;
-* an older frame is skipped, unless ``resync_frames`` (5) consecutive frames are all
-  older: then the logger's clock was reset, and the time base shifts so that those frames
-  continue right after the newest one (they are replayed, counted as a resync);
-* a forward gap longer than ``max_gap_s`` (60 s) is shortened to ``max_gap_s`` of stale
-  (NaN) rows and counted, so a clock jump of days cannot allocate millions of rows.
+Time that goes backwards (merged interfaces, a clock reset in the logger), forward gaps
+and outages follow the rule of ``monitor.sampling.clock``: one kernel places each frame,
+here frame by frame and in ``monitor.sampling.bulk`` over a whole log.
 
 A silence of the whole bus of at least ``OUTAGE_S`` (1 s: a link down, a logger paused)
 restarts every signal's staleness clock when frames return: a signal sent before it counts
@@ -49,6 +42,7 @@ from monitor.codec.frames import FrameCodec
 from monitor.errors import InputFileError, NoHydraulicDataError
 from monitor.io.candump import read_candump
 from monitor.io.recording import Recording
+from monitor.sampling.clock import S_HELD, S_NEWEST, S_OFFSET, S_RESUMES, clock_step, new_state
 from monitor.signals import ROD_POS, SAMPLE_PERIOD_S, SIGNAL_NAMES
 
 #: Row columns after ``t``: the contract signals, then the optional RodPos.
@@ -139,20 +133,23 @@ class Sampler:
         self.max_gap_s = float(max_gap_s)
         self.resync_frames = int(resync_frames)
         self._index = {name: i for i, name in enumerate(self.columns)}
-        self._stale_s = [
+        self.stale_s = [
             stale_cycles * cycle_times_s.get(name, self.period_s) + _EPS_S for name in self.columns
         ]
         self._values = [_NAN] * len(self.columns)
         self._last_t = [-math.inf] * len(self.columns)  # sampler time of each latest value
         self.seen: set[str] = set()
         self.start_time_s: float | None = None  # log time of row t = 0
-        self.counts = TimeCounts()
-        self._offset = 0.0  # sampler time = log time + offset (changes on resync/gap)
-        self._newest = -math.inf  # sampler time of the newest frame applied
+        self._state, self._counts = new_state(0.0)  # the clock (monitor.sampling.clock)
         self._resumed = -math.inf  # sampler time of the first frame after the last outage
         self._k = 0  # next instant to emit
         self._pending: list[list[float]] = []
         self._behind: list[tuple[float, str, Mapping[str, float]]] = []
+
+    @property
+    def counts(self) -> TimeCounts:
+        """How often the clock had to deal with a misbehaving log time so far."""
+        return TimeCounts(*(int(c) for c in self._counts))
 
     @classmethod
     def for_codec(cls, codec: FrameCodec, **kwargs: Any) -> Sampler:
@@ -185,39 +182,22 @@ class Sampler:
         ignored; ``message_name`` is only used for bookkeeping."""
         if self.start_time_s is None:
             self.start_time_s = float(timestamp_s)
-            self._offset = -float(timestamp_s)  # sampler time 0 = first frame
-        st = timestamp_s + self._offset
-        newest = self._newest
-        if st < newest - _EPS_S:
-            self.counts.time_backwards += 1
-            if newest - st <= self.period_s:
-                st = newest  # reordering jitter
-            else:
-                self._behind_frame(timestamp_s, message_name, values)
-                return
-        elif self._behind:
-            # A frame on time again: the older ones were strays, not a clock reset.
-            self.counts.time_skipped += len(self._behind)
-            self._behind.clear()
-        if newest > -math.inf and st - newest > self.max_gap_s:
-            self._offset -= st - newest - self.max_gap_s
-            st = newest + self.max_gap_s
-            self.counts.gaps_shortened += 1
+            self._state, self._counts = new_state(float(timestamp_s))  # sampler time 0
+        state = self._state
+        st = clock_step(float(timestamp_s), state, self._counts, self.period_s, self.max_gap_s,
+                        self.resync_frames, _EPS_S, OUTAGE_S)  # fmt: skip
+        if st != st:  # held back as possibly older
+            self._behind.append((timestamp_s, message_name, values))
+            if state[S_HELD] == 0:  # a clock reset: replay them on the new time base
+                frames, self._behind = self._behind, []
+                for ts, name, vals in frames:
+                    self.feed(ts, name, vals)
+            return
+        del self._behind[int(state[S_HELD]) :]  # strays dropped by the clock
         self._emit_before(st)
-        if st - newest >= OUTAGE_S:  # the rows of the silence are out: staleness restarts
+        if state[S_RESUMES]:  # the rows of the silence are out: staleness restarts
             self._resumed = st
         self._apply(st, values)
-
-    def _behind_frame(self, timestamp_s: float, name: str, values: Mapping[str, float]) -> None:
-        self._behind.append((timestamp_s, name, values))
-        if len(self._behind) < self.resync_frames:
-            return
-        # Clock reset: map the first older frame to just after the newest one and replay.
-        frames, self._behind = self._behind, []
-        self._offset = self._newest + self.period_s - frames[0][0]
-        self.counts.time_resyncs += 1
-        for ts, name_, vals in frames:
-            self.feed(ts, name_, vals)
 
     def _apply(self, st: float, values: Mapping[str, float]) -> None:
         index = self._index
@@ -227,7 +207,6 @@ class Sampler:
                 self._values[i] = float(value)
                 self._last_t[i] = st
                 self.seen.add(name)
-        self._newest = st
 
     # -- rows -----------------------------------------------------------------------------
 
@@ -238,7 +217,7 @@ class Sampler:
             inst,
             *[
                 v if inst - max(tl, back) <= stale else _NAN
-                for v, tl, stale in zip(self._values, self._last_t, self._stale_s, strict=True)
+                for v, tl, stale in zip(self._values, self._last_t, self.stale_s, strict=True)
             ],
         ]
 
@@ -257,7 +236,7 @@ class Sampler:
             inst = np.arange(k0, end) * self.period_s
             vals = np.array(self._values)
             since = np.maximum(np.array(self._last_t), self._resumed)
-            fresh = (inst[:, None] - since[None, :]) <= np.array(self._stale_s)
+            fresh = (inst[:, None] - since[None, :]) <= np.array(self.stale_s)
             block = np.column_stack([inst, np.where(fresh, vals[None, :], np.nan)])
             self._pending.extend(block.tolist())
         self._k = end
@@ -274,14 +253,14 @@ class Sampler:
         not handed out yet.  Call it with a time no frame of an earlier instant can still
         arrive before (the live daemon allows for bus latency)."""
         if self.start_time_s is not None:
-            st = until_s + self._offset
+            st = until_s + self._state[S_OFFSET]
             self._emit_to(math.floor((st + _EPS_S) / self.period_s) + 1)
         return self.take()
 
     def flush(self) -> np.ndarray:
         """Rows up to and including the instant of the newest frame (end of a log)."""
         if self.start_time_s is not None:
-            self._emit_to(math.floor((self._newest + _EPS_S) / self.period_s) + 1)
+            self._emit_to(math.floor((self._state[S_NEWEST] + _EPS_S) / self.period_s) + 1)
         return self.take()
 
 
