@@ -50,7 +50,9 @@ def make_recording(n: int = 300, rod: bool = True) -> Recording:
 
 
 def sampler() -> Sampler:
-    return Sampler({"PP": 0.01, "QP": 0.01, "OilTemp": 1.0})
+    """A sampler for the time and staleness rules: every column optional, so a signal these
+    tests never send holds no row back (warming is tested on its own below)."""
+    return Sampler({"PP": 0.01, "QP": 0.01, "OilTemp": 1.0}, optional=ROW_COLUMNS)
 
 
 def test_rows_hold_latest_value_and_go_stale_after_three_cycles() -> None:
@@ -100,6 +102,45 @@ def test_oil_temperature_goes_stale_after_three_seconds() -> None:
     assert (oil[:301] == 50.0).all() and np.isnan(oil[301:]).all()
 
 
+def test_start_mid_operation_is_warming_until_every_signal_was_seen() -> None:
+    """A start mid-operation: the 1 Hz OilTemp comes 0.43 s after the first frame, and RodPos
+    (optional) never.  The rows before it are warming, not emitted; row t = 0 is the first
+    instant with every required signal fresh."""
+    cycles = {"SpoolCmd": 0.01, "PumpDispCmd": 0.01, "EngineSpeed": 0.01, "PP": 0.01,
+              "PA": 0.01, "PB": 0.01, "QP": 0.01, "OilTemp": 1.0, "RodPos": 0.01}  # fmt: skip
+    frames = []
+    for k in range(100):
+        t = 50.0 + k * 0.01
+        frames.append((t, "m", {n: float(k) for n in SIGNAL_NAMES if n != "OilTemp"}))
+        if k == 43:
+            frames.append((t + 0.004, "HYD_OilTemp", {"OilTemp": 60.0}))
+    live, batch = Sampler(cycles), Sampler(cycles)
+    parts = []
+    for f in frames:
+        live.feed(*f)
+        batch.feed(*f)
+        parts.append(live.advance(f[0] - 0.002))
+    parts.append(live.flush())
+    rows = batch.flush()
+    np.testing.assert_array_equal(np.concatenate(parts), rows)
+    # OilTemp at 434 ms is visible from the 440 ms instant on: 56 rows from there to 990 ms.
+    assert len(rows) == 56 and rows[0, 0] == 0.0
+    assert batch.start_time_s == pytest.approx(50.44) and batch.first_time_s == 50.0
+    assert rows[0, COL["PP"]] == 44.0 and (rows[:, COL["OilTemp"]] == 60.0).all()
+    assert np.isfinite(rows[:, 1:-1]).all() and np.isnan(rows[:, COL["RodPos"]]).all()
+
+
+def test_signal_never_seen_is_stale_after_its_own_deadline() -> None:
+    """A required signal that never comes stops warming at its own staleness time from the
+    first frame (3 x 1 s for OilTemp), and reads stale (NaN) from there."""
+    s = Sampler({"QP": 0.01, "OilTemp": 1.0}, columns=("QP", "OilTemp"))
+    for k in range(400):
+        s.feed(k * 0.01, "HYD_Flow", {"QP": 1.0})
+    rows = s.flush()
+    assert s.start_time_s == pytest.approx(3.01)  # first instant past 3 s + 1 us
+    assert len(rows) == 400 - 301 and np.isnan(rows[:, 2]).all() and (rows[:, 1] == 1).all()
+
+
 def test_time_backwards_jitter_stray_and_clock_reset() -> None:
     s = sampler()
     for k in range(10):
@@ -121,7 +162,7 @@ def test_time_backwards_jitter_stray_and_clock_reset() -> None:
 
 
 def test_long_forward_gap_is_shortened() -> None:
-    s = Sampler({"QP": 0.01}, max_gap_s=2.0)
+    s = Sampler({"QP": 0.01}, max_gap_s=2.0, optional=ROW_COLUMNS)
     s.feed(0.0, "HYD_Flow", {"QP": 1.0})
     s.feed(86400.0, "HYD_Flow", {"QP": 2.0})  # a day later
     rows = s.flush()

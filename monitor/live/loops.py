@@ -173,7 +173,8 @@ def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording
         raise InputFileError(f"{path}: a contract CSV holds one loop; --loop reads a candump log")
     codec = FrameCodec.from_dbc(cfg.dbc)
     columns, views = row_layout(cfg, codec)
-    wide = recording_from_candump_bulk(path, codec, columns)
+    rods = {lc.dbc_signal(ROD_POS.name) for lc in cfg.monitored_loops} - {None}
+    wide = recording_from_candump_bulk(path, codec, columns, optional=rods)
     view = views[names.index(name)]
     picked = {
         contract: wide[col]

@@ -36,6 +36,7 @@ from monitor.detection.ticker import Tick
 from monitor.io.candump import MAX_TIMESTAMP_S
 from monitor.live.loops import Loop
 from monitor.sampling.sampler import Sampler, hydraulic_messages
+from monitor.signals import ROD_POS
 
 log = logging.getLogger("monitor")
 
@@ -59,7 +60,9 @@ class FramePipeline:
     ) -> None:
         self.codec = codec
         self.loops = loops
-        self.sampler = Sampler.for_codec(codec, columns=columns)
+        # A loop's rod sensor is optional: it never holds the first rows back (warming).
+        rods = {lp.cfg.dbc_signal(ROD_POS.name) for lp in loops}
+        self.sampler = Sampler.for_codec(codec, columns=columns, optional=rods - {None})
         self._hydraulic = hydraulic_messages(codec, columns)
         self._diags = [lp.diag for lp in loops if lp.diag is not None]  # kept on reload
         self._send = send
@@ -77,7 +80,7 @@ class FramePipeline:
 
     @property
     def start_time_s(self) -> float | None:
-        """Bus time of the first sensor frame: the sample clock's origin."""
+        """Log time of row t = 0: the first sensor frame's, plus the warming rows."""
         return self.sampler.start_time_s
 
     def feed(self, msg: can.Message) -> None:
@@ -138,12 +141,13 @@ class FramePipeline:
         self._tick_rows(self.sampler.flush())
 
     def bus_time(self, t_s: float) -> float:
-        """Bus time of a sample-clock time."""
-        return (self.sampler.start_time_s or 0.0) + t_s * self._scale
+        """Bus time of a row's time ``t_s`` (row t = 0 is the first row past warming)."""
+        origin_s = self.sampler.origin_k * self.sampler.period_s
+        return (self.sampler.first_time_s or 0.0) + (origin_s + t_s) * self._scale
 
     def _clock(self, bus_ts: float) -> float:
         """Sample-clock time of a bus timestamp (the first sensor frame is the origin)."""
-        t0 = self.sampler.start_time_s
+        t0 = self.sampler.first_time_s
         if t0 is None or self._scale == 1.0:
             return bus_ts  # exactly the bus time: same rows as ``monitor detect`` of a log
         return t0 + (bus_ts - t0) / self._scale

@@ -21,6 +21,7 @@ frame-by-frame sampler computes.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +43,7 @@ from monitor.sampling.sampler import (
     row_limit,
     runs_backwards,
     too_many_rows,
+    warm_row,
 )
 from monitor.signals import ROD_POS
 
@@ -100,12 +102,16 @@ def _clock(ts, period, max_gap, resync, eps, outage):  # pragma: no cover - numb
 
 
 def recording_from_candump_bulk(
-    path: str | Path, codec: FrameCodec | None = None, columns: tuple[str, ...] = ROW_COLUMNS
+    path: str | Path,
+    codec: FrameCodec | None = None,
+    columns: tuple[str, ...] = ROW_COLUMNS,
+    optional: Collection[str] = (ROD_POS.name,),
 ) -> Recording:
-    """``recording_from_candump`` computed in bulk: same rows, columns, meta and errors."""
+    """``recording_from_candump`` computed in bulk: same rows, columns, meta and errors
+    (``columns`` and ``optional`` as for ``Sampler``)."""
     codec = codec or FrameCodec.from_dbc()
-    # Its parameters and staleness, not its feed().
-    sampler = Sampler.for_codec(codec, columns=columns)
+    # Its parameters, staleness and warming rows, not its feed().
+    sampler = Sampler.for_codec(codec, columns=columns, optional=optional)
     frames = read_candump_frames(path)
     decoded = decode_frames(codec, frames)
     wanted = hydraulic_messages(codec, columns)
@@ -141,6 +147,7 @@ def recording_from_candump_bulk(
     resumed = np.append(st_applied[ends], -np.inf)[back_at]  # -1: no outage yet, -inf
 
     seen: set[str] = set()
+    first_seen = np.full(len(sampler.columns), np.inf)  # row from which each is visible
     columns: dict[str, np.ndarray] = {}
     stale = dict(zip(sampler.columns, sampler.stale_s, strict=True))
     for name in sampler.columns:
@@ -149,6 +156,7 @@ def recording_from_candump_bulk(
         col = np.full(n_rows, np.nan)
         if sel.size:
             seen.add(name)
+            first_seen[sampler.columns.index(name)] = first_row[sel[0]]
             f = applied[sel]
             vals = np.empty(sel.size)
             for k in carriers:
@@ -161,9 +169,14 @@ def recording_from_candump_bulk(
             col[np.flatnonzero(have)[fresh]] = vals[li[fresh]]
         if name != ROD_POS.name or name in seen:
             columns[name] = col
+    warm = min(warm_row(first_seen[list(sampler.required)], sampler.deadline_rows), n_rows)
+    # Row t = 0 is the first one past warming; its log time as the sampler computes it.
+    start = float(ts[0]) + warm * period if warm < n_rows else None
     meta: dict[str, object] = {
         "format": "candump",
-        "start_time_s": float(ts[0]),
+        "start_time_s": start,
         "counts": {**counts, **time_counts.as_dict()},
     }
-    return Recording(t=inst, columns=columns, source=str(path), meta=meta)
+    columns = {name: col[warm:] for name, col in columns.items()}
+    return Recording(t=np.arange(n_rows - warm) * period, columns=columns, source=str(path),
+                     meta=meta)  # fmt: skip

@@ -6,7 +6,18 @@ instant k holds, per signal, the latest value received at or before that instant
 when the signal is stale: its last value is older than ``stale_cycles`` (3) cycle times of
 its message's GenMsgCycleTime (30 ms for 10 ms frames, 3 s for the 1 Hz oil temperature),
 or it never arrived.  Stale data is a sensor fault downstream, never a hydraulic one.
-Row ``t`` is seconds from the first frame (``start_time_s`` keeps the absolute time).
+Row ``t`` is seconds from the first row emitted (``start_time_s`` keeps its log time).
+
+A start mid-operation (a daemon restart, a log cut from a longer one) meets each message at
+some point of its own cycle: the 1 Hz oil temperature may come up to a second after the
+first frame.  So the first rows are *warming*, not stale, and are not emitted, while a
+required signal (every column but the ``optional`` ones, the rod sensor by default) has not
+been seen and has not yet missed its own staleness time counted from the first frame
+(``warm_row``).  The first row emitted is the first instant by which every required signal
+was seen or is overdue: a signal that never comes is stale from its own deadline on (3 s for
+the oil temperature), a sensor fault as before.  That row is t = 0: a recording starts
+where it can be judged, and ``start_time_s`` is its log time (the first frame's plus the
+warming rows).
 
 Time that goes backwards (merged interfaces, a clock reset in the logger), forward gaps
 and outages follow the rule of ``monitor.sampling.clock``: one kernel places each frame,
@@ -31,7 +42,7 @@ daemon and the offline replay share it.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -58,6 +69,25 @@ OUTAGE_S = 1.0
 MIN_ROW_LIMIT = 360_000
 #: Rows per frame of the log a longer one may need (a normal log needs about 0.3).
 ROWS_PER_FRAME = 20
+
+
+def deadline_row(stale_s: float, period_s: float = SAMPLE_PERIOD_S) -> int:
+    """First instant k whose time ``k * period_s`` is past ``stale_s``: a signal not seen by
+    then has missed its own cycle time by the margin, and is stale rather than warming."""
+    k = math.floor(stale_s / period_s) + 1
+    while k > 0 and (k - 1) * period_s > stale_s:  # the products the rows use decide
+        k -= 1
+    while k * period_s <= stale_s:
+        k += 1
+    return k
+
+
+def warm_row(first_seen_rows: Iterable[float], deadline_rows: Iterable[int]) -> int:
+    """First row that is not warming: by it every required signal has been seen (its first
+    frame visible from row ``first_seen_rows[i]``, inf if not yet) or is past its deadline
+    (``deadline_rows[i]``, from ``deadline_row``)."""
+    return int(max((min(s, d) for s, d in zip(first_seen_rows, deadline_rows, strict=True)),
+                   default=0))  # fmt: skip
 
 
 def row_limit(frames: int) -> int:
@@ -125,9 +155,11 @@ class Sampler:
         stale_cycles: float = 3.0,
         max_gap_s: float = 60.0,
         resync_frames: int = 5,
+        optional: Collection[str] = (ROD_POS.name,),
     ) -> None:
         """``cycle_times_s`` maps a signal to its message's cycle time (s); a signal not
-        in it is stale after ``stale_cycles`` sample periods."""
+        in it is stale after ``stale_cycles`` sample periods.  ``optional`` columns (a
+        sensor a machine may lack) do not hold the first rows back while warming."""
         self.columns = tuple(columns)
         self.period_s = float(period_s)
         self.max_gap_s = float(max_gap_s)
@@ -136,10 +168,15 @@ class Sampler:
         self.stale_s = [
             stale_cycles * cycle_times_s.get(name, self.period_s) + _EPS_S for name in self.columns
         ]
+        self.required = tuple(i for i, c in enumerate(self.columns) if c not in set(optional))
+        self.deadline_rows = [deadline_row(self.stale_s[i], self.period_s) for i in self.required]
+        self._warming = True  # no row emitted yet: the first ones may be warming
         self._values = [_NAN] * len(self.columns)
         self._last_t = [-math.inf] * len(self.columns)  # sampler time of each latest value
         self.seen: set[str] = set()
-        self.start_time_s: float | None = None  # log time of row t = 0
+        self.first_time_s: float | None = None  # log time of the first frame (sampler time 0)
+        self.start_time_s: float | None = None  # log time of row t = 0 (once warming ends)
+        self.origin_k = 0  # the instant of row t = 0 (warming rows are not emitted)
         self._state, self._counts = new_state(0.0)  # the clock (monitor.sampling.clock)
         self._resumed = -math.inf  # sampler time of the first frame after the last outage
         self._k = 0  # next instant to emit
@@ -159,7 +196,8 @@ class Sampler:
 
     @property
     def started(self) -> bool:
-        return self.start_time_s is not None
+        """Whether a frame has been fed (the clock runs)."""
+        return self.first_time_s is not None
 
     @property
     def pending(self) -> int:
@@ -180,8 +218,8 @@ class Sampler:
     def feed(self, timestamp_s: float, message_name: str, values: Mapping[str, float]) -> None:
         """Apply one decoded frame (log/bus time in s).  Signals not in ``columns`` are
         ignored; ``message_name`` is only used for bookkeeping."""
-        if self.start_time_s is None:
-            self.start_time_s = float(timestamp_s)
+        if self.first_time_s is None:
+            self.first_time_s = float(timestamp_s)
             self._state, self._counts = new_state(float(timestamp_s))  # sampler time 0
         state = self._state
         st = clock_step(float(timestamp_s), state, self._counts, self.period_s, self.max_gap_s,
@@ -214,7 +252,7 @@ class Sampler:
         inst = k * self.period_s
         back = self._resumed
         return [
-            inst,
+            (k - self.origin_k) * self.period_s,
             *[
                 v if inst - max(tl, back) <= stale else _NAN
                 for v, tl, stale in zip(self._values, self._last_t, self.stale_s, strict=True)
@@ -230,6 +268,13 @@ class Sampler:
         k0 = self._k
         if end <= k0:
             return
+        if self._warming:  # skip the warming rows (their frames are all applied by now)
+            seen = [0 if self._last_t[i] > -math.inf else math.inf for i in self.required]
+            k0 = min(max(k0, warm_row(seen, self.deadline_rows)), end)
+            self._warming = k0 == end
+            if not self._warming:
+                self.origin_k = k0
+                self.start_time_s = self.first_time_s + k0 * self.period_s  # type: ignore[operator]
         if end - k0 <= 64:
             self._pending.extend(self._row(k) for k in range(k0, end))
         else:  # a long gap: same state throughout, vectorised
@@ -237,7 +282,8 @@ class Sampler:
             vals = np.array(self._values)
             since = np.maximum(np.array(self._last_t), self._resumed)
             fresh = (inst[:, None] - since[None, :]) <= np.array(self.stale_s)
-            block = np.column_stack([inst, np.where(fresh, vals[None, :], np.nan)])
+            t = np.arange(k0 - self.origin_k, end - self.origin_k) * self.period_s
+            block = np.column_stack([t, np.where(fresh, vals[None, :], np.nan)])
             self._pending.extend(block.tolist())
         self._k = end
 
@@ -252,14 +298,14 @@ class Sampler:
         """Rows (n x (1 + len(columns))) of every instant up to log/bus time ``until_s``
         not handed out yet.  Call it with a time no frame of an earlier instant can still
         arrive before (the live daemon allows for bus latency)."""
-        if self.start_time_s is not None:
+        if self.started:
             st = until_s + self._state[S_OFFSET]
             self._emit_to(math.floor((st + _EPS_S) / self.period_s) + 1)
         return self.take()
 
     def flush(self) -> np.ndarray:
         """Rows up to and including the instant of the newest frame (end of a log)."""
-        if self.start_time_s is not None:
+        if self.started:
             self._emit_to(math.floor((self._state[S_NEWEST] + _EPS_S) / self.period_s) + 1)
         return self.take()
 
