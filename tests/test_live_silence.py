@@ -12,11 +12,12 @@ from live_support import live_config, wait_until
 
 from monitor.bus.reader import BusConfig, BusReader
 from monitor.codec.frames import FrameCodec
+from monitor.config.layout import row_layout
 from monitor.config.settings import load_config
 from monitor.errors import ConfigError
 from monitor.io.candump import read_candump
 from monitor.live.daemon import Daemon
-from monitor.live.loops import Loop, row_layout
+from monitor.live.loops import Loop
 from monitor.live.pipeline import FramePipeline
 from monitor.resources import resource_path
 

@@ -21,13 +21,15 @@ from live_support import assert_same_events, live_config, replay_settled, run_da
 from monitor.cli import main
 from monitor.codec.frames import FrameCodec
 from monitor.codec.logwrite import write_candump
+from monitor.config.layout import row_layout
 from monitor.config.settings import load_config
 from monitor.detection.alarm import State
 from monitor.detection.offline import detect
 from monitor.errors import ConfigError
 from monitor.live.daemon import Daemon
-from monitor.live.loops import loop_recording, row_layout, wide_recording, worst_state
+from monitor.live.loops import worst_state
 from monitor.model.modelfile import load_model
+from monitor.offline.recordings import loop_recording, wide_recording
 from monitor.resources import resource_path
 from monitor.sampling.bulk import recording_from_candump_bulk
 from monitor.sampling.sampler import ROW_COLUMNS

@@ -12,10 +12,11 @@ import pytest
 from model_support import SHIPPED, craft_model
 
 from monitor.cli import main
+from monitor.config.layout import row_layout
 from monitor.config.settings import load_config
 from monitor.errors import ModelFileError
 from monitor.io.recording import Recording
-from monitor.live.loops import Loop, row_layout
+from monitor.live.loops import Loop
 from monitor.model.machinecard import ModelCard
 from monitor.model.modelfile import load_model, save_model
 from monitor.resources import resource_path
@@ -102,7 +103,7 @@ def test_an_old_model_without_the_record_loads_as_unknown(caplog) -> None:
     model = load_model(SHIPPED)
     assert model.card is None
     cfg = load_config()
-    from monitor.live.loops import check_loop_model
+    from monitor.config.layout import check_loop_model
 
     with caplog.at_level(logging.INFO, logger="monitor"):
         check_loop_model(model, cfg.monitored_loops[0], cfg)

@@ -51,7 +51,7 @@ from monitor.codec.frames import FrameCodec
 from monitor.config.settings import BusConfig, MonitorConfig, load_config
 from monitor.io.recording import Recording
 from monitor.live.daemon import Daemon
-from monitor.live.loops import wide_recording
+from monitor.offline.recordings import wide_recording
 from monitor.resources import resource_path
 
 START_TIME_S = 1_700_000_000.0

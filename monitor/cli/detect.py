@@ -107,10 +107,11 @@ def _write_lines(lines: list[dict[str, Any]], fh: TextIO) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.config.layout import check_loop_model
     from monitor.config.settings import load_config
     from monitor.detection.offline import detect
-    from monitor.live.loops import check_loop_model, read_loop
     from monitor.model.modelfile import load_model
+    from monitor.offline.recordings import read_loop
 
     cfg = load_config(args.config)
     loop = next((lc for lc in cfg.monitored_loops if lc.name == args.loop), None)

@@ -244,8 +244,8 @@ def _check_input(
 
 def run(args: argparse.Namespace) -> int:
     from monitor.config.settings import load_config
-    from monitor.live.loops import read_loop
     from monitor.model.modelfile import load_model, save_model
+    from monitor.offline.recordings import read_loop
     from monitor.training.train import train
 
     cfg = TrainConfig(

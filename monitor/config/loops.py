@@ -11,7 +11,7 @@ and ``RodPos: null`` says the loop has no rod position (a swing motor).
 Without a ``loops`` section the daemon monitors one loop, ``boom``: the top-level ``model``,
 the contract names, MON_Alarm and ``j1939.source_address`` (the behaviour before loops).
 Checks against the DBC (do the signals and messages exist) happen where the DBC is loaded
-(``monitor.live.loops``); here only the section's own shape is checked.
+(``monitor.config.layout``); here only the section's own shape is checked.
 """
 
 from __future__ import annotations

@@ -6,7 +6,6 @@ FLEET/<machine_id>/logs/*.log|*.csv           operating logs; file-name order is
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,12 +49,3 @@ def scan_fleet(root: Path) -> Fleet:
     if not machines:
         raise InputFileError(f"{root}: no machine folders (expected FLEET/<machine_id>/logs/)")
     return Fleet(root, machines)
-
-
-def sha256_file(path: Path) -> str:
-    """Hex SHA-256 of a file's bytes (read in 1 MiB blocks)."""
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()

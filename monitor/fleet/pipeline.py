@@ -86,7 +86,7 @@ def train_model_bytes(
     """`monitor train REC... --out M --folds 4 --bias off [--isolation I] [--reference R]`
     with its other defaults (:data:`COMMISSIONING`): the model file's bytes
     (``reference``: the reference model's bytes)."""
-    from monitor.live.loops import read_loop
+    from monitor.offline.recordings import read_loop
     from monitor.training.settings import TrainConfig
     from monitor.training.train import train
 
@@ -147,7 +147,7 @@ def statistic_ratios(summary: dict[str, Any]) -> dict[str, float | None]:
 def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> Judged:
     """`monitor detect PATH --model M --j-every 0`: its summary as row keys, its events."""
     from monitor.detection.offline import detect
-    from monitor.live.loops import read_loop
+    from monitor.offline.recordings import read_loop
 
     cfg = _config(config_path)
     model = model_from_bytes(model_bytes)

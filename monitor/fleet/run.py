@@ -19,8 +19,9 @@ from typing import Any
 
 from monitor.errors import MonitorError
 from monitor.fleet import pipeline
-from monitor.fleet.layout import Fleet, Machine, scan_fleet, sha256_file
+from monitor.fleet.layout import Fleet, Machine, scan_fleet
 from monitor.fleet.store import ResultStore
+from monitor.io.digest import sha256_file
 
 Say = Callable[[str], None]
 

@@ -40,13 +40,14 @@ import can
 from monitor.bus.reader import BusReader, open_bus
 from monitor.bus.recovery import Backoff
 from monitor.codec.frames import FrameCodec
+from monitor.config.layout import row_layout
 from monitor.config.settings import MonitorConfig
 from monitor.detection.alarm import State
 from monitor.detection.ticker import Tick, Ticker
 from monitor.live.blackbox import BlackBox
 from monitor.live.dm1 import Diagnostics
 from monitor.live.eventlog import bus_event_record
-from monitor.live.loops import Loop, row_layout, worst_state
+from monitor.live.loops import Loop, worst_state
 from monitor.live.outputs import AlarmFrames, EventLog, TokenBucket
 from monitor.live.pipeline import FramePipeline
 from monitor.live.reload import Reload, Reloader, prepare

@@ -32,11 +32,11 @@ import can
 import numpy as np
 
 from monitor.codec.frames import FrameCodec
+from monitor.config.layout import rod_columns
 from monitor.detection.ticker import Tick
 from monitor.io.candump import MAX_TIMESTAMP_S
 from monitor.live.loops import Loop
 from monitor.sampling.sampler import Sampler, hydraulic_messages
-from monitor.signals import ROD_POS
 
 log = logging.getLogger("monitor")
 
@@ -61,8 +61,8 @@ class FramePipeline:
         self.codec = codec
         self.loops = loops
         # A loop's rod sensor is optional: it never holds the first rows back (warming).
-        rods = {lp.cfg.dbc_signal(ROD_POS.name) for lp in loops}
-        self.sampler = Sampler.for_codec(codec, columns=columns, optional=rods - {None})
+        optional = rod_columns(lp.cfg for lp in loops)
+        self.sampler = Sampler.for_codec(codec, columns=columns, optional=optional)
         self._hydraulic = hydraulic_messages(codec, columns)
         self._diags = [lp.diag for lp in loops if lp.diag is not None]  # kept on reload
         self._send = send

@@ -21,8 +21,9 @@ from typing import Any, NamedTuple
 
 from monitor.config.settings import MonitorConfig, load_config
 from monitor.detection.ticker import Ticker
+from monitor.io.digest import sha256_file
 from monitor.live.eventlog import EventLog
-from monitor.live.loops import Loop, file_digest
+from monitor.live.loops import Loop
 from monitor.live.storage import Quota
 from monitor.model.modelfile import MonitorModel
 
@@ -48,7 +49,7 @@ def prepare(current: MonitorConfig, loops: Sequence[Loop], quota: Quota) -> Relo
         same_rules = ticker_rules(cfg) == ticker_rules(current)
         loaded: list[tuple[MonitorModel, Ticker, str] | None] = []
         for lc, lp in zip(cfg.monitored_loops, loops, strict=True):
-            digest = file_digest(lc.model)
+            digest = sha256_file(lc.model)
             if digest == lp.digest and same_rules:
                 loaded.append(None)  # the same model, judged the same way: keep its ticker
             else:

@@ -1,0 +1,1 @@
+"""Reading recordings for the offline tools as the daemon would see them on the bus."""

@@ -1,0 +1,86 @@
+"""Recordings of one loop of a log with several loops' frames, and several loops' recordings
+as one: ``monitor detect``/``train --loop``, the fleet and the benchmarks read logs here, on
+the daemon's row layout (``monitor.config.layout``) and sample clock, without the daemon.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from monitor.codec.frames import FrameCodec
+from monitor.config.layout import OTHER, rod_columns, row_layout
+from monitor.config.settings import MonitorConfig
+from monitor.errors import ConfigError, InputFileError, NoHydraulicDataError
+from monitor.io.recording import Recording
+from monitor.sampling.bulk import recording_from_candump_bulk
+from monitor.sampling.read import read_recording
+from monitor.sampling.sampler import ROW_COLUMNS
+from monitor.signals import ROD_POS
+
+
+def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording:
+    """Loop ``name``'s signals of a candump log with several loops' frames, under the
+    contract names, on the daemon's sample clock (which starts at the first frame of any
+    loop, so the rows are the ones the daemon ticks)."""
+    names = [lc.name for lc in cfg.monitored_loops]
+    if name not in names:
+        raise ConfigError(f"{cfg.source}: no loop {name!r}; loops: {', '.join(names)}")
+    if Path(path).suffix.lower() == ".csv":
+        raise InputFileError(f"{path}: a contract CSV holds one loop; --loop reads a candump log")
+    codec = FrameCodec.from_dbc(cfg.dbc)
+    columns, views = row_layout(cfg, codec)
+    optional = rod_columns(cfg.monitored_loops)
+    wide = recording_from_candump_bulk(path, codec, columns, optional=optional)
+    view = views[names.index(name)]
+    picked = {
+        contract: wide[col]
+        for col, contract in zip(columns, view, strict=True)
+        if not contract.startswith(OTHER) and wide.has(col)
+    }
+    # The signals the loop renames are its own; a log without any of them is not its log.
+    own = [col for col, c in zip(columns, view, strict=True)
+           if not c.startswith(OTHER) and col != c]  # fmt: skip
+    if own and not any(wide.has(c) and np.isfinite(wide[c]).any() for c in own):
+        raise NoHydraulicDataError(f"{path}: no frame carries loop {name}'s own signals "
+                                   f"({', '.join(own)}) in {cfg.dbc}")  # fmt: skip
+    rod = picked.get(ROD_POS.name)
+    if rod is not None and not np.isfinite(rod).any():
+        del picked[ROD_POS.name]  # as without a rod sensor: the column is left out
+    meta = {**wide.meta, "loop": name}
+    return Recording(t=wide.t, columns=picked, source=f"{path} (loop {name})", meta=meta)
+
+
+def read_loop(path: str | Path, cfg: MonitorConfig, name: str | None) -> Recording:
+    """``monitor detect``/``train`` input: loop ``name`` of a log with several loops, or
+    (``name`` None) the recording itself."""
+    if name is None:
+        return read_recording(path, cfg.dbc)  # the config's DBC, as the daemon reads the bus
+    if Path(path).is_dir():
+        raise InputFileError(f"{path}: is a folder; give a recording (.log or .csv) in it")
+    if not Path(path).is_file():
+        raise InputFileError(f"{path}: no such file")
+    return loop_recording(path, cfg, name)
+
+
+def wide_recording(cfg: MonitorConfig, recordings: dict[str, Recording]) -> Recording:
+    """The inverse of ``loop_recording``: one recording per loop (contract names, one
+    time base) as one recording under the DBC's signal names, for ``write_candump`` with
+    the config's DBC.  A signal several loops share (EngineSpeed, OilTemp) comes from the
+    first loop's recording."""
+    loops = cfg.monitored_loops
+    missing = [lc.name for lc in loops if lc.name not in recordings]
+    if missing:
+        raise ValueError(f"no recording for loop(s) {', '.join(missing)}")
+    first = recordings[loops[0].name]
+    columns: dict[str, np.ndarray] = {}
+    for lc in loops:
+        rec = recordings[lc.name]
+        if len(rec) != len(first) or not np.allclose(rec.t, first.t):
+            raise ValueError(f"loop {lc.name}'s recording is not on the first loop's time base")
+        for contract in ROW_COLUMNS:
+            name = lc.dbc_signal(contract)
+            if name is not None and rec.has(contract) and name not in columns:
+                columns[name] = rec[contract]
+    return Recording(t=first.t, columns=columns, source="+".join(recordings), meta={})
