@@ -9,6 +9,7 @@ import can
 import cantools
 import numpy as np
 import pytest
+from naive import read_candump_lines, recording_from_candump
 from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS, TORN_LOGS
 
 from monitor.codec import FrameCodec
@@ -22,7 +23,6 @@ from monitor.io.candump_bulk import read_candump_frames
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
 from monitor.sampling.bulk import recording_from_candump_bulk
-from monitor.sampling.sampler import recording_from_candump
 from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine
@@ -70,7 +70,7 @@ def test_malformed_real_logs_name_the_same_line(name, line):
 def test_torn_real_log_gives_the_frames_before_the_tear(name, line):
     """Both readers stop at the torn line: every whole line before it, nothing else."""
     bulk = read_candump_frames(REAL_LOGS / name)
-    slow = list(read_candump(REAL_LOGS / name))
+    slow = list(read_candump_lines(REAL_LOGS / name))
     assert len(bulk) == len(slow) == line - 1
     assert np.array_equal(bulk.timestamp, [m.timestamp for m in slow])
 
@@ -88,6 +88,14 @@ def test_line_variants_and_errors(tmp_path):
         "(1.600000)\tcan0 7FF#01\n"  # tab
     )
     assert_same_frames(log)
+    # The messages of the one parser (replay's) are python-can's, line by line.
+    fields = ("timestamp", "arbitration_id", "is_extended_id", "is_remote_frame",
+              "is_error_frame", "is_fd", "bitrate_switch", "error_state_indicator")  # fmt: skip
+    got, ref = list(read_candump(log)), list(read_candump_lines(log))
+    assert [[getattr(m, f) for f in fields] for m in got] == [
+        [getattr(m, f) for f in fields] for m in ref
+    ]
+    assert [bytes(m.data or b"") for m in got] == [bytes(m.data or b"") for m in ref]
     bad = tmp_path / "bad.log"
     bad.write_text("(1.000000) can0 123#00\n(1.0) can0 123#ABC\n")
     with pytest.raises(InputFileError, match=r"bad\.log:2: not a candump -L line"):

@@ -33,6 +33,7 @@ from live_support import (
     settle,
     wait_until,
 )
+from naive import recording_from_candump
 
 from monitor.bus.reader import BusReader
 from monitor.bus.recovery import Backoff, error_frame_kind, is_link_error
@@ -47,7 +48,6 @@ from monitor.live.outputs import ALARM, fault_codes
 from monitor.live.pipeline import FramePipeline
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampling.sampler import recording_from_candump
 
 
 def enetdown(where: str = "receiving") -> can.CanOperationError:

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+from naive import recording_from_candump
 
 from monitor.cli import main
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
-from monitor.sampling.sampler import recording_from_candump
 from monitor.signals import CSV_COLUMNS, SIGNAL_NAMES
 
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from naive import recording_from_candump
 
 from monitor.cli import main
 from monitor.io.csvio import read_csv
-from monitor.sampling.sampler import recording_from_candump
 
 
 def test_simulate_csv_has_the_contract_columns_and_rodpos(tmp_path, capsys):

@@ -28,6 +28,7 @@ import yaml
 from fuzz_support import outcome
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
+from naive import recording_from_candump
 
 from monitor.config.settings import load_config
 from monitor.io.candump import read_candump
@@ -36,7 +37,6 @@ from monitor.io.csvio import read_csv
 from monitor.model.modelfile import _checksum, load_model
 from monitor.resources import resource_path
 from monitor.sampling.read import read_recording
-from monitor.sampling.sampler import recording_from_candump
 
 _ENV = os.environ.get("MONITOR_FUZZ_EXAMPLES")
 

@@ -10,6 +10,7 @@ import can
 import numpy as np
 import pytest
 from live_support import live_config, rows_of, settle, tick_recording, write_config
+from naive import recording_from_candump
 
 from monitor.bus.replay import replay_log
 from monitor.codec.frames import FrameCodec
@@ -27,7 +28,6 @@ from monitor.model.envelope import ValidityConfig, envelope_from_patterns
 from monitor.model.modelfile import load_model, save_model
 from monitor.model.residual import window_j
 from monitor.resources import resource_path
-from monitor.sampling.sampler import recording_from_candump
 from monitor.sim.cycles import make_cycle
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate

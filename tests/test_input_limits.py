@@ -12,6 +12,7 @@ import tracemalloc
 from pathlib import Path
 
 import pytest
+from naive import recording_from_candump
 
 from monitor.errors import InputFileError
 from monitor.io.candump import read_candump
@@ -20,7 +21,6 @@ from monitor.io.csvio import read_csv
 from monitor.resources import resource_path
 from monitor.sampling.bulk import recording_from_candump_bulk
 from monitor.sampling.read import read_recording
-from monitor.sampling.sampler import recording_from_candump
 
 REPLAY = sorted(resource_path("replay", "normal.log").parent.glob("*.log"))
 PRESSURES = "0CFF1021"  # HYD_Pressures: PP, PA, PB

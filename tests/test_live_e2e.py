@@ -11,6 +11,7 @@ from typing import Any
 import can
 import pytest
 from live_support import assert_same_events, live_config, replay_settled, run_daemon
+from naive import recording_from_candump
 
 from monitor.cli import main
 from monitor.codec.frames import FrameCodec
@@ -20,7 +21,6 @@ from monitor.io.candump import read_candump
 from monitor.live.outputs import ALARM, fault_codes
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampling.sampler import recording_from_candump
 
 LOG = resource_path("replay", "spool_wear.log")
 ONSET_S = 45.0  # replay/regenerate.sh

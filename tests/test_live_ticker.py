@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from live_support import assert_same_events, tick_recording
+from naive import recording_from_candump
 
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect
@@ -12,7 +13,6 @@ from monitor.detection.ticker import Ticker
 from monitor.io.recording import Recording
 from monitor.resources import resource_path
 from monitor.sampling.ring import RowRing
-from monitor.sampling.sampler import recording_from_candump
 
 CFG = load_config()
 

@@ -7,6 +7,7 @@ from typing import Any
 
 import can
 from live_support import assert_same_events, live_config, send_all, settle
+from naive import recording_from_candump
 
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect
@@ -14,7 +15,6 @@ from monitor.io.candump import read_candump
 from monitor.live.daemon import Daemon
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampling.sampler import recording_from_candump
 
 LOG = resource_path("replay", "spool_wear.log")
 SLOWER = 4.0

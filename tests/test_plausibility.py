@@ -8,6 +8,7 @@ import naive
 import numpy as np
 import pytest
 from live_support import tick_recording
+from naive import recording_from_candump
 
 from monitor.config.settings import load_config
 from monitor.detection.gating import GatingConfig
@@ -22,7 +23,6 @@ from monitor.detection.plausibility import (
 from monitor.detection.ticker import Ticker
 from monitor.io.recording import Recording
 from monitor.resources import resource_path
-from monitor.sampling.sampler import recording_from_candump
 from monitor.sim.cycles import make_cycle
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate

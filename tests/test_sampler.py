@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from naive import recording_from_candump
 from shared_data import GOOD_LOGS, REAL_LOGS
 
 from monitor.codec import FrameCodec
@@ -14,7 +15,7 @@ from monitor.codec.logwrite import write_candump
 from monitor.errors import InputFileError, NoHydraulicDataError
 from monitor.io.csvio import read_csv, write_csv
 from monitor.io.recording import Recording
-from monitor.sampling.sampler import ROW_COLUMNS, Sampler, recording_from_candump
+from monitor.sampling.sampler import ROW_COLUMNS, Sampler
 from monitor.signals import SIGNAL_NAMES
 
 # DBC resolution per signal: half a quantisation step is the largest round-trip error

@@ -21,6 +21,7 @@ from live_support import (
     run_daemon,
     tick_recording,
 )
+from naive import recording_from_candump
 
 from monitor.codec.j1939.dtc import PGN_DM1
 from monitor.config.settings import load_config
@@ -29,7 +30,6 @@ from monitor.detection.opstate import SilenceTracker, silent_source
 from monitor.detection.ticker import Ticker
 from monitor.io.recording import Recording
 from monitor.resources import resource_path
-from monitor.sampling.sampler import recording_from_candump
 
 CFG = load_config()
 COMMANDS = "0CFF1203#"  # HYD_Commands (dbc: BO_ 2365526531 = 0x8CFF1203, extended)

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 import pytest
 from live_support import REPO, start_daemon, wait_for_text, wait_until, write_config
+from naive import recording_from_candump
 from vcan_support import (
     CHANNEL,
     SLOWER,
@@ -52,7 +53,6 @@ from monitor.detection.offline import detect
 from monitor.io.candump import format_line
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
-from monitor.sampling.sampler import recording_from_candump
 
 pytestmark = [pytest.mark.vcan, pytest.mark.skipif(vcan_missing() is not None,
                                                    reason=str(vcan_missing()))]  # fmt: skip

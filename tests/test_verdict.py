@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from naive import recording_from_candump
 
 from monitor.codec.logwrite import write_candump
 from monitor.io.recording import Recording
 from monitor.resources import resource_path
 from monitor.sampling.read import read_recording
-from monitor.sampling.sampler import recording_from_candump
 
 WINDOW_S = 30.0  # the shipped model's J window: N = 3000 samples at 100 Hz
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from j1939_support import DM1_ID, decode_dm, reassemble
 from live_support import assert_same_events, live_config, replay_settled, run_daemon
+from naive import recording_from_candump
 
 from monitor.cli import main
 from monitor.codec.frames import FrameCodec
@@ -23,7 +24,6 @@ from monitor.live.outputs import ALARM
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
 from monitor.sampling.bulk import recording_from_candump_bulk
-from monitor.sampling.sampler import recording_from_candump
 
 LOG = resource_path("replay", "normal.log")
 OIL = "18FF1300#"  # HYD_OilTemp, sent once a second

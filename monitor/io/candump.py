@@ -12,10 +12,8 @@ import logging
 import re
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TextIO
 
 import can
-from can.io.canutils import CanutilsLogReader
 
 from monitor.errors import InputFileError
 
@@ -105,70 +103,14 @@ def too_long_line(path: Path, line_no: int) -> InputFileError:
     )
 
 
-class _CheckedLines:
-    """The log's lines, each checked against ``_LINE`` before python-can parses it.
-
-    python-can's CanutilsLogReader gives no line numbers and is lenient: a foreign line
-    such as ``0x1dc`` or a truncated last line ``(1606770`` raises a bare ValueError from
-    tuple unpacking, and odd-length data such as ``123#ABC`` decodes silently to wrong
-    bytes.  So we validate every line here (knowing its number) and let python-can build
-    the messages from lines we know are well formed.
-    """
-
-    def __init__(self, fh: TextIO, path: Path) -> None:
-        self._fh = fh
-        self._path = path
-        self.line_no = 0
-
-    def __iter__(self) -> Iterator[str]:
-        line_no = 0
-        while True:
-            # At most the limit (and a CRLF) at a time: one endless line must not be read whole.
-            line = self._fh.readline(MAX_LINE_BYTES + 2)
-            if not line:
-                return
-            line_no += 1
-            self.line_no = line_no  # read by _messages when python-can itself fails
-            if len(line) - line.endswith("\n") - line.rstrip("\n").endswith("\r") > MAX_LINE_BYTES:
-                raise too_long_line(self._path, line_no)
-            if "\x00" in line and line.endswith("\n"):
-                raise nul_line(self._path, line_no)
-            text = line.strip()
-            problem = line_problem(text) if text else None
-            if problem:
-                skip_odd_line(text, self._path, line_no, not line.endswith("\n"), problem)
-                continue
-            yield line
-
-    def close(self) -> None:
-        self._fh.close()
-
-
 def read_candump(path: str | Path) -> Iterator[can.Message]:
-    """Messages of a candump log, in file order, read with python-can's CanutilsLogReader.
+    """Messages of a candump log, in file order, from the one parser
+    (``monitor.io.candump_bulk.read_candump_frames``).
 
-    The file is opened at once (a missing file fails here); a malformed line raises
-    ``InputFileError`` naming file and line when iteration reaches it.  Blank lines, comment
+    The whole file is read and checked first: a missing file or a malformed line raises
+    ``InputFileError`` naming file and line before the first message.  Blank lines, comment
     lines and a torn last line are skipped (``skip_odd_line``).
     """
-    p = Path(path)
-    try:
-        # errors="replace": a binary or non-ASCII line becomes a line error, not a crash.
-        # newline="\n": lines end at LF only (a CR LF's CR is stripped with the line), as in
-        # the bulk reader; a lone CR is inside a line, which is then malformed.
-        fh = p.open("r", encoding="utf-8", errors="replace", newline="\n")
-    except OSError as exc:
-        raise InputFileError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    return _messages(_CheckedLines(fh, p), p)
+    from monitor.io.candump_bulk import read_candump_frames  # it builds on this module
 
-
-def _messages(lines: _CheckedLines, path: Path) -> Iterator[can.Message]:
-    reader = CanutilsLogReader(lines)
-    try:
-        yield from reader
-    except InputFileError:
-        raise
-    except (ValueError, IndexError) as exc:  # a line our check let through but can cannot use
-        raise InputFileError(f"{path}:{lines.line_no}: unreadable candump line: {exc}") from None
-    finally:
-        lines.close()
+    return read_candump_frames(path).messages()

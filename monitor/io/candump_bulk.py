@@ -1,7 +1,9 @@
 """candump -L logs read in bulk: the whole file into numpy arrays of frames, no per-line Python.
+The one candump parser: ``monitor detect`` takes the arrays, ``read_candump`` (replay onto a
+bus) the messages made of them.
 
-``read_candump`` (python-can's CanutilsLogReader behind a line check) builds one
-``can.Message`` per line, about 10 us each.  Here the file is one byte array: a numba pass
+python-can's CanutilsLogReader builds one ``can.Message`` per line, about 10 us each, and is
+lenient with malformed lines.  Here the file is one byte array: a numba pass
 finds each line's bounds, its two spaces and its ``#``, a second one turns the fields of
 the plain lines into timestamp, id and data bytes (hex by table lookup).  Timestamps are
 N / 10^k with exact N and 10^k, so IEEE division gives the correctly rounded value that
@@ -11,13 +13,13 @@ ones).
 Only the plain form ``(SECONDS) IFACE ID#HEXDATA`` (classic frame, 0-8 bytes, single spaces,
 optional ``\\r``) takes the fast path.  Any other line (remote, CAN FD, direction flag,
 tabs, stray text) goes through the line check and python-can's reader, one line at a time,
-so it means what it means in ``read_candump``, and a malformed line raises the same
-``InputFileError`` naming file and line.
+so it means what it means to python-can, and a malformed line raises an ``InputFileError``
+naming file and line (``line_problem``).
 
 The file is read in chunks, each checked before the next: a line longer than
 ``MAX_LINE_BYTES`` or a NUL byte in a whole line stops the read there (a binary file, a
 2 GB sparse file), so refusing it costs one chunk of memory, not the file.  (So the line
-named may come after a malformed line that ``read_candump`` would name first.)  The lines
+named may come after a malformed line that a line-by-line reader would name first.)  The lines
 are parsed a block at a time, so the memory beyond the frames kept is one block's.
 """
 
@@ -58,7 +60,8 @@ _POW10 = np.array([float(10**k) for k in range(23)])  # exact doubles up to 1e22
 class Frames:
     """Frames of a log in file order (the fields of python-can's Message that decoding uses).
 
-    ``data`` is (n, width) zero-padded, ``length`` the number of data bytes (0 for remote).
+    ``data`` is (n, width) zero-padded, ``length`` the number of data bytes (0 for remote);
+    ``fd`` marks CAN FD frames, ``brs``/``esi`` their bit-rate-switch and error-state flags.
     """
 
     timestamp: np.ndarray  # float64, s
@@ -68,9 +71,28 @@ class Frames:
     error: np.ndarray  # bool
     length: np.ndarray  # int64
     data: np.ndarray  # uint8 (n, width)
+    fd: np.ndarray  # bool
+    brs: np.ndarray  # bool
+    esi: np.ndarray  # bool
 
     def __len__(self) -> int:
         return int(self.timestamp.shape[0])
+
+    def messages(self) -> Iterator[can.Message]:
+        """The frames as python-can messages, in file order (as python-can's reader makes
+        them of the lines, without the interface name and direction)."""
+        cols = zip(self.timestamp.tolist(), self.can_id.tolist(), self.extended.tolist(),
+                   self.remote.tolist(), self.error.tolist(), self.length.tolist(),
+                   self.fd.tolist(), self.brs.tolist(), self.esi.tolist(), strict=True)  # fmt: skip
+        for i, (ts, can_id, ext, remote, error, n, fd, brs, esi) in enumerate(cols):
+            if error:
+                yield can.Message(timestamp=ts, is_error_frame=True)
+                continue
+            yield can.Message(
+                timestamp=ts, arbitration_id=can_id, is_extended_id=ext, is_remote_frame=remote,
+                dlc=None if remote else n, data=None if remote else self.data[i, :n].tobytes(),
+                is_fd=fd, bitrate_switch=brs, error_state_indicator=esi,
+            )
 
 
 def read_candump_frames(path: str | Path) -> Frames:
@@ -112,7 +134,8 @@ def _concat(parts: list[Frames]) -> Frames:
                            for f in parts])  # fmt: skip
     cols = [np.concatenate([getattr(f, k) for f in parts])
             for k in ("timestamp", "can_id", "extended", "remote", "error", "length")]  # fmt: skip
-    return Frames(*cols, data)
+    flags = [np.concatenate([getattr(f, k) for f in parts]) for k in ("fd", "brs", "esi")]
+    return Frames(*cols, data, *flags)
 
 
 _CHUNK = 1 << 18
@@ -335,8 +358,9 @@ def _merge(fast: dict[str, np.ndarray], fast_lines: np.ndarray, slow: list) -> F
     if ns == 0:  # every line plain: already in file order
         error = ((fast["can_id"] & CAN_ERR_FLAG) != 0) & ((fast["can_id"] & CAN_ERR_BUSERROR) != 0)
         can_id = np.where(error, 0, fast["can_id"] & 0x1FFFFFFF)
-        return Frames(fast["timestamp"], can_id, fast["extended"] | error,
-                      np.zeros(nf, dtype=bool), error, fast["length"], fast["data"])  # fmt: skip
+        no = np.zeros(nf, dtype=bool)
+        return Frames(fast["timestamp"], can_id, fast["extended"] | error, no, error,
+                      fast["length"], fast["data"], no, no, no)  # fmt: skip
     width = max([8] + [len(m.data or b"") for _, m in slow])
     line = np.concatenate([fast_lines, np.array([i for i, _ in slow], dtype=np.int64)])
     order = np.argsort(line, kind="stable")
@@ -352,12 +376,14 @@ def _merge(fast: dict[str, np.ndarray], fast_lines: np.ndarray, slow: list) -> F
     can_id[:nf][error[:nf]] = 0  # as python-can's error Message: id 0, extended
     extended[:nf][error[:nf]] = True
     length = np.concatenate([fast["length"], np.zeros(ns, np.int64)])
+    fd, brs, esi = (np.zeros(nf + ns, dtype=bool) for _ in range(3))
     for k, (_, m) in enumerate(slow, start=nf):
         m: can.Message
         can_id[k], extended[k] = m.arbitration_id, m.is_extended_id
         remote[k], error[k] = m.is_remote_frame, m.is_error_frame
+        fd[k], brs[k], esi[k] = m.is_fd, m.bitrate_switch, m.error_state_indicator
         payload = b"" if m.is_remote_frame or m.data is None else bytes(m.data)
         length[k] = len(payload)
         data[k, : len(payload)] = np.frombuffer(payload, dtype=np.uint8)
     return Frames(ts[order], can_id[order], extended[order], remote[order], error[order],
-                  length[order], data[order])  # fmt: skip
+                  length[order], data[order], fd[order], brs[order], esi[order])  # fmt: skip

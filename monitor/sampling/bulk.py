@@ -1,7 +1,7 @@
 """A candump log to a 100 Hz ``Recording`` in bulk: the offline path of ``monitor detect``.
 
-Same result as ``monitor.sampling.sampler.recording_from_candump`` (python-can reader -> FrameCodec
--> Sampler, frame by frame), computed in three array passes:
+The rows the daemon's ``Sampler`` makes of the same frames fed one by one (tests hold it
+equal to that frame-by-frame reference, ``tests/naive.py``), computed in three array passes:
 
 1. ``read_candump_frames``: the log as arrays of frames (``monitor.io.candump_bulk``);
 2. ``decode_frames``: checks and physical values per message ID (``monitor.codec.bulk``);
@@ -107,8 +107,14 @@ def recording_from_candump_bulk(
     columns: tuple[str, ...] = ROW_COLUMNS,
     optional: Collection[str] = (ROD_POS.name,),
 ) -> Recording:
-    """``recording_from_candump`` computed in bulk: same rows, columns, meta and errors
-    (``columns`` and ``optional`` as for ``Sampler``)."""
+    """A candump log as a 100 Hz ``Recording`` (RodPos only when the log has it): the rows
+    of ``Sampler``, frame by frame, computed in bulk.
+
+    ``meta["counts"]`` holds the log's frame counts: frames read, decoded, ignored (unknown
+    id), rejected by reason, counter jumps, and the sampler's time counts.  Raises
+    ``InputFileError`` for a malformed line or a log needing more than ``row_limit(frames)``
+    rows, and ``NoHydraulicDataError`` (exit 3) when no valid hydraulic frame of the DBC is
+    in the log.  ``columns`` and ``optional`` as for ``Sampler``."""
     codec = codec or FrameCodec.from_dbc()
     # Its parameters, staleness and warming rows, not its feed().
     sampler = Sampler.for_codec(codec, columns=columns, optional=optional)

@@ -29,8 +29,8 @@ def read_recording(path: str | Path, dbc: str | Path | None = None) -> Recording
         from monitor.io.csvio import read_csv
 
         return read_csv(path)
-    # The bulk path gives the Recording of monitor.sampling.sampler.recording_from_candump (the
-    # daemon's frame-by-frame path), tested equal, some 20x faster.
+    # The bulk path gives the rows of the daemon's frame-by-frame Sampler (tested equal),
+    # some 20x faster.
     from monitor.codec.frames import FrameCodec
     from monitor.sampling.bulk import recording_from_candump_bulk
 

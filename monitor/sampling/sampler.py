@@ -51,8 +51,6 @@ import numpy as np
 
 from monitor.codec.frames import FrameCodec
 from monitor.errors import InputFileError, NoHydraulicDataError
-from monitor.io.candump import read_candump
-from monitor.io.recording import Recording
 from monitor.sampling.clock import S_HELD, S_NEWEST, S_OFFSET, S_RESUMES, clock_step, new_state
 from monitor.signals import ROD_POS, SAMPLE_PERIOD_S, SIGNAL_NAMES
 
@@ -327,75 +325,6 @@ def no_hydraulic_data(path: str | Path, counts: Mapping[str, Any]) -> NoHydrauli
         + (f"; rejected: {rejected}" if rejected else "")
         + ")"
     )
-
-
-def recording_from_candump(path: str | Path, codec: FrameCodec | None = None) -> Recording:
-    """Decode a candump log into a 100 Hz ``Recording`` (RodPos only when the log has it).
-
-    ``meta["counts"]`` holds the log's frame counts: frames read, decoded, ignored
-    (unknown id), rejected by reason, counter jumps, and the sampler's time counts.
-    Raises ``InputFileError`` for a malformed line or a log needing more than
-    ``row_limit(frames)`` rows, and ``NoHydraulicDataError`` (exit 3) when no valid
-    hydraulic frame of the DBC is in the log.
-    """
-    codec = codec or FrameCodec.from_dbc()
-    codec.reset_counters()
-    sampler = Sampler.for_codec(codec)
-    hydraulic = hydraulic_messages(codec)
-    # The frames are known only at the end; the file's lines bound them, so rows beyond
-    # row_limit(lines) are refused anyway and need not be kept (lines counted when needed).
-    most: int | None = None
-    chunks: list[np.ndarray] = []
-    decode, feed = codec.decode_message, sampler.feed
-    first, last = math.inf, -math.inf
-    fed = 0
-    for msg in read_candump(path):
-        d = decode(msg)
-        if d.rejection is None and d.name in hydraulic:
-            feed(msg.timestamp, d.name, d.values)  # type: ignore[arg-type]
-            fed += 1
-            first, last = min(first, msg.timestamp), max(last, msg.timestamp)
-            if sampler.pending >= 8192:  # lists of floats cost more memory than arrays
-                rows = sampler.take()
-                if most is None and sampler.rows > MIN_ROW_LIMIT:
-                    most = row_limit(_count_lines(path))
-                if most is None or sampler.rows <= most:
-                    chunks.append(rows)
-    counts = {**codec.counts.as_dict(), **sampler.counts.as_dict()}
-    if not sampler.started:
-        raise no_hydraulic_data(path, counts)
-    chunks.append(sampler.flush())
-    frames = counts["frames"]
-    if sampler.rows > row_limit(frames):
-        raise too_many_rows(path, sampler.rows, frames, last - first, counts["time_resyncs"])
-    if err := runs_backwards(path, fed, counts):
-        raise err
-    rows = np.concatenate(chunks)
-    columns = {
-        name: rows[:, 1 + i]
-        for i, name in enumerate(sampler.columns)
-        if name != ROD_POS.name or ROD_POS.name in sampler.seen
-    }
-    meta: dict[str, object] = {
-        "format": "candump",
-        "start_time_s": sampler.start_time_s,
-        "counts": counts,
-    }
-    return Recording(t=rows[:, 0], columns=columns, source=str(path), meta=meta)
-
-
-def _count_lines(path: str | Path) -> int:
-    """Lines of a file (an unterminated last one counted), read in chunks; 0 if unreadable
-    (``read_candump`` then says why)."""
-    n, last = 0, b"\n"
-    try:
-        with open(path, "rb") as fh:
-            while chunk := fh.read(1 << 20):
-                n += chunk.count(b"\n")
-                last = chunk[-1:]
-    except OSError:
-        return 0
-    return n + (last != b"\n")
 
 
 _ID_MASK_EXT = 0x1FFFFFFF
