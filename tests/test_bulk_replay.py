@@ -14,7 +14,7 @@ from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS, TORN_LOGS
 
 from monitor.codec import FrameCodec
 from monitor.codec.bulk import decode_frames, raw_values
-from monitor.codec.frames import MessageInfo, _message_info
+from monitor.codec.layout import MessageInfo, message_info
 from monitor.codec.logwrite import write_candump
 from monitor.detection.offline import detect
 from monitor.errors import InputFileError, NoHydraulicDataError
@@ -144,12 +144,16 @@ def test_bit_layouts_from_cantools_incl_big_endian_and_signed():
             cantools.database.can.Signal("CRC8", start=56, length=8),
         ],
     )  # fmt: skip
-    info: MessageInfo = _message_info(msg)
+    info: MessageInfo = message_info(msg)
     data = np.random.default_rng(0).integers(0, 256, (500, 8), dtype=np.uint8)
     raw = raw_values(info, data)
     for i in range(500):
         ref = msg.decode(bytes(data[i]), scaling=False, decode_choices=False)
         assert {s: int(raw[s][i]) for s in "ABCD"} == {s: ref[s] for s in "ABCD"}
+        # The frame-by-frame decoder reads the same layout.
+        b = bytes(data[i])
+        little, big = int.from_bytes(b, "little"), int.from_bytes(b, "big")
+        assert {s.name: s.raw(little, big) for s in info.signals} == {s: ref[s] for s in "ABCD"}
 
 
 # --------------------------------------------------------------------------- recordings

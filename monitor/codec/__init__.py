@@ -2,14 +2,8 @@
 
 from monitor.codec.crc import crc8_sae_j1850
 from monitor.codec.dbc import default_dbc_path, load_dbc
-from monitor.codec.frames import (
-    DecodeCounts,
-    Decoded,
-    FrameCodec,
-    MessageInfo,
-    Rejection,
-    SignalInfo,
-)
+from monitor.codec.frames import DecodeCounts, Decoded, FrameCodec, Rejection
+from monitor.codec.layout import MessageInfo, SignalInfo
 
 __all__ = [
     "DecodeCounts",

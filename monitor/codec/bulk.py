@@ -3,9 +3,9 @@
 The checks and counts are those of ``FrameCodec.decode`` frame by frame, in the same order:
 unknown id (ignored), DLC not 8, CRC-8 over bytes 0-6, alive counter continuity (counted,
 the frame kept; only frames with a good CRC move the counter), raw value outside the DBC
-range.  Bit positions, lengths, byte order and signedness come from cantools' signal
-objects (``cantools.database.utils.start_bit`` for big-endian signals); scaling and raw
-ranges from the codec's ``SignalInfo``, so both paths share one reading of the DBC.
+range.  Bit positions, lengths, byte order, signedness, scaling and raw ranges come from
+the message layout (``monitor.codec.layout``, read once from the DBC with cantools) and
+the CRC from ``monitor.codec.crc``'s table, as in ``FrameCodec.decode``.
 """
 
 from __future__ import annotations
@@ -13,22 +13,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from cantools.database.utils import start_bit
 
-from monitor.codec.crc import _INIT, _TABLE, _XOROUT
-from monitor.codec.frames import (
+from monitor.codec.crc import crc8_rows
+from monitor.codec.frames import DecodeCounts, FrameCodec, Rejection
+from monitor.codec.layout import (
     COUNTER_BYTE,
     COUNTER_MODULO,
     CRC_BYTE,
     FRAME_LENGTH,
-    DecodeCounts,
-    FrameCodec,
     MessageInfo,
-    Rejection,
 )
 from monitor.io.candump_bulk import Frames
-
-_CRC_TABLE = np.frombuffer(_TABLE, dtype=np.uint8)
 
 
 @dataclass
@@ -39,32 +34,18 @@ class DecodedMessage:
     values: dict[str, np.ndarray]  # signal -> float64 per accepted frame
 
 
-def crc8_rows(data: np.ndarray) -> np.ndarray:
-    """CRC-8/SAE-J1850 of bytes 0-6 of every row (the table of ``monitor.codec.crc``)."""
-    reg = np.full(data.shape[0], _INIT, dtype=np.uint8)
-    for b in range(CRC_BYTE):
-        reg = _CRC_TABLE[reg ^ data[:, b]]
-    return reg ^ np.uint8(_XOROUT)
-
-
 def raw_values(info: MessageInfo, data: np.ndarray) -> dict[str, np.ndarray]:
-    """Raw integer of each physical signal of ``info`` in every row of 8-byte ``data``."""
+    """Raw integer of each physical signal of ``info`` in every row of 8-byte ``data`` (the
+    bits where the layout says)."""
     b = np.ascontiguousarray(data[:, :FRAME_LENGTH])
     little = b.view("<u8").ravel()
     big = b.view(">u8").ravel()
-    by_name = {s.name: s for s in info.dbc_message.signals}
     out = {}
     for sig in info.signals:
-        s = by_name[sig.name]
-        mask = np.uint64((1 << s.length) - 1)
-        if s.byte_order == "little_endian":
-            raw = (little >> np.uint64(s.start)) & mask
-        else:  # start_bit: the msb's position counted from byte 0's msb
-            raw = (big >> np.uint64(64 - start_bit(s) - s.length)) & mask
-        raw = raw.astype(np.int64)
-        if s.is_signed:
-            half = 1 << (s.length - 1)
-            raw = np.where(raw >= half, raw - (1 << s.length), raw)
+        word = big if sig.big_endian else little
+        raw = ((word >> np.uint64(sig.shift)) & np.uint64(sig.mask)).astype(np.int64)
+        if sig.signed:
+            raw = np.where(raw >> (sig.length - 1) != 0, raw - (1 << sig.length), raw)
         out[sig.name] = raw
     return out
 
@@ -88,7 +69,7 @@ def decode_frames(codec: FrameCodec, frames: Frames) -> dict[str, DecodedMessage
         counts.reject(info.name, Rejection.DLC.value, int((~dlc_ok).sum()))
         rows = rows[dlc_ok]
         data = frames.data[rows, :FRAME_LENGTH]
-        crc_ok = crc8_rows(data) == data[:, CRC_BYTE]
+        crc_ok = crc8_rows(data[:, :CRC_BYTE]) == data[:, CRC_BYTE]
         counts.reject(info.name, Rejection.CRC.value, int((~crc_ok).sum()))
         rows, data = rows[crc_ok], data[crc_ok]
         counter = (data[:, COUNTER_BYTE] & 0x0F).astype(np.int64)

@@ -1,8 +1,8 @@
 """Per-frame work: physical signals <-> 8 data bytes with alive counter and CRC.
 
-The frame rules of docs/reference/contracts.md: every frame is 8 bytes, byte 6 low
-nibble is an alive counter (+1 mod 16 per frame of that message), byte 7 a
-CRC-8/SAE-J1850 over bytes 0-6.
+The frame rules (docs/reference/contracts.md) and where each signal's bits are: the
+message layout (``monitor.codec.layout``), which the bulk decoder (``monitor.codec.bulk``)
+reads too.
 ``FrameCodec`` precompiles what it needs per message once, so encode/decode only do
 the per-frame arithmetic.  It never raises for bad bus data: a decode returns either
 the physical values or a rejection reason.  Loading the DBC lives in ``monitor.codec.dbc``.
@@ -19,18 +19,20 @@ from typing import NamedTuple
 
 import can
 from cantools.database.can import Database
-from cantools.database.can import Message as DbcMessage
 
 from monitor.codec.crc import crc8_sae_j1850
 from monitor.codec.dbc import load_dbc
+from monitor.codec.layout import (
+    COUNTER_BYTE,
+    COUNTER_MODULO,
+    COUNTER_SIGNAL,
+    CRC_BYTE,
+    CRC_SIGNAL,
+    FRAME_LENGTH,
+    MessageInfo,
+    message_info,
+)
 from monitor.errors import ConfigError
-
-FRAME_LENGTH = 8
-COUNTER_SIGNAL = "AliveCounter"
-CRC_SIGNAL = "CRC8"
-COUNTER_BYTE = 6  # low nibble
-CRC_BYTE = 7
-COUNTER_MODULO = 16
 
 
 class Rejection(str, Enum):
@@ -40,35 +42,6 @@ class Rejection(str, Enum):
     CRC = "crc"  # byte 7 does not match the CRC of bytes 0-6
     RANGE = "range"  # a signal decodes outside its DBC [min, max]
     UNKNOWN_ID = "unknown_id"  # the frame is not in the DBC (foreign traffic)
-
-
-@dataclass(frozen=True)
-class SignalInfo:
-    """Scaling and the raw range that maps onto the DBC's [min, max]."""
-
-    name: str
-    scale: float
-    offset: float
-    raw_min: int
-    raw_max: int
-    phys_min: float  # on the quantisation grid, so a clipped value always re-decodes in range
-    phys_max: float
-
-
-@dataclass(frozen=True)
-class MessageInfo:
-    """What the codec precompiles for one DBC message."""
-
-    name: str
-    frame_id: int
-    is_extended_id: bool
-    cycle_time_s: float | None  # GenMsgCycleTime, None when the DBC gives none (or 0)
-    signals: tuple[SignalInfo, ...]  # physical signals, without counter and CRC
-    dbc_message: DbcMessage
-
-    @property
-    def signal_names(self) -> tuple[str, ...]:
-        return tuple(s.name for s in self.signals)
 
 
 class Decoded(NamedTuple):
@@ -130,56 +103,6 @@ class DecodeCounts:
         }
 
 
-def _signal_info(msg: DbcMessage, sig) -> SignalInfo:
-    conv = sig.conversion
-    scale = float(conv.scale)
-    offset = float(conv.offset)
-    if getattr(conv, "is_float", False) or scale == 0.0 or sig.multiplexer_ids:
-        raise ConfigError(f"message {msg.name}: signal {sig.name} must be a plain integer signal")
-    bit_min = -(1 << (sig.length - 1)) if sig.is_signed else 0
-    bit_max = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
-    lo_raw, hi_raw = bit_min, bit_max
-    if sig.minimum is not None and sig.maximum is not None:
-        a = (float(sig.minimum) - offset) / scale
-        b = (float(sig.maximum) - offset) / scale
-        lo, hi = min(a, b), max(a, b)
-        # 1e-9 absorbs float noise such as (400 - 0) / 0.01 = 40000.000000000004
-        lo_raw = max(bit_min, math.ceil(lo - 1e-9))
-        hi_raw = min(bit_max, math.floor(hi + 1e-9))
-    p1, p2 = lo_raw * scale + offset, hi_raw * scale + offset
-    return SignalInfo(sig.name, scale, offset, lo_raw, hi_raw, min(p1, p2), max(p1, p2))
-
-
-def _message_info(msg: DbcMessage) -> MessageInfo:
-    if msg.length != FRAME_LENGTH or msg.is_multiplexed():
-        raise ConfigError(f"message {msg.name}: must be a non-multiplexed 8-byte frame")
-    by_name = {s.name: s for s in msg.signals}
-    counter, crc_sig = by_name.get(COUNTER_SIGNAL), by_name.get(CRC_SIGNAL)
-    # Counter and CRC are read from fixed bytes (the contract), so the DBC must agree.
-    if (
-        counter is None
-        or crc_sig is None
-        or (counter.start, counter.length, counter.byte_order) != (48, 4, "little_endian")
-        or (crc_sig.start, crc_sig.length, crc_sig.byte_order) != (56, 8, "little_endian")
-    ):
-        raise ConfigError(
-            f"message {msg.name}: needs {COUNTER_SIGNAL} at bit 48 (4 bits) and "
-            f"{CRC_SIGNAL} at bit 56 (8 bits), little endian"
-        )
-    signals = tuple(
-        _signal_info(msg, s) for s in msg.signals if s.name not in (COUNTER_SIGNAL, CRC_SIGNAL)
-    )
-    cycle_ms = msg.cycle_time
-    return MessageInfo(
-        name=msg.name,
-        frame_id=msg.frame_id,
-        is_extended_id=bool(msg.is_extended_frame),
-        cycle_time_s=cycle_ms / 1000.0 if cycle_ms else None,
-        signals=signals,
-        dbc_message=msg,
-    )
-
-
 class FrameCodec:
     """Encode and check frames of one DBC; keeps alive-counter state per message.
 
@@ -192,7 +115,7 @@ class FrameCodec:
         self.messages: dict[str, MessageInfo] = {}
         self._by_id: dict[tuple[int, bool], MessageInfo] = {}
         for msg in db.messages:
-            info = _message_info(msg)
+            info = message_info(msg)
             self.messages[info.name] = info
             self._by_id[(info.frame_id, info.is_extended_id)] = info
         self._tx_counter: dict[str, int] = {}
@@ -298,10 +221,10 @@ class FrameCodec:
         if jump:
             counts.counter_jumps += 1
             counts.reject(name, "counter_jump")
-        raw = info.dbc_message.decode(bytes(data), decode_choices=False, scaling=False)
+        little, big = int.from_bytes(data, "little"), int.from_bytes(data, "big")
         values: dict[str, float] = {}
         for sig in info.signals:
-            r = raw[sig.name]
+            r = sig.raw(little, big)
             if r < sig.raw_min or r > sig.raw_max:
                 counts.reject(name, Rejection.RANGE.value)
                 return Decoded(name, None, Rejection.RANGE, jump)
