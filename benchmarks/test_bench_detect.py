@@ -15,7 +15,7 @@ from monitor.model.dgrnn import TickPredictor
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
 from monitor.sampling.bulk import recording_from_candump_bulk
-from tests.naive import recording_from_candump  # the frame-by-frame reference
+from tests.naive_frames import recording_from_candump  # the frame-by-frame reference
 
 MODEL = load_model(resource_path("config", "boom_default.model.npz"))
 LOG = resource_path("replay", "spool_wear.log")

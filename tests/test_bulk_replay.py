@@ -9,7 +9,7 @@ import can
 import cantools
 import numpy as np
 import pytest
-from naive import read_candump_lines, recording_from_candump
+from naive_frames import read_candump_lines, recording_from_candump
 from shared_data import BAD_LOGS, GOOD_LOGS, REAL_LOGS, TORN_LOGS
 
 from monitor.codec import FrameCodec

@@ -33,7 +33,7 @@ from live_support import (
     settle,
     wait_until,
 )
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.bus.reader import BusReader
 from monitor.bus.recovery import Backoff, error_frame_kind, is_link_error

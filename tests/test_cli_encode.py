@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.cli import main
 from monitor.io.csvio import write_csv

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.cli import main
 from monitor.io.csvio import read_csv

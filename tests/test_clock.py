@@ -1,11 +1,11 @@
 """The sample clock's step kernel (monitor.sampling.clock) against the recursive twin written
-from its rule in tests/naive.py, on log times that misbehave in every way the rule names."""
+from its rule in tests/naive_frames.py, on log times that misbehave in every way the rule names."""
 
 from __future__ import annotations
 
 import math
 
-import naive
+import naive_frames
 import numpy as np
 import pytest
 
@@ -69,7 +69,7 @@ def _step_all(ts: np.ndarray) -> tuple[np.ndarray, list[int], list[bool], list[i
 @pytest.mark.parametrize("seed", range(6))
 def test_step_kernel_frame_by_frame_and_in_bulk_match_the_rule(seed: int) -> None:
     ts = _hostile_times(seed)
-    want_st, want_order, want_resumes, want_counts = naive.sample_clock(
+    want_st, want_order, want_resumes, want_counts = naive_frames.sample_clock(
         ts, PERIOD, MAX_GAP, RESYNC, _EPS_S, OUTAGE_S
     )
     assert min(want_counts) > 0, "every rule exercised"

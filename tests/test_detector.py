@@ -207,7 +207,7 @@ def test_shipped_model_on_shipped_logs():
     """The packaged model against the packaged demo logs: no alarm on the normal log, the
     spool-wear log alarms after its onset at 45 s and names the fault."""
     model = load_model(resource_path("config", "boom_default.model.npz"))
-    from naive import recording_from_candump
+    from naive_frames import recording_from_candump
 
     normal = detect(model, recording_from_candump(resource_path("replay", "normal.log")))
     assert normal.summary["alarm"] is False
@@ -223,7 +223,7 @@ def test_csv_and_candump_give_the_same_verdict(tmp_path):
     args = ["--duration", "90", "--seed", "9004", "--fault", "spool_wear:0.6@45"]
     assert main(["simulate", *args, "--out", str(csv)]) == 0
     assert main(["simulate", *args, "--out", str(log)]) == 0
-    from naive import recording_from_candump
+    from naive_frames import recording_from_candump
 
     a = detect(model, read_csv(csv)).summary
     b = detect(model, recording_from_candump(log)).summary

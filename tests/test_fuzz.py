@@ -28,7 +28,7 @@ import yaml
 from fuzz_support import outcome
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.config.settings import load_config
 from monitor.io.candump import read_candump

@@ -10,7 +10,7 @@ import can
 import numpy as np
 import pytest
 from live_support import live_config, rows_of, settle, tick_recording, write_config
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.bus.replay import replay_log
 from monitor.codec.frames import FrameCodec

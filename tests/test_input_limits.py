@@ -12,7 +12,7 @@ import tracemalloc
 from pathlib import Path
 
 import pytest
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.errors import InputFileError
 from monitor.io.candump import read_candump

@@ -11,7 +11,7 @@ from typing import Any
 import can
 import pytest
 from live_support import assert_same_events, live_config, replay_settled, run_daemon
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.cli import main
 from monitor.codec.frames import FrameCodec

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from live_support import assert_same_events, tick_recording
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect

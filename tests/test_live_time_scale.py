@@ -7,7 +7,7 @@ from typing import Any
 
 import can
 from live_support import assert_same_events, live_config, send_all, settle
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect

@@ -8,7 +8,7 @@ import naive
 import numpy as np
 import pytest
 from live_support import tick_recording
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.config.settings import load_config
 from monitor.detection.gating import GatingConfig

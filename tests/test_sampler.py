@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 from shared_data import GOOD_LOGS, REAL_LOGS
 
 from monitor.codec import FrameCodec

@@ -21,7 +21,7 @@ from live_support import (
     run_daemon,
     tick_recording,
 )
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.codec.j1939.dtc import PGN_DM1
 from monitor.config.settings import load_config

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import pytest
 from live_support import REPO, start_daemon, wait_for_text, wait_until, write_config
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 from vcan_support import (
     CHANNEL,
     SLOWER,

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.codec.logwrite import write_candump
 from monitor.io.recording import Recording

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from j1939_support import DM1_ID, decode_dm, reassemble
 from live_support import assert_same_events, live_config, replay_settled, run_daemon
-from naive import recording_from_candump
+from naive_frames import recording_from_candump
 
 from monitor.cli import main
 from monitor.codec.frames import FrameCodec

@@ -1,7 +1,7 @@
 """A candump log to a 100 Hz ``Recording`` in bulk: the offline path of ``monitor detect``.
 
 The rows the daemon's ``Sampler`` makes of the same frames fed one by one (tests hold it
-equal to that frame-by-frame reference, ``tests/naive.py``), computed in three array passes:
+equal to that frame-by-frame reference, ``tests/naive_frames.py``), computed in three array passes:
 
 1. ``read_candump_frames``: the log as arrays of frames (``monitor.io.candump_bulk``);
 2. ``decode_frames``: checks and physical values per message ID (``monitor.codec.bulk``);
