@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.codec.bulk import decode_frames
+from monitor.codec.bulk import DecodedMessage, decode_frames
 from monitor.codec.frames import FrameCodec
 from monitor.io.candump_bulk import read_candump_frames
 from monitor.io.recording import Recording
@@ -144,14 +144,42 @@ def recording_from_candump_bulk(
     time_counts = TimeCounts(*(int(v) for v in tc))
     if err := runs_backwards(path, ts.size, time_counts.as_dict()):
         raise err
-    inst = np.arange(n_rows) * period
+    cols, first_seen = _columns(sampler, parts, (msg_of, pos_in_msg), applied, first_row, st,
+                                resumes, n_rows)  # fmt: skip
+    warm = min(warm_row(first_seen[list(sampler.required)], sampler.deadline_rows), n_rows)
+    # Row t = 0 is the first one past warming; its log time as the sampler computes it.
+    start = float(ts[0]) + warm * period if warm < n_rows else None
+    meta: dict[str, object] = {
+        "format": "candump",
+        "start_time_s": start,
+        "counts": {**counts, **time_counts.as_dict()},
+    }
+    cols = {name: col[warm:] for name, col in cols.items()}
+    return Recording(t=np.arange(n_rows - warm) * period, columns=cols, source=str(path),
+                     meta=meta)  # fmt: skip
+
+
+def _columns(
+    sampler: Sampler,
+    parts: list[DecodedMessage],
+    slots: tuple[np.ndarray, np.ndarray],
+    applied: np.ndarray,
+    first_row: np.ndarray,
+    st: np.ndarray,
+    resumes: np.ndarray,
+    n_rows: int,
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Each signal's rows (the value of its last frame visible by then, NaN once stale) and
+    the row from which each is visible (inf: never); ``slots``: per frame its message's
+    index in ``parts`` and its position there."""
+    msg_of, pos_in_msg = slots
+    inst = np.arange(n_rows) * sampler.period_s
     # Outages (the clock's rule): from the first row after each, staleness restarts at the
     # time of the frame that ended it (the sampler's ``_resumed``).
     st_applied = st[applied]
     ends = np.flatnonzero(resumes)
     back_at = np.searchsorted(first_row[ends], np.arange(n_rows), side="right") - 1
     resumed = np.append(st_applied[ends], -np.inf)[back_at]  # -1: no outage yet, -inf
-
     seen: set[str] = set()
     first_seen = np.full(len(sampler.columns), np.inf)  # row from which each is visible
     columns: dict[str, np.ndarray] = {}
@@ -175,14 +203,4 @@ def recording_from_candump_bulk(
             col[np.flatnonzero(have)[fresh]] = vals[li[fresh]]
         if name != ROD_POS.name or name in seen:
             columns[name] = col
-    warm = min(warm_row(first_seen[list(sampler.required)], sampler.deadline_rows), n_rows)
-    # Row t = 0 is the first one past warming; its log time as the sampler computes it.
-    start = float(ts[0]) + warm * period if warm < n_rows else None
-    meta: dict[str, object] = {
-        "format": "candump",
-        "start_time_s": start,
-        "counts": {**counts, **time_counts.as_dict()},
-    }
-    columns = {name: col[warm:] for name, col in columns.items()}
-    return Recording(t=np.arange(n_rows - warm) * period, columns=columns, source=str(path),
-                     meta=meta)  # fmt: skip
+    return columns, first_seen
