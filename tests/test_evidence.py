@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_support import assert_same_events, live_config, replay_settled, run_daemon, tick_recording
+from naive_frames import recording_from_candump
 
 from monitor.codec.frames import FrameCodec
 from monitor.config.settings import load_config
@@ -24,7 +25,6 @@ from monitor.detection.ticker import Ticker
 from monitor.errors import ConfigError
 from monitor.io.recording import Recording
 from monitor.resources import resource_path
-from monitor.sampling.sampler import recording_from_candump
 
 CFG = load_config()
 LOG = resource_path("replay", "spool_wear.log")
