@@ -192,7 +192,7 @@ def trace_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
     alarm: t (s from the first sample), the signals of ``TRACE_SIGNALS`` it has, J / eps0
     and the alarm level (1.0 = alarm)."""
     from monitor.detection.offline import detect
-    from monitor.live.loops import read_loop
+    from monitor.offline.recordings import read_loop
 
     cfg = _config(config_path)
     model = model_from_bytes(model_bytes)
