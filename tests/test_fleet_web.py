@@ -265,7 +265,7 @@ def test_a_judged_log_names_its_episode_from_every_fault_sample_of_it():
     from monitor.fleet.pipeline import judge_log
     from monitor.model.modelfile import load_model
     from monitor.resources import resource_path
-    from monitor.sampling.sampler import recording_from_candump
+    from naive_frames import recording_from_candump
 
     model_path, log = resource_path("config", "boom_default.model.npz"), resource_path(
         "replay", "piston_wear.log")  # fmt: skip
