@@ -6,10 +6,13 @@ size.
 the highest number is the oldest; only the storage quota (``monitor.live.storage``) deletes
 rotated files, and never one that holds an unsent alarm.
 
-Every event gets ``seq``, 1, 2, ... per event log: a restart appends and continues from the
-last ``seq`` written, kept in ``<event log>.seq`` (and read from the logs' tails), so an
-uploader that moves acknowledged logs away, or a damaged tail, never restarts the numbering
-(``monitor.live.storage`` says how an uploader acknowledges events).  Files are opened
+Every event gets ``seq``, 1, 2, ... per event log, and a number is never issued twice: a
+start continues from the largest of ``<event log>.seq`` (the last ``seq`` written), the
+tails of the log and its rotated files, and ``<event log>.acked`` (the highest ``seq`` an
+uploader took), so moving logs away, a damaged tail or a lost ``.seq`` never restarts the
+numbering below what was acknowledged (``monitor.live.storage`` says how an uploader
+acknowledges events).  Rotation moves only the names it makes (``.1``, ``.2``, ...; a
+stray ``.01`` is left alone) and never renames onto an existing file.  Files are opened
 without following symbolic links (``monitor.live.files``).
 ``stamp`` runs in the detector thread (so a hook sees the record as written); ``write`` and
 ``close`` in the disk writer's (``monitor.live.writer``).
@@ -18,6 +21,7 @@ without following symbolic links (``monitor.live.files``).
 from __future__ import annotations
 
 import datetime as dt
+import errno
 import json
 import logging
 import os
@@ -31,7 +35,7 @@ from monitor.bus.recovery import BusEvent
 from monitor.detection.alarm import State
 from monitor.errors import ConfigError
 from monitor.live.files import NO_SPACE, append_all, fsync_dir, open_append, open_small
-from monitor.live.storage import Quota, rotated_logs
+from monitor.live.storage import Quota, ack_path, acked_seq, rotated_logs
 
 log = logging.getLogger(__name__)
 
@@ -74,19 +78,24 @@ class EventLog:
                 append_all(self._fd, b"\n", os.fstat(self._fd).st_size)
                 os.fsync(self._fd)
             self._seq_fd: int | None = open_small(seq_path(self.path))
-            self.last_seq = max(self._last_seq_on_disk(), _read_seq(self._seq_fd))
+            self.last_seq = self._start_seq()
         except OSError as exc:
             raise ConfigError(
                 f"event_log.path: cannot open {exc.filename or self.path}: {exc.strerror}"
             ) from None
         self._size = os.fstat(self._fd).st_size
 
-    def _last_seq_on_disk(self) -> int:
-        for p in (self.path, *reversed(rotated_logs(self.path))):  # newest file first
-            seq = _last_seq(p)
-            if seq is not None:
-                return seq
-        return 0
+    def _start_seq(self) -> int:
+        """The largest ``seq`` issued or acknowledged so far: numbering goes on above it."""
+        assert self._seq_fd is not None
+        tails = [_last_seq(p) or 0 for p in (self.path, *rotated_logs(self.path))]
+        on_disk = max(max(tails), _read_seq(self._seq_fd))
+        acked = acked_seq(self.path)
+        if acked > on_disk:  # the logs and .seq were moved away or lost, .acked was not
+            log.warning("event log: %s acknowledges seq %d, above the %d found in the logs "
+                        "and %s; numbering goes on from %d", ack_path(self.path), acked,
+                        on_disk, seq_path(self.path), acked + 1)  # fmt: skip
+        return max(on_disk, acked)
 
     @property
     def unwritten(self) -> int:
@@ -160,10 +169,10 @@ class EventLog:
         """Rename the full file away and start a new one; on failure write on in it."""
         try:
             os.fsync(self._fd)
-            for p in rotated_logs(self.path):  # oldest first, so no rename overwrites a file
+            for p in rotated_logs(self.path):  # oldest first: each moves to a free name
                 n = int(p.name.rsplit(".", 1)[1])
-                p.rename(p.with_name(f"{self.path.name}.{n + 1}"))
-            self.path.rename(self.path.with_name(self.path.name + ".1"))
+                _rename_new(p, p.with_name(f"{self.path.name}.{n + 1}"))
+            _rename_new(self.path, self.path.with_name(self.path.name + ".1"))
         except OSError as exc:
             self._error(f"cannot rotate {self.path}: {exc.strerror}; writing on in it")
             return
@@ -198,6 +207,14 @@ class EventLog:
 def seq_path(path: Path) -> Path:
     """The small file holding the last ``seq`` written to event log ``path``."""
     return path.with_name(path.name + ".seq")
+
+
+def _rename_new(src: Path, dst: Path) -> None:
+    """Rename ``src`` to ``dst`` unless something is there already (a file planted or left
+    at that name): a rotation must never replace a log that may hold an unsent alarm."""
+    if os.path.lexists(dst):
+        raise FileExistsError(errno.EEXIST, "a file of that name exists", str(dst))
+    src.rename(dst)
 
 
 def _line(record: dict[str, Any]) -> bytes:

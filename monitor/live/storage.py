@@ -39,8 +39,9 @@ NOT_ALARMS = frozenset({"normal", "inactive"})
 
 
 def rotated_logs(path: Path) -> list[Path]:
-    """Rotated files of event log ``path``, oldest (highest number) first."""
-    pattern = re.compile(re.escape(path.name) + r"\.(\d+)")
+    """Rotated files of event log ``path``, oldest (highest number) first: only the names a
+    rotation makes (``.1``, ``.2``, ...; not ``.01`` or ``.1.gz``, which are left alone)."""
+    pattern = re.compile(re.escape(path.name) + r"\.([1-9]\d{0,8})")
     found = []
     for p in path.parent.glob(path.name + ".*"):
         m = pattern.fullmatch(p.name)
