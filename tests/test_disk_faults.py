@@ -1,5 +1,6 @@
 """Disk faults: the event log loses no event and keeps ``seq`` contiguous on a full disk, a
-failed rotation, a moved or damaged log; nothing is written through a planted link, an
+failed rotation, a moved or damaged log; a full disk deletes no black box elsewhere, nor the
+one being recorded; nothing is written through a planted link, an
 ``.acked`` FIFO blocks nothing, black-box names never collide, and a failing job never
 ends the writer thread.
 
@@ -25,7 +26,7 @@ from monitor.config.settings import BlackBoxConfig
 from monitor.errors import ConfigError
 from monitor.live.blackbox import BlackBox
 from monitor.live.eventlog import EventLog, seq_path
-from monitor.live.storage import Quota, ack_path, acked_seq, rotated_logs
+from monitor.live.storage import Quota, ack_path, acked_seq, black_boxes, rotated_logs
 from monitor.live.writer import DiskWriter
 
 T0 = 1_700_000_000.0
@@ -82,6 +83,12 @@ def _event(i: int) -> dict:
             "threshold": 0.0012, "fault": "spool_wear" if fault else None, "pad": "x" * 200}
 
 
+def _frame100(i: int) -> can.Message:
+    """Frame ``i`` of a 100 Hz bus from T0."""
+    return can.Message(timestamp=T0 + i * 0.01, arbitration_id=0x123, is_extended_id=False,
+                       data=bytes(8))  # fmt: skip
+
+
 def _lines(*paths: Path) -> list[dict]:
     """Every line of the files, each one whole JSON (a torn line fails the test)."""
     return [json.loads(line) for p in paths for line in p.read_bytes().splitlines()]
@@ -103,6 +110,54 @@ def test_full_disk_deletes_black_boxes_before_losing_an_event(small_disk) -> Non
     assert [e["seq"] for e in _lines(ev)] == list(range(1, 57))
     assert len(list(boxes.glob("alarm-*.log"))) < 3  # boxes gave way, oldest first
     assert log.quota.deleted_black_boxes >= 1
+
+
+@needs_tmpfs
+def test_full_disk_deletes_no_black_box_on_another_filesystem(small_disk, tmp_path) -> None:
+    """The event log's disk is full of someone else's file; the black boxes sit on another
+    filesystem: deleting them frees nothing there, so they stay and the event waits."""
+    boxes = tmp_path / "bb"  # tmp_path is not the tmpfs
+    boxes.mkdir()
+    for k in range(3):
+        (boxes / f"alarm-2026010{k}T000000.000000Z-spool_wear-seq{k + 1}.log").write_text("x")
+    ev = small_disk / "events.jsonl"
+    log = EventLog(ev, quota=Quota(10**9, boxes, ev))
+    log.write(log.stamp(_event(0)))
+    filler = small_disk / "someone-elses-file"
+    _fill(filler)
+    for i in range(1, 40):  # the log's last page fills, then the disk refuses
+        log.write(log.stamp(_event(i)))
+    assert log.unwritten > 0  # waits in memory: the disk is still full
+    assert len(black_boxes(boxes)) == 3 and log.quota.deleted_black_boxes == 0
+    filler.unlink()
+    log.close()
+    assert [e["seq"] for e in _lines(ev)] == list(range(1, 41))
+
+
+@needs_tmpfs
+def test_full_disk_keeps_the_box_being_recorded_and_the_newest(small_disk) -> None:
+    """Boxes and event log on one full disk: older boxes give way, the one being recorded
+    (the newest alarm's) never does."""
+    boxes = small_disk / "bb"
+    boxes.mkdir()
+    for k in range(2):  # two old boxes of about a third of the disk each
+        (boxes / f"alarm-2026010{k}T000000.000000Z-spool_wear-seq{k + 1}.log").write_bytes(
+            b"x" * 300_000)  # fmt: skip
+    ev = small_disk / "events.jsonl"
+    quota = Quota(10**9, boxes, ev)
+    log = EventLog(ev, quota=quota)
+    box = BlackBox(BlackBoxConfig(directory=boxes, pre_s=1.0, post_s=60.0), quota=quota)
+    for i in range(100):
+        box.add(_frame100(i))
+    recording = box.trigger(T0 + 1.0, "piston_wear", seq=3)
+    _fill(small_disk / "filler")  # the disk is full while the box is being written
+    for i in range(3):
+        log.write(log.stamp(_event(i)))
+    assert log.unwritten == 0 and quota.deleted_black_boxes >= 1
+    assert recording.exists()  # the box being recorded survived make_room
+    assert recording in black_boxes(boxes)
+    box.close()
+    log.close()
 
 
 @needs_tmpfs

@@ -43,7 +43,7 @@ def test_numbering_takes_the_largest_of_seq_tails_and_acked(tmp_path) -> None:
     ev = tmp_path / "ev.jsonl"
     ev.write_text('{"seq": 7, "state": "normal"}\n')
     ev.with_name("ev.jsonl.2").write_text('{"seq": 30, "state": "normal"}\n')  # not the newest
-    seq_path(ev).write_text("%020d\n" % 12)
+    seq_path(ev).write_text(f"{12:020d}\n")
     ack_path(ev).write_text("20")
     log = EventLog(ev)
     assert log.last_seq == 30  # the largest anywhere, not the first tail found

@@ -61,31 +61,34 @@ def test_quota_deletes_oldest_black_boxes_first(store) -> None:
     q = Quota(3300, boxes, ev)
     assert q.enforce() == 3200  # 4200 - a
     assert [p.name[-5] for p in q.black_boxes()] == ["b", "c"]
-    q.quota_bytes = 1300
-    assert q.enforce() == 1200  # - b - c; the event logs untouched while boxes remain
-    assert q.black_boxes() == [] and len(rotated_logs(ev)) == 2
-    q.quota_bytes = 900
-    assert q.enforce() == 900  # - .2 (the oldest rotated log)
+    q.quota_bytes = 2300
+    assert q.enforce() == 2200  # - b; the event logs untouched while boxes remain
+    assert [p.name[-5] for p in q.black_boxes()] == ["c"] and len(rotated_logs(ev)) == 2
+    q.quota_bytes = 1900
+    assert q.enforce() == 1900  # - .2 (the oldest rotated log); c, the newest box, stays
     assert rotated_logs(ev) == [ev.with_name("ev.jsonl.1")]
     q.quota_bytes = 100
-    assert q.enforce() == 500  # - .1; the current log is never deleted
+    assert q.enforce() == 1500  # - .1; the current log and the newest box are never deleted
     assert rotated_logs(ev) == [] and ev.exists() and q.over_quota == 1
-    assert (q.deleted_black_boxes, q.deleted_event_logs) == (3, 2)
+    assert [p.name[-5] for p in q.black_boxes()] == ["c"]
+    assert (q.deleted_black_boxes, q.deleted_event_logs) == (2, 2)
 
 
 def test_quota_keeps_unsent_alarms(store) -> None:
     boxes, ev = store
     q = Quota(100, boxes, ev)
-    # No .acked file: the fault in .2 is unsent, so .2 stays, and .1 behind it too.
-    assert q.enforce() == 1200
-    assert q.black_boxes() == [] and len(rotated_logs(ev)) == 2 and q.over_quota == 1
+    # No .acked file: the fault in .2 is unsent, so .2 stays, and .1 behind it too; the
+    # newest black box (c) stays too.
+    assert q.enforce() == 2200
+    assert len(q.black_boxes()) == 1 and len(rotated_logs(ev)) == 2 and q.over_quota == 1
     (ev.parent / "ev.jsonl.acked").write_text("1")
-    assert q.enforce() == 1200  # acknowledged up to 1 < 2: still unsent
+    assert q.enforce() == 2200  # acknowledged up to 1 < 2: still unsent
     (ev.parent / "ev.jsonl.acked").write_text("not a number")
-    assert q.enforce() == 1200  # unreadable: nothing counts as acknowledged
+    assert q.enforce() == 2200  # unreadable: nothing counts as acknowledged
     (ev.parent / "ev.jsonl.acked").write_text("2")
-    assert q.enforce() == 500
-    assert _names(boxes, ev) == ["ev.jsonl", "ev.jsonl.acked"]
+    assert q.enforce() == 1500
+    assert _names(boxes, ev) == ["alarm-20260101T020000.000000Z-c.log", "ev.jsonl",
+                                 "ev.jsonl.acked"]  # fmt: skip
 
 
 def test_sensor_fault_is_an_alarm_inactive_and_bus_lines_are_not(tmp_path) -> None:

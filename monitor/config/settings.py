@@ -82,7 +82,7 @@ class BlackBoxConfig:
     max_frames: int = setting(200_000, check=_POSITIVE, demand=">= 1", unit="frames",
                               doc="bound of the pre-alarm buffer (~50 s at 4 kHz)")  # fmt: skip
     max_files: int = setting(50, check=_POSITIVE, demand=">= 1",
-                             doc="oldest files deleted beyond this")  # fmt: skip
+                             doc="oldest (by alarm seq) deleted beyond this")  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,9 @@ Every frame taken off the bus (accepted or not: a bad frame may be the story) go
 bounded deque covering ``pre_s`` of bus time and at most ``max_frames`` frames.  When an
 alarm is raised the deque is written to a new file, and frames keep being appended until
 bus time passes the alarm by ``post_s`` (or the daemon stops).  At most ``max_files`` files
-are kept, and the storage quota (``monitor.live.storage``) deletes the oldest first.
+are kept, and the storage quota (``monitor.live.storage``) deletes the oldest first; oldest
+by the ``seq`` of the alarm's event (``-seq<N>`` in the name), not by the time in the name,
+which a clock that ran ahead would make lie.
 
 The detector thread only keeps the deque and hands over work: at an alarm a snapshot of the
 deque (references to the frames, no copies), after it the frames in batches of
@@ -31,7 +33,7 @@ from monitor.config.settings import BlackBoxConfig
 from monitor.errors import ConfigError
 from monitor.io.candump import format_line
 from monitor.live.files import open_append
-from monitor.live.storage import Quota
+from monitor.live.storage import Quota, black_boxes
 from monitor.live.writer import DiskWriter
 
 log = logging.getLogger(__name__)
@@ -93,12 +95,14 @@ class BlackBox:
                 if len(self._batch) >= BATCH_FRAMES:
                     self._hand_over()
 
-    def trigger(self, bus_time_s: float, label: str) -> Path:
-        """Start a file at an alarm raised at ``bus_time_s``; returns its path (the disk
-        writer writes it; a failure there is logged)."""
+    def trigger(self, bus_time_s: float, label: str, seq: int | None = None) -> Path:
+        """Start a file at an alarm raised at ``bus_time_s`` (``seq``: its event's, which
+        orders the boxes for retention); returns its path (the disk writer writes it; a
+        failure there is logged)."""
         self.close()
         stamp = dt.datetime.fromtimestamp(bus_time_s, tz=dt.timezone.utc)
-        path = self.directory / f"alarm-{stamp:%Y%m%dT%H%M%S.%fZ}-{label}.log"
+        tail = "" if seq is None else f"-seq{seq}"
+        path = self.directory / f"alarm-{stamp:%Y%m%dT%H%M%S.%fZ}-{label}{tail}.log"
         if path in self._names:  # two alarms at one instant (several loops, a clock reset)
             path = path.with_name(f"{path.stem}-{len(self.files) + 1}.log")
         self._names.add(path)
@@ -144,11 +148,13 @@ class BlackBox:
             log.error("black box: cannot write %s: %s", path, exc.strerror)
             return
         self._fh, self._fh_path = fh, path
+        if self.quota is not None:
+            self.quota.recording = name  # never deleted while written, even on a full disk
         self._lines(fh, frames)
         log.info("black box: %s (%d frames before the alarm)", name, len(frames))
-        self._prune()
+        self._prune(name)
         if self.quota is not None:
-            self.quota.enforce(recording=path)
+            self.quota.enforce()
 
     def _append(self, path: Path, frames: Sequence[can.Message]) -> None:
         if self._fh is not None and path == self._fh_path:
@@ -160,15 +166,18 @@ class BlackBox:
         if self._fh is None or path != self._fh_path:
             return
         fh, self._fh, self._fh_path = self._fh, None, None
+        if self.quota is not None:
+            self.quota.recording = None
         fh.flush()
         os.fsync(fh.fileno())
         fh.close()
         if self.quota is not None:
             self.quota.enforce()
 
-    def _prune(self) -> None:
-        old = sorted(self.directory.glob("alarm-*.log"))
-        for p in old[: max(0, len(old) - self.cfg.max_files)]:
+    def _prune(self, recording: Path) -> None:
+        """Keep the ``max_files`` newest boxes by ``seq`` (the one being written always)."""
+        old = [p for p in black_boxes(self.directory) if p != recording]
+        for p in old[: max(0, len(old) + 1 - self.cfg.max_files)]:
             try:
                 p.unlink()
             except OSError as exc:

@@ -289,7 +289,7 @@ class Daemon:
                      ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
                      ev["sensor_check"])  # fmt: skip
         if tick.raised:  # a new episode; a fault back after a short gap is the same one
-            self.black_box.trigger(self.pipeline.bus_time(tick.t_s), lp.alarm_label())
+            self.black_box.trigger(self.pipeline.bus_time(tick.t_s), lp.alarm_label(), ev["seq"])
         if self.on_event is not None:
             self.on_event(ev)
 

@@ -5,9 +5,15 @@ What counts: every ``alarm-*.log`` in the black-box directory, the event log
 the highest number the oldest).  When they take more than the quota, files are deleted in
 this order until they fit:
 
-1. black boxes, oldest first (by name: the alarm's UTC time), except the one being recorded;
+1. black boxes, oldest first by the ``seq`` of their alarm's event (in the name,
+   ``-seq<N>``; a name without one counts as older than any with one, then by name), never
+   the one being recorded nor the newest alarm's: a clock that ran ahead cannot make a new
+   box look old;
 2. rotated event-log files, oldest first, stopping at the first one that holds an *unsent
    alarm*.  The current event log is never deleted.
+
+On a full disk (``make_room``) only files on the event log's filesystem are deleted: a black
+box elsewhere frees nothing where the event waits.
 
 An alarm is an event of the detector (not a ``kind: "bus"`` line) whose state is neither
 ``normal`` nor ``inactive`` (a fault or a sensor fault).  Every event carries ``seq`` (1,
@@ -48,6 +54,20 @@ def rotated_logs(path: Path) -> list[Path]:
         if m:
             found.append((int(m.group(1)), p))
     return [p for _, p in sorted(found, reverse=True)]
+
+
+_BOX_SEQ = re.compile(r"-seq(\d{1,18})(?:-\d+)?(?:~\d+)?\.log")
+
+
+def box_seq(path: Path) -> int:
+    """The ``seq`` of the alarm event a black box belongs to (0: its name has none)."""
+    m = _BOX_SEQ.search(path.name)
+    return int(m.group(1)) if m else 0
+
+
+def black_boxes(directory: Path) -> list[Path]:
+    """Black-box files in ``directory``, oldest first by their alarm's ``seq``."""
+    return sorted(directory.glob("alarm-*.log"), key=lambda p: (box_seq(p), p.name))
 
 
 def ack_path(path: Path) -> Path:
@@ -105,13 +125,14 @@ class Quota:
         self.deleted_event_logs = 0
         self.over_quota = 0  # checks that ended over the quota (unsent alarms kept)
         self._over = False
+        self.recording: Path | None = None  # the black box being written (set by it)
         # (inode, size, mtime) of a rotated file -> its last alarm seq: rotated files do
         # not change, and the check runs after every event.
         self._alarm_seq: dict[tuple[int, int, int], int] = {}
 
     def black_boxes(self) -> list[Path]:
-        """Black-box files, oldest first."""
-        return sorted(self.black_box_dir.glob("alarm-*.log"))
+        """Black-box files, oldest first (by their alarm's ``seq``)."""
+        return black_boxes(self.black_box_dir)
 
     def _unsent_alarm(self, path: Path, acked: int) -> bool:
         st = path.stat()
@@ -122,26 +143,38 @@ class Quota:
 
     def make_room(self) -> bool:
         """A full disk and an event to write: delete every file the rules allow (black boxes
-        first, then acknowledged rotated logs); True if anything was deleted."""
+        first, then acknowledged rotated logs) on the event log's filesystem; True if
+        anything was deleted."""
         before = self.deleted_black_boxes + self.deleted_event_logs
-        self.enforce(limit_bytes=0)
+        try:
+            device = self.event_log_path.parent.stat().st_dev
+        except OSError:
+            return False
+        self.enforce(limit_bytes=0, device=device)
         return self.deleted_black_boxes + self.deleted_event_logs > before
 
-    def enforce(self, recording: Path | None = None, limit_bytes: int | None = None) -> int:
+    def enforce(
+        self,
+        recording: Path | None = None,
+        limit_bytes: int | None = None,
+        device: int | None = None,
+    ) -> int:
         """Delete files as the module says until they fit; return the bytes in use.
 
-        ``recording``: the black box being written, never deleted.  ``limit_bytes``: the
-        target instead of the quota (``make_room``).
+        ``recording``: a black box being written, never deleted (nor ``self.recording``,
+        nor the newest box).  ``limit_bytes``: the target instead of the quota
+        (``make_room``); ``device``: delete only files on that filesystem (``st_dev``).
         """
         limit = self.quota_bytes if limit_bytes is None else limit_bytes
         boxes = [(p, _size(p)) for p in self.black_boxes()]
         rotated = [(p, _size(p)) for p in rotated_logs(self.event_log_path)]
         used = sum(s for _, s in boxes) + sum(s for _, s in rotated)
         used += _size(self.event_log_path)
+        keep = {recording, self.recording, boxes[-1][0] if boxes else None}
         for p, size in boxes:
             if used <= limit:
                 break
-            if p == recording:
+            if p in keep or not _on(p, device):
                 continue
             if _unlink(p):
                 used -= size
@@ -154,6 +187,8 @@ class Quota:
             acked = acked_seq(self.event_log_path) if acked is None else acked
             if self._unsent_alarm(p, acked):
                 break
+            if not _on(p, device):
+                continue
             if _unlink(p):
                 used -= size
                 self.deleted_event_logs += 1
@@ -177,6 +212,16 @@ def _size(path: Path) -> int:
         return path.stat().st_size
     except FileNotFoundError:
         return 0
+
+
+def _on(path: Path, device: int | None) -> bool:
+    """Whether ``path`` lies on filesystem ``device`` (None: any)."""
+    if device is None:
+        return True
+    try:
+        return path.lstat().st_dev == device
+    except OSError:
+        return False
 
 
 def _unlink(path: Path) -> bool:
