@@ -129,7 +129,7 @@ class J1939Config:
                                demand="between 0.05 and 0.2 (J1939-21)", unit="s",
                                doc="between BAM data packets")  # fmt: skip
     max_frames_per_s: float = setting(10.0, check=lambda v: v >= 2, demand=">= 2", unit="1/s",
-                                      doc="token bucket over every J1939 frame")  # fmt: skip
+                                      doc="cap on J1939 frames in any second")  # fmt: skip
 
     def __post_init__(self) -> None:
         dtc = j1939_dtc

@@ -48,8 +48,9 @@ from monitor.live.blackbox import BlackBox
 from monitor.live.dm1 import Diagnostics
 from monitor.live.eventlog import bus_event_record
 from monitor.live.loops import Loop, worst_state
-from monitor.live.outputs import AlarmFrames, EventLog, TokenBucket
+from monitor.live.outputs import AlarmFrames, EventLog
 from monitor.live.pipeline import FramePipeline
+from monitor.live.ratecap import RateCap
 from monitor.live.reload import Reload, Reloader, prepare
 from monitor.live.storage import Quota
 from monitor.live.writer import DiskWriter
@@ -104,7 +105,7 @@ class Daemon:
         self.tx_capped = 0  # own frames dropped by outputs.frames_max_per_s
         self._last_cap_log = 0.0
         # A log replayed faster than real time (time_scale < 1) times its alarms faster too.
-        self._budget = TokenBucket(cfg.outputs.frames_max_per_s / min(1.0, cfg.bus.time_scale))
+        self._budget = RateCap(cfg.outputs.frames_max_per_s / min(1.0, cfg.bus.time_scale))
         self.unwritten = 0  # events still not on disk when ``stop`` returned
         self._disk_errors_sent = 0  # disk_errors at the last MON_Status
         self._last_retry_mono = 0.0

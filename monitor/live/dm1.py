@@ -15,7 +15,9 @@ J1939-73: DM1 goes out when the set of active DTCs changes and every second whil
 active; with none, once on the change and, with ``repeat_when_clear``, every second in the
 no-DTC form.  A request (PGN 59904) for DM2 or DM1 is answered with it.  One message at a
 time: a BAM's data packets go out ``bam_gap_s`` apart before the next message starts.  A
-token bucket caps the J1939 frames per second; a DM1 it holds back goes out once it allows.
+rate cap (``monitor.live.ratecap``) keeps the J1939 frames within ``max_frames_per_s`` in any
+second of the sample clock: a message starts only when all its frames fit, each counted when
+it goes out; a DM1 it holds back goes out once it allows.
 """
 
 from __future__ import annotations
@@ -30,33 +32,13 @@ from monitor.codec.j1939.dtc import OC_MAX, PGN_DM1, PGN_DM2, Dtc, Lamp, dm_payl
 from monitor.codec.j1939.transport import REQUEST_FILTER, pgn_frames, requested_pgn
 from monitor.config.settings import J1939Config
 from monitor.detection.alarm import State
+from monitor.live.ratecap import RateCap
 from monitor.sampling.sampler import ROW_COLUMNS
 
 DM1_PERIOD_S = 1.0  # J1939-73
 _EPS = 1e-6  # sample times are sums of 10 ms steps
 
 Key = tuple[int, int]  # (SPN, FMI)
-
-
-class TokenBucket:
-    """``rate`` tokens a second, holding one second's worth."""
-
-    def __init__(self, rate: float) -> None:
-        self.rate = rate
-        self.tokens = rate
-        self._t: float | None = None
-
-    def refill(self, t_s: float) -> None:
-        if self._t is not None and t_s > self._t:
-            self.tokens = min(self.rate, self.tokens + (t_s - self._t) * self.rate)
-        self._t = t_s
-
-    def take(self, n: int) -> bool:
-        """Spend ``n`` tokens; a message larger than the bucket waits until it is full."""
-        if self.tokens < min(n, self.rate):
-            return False
-        self.tokens -= n
-        return True
 
 
 class Diagnostics:
@@ -86,10 +68,10 @@ class Diagnostics:
         self._queue: deque[can.Message] = deque()
         self._next_t = 0.0
         self._last_dm1_t = -float("inf")
-        self.bucket = TokenBucket(cfg.max_frames_per_s)
+        self.cap = RateCap(cfg.max_frames_per_s)
         self.sent = {PGN_DM1: 0, PGN_DM2: 0}
         self.frames = 0
-        self.held_back = 0  # messages the token bucket delayed
+        self.held_back = 0  # messages the rate cap delayed
         self.requests = 0
 
     # -- inputs ---------------------------------------------------------------------------
@@ -178,11 +160,11 @@ class Diagnostics:
             self._update(keys)
             self._want.add(PGN_DM1)
             self._started = True
-        self.bucket.refill(t_s)
         out: list[can.Message] = []
         if self._queue:
             if t_s + _EPS >= self._next_t:
                 out.append(self._queue.popleft())
+                self.cap.record(t_s)
                 self._next_t = t_s + self.cfg.bam_gap_s
         else:
             periodic = (self.active or self.cfg.repeat_when_clear) and (
@@ -199,12 +181,13 @@ class Diagnostics:
 
     def _start(self, pgn: int, t_s: float) -> list[can.Message]:
         frames = pgn_frames(pgn, self.payload(pgn), self.cfg.source_address, self.cfg.priority)
-        if not self.bucket.take(len(frames)):
+        if not self.cap.allows(t_s, len(frames)):
             if not self._held:
                 self.held_back += 1
             self._held = True
             return []
         self._held = False
+        self.cap.record(t_s)  # the first frame; the others as they go out
         self._want.discard(pgn)
         self.sent[pgn] += 1
         if pgn == PGN_DM1:

@@ -2,9 +2,10 @@
 
 MON_Alarm goes out on every state change and is repeated every ``alarm_repeat_s`` while in
 fault, both timed on the sample clock so a replayed log gives the same frames at any speed.
-A token bucket caps the frames per second whatever the state does (a flapping sensor must
-not flood the bus); a state change held back by the cap is sent as soon as it allows, with
-the state current at that moment.
+A rate cap (``monitor.live.ratecap``, at most ``alarm_max_per_s`` in any second of the sample
+clock) holds whatever the state does (a flapping sensor must not flood the bus); a state
+change held back by the cap is sent as soon as it allows, with the state current at that
+moment.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from monitor.codec.frames import FrameCodec
 from monitor.config.settings import OutputConfig
 from monitor.detection.alarm import State
 from monitor.live.eventlog import EventLog  # noqa: F401  (the event log lives there now)
+from monitor.live.ratecap import RateCap
 
 ALARM = "MON_Alarm"
 STATUS = "MON_Status"
@@ -39,21 +41,13 @@ class AlarmFrames:
         self.sent = 0
         self.held_back = 0  # state changes delayed by the rate cap
         self._last_sent_t = -float("inf")
-        self._tokens = cfg.alarm_max_per_s  # bucket holds one second's worth
-        self._bucket_t: float | None = None
+        self._cap = RateCap(cfg.alarm_max_per_s)
         self._pending = False
-
-    def _refill(self, t_s: float) -> None:
-        if self._bucket_t is not None and t_s > self._bucket_t:
-            rate = self.cfg.alarm_max_per_s
-            self._tokens = min(rate, self._tokens + (t_s - self._bucket_t) * rate)
-        self._bucket_t = t_s
 
     def due(self, t_s: float, state: State, changed: bool) -> bool:
         """Whether a MON_Alarm should go out at sample time ``t_s``."""
         if changed and state is State.FAULT:
             self.alarm_count += 1
-        self._refill(t_s)
         want = (
             changed
             or self._pending
@@ -61,12 +55,11 @@ class AlarmFrames:
         )
         if not want:
             return False
-        if self._tokens < 1.0:
+        if not self._cap.take(t_s):
             if changed:
                 self.held_back += 1
             self._pending = True
             return False
-        self._tokens -= 1.0
         self._pending = False
         self._last_sent_t = t_s
         self.sent += 1
@@ -119,20 +112,3 @@ class AlarmFrames:
         }
         return self.codec.encode_message(STATUS, values, bus_time_s)
 
-
-class TokenBucket:
-    """At most ``rate_per_s`` takes per second on average, bursts of one second's worth."""
-
-    def __init__(self, rate_per_s: float) -> None:
-        self.rate = float(rate_per_s)
-        self.tokens = self.rate
-        self.last: float | None = None
-
-    def take(self, now_s: float) -> bool:
-        if self.last is not None and now_s > self.last:
-            self.tokens = min(self.rate, self.tokens + (now_s - self.last) * self.rate)
-        self.last = now_s
-        if self.tokens < 1.0:
-            return False
-        self.tokens -= 1.0
-        return True
