@@ -7,7 +7,9 @@ never stalls detection, and the detector swaps the result in between two frames
 unchanged keeps its ticker: its J window and alarm state go on.  Otherwise the new ticker
 takes over the running alarm state (``Ticker.carry_over``).  What a reload cannot change
 (the loops' layout, bus, DBC, J1939) waits for a restart.  A reload not parsed within
-``RELOAD_LIMIT_S`` is given up: its result, if it ever comes, is dropped.
+``RELOAD_LIMIT_S`` is given up: its result, if it ever comes, is dropped, and the next
+SIGHUP (or one that came meanwhile) starts a reload of its own, so one hung reload (a file
+on a dead network mount) never disables SIGHUP until a restart.
 """
 
 from __future__ import annotations
@@ -80,15 +82,19 @@ class Reloader:
     """Runs ``prepare_fn`` on a ``reload`` thread per request; ``poll`` (detector thread)
     hands over a finished result, or an error once a reload has taken too long."""
 
-    def __init__(self, prepare_fn: Callable[[], Reload | Exception]) -> None:
+    def __init__(
+        self, prepare_fn: Callable[[], Reload | Exception], limit_s: float | None = None
+    ) -> None:
         self._prepare = prepare_fn
+        self.limit_s = RELOAD_LIMIT_S if limit_s is None else limit_s
         self._lock = threading.Lock()
-        self.busy = False  # a reload thread is parsing
+        self.busy = False  # a reload thread is parsing (and not given up)
         self._again = False  # another request came meanwhile: run once more after it
         self._gen = 0  # requests started
         self._given_up = 0  # the last one given up as overdue
         self._since = 0.0
         self._result: Reload | Exception | None = None
+        self.hung = 0  # reloads given up (their threads may still be stuck)
 
     @property
     def pending(self) -> bool:
@@ -109,8 +115,9 @@ class Reloader:
     def _run(self, gen: int) -> None:
         result = self._prepare()
         with self._lock:
-            if gen > self._given_up:
-                self._result = result
+            if gen <= self._given_up:  # given up: ``poll`` already freed the next request
+                return
+            self._result = result
             self.busy = False
             again, self._again = self._again, False
         if again:
@@ -122,9 +129,13 @@ class Reloader:
             result, self._result = self._result, None
             if result is not None:
                 return result
-            if self.busy and self._gen > self._given_up:
-                waited = time.monotonic() - self._since
-                if waited > RELOAD_LIMIT_S:
-                    self._given_up = self._gen  # its result will be dropped
-                    return TimeoutError(f"still not parsed after {RELOAD_LIMIT_S:.0f} s; given up")
-        return None
+            if not self.busy or time.monotonic() - self._since <= self.limit_s:
+                return None
+            self._given_up = self._gen  # its result, if it ever comes, is dropped
+            self.busy = False
+            self.hung += 1
+            again, self._again = self._again, False
+        if again:  # a SIGHUP that came while it hung
+            self.request()
+        return TimeoutError(f"still not parsed after {self.limit_s:g} s; given up ({self.hung} "
+                            "hung so far), the next SIGHUP reloads again")  # fmt: skip

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from monitor.model.npyheader import check_npz_headers
+
 MAX_MODEL_BYTES = 512_000_000  # unpacked; a 20-minute commissioning model is a few MB
 MAX_WINDOW_N = 360_000  # one hour of 100 Hz samples
 # member -> (dtype, largest rank), as ``save_model`` writes them
@@ -34,6 +36,7 @@ def read_members(path: Path) -> dict[str, np.ndarray]:
     if unpacked > MAX_MODEL_BYTES:
         raise ValueError(f"its arrays unpack to {unpacked} bytes, more than {MAX_MODEL_BYTES}")
     try:
+        check_npz_headers(path, LAYOUT)  # before np.load allocates what a header claims
         with np.load(path, allow_pickle=False) as npz:
             data = {k: npz[k] for k in npz.files if k in LAYOUT}
     except (SyntaxError, tokenize.TokenError) as exc:  # numpy parses .npy headers as Python

@@ -101,7 +101,11 @@ def value(kind: str, raw: Any, where: str, source: Path | str) -> Any:
         return raw
     if isinstance(raw, bool) or not isinstance(raw, (int, float)):
         raise bad("a number")
-    if not math.isfinite(raw):
+    try:  # a 4,000-digit integer is a Python int, beyond any float
+        finite = math.isfinite(raw)
+    except OverflowError:
+        finite = False
+    if not finite:
         raise bad("a finite number")
     if kind == "int":
         if not float(raw).is_integer():

@@ -10,6 +10,8 @@
 
 from __future__ import annotations
 
+import os
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -50,18 +52,44 @@ class _StrictLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep)
 
 
+    def construct_yaml_int(self, node: Any) -> Any:
+        try:
+            return super().construct_yaml_int(node)
+        except ValueError:  # more digits than Python converts (4,300): a ValueError traceback
+            raise _Refused(f"line {node.start_mark.line + 1}: an integer of "
+                           f"{len(node.value)} characters is not a number a configuration "
+                           "holds") from None  # fmt: skip
+
+
+_StrictLoader.add_constructor("tag:yaml.org,2002:int", _StrictLoader.construct_yaml_int)
+
+
 class _Refused(Exception):
     pass
+
+
+def _read_text(path: Path, what: str) -> str:
+    """The file's text; a FIFO, a device or a directory is refused without blocking (a FIFO
+    at the config's path hung ``monitor run`` at start and at every SIGHUP)."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    with os.fdopen(fd, "rb") as fh:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise ConfigError(f"{path}: not a regular file (a FIFO, device or directory); a "
+                              f"{what} must be a file")  # fmt: skip
+        if st.st_size > MAX_BYTES:
+            raise ConfigError(f"{path}: {st.st_size} bytes is too large for a {what} "
+                              f"(at most {MAX_BYTES})")  # fmt: skip
+        data = fh.read(MAX_BYTES + 1)
+    if len(data) > MAX_BYTES:  # grew since the stat
+        raise ConfigError(f"{path}: too large for a {what} (at most {MAX_BYTES} bytes)")
+    return data.decode("utf-8")
 
 
 def read_yaml(path: Path, what: str) -> Any:
     """The parsed YAML of ``path`` (``what``: "config", "simulator config" for messages)."""
     try:
-        size = path.stat().st_size
-        if size > MAX_BYTES:
-            raise ConfigError(f"{path}: {size} bytes is too large for a {what} "
-                              f"(at most {MAX_BYTES})")  # fmt: skip
-        text = path.read_text(encoding="utf-8")
+        text = _read_text(path, what)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
     except UnicodeDecodeError:

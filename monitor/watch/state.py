@@ -115,6 +115,9 @@ class WatchState:
         return False
 
     def _dm1(self, sa: int, payload: bytes) -> None:
+        if len(payload) < 2:  # no lamp bytes (a 0-byte frame, an empty BAM): not a DM1
+            self.rejected["DM1"] = self.rejected.get("DM1", 0) + 1
+            return
         lamps = [name for k, name in enumerate(("protect", "amber", "red", "mil"))
                  if (payload[0] >> (2 * k)) & 0b11 == 0b01]  # fmt: skip
         dtcs = []

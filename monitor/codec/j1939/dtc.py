@@ -139,6 +139,7 @@ def check_number_map(
         if key not in known:
             raise ConfigError(f"unknown name {where}.{key}; known: {', '.join(known)}")
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= top:
-            raise ConfigError(f"{where}.{key} must be a whole number 0..{top}, got {value!r}")
+            text = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+            raise ConfigError(f"{where}.{key} must be a whole number 0..{top}, got {text}")
         out[key] = value
     return out
