@@ -83,3 +83,28 @@ def test_killed_daemon_with_logs_moved_and_acked_left_numbers_on_above_acked(
     alarm_states = {int(d.values["State"]) for d in states
                     if d.name == "MON_Alarm" and d.values is not None}  # fmt: skip
     assert int(State.FAULT) in alarm_states  # the fault went out on the bus
+
+
+def test_sigkills_and_a_stray_rotated_name_never_reuse_a_seq(tmp_path: Path) -> None:
+    """Three runs each ended by SIGKILL, a stray ``events.jsonl.01`` planted beside the
+    rotated logs: every seq issued once, in order, across the files; the stray file left
+    as it was (the rotation used to rename it onto ``.2``, over a rotated log)."""
+    rig = AttackRig(tmp_path, event_log="rotate_mb: 0.001")
+    stray = tmp_path / "events.jsonl.01"
+    stray.write_text('{"seq": 1, "state": "fault", "planted": true}\n')
+    head = _head(LOG, 10.0, tmp_path / "head.log")
+    last = 0
+    try:
+        for _ in range(3):
+            rig.start()
+            rig.replay(head)
+            done = last
+            rig.wait_event(lambda e, after=done: e["seq"] > after and e.get("state") == "inactive")
+            rig.kill()
+            last = rig.events()[-1]["seq"]
+    finally:
+        if rig.daemon is not None and rig.daemon.poll() is None:
+            rig.kill()
+    seqs = [e["seq"] for e in rig.events()]
+    assert seqs == list(range(1, last + 1)) and len(rig.event_files()) >= 3
+    assert stray.read_text() == '{"seq": 1, "state": "fault", "planted": true}\n'
