@@ -259,13 +259,13 @@ def test_a_judged_log_names_its_episode_from_every_fault_sample_of_it():
     # to the end of the log.  Its votes are its fault samples, counted apart from the
     # detector's state per sample; the name and DM1 code are piston_wear's (by hand above).
     import numpy as np
+    from naive_frames import recording_from_candump
 
     from monitor.detection.alarm import State
     from monitor.detection.offline import detect
     from monitor.fleet.pipeline import judge_log
     from monitor.model.modelfile import load_model
     from monitor.resources import resource_path
-    from naive_frames import recording_from_candump
 
     model_path, log = resource_path("config", "boom_default.model.npz"), resource_path(
         "replay", "piston_wear.log")  # fmt: skip
