@@ -100,6 +100,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MonitorError as exc:
         print(f"monitor {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print(f"monitor {args.command}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # with a message when the command stopped in order
+        why = f": {exc}" if str(exc) else ""
+        print(f"monitor {args.command}: interrupted{why}", file=sys.stderr)
         return 130

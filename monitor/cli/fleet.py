@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from monitor.cli import _fleet_web
+from monitor.cli._paths import output_dir
 from monitor.fleet.health import DRIFT_FLAG, DRIFT_LOGS
 
 
@@ -28,11 +29,15 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "commissioning data the default model, and it says so), then judge every log not yet "
         "in RESULTS (by SHA-256) as `monitor detect` does. Writes RESULTS/logs.parquet, "
         "events.parquet and models/<machine>.model.npz. Runs on a Dask LocalCluster of "
-        "--workers processes, or on an existing scheduler. Exit 0 when every log got a row "
-        "(whatever the rows say); a log that cannot be judged is a row with its `error`.",
+        "--workers processes, or on an existing scheduler. Progress on stderr (redrawn on a "
+        "terminal, a line every 30 s elsewhere); the last line counts the fleet's logs "
+        "judged, not judged (read, nothing to judge) and failed (a row with its `error`), "
+        "naming the first failures. Exit 0 when every log was read, whatever its verdict; 3 "
+        "when any log failed; 130 on Ctrl-C, with the tables as before the run and the "
+        "finished logs kept for the next run, which resumes.",
     )
     r.add_argument("fleet", type=Path, metavar="FLEET")
-    r.add_argument("--out", type=Path, required=True, metavar="RESULTS")
+    r.add_argument("--out", type=output_dir, required=True, metavar="RESULTS")
     where = r.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
@@ -80,9 +85,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "commissioning run: a bounded crossing forecast).",
     )
     rep.add_argument("results", type=Path, metavar="RESULTS")
-    rep.add_argument("--out", type=Path, default=None, metavar="DIR",
+    rep.add_argument("--out", type=output_dir, default=None, metavar="DIR",
                      help="the Markdown page with PNG pictures into DIR")
-    rep.add_argument("--html", type=Path, default=None, metavar="DIR",
+    rep.add_argument("--html", type=output_dir, default=None, metavar="DIR",
                      help="the web page into DIR (index.html)")
     rep.add_argument(
         "--last", type=int, default=6, metavar="K", help="logs in the trend (default 6)"
@@ -105,12 +110,16 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monitor.errors import ConfigError
+    from monitor.fleet.progress import Progress
     from monitor.fleet.run import RunOptions, run_fleet
 
     if args.workers < 1:
         raise ConfigError(f"--workers {args.workers}: at least 1")
     if not args.fleet.is_dir():
         raise ConfigError(f"{args.fleet}: no such fleet folder")
+    if (args.fleet / "logs").is_dir() or (args.fleet / "commissioning").is_dir():
+        raise ConfigError(f"{args.fleet}: one machine's folder (it holds logs/ or "
+                          "commissioning/); give the fleet folder above it")  # fmt: skip
 
     opts = RunOptions(
         workers=args.workers,
@@ -119,11 +128,10 @@ def run(args: argparse.Namespace) -> int:
         config=None if args.config is None else str(args.config.resolve()),
         isolation=args.isolation,
     )
-    counts = run_fleet(args.fleet.resolve(), args.out, opts,
-                       say=lambda m: print(m, file=sys.stderr, flush=True))  # fmt: skip
-    print(f"fleet: {counts['judged']} logs judged, {counts['skipped']} already in results, "
-          f"{counts['rows']} rows in {args.out / 'logs.parquet'}", file=sys.stderr)  # fmt: skip
-    return 0
+    progress = Progress(sys.stderr, tty=sys.stderr.isatty())
+    outcome = run_fleet(args.fleet.resolve(), args.out, opts, progress)
+    print(f"{outcome.line()}; rows in {args.out / 'logs.parquet'}", file=sys.stderr)
+    return outcome.exit_code
 
 
 def report(args: argparse.Namespace) -> int:
@@ -139,6 +147,11 @@ def report(args: argparse.Namespace) -> int:
         print(f"wrote {page}", file=sys.stderr)
     if args.html is not None:
         print(f"wrote {_fleet_web.write_html(args)}", file=sys.stderr)
+    unmerged = len(list((args.results / "parts").glob("*.json")))
+    if unmerged:  # an interrupted or running `fleet run`: the page shows the tables only
+        print(f"monitor fleet report: note: {unmerged} finished log(s) of an unfinished run "
+              "are not in the tables yet (`monitor fleet run` again merges them)",
+              file=sys.stderr)  # fmt: skip
     return 0
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
+from monitor.cli._paths import output_dir
 from monitor.errors import ConfigError
 
 
@@ -19,7 +19,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "in the first log rising to --wear-max in the last), M03's flow sensor freezes from "
         "the middle day on; the rest are healthy. OUT/answer_key.json says which is which.",
     )
-    p.add_argument("out", type=Path, metavar="OUT", help="fleet folder to write (created)")
+    p.add_argument("out", type=output_dir, metavar="OUT", help="fleet folder to write (created)")
     p.add_argument("--machines", type=int, required=True, metavar="N",
                    help="machines to simulate (M01, M02, ...; roles as above)")  # fmt: skip
     p.add_argument("--days", type=int, required=True, metavar="D",

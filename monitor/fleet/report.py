@@ -37,8 +37,12 @@ def load_rows(results: Path) -> dict[str, list[dict[str, Any]]]:
     path = results / "logs.parquet"
     if not path.is_file():
         raise InputFileError(f"{path}: no such file (run `monitor fleet run` first)")
+    table = pq.read_table(path).to_pylist()
+    if not table:
+        raise InputFileError(f"{path}: no rows yet (a first run stopped before its end?): "
+                             "run `monitor fleet run` again")  # fmt: skip
     per: dict[str, list[dict[str, Any]]] = defaultdict(list)
-    for r in sorted(pq.read_table(path).to_pylist(), key=lambda r: r["log"]):
+    for r in sorted(table, key=lambda r: r["log"]):
         per[r["machine"]].append(r)
     return dict(per)
 

@@ -10,20 +10,30 @@ it.  Results come back to the client, which writes each one durably as it arrive
 from __future__ import annotations
 
 import hashlib
+import logging
+import os
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 from monitor.errors import MonitorError
 from monitor.fleet import pipeline
 from monitor.fleet.layout import Fleet, Machine, scan_fleet
+from monitor.fleet.outcome import Outcome
+from monitor.fleet.progress import Progress
 from monitor.fleet.store import ResultStore
 from monitor.io.digest import sha256_file
 
 Say = Callable[[str], None]
+
+#: Dask's logging level in worker processes, read from the environment at their start.
+_WORKER_LOG = "DASK_LOGGING__DISTRIBUTED"
 
 
 @dataclass(frozen=True)
@@ -57,22 +67,56 @@ def _empty_row(machine: str, log: str, sha: str | None, model: str, error: str) 
             "p50_j_drift": None}  # fmt: skip
 
 
-class _Progress:
-    def __init__(self, total: int, say: Say) -> None:
-        self.total, self.say, self.done, self.frames = total, say, 0, 0
-        self.start = self.last = time.monotonic()
+class FleetInterrupted(KeyboardInterrupt):
+    """Ctrl-C or SIGTERM during a run: the cluster is stopped, every finished log kept."""
 
-    def tick(self, frames: int | None, force: bool = False) -> None:
-        self.done += 1
-        self.frames += frames or 0
-        now = time.monotonic()
-        if not force and now - self.last < 2.0 and self.done < self.total:
-            return
-        self.last = now
-        elapsed = max(now - self.start, 1e-9)
-        eta = (self.total - self.done) * elapsed / self.done
-        self.say(f"fleet: {self.done}/{self.total} logs, {self.frames / elapsed:,.0f} frames/s, "
-                 f"ETA {eta:.0f} s")  # fmt: skip
+
+class _Stop:
+    """The flag SIGINT and SIGTERM set (a handler does nothing else); the run checks it
+    between short waits, so it stops its cluster in order instead of dying inside Dask."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def __call__(self, signum: int, _frame: FrameType | None) -> None:
+        self.signum = signum
+
+    def check(self) -> None:
+        if self.signum is not None:
+            raise FleetInterrupted(signal.Signals(self.signum).name)
+
+
+@contextmanager
+def _flag_on_signals(stop: _Stop) -> Iterator[None]:
+    if threading.current_thread() is not threading.main_thread():
+        yield  # a library caller's thread: no signals to take over
+        return
+    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+
+
+@contextmanager
+def _quiet_workers() -> Iterator[None]:
+    """While local workers start.  They inherit an ignored SIGINT, so a Ctrl-C at the
+    terminal (sent to the whole process group) reaches the client alone, which stops them;
+    and Dask's warnings only from errors up (stopped mid-task, each says so at length)."""
+    old_env = os.environ.get(_WORKER_LOG)
+    os.environ[_WORKER_LOG] = "error"
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        yield
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, old)
+        if old_env is None:
+            del os.environ[_WORKER_LOG]
+        else:
+            os.environ[_WORKER_LOG] = old_env
 
 
 @contextmanager
@@ -86,8 +130,9 @@ def _client(opts: RunOptions, say: Say) -> Iterator[Any]:
         n = len(client.scheduler_info()["workers"])
         say(f"fleet: Dask scheduler {opts.scheduler}, {n} workers")
     else:
-        cluster = LocalCluster(n_workers=opts.workers, threads_per_worker=1, processes=True,
-                               dashboard_address="127.0.0.1:0")  # fmt: skip
+        with _quiet_workers():
+            cluster = LocalCluster(n_workers=opts.workers, threads_per_worker=1,
+                                   processes=True, dashboard_address="127.0.0.1:0")  # fmt: skip
         client = Client(cluster)
         say(f"fleet: Dask LocalCluster, {opts.workers} workers")
     if client.dashboard_link:
@@ -95,9 +140,22 @@ def _client(opts: RunOptions, say: Say) -> Iterator[Any]:
     try:
         yield client
     finally:
+        # What Dask logs while it stops (workers it kills, tasks it drops, mid-run after a
+        # Ctrl-C) is not for the user: the run's own lines say what happened.
+        for name in ("distributed", "tornado", "asyncio"):
+            logging.getLogger(name).setLevel(logging.CRITICAL)
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _wait(futures: list[Any], stop: _Stop, progress: Progress) -> None:
+    """Until every future is done, checking ``stop`` and redrawing the progress."""
+    while not all(f.done() for f in futures):
+        stop.check()
+        progress.refresh()
+        time.sleep(0.1)
+    stop.check()
 
 
 def _settings(default: bytes, opts: RunOptions) -> dict[str, Any]:
@@ -117,10 +175,9 @@ def _manifest(m: Machine, fleet: Fleet, settings: dict[str, Any]) -> dict[str, A
 
 
 def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, needed: set[str],
-            say: Say) -> dict:  # fmt: skip
+            stop: _Stop, progress: Progress) -> dict:  # fmt: skip
     """machine id -> (future or bytes of its model, model label), for the ``needed`` ones."""
-    from distributed import wait
-
+    say = progress.say
     default = pipeline.default_model_bytes(opts.default_model, opts.config)
     out: dict[str, tuple[Any, str]] = {}
     manifests: dict[str, dict[str, Any]] = {}
@@ -138,21 +195,26 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, nee
         if cached is not None:
             out[m.machine_id] = (cached, "commissioned")
             continue
+        if first:
+            progress.commissioning(sum(1 for x in fleet.machines if x.machine_id in needed
+                                       and x.commissioning))  # fmt: skip
         # The default model floors the commissioned thresholds (minutes cannot show the
         # tail of hours: monitor.training.train.floor_thresholds).
         fut = client.submit(train_task, [str(p) for p in m.commissioning], opts.config,
                             opts.isolation, default, key=f"train-{m.machine_id}",
                             pure=False)  # fmt: skip
         if first:  # alone: it fills numba's cache for the training kernels
-            wait([fut])  # a failure is reported below, with the others'
+            _wait([fut], stop, progress)  # a failure is reported below, with the others'
             first = False
         out[m.machine_id] = (fut, "training")
     reused = [mid for mid, (_, label) in out.items() if label == "commissioned"]
     if reused:
         say(f"fleet: {len(reused)} machine model(s) reused (commissioning unchanged)")
+        progress.machines_total -= len(reused)
     for mid, (fut, label) in list(out.items()):
         if label != "training":
             continue
+        _wait([fut], stop, progress)
         try:
             data = fut.result()
         except Exception as exc:  # noqa: BLE001 - any failure of a machine's training
@@ -161,16 +223,21 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, nee
             continue
         store.save_model(mid, data, manifests[mid])
         out[mid] = (fut, "commissioned")
+        progress.commissioned()
     for mid, (data, label) in out.items():
         if label.startswith("default"):
             store.save_model(mid, data, None)
     return out
 
 
-def _todo(fleet: Fleet, store: ResultStore) -> tuple[list[tuple[Machine, Path, str]], list]:
-    """Logs without a row yet, and rows for what cannot be judged at all."""
+Todo = list[tuple[Machine, Path, str]]
+
+
+def _todo(fleet: Fleet, store: ResultStore) -> tuple[Todo, list[dict], set[tuple[str, str]]]:
+    """Logs without a row yet, rows for what cannot be judged at all, and the (log, sha256)
+    key of every row this fleet has now (what the closing line counts)."""
     done = store.done()
-    todo, bad = [], []
+    todo, bad, keys = [], [], set()
     for m in fleet.machines:
         if not m.logs:
             bad.append(
@@ -191,42 +258,76 @@ def _todo(fleet: Fleet, store: ResultStore) -> tuple[list[tuple[Machine, Path, s
                     _empty_row(m.machine_id, log, None, "-", f"unreadable: {exc.strerror or exc}")
                 )
                 continue
+            keys.add((log, sha))
             if (log, sha) not in done:
                 todo.append((m, p, sha))
-    return todo, bad
+    keys |= {(r["log"], "") for r in bad}
+    return todo, bad, keys
 
 
-def run_fleet(root: Path, out: Path, opts: RunOptions, say: Say) -> dict[str, int]:
-    """Judge every new log of FLEET into RESULTS; counts of logs judged, skipped and rows."""
+def _judge(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, todo: Todo,
+           stop: _Stop, progress: Progress) -> None:  # fmt: skip
+    """Commission the machines of ``todo`` and judge its logs, each row stored as it comes."""
     from distributed import as_completed
 
+    needed = {m.machine_id for m, _p, _sha in todo}
+    models = _models(client, fleet, store, opts, needed, stop, progress)
+    futures: dict[Any, tuple[Machine, Path, str]] = {}
+    progress.judging(len(todo))
+    for i, (m, p, sha) in enumerate(todo):
+        fut = client.submit(judge_task, models[m.machine_id][0], str(p), opts.config,
+                            key=f"judge-{sha[:16]}-{i}", pure=False)  # fmt: skip
+        futures[fut] = (m, p, sha)
+        if i == 0:  # alone: it fills numba's cache for the detection kernels
+            _wait([fut], stop, progress)
+    pending = as_completed(list(futures))
+    while not pending.is_empty():
+        stop.check()
+        batch = pending.next_batch(block=False)
+        if not batch:
+            progress.refresh()
+            time.sleep(0.1)
+            continue
+        for fut in batch:
+            m, p, sha = futures[fut]
+            try:
+                res = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a worker lost: the log's row says so
+                res = {"row": {}, "events": [], "error": f"worker failed: {exc!r}"}
+            label = models[m.machine_id][1]
+            row = _empty_row(m.machine_id, fleet.relative(p), sha, label, res["error"])
+            row.update(res["row"])
+            store.add(row, res["events"])
+            progress.judged(row.get("frames"))
+
+
+def run_fleet(root: Path, out: Path, opts: RunOptions, progress: Progress) -> Outcome:
+    """Judge every new log of FLEET into RESULTS; what the fleet's rows say.
+
+    The tables are written once, at the end: interrupted (:class:`FleetInterrupted`), they
+    stay as they were before the run and the finished logs wait as parts, which the next
+    run finds done and merges."""
     fleet = scan_fleet(root)
     store = ResultStore(out)
-    store.compact()  # parts of a killed run first
-    todo, bad = _todo(fleet, store)
-    for row in bad:
-        store.add(row, [])
-    n_logs = sum(len(m.logs) for m in fleet.machines)
-    say(f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new")
-    if todo:
-        with _client(opts, say) as client:
-            needed = {m.machine_id for m, _p, _sha in todo}
-            models = _models(client, fleet, store, opts, needed, say)
-            futures: dict[Any, tuple[Machine, Path, str]] = {}
-            for i, (m, p, sha) in enumerate(todo):
-                fut = client.submit(judge_task, models[m.machine_id][0], str(p), opts.config,
-                                    key=f"judge-{sha[:16]}-{i}", pure=False)  # fmt: skip
-                futures[fut] = (m, p, sha)
-                if i == 0:  # alone: it fills numba's cache for the detection kernels
-                    fut.result()
-            progress = _Progress(len(todo), say)
-            for fut in as_completed(list(futures)):
-                m, p, sha = futures[fut]
-                res = fut.result()
-                label = models[m.machine_id][1]
-                row = _empty_row(m.machine_id, fleet.relative(p), sha, label, res["error"])
-                row.update(res["row"])
-                store.add(row, res["events"])
-                progress.tick(row.get("frames"))
-    rows = store.compact()
-    return {"judged": len(todo), "skipped": n_logs - len(todo), "rows": rows}
+    stop = _Stop()
+    with _flag_on_signals(stop):
+        todo, bad, keys = _todo(fleet, store)
+        for row in bad:
+            store.add(row, [])
+        n_logs = sum(len(m.logs) for m in fleet.machines)
+        progress.say(f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new")
+        try:
+            if todo:
+                with _client(opts, progress.say) as client:
+                    _judge(client, fleet, store, opts, todo, stop, progress)
+                progress.close()
+            stop.check()
+        except FleetInterrupted:
+            progress.close()
+            finished = store.pending()
+            raise FleetInterrupted(f"{finished} finished log(s) kept in {store.parts}, "
+                                   f"the tables as before the run; run again to resume"
+                                   ) from None  # fmt: skip
+        store.compact()
+    skipped = sum(1 for _log, sha in keys if sha) - len(todo)
+    return Outcome.of(store.rows(), keys, new=len(todo), skipped=skipped)

@@ -113,6 +113,14 @@ class ResultStore:
         data = json.dumps({"row": row, "events": events}).encode("utf-8")
         _write_atomic(self.parts / f"{name}.json", data)
 
+    def pending(self) -> int:
+        """Finished logs not merged into the tables yet (an unfinished run's)."""
+        return len(list(self.parts.glob("*.json")))
+
+    def rows(self) -> list[dict[str, Any]]:
+        """The rows of logs.parquet (none before the first finished run)."""
+        return self._rows_parquet()
+
     def _parts(self) -> list[dict[str, Any]]:
         out = []
         for p in sorted(self.parts.glob("*.json")):
