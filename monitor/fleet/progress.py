@@ -96,6 +96,10 @@ class Progress:
         self._clear()
         print(self.status(), file=self.stream, flush=True)
 
+    def end(self) -> None:
+        """Clear a status line still drawn (before an error line, say)."""
+        self._clear()
+
     def _show(self, line: str) -> None:
         if self.tty:
             self.stream.write("\r" + line + "\x1b[K")

@@ -25,6 +25,7 @@ from typing import Any
 from monitor.errors import MonitorError
 from monitor.fleet import pipeline
 from monitor.fleet.layout import Fleet, Machine, scan_fleet
+from monitor.fleet.lock import results_lock
 from monitor.fleet.outcome import Outcome
 from monitor.fleet.progress import Progress
 from monitor.fleet.store import ResultStore
@@ -237,18 +238,14 @@ def _todo(fleet: Fleet, store: ResultStore) -> tuple[Todo, list[dict], set[tuple
     """Logs without a row yet, rows for what cannot be judged at all, and the (log, sha256)
     key of every row this fleet has now (what the closing line counts)."""
     done = store.done()
-    todo, bad, keys = [], [], set()
+    todo, keys = [], set()
+    bad = [_empty_row(r.machine, r.name, None, "-", f"refused: {r.reason}")
+           for r in fleet.refused]  # fmt: skip
     for m in fleet.machines:
-        if not m.logs:
-            bad.append(
-                _empty_row(
-                    m.machine_id,
-                    f"{m.machine_id}/logs/",
-                    None,
-                    "-",
-                    "no logs (expected FLEET/<machine>/logs/*.log|*.csv)",
-                )
-            )
+        if not m.logs and not any(r.name.startswith(f"{m.machine_id}/logs/")
+                                  for r in fleet.refused):  # fmt: skip
+            why = "no logs (expected FLEET/<machine>/logs/*.log|*.csv)"
+            bad.append(_empty_row(m.machine_id, f"{m.machine_id}/logs/", None, "-", why))
         for p in m.logs:
             log = fleet.relative(p)
             try:
@@ -301,21 +298,43 @@ def _judge(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, todo
             progress.judged(row.get("frames"))
 
 
+class ResultsWriteError(MonitorError, OSError):
+    """RESULTS could not be written (a full disk, ...): the run stopped, finished logs kept."""
+
+    exit_code = 3
+
+
 def run_fleet(root: Path, out: Path, opts: RunOptions, progress: Progress) -> Outcome:
     """Judge every new log of FLEET into RESULTS; what the fleet's rows say.
 
-    The tables are written once, at the end: interrupted (:class:`FleetInterrupted`), they
-    stay as they were before the run and the finished logs wait as parts, which the next
-    run finds done and merges."""
+    One run per RESULTS at a time (:func:`results_lock`).  The tables are written once, at
+    the end: interrupted (:class:`FleetInterrupted`) or stopped by a full disk
+    (:class:`ResultsWriteError`), they stay as they were before the run and the finished
+    logs wait as parts, which the next run finds done and merges."""
     fleet = scan_fleet(root)
-    store = ResultStore(out)
+    try:
+        with results_lock(out):
+            return _run(fleet, ResultStore(out), opts, progress)
+    except OSError as exc:
+        if isinstance(exc, MonitorError):
+            raise
+        where = f" ({exc.filename})" if exc.filename else ""
+        raise ResultsWriteError(f"{out}: cannot write the results: {exc.strerror or exc}"
+                                f"{where}; finished logs are kept, run again once it can "
+                                "be written") from None  # fmt: skip
+    finally:
+        progress.end()
+
+
+def _run(fleet: Fleet, store: ResultStore, opts: RunOptions, progress: Progress) -> Outcome:
     stop = _Stop()
     with _flag_on_signals(stop):
         todo, bad, keys = _todo(fleet, store)
         for row in bad:
             store.add(row, [])
         n_logs = sum(len(m.logs) for m in fleet.machines)
-        progress.say(f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new")
+        progress.say(f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new"
+                     + (f", {len(fleet.refused)} refused" if fleet.refused else ""))  # fmt: skip
         try:
             if todo:
                 with _client(opts, progress.say) as client:
