@@ -183,7 +183,7 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, nee
     out: dict[str, tuple[Any, str]] = {}
     manifests: dict[str, dict[str, Any]] = {}
     settings = _settings(default, opts)
-    first = True
+    to_train: list[Machine] = []
     for m in fleet.machines:
         if m.machine_id not in needed:
             continue
@@ -195,23 +195,22 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, nee
         cached = store.cached_model(m.machine_id, manifest)
         if cached is not None:
             out[m.machine_id] = (cached, "commissioned")
-            continue
-        if first:
-            progress.commissioning(sum(1 for x in fleet.machines if x.machine_id in needed
-                                       and x.commissioning))  # fmt: skip
+        else:
+            to_train.append(m)
+    if to_train:
+        progress.commissioning(len(to_train))
+    for i, m in enumerate(to_train):
         # The default model floors the commissioned thresholds (minutes cannot show the
         # tail of hours: monitor.training.train.floor_thresholds).
         fut = client.submit(train_task, [str(p) for p in m.commissioning], opts.config,
                             opts.isolation, default, key=f"train-{m.machine_id}",
                             pure=False)  # fmt: skip
-        if first:  # alone: it fills numba's cache for the training kernels
+        if i == 0:  # alone: it fills numba's cache for the training kernels
             _wait([fut], stop, progress)  # a failure is reported below, with the others'
-            first = False
         out[m.machine_id] = (fut, "training")
     reused = [mid for mid, (_, label) in out.items() if label == "commissioned"]
     if reused:
         say(f"fleet: {len(reused)} machine model(s) reused (commissioning unchanged)")
-        progress.machines_total -= len(reused)
     for mid, (fut, label) in list(out.items()):
         if label != "training":
             continue
@@ -332,6 +331,7 @@ def _run(fleet: Fleet, store: ResultStore, opts: RunOptions, progress: Progress)
         todo, bad, keys = _todo(fleet, store)
         for row in bad:
             store.add(row, [])
+        stop.check()  # hashing a large fleet takes a while: a Ctrl-C then starts no cluster
         n_logs = sum(len(m.logs) for m in fleet.machines)
         progress.say(f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new"
                      + (f", {len(fleet.refused)} refused" if fleet.refused else ""))  # fmt: skip
