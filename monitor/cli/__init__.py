@@ -10,6 +10,7 @@ import sys
 from collections.abc import Sequence
 
 from monitor import __version__
+from monitor.cli._extras import missing_extra
 from monitor.errors import MonitorError
 
 # Every module of this package defines ``add_subparser(subparsers)``, which registers its
@@ -85,6 +86,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Import only the subcommand asked for: the others pull in the simulator, scipy and
     # matplotlib, seconds of start-up on a controller (minutes in the SocketCAN test VM).
     first = argv[0].replace("-", "_") if argv and not argv[0].startswith("-") else None
+    try:
+        return _main(argv, first)
+    except ModuleNotFoundError as exc:  # a command of an extra on the controller's install
+        line = missing_extra(exc)
+        if line is None:
+            raise
+        print(f"monitor{f' {argv[0]}' if first else ''}: error: {line}", file=sys.stderr)
+        return 2
+
+
+def _main(argv: list[str], first: str | None) -> int:
     parser = build_parser(first)
     if not argv:  # `monitor` alone: what it can do, as with --help, but a usage error
         parser.print_help(sys.stderr)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
+from monitor.cli._extras import require
 from monitor.cli._paths import output_file
 from monitor.detection.alarm import State
 from monitor.detection.opstate import OpState
@@ -107,6 +108,8 @@ def _write_lines(lines: list[dict[str, Any]], fh: TextIO) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.plot:
+        require("matplotlib")  # the [analysis] extra: said before the work, not after
     from monitor.config.layout import check_loop_model
     from monitor.config.settings import load_config
     from monitor.detection.offline import detect

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from monitor.cli import _fleet_web
+from monitor.cli._extras import require
 from monitor.cli._paths import output_dir
 from monitor.fleet.health import DRIFT_FLAG, DRIFT_LOGS
 
@@ -109,6 +110,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    require("distributed", "pyarrow", "scipy")  # the [fleet] extra, before any work
     from monitor.errors import ConfigError
     from monitor.fleet.progress import Progress
     from monitor.fleet.run import RunOptions, run_fleet
@@ -135,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def report(args: argparse.Namespace) -> int:
+    require("pyarrow", "matplotlib")
     from monitor.errors import ConfigError
     from monitor.fleet.report import write_report
 

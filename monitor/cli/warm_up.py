@@ -40,9 +40,6 @@ def run(args: argparse.Namespace) -> int:
     from monitor.model.modelfile import load_model
     from monitor.resources import resource_path
     from monitor.sampling.read import read_recording
-    from monitor.sim.cycles import make_cycle
-    from monitor.sim.machine import load_machine
-    from monitor.sim.simulate import simulate
 
     os.environ["MONITOR_AOT"] = "0"  # through the JIT: numba learns the kernels' types
     start = time.perf_counter()
@@ -58,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         ("per-tick detector", lambda: _ticks(Ticker(model, cfg.alarm, cfg.horizon,
                                                     gating=cfg.gating))),
         ("live sample clock", _sample_clock),
-        ("simulator", lambda: simulate(make_cycle("boom", 2.0, 1), load_machine(), seed=1)),
+        ("simulator", _simulator),
         # A statistic may be opt-in for `monitor train` (H: ``--hold on``): each member's
         # kernels typed here whatever the configured model carries, so any model with it
         # finds them ahead of time.
@@ -66,7 +63,10 @@ def run(args: argparse.Namespace) -> int:
     ]  # fmt: skip
     for name, step in steps:
         t0 = time.perf_counter()
-        step()
+        if step() is False:
+            print(f"warm-up: {name}: skipped (the [analysis] extra is not installed)",
+                  file=sys.stderr)  # fmt: skip
+            continue
         print(f"warm-up: {name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     s = cache_stats()
     where = os.environ.get("NUMBA_CACHE_DIR") or "next to the installed package (__pycache__)"
@@ -98,6 +98,21 @@ def _build_aot() -> None:
           f"compiled ahead of time in {time.perf_counter() - t0:.1f} s: {path} (the daemon "
           f"and monitor detect load no numba)",
           file=sys.stderr)  # fmt: skip
+
+
+def _simulator() -> bool:
+    """The simulator's kernels, where it is installed (a controller's install has no scipy,
+    and no use for the simulator)."""
+    from importlib.util import find_spec
+
+    if find_spec("scipy") is None:
+        return False
+    from monitor.sim.cycles import make_cycle
+    from monitor.sim.machine import load_machine
+    from monitor.sim.simulate import simulate
+
+    simulate(make_cycle("boom", 2.0, 1), load_machine(), seed=1)
+    return True
 
 
 def _serial_prediction(model: object) -> None:
