@@ -104,9 +104,11 @@ def _flag_on_signals(stop: _Stop) -> Iterator[None]:
 def _quiet_workers() -> Iterator[None]:
     """While local workers start.  They inherit an ignored SIGINT, so a Ctrl-C at the
     terminal (sent to the whole process group) reaches the client alone, which stops them;
-    and Dask's warnings only from errors up (stopped mid-task, each says so at length)."""
+    and Dask's own logging only for critical errors: a task's failure comes back to the
+    client and into the log's row, while what workers log when stopped mid-task or when
+    the scheduler closes before their last heartbeat is tracebacks the user cannot act on."""
     old_env = os.environ.get(_WORKER_LOG)
-    os.environ[_WORKER_LOG] = "error"
+    os.environ[_WORKER_LOG] = "critical"
     main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:
@@ -331,11 +333,11 @@ def _run(fleet: Fleet, store: ResultStore, opts: RunOptions, progress: Progress)
         todo, bad, keys = _todo(fleet, store)
         for row in bad:
             store.add(row, [])
-        stop.check()  # hashing a large fleet takes a while: a Ctrl-C then starts no cluster
         n_logs = sum(len(m.logs) for m in fleet.machines)
         progress.say(f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new"
                      + (f", {len(fleet.refused)} refused" if fleet.refused else ""))  # fmt: skip
         try:
+            stop.check()  # hashing a large fleet takes a while: a Ctrl-C starts no cluster
             if todo:
                 with _client(opts, progress.say) as client:
                     _judge(client, fleet, store, opts, todo, stop, progress)
