@@ -10,6 +10,7 @@ import shutil
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -200,7 +201,8 @@ def test_a_model_trained_with_other_settings_is_commissioned_again(run1, tmp_pat
     assert again["commissioning"] == meta["commissioning"]
 
 
-def test_a_killed_client_loses_nothing_finished_and_writes_no_row_twice(fleet, tmp_path):
+def _started_with_a_finished_log(fleet, tmp_path) -> tuple[Path, Path, subprocess.Popen]:
+    """A run on a copy of ``fleet`` in its own process group, once it has a finished log."""
     f = copy_fleet(fleet, tmp_path / "fleet")
     out = tmp_path / "results"
     proc = subprocess.Popen(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
@@ -208,8 +210,12 @@ def test_a_killed_client_loses_nothing_finished_and_writes_no_row_twice(fleet, t
                             start_new_session=True)  # fmt: skip
     parts = out / "parts"
     wait_for(lambda: parts.is_dir() and any(parts.glob("*.json")), "a first finished log", proc)
-    kill(proc)  # the client and its LocalCluster's workers (one process group)
-    finished = len(list(parts.glob("*.json")))
+    return f, out, proc
+
+
+def _rerun_resumes(f: Path, out: Path) -> None:
+    """A second run judges only what the first did not finish, and every log has one row."""
+    finished = len(list((out / "parts").glob("*.json")))
     total = len(list(f.glob("*/logs/*.log")))
     again = subprocess.run(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
                            capture_output=True, text=True, env=env())  # fmt: skip
@@ -219,19 +225,18 @@ def test_a_killed_client_loses_nothing_finished_and_writes_no_row_twice(fleet, t
     assert sorted(logs) == sorted(p.relative_to(f).as_posix() for p in f.glob("*/logs/*.log"))
 
 
+def test_a_killed_client_loses_nothing_finished_and_writes_no_row_twice(fleet, tmp_path):
+    f, out, proc = _started_with_a_finished_log(fleet, tmp_path)
+    kill(proc)  # the client and its LocalCluster's workers (one process group)
+    _rerun_resumes(f, out)
+
+
 def test_ctrl_c_stops_in_one_line_with_130_leaves_no_table_and_a_rerun_resumes(fleet, tmp_path):
     # Ctrl-C at a terminal: SIGINT to the whole process group (the client and its local
     # workers).  Before: ~120 lines of Dask tracebacks and an empty logs.parquet, on which
     # `fleet report` died of a ZeroDivisionError.
-    f = copy_fleet(fleet, tmp_path / "fleet")
-    out = tmp_path / "results"
-    proc = subprocess.Popen(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
-                            stderr=subprocess.PIPE, text=True, env=env(),
-                            start_new_session=True)  # fmt: skip
-    parts = out / "parts"
+    f, out, proc = _started_with_a_finished_log(fleet, tmp_path)
     try:
-        wait_for(lambda: parts.is_dir() and any(parts.glob("*.json")), "a first finished log",
-                 proc)  # fmt: skip
         os.killpg(proc.pid, signal.SIGINT)
         _o, err = proc.communicate(timeout=120)
     finally:
@@ -247,11 +252,4 @@ def test_ctrl_c_stops_in_one_line_with_130_leaves_no_table_and_a_rerun_resumes(f
                             env=env())  # fmt: skip
     assert report.returncode == 2 and "run `monitor fleet run` first" in report.stderr
     assert len(report.stderr.strip().splitlines()) == 1
-    finished = len(list(parts.glob("*.json")))
-    total = len(list(f.glob("*/logs/*.log")))
-    again = subprocess.run(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
-                           capture_output=True, text=True, env=env())  # fmt: skip
-    assert again.returncode == 0, again.stderr
-    assert f"{total - finished} new this run, {finished} already in results" in again.stderr
-    assert sorted(r["log"] for r in rows(out)) == sorted(
-        p.relative_to(f).as_posix() for p in f.glob("*/logs/*.log"))
+    _rerun_resumes(f, out)
