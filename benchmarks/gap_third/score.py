@@ -8,6 +8,7 @@ class), healthy `none`, sensor_calibration on the right signal, out-of-catalogue
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import subprocess
 import sys
@@ -118,8 +119,10 @@ def main(argv: list[str] | None = None) -> int:
         reps = list(pool.map(lambda e: diagnose(args.out / f"{e['name']}.csv", gap), entries))
     rows = [judge(e, r) for e, r in zip(entries, reps, strict=True)]
     summary = summarise(rows)
-    args.json.write_text(json.dumps({"seed": key["seed"], "summary": summary, "rows": rows},
-                                    indent=1))
+    spec = importlib.util.find_spec("monitor")
+    tool = {"python": sys.executable, "monitor": spec.origin if spec else None}
+    args.json.write_text(json.dumps({"seed": key["seed"], "set": key["set"], "tool": tool,
+                                     "summary": summary, "rows": rows}, indent=1))
     md = markdown(summary, rows)
     if args.md:
         args.md.write_text(md)
