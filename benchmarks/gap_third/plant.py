@@ -113,14 +113,12 @@ def _capacity(prm: np.ndarray, volume: float, p: float, temp_c: float) -> float:
 
 
 @numba.njit(cache=True)
-def derivatives(prm, s, cmd, disp_cmd, n_set, temp_c, t, ds):  # noqa: PLR0915
-    p_p, p_a, p_b, p_t, x, v, xs, vs, alpha, z, n = s
-    nu_r = viscosity_ratio(temp_c)
-    dpt = prm[DPT0] * nu_r * nu_r
-    # valve: flow force closes the spool, the spool lags its command
+def _valve(prm, s, cmd, nu_r, ds):
+    """Edge flows P->A, A->T, P->B, B->T (m^3/s); sets the spool's derivatives."""
+    p_p, p_a, p_b, p_t, xs, vs = s[0], s[1], s[2], s[3], s[6], s[7]
     u = _opening(xs, prm[OVERLAP])
     area = (1.0 - prm[NOTCH]) * u + prm[NOTCH] * u * u
-    dpt_u = dpt * (1.0 + 0.1 / (u + 0.01))
+    dpt_u = prm[DPT0] * nu_r * nu_r * (1.0 + 0.1 / (u + 0.01))
     kcl = prm[K_CLEAR] / nu_r
     if xs >= 0.0:
         q_pa = _edge(prm[KV_PA], area, p_p - p_a, dpt_u) + kcl * (p_p - p_a)
@@ -136,21 +134,63 @@ def derivatives(prm, s, cmd, disp_cmd, n_set, temp_c, t, ds):  # noqa: PLR0915
         q_bt = kcl * (p_b - p_t)
         drop = abs(p_p - p_b) + abs(p_a - p_t)
         sgn = -1.0
+    # the steady flow force closes the spool against its position control
     x_ref = cmd - sgn * prm[FLOW_FORCE] * area * drop / 1e7
     wn = prm[WN_S]
     ds[6] = vs
     ds[7] = wn * wn * (x_ref - xs) - 2.0 * prm[ZETA_S] * wn * vs
-    # pump: control piston towards min(command, compensator), Wilson slip
+    return q_pa, q_at, q_pb, q_bt
+
+
+@numba.njit(cache=True)
+def _pump(prm, s, disp_cmd, n_set, nu_r, ds):
+    """Pump outlet flow and relief flow (m^3/s); sets swashplate and engine derivatives."""
+    p_p, alpha, n = s[0], s[8], s[10]
     comp = min(1.0, max(0.0, (prm[P_CF] - p_p) / (prm[P_CF] - prm[P_CS])))
     target = min(disp_cmd, comp)
     ds[8] = min(prm[RATE_CP], max(-prm[RATE_CP], (target - alpha) / prm[TAU_CP]))
     q_th = max(alpha, 0.0) * prm[D_MAX] * n / 60.0
     slip = prm[SLIP40] * max(p_p, 0.0) / nu_r ** prm[SLIP_EXP]
-    q_pump = q_th - slip
     q_rel = prm[Q_MAX] * max(0.0, p_p - prm[P_RC]) / (prm[P_RF] - prm[P_RC])
     torque = max(alpha, 0.0) * prm[D_MAX] * max(p_p, 0.0) / (2.0 * np.pi * prm[ETA_M])
     ds[10] = (n_set - prm[DROOP] * torque - n) / prm[TAU_E]
-    # cylinder and boom
+    return q_th - slip, q_rel
+
+
+@numba.njit(cache=True)
+def _rod(prm, s, nu_r, t, ds):
+    """Rod velocity and acceleration (boom dynamics), LuGre bristle derivative."""
+    p_a, p_b, x, v, z = s[1], s[2], s[4], s[5], s[9]
+    visc = prm[C_VISC] * (1.0 - prm[VISC_P] + prm[VISC_P] * (p_a + p_b) / (200 * BAR))
+    f_fric = visc * v * nu_r ** prm[VF_EXP]
+    ds[9] = 0.0
+    if prm[FC] > 0.0:  # LuGre
+        g = prm[FC] + (prm[FS] - prm[FC]) * np.exp(-(v / prm[VS]) ** 2)
+        dz = v - prm[SIGMA0] * abs(v) * z / g
+        ds[9] = dz
+        f_fric += prm[SIGMA0] * z + prm[SIGMA1] * np.exp(-(v / prm[VS]) ** 2) * dz
+    f_stop = 0.0
+    if x < 0.0:
+        f_stop = -prm[K_STOP] * x - prm[C_STOP] * min(v, 0.0)
+    elif x > prm[STROKE]:
+        f_stop = -prm[K_STOP] * (x - prm[STROKE]) - prm[C_STOP] * max(v, 0.0)
+    h, _ = boom_geometry(prm, x)
+    h2, _ = boom_geometry(prm, x + 1e-4)
+    m_eq = prm[INERTIA] / (h * h)
+    dm = (prm[INERTIA] / (h2 * h2) - m_eq) / 1e-4  # Lagrange: the pose-dependent inertia
+    f_per = prm[F_PER] * np.sin(prm[W_PER] * t)
+    force = p_a * prm[AREA_A] - p_b * prm[AREA_B] - load_force(prm, x) - f_fric + f_stop + f_per
+    ds[4] = v
+    ds[5] = (force - 0.5 * dm * v * v) / m_eq
+
+
+@numba.njit(cache=True)
+def derivatives(prm, s, cmd, disp_cmd, n_set, temp_c, t, ds):
+    """All state derivatives into ds; returns the pump outlet flow (m^3/s)."""
+    p_p, p_a, p_b, p_t, x, v = s[0], s[1], s[2], s[3], s[4], s[5]
+    nu_r = viscosity_ratio(temp_c)
+    q_pa, q_at, q_pb, q_bt = _valve(prm, s, cmd, nu_r, ds)
+    q_pump, q_rel = _pump(prm, s, disp_cmd, n_set, nu_r, ds)
     v_a = prm[V0A] + prm[AREA_A] * x
     v_b = prm[V0B] + prm[AREA_B] * (prm[STROKE] - x)
     q_int = prm[C_INT] * (p_a - p_b)
@@ -160,28 +200,7 @@ def derivatives(prm, s, cmd, disp_cmd, n_set, temp_c, t, ds):  # noqa: PLR0915
     ds[2] = (q_pb - q_bt + prm[AREA_B] * v + q_int) / _capacity(prm, v_b, p_b, temp_c)
     q_t = max(q_at + q_bt + q_rel + q_chk, 0.0)
     ds[3] = (prm[PT0] + prm[KT] * q_t * q_t - p_t) / 0.005
-    visc = prm[C_VISC] * (1.0 - prm[VISC_P] + prm[VISC_P] * (p_a + p_b) / (200 * BAR))
-    f_fric = visc * v * nu_r ** prm[VF_EXP]
-    if prm[FC] > 0.0:  # LuGre
-        g = prm[FC] + (prm[FS] - prm[FC]) * np.exp(-(v / prm[VS]) ** 2)
-        dz = v - prm[SIGMA0] * abs(v) * z / g
-        ds[9] = dz
-        f_fric += prm[SIGMA0] * z + prm[SIGMA1] * np.exp(-(v / prm[VS]) ** 2) * dz
-    else:
-        ds[9] = 0.0
-    f_stop = 0.0
-    if x < 0.0:
-        f_stop = -prm[K_STOP] * x - prm[C_STOP] * min(v, 0.0)
-    elif x > prm[STROKE]:
-        f_stop = -prm[K_STOP] * (x - prm[STROKE]) - prm[C_STOP] * max(v, 0.0)
-    h, _ = boom_geometry(prm, x)
-    h2, _ = boom_geometry(prm, x + 1e-4)
-    m_eq = prm[INERTIA] / (h * h)
-    dm = (prm[INERTIA] / (h2 * h2) - m_eq) / 1e-4
-    f_per = prm[F_PER] * np.sin(prm[W_PER] * t)
-    force = p_a * prm[AREA_A] - p_b * prm[AREA_B] - load_force(prm, x) - f_fric + f_stop + f_per
-    ds[4] = v
-    ds[5] = (force - 0.5 * dm * v * v) / m_eq
+    _rod(prm, s, nu_r, t, ds)
     return q_pump
 
 
