@@ -224,3 +224,24 @@ def test_answer_key_round_trips(tmp_path):
     worn = key["recordings"][1]
     assert worn["expected"] == "unexplained" and worn["mechanism"] == "leakage"
     assert worn["warmup"] is True
+
+
+def test_pump_settings_set_low_move_the_dead_head_pressure(nominal):
+    """Spool closed: PP sits in the compensator band, shifted by its key; a low relief caps it."""
+    prm, key, _ = _effect("compensator_low")
+    pp = _run(prm, _inputs(3.0, 0.0))[-500:, 0].mean() / BAR
+    assert 190 + key["shift_bar"] < pp < 200 + key["shift_bar"]
+    prm, key, _ = _effect("relief_low")
+    pp = _run(prm, _inputs(3.0, 0.0))[-500:, 0].mean() / BAR
+    assert key["relief_crack_bar"] < pp < key["relief_crack_bar"] + 10
+
+
+def test_periodic_force_rings_the_held_load_at_its_frequency(nominal):
+    prm, key, _ = _effect("periodic_force")
+    out = _run(prm, _inputs(8.0, 0.0), x0=0.25)
+    pa = np.polynomial.polynomial.polyfit(np.arange(6000), out[2000:, 1], 2)
+    pa = out[2000:, 1] - np.polynomial.polynomial.polyval(np.arange(6000), pa)  # slow drift
+    freqs = np.fft.rfftfreq(len(pa), 1e-3)
+    spectrum = np.where(freqs > 0.5, np.abs(np.fft.rfft(pa)), 0.0)
+    peak = freqs[np.argmax(spectrum)]
+    assert peak == pytest.approx(key["frequency_hz"], abs=1 / 6)

@@ -103,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, required=True)
     ap.add_argument("--md", type=Path, help="also write the Markdown table here")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--cached-only", action="store_true",
+                    help="score only the recordings already diagnosed (OUT/gap/*.json)")
     ap.add_argument("--spend-blind", action="store_true",
                     help="score a blind seed (once, after the change to the tool is fixed)")
     args = ap.parse_args(argv)
@@ -115,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
     gap = args.out / "gap"
     gap.mkdir(exist_ok=True)
     entries = key["recordings"]
+    if args.cached_only:
+        entries = [e for e in entries if (gap / f"{e['name']}.json").exists()]
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         reps = list(pool.map(lambda e: diagnose(args.out / f"{e['name']}.csv", gap), entries))
     rows = [judge(e, r) for e, r in zip(entries, reps, strict=True)]
@@ -122,6 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = importlib.util.find_spec("monitor")
     tool = {"python": sys.executable, "monitor": spec.origin if spec else None}
     args.json.write_text(json.dumps({"seed": key["seed"], "set": key["set"], "tool": tool,
+                                     "scored": len(rows), "recordings": len(key["recordings"]),
                                      "summary": summary, "rows": rows}, indent=1))
     md = markdown(summary, rows)
     if args.md:
