@@ -245,3 +245,37 @@ def test_periodic_force_rings_the_held_load_at_its_frequency(nominal):
     spectrum = np.where(freqs > 0.5, np.abs(np.fft.rfft(pa)), 0.0)
     peak = freqs[np.argmax(spectrum)]
     assert peak == pytest.approx(key["frequency_hz"], abs=1 / 6)
+
+
+def test_scorer_counts_by_the_rules(tmp_path):
+    """Cached diagnoses scored: top-1, the sensor's signal, the mechanism first."""
+    from benchmarks.gap_third import score
+
+    def entry(name, effect, expected, mechanism=None, signal=None):
+        return {"name": name, "effect": effect, "tolerance": 0.03, "rodpos": True,
+                "expected": expected, "mechanism": mechanism, "signal": signal}
+
+    recs = [entry("a", "valve_deadband", "valve_deadband"),
+            entry("b", "sensor_calibration", "sensor_calibration", signal="PB"),
+            entry("c", "worn_pump", "unexplained", mechanism="leakage"),
+            entry("d", "none", "none"), entry("e", "sensor_lag", "sensor_lag")]
+    reps = {"a": {"verdict": "valve_deadband"},
+            "b": {"verdict": "sensor_calibration",
+                  "params": {"sensor_calibration": {"PA_gain": 1.1, "PA_offset_bar": 0}}},
+            "c": {"verdict": "unexplained", "suggestion": [{"term": "leakage"}]},
+            "d": {"verdict": "oil_viscosity"}, "e": {"verdict": "hose_compliance"}}
+    (tmp_path / "gap").mkdir()
+    for name, rep in reps.items():
+        (tmp_path / "gap" / f"{name}.json").write_text(json.dumps(rep))
+    (tmp_path / "key.json").write_text(json.dumps({"seed": 1, "blind": False, "set": "small",
+                                                   "recordings": recs}))
+    assert score.main([str(tmp_path), "--json", str(tmp_path / "s.json")]) == 0
+    s = json.loads((tmp_path / "s.json").read_text())["summary"]
+    assert s["single_top1"] == [2, 3]  # the sensor error counts as named, its signal does not
+    assert s["sensor_right_signal"] == [0, 1]
+    assert s["out_of_catalogue"] == [1, 1] and s["healthy_none"] == [0, 1]
+    assert s["families"]["sensor_lag @3%"] == [0, 1]
+    key = json.loads((tmp_path / "key.json").read_text())
+    (tmp_path / "key.json").write_text(json.dumps({**key, "seed": 4242, "blind": True}))
+    with pytest.raises(SystemExit):  # a blind seed is not scored by accident
+        score.main([str(tmp_path), "--json", str(tmp_path / "s.json")])
