@@ -63,6 +63,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--seed must be >= 1 (1-999 development, >= 1000 blind)")
     if args.duration < 60:
         ap.error("--duration must be at least 60 s")
+    if args.out.exists() and not args.out.is_dir():
+        ap.error(f"{args.out}: exists and is not a folder")
     args.out.mkdir(parents=True, exist_ok=True)
     keep = {e for e in args.only.split(",") if e}
     key = []
