@@ -11,6 +11,7 @@ from pathlib import Path
 from monitor.cli._numbers import DURATION_MAX_S, DURATION_WHY, SEED_MAX, number
 from monitor.cli._paths import output_file
 from monitor.errors import ConfigError, MonitorError
+from monitor.io.recording import Recording
 from monitor.sim.cycles import CYCLES, make_cycle
 from monitor.sim.effects import describe_catalogue, parse_effect
 from monitor.sim.faults import parse_fault
@@ -144,25 +145,32 @@ def run(args: argparse.Namespace) -> int:
         rod_pos0_m=args.rod_pos * 1e-3,
     )
     elapsed = time.perf_counter() - start
-    try:
-        if suffix == ".csv":
-            from monitor.io.csvio import write_csv
-
-            write_csv(args.out, rec)
-            what = f"{len(rec)} rows"
-        else:
-            from monitor.codec.logwrite import write_candump
-
-            counts = write_candump(args.out, rec)
-            what = f"{sum(counts.values())} frames"
-    except OSError as exc:
-        raise MonitorError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    what = _write(args.out, suffix, rec)
     print(
         f"simulated {args.duration:g} s ({args.cycle}, seed {args.seed}) in {elapsed:.2f} s; "
         f"wrote {what} to {args.out}",
         file=sys.stderr,
     )
     return 0
+
+
+def _write(out: Path, suffix: str, rec: Recording, dbc: Path | None = None) -> str:
+    """``rec`` as the contract CSV or as a candump log through ``dbc`` (default: the shipped
+    monitor.dbc); what was written, for the closing line."""
+    try:
+        if suffix == ".csv":
+            from monitor.io.csvio import write_csv
+
+            write_csv(out, rec)
+            return f"{len(rec)} rows"
+        from monitor.codec.frames import FrameCodec
+        from monitor.codec.logwrite import write_candump
+
+        codec = None if dbc is None else FrameCodec.from_dbc(dbc)
+        counts = write_candump(out, rec, codec=codec)
+        return f"{sum(counts.values())} frames"
+    except OSError as exc:
+        raise MonitorError(f"cannot write {out}: {exc.strerror or exc}") from None
 
 
 def _run_machine(args: argparse.Namespace, suffix: str) -> int:
@@ -193,21 +201,7 @@ def _run_machine(args: argparse.Namespace, suffix: str) -> int:
     commands = make_whole_cycle(args.cycle, args.duration, args.seed, machine)
     rec = simulate_whole(commands, machine, faults, seed=None if args.no_noise else args.seed)
     elapsed = time.perf_counter() - start
-    try:
-        if suffix == ".csv":
-            from monitor.io.csvio import write_csv
-
-            write_csv(args.out, rec)
-            what = f"{len(rec)} rows"
-        else:
-            from monitor.codec.frames import FrameCodec
-            from monitor.codec.logwrite import write_candump
-
-            codec = FrameCodec.from_dbc(resource_path("dbc", "excavator4.dbc"))
-            counts = write_candump(args.out, rec, codec=codec)
-            what = f"{sum(counts.values())} frames"
-    except OSError as exc:
-        raise MonitorError(f"cannot write {args.out}: {exc.strerror or exc}") from None
+    what = _write(args.out, suffix, rec, dbc=resource_path("dbc", "excavator4.dbc"))
     print(
         f"simulated {args.duration:g} s of excavator4 ({args.cycle}, seed {args.seed}) in "
         f"{elapsed:.2f} s; wrote {what} to {args.out}",
