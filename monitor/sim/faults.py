@@ -53,16 +53,22 @@ class Fault:
 
 def parse_fault(text: str) -> Fault:
     """Parse the CLI form ``NAME:SEV[@ONSET_S[+RAMP_S]]``."""
-    m = _SPEC.match(text.strip())
+    return Fault(*fault_parts(text.strip(), text, "NAME:SEV[@ONSET_S[+RAMP_S]]"))
+
+
+def fault_parts(spec: str, text: str, form: str) -> tuple[str, float, float, float]:
+    """Name, severity, onset (s) and ramp (s) of ``spec``, the ``NAME:SEV[@ONSET_S[+RAMP_S]]``
+    part of the option ``text`` (which the message quotes, with the expected ``form``)."""
+    m = _SPEC.match(spec)
     if not m:
-        raise ConfigError(f"--fault {text!r}: expected NAME:SEV[@ONSET_S[+RAMP_S]]")
+        raise ConfigError(f"--fault {text!r}: expected {form}")
     try:
         sev = float(m["sev"])
         onset = float(m["onset"]) if m["onset"] else 0.0
         ramp = float(m["ramp"]) if m["ramp"] else 0.0
     except ValueError:
         raise ConfigError(f"--fault {text!r}: severity, onset and ramp must be numbers") from None
-    return Fault(m["name"], sev, onset, ramp)
+    return m["name"], sev, onset, ramp
 
 
 def fault_inputs(faults: list[Fault], t_s: np.ndarray) -> dict[str, np.ndarray]:

@@ -16,7 +16,7 @@ import numpy as np
 
 from monitor.errors import ConfigError
 from monitor.signals import FAULT_NAMES
-from monitor.sim.faults import _SPEC, Fault, fault_inputs
+from monitor.sim.faults import Fault, fault_inputs, fault_parts
 from monitor.sim.whole import kernel as K
 
 #: 7 L/min at 100 bar (half the swing section's full flow): a worn motor that drifts.
@@ -61,17 +61,11 @@ class MachineFault(Fault):
 
 def parse_machine_fault(text: str) -> MachineFault:
     """Parse ``LOOP.FAULT:SEV[@ONSET_S[+RAMP_S]]``."""
+    form = "LOOP.FAULT:SEV[@ONSET_S[+RAMP_S]]"
     loop, dot, rest = text.strip().partition(".")
-    m = _SPEC.match(rest)
-    if not dot or not m:
-        raise ConfigError(f"--fault {text!r}: expected LOOP.FAULT:SEV[@ONSET_S[+RAMP_S]]")
-    try:
-        sev = float(m["sev"])
-        onset = float(m["onset"]) if m["onset"] else 0.0
-        ramp = float(m["ramp"]) if m["ramp"] else 0.0
-    except ValueError:
-        raise ConfigError(f"--fault {text!r}: severity, onset and ramp must be numbers") from None
-    return MachineFault(m["name"], sev, onset, ramp, loop=loop)
+    if not dot:
+        raise ConfigError(f"--fault {text!r}: expected {form}")
+    return MachineFault(*fault_parts(rest, text, form), loop=loop)
 
 
 def fill_fault_inputs(faults: list[MachineFault], t_s: np.ndarray, u: np.ndarray) -> None:
