@@ -35,6 +35,28 @@ def model(shipped_config):
     return load_model(shipped_config.model)
 
 
+def pytest_sessionfinish(session) -> None:
+    """Under pytest-xdist (CI: ``-n auto``) a worker hands its fuzz counts to the controller,
+    which prints the summary."""
+    import sys
+
+    support = sys.modules.get("fuzz_support")
+    out = getattr(session.config, "workeroutput", None)  # set in xdist workers only
+    if out is not None and support is not None:
+        out["fuzz_outcomes"] = {t: dict(c) for t, c in support.OUTCOMES.items()}
+
+
+@pytest.hookimpl(optionalhook=True)  # an xdist hook: pytest without xdist knows it not
+def pytest_testnodedown(node, error) -> None:
+    """The controller adds up the fuzz counts of a worker that finished."""
+    outcomes = getattr(node, "workeroutput", {}).get("fuzz_outcomes")
+    if outcomes:
+        import fuzz_support
+
+        for target, counts in outcomes.items():
+            fuzz_support.OUTCOMES[target].update(counts)
+
+
 def pytest_terminal_summary(terminalreporter) -> None:
     """The fuzz suite's counts (inputs tried per target and how they ended), when it ran."""
     import sys
