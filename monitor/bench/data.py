@@ -124,9 +124,11 @@ def monitor_model(work: Path, n_patterns: int, train_s: float, say: Progress) ->
     say(f"  refitted: {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g}")
     model.residual_clip = None
     e_val = [normal_residuals(model, r) for r in val_part]
-    clip = np.nanquantile(np.abs(np.concatenate(e_val)), cfg.residual_clip_quantile, axis=0)
-    model.residual_clip = tuple(float(c) for c in clip)
-    j_val = np.concatenate([window_j(np.clip(e, -clip, clip), cfg.window_n) for e in e_val])
+    if cfg.residual_clip_quantile is not None:  # as `monitor train` does
+        clip = np.nanquantile(np.abs(np.concatenate(e_val)), cfg.residual_clip_quantile, axis=0)
+        model.residual_clip = tuple(float(c) for c in clip)
+        e_val = [np.clip(e, -clip, clip) for e in e_val]
+    j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
     model.j0, model.eps0 = cfg.threshold.eps0(j_val)
     model.isolation_labels, model.isolation_centroids = simulated_signatures(model, cfg, say)
     model.training = {**model.training, "max_patterns": n_patterns, "isolation": "sim",

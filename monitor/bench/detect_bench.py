@@ -20,9 +20,9 @@ import sys
 import tempfile
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import can
 import cantools
@@ -59,6 +59,8 @@ def reference_pipeline(model: MonitorModel, log: Path, dbc: Path) -> dict[str, A
     from pyGRNN import GRNN as PyGRNN
 
     db = cantools.database.load_file(str(dbc))
+    if not isinstance(db, cantools.database.can.Database):
+        raise TypeError(f"{dbc}: not a CAN database")
     spec = model.spec
     names = list(spec.variables)
     latest = dict.fromkeys(names, np.nan)
@@ -66,7 +68,13 @@ def reference_pipeline(model: MonitorModel, log: Path, dbc: Path) -> dict[str, A
     with can.LogReader(str(log)) as reader:
         for msg in reader:
             try:
-                values = db.decode_message(msg.arbitration_id, msg.data)
+                # Casts: cantools decodes any bytes-like (its annotation says bytes) and, with
+                # containers not decoded (the default), gives a mapping of this DBC's numbers
+                # (its annotation is the union of every kind of result).
+                values = cast(
+                    Mapping[str, float],
+                    db.decode_message(msg.arbitration_id, cast(bytes, msg.data)),
+                )
             except KeyError:
                 continue
             if t0 is None:
@@ -103,10 +111,10 @@ def reference_pipeline(model: MonitorModel, log: Path, dbc: Path) -> dict[str, A
     if model.residual_clip is not None:
         e = np.clip(e, -np.asarray(model.residual_clip), np.asarray(model.residual_clip))
     s = np.mean(e * e, axis=1)
-    n = model.window_n + 1
+    win = model.window_n + 1
     csum = np.concatenate([[0.0], np.cumsum(np.nan_to_num(s))])
     j = np.full(len(s), np.nan)
-    j[n - 1 :] = (csum[n:] - csum[:-n]) / n
+    j[win - 1 :] = (csum[win:] - csum[:-win]) / win
     above = np.nan_to_num(j) > model.eps0
     run = max((sum(1 for _ in grp) for v, grp in itertools.groupby(above) if v), default=0)
     max_j = float(np.nanmax(j)) if np.isfinite(j).any() else None

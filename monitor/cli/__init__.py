@@ -8,6 +8,7 @@ import logging
 import pkgutil
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from monitor import __version__
 from monitor.cli._extras import missing_extra
@@ -40,7 +41,7 @@ def _subcommand_modules() -> list[str]:
 class _Parser(argparse.ArgumentParser):
     """argparse that exits 2 with one line, as the command contract asks."""
 
-    def error(self, message: str) -> None:  # noqa: D102 - argparse API
+    def error(self, message: str) -> NoReturn:  # noqa: D102 - argparse API
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 

@@ -89,7 +89,9 @@ def run(args: argparse.Namespace) -> int:
     presets = result["presets"]
     names = list(presets)
     print(f"{'condition':18s}" + "".join(f"{n:>12s}" for n in names))
-    rows = [("healthy (false al.)", "healthy_false_alarm_rate", None)]
+    rows: list[tuple[str, str, str | None]] = [
+        ("healthy (false al.)", "healthy_false_alarm_rate", None)
+    ]
     rows += [(f"{c}={v}", "detection", f"{c}={v}") for c, v in DETECTION_KEYS]
     for label, key, sub in rows:
         cells = []

@@ -206,8 +206,11 @@ def train_presets(
     for preset in presets:
         t0 = time.perf_counter()
         tag = f"[{preset}] "
-        model = train(fit, TrainConfig(preset=preset, isolation_runs=8),
-                      progress=lambda m, tag=tag: say(tag + m),
+
+        def progress(m: str, tag: str = tag) -> None:
+            say(tag + m)
+
+        model = train(fit, TrainConfig(preset=preset, isolation_runs=8), progress=progress,
                       held_out=held or None)  # fmt: skip
         source = f"trained: preset {preset}, seeds {_seed_text(seeds)} x {duration_s:g} s"
         out.append(ModelUnderTest(preset, model, source, train_s=time.perf_counter() - t0))

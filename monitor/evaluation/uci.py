@@ -294,7 +294,7 @@ def evaluate(
         t = results[name]["test"] = score(test, cr.alarms(jm_test, m_test))
         # How close the healthy test cycles came to the threshold (1.0 = at eps0).
         t["max_J_healthy_over_eps0"] = float(np.max(jm_test[test.healthy], initial=0) / eps0)
-        t["max_B_healthy_over_b0"] = None if m_test is None else float(
+        t["max_B_healthy_over_b0"] = None if m_test is None or cr.scale is None else float(
             np.max(cycle_b(m_test[test.healthy], cr.scale), initial=0) / cr.b0)  # fmt: skip
         # Detection delay within the cycle: J needs N + 1 residuals, so >= max_lag + N s; B
         # is judged at the end of a phase.

@@ -86,9 +86,11 @@ class CycleRule:
 
     def first_b_alarm_s(self, means: np.ndarray, phase_s: int) -> np.ndarray:
         """Per cycle: the last second of the first phase whose B exceeds b0 (NaN: none)."""
-        above = (_ratios(means, self.scale) > self.b0).any(axis=2)
+        if self.scale is None:  # J alone: B raises no alarm
+            return np.full(means.shape[0], np.nan)
+        above = np.any(_ratios(means, self.scale) > self.b0, axis=2)
         first = np.argmax(above, axis=1)
-        return np.where(above.any(axis=1), (first + 1) * phase_s - 1.0, np.nan)
+        return np.where(np.any(above, axis=1), (first + 1) * phase_s - 1.0, np.nan)
 
     def alarms(self, jmax: np.ndarray, means: np.ndarray | None) -> np.ndarray:
         """Per cycle: largest J above eps0, or B above b0."""

@@ -139,15 +139,16 @@ def report(
     if after is not None:
         base = np.minimum(base, _fast(after[0], after[1], floor))
     g = gap(m, floor)
+    signals: dict[str, dict[str, float]] = {}
     out = {
         "share": round(float(base.sum() / g), 4) if g > 0 else 0.0,
         "above_hz": round(1.0 / SMOOTH_S, 2),
         "practical_nrmse": PRACTICAL_NRMSE,
         "practically_small": practically_small(smooth_nominal, floor_s),
-        "signals": {},
+        "signals": signals,
     }
     for j, n in enumerate(names):
-        out["signals"][n] = {
+        signals[n] = {
             "share": round(float(base[j] / total[j]), 4) if total[j] > 0 else 0.0,
             "nrmse": round(float(np.sqrt(base[j])), 5),
             "structured_nrmse": round(float(np.sqrt(structured[j])), 5),

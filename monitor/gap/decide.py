@@ -212,9 +212,9 @@ def decide(
     traded = (best.effects[0].name, worse) if worse is not None else None
     named = named and worse is None
     if not named and against:
-        runner = _absorbed_runner(singles[1:], sums, nominal, idx, floor, structured, against)
-        if runner is not None:
-            return runner
+        absorbed = _absorbed_runner(singles[1:], sums, nominal, idx, floor, structured, against)
+        if absorbed is not None:
+            return absorbed
     if not named:
         if structured is not None:
             # What is left is base mismatch and a structured part too small to matter, or

@@ -320,8 +320,8 @@ def _diagnose(
                 sums[c.name], smooth[c.name] = kept
         # The tolerances again, from where the refits put them (without their effects):
         # if that fits the calibration part better, it is the simulator to beat.
-        starts = [(base.factors, ())] + [(c.factors, ()) for c in singles[:REFINE_TOP]]
-        recal = fit_candidate([], fit_ev.residual, base.factors, tol, starts)
+        from_refits = [(base.factors, ())] + [(c.factors, ()) for c in singles[:REFINE_TOP]]
+        recal = fit_candidate([], fit_ev.residual, base.factors, tol, from_refits)
         if recal.fit_cost < base.cal.fit_cost:
             base = _Baseline(prep, held, held_ev, floor, recal)
             say("recalibrated " + _percent(base.factors))

@@ -203,13 +203,14 @@ def _absorbed(diag: Diagnosis) -> dict:
     held-out gap of its own tolerances without it that the effect removes (what it was
     judged on)."""
     # Keyed by single effects: a pair or no verdict has none.
-    a = diag.absorbed.get(diag.chosen.name) if diag.chosen is not None else None
-    if a is None:
+    chosen = diag.chosen
+    a = diag.absorbed.get(chosen.name) if chosen is not None else None
+    if chosen is None or a is None:
         return {}
     without = gap(a.sums[0].mse(), diag.floor)
     return {
         "absorbed": {
-            "effect": diag.chosen.effects[0].name,
+            "effect": chosen.effects[0].name,
             "tolerances": {
                 t: {
                     "calibration_pct": round(100 * (f0 - 1), 2),
@@ -217,7 +218,7 @@ def _absorbed(diag: Diagnosis) -> dict:
                 }
                 for t, (f0, f1) in a.tolerances.items()
             },
-            "heldout_reduction": round(reduction(without, diag.chosen.heldout_gap), 4),
+            "heldout_reduction": round(reduction(without, chosen.heldout_gap), 4),
         }
     }
 

@@ -289,9 +289,9 @@ def _hypotheses(
         effect, pred = _refined(prep, segments, predict, factors, effect)
         own: Prepared | None = None
         for _ in range(REREADS if reread is not None else 0):
-            reading = reread(effect)
+            reading = reread(effect) if reread is not None else None
             found = _fitted_on(reading, segments, factors, signal) if reading else None
-            if found is None:
+            if reading is None or found is None:
                 break
             own, (effect, pred) = reading[0], found
         if kinematically_consistent(prep, segments, base, effect):

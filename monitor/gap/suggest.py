@@ -126,9 +126,9 @@ class _Runs:
             pred = sense(self.prep, self.segments, self.plant.traces(m, (), corr), ())
         else:
             pred = self.base
-        for t, _ in terms:
-            if isinstance(t, SensorTerm):
-                pred = t.apply(self.prep, self.segments, pred)
+        for term, _ in terms:
+            if isinstance(term, SensorTerm):
+                pred = term.apply(self.prep, self.segments, pred)
         return pred
 
     def residual(self, terms: Terms, factors: dict[str, float] | None = None) -> np.ndarray:
@@ -155,6 +155,14 @@ def _gn_step(
     dc, *_ = np.linalg.lstsq(jac, -r, rcond=None)
     new = np.clip(c + dc, term.low, term.high)
     return new, float(np.mean((r + jac @ (new - c)) ** 2))
+
+
+def _plant(f: Fitted) -> PlantTerm:
+    """The term of a single plant-term fit (what ``_fit_plant`` returns)."""
+    term = f.terms[0]
+    if not isinstance(term, PlantTerm):
+        raise TypeError(f"not a plant term: {term!r}")
+    return term
 
 
 def _fit_plant(runs: _Runs, term: PlantTerm, r0: np.ndarray, steps: int) -> Fitted:
@@ -252,9 +260,9 @@ def periodic_frequencies_hz(prep: Prepared, segments: Sequence[Segment], pred: P
             # integrated from the flow, a slow load) would otherwise leak through the
             # segments' on-off pattern into lines at multiples of its repetition rate.
             y = np.nan_to_num(v[seg.scored])
-            k = np.arange(y.size)
+            rows = np.arange(y.size)
             if y.size > 2:
-                y = y - np.polyval(np.polyfit(k, y, 2), k)
+                y = y - np.polyval(np.polyfit(rows, y, 2), rows)
             x[seg.scored] = y
         power += np.abs(np.fft.rfft(x, n)) ** 2
     df = 1.0 / (n * dt)
@@ -301,7 +309,7 @@ def suggest(
 
     screened = sorted((_fit_plant(fit_runs, t, r0, 1) for t in plant_terms),
                       key=lambda f: f.fit_cost)  # fmt: skip
-    refined = [_fit_plant(fit_runs, f.terms[0], r0, 2) for f in screened[:REFINE]]
+    refined = [_fit_plant(fit_runs, _plant(f), r0, 2) for f in screened[:REFINE]]
     refined.sort(key=lambda f: f.fit_cost)
     sensors = sorted((_sensor_fitted(fit_runs, t) for t in fit_sensor_terms(prep, fit[0],
                       fit_runs.base)), key=lambda f: f.fit_cost)  # fmt: skip
@@ -323,7 +331,7 @@ def suggest(
     if not periodic_in(refined[:SCORED]):
         per = periodic_in(refined[SCORED:])[:1]
         if not per and periodic_in(screened[REFINE:]):
-            per = [_fit_plant(fit_runs, periodic_in(screened[REFINE:])[0].terms[0], r0, 2)]
+            per = [_fit_plant(fit_runs, _plant(periodic_in(screened[REFINE:])[0]), r0, 2)]
     singles = [scored(f) for f in [*refined[:SCORED], *per[:1], *sensors[:1]]]
     singles.sort(key=lambda f: f.criterion)
     if isinstance(singles[0].terms[0], PlantTerm):

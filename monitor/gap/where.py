@@ -41,7 +41,7 @@ def scored_mask(n: int, segments: Sequence[Segment]) -> np.ndarray:
 def _near(events: np.ndarray, n: int, half_rows: int) -> np.ndarray:
     """Rows within ``half_rows`` of any event row."""
     mark = np.zeros(n + 1)
-    for e in np.flatnonzero(events):
+    for e in np.flatnonzero(events).tolist():  # Python ints
         mark[max(e - half_rows, 0)] += 1
         mark[min(e + half_rows + 1, n)] -= 1
     return np.cumsum(mark[:-1]) > 0

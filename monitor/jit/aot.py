@@ -29,7 +29,7 @@ import sys
 import weakref
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -167,7 +167,9 @@ def _describe(t: Any) -> Any:
     if isinstance(t, types.Array):
         return ["array", np.dtype(str(t.dtype)).str, t.ndim, t.layout, bool(t.mutable)]
     if isinstance(t, types.BaseTuple):
-        return ["tuple", [_describe(x) for x in t.types]]
+        # Every concrete tuple type (uni-, heterogeneous, named) has ``types``; numba's
+        # annotations declare it on the subclasses only.
+        return ["tuple", [_describe(x) for x in cast(Any, t).types]]
     if isinstance(t, types.Boolean):
         return ["bool"]
     if isinstance(t, types.Integer):

@@ -70,7 +70,8 @@ class MachineParams:
         full_flow = self.pump_disp_m3_rev * self.nominal_speed_rpm / 60.0
         return full_flow / (self.relief_full_pa - self.relief_crack_pa)
 
-    def with_changes(self, **changes: float) -> MachineParams:
+    def with_changes(self, **changes: Any) -> MachineParams:
+        """A copy with the named fields changed (SI floats; ``compensator_enabled`` a bool)."""
         return replace(self, **changes)
 
 

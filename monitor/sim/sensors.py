@@ -12,8 +12,6 @@ from functools import lru_cache
 import numpy as np
 from scipy.signal import lfilter
 
-from monitor.resources import resource_path
-
 
 @dataclass(frozen=True)
 class SensorParams:
@@ -31,9 +29,9 @@ class SensorParams:
 @lru_cache(maxsize=1)
 def dbc_resolutions() -> dict[str, tuple[float, float]]:
     """(scale, offset) of every signal in the shipped DBC: the bus's resolution."""
-    import cantools
+    from monitor.codec.dbc import load_dbc  # cantools only when the bus's resolution is asked
 
-    db = cantools.database.load_file(str(resource_path("dbc", "monitor.dbc")), strict=True)
+    db = load_dbc()
     return {s.name: (float(s.scale), float(s.offset)) for m in db.messages for s in m.signals}
 
 

@@ -208,7 +208,7 @@ def sense(
     out["SpoolPos"] = sampled(trace.spool, False) * 100.0
     out["RodPosTrue"] = rod_mm
     out["RodVel"] = sampled(trace.rod_vel_m_s, False) * 1e3
-    meta = {
+    meta: dict[str, object] = {
         "faults": [f.__dict__ for f in faults],
         "effects": {e.name: {**e.labels, **e.params} for e in effects},
         "seed": seed,
