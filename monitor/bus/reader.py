@@ -94,7 +94,7 @@ def open_bus(cfg: BusConfig, can_filters: list[dict[str, int | bool]] | None = N
     ``ignore_rx_error_frames`` is given, and CAN_RAW_FILTER (the ID filters) does not
     apply to them (checked on vcan0 in the CI VM).
     """
-    kwargs: dict[str, object] = {"interface": cfg.interface, "channel": cfg.channel}
+    kwargs: dict[str, Any] = {"interface": cfg.interface, "channel": cfg.channel}
     if cfg.interface != "virtual":
         kwargs["bitrate"] = cfg.bitrate
     else:
@@ -353,7 +353,7 @@ def _bring_up_hint(channel: str, bitrate: int) -> str:
     return f"`sudo ip link set {channel} up type can bitrate {bitrate}`"
 
 
-def _drain(q: queue.Queue) -> list:
+def _drain(q: queue.Queue[Any] | queue.SimpleQueue[Any]) -> list:
     """Everything queued right now, without waiting."""
     out = []
     while True:

@@ -23,7 +23,9 @@ for ``1 / volume_up_l`` and ``1 / volume_down_l`` by least squares.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -70,9 +72,9 @@ class StrokeModel:
                 "n_stall": int(self.n_stall)}  # fmt: skip
 
     @classmethod
-    def from_dict(cls, d: dict[str, object]) -> StrokeModel:
-        return cls(float(d["volume_up_l"]), float(d["volume_down_l"]),  # type: ignore[arg-type]
-                   float(d["margin"]), float(d["q_stall_lpm"]), int(d["n_stall"]))  # type: ignore[arg-type]  # fmt: skip
+    def from_dict(cls, d: Mapping[str, Any]) -> StrokeModel:
+        return cls(float(d["volume_up_l"]), float(d["volume_down_l"]),
+                   float(d["margin"]), float(d["q_stall_lpm"]), int(d["n_stall"]))  # fmt: skip
 
 
 # State vector of the step kernel: the interval and the stall count.

@@ -130,8 +130,9 @@ class DGRNNSpec:
             lags = d["lags"]
             pairs = tuple(lags.items()) if isinstance(lags, Mapping) else tuple(map(tuple, lags))
             delta = d.get("delta", ())
-            delta = delta if isinstance(delta, bool) else tuple(delta)
-            return cls(d["outputs"], d["exogenous"], pairs, d["horizon"], delta)
+            if isinstance(delta, bool):  # True: every output, as the constructor reads it
+                delta = tuple(d["outputs"]) if delta else ()
+            return cls(d["outputs"], d["exogenous"], pairs, d["horizon"], tuple(delta))
         except (KeyError, AttributeError, TypeError) as exc:
             shown = repr(dict(d))  # cut: a model file's spec may be anything
             shown = shown if len(shown) <= 80 else shown[:77] + "..."
