@@ -113,7 +113,8 @@ def prognosis(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Prognosis
     from scipy.stats import kendalltau, theilslopes
 
     judged = [r for r in rows if health_index(r) is not None and not r["error"]][-k:]
-    last = float(health_index(judged[-1])) if judged else None
+    last_index = health_index(judged[-1]) if judged else None
+    last = float(last_index) if last_index is not None else None
     if len(judged) < 3:
         return Prognosis(machine, len(judged), last, None, None, None)
     y, basis = trended(judged)

@@ -48,11 +48,13 @@ class TimeBase:
         return 1.0 / self.step_s
 
 
-def _at(source: str, lines: Sequence[int] | None, i: int) -> str:
+def _at(source: str, lines: Sequence[int] | np.ndarray | None, i: int) -> str:
     return f"{source}:{lines[i]}" if lines is not None else f"{source}: row {i + 1}"
 
 
-def check_time(t: np.ndarray, source: str, lines: Sequence[int] | None = None) -> TimeBase:
+def check_time(
+    t: np.ndarray, source: str, lines: Sequence[int] | np.ndarray | None = None
+) -> TimeBase:
     """Refuse a time column the tools cannot trust (``InputFileError`` naming the first bad
     line: ``lines[i]`` is the file line of row i) and say whether its rows need resampling."""
     bad = np.flatnonzero(~np.isfinite(t) | (np.abs(t) > MAX_ABS_T_S))

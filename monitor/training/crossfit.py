@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -43,7 +44,7 @@ def n_blocks(lengths: Sequence[int], block_n: int) -> int:
     return sum(-(-n // block_n) for n in lengths)
 
 
-def _params(grnn: GRNN) -> dict[str, object]:
+def _params(grnn: GRNN) -> dict[str, Any]:
     """The GRNN's constructor arguments (scikit-learn's get_params): fold models are
     thinned and clustered exactly as the full model."""
     names = inspect.signature(GRNN.__init__).parameters
