@@ -192,10 +192,12 @@ def _card(monitor_cfg: MonitorConfig, loop_name: str | None, recordings: list) -
 
     loop = next(lc for lc in monitor_cfg.monitored_loops if loop_name in (None, lc.name))
     where = f"{monitor_cfg.source} (machine {loop.machine_source})"
-    for rec in recordings if loop.machine is not None else ():
-        seen = {s: float(np.nanmax(rec[s], initial=0.0)) for s in ("PP", "PA", "PB", "QP")
-                if rec.has(s)}  # fmt: skip
-        check_seen(seen, loop.machine, f"{rec.source}: shows", where)
+    machine = loop.machine
+    if machine is not None:
+        for rec in recordings:
+            seen = {s: float(np.nanmax(rec[s], initial=0.0)) for s in ("PP", "PA", "PB", "QP")
+                    if rec.has(s)}  # fmt: skip
+            check_seen(seen, machine, f"{rec.source}: shows", where)
     source = None if loop.machine_source is None else str(loop.machine_source)
     return card_for(loop.name, loop.machine, source)
 def _check_input(

@@ -24,7 +24,7 @@ same numbers.  A NaN residual (a gated or missing sample) pauses the window, as 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -103,9 +103,9 @@ class BiasModel:
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, object]) -> BiasModel:
-        return cls(int(d["window_n"]), int(d["min_count"]),  # type: ignore[arg-type]
-                   np.asarray(d["scale"], dtype=np.float64), float(d["b0"]))  # type: ignore[arg-type]  # fmt: skip
+    def from_dict(cls, d: Mapping[str, Any]) -> BiasModel:
+        return cls(int(d["window_n"]), int(d["min_count"]),
+                   np.asarray(d["scale"], dtype=np.float64), float(d["b0"]))  # fmt: skip
 
 
 def fit_scale(residuals: list[np.ndarray], regimes: list[np.ndarray]) -> np.ndarray:

@@ -35,7 +35,7 @@ batch series.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -107,11 +107,12 @@ class HoldModel:
                 **({} if self.stroke is None else {"stroke": self.stroke.to_dict()})}  # fmt: skip
 
     @classmethod
-    def from_dict(cls, d: dict[str, object]) -> HoldModel:
-        return cls(int(d["window_n"]), int(d["min_count"]), int(d["settle_n"]),  # type: ignore[arg-type]
-                   tuple(int(o) for o in d["outputs"]),  # type: ignore[attr-defined]
-                   np.asarray(d["scale"], dtype=np.float64), float(d["h0"]),  # type: ignore[arg-type]
-                   None if d.get("stroke") is None else StrokeModel.from_dict(d["stroke"]))  # type: ignore[arg-type]  # fmt: skip
+    def from_dict(cls, d: Mapping[str, Any]) -> HoldModel:
+        stroke = d.get("stroke")
+        return cls(int(d["window_n"]), int(d["min_count"]), int(d["settle_n"]),
+                   tuple(int(o) for o in d["outputs"]),
+                   np.asarray(d["scale"], dtype=np.float64), float(d["h0"]),
+                   None if stroke is None else StrokeModel.from_dict(stroke))  # fmt: skip
 
 
 # State vector layout of the step kernel.

@@ -23,7 +23,7 @@ full-lever statistic L").
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -81,9 +81,9 @@ class LeverModel:
                 "l0": float(self.l0)}  # fmt: skip
 
     @classmethod
-    def from_dict(cls, d: dict[str, object]) -> LeverModel:
-        return cls(int(d["window_n"]), int(d["min_count"]), int(d["output"]),  # type: ignore[arg-type]
-                   np.asarray(d["scale"], dtype=np.float64), float(d["l0"]))  # type: ignore[arg-type]  # fmt: skip
+    def from_dict(cls, d: Mapping[str, Any]) -> LeverModel:
+        return cls(int(d["window_n"]), int(d["min_count"]), int(d["output"]),
+                   np.asarray(d["scale"], dtype=np.float64), float(d["l0"]))  # fmt: skip
 
 
 # State vector layout of the step kernel.

@@ -139,7 +139,9 @@ def save_model(path: str | Path, model: MonitorModel) -> None:
             fh,
             header=np.frombuffer(header, dtype=np.uint8),
             checksum=np.frombuffer(checksum, dtype=np.uint8),
-            **arrays,
+            # The arrays' names are keywords; mypy also matches them to savez's own
+            # allow_pickle flag (numpy >= 2.1), which no name here is.
+            **arrays,  # type: ignore[arg-type]
         )
 
 

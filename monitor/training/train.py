@@ -150,13 +150,14 @@ def train(
         say(f"  thresholds floored by the reference model: {floor_note}")
     # Said only when the event sets the threshold (not when the reference's floor does).
     j_parts = [window_j(e, cfg.window_n) for e in e_val]
-    event = one_event(j_parts, cfg.window_n) if model.eps0 == own_eps0 else None
-    if event is not None:
-        rec = val_part[int(event.pop("part"))]
-        t_s = float(rec.t[min(int(event.pop("start")), len(rec) - 1)])
-        event = {"source": rec.source, "t_s": t_s, **event}
-        say(f"  note: J0 rests on one event, {event['source']} at {event['t_s'] / 60:.1f} min "
-            f"({event['ratio']:.1f} x any other window's J): the threshold is that much less "
+    found = one_event(j_parts, cfg.window_n) if model.eps0 == own_eps0 else None
+    event: dict[str, object] | None = None  # the model file's note: the event's source and time
+    if found is not None:
+        rec = val_part[int(found.pop("part"))]
+        t_s = float(rec.t[min(int(found.pop("start")), len(rec) - 1)])
+        event = {"source": rec.source, "t_s": t_s, **found}
+        say(f"  note: J0 rests on one event, {rec.source} at {t_s / 60:.1f} min "
+            f"({found['ratio']:.1f} x any other window's J): the threshold is that much less "
             "sensitive unless such events are this machine's normal work; check what it did "
             "then")  # fmt: skip
     # The operating envelope of every training recording (patterns and held-out part): the
