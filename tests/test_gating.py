@@ -239,8 +239,9 @@ def test_daemon_logs_and_announces_the_operating_state(tmp_path, model) -> None:
     lines = cfg.event_log.path.read_text().splitlines()
     live = [json.loads(x) for x in lines]
     # J to rounding; mono and seq are the daemon's own (monotonic clock, log sequence).
-    strip = lambda evs: [{k: v for k, v in e.items() if k not in ("J", "mono", "seq")}  # noqa: E731
-                         for e in evs]  # fmt: skip
+    def strip(evs):
+        return [{k: v for k, v in e.items() if k not in ("J", "mono", "seq")} for e in evs]
+
     assert strip(live) == strip(offline.events)
     assert {e["out_of_range_signal"] for e in live} == {None, "PumpDispCmd"}
     assert live[-1]["op_state"] == "warm_up" and live[-1]["state"] == "inactive"
