@@ -74,7 +74,7 @@ def _view(lp: LoopConfig, columns: list[str]) -> tuple[str, ...]:
 def rod_columns(loops: Iterable[LoopConfig]) -> set[str]:
     """The row columns of the loops' rod sensors: optional, they hold no row back while the
     sampler warms up (``Sampler(optional=...)``)."""
-    return {lc.dbc_signal(ROD_POS.name) for lc in loops} - {None}  # type: ignore[misc]
+    return {s for lc in loops if (s := lc.dbc_signal(ROD_POS.name)) is not None}
 
 
 def check_loop_model(model: MonitorModel, lc: LoopConfig, cfg: MonitorConfig,

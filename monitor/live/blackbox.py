@@ -93,7 +93,7 @@ class BlackBox:
             else:
                 self._batch.append(msg)
                 if len(self._batch) >= BATCH_FRAMES:
-                    self._hand_over()
+                    self._hand_over(self._path)
 
     def trigger(self, bus_time_s: float, label: str, seq: int | None = None) -> Path:
         """Start a file at an alarm raised at ``bus_time_s`` (``seq``: its event's, which
@@ -113,16 +113,16 @@ class BlackBox:
         self.files.append(path)
         return path
 
-    def _hand_over(self) -> None:
+    def _hand_over(self, path: Path) -> None:
         frames, self._batch = self._batch, []
-        self.writer.put_frames(partial(self._append, self._path, frames), len(frames))
+        self.writer.put_frames(partial(self._append, path, frames), len(frames))
 
     def close(self) -> None:
         """End the recording (if any): the last frames and the close go to the writer."""
         if self._path is None:
             return
         if self._batch:
-            self._hand_over()
+            self._hand_over(self._path)
         # Closing must not be dropped: a later file would find this one still open.
         self.writer.put_event(partial(self._finish, self._path))
         self._path = None

@@ -117,7 +117,7 @@ class Diagnostics:
         if pgn not in (PGN_DM1, PGN_DM2):
             return False
         self.requests += 1
-        self._want.add(pgn)  # type: ignore[arg-type]
+        self._want.add(pgn)
         return True
 
     @staticmethod

@@ -144,7 +144,7 @@ class EventLog:
             self._size = os.fstat(self._fd).st_size
         limit = self.rotate_bytes
         if limit is not None and self._size and self._size + len(line) > limit:
-            self._rotate()
+            self._rotate(self._fd)
         try:
             append_all(self._fd, line, self._size)
         except OSError as exc:
@@ -160,15 +160,18 @@ class EventLog:
         # In place, fixed width: a rewrite of the same 21 bytes needs no new disk block, so
         # it works on a full disk, and a moved or damaged log cannot restart the numbering.
         try:
+            if self._seq_fd is None:  # closed: reopened, as _append reopens the log
+                self._seq_fd = open_small(seq_path(self.path))
             os.pwrite(self._seq_fd, b"%020d\n" % seq, 0)
             os.fsync(self._seq_fd)
         except OSError as exc:
             self._error(f"cannot update {seq_path(self.path)}: {exc.strerror}")
 
-    def _rotate(self) -> None:
-        """Rename the full file away and start a new one; on failure write on in it."""
+    def _rotate(self, fd: int) -> None:
+        """Rename the full file away (``fd``: the open one) and start a new one; on failure
+        write on in it."""
         try:
-            os.fsync(self._fd)
+            os.fsync(fd)
             for p in rotated_logs(self.path):  # oldest first: each moves to a free name
                 n = int(p.name.rsplit(".", 1)[1])
                 _rename_new(p, p.with_name(f"{self.path.name}.{n + 1}"))
@@ -176,7 +179,7 @@ class EventLog:
         except OSError as exc:
             self._error(f"cannot rotate {self.path}: {exc.strerror}; writing on in it")
             return
-        fd, self._fd = self._fd, None
+        self._fd = None
         os.close(fd)
         self._size = 0
         self.rotations += 1

@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass
 
 log = logging.getLogger(__name__)
 
-Job = Callable[[], None]
+Job = Callable[[], object]  # its result is not used (EventLog.retry's bool, for one)
 
 
 @dataclass
