@@ -91,4 +91,4 @@ def record(
         fh.write(json.dumps(line) + "\n")
         fh.flush()
         os.fsync(fh.fileno())
-    return AckStatus(action, by, line["at"], until, note)
+    return AckStatus(action, by, at, until, note)

@@ -122,5 +122,5 @@ def machine_fault(rows: list[dict[str, Any]]) -> MachineFault:
                 votes[k] = votes.get(k, 0) + int(v)
     known = {k: v for k, v in votes.items() if k != UNKNOWN}
     pool = known or votes
-    name = max(pool, key=pool.get) if pool else (names[0] if names else None)
+    name = max(pool, key=pool.__getitem__) if pool else (names[0] if names else None)
     return MachineFault(name, votes, len(names), sum(n != name for n in names))

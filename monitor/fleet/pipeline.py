@@ -12,7 +12,7 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -65,6 +65,14 @@ def default_model_bytes(model_path: str | None, config_path: str | None) -> byte
     return Path(model_path or cfg.model).read_bytes()
 
 
+class _Commissioning(TypedDict):
+    """The :class:`~monitor.training.settings.TrainConfig` fields commissioning sets."""
+
+    folds: int
+    bias: bool
+    lend: bool
+
+
 #: How a machine is commissioned, as `monitor train --folds 4 --bias off`: J's threshold
 #: from residuals cross-fitted over the whole commissioning run (each minute predicted by
 #: a model fitted on the others), not from its last quarter held out: J0 rests on every
@@ -74,7 +82,7 @@ def default_model_bytes(model_path: str | None, config_path: str | None) -> byte
 #: alone").  The bias statistic stays off: its per-regime scales from 20 minutes are too
 #: uncertain.  The default model lends its patterns where the machine's own data has none
 #: (``monitor.training.fill``).  Recorded in each model's trained-from.json.
-COMMISSIONING = {"folds": 4, "bias": False, "lend": True}
+COMMISSIONING: _Commissioning = {"folds": 4, "bias": False, "lend": True}
 
 
 def train_model_bytes(

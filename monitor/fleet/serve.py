@@ -83,7 +83,7 @@ def serve_site(site: Any, host: str, port: int, say: Callable[[str], None]) -> i
         except OSError as exc:
             raise ConfigError(f"{host}:{port}: cannot listen ({exc.strerror or exc})") from None
         with server:
-            h, p = server.server_address[:2]
+            h, p = server.socket.getsockname()[:2]  # server_address, typed str | bytes
             say(f"fleet serve: http://{h}:{p}/ (Ctrl-C to stop)")
             try:
                 server.serve_forever()

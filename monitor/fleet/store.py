@@ -160,8 +160,8 @@ class ResultStore:
         ev.sort(key=lambda e: (e["log"], e["t"]))
         self._write_table(self.root / "logs.parquet", table)
         self._write_table(self.root / "events.parquet", pa.Table.from_pylist(ev, EVENT_SCHEMA))
-        for p in self.parts.glob("*.json"):
-            p.unlink()
+        for done in self.parts.glob("*.json"):
+            done.unlink()
         return table.num_rows
 
     @staticmethod
