@@ -132,10 +132,10 @@ def _concat(parts: list[Frames]) -> Frames:
     width = max(f.data.shape[1] for f in parts)
     data = np.concatenate([np.pad(f.data, ((0, 0), (0, width - f.data.shape[1])))
                            for f in parts])  # fmt: skip
-    cols = [np.concatenate([getattr(f, k) for f in parts])
-            for k in ("timestamp", "can_id", "extended", "remote", "error", "length")]  # fmt: skip
-    flags = [np.concatenate([getattr(f, k) for f in parts]) for k in ("fd", "brs", "esi")]
-    return Frames(*cols, data, *flags)
+    cols = {k: np.concatenate([getattr(f, k) for f in parts])
+            for k in ("timestamp", "can_id", "extended", "remote", "error", "length", "fd", "brs",
+                      "esi")}  # fmt: skip
+    return Frames(data=data, **cols)
 
 
 _CHUNK = 1 << 18
@@ -331,10 +331,10 @@ def _fields(buf, starts, ends, sp1, sp2, hs, hexval, pow10, width, max_whole):  
 
 def _parse_slow(
     raw: bytes | bytearray, starts, ends, lines: np.ndarray, path: Path, first: int, last: bool
-) -> list:
+) -> list[tuple[int, can.Message]]:
     """(line index, Message) for the other lines, through the line check and python-can;
     ``first`` lines come before ``raw`` in the file, ``last``: ``raw`` ends the file."""
-    out = []
+    out: list[tuple[int, can.Message]] = []
     for i in lines.tolist():
         text = raw[starts[i] : ends[i]].decode("utf-8", errors="replace").strip()
         if not text:
@@ -353,7 +353,9 @@ def _parse_slow(
     return out
 
 
-def _merge(fast: dict[str, np.ndarray], fast_lines: np.ndarray, slow: list) -> Frames:
+def _merge(
+    fast: dict[str, np.ndarray], fast_lines: np.ndarray, slow: list[tuple[int, can.Message]]
+) -> Frames:
     nf, ns = fast_lines.size, len(slow)
     if ns == 0:  # every line plain: already in file order
         error = ((fast["can_id"] & CAN_ERR_FLAG) != 0) & ((fast["can_id"] & CAN_ERR_BUSERROR) != 0)
@@ -378,7 +380,6 @@ def _merge(fast: dict[str, np.ndarray], fast_lines: np.ndarray, slow: list) -> F
     length = np.concatenate([fast["length"], np.zeros(ns, np.int64)])
     fd, brs, esi = (np.zeros(nf + ns, dtype=bool) for _ in range(3))
     for k, (_, m) in enumerate(slow, start=nf):
-        m: can.Message
         can_id[k], extended[k] = m.arbitration_id, m.is_extended_id
         remote[k], error[k] = m.is_remote_frame, m.is_error_frame
         fd[k], brs[k], esi[k] = m.is_fd, m.bitrate_switch, m.error_state_indicator
