@@ -40,6 +40,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -49,8 +50,10 @@ import numpy as np
 from monitor.bench.data import test_recording
 from monitor.codec.frames import FrameCodec
 from monitor.config.settings import BusConfig, MonitorConfig, load_config
+from monitor.detection.ticker import Tick
 from monitor.io.recording import Recording
 from monitor.live.daemon import Daemon
+from monitor.live.loops import Loop
 from monitor.offline.recordings import wide_recording
 from monitor.resources import resource_path
 
@@ -75,6 +78,12 @@ class _TimedBus:
 
     def shutdown(self) -> None:
         self._bus.shutdown()
+
+
+def _wrap(obj: object, name: str, timed: Callable[..., Any]) -> None:
+    """Replace method ``name`` of the instance ``obj`` by its timed wrapper (an assignment
+    mypy cannot type: a bound method replaced on one instance)."""
+    setattr(obj, name, timed)
 
 
 def _frames(codec: FrameCodec, rec: Recording) -> list[tuple[float, str, dict[str, float]]]:
@@ -169,7 +178,7 @@ def run(
     state_change = daemon._state_change
     change_wall, change_cpu = [], []
 
-    def timed_state_change(t, lp=None) -> None:
+    def timed_state_change(t: Tick, lp: Loop) -> None:
         # What a state change costs the detector thread (event log, black box, hook).
         w0, c0 = time.perf_counter(), time.thread_time()
         state_change(t, lp)
@@ -177,9 +186,10 @@ def run(
         change_cpu.append(time.thread_time() - c0)
 
     for k, lp in enumerate(daemon.loops):
-        lp.ticker.tick = timed(k, lp.ticker.tick)
-    daemon._frame, daemon._send = timed_frame, timed_send
-    daemon._state_change = timed_state_change
+        _wrap(lp.ticker, "tick", timed(k, lp.ticker.tick))
+    _wrap(daemon, "_frame", timed_frame)
+    _wrap(daemon, "_send", timed_send)
+    _wrap(daemon, "_state_change", timed_state_change)
     codec = FrameCodec.from_dbc(cfg.dbc)
     plan = _frames(codec, rec)
     sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
@@ -270,7 +280,9 @@ def compare(
     for mode, rs in runs.items():
         pooled = {"lat": np.concatenate([r.pop("_latency_ms") for r in rs]),
                   "cpu": np.concatenate([r.pop("_cpu_ms") for r in rs])}  # fmt: skip
-        summary = {k: float(np.percentile(pooled[a], q)) for k, (a, q) in _SUMMARY.items()}
+        summary: dict[str, float | None] = {
+            k: float(np.percentile(pooled[a], q)) for k, (a, q) in _SUMMARY.items()
+        }
         summary["ticks"] = int(pooled["lat"].size)
         summary["ticks_over_1ms"] = int(np.count_nonzero(pooled["lat"] > 1.0))
         for key in ("state_change_detector_ms", "state_change_detector_cpu_ms"):

@@ -37,7 +37,7 @@ from typing import Any
 
 import can
 
-from monitor.bus.reader import BusReader, open_bus
+from monitor.bus.reader import BusReader, CanBus, open_bus
 from monitor.bus.recovery import Backoff
 from monitor.codec.frames import FrameCodec
 from monitor.config.layout import row_layout
@@ -67,7 +67,7 @@ class Daemon:
     def __init__(
         self,
         cfg: MonitorConfig,
-        bus: can.BusABC | None = None,
+        bus: CanBus | None = None,
         on_event: EventHook | None = None,
         opener: Callable[[], can.BusABC] | None = None,
     ) -> None:
@@ -181,7 +181,7 @@ class Daemon:
         return self.pipeline.last_t_s
 
     @property
-    def bus(self) -> can.BusABC:
+    def bus(self) -> CanBus:
         """The bus in use (the reader replaces it when it reopens a failed one)."""
         return self.reader.bus
 
