@@ -198,7 +198,7 @@ def _decide_all(
     """The shared per-sample decision over every sample of the recording, in order."""
     n = len(rec)
     engine = rec["EngineSpeed"]
-    inputs_ok = ~missing.any(axis=1)
+    inputs_ok = ~np.asarray(missing.any(axis=1))  # an array (numpy's stubs: or a scalar)
     stale = np.where(inputs_ok, -1, np.argmax(missing, axis=1))  # first missing model signal
     regimes = regimes_of(rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(n))
     states = np.empty(n, dtype=np.int8)
@@ -263,7 +263,7 @@ def vote_name(votes: dict[str, int]) -> str | None:
     a known fault before ``unknown`` (None: no votes)."""
     known = {k: v for k, v in votes.items() if k != "unknown"}
     pool = known or votes
-    return max(pool, key=pool.get) if pool else None
+    return max(pool, key=pool.__getitem__) if pool else None
 
 
 def stale_checks(
