@@ -96,3 +96,17 @@ def test_rotation_never_renames_onto_a_planted_file(tmp_path, monkeypatch) -> No
     assert planted.read_text() == "someone else's file\n"
     assert log.rotations == 0 and log.disk_errors >= 1
     assert [e["seq"] for e in _lines(ev)] == [1, 2, 3, 4]
+
+
+def test_a_write_after_close_reopens_the_log_and_its_seq_file(tmp_path) -> None:
+    """An event that comes after the close (a disk job queued behind it) is written, and its
+    ``seq`` saved: the log and its .seq file open again, as after a failed write."""
+    ev = tmp_path / "ev.jsonl"
+    log = EventLog(ev)
+    log.write(_alarm(log))
+    log.close()
+    log.write(_alarm(log))
+    log.close()
+    assert [e["seq"] for e in _lines(ev)] == [1, 2]
+    assert int(seq_path(ev).read_text()) == 2
+    assert log.disk_errors == 0 and log.unwritten == 0
