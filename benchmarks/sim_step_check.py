@@ -26,8 +26,9 @@ def main() -> None:
     for label, effects in (("nominal", []), ("all effects", [Effect.make(n) for n in CATALOGUE])):
         ref = simulate(cmds, machine.with_changes(step_s=25e-6), effects=effects, seed=None)
         for step_us in (400, 200, 100, 50):
-            rec = simulate(cmds, machine.with_changes(step_s=step_us * 1e-6), effects=effects,
-                           seed=None)
+            rec = simulate(
+                cmds, machine.with_changes(step_s=step_us * 1e-6), effects=effects, seed=None
+            )
             cells = []
             for s in SIGNALS:
                 d = rec[s] - ref[s]

@@ -26,16 +26,18 @@ LOG = resource_path("replay", "spool_wear.log")
 def test_tick_prediction(benchmark, p, exact):
     rec = recording_from_candump_bulk(LOG)
     spec = MODEL.spec
-    z = MODEL.normalizer.transform(np.column_stack([rec[v] for v in spec.variables]),
-                                   spec.variables)  # fmt: skip
+    z = MODEL.normalizer.transform(
+        np.column_stack([rec[v] for v in spec.variables]), spec.variables
+    )
     pred = TickPredictor(MODEL.dgrnn, p, exact=exact)
     window = np.ascontiguousarray(z[2000 : 2000 + pred.rows_needed])
     pred.predict(window)
     benchmark(pred.predict, window)
 
 
-@pytest.mark.parametrize("reader", [recording_from_candump_bulk, recording_from_candump],
-                         ids=["bulk", "frame-by-frame"])  # fmt: skip
+@pytest.mark.parametrize(
+    "reader", [recording_from_candump_bulk, recording_from_candump], ids=["bulk", "frame-by-frame"]
+)
 def test_read_log(benchmark, reader):
     reader(LOG)
     benchmark.pedantic(reader, args=(LOG,), rounds=3, iterations=1)

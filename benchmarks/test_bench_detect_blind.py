@@ -16,8 +16,18 @@ def run(p, seconds, spool, x0=0.25, temp=40.0, fault="normal", sev=0.0, payload=
     n = int(seconds / plant.SAMPLE_S)
     s = plant.initial_state(p, x0, payload)
     lever = np.full(n, spool, dtype=float)
-    out = plant.simulate(p, s, 0.0, lever, np.ones(n), np.full(n, 2200.0), np.full(n, temp),
-                         np.full(n, sev), fault, payload)
+    out = plant.simulate(
+        p,
+        s,
+        0.0,
+        lever,
+        np.ones(n),
+        np.full(n, 2200.0),
+        np.full(n, temp),
+        np.full(n, sev),
+        fault,
+        payload,
+    )
     return out
 
 
@@ -75,8 +85,9 @@ def test_spool_wear_leaks_at_centre_and_not_beyond_its_band():
     p = nominal()
     p[IDX["valve_leak_m3_spa"]] = 0.0
     dpl = NOMINAL["dp_lam_pa"]
-    q_pa, q_at, q_pb, q_bt = plant.valve_flows(p, 0.0, 200 * BAR, 100 * BAR, 20 * BAR, 1.0,
-                                               plant.SPOOL_WEAR, 0.5)
+    q_pa, q_at, q_pb, q_bt = plant.valve_flows(
+        p, 0.0, 200 * BAR, 100 * BAR, 20 * BAR, 1.0, plant.SPOOL_WEAR, 0.5
+    )
     by_hand = 20 / 60000 * 0.04 * np.sqrt(100 / 10)  # 4 % of a full edge at 100 bar
     assert q_pa == pytest.approx(by_hand, rel=1e-3)
     assert q_pa > 0 and q_at > 0 and q_pb > 0 and q_bt > 0
@@ -160,11 +171,22 @@ def test_an_alarm_before_the_onset_is_early_not_a_detection():
     from benchmarks.detect_blind.metrics import detection
 
     def row(t, named):
-        return {"alarm": t is not None, "first_alarm_t": t, "onset_s": 100.0,
-                "fault": "spool_wear", "fault_named": named}
+        return {
+            "alarm": t is not None,
+            "first_alarm_t": t,
+            "onset_s": 100.0,
+            "fault": "spool_wear",
+            "fault_named": named,
+        }
 
-    d = detection([row(130.0, "spool_wear"), row(50.0, "spool_wear"), row(None, None),
-                   row(190.0, "piston_wear")])
+    d = detection(
+        [
+            row(130.0, "spool_wear"),
+            row(50.0, "spool_wear"),
+            row(None, None),
+            row(190.0, "piston_wear"),
+        ]
+    )
     assert (d["runs"], d["detected"], d["early_alarms"], d["isolated"]) == (4, 2, 1, 1)
     assert d["median_delay_s"] == pytest.approx(60.0)
 

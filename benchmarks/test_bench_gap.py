@@ -25,10 +25,23 @@ def _cpu_children_s() -> float:
 def recording(tmp_path_factory):
     path = tmp_path_factory.mktemp("gap") / "friction_300s.csv"
     subprocess.run(
-        [sys.executable, "-m", "monitor", "simulate", "--duration", "300", "--seed", "3",
-         "--effect", "cylinder_friction:coulomb_n=400", "--out", str(path)],
-        check=True, capture_output=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "simulate",
+            "--duration",
+            "300",
+            "--seed",
+            "3",
+            "--effect",
+            "cylinder_friction:coulomb_n=400",
+            "--out",
+            str(path),
+        ],
+        check=True,
+        capture_output=True,
+    )
     return path
 
 
@@ -39,10 +52,20 @@ def test_gap_5min_cpu(benchmark, recording, tmp_path):
     def run() -> None:
         before = _cpu_children_s()
         subprocess.run(
-            [sys.executable, "-m", "monitor", "gap", "--real", str(recording), "--json",
-             str(out), "--quiet"],
-            check=True, capture_output=True,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "monitor",
+                "gap",
+                "--real",
+                str(recording),
+                "--json",
+                str(out),
+                "--quiet",
+            ],
+            check=True,
+            capture_output=True,
+        )
         cpu.append(_cpu_children_s() - before)
 
     benchmark.pedantic(run, rounds=1, iterations=1)

@@ -1,6 +1,6 @@
 """The third plant's physics checked by hand (benchmarks/gap_third, written apart).
 
-    python -m pytest -q benchmarks/test_bench_gap_third.py
+python -m pytest -q benchmarks/test_bench_gap_third.py
 """
 
 from __future__ import annotations
@@ -19,9 +19,14 @@ FS = 100
 def _inputs(n_s: float, spool: float, t_on: float = 1.0, temp: float = 40.0) -> dict:
     n = int(n_s * FS)
     sp = np.zeros(n)
-    sp[int(t_on * FS):] = spool
-    return {"spool": sp, "disp": np.ones(n), "n_set": np.full(n, 2200.0),
-            "temp": np.full(n, temp), "ripple": np.zeros(n)}
+    sp[int(t_on * FS) :] = spool
+    return {
+        "spool": sp,
+        "disp": np.ones(n),
+        "n_set": np.full(n, 2200.0),
+        "temp": np.full(n, temp),
+        "ripple": np.zeros(n),
+    }
 
 
 def _run(prm: np.ndarray, inputs: dict, x0: float = 0.1) -> np.ndarray:
@@ -30,8 +35,16 @@ def _run(prm: np.ndarray, inputs: dict, x0: float = 0.1) -> np.ndarray:
     s[1] = plant.load_force(prm, x0) / prm[IX["area_a"]]
     s[0] = 195 * BAR
     s[8] = 0.5
-    return plant.run(prm, s, inputs["spool"], inputs["disp"], inputs["n_set"], inputs["temp"],
-                     inputs["ripple"], scenario.DT_S)
+    return plant.run(
+        prm,
+        s,
+        inputs["spool"],
+        inputs["disp"],
+        inputs["n_set"],
+        inputs["temp"],
+        inputs["ripple"],
+        scenario.DT_S,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -182,8 +195,12 @@ def test_sensor_lag_delays_the_reading_by_its_delay(nominal):
     inputs = _inputs(6.0, 0.0)
     inputs["spool"][100:] = 0.6 * np.sign(np.sin(np.arange(500) / 40.0))
     states = _run(nominal, inputs)
-    sens = {"delay_ms": 40.0, "time_constant_ms": 0.0, "update_ms": 1.0,
-            "signals": ["PP", "PA", "PB", "QP"]}
+    sens = {
+        "delay_ms": 40.0,
+        "time_constant_ms": 0.0,
+        "update_ms": 1.0,
+        "signals": ["PP", "PA", "PB", "QP"],
+    }
     prompt = _read(states, inputs, sens, "none")
     late = _read(states, inputs, sens, "sensor_lag")
     a, b = np.diff(prompt["PA"]), np.diff(late["PA"])
@@ -209,15 +226,33 @@ def test_sensor_calibration_moves_one_column(nominal):
 
 def test_answer_key_round_trips(tmp_path):
     """generate writes a key whose entries rebuild the same recordings bit for bit."""
-    assert generate.main([str(tmp_path), "--seed", "7", "--set", "small", "--duration", "60",
-                          "--only", "sensor_calibration,worn_pump"]) == 0
+    assert (
+        generate.main(
+            [
+                str(tmp_path),
+                "--seed",
+                "7",
+                "--set",
+                "small",
+                "--duration",
+                "60",
+                "--only",
+                "sensor_calibration,worn_pump",
+            ]
+        )
+        == 0
+    )
     key = json.loads((tmp_path / "key.json").read_text())
     assert key["seed"] == 7 and not key["blind"]
     names = [r["effect"] for r in key["recordings"]]
     assert names == ["sensor_calibration", "worn_pump"]
     for entry in key["recordings"]:
-        sc = scenario.Scenario(**{k: entry[k] for k in ("name", "seed", "effect", "tolerance",
-                                                        "rodpos", "warmup", "duration_s")})
+        sc = scenario.Scenario(
+            **{
+                k: entry[k]
+                for k in ("name", "seed", "effect", "tolerance", "rodpos", "warmup", "duration_s")
+            }
+        )
         again = tmp_path / "again.csv"
         assert json.loads(json.dumps(scenario.record(sc, again))) == entry
         assert again.read_bytes() == (tmp_path / f"{entry['name']}.csv").read_bytes()
@@ -252,23 +287,39 @@ def test_scorer_counts_by_the_rules(tmp_path):
     from benchmarks.gap_third import score
 
     def entry(name, effect, expected, mechanism=None, signal=None):
-        return {"name": name, "effect": effect, "tolerance": 0.03, "rodpos": True,
-                "expected": expected, "mechanism": mechanism, "signal": signal}
+        return {
+            "name": name,
+            "effect": effect,
+            "tolerance": 0.03,
+            "rodpos": True,
+            "expected": expected,
+            "mechanism": mechanism,
+            "signal": signal,
+        }
 
-    recs = [entry("a", "valve_deadband", "valve_deadband"),
-            entry("b", "sensor_calibration", "sensor_calibration", signal="PB"),
-            entry("c", "worn_pump", "unexplained", mechanism="leakage"),
-            entry("d", "none", "none"), entry("e", "sensor_lag", "sensor_lag")]
-    reps = {"a": {"verdict": "valve_deadband"},
-            "b": {"verdict": "sensor_calibration",
-                  "params": {"sensor_calibration": {"PA_gain": 1.1, "PA_offset_bar": 0}}},
-            "c": {"verdict": "unexplained", "suggestion": [{"term": "leakage"}]},
-            "d": {"verdict": "oil_viscosity"}, "e": {"verdict": "hose_compliance"}}
+    recs = [
+        entry("a", "valve_deadband", "valve_deadband"),
+        entry("b", "sensor_calibration", "sensor_calibration", signal="PB"),
+        entry("c", "worn_pump", "unexplained", mechanism="leakage"),
+        entry("d", "none", "none"),
+        entry("e", "sensor_lag", "sensor_lag"),
+    ]
+    reps = {
+        "a": {"verdict": "valve_deadband"},
+        "b": {
+            "verdict": "sensor_calibration",
+            "params": {"sensor_calibration": {"PA_gain": 1.1, "PA_offset_bar": 0}},
+        },
+        "c": {"verdict": "unexplained", "suggestion": [{"term": "leakage"}]},
+        "d": {"verdict": "oil_viscosity"},
+        "e": {"verdict": "hose_compliance"},
+    }
     (tmp_path / "gap").mkdir()
     for name, rep in reps.items():
         (tmp_path / "gap" / f"{name}.json").write_text(json.dumps(rep))
-    (tmp_path / "key.json").write_text(json.dumps({"seed": 1, "blind": False, "set": "small",
-                                                   "recordings": recs}))
+    (tmp_path / "key.json").write_text(
+        json.dumps({"seed": 1, "blind": False, "set": "small", "recordings": recs})
+    )
     assert score.main([str(tmp_path), "--json", str(tmp_path / "s.json")]) == 0
     s = json.loads((tmp_path / "s.json").read_text())["summary"]
     assert s["single_top1"] == [2, 3]  # the sensor error counts as named, its signal does not

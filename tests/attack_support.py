@@ -48,8 +48,11 @@ class AttackRig:
         self.root = root
         self.group = f"239.74.165.{next(_groups)}"
         self.port = own_udp_port()
-        self.env = {**os.environ, "PYTHONPATH": str(REPO),
-                    "CAN_CONFIG": json.dumps({"port": self.port})}  # fmt: skip
+        self.env = {
+            **os.environ,
+            "PYTHONPATH": str(REPO),
+            "CAN_CONFIG": json.dumps({"port": self.port}),
+        }
         self.config = root / "attack.yaml"
         self.config.write_text(
             f'bus: {{interface: udp_multicast, channel: "{self.group}", time_scale: '
@@ -89,10 +92,25 @@ class AttackRig:
     def replay(self, log: Path, speed: float = 2.0) -> None:
         """``monitor replay`` of ``log`` from a process of its own, to its end."""
         r = subprocess.run(
-            [sys.executable, "-m", "monitor", "replay", str(log), "--bus", self.group,
-             "--interface", "udp_multicast", "--speed", str(speed)],
-            capture_output=True, text=True, env=self.env, timeout=1800, check=False,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "monitor",
+                "replay",
+                str(log),
+                "--bus",
+                self.group,
+                "--interface",
+                "udp_multicast",
+                "--speed",
+                str(speed),
+            ],
+            capture_output=True,
+            text=True,
+            env=self.env,
+            timeout=1800,
+            check=False,
+        )
         assert r.returncode == 0, r.stderr
 
     def sniff(self) -> None:
@@ -100,10 +118,23 @@ class AttackRig:
         own; the frames of the first moment, before it joined the group, may be missed)."""
         out = self.root / "sniffed.log"
         self.sniffer = subprocess.Popen(
-            [sys.executable, "-m", "can.logger", "-i", "udp_multicast", "-c", self.group,
-             "-f", str(out), "--bus-kwargs", f"port={self.port}"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=self.env,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "can.logger",
+                "-i",
+                "udp_multicast",
+                "-c",
+                self.group,
+                "-f",
+                str(out),
+                "--bus-kwargs",
+                f"port={self.port}",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            env=self.env,
+        )
 
     def sniffed(self) -> list[can.Message]:
         """Stop the sniffer (SIGINT: it closes its file) and read what it saw."""
@@ -122,8 +153,13 @@ class AttackRig:
 
     def events(self) -> list[dict[str, Any]]:
         """Every event line of the event log's files, oldest first (each whole JSON)."""
-        return [json.loads(x) for p in self.event_files() if p.exists()
-                for x in p.read_text().splitlines() if x.strip()]  # fmt: skip
+        return [
+            json.loads(x)
+            for p in self.event_files()
+            if p.exists()
+            for x in p.read_text().splitlines()
+            if x.strip()
+        ]
 
     def _events_so_far(self) -> list[dict[str, Any]]:
         """``events`` while the daemon writes: a line being appended is skipped."""

@@ -49,9 +49,12 @@ def start_daemon(
     with log_path.open("ab") as err:
         return subprocess.Popen(
             [sys.executable, "-m", "monitor", "run", "--config", str(config)],
-            stdin=subprocess.DEVNULL, stderr=err, env=full_env, cwd=cwd,
+            stdin=subprocess.DEVNULL,
+            stderr=err,
+            env=full_env,
+            cwd=cwd,
             preexec_fn=(lambda: os.nice(nice)) if nice else None,
-        )  # fmt: skip
+        )
 
 
 def own_udp_port() -> int:
@@ -84,8 +87,13 @@ def live_config(tmp: Path, config: Path | None = None, **bus: Any) -> MonitorCon
     (``outputs.frames_max_per_s``, tested in test_own_frames) is lifted so that it drops
     none of the frames these tests compare."""
     cfg = load_config(config)
-    opts = {"interface": "virtual", "channel": f"test-{next(_channels)}",
-            "queue_frames": 200_000, "silent_s": 30.0, **bus}  # fmt: skip
+    opts = {
+        "interface": "virtual",
+        "channel": f"test-{next(_channels)}",
+        "queue_frames": 200_000,
+        "silent_s": 30.0,
+        **bus,
+    }
     return dataclasses.replace(
         cfg,
         bus=BusConfig(**opts),
@@ -106,8 +114,7 @@ def wait_until(cond: Callable[[], bool], timeout_s: float = 60.0) -> None:
 def settle(daemon: Daemon, sent: int, timeout_s: float = 60.0) -> None:
     """Wait until the daemon has taken ``sent`` frames off the bus and processed them."""
     wait_until(lambda: daemon.reader.counts.received + 0 >= sent, timeout_s)
-    wait_until(lambda: daemon.codec.counts.frames >= sent - daemon.reader.counts.dropped,
-               timeout_s)  # fmt: skip
+    wait_until(lambda: daemon.codec.counts.frames >= sent - daemon.reader.counts.dropped, timeout_s)
 
 
 def run_daemon(

@@ -35,9 +35,13 @@ def craft_model(
         arrays_change(arrays)
     out = tmp_path / "crafted.npz"
     with out.open("wb") as fh:
-        np.savez(fh, header=np.frombuffer(hb, np.uint8),
-                 checksum=np.frombuffer(_checksum(hb, arrays).encode(), np.uint8),
-                 **arrays, **(extra or {}))  # fmt: skip
+        np.savez(
+            fh,
+            header=np.frombuffer(hb, np.uint8),
+            checksum=np.frombuffer(_checksum(hb, arrays).encode(), np.uint8),
+            **arrays,
+            **(extra or {}),
+        )
     return out
 
 

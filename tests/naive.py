@@ -173,8 +173,12 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
     (signal_range, frozen, stuck, pump_below_port, rest_offset = 1..5), then column order.
     """
     names = ["SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp", "PP", "PA", "PB", "QP"]
-    dbc = {"SpoolCmd": (-100.0, 100.0), "PumpDispCmd": (0.0, 100.0),
-           "EngineSpeed": (0.0, 3000.0), "OilTemp": (-40.0, 150.0)}  # fmt: skip
+    dbc = {
+        "SpoolCmd": (-100.0, 100.0),
+        "PumpDispCmd": (0.0, 100.0),
+        "EngineSpeed": (0.0, 3000.0),
+        "OilTemp": (-40.0, 150.0),
+    }
     lim = dict(dbc)
     for s in ("PP", "PA", "PB"):
         lim[s] = (cfg.pressure_min_bar, cfg.pressure_max_bar)
@@ -194,12 +198,16 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
     for row in x:
         v = dict(zip(names, (float(a) for a in row), strict=True))
         running = v["EngineSpeed"] >= min_engine_rpm  # False for NaN
-        moving = running and (abs(v["SpoolCmd"]) >= cfg.move_spool_pct
-                              or v["QP"] >= cfg.move_flow_lpm)  # fmt: skip
+        moving = running and (
+            abs(v["SpoolCmd"]) >= cfg.move_spool_pct or v["QP"] >= cfg.move_flow_lpm
+        )
         # The valve passes oil: open, the pump well above the port the command feeds.
         fed = v["PA"] if v["SpoolCmd"] > 0 else v["PB"]
-        passing = (running and abs(v["SpoolCmd"]) >= cfg.relation_spool_pct
-                   and v["PP"] - fed > cfg.relation_margin_bar)  # fmt: skip
+        passing = (
+            running
+            and abs(v["SpoolCmd"]) >= cfg.relation_spool_pct
+            and v["PP"] - fed > cfg.relation_margin_bar
+        )
         for s in names:
             val = v[s]
             if math.isnan(val):
@@ -207,8 +215,11 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
             lo, hi = lim[s]
             # A transducer may read a share of full scale below its range (offset, noise);
             # one at full scale is pinned there.
-            in_range = (lo - cfg.range_tolerance_fs * (hi - lo) <= val < hi if s in sensors
-                        else lo <= val <= hi)  # fmt: skip
+            in_range = (
+                lo - cfg.range_tolerance_fs * (hi - lo) <= val < hi
+                if s in sensors
+                else lo <= val <= hi
+            )
             if in_range:
                 out_of_range_run[s] = 0
                 latched[("signal_range", s)] = False
@@ -244,8 +255,12 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
                     latched[("stuck", s)] = True
         # pump below a port while the spool is open
         n_rel = samples(cfg.relation_s)
-        if running and abs(v["SpoolCmd"]) >= cfg.relation_spool_pct and n_rel > 0 \
-                and not math.isnan(v["PP"]):
+        if (
+            running
+            and abs(v["SpoolCmd"]) >= cfg.relation_spool_pct
+            and n_rel > 0
+            and not math.isnan(v["PP"])
+        ):
             for s in ("PA", "PB"):
                 if v[s] > v["PP"] + cfg.relation_margin_bar:
                     above_pump_run[s] += 1
@@ -258,8 +273,12 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
         )
         # rest: engine off (a reading), spool centred, settled -> pressures at tank
         n_rest = samples(cfg.rest_settle_s)
-        at_rest = not math.isnan(v["EngineSpeed"]) and not running \
-            and abs(v["SpoolCmd"]) < cfg.move_spool_pct and n_rest > 0
+        at_rest = (
+            not math.isnan(v["EngineSpeed"])
+            and not running
+            and abs(v["SpoolCmd"]) < cfg.move_spool_pct
+            and n_rest > 0
+        )
         if at_rest:
             rest_run += 1
             if rest_run >= n_rest:
@@ -395,13 +414,16 @@ def hold_statistic(e, spool_pct, outputs, scale, window, settle, min_count):
         members = [k for k in valid[-window:] if counted[k]]
         if len(members) < min_count:
             continue
-        out[i] = max(abs(math.fsum(e[k, o] for k in members)) / len(members) / scale[q]
-                     for q, o in enumerate(outputs))  # fmt: skip
+        out[i] = max(
+            abs(math.fsum(e[k, o] for k in members)) / len(members) / scale[q]
+            for q, o in enumerate(outputs)
+        )
     return out
 
 
-def near_stop(spool_pct, qp_lpm, volume_up_l, volume_down_l, margin, q_stall_lpm, n_stall,
-              period_s=0.01):
+def near_stop(
+    spool_pct, qp_lpm, volume_up_l, volume_down_l, margin, q_stall_lpm, n_stall, period_s=0.01
+):
     """The end-stop estimate from its definition, with the rod's possible places as a set.
 
     The rod's possible stroke fractions are kept as the pair (lowest, highest), both 0..1.

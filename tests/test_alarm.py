@@ -118,9 +118,14 @@ def test_isolator_add_many_is_add_row_by_row_to_the_bit() -> None:
 
 def episode_run(js, rpm, gap_samples=5):
     """States and the samples that raised a new episode, with ``episode_gap_samples``."""
-    cfg = AlarmConfig(raise_samples=3, clear_samples=4, clear_ratio=0.5,
-                      sensor_recover_samples=2, min_engine_rpm=500,
-                      episode_gap_samples=gap_samples)  # fmt: skip
+    cfg = AlarmConfig(
+        raise_samples=3,
+        clear_samples=4,
+        clear_ratio=0.5,
+        sensor_recover_samples=2,
+        min_engine_rpm=500,
+        episode_gap_samples=gap_samples,
+    )
     m = AlarmMachine(cfg, eps0=1.0)
     states, raised = [], []
     for k, (j, r) in enumerate(zip(js, rpm, strict=True)):

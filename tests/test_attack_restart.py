@@ -80,8 +80,9 @@ def test_killed_daemon_with_logs_moved_and_acked_left_numbers_on_above_acked(
     assert box_seq(boxes[-1]) >= fault["seq"], boxes
     codec = FrameCodec.from_dbc(None)
     states = [codec.decode_message(m) for m in frames if m.arbitration_id & 0xFF == 0xA0]
-    alarm_states = {int(d.values["State"]) for d in states
-                    if d.name == "MON_Alarm" and d.values is not None}  # fmt: skip
+    alarm_states = {
+        int(d.values["State"]) for d in states if d.name == "MON_Alarm" and d.values is not None
+    }
     assert int(State.FAULT) in alarm_states  # the fault went out on the bus
 
 

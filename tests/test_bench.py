@@ -34,8 +34,18 @@ def quick(tmp_path_factory):
     pytest.importorskip("pyGRNN")
     out = tmp_path_factory.mktemp("bench")
     # The shortest RSS sampling: the test checks the numbers are measured, not their size.
-    code = main(["bench", "--quick", "--footprint-s", "5", "--json", str(out / "b.json"),
-                 "--work-dir", str(out)])
+    code = main(
+        [
+            "bench",
+            "--quick",
+            "--footprint-s",
+            "5",
+            "--json",
+            str(out / "b.json"),
+            "--work-dir",
+            str(out),
+        ]
+    )
     assert code == 0
     return out, json.loads((out / "b.json").read_text())
 
@@ -53,9 +63,12 @@ def test_values_are_consistent_with_their_parts(quick):
     g, live, det = r["grnn"], r["live"], r["detect"]
     assert r["grnn_max_rel_error"] <= 1e-6  # the stated bound, measured on real queries
     assert r["grnn_speedup_vs_numba_loop"] == pytest.approx(
-        next(c["plain_us_per_query"] / c["cutoff_us_per_query"] for c in g["cells"]
-             if c["patterns"] == g["grnn_headline_patterns"] and c["p"] == 1)
-    )  # fmt: skip
+        next(
+            c["plain_us_per_query"] / c["cutoff_us_per_query"]
+            for c in g["cells"]
+            if c["patterns"] == g["grnn_headline_patterns"] and c["p"] == 1
+        )
+    )
     assert {(c["patterns"] > 0, c["p"]) for c in g["cells"]} == {(True, 1), (True, 10)}
     # Every frame put on the bus was processed, one tick per 10 ms row.
     assert live["dropped"] == 0

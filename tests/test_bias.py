@@ -148,8 +148,12 @@ def _piston_wear_run(severity: float, seed: int):
     from monitor.sim.machine import load_machine
     from monitor.sim.simulate import simulate
 
-    return simulate(make_cycle("boom", 120.0, seed), load_machine(),
-                    faults=[Fault("piston_wear", severity, 30.0)], seed=seed)  # fmt: skip
+    return simulate(
+        make_cycle("boom", 120.0, seed),
+        load_machine(),
+        faults=[Fault("piston_wear", severity, 30.0)],
+        seed=seed,
+    )
 
 
 def test_b_finds_slight_piston_wear_that_j_misses(model) -> None:
@@ -171,7 +175,8 @@ def test_b_finds_slight_piston_wear_that_j_misses(model) -> None:
     s = det.summary
     assert s["max_J"] < s["threshold"]
     assert s["max_B"] > s["bias_threshold"] and s["max_level"] == pytest.approx(
-        s["max_B"] / s["bias_threshold"])
+        s["max_B"] / s["bias_threshold"]
+    )
     assert s["alarm"] and s["first_alarm_t"] > 30.0 and s["fault"] == "piston_wear"
     _, events = tick_recording(Ticker(model, cfg.alarm, cfg.horizon), rec)
     assert_same_events(events, det)

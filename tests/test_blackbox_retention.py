@@ -13,8 +13,9 @@ from monitor.live.storage import Quota, black_boxes, box_seq
 
 
 def _frame(i: int) -> can.Message:
-    return can.Message(timestamp=T0 + i * 0.01, arbitration_id=0x123, is_extended_id=False,
-                       data=bytes(8))  # fmt: skip
+    return can.Message(
+        timestamp=T0 + i * 0.01, arbitration_id=0x123, is_extended_id=False, data=bytes(8)
+    )
 
 
 def test_max_files_keeps_the_new_alarm_although_older_names_run_ahead(tmp_path) -> None:
@@ -38,9 +39,11 @@ def test_max_files_keeps_the_new_alarm_although_older_names_run_ahead(tmp_path) 
 def test_quota_keeps_the_newest_alarm_box(tmp_path) -> None:
     d = tmp_path / "bb"
     d.mkdir()
-    names = ["alarm-20310101T000000.000000Z-a-seq7.log",  # clock ahead, but older
-             "alarm-20260101T000000.000000Z-b-seq9.log",
-             "alarm-20260101T000000.000000Z-c.log"]  # a name of an earlier release: oldest
+    names = [
+        "alarm-20310101T000000.000000Z-a-seq7.log",  # clock ahead, but older
+        "alarm-20260101T000000.000000Z-b-seq9.log",
+        "alarm-20260101T000000.000000Z-c.log",
+    ]  # a name of an earlier release: oldest
     for n in names:
         (d / n).write_text("x" * 1000)
     q = Quota(500, d, tmp_path / "ev.jsonl")
@@ -48,11 +51,14 @@ def test_quota_keeps_the_newest_alarm_box(tmp_path) -> None:
     assert [p.name for p in q.black_boxes()] == [names[1]]
 
 
-@pytest.mark.parametrize(("name", "seq"), [
-    ("alarm-20260101T000000.000000Z-piston_wear-seq12.log", 12),
-    ("alarm-20260101T000000.000000Z-piston_wear-seq12-3.log", 12),
-    ("alarm-20260101T000000.000000Z-piston_wear-seq12~1.log", 12),
-    ("alarm-20260101T000000.000000Z-boom-piston_wear.log", 0),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("name", "seq"),
+    [
+        ("alarm-20260101T000000.000000Z-piston_wear-seq12.log", 12),
+        ("alarm-20260101T000000.000000Z-piston_wear-seq12-3.log", 12),
+        ("alarm-20260101T000000.000000Z-piston_wear-seq12~1.log", 12),
+        ("alarm-20260101T000000.000000Z-boom-piston_wear.log", 0),
+    ],
+)
 def test_box_seq_from_the_name(tmp_path, name: str, seq: int) -> None:
     assert box_seq(tmp_path / name) == seq

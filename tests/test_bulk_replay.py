@@ -89,8 +89,16 @@ def test_line_variants_and_errors(tmp_path):
     )
     assert_same_frames(log)
     # The messages of the one parser (replay's) are python-can's, line by line.
-    fields = ("timestamp", "arbitration_id", "is_extended_id", "is_remote_frame",
-              "is_error_frame", "is_fd", "bitrate_switch", "error_state_indicator")  # fmt: skip
+    fields = (
+        "timestamp",
+        "arbitration_id",
+        "is_extended_id",
+        "is_remote_frame",
+        "is_error_frame",
+        "is_fd",
+        "bitrate_switch",
+        "error_state_indicator",
+    )
     got, ref = list(read_candump(log)), list(read_candump_lines(log))
     assert [[getattr(m, f) for f in fields] for m in got] == [
         [getattr(m, f) for f in fields] for m in ref
@@ -106,11 +114,20 @@ def test_line_variants_and_errors(tmp_path):
 
 def test_timestamps_bit_identical_to_float(tmp_path):
     rng = np.random.default_rng(3)
-    stamps = [f"{rng.integers(0, 10 ** int(rng.integers(1, 11)))}."
-              f"{rng.integers(0, 10**6):0{int(rng.integers(1, 10))}d}" for _ in range(3000)]
+    stamps = [
+        f"{rng.integers(0, 10 ** int(rng.integers(1, 11)))}."
+        f"{rng.integers(0, 10**6):0{int(rng.integers(1, 10))}d}"
+        for _ in range(3000)
+    ]
     # 2^53 and more digits (numpy's parse), in range (at most 1e11 s)
-    stamps += ["9007199254.740993", "99999999999.999999", "1700000000.0000001234", "0.000001",
-               "1700000000.000000", "00000000001700000000.5"]
+    stamps += [
+        "9007199254.740993",
+        "99999999999.999999",
+        "1700000000.0000001234",
+        "0.000001",
+        "1700000000.000000",
+        "00000000001700000000.5",
+    ]
     log = tmp_path / "ts.log"
     log.write_text("".join(f"({s}) can0 123#00\n" for s in stamps))
     got = read_candump_frames(log).timestamp
@@ -134,16 +151,20 @@ def test_values_equal_cantools_decode():
 
 def test_bit_layouts_from_cantools_incl_big_endian_and_signed():
     msg = cantools.database.can.Message(
-        frame_id=0x123, name="M", length=8, signals=[
+        frame_id=0x123,
+        name="M",
+        length=8,
+        signals=[
             cantools.database.can.Signal("A", start=0, length=12, is_signed=True),
             cantools.database.can.Signal("B", start=12, length=20),
             cantools.database.can.Signal("C", start=39, length=10, byte_order="big_endian"),
-            cantools.database.can.Signal("D", start=45, length=6, byte_order="big_endian",
-                                         is_signed=True),
+            cantools.database.can.Signal(
+                "D", start=45, length=6, byte_order="big_endian", is_signed=True
+            ),
             cantools.database.can.Signal("AliveCounter", start=48, length=4),
             cantools.database.can.Signal("CRC8", start=56, length=8),
         ],
-    )  # fmt: skip
+    )
     info: MessageInfo = message_info(msg)
     data = np.random.default_rng(0).integers(0, 256, (500, 8), dtype=np.uint8)
     raw = raw_values(info, data)
@@ -166,8 +187,9 @@ def _rewrite(log: Path, edit) -> None:
 
 def _troubled_log(tmp_path: Path, seconds: float = 90.0) -> Path:
     """A faulty simulated run with every kind of trouble a real log shows."""
-    rec = simulate(make_cycle("boom", seconds, 7), load_machine(),
-                   [Fault("spool_wear", 0.8, 40.0)], seed=7)  # fmt: skip
+    rec = simulate(
+        make_cycle("boom", seconds, 7), load_machine(), [Fault("spool_wear", 0.8, 40.0)], seed=7
+    )
     log = tmp_path / "trouble.log"
     write_candump(log, rec)
 
@@ -278,8 +300,11 @@ def _with_outage(src: Path, dst: Path, cut_s: float, gap_s: float, drop: int | N
             if after and m.arbitration_id == drop:
                 continue
             shift = gap_s if after else 0.0
-            fh.write(format_line(m.timestamp + shift, "can0", m.arbitration_id,
-                                 m.is_extended_id, bytes(m.data)))  # fmt: skip
+            fh.write(
+                format_line(
+                    m.timestamp + shift, "can0", m.arbitration_id, m.is_extended_id, bytes(m.data)
+                )
+            )
     return dst
 
 
@@ -305,8 +330,9 @@ def test_after_an_outage_a_slow_signal_is_fresh_until_its_next_frame(tmp_path, g
 
 def test_after_an_outage_a_sender_that_stays_silent_is_stale_after_its_time(tmp_path):
     oil_id = FrameCodec.from_dbc().message("HYD_OilTemp").frame_id
-    log = _with_outage(resource_path("replay", "normal.log"), tmp_path / "o.log", 40.3, 5.0,
-                       drop=oil_id)  # fmt: skip
+    log = _with_outage(
+        resource_path("replay", "normal.log"), tmp_path / "o.log", 40.3, 5.0, drop=oil_id
+    )
     bulk, ref = recording_from_candump_bulk(log), recording_from_candump(log)
     assert_same_recording(bulk, ref)
     back = _first_row_back(ref)

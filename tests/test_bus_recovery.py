@@ -56,8 +56,12 @@ def enetdown(where: str = "receiving") -> can.CanOperationError:
 
 def error_frame(can_id: int, data1: int = 0) -> can.Message:
     """A SocketCAN error frame: class bits in the id, controller status in data[1]."""
-    return can.Message(arbitration_id=can_id, is_extended_id=False, is_error_frame=True,
-                       data=bytes([0, data1, 0, 0, 0, 0, 0, 0]))  # fmt: skip
+    return can.Message(
+        arbitration_id=can_id,
+        is_extended_id=False,
+        is_error_frame=True,
+        data=bytes([0, data1, 0, 0, 0, 0, 0, 0]),
+    )
 
 
 def data_frame(n: int) -> can.Message:
@@ -165,8 +169,9 @@ def rig(script: list, opens: list | None = None, reopen: bool = True, **kw: Any)
         now[0] += delay
         return False
 
-    r.reader = BusReader(r.first, 1000, opener=opener if reopen else None,
-                         sleep=sleep, clock=lambda: now[0], **kw)  # fmt: skip
+    r.reader = BusReader(
+        r.first, 1000, opener=opener if reopen else None, sleep=sleep, clock=lambda: now[0], **kw
+    )
     r.reader.start()
     try:
         assert done.wait(30.0), "the script did not finish"
@@ -187,14 +192,18 @@ def test_link_down_reopens_with_backoff_until_the_link_works() -> None:
     a, b, c = data_frame(1), data_frame(2), data_frame(3)
     gone = BusError("cannot open CAN bus socketcan:can0: [Errno 19] No such device")
     r = rig(
-        [a, enetdown(),  # link down: 0.1 s, two failed opens (0.2, 0.4), then an open
-         enetdown(),  # ... whose first recv fails (bound to a link still down): 0.5 (max)
-         None,  # the next reopened bus receives without error: up
-         b,  # a frame through it: the backoff starts again from 0.1
-         enetdown(), c],  # down again: 0.1, reopened, frames again
+        [
+            a,
+            enetdown(),  # link down: 0.1 s, two failed opens (0.2, 0.4), then an open
+            enetdown(),  # ... whose first recv fails (bound to a link still down): 0.5 (max)
+            None,  # the next reopened bus receives without error: up
+            b,  # a frame through it: the backoff starts again from 0.1
+            enetdown(),
+            c,
+        ],  # down again: 0.1, reopened, frames again
         opens=[gone, gone, "ok", "ok", "ok"],
         backoff=Backoff(0.1, 0.5),
-    )  # fmt: skip
+    )
     reader = r.reader
     assert r.delays == [0.1, 0.2, 0.4, 0.5, 0.1]
     assert r.opens == ["BusError", "BusError", "ok", "ok", "ok"]
@@ -206,9 +215,14 @@ def test_link_down_reopens_with_backoff_until_the_link_works() -> None:
     assert events[1].down_s == pytest.approx(0.1 + 0.2 + 0.4 + 0.5)  # fake clock
     assert events[3].down_s == pytest.approx(0.1)
     assert (events[1].reopens, events[3].reopens) == (2, 3)
-    assert reader.recovery.as_dict() == {"bus_down": 2, "bus_off": 0, "error_passive": 0,
-                                         "reopen_attempts": 5, "reopens": 3,
-                                         "reopen_failures": 3}  # fmt: skip
+    assert reader.recovery.as_dict() == {
+        "bus_down": 2,
+        "bus_off": 0,
+        "error_passive": 0,
+        "reopen_attempts": 5,
+        "reopens": 3,
+        "reopen_failures": 3,
+    }
     assert reader.counts.bus_errors == 3
     assert [m.arbitration_id for m in received(reader)] == [0x101, 0x102, 0x103]
     assert reader.bus_up
@@ -248,8 +262,13 @@ def test_a_link_error_seen_only_by_the_sender_reopens_the_bus() -> None:
     def send_fails(exc: BaseException) -> Callable[[BusReader], None]:
         return lambda reader: reader.report_send_error(exc)
 
-    script = [data_frame(1), send_fails(can.CanOperationError("Transmit buffer full")), None,
-              send_fails(enetdown("transmitting")), data_frame(2)]  # fmt: skip
+    script = [
+        data_frame(1),
+        send_fails(can.CanOperationError("Transmit buffer full")),
+        None,
+        send_fails(enetdown("transmitting")),
+        data_frame(2),
+    ]
     r = rig(script, opens=["ok"])
     events = r.reader.take_events()
     assert [e.kind for e in events] == ["down", "up"]  # the full queue was no link error
@@ -273,8 +292,11 @@ def test_a_send_error_the_reader_already_heard_reopens_nothing_more() -> None:
 
 
 def test_a_bus_the_caller_owns_is_retried_not_reopened() -> None:
-    r = rig([data_frame(1), enetdown(), enetdown(), data_frame(2)], reopen=False,
-            backoff=Backoff(0.25, 1.0))  # fmt: skip
+    r = rig(
+        [data_frame(1), enetdown(), enetdown(), data_frame(2)],
+        reopen=False,
+        backoff=Backoff(0.25, 1.0),
+    )
     assert r.delays == [0.25, 0.5]
     assert not r.first.closed and r.reader.recovery.reopens == 0
     assert [e.kind for e in r.reader.take_events()] == ["down", "up"]
@@ -368,8 +390,9 @@ def _frames() -> tuple[list[can.Message], list[can.Message]]:
 def _write_log(path: Path, frames: list[can.Message]) -> None:
     with path.open("w") as fh:
         for m in frames:
-            fh.write(format_line(m.timestamp, "can0", m.arbitration_id, m.is_extended_id,
-                                 bytes(m.data)))  # fmt: skip
+            fh.write(
+                format_line(m.timestamp, "can0", m.arbitration_id, m.is_extended_id, bytes(m.data))
+            )
 
 
 @pytest.fixture(scope="module")
@@ -405,9 +428,17 @@ def outage(tmp_path_factory) -> dict[str, Any]:
         daemon.stop()
     mon = drain(sender)
     lines = [json.loads(x) for x in cfg.event_log.path.read_text().splitlines()]
-    return {"daemon": daemon, "cfg": cfg, "events": events, "lines": lines, "mon": mon,
-            "link": link, "alive": alive, "t0": before[0].timestamp,
-            "gapped": tmp / "gapped.log"}  # fmt: skip
+    return {
+        "daemon": daemon,
+        "cfg": cfg,
+        "events": events,
+        "lines": lines,
+        "mon": mon,
+        "link": link,
+        "alive": alive,
+        "t0": before[0].timestamp,
+        "gapped": tmp / "gapped.log",
+    }
 
 
 def test_the_daemon_survives_the_outage_and_logs_it(outage) -> None:
@@ -454,8 +485,11 @@ def test_alarms_resume_after_recovery_as_the_desk_sees_the_gap(outage) -> None:
     # MON_Alarm in fault on the bus after the outage, with the event's fault.
     codec = FrameCodec.from_dbc()
     alarm_id = codec.message(ALARM).frame_id
-    alarms = [(m.timestamp - outage["t0"], codec.decode_message(m).values)
-              for m in outage["mon"] if m.arbitration_id == alarm_id]  # fmt: skip
+    alarms = [
+        (m.timestamp - outage["t0"], codec.decode_message(m).values)
+        for m in outage["mon"]
+        if m.arbitration_id == alarm_id
+    ]
     t_fault, sig = next((t, v) for t, v in alarms if v["State"] == State.FAULT)
     assert t_fault == pytest.approx(fault["t"], abs=1e-6)
     assert sig["Fault"] == fault_codes(codec)[fault["fault"]]
@@ -472,10 +506,18 @@ def test_a_silence_after_the_last_frame_adds_an_inactive_only_when_the_reader_pr
     daemon = Daemon(cfg)  # not started: its codec and loops only
     reader = {"heard": -float("inf"), "rx": 1000.0}
     events: list[dict[str, Any]] = []
-    pipe = FramePipeline(daemon.codec, daemon.columns, daemon.loops, lambda m: None,
-                         lambda tick, lp: events.append(lp.event(tick, pipe.start_time_s)),
-                         cfg.bus.silent_s, 1.0, heard_until=lambda: reader["heard"],
-                         backlog=lambda: False, received_at=lambda: reader["rx"])  # fmt: skip
+    pipe = FramePipeline(
+        daemon.codec,
+        daemon.columns,
+        daemon.loops,
+        lambda m: None,
+        lambda tick, lp: events.append(lp.event(tick, pipe.start_time_s)),
+        cfg.bus.silent_s,
+        1.0,
+        heard_until=lambda: reader["heard"],
+        backlog=lambda: False,
+        received_at=lambda: reader["rx"],
+    )
     before, after = _frames()
     _write_log(tmp_path / "gapped.log", before + after)
 
@@ -534,8 +576,11 @@ def test_a_fault_on_before_an_outage_is_the_same_episode_after_it(tmp_path) -> N
         for m in read_candump(LOG):
             t0 = m.timestamp if t0 is None else t0
             shift = gap_s if m.timestamp - t0 >= cut_s else 0.0
-            fh.write(format_line(m.timestamp + shift, "can0", m.arbitration_id,
-                                 m.is_extended_id, bytes(m.data)))  # fmt: skip
+            fh.write(
+                format_line(
+                    m.timestamp + shift, "can0", m.arbitration_id, m.is_extended_id, bytes(m.data)
+                )
+            )
     det = detect(model, recording_from_candump(path), cfg.alarm, cfg.horizon)
     states = [(e["state"], e["t"], e["fault"]) for e in det.events]
     assert [s for s, _, _ in states] == ["normal", "fault", "inactive", "fault"], states

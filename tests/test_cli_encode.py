@@ -36,8 +36,16 @@ def test_encode_writes_decodable_log_and_one_summary_line(tmp_path, capsys) -> N
 
 def test_encode_start_time_and_channel(tmp_path, capsys) -> None:
     log = tmp_path / "out.log"
-    args = ["encode", str(_csv(tmp_path)), "--out", str(log), "--start-time", "1.5",
-            "--channel", "vcan0"]
+    args = [
+        "encode",
+        str(_csv(tmp_path)),
+        "--out",
+        str(log),
+        "--start-time",
+        "1.5",
+        "--channel",
+        "vcan0",
+    ]
     assert main(args) == 0
     assert log.read_text().startswith("(1.500000) vcan0 0CFF1021#")
 
@@ -55,8 +63,14 @@ def test_bad_csv_exits_2_with_one_line(tmp_path, capsys) -> None:
 def test_missing_csv_and_bad_dbc_exit_2(tmp_path, capsys) -> None:
     assert main(["encode", str(tmp_path / "none.csv"), "--out", str(tmp_path / "x.log")]) == 2
     assert "none.csv" in capsys.readouterr().err
-    args = ["encode", str(_csv(tmp_path)), "--out", str(tmp_path / "x.log"),
-            "--dbc", str(tmp_path / "none.dbc")]
+    args = [
+        "encode",
+        str(_csv(tmp_path)),
+        "--out",
+        str(tmp_path / "x.log"),
+        "--dbc",
+        str(tmp_path / "none.dbc"),
+    ]
     assert main(args) == 2
     assert "none.dbc" in capsys.readouterr().err
 

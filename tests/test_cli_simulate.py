@@ -117,7 +117,9 @@ def test_a_day_of_simulation_is_refused_before_any_work(capsys) -> None:
         parser.parse_args(["simulate", "--duration", "86400", "--out", "x.csv"])
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
-    assert err.endswith("argument --duration: must be within 0.01..7200 s, got 86400 (the run "
-                        "is held in memory, some 0.3 GB a simulated hour; simulate longer spans "
-                        "as several runs with other seeds)")  # fmt: skip
+    assert err.endswith(
+        "argument --duration: must be within 0.01..7200 s, got 86400 (the run "
+        "is held in memory, some 0.3 GB a simulated hour; simulate longer spans "
+        "as several runs with other seeds)"
+    )
     assert parser.parse_args(["simulate", "--duration", "7200", "--out", "x.csv"]).duration == 7200

@@ -77,8 +77,9 @@ def test_step_kernel_frame_by_frame_and_in_bulk_match_the_rule(seed: int) -> Non
     np.testing.assert_array_equal(st, want_st)  # bit for bit, NaN where skipped
     assert order == want_order.tolist() and resumes == want_resumes.tolist()
     assert counts == want_counts
-    b_st, b_order, b_resumes, b_counts, b_newest = _clock(ts, PERIOD, MAX_GAP, RESYNC, _EPS_S,
-                                                          OUTAGE_S)  # fmt: skip
+    b_st, b_order, b_resumes, b_counts, b_newest = _clock(
+        ts, PERIOD, MAX_GAP, RESYNC, _EPS_S, OUTAGE_S
+    )
     np.testing.assert_array_equal(b_st, want_st)
     assert b_order.tolist() == want_order.tolist()
     assert b_resumes.tolist() == want_resumes.tolist()

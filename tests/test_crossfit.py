@@ -47,8 +47,7 @@ def test_each_block_is_predicted_from_the_other_folds_only() -> None:
     norm = Normalizer().fit(np.concatenate(tables), spec.variables)
     zs = [norm.transform(t) for t in tables]
     grnn = GRNN(thinning="none", max_patterns=None, exclude_neighbours=5)
-    model = MonitorModel(DGRNN(spec, grnn).fit(zs), norm, 100, ThresholdRule(), math.nan,
-                         math.nan)  # fmt: skip
+    model = MonitorModel(DGRNN(spec, grnn).fit(zs), norm, 100, ThresholdRule(), math.nan, math.nan)
     folds, block_n = 3, 250
     got = cross_fitted_residuals(model, zs, recs, folds, block_n, normal_residuals)
 

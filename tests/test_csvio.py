@@ -27,8 +27,18 @@ def _write(tmp_path, text: str, name: str = "rec.csv"):
 
 
 def test_reads_contract_csv_any_order_with_extra_column(tmp_path) -> None:
-    cols = ["QP", "PP", "t", "RodPos", "SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp", "PA",
-            "PB"]
+    cols = [
+        "QP",
+        "PP",
+        "t",
+        "RodPos",
+        "SpoolCmd",
+        "PumpDispCmd",
+        "EngineSpeed",
+        "OilTemp",
+        "PA",
+        "PB",
+    ]
     lines = [",".join(cols), "1.5,100,0.00,12.5,10,100,2200,45,80,20", "1.6,101,0.01,13,,,,,,"]
     rec = read_csv(_write(tmp_path, "\n".join(lines) + "\n"))
     assert rec.t.tolist() == [0.0, 0.01]

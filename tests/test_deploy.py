@@ -13,8 +13,9 @@ from live_support import REPO
 UNIT = REPO / "deploy" / "hydraulic-monitor.service"
 
 
-@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="no systemd-analyze "
-                    "(apt package systemd)")  # fmt: skip
+@pytest.mark.skipif(
+    shutil.which("systemd-analyze") is None, reason="no systemd-analyze (apt package systemd)"
+)
 def test_unit_verifies_cleanly(tmp_path: Path) -> None:
     monitor = shutil.which("monitor")
     if monitor is None:
@@ -24,6 +25,7 @@ def test_unit_verifies_cleanly(tmp_path: Path) -> None:
     assert "ExecStart=/usr/local/bin/monitor run" in text
     unit = tmp_path / UNIT.name
     unit.write_text(text.replace("ExecStart=/usr/local/bin/monitor", f"ExecStart={monitor}"))
-    out = subprocess.run(["systemd-analyze", "verify", str(unit)], capture_output=True,
-                         text=True, timeout=120)  # fmt: skip
+    out = subprocess.run(
+        ["systemd-analyze", "verify", str(unit)], capture_output=True, text=True, timeout=120
+    )
     assert out.returncode == 0 and not (out.stdout + out.stderr).strip(), out.stdout + out.stderr

@@ -55,9 +55,15 @@ def test_paper_preset_is_eq_11():
     assert spec.outputs == ("QP",)
     assert spec.variables == ("QP", "PP", "PA", "PB")
     assert spec.features == (
-        ("QP", 1), ("PP", 1), ("PA", 1), ("PB", 1),
-        ("QP", 2), ("PP", 2), ("PA", 2), ("PB", 2),
-    )  # fmt: skip
+        ("QP", 1),
+        ("PP", 1),
+        ("PA", 1),
+        ("PB", 1),
+        ("QP", 2),
+        ("PP", 2),
+        ("PA", 2),
+        ("PB", 2),
+    )
     assert spec.horizon == 1 and spec.max_lag == 2
     assert DGRNNSpec.preset("paper", horizon=5).horizon == 5
 
@@ -245,10 +251,15 @@ def test_default_preset_end_to_end_loo():
     pp = np.maximum(pa, pb) + 5 + rng.normal(0, 0.3, n)
     qp = np.abs(spool) / 3 + rng.normal(0, 0.1, n)
     raw = {
-        "PP": pp, "PA": pa, "PB": pb, "QP": qp, "SpoolCmd": spool,
-        "PumpDispCmd": np.full(n, 100.0), "EngineSpeed": np.full(n, 2200.0),
+        "PP": pp,
+        "PA": pa,
+        "PB": pb,
+        "QP": qp,
+        "SpoolCmd": spool,
+        "PumpDispCmd": np.full(n, 100.0),
+        "EngineSpeed": np.full(n, 2200.0),
         "OilTemp": 40 + rng.normal(0, 0.01, n),
-    }  # fmt: skip
+    }
     rec = Recording(np.arange(n) * 0.01, raw)
     norm = Normalizer().fit(rec, spec.variables)
     Z = norm.transform(rec, spec.variables)

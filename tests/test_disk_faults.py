@@ -38,8 +38,11 @@ def _mount_error() -> str | None:
     probe = Path("/tmp") / f"monitor-tmpfs-probe-{os.getpid()}"
     probe.mkdir(exist_ok=True)
     try:
-        r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(probe)],
-                           capture_output=True, text=True)  # fmt: skip
+        r = subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(probe)],
+            capture_output=True,
+            text=True,
+        )
         if r.returncode:
             return f"cannot mount a tmpfs here: {r.stderr.strip()}"
         subprocess.run(["umount", str(probe)], check=True)
@@ -79,14 +82,21 @@ def _fill(path: Path) -> int:
 def _event(i: int) -> dict:
     # Alarms and normals in turn, each about 300 bytes like the daemon's lines.
     fault = i % 2 == 1
-    return {"t": i * 1.5, "state": "fault" if fault else "normal", "J": 0.01,
-            "threshold": 0.0012, "fault": "spool_wear" if fault else None, "pad": "x" * 200}
+    return {
+        "t": i * 1.5,
+        "state": "fault" if fault else "normal",
+        "J": 0.01,
+        "threshold": 0.0012,
+        "fault": "spool_wear" if fault else None,
+        "pad": "x" * 200,
+    }
 
 
 def _frame100(i: int) -> can.Message:
     """Frame ``i`` of a 100 Hz bus from T0."""
-    return can.Message(timestamp=T0 + i * 0.01, arbitration_id=0x123, is_extended_id=False,
-                       data=bytes(8))  # fmt: skip
+    return can.Message(
+        timestamp=T0 + i * 0.01, arbitration_id=0x123, is_extended_id=False, data=bytes(8)
+    )
 
 
 def _lines(*paths: Path) -> list[dict]:
@@ -142,7 +152,8 @@ def test_full_disk_keeps_the_box_being_recorded_and_the_newest(small_disk) -> No
     boxes.mkdir()
     for k in range(2):  # two old boxes of about a third of the disk each
         (boxes / f"alarm-2026010{k}T000000.000000Z-spool_wear-seq{k + 1}.log").write_bytes(
-            b"x" * 300_000)  # fmt: skip
+            b"x" * 300_000
+        )
     ev = small_disk / "events.jsonl"
     quota = Quota(10**9, boxes, ev)
     log = EventLog(ev, quota=quota)
@@ -265,8 +276,12 @@ def test_event_log_refuses_a_planted_link(tmp_path) -> None:
 
 
 def _frames(n: int) -> list[can.Message]:
-    return [can.Message(timestamp=T0 + i * 0.01, arbitration_id=0x123, is_extended_id=False,
-                        data=bytes(8)) for i in range(n)]  # fmt: skip
+    return [
+        can.Message(
+            timestamp=T0 + i * 0.01, arbitration_id=0x123, is_extended_id=False, data=bytes(8)
+        )
+        for i in range(n)
+    ]
 
 
 def test_black_box_never_writes_through_a_link_nor_over_a_file(tmp_path) -> None:
@@ -315,12 +330,14 @@ def test_daemon_on_a_full_disk_flags_disk_error_and_reports_unwritten(small_disk
 
     cfg = live_config(tmp_path)
     cfg = dataclasses.replace(
-        cfg, event_log=dataclasses.replace(cfg.event_log, path=small_disk / "events.jsonl"),
+        cfg,
+        event_log=dataclasses.replace(cfg.event_log, path=small_disk / "events.jsonl"),
         black_box=dataclasses.replace(cfg.black_box, directory=small_disk / "bb"),
-    )  # fmt: skip
+    )
     _fill(small_disk / "filler")
-    daemon, events, frames, _ = run_daemon(cfg, replay_settled(resource_path("replay",
-                                                                             "spool_wear.log")))
+    daemon, events, frames, _ = run_daemon(
+        cfg, replay_settled(resource_path("replay", "spool_wear.log"))
+    )
     assert events and daemon.error is None
     assert daemon.unwritten == len(events)  # every event kept, none on disk
     dbc = daemon.codec.message("MON_Status").dbc_message

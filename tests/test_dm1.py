@@ -173,10 +173,13 @@ def test_dm1_on_change_and_every_second_while_active() -> None:
     one = [(*WEAR, 1)]
     assert got == [
         (0.0, NO_DTC),  # the start announces "no DTC"
-        (2.0, one), (3.0, one), (4.0, one), (5.0, one),  # fault at 2.0, every 1 s
+        (2.0, one),
+        (3.0, one),
+        (4.0, one),
+        (5.0, one),  # fault at 2.0, every 1 s
         (5.5, NO_DTC),  # cleared: once, not repeated
         (7.5, [(*WEAR, 2)]),  # active again: the second occurrence
-    ]  # fmt: skip
+    ]
     assert all(m.arbitration_id == DM1_ID for m in frames)
     lamps, _ = decode_dm(bytes(frames[1].data))
     assert lamps == {"protect": "off", "amber": "on", "red": "off", "mil": "off"}
@@ -200,17 +203,23 @@ def test_one_dtc_per_alarm_while_isolation_refines_its_answer() -> None:
         ],
     )
     unknown, wear, qp = (520195, 11, 1), (*WEAR, 1), (520215, 9, 1)
-    assert _dm1s(frames) == [(0.0, NO_DTC), (0.5, [unknown]), (0.8, [wear]), (1.8, [wear]),
-                             (2.2, [qp]), (2.7, [wear]), (2.9, NO_DTC),
-                             (3.4, [(520195, 11, 2)])]  # fmt: skip
+    assert _dm1s(frames) == [
+        (0.0, NO_DTC),
+        (0.5, [unknown]),
+        (0.8, [wear]),
+        (1.8, [wear]),
+        (2.2, [qp]),
+        (2.7, [wear]),
+        (2.9, NO_DTC),
+        (3.4, [(520195, 11, 2)]),
+    ]
 
 
 def test_no_dtc_repeats_every_second_when_configured() -> None:
     diag = Diagnostics(J1939Config(enabled=True), SIGNALS)
     got = _dm1s(_drive(diag, [(2.5, State.NORMAL, "", ()), (1.2, State.FAULT, "x", ())]))
     unknown = (520195, 11, 1)  # a fault isolation could not name
-    assert got == [(0.0, NO_DTC), (1.0, NO_DTC), (2.0, NO_DTC), (2.5, [unknown]),
-                   (3.5, [unknown])]  # fmt: skip
+    assert got == [(0.0, NO_DTC), (1.0, NO_DTC), (2.0, NO_DTC), (2.5, [unknown]), (3.5, [unknown])]
 
 
 def test_sensor_fault_is_a_bam_per_stale_signal_kept_through_recovery() -> None:
@@ -230,8 +239,7 @@ def test_sensor_fault_is_a_bam_per_stale_signal_kept_through_recovery() -> None:
     dts = [m.timestamp for m in frames if m.arbitration_id == TP_DT_ID]
     assert dts == pytest.approx([1.05, 1.10, 2.05, 2.10])  # J1939-21: 50-200 ms apart
     pressures = [(520212, 9, 1), (520213, 9, 1), (520214, 9, 1)]
-    assert _dm1s(frames) == [(0.0, NO_DTC), (1.1, pressures), (2.1, pressures),
-                             (2.6, NO_DTC)]  # fmt: skip
+    assert _dm1s(frames) == [(0.0, NO_DTC), (1.1, pressures), (2.1, pressures), (2.6, NO_DTC)]
     assert diag.previous == {(520212, 9), (520213, 9), (520214, 9)}
 
 

@@ -37,8 +37,15 @@ def _run(tmp, feed) -> dict[str, Any]:
 
     daemon, events, frames, t0 = run_daemon(cfg, fed)
     j1939_frames = [m for m in frames if m.arbitration_id in J1939_IDS]
-    return {"cfg": cfg, "daemon": daemon, "t0": t0, "frames": frames, "events": events,
-            "groups": reassemble(j1939_frames), "j1939": j1939_frames}  # fmt: skip
+    return {
+        "cfg": cfg,
+        "daemon": daemon,
+        "t0": t0,
+        "frames": frames,
+        "events": events,
+        "groups": reassemble(j1939_frames),
+        "j1939": j1939_frames,
+    }
 
 
 def _dm1s(run: dict[str, Any]) -> list[tuple[float, Any, Any]]:
@@ -60,8 +67,11 @@ def hydraulic(tmp_path_factory) -> dict[str, Any]:
 def test_dm1_announces_the_hydraulic_fault_with_the_alarm_and_every_second(hydraulic) -> None:
     codec = FrameCodec.from_dbc()
     alarm_id = codec.message(ALARM).frame_id
-    alarms = [(m.timestamp - hydraulic["t0"], codec.decode_message(m).values)
-              for m in hydraulic["frames"] if m.arbitration_id == alarm_id]  # fmt: skip
+    alarms = [
+        (m.timestamp - hydraulic["t0"], codec.decode_message(m).values)
+        for m in hydraulic["frames"]
+        if m.arbitration_id == alarm_id
+    ]
     t_alarm = next(t for t, v in alarms if v["State"] == 1)
     dm1 = _dm1s(hydraulic)
     assert dm1[0][2] == [(0, 0, 0)] and dm1[0][0] == pytest.approx(alarms[0][0])
@@ -91,11 +101,18 @@ def sensor(tmp_path_factory) -> dict[str, Any]:
     def feed(sender):
         msgs = list(read_candump(resource_path("replay", "normal.log")))
         t0 = msgs[0].timestamp
-        keep = [m for m in msgs if m.timestamp - t0 < 30.0 and not (
-            m.arbitration_id == PRESSURES and 10.0 <= m.timestamp - t0 < 12.0)]  # fmt: skip
+        keep = [
+            m
+            for m in msgs
+            if m.timestamp - t0 < 30.0
+            and not (m.arbitration_id == PRESSURES and 10.0 <= m.timestamp - t0 < 12.0)
+        ]
         for at, to in ((20.0, 0xA0), (21.0, 0x17)):
-            req = can.Message(timestamp=t0 + at, arbitration_id=frame_id(59904, 0xF9, 6, to),
-                              data=PGN_DM2.to_bytes(3, "little"))  # fmt: skip
+            req = can.Message(
+                timestamp=t0 + at,
+                arbitration_id=frame_id(59904, 0xF9, 6, to),
+                data=PGN_DM2.to_bytes(3, "little"),
+            )
             keep.insert(next(i for i, m in enumerate(keep) if m.timestamp > req.timestamp), req)
         return t0, send_all(sender, keep), 1
 

@@ -28,8 +28,9 @@ UNIT = StrokeModel(1.0, 1.0, margin=0.045, q_stall_lpm=1.0, n_stall=3)
 
 
 def _flags(spool, qp, stroke: StrokeModel = UNIT) -> list[int]:
-    return [int(v) for v in near_stop_series(np.asarray(spool, float), np.asarray(qp, float),
-                                             stroke)]  # fmt: skip
+    return [
+        int(v) for v in near_stop_series(np.asarray(spool, float), np.asarray(qp, float), stroke)
+    ]
 
 
 def test_worked_by_hand() -> None:
@@ -167,10 +168,21 @@ def test_stroke_model_checks_its_values() -> None:
     assert StrokeModel.from_dict(s.to_dict()) == s
 
 
-GOOD_HOLD = {"window_n": 6000, "min_count": 300, "settle_n": 200, "outputs": [1, 2],
-             "scale": [0.3, 0.7], "h0": 2.0,
-             "stroke": {"volume_up_l": 1.57, "volume_down_l": 1.07, "margin": 0.05,
-                        "q_stall_lpm": 1.0, "n_stall": 20}}  # fmt: skip
+GOOD_HOLD = {
+    "window_n": 6000,
+    "min_count": 300,
+    "settle_n": 200,
+    "outputs": [1, 2],
+    "scale": [0.3, 0.7],
+    "h0": 2.0,
+    "stroke": {
+        "volume_up_l": 1.57,
+        "volume_down_l": 1.07,
+        "margin": 0.05,
+        "q_stall_lpm": 1.0,
+        "n_stall": 20,
+    },
+}
 
 
 def test_a_model_file_keeps_the_stroke(tmp_path) -> None:
@@ -181,10 +193,14 @@ def test_a_model_file_keeps_the_stroke(tmp_path) -> None:
 
 @pytest.mark.parametrize(
     ("change", "key"),
-    [({"volume_up_l": 0.0}, "volume_up_l"), ({"volume_down_l": "1"}, "volume_down_l"),
-     ({"margin": 0.6}, "margin"), ({"q_stall_lpm": -1.0}, "q_stall_lpm"),
-     ({"n_stall": 0}, "n_stall")],
-)  # fmt: skip
+    [
+        ({"volume_up_l": 0.0}, "volume_up_l"),
+        ({"volume_down_l": "1"}, "volume_down_l"),
+        ({"margin": 0.6}, "margin"),
+        ({"q_stall_lpm": -1.0}, "q_stall_lpm"),
+        ({"n_stall": 0}, "n_stall"),
+    ],
+)
 def test_a_malformed_stroke_names_its_key(tmp_path, change, key) -> None:
     bad = {**GOOD_HOLD, "stroke": {**GOOD_HOLD["stroke"], **change}}
     with pytest.raises(ModelFileError, match=f"hold.stroke.{key}") as exc:

@@ -56,8 +56,9 @@ def _detection(
     return Detection(t, nan, nan, nan, state, events, summary)
 
 
-FAULT = RunSpec(seed=1, duration_s=60.0, fault="spool_wear", severity=1.0, onset="abrupt",
-                onset_s=30.0)  # fmt: skip
+FAULT = RunSpec(
+    seed=1, duration_s=60.0, fault="spool_wear", severity=1.0, onset="abrupt", onset_s=30.0
+)
 
 
 def test_score_detected_after_onset_uses_summary_label() -> None:
@@ -142,9 +143,20 @@ def _check_invariants(result: dict[str, Any]) -> None:
 def test_cli_shipped_model_small_set(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "eval.json"
     code = main(
-        ["eval-sim", "--model", "shipped", "--severities", "1.0", "--runs", "1",
-         "--normal-hours", "0.02", "--json", str(out)]
-    )  # fmt: skip
+        [
+            "eval-sim",
+            "--model",
+            "shipped",
+            "--severities",
+            "1.0",
+            "--runs",
+            "1",
+            "--normal-hours",
+            "0.02",
+            "--json",
+            str(out),
+        ]
+    )
     assert code == 0
     result = json.loads(out.read_text())
     assert list(result["models"]) == ["shipped"]
@@ -161,10 +173,28 @@ def test_cli_shipped_model_small_set(tmp_path: Path, capsys: pytest.CaptureFixtu
 def test_cli_trains_paper_preset(tmp_path: Path) -> None:
     out, md = tmp_path / "eval.json", tmp_path / "eval.md"
     code = main(
-        ["eval-sim", "--presets", "paper", "--train-seeds", "1-3", "--train-duration", "90",
-         "--severities", "0.6", "--runs", "1", "--onsets", "abrupt", "--normal-hours", "0.02",
-         "--json", str(out), "--markdown", str(md)]
-    )  # fmt: skip
+        [
+            "eval-sim",
+            "--presets",
+            "paper",
+            "--train-seeds",
+            "1-3",
+            "--train-duration",
+            "90",
+            "--severities",
+            "0.6",
+            "--runs",
+            "1",
+            "--onsets",
+            "abrupt",
+            "--normal-hours",
+            "0.02",
+            "--json",
+            str(out),
+            "--markdown",
+            str(md),
+        ]
+    )
     assert code == 0
     result = json.loads(out.read_text())
     assert result["models"]["paper"]["outputs"] == ["QP"]
@@ -200,8 +230,19 @@ def test_cli_json_folder_missing(tmp_path: Path) -> None:
 def test_cli_dask_workers_give_the_one_process_rows(tmp_path: Path) -> None:
     """--workers 2 (a Dask LocalCluster) scores the same runs to the same rows as the
     one-process loop; only the timings differ."""
-    common = ["eval-sim", "--model", "shipped", "--severities", "0.3,1.0", "--runs", "1",
-              "--normal-hours", "0.1", "--onsets", "abrupt"]  # fmt: skip
+    common = [
+        "eval-sim",
+        "--model",
+        "shipped",
+        "--severities",
+        "0.3,1.0",
+        "--runs",
+        "1",
+        "--normal-hours",
+        "0.1",
+        "--onsets",
+        "abrupt",
+    ]
     one, two = tmp_path / "one.json", tmp_path / "two.json"
     assert main([*common, "--json", str(one)]) == 0
     assert main([*common, "--workers", "2", "--json", str(two)]) == 0
@@ -211,8 +252,10 @@ def test_cli_dask_workers_give_the_one_process_rows(tmp_path: Path) -> None:
 
 
 def test_seed_sets_are_disjoint() -> None:
-    dev, blind = EvalConfig(runs=10, normal_hours=10.0), EvalConfig(runs=10, normal_hours=10.0,
-                                                                  seed_set=3)  # fmt: skip
+    dev, blind = (
+        EvalConfig(runs=10, normal_hours=10.0),
+        EvalConfig(runs=10, normal_hours=10.0, seed_set=3),
+    )
     assert not planned_seeds(dev) & planned_seeds(blind)
     assert len(planned_seeds(blind)) == len(planned_seeds(dev))
     assert min(planned_seeds(blind)) == NORMAL_SEED_BASE + 30_000_000

@@ -40,8 +40,12 @@ def _commands(phases: list[tuple[float, float]], total_s: float) -> Recording:
     spool = np.zeros_like(t)
     for start, level in phases:
         spool[t >= start - 1e-9] = level
-    cols = {"SpoolCmd": spool, "PumpDispCmd": np.full_like(t, 100.0),
-            "EngineSpeed": np.full_like(t, 2200.0), "OilTemp": np.full_like(t, 50.0)}  # fmt: skip
+    cols = {
+        "SpoolCmd": spool,
+        "PumpDispCmd": np.full_like(t, 100.0),
+        "EngineSpeed": np.full_like(t, 2200.0),
+        "OilTemp": np.full_like(t, 50.0),
+    }
     return Recording(t, cols, source="hand-built commands")
 
 
@@ -125,8 +129,13 @@ def test_unjudged_samples_pause_the_window(model: MonitorModel) -> None:
 
 
 def _run(ratio: float, detected: bool) -> dict:
-    return {"fault": "spool_stroke", "severity": 0.3, "onset": "abrupt", "detected": detected,
-            "fault_j_ratio": ratio}  # fmt: skip
+    return {
+        "fault": "spool_stroke",
+        "severity": 0.3,
+        "onset": "abrupt",
+        "detected": detected,
+        "fault_j_ratio": ratio,
+    }
 
 
 def test_exercised_counts_on_hand_made_runs() -> None:
@@ -149,8 +158,10 @@ def test_exercised_counts_on_hand_made_runs() -> None:
 
 
 def test_passed_columns_when_the_residual_view_is_there() -> None:
-    runs = [{**_run(0.5, True), "fault_residual_level_ratio": 1.5},
-            {**_run(0.5, False), "fault_residual_level_ratio": 0.5}]  # fmt: skip
+    runs = [
+        {**_run(0.5, True), "fault_residual_level_ratio": 1.5},
+        {**_run(0.5, False), "fault_residual_level_ratio": 0.5},
+    ]
     c = exercised_cell(runs)
     assert c["exercised"] == 0 and c["passed"] == 1 and c["detected_passed"] == 1
     row = {"fault": "piston_wear", "severity": 0.1, "all": {"runs": 2, "detected": 1, **c}}
@@ -165,8 +176,21 @@ def test_no_twins_no_counts() -> None:
 
 
 def test_cli_twins_and_no_twins(tmp_path: Path) -> None:
-    common = ["eval-sim", "--model", "shipped", "--faults", "spool_stroke", "--severities",
-              "1.0", "--runs", "1", "--onsets", "abrupt", "--normal-hours", "0"]  # fmt: skip
+    common = [
+        "eval-sim",
+        "--model",
+        "shipped",
+        "--faults",
+        "spool_stroke",
+        "--severities",
+        "1.0",
+        "--runs",
+        "1",
+        "--onsets",
+        "abrupt",
+        "--normal-hours",
+        "0",
+    ]
     on, off, md = tmp_path / "on.json", tmp_path / "off.json", tmp_path / "on.md"
     assert main([*common, "--json", str(on), "--markdown", str(md)]) == 0
     assert main([*common, "--no-twins", "--json", str(off)]) == 0
@@ -183,6 +207,13 @@ def test_cli_twins_and_no_twins(tmp_path: Path) -> None:
 
 
 def test_cli_twin_residuals_need_the_twins(tmp_path: Path) -> None:
-    argv = ["eval-sim", "--model", "shipped", "--no-twins", "--twin-residuals",
-            "--json", str(tmp_path / "x.json")]  # fmt: skip
+    argv = [
+        "eval-sim",
+        "--model",
+        "shipped",
+        "--no-twins",
+        "--twin-residuals",
+        "--json",
+        str(tmp_path / "x.json"),
+    ]
     assert main(argv) == 2

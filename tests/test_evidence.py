@@ -99,8 +99,11 @@ def forged(tmp: Path, at_s: float, message: str, values: dict[str, float]) -> Pa
     frame_id = f"{codec.message(message).frame_id:08X}"
     lines = LOG.read_text().splitlines()
     t0 = float(lines[0].split(")")[0][1:])
-    k = next(i for i, x in enumerate(lines)
-             if f" {frame_id}#" in x and float(x.split(")")[0][1:]) - t0 >= at_s)  # fmt: skip
+    k = next(
+        i
+        for i, x in enumerate(lines)
+        if f" {frame_id}#" in x and float(x.split(")")[0][1:]) - t0 >= at_s
+    )
     stamp, _, data = lines[k].partition(" can0 ")
     counter = int(data.split("#")[1][12:14], 16) & 0x0F  # byte 6, low nibble
     fake = codec.encode(message, values, counter=counter + 1)
@@ -131,8 +134,9 @@ def strip(events):
     ],
     ids=["OilTemp-0degC", "EngineSpeed-0rpm"],
 )
-def test_a_forged_frame_does_not_drop_a_raised_fault(tmp_path, model, genuine, message,
-                                                     values) -> None:  # fmt: skip
+def test_a_forged_frame_does_not_drop_a_raised_fault(
+    tmp_path, model, genuine, message, values
+) -> None:
     det0, t_fault = genuine
     log = forged(tmp_path, t_fault + 5.0, message, values)
     rec = recording_from_candump(log)

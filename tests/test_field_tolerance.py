@@ -89,8 +89,9 @@ def pp_pinned(src: Path, out: Path) -> Recording:
     return shifted(src, out, PP=lambda v, t: np.where(t >= REST_S + 10.0, 400.0, v))
 
 
-def test_healthy_transducer_offsets_are_no_sensor_fault_offline(simulated_csv, tmp_path, model,
-                                                                 capsys) -> None:  # fmt: skip
+def test_healthy_transducer_offsets_are_no_sensor_fault_offline(
+    simulated_csv, tmp_path, model, capsys
+) -> None:
     rec = healthy_offsets(simulated_csv, tmp_path / "offsets.csv")
     at_rest = rec.t < REST_S
     # The recording shows what the field shows: PA and QP below zero at rest.
@@ -100,8 +101,16 @@ def test_healthy_transducer_offsets_are_no_sensor_fault_offline(simulated_csv, t
     assert det.summary["sensor_fault"] is False
     assert det.summary["sensor_checks"] == []
     assert all(e["state"] != "sensor_fault" for e in det.events)
-    code = main(["detect", str(tmp_path / "offsets.csv"), "--j-every", "0",
-                 "--events", str(tmp_path / "events.jsonl")])  # fmt: skip
+    code = main(
+        [
+            "detect",
+            str(tmp_path / "offsets.csv"),
+            "--j-every",
+            "0",
+            "--events",
+            str(tmp_path / "events.jsonl"),
+        ]
+    )
     line = capsys.readouterr().err
     assert "no hydraulic fault (" in line and "signal_range" not in line, line
     assert code == 0
@@ -112,8 +121,9 @@ def test_healthy_transducer_offsets_are_no_sensor_fault_offline(simulated_csv, t
     [(pa_below_zero, "PA", 20.0 + 0.09), (pp_pinned, "PP", REST_S + 10.0 + 0.09)],
     ids=["PA-20bar", "PP-pinned-400"],
 )
-def test_real_range_faults_are_still_named_offline(simulated_csv, tmp_path, model, edit, sensor,
-                                                   first_s) -> None:  # fmt: skip
+def test_real_range_faults_are_still_named_offline(
+    simulated_csv, tmp_path, model, edit, sensor, first_s
+) -> None:
     rec = edit(simulated_csv, tmp_path / "bad.csv")
     det = detect(model, rec, CFG.alarm, CFG.horizon, gating=CFG.gating)
     checks = {(c["sensor"], c["check"]) for c in det.summary["sensor_checks"]}
@@ -155,11 +165,15 @@ def signed_dbc(tmp: Path) -> Path:
     stay the sensors' 0..400 bar and 0..60 L/min."""
     text = resource_path("dbc", "monitor.dbc").read_text()
     for s in ("PP", "PA", "PB"):
-        text, k = re.subn(rf"SG_ {s} : (\d+)\|16@1\+ \(0\.01,0\) \[0\|400\]",
-                          rf"SG_ {s} : \1|16@1- (0.02,0) [-50|400]", text)  # fmt: skip
+        text, k = re.subn(
+            rf"SG_ {s} : (\d+)\|16@1\+ \(0\.01,0\) \[0\|400\]",
+            rf"SG_ {s} : \1|16@1- (0.02,0) [-50|400]",
+            text,
+        )
         assert k == 1
-    text, k = re.subn(r"SG_ QP : 0\|16@1\+ \(0\.01,0\) \[0\|60\]",
-                      "SG_ QP : 0|16@1- (0.01,0) [-10|60]", text)  # fmt: skip
+    text, k = re.subn(
+        r"SG_ QP : 0\|16@1\+ \(0\.01,0\) \[0\|60\]", "SG_ QP : 0|16@1- (0.01,0) [-10|60]", text
+    )
     assert k == 1
     path = tmp / "signed.dbc"
     path.write_text(text)
@@ -174,8 +188,11 @@ def on_the_bus(tmp: Path, rec: Recording) -> tuple[list[dict], list]:
     log = tmp / "run.log"
     write_candump(log, rec, FrameCodec.from_dbc(dbc))
     _, events, frames, _ = run_daemon(cfg, replay_settled(log))
-    groups = [g for g in reassemble([m for m in frames if m.arbitration_id in J1939_IDS])
-              if g["pgn"] == PGN_DM1]  # fmt: skip
+    groups = [
+        g
+        for g in reassemble([m for m in frames if m.arbitration_id in J1939_IDS])
+        if g["pgn"] == PGN_DM1
+    ]
     dtcs = [decode_dm(g["data"])[1] for g in groups]
     return events, dtcs
 
@@ -190,8 +207,9 @@ def test_healthy_transducer_offsets_are_no_sensor_fault_and_no_dm1_on_the_bus(
     assert dtcs and all(d == [(0, 0, 0)] for d in dtcs)  # "no DTC" every second
 
 
-@pytest.mark.parametrize("edit, sensor", [(pa_below_zero, "PA"), (pp_pinned, "PP")],
-                         ids=["PA-20bar", "PP-pinned-400"])  # fmt: skip
+@pytest.mark.parametrize(
+    "edit, sensor", [(pa_below_zero, "PA"), (pp_pinned, "PP")], ids=["PA-20bar", "PP-pinned-400"]
+)
 def test_real_range_faults_raise_a_sensor_fault_and_dm1_on_the_bus(
     simulated_csv, tmp_path, edit, sensor
 ) -> None:

@@ -40,8 +40,12 @@ def run1(fleet, tmp_path_factory):
     (f / "M02" / "logs" / "day03.csv").write_text("t,Swing,Bucket\n0,1,2\n0.01,1,2\n")
     shutil.copytree(fleet / "M03" / "logs", f / "M04" / "logs")
     out = where / "results"
-    proc = subprocess.run(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
-                          capture_output=True, text=True, env=env())  # fmt: skip
+    proc = subprocess.run(
+        fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
+        capture_output=True,
+        text=True,
+        env=env(),
+    )
     assert proc.returncode == 3, proc.stderr  # logs failed: each is a row with its error
     return f, out, proc.stderr
 
@@ -49,8 +53,10 @@ def run1(fleet, tmp_path_factory):
 def test_every_log_is_one_row_and_bad_input_is_a_row_with_its_reason(run1):
     f, out, err = run1
     by_log = {r["log"]: r for r in rows(out)}
-    expected = {p.relative_to(f).as_posix() for p in f.glob("*/logs/*")} | {"M09/logs/",
-                                                                           "M08/logs/"}
+    expected = {p.relative_to(f).as_posix() for p in f.glob("*/logs/*")} | {
+        "M09/logs/",
+        "M08/logs/",
+    }
     assert set(by_log) == expected and len(rows(out)) == len(expected)
     assert "no logs" in by_log["M09/logs/"]["error"]
     assert "no logs" in by_log["M08/logs/"]["error"]
@@ -58,8 +64,9 @@ def test_every_log_is_one_row_and_bad_input_is_a_row_with_its_reason(run1):
         "not_judged"
     )
     assert by_log["M02/logs/day03.csv"]["error"]
-    assert all(r["error"] is None for log, r in by_log.items() if log.endswith(("01.log",
-               "02.log")))  # fmt: skip
+    assert all(
+        r["error"] is None for log, r in by_log.items() if log.endswith(("01.log", "02.log"))
+    )
     assert "Dask dashboard http" in err and "logs," in err and "frames/s" in err
 
 
@@ -71,8 +78,10 @@ def test_the_last_line_counts_judged_not_judged_and_failed_and_names_the_first(r
     not_judged = sum(r["error"] is None and r["verdict"] == "not_judged" for r in got)
     judged = len(got) - len(failed) - not_judged
     last = err.strip().splitlines()[-1]
-    assert last.startswith(f"fleet: {len(got)} logs: {judged} judged, {not_judged} not judged, "
-                           "4 failed (M01/logs/day03.log: ")  # fmt: skip
+    assert last.startswith(
+        f"fleet: {len(got)} logs: {judged} judged, {not_judged} not judged, "
+        "4 failed (M01/logs/day03.log: "
+    )
     assert "; M02/logs/day03.csv: " in last and "; 2 more); " in last
     assert f"{len(got) - 2} new this run, 0 already in results" in last
 
@@ -86,10 +95,23 @@ def test_drift_is_the_logs_median_j_over_the_commissioning_runs(run1, tmp_path):
     model = out / "models" / "M01.model.npz"
     j_median = load_model(model).training["j_median"]
     lines = tmp_path / "e.jsonl"
-    main(["detect", str(f / r["log"]), "--model", str(model), "--j-every", "0.01",
-          "--events", str(lines)])  # fmt: skip
-    js = [e["J"] for e in map(json.loads, lines.read_text().splitlines())
-          if e.get("event") == "j" and e.get("J") is not None]  # fmt: skip
+    main(
+        [
+            "detect",
+            str(f / r["log"]),
+            "--model",
+            str(model),
+            "--j-every",
+            "0.01",
+            "--events",
+            str(lines),
+        ]
+    )
+    js = [
+        e["J"]
+        for e in map(json.loads, lines.read_text().splitlines())
+        if e.get("event") == "j" and e.get("J") is not None
+    ]
     assert len(js) > 1000
     assert r["p50_j_drift"] == pytest.approx(float(np.median(js)) / j_median, rel=1e-6)
 
@@ -128,12 +150,28 @@ def test_each_row_and_its_events_equal_monitor_detect_with_the_machines_model(ru
     for r in judged:
         summary, lines = tmp_path / "s.json", tmp_path / "e.jsonl"
         model = out / "models" / f"{r['machine']}.model.npz"
-        rc = main(["detect", str(f / r["log"]), "--model", str(model), "--j-every", "0",
-                   "--summary", str(summary), "--events", str(lines)])  # fmt: skip
+        rc = main(
+            [
+                "detect",
+                str(f / r["log"]),
+                "--model",
+                str(model),
+                "--j-every",
+                "0",
+                "--summary",
+                str(summary),
+                "--events",
+                str(lines),
+            ]
+        )
         s = json.loads(summary.read_text())
         assert rc == (3 if s["verdict"] == "not_judged" else 0)
         assert (r["verdict"], r["alarm"], r["fault"], r["sensor_fault"]) == (
-            s["verdict"], s["alarm"], s["fault"], s["sensor_fault"])  # fmt: skip
+            s["verdict"],
+            s["alarm"],
+            s["fault"],
+            s["sensor_fault"],
+        )
         assert r["max_j"] == s["max_J"] and r["eps0"] == s["threshold"]
         assert r["max_j_ratio"] == (None if s["max_J"] is None else s["max_J"] / s["threshold"])
         assert r["judged_s"] == s["judged_s"] and r["first_alarm_t"] == s["first_alarm_t"]
@@ -149,8 +187,12 @@ def test_rerun_is_incremental(run1, tmp_path):
     res = tmp_path / "r"
     shutil.copytree(out, res)
     shutil.copy(f / "M01" / "logs" / "day02.log", f / "M01" / "logs" / "day04.log")
-    proc = subprocess.run(fleet_cmd(str(f), "--out", str(res), "--workers", "1"),
-                          capture_output=True, text=True, env=env())  # fmt: skip
+    proc = subprocess.run(
+        fleet_cmd(str(f), "--out", str(res), "--workers", "1"),
+        capture_output=True,
+        text=True,
+        env=env(),
+    )
     (f / "M01" / "logs" / "day04.log").unlink()
     assert proc.returncode == 3, proc.stderr  # run1's failed logs are still there
     assert "1 new this run" in proc.stderr.splitlines()[-1]
@@ -167,17 +209,24 @@ def test_new_commissioning_data_trains_the_machine_again(run1, tmp_path):
     shutil.copytree(out, res)
     old_model = (res / "models" / "M02.model.npz").read_bytes()
     # M02 is commissioned again (another recording) and sends a new log.
-    shutil.copy(g / "M01" / "commissioning" / "normal.log", g / "M02" / "commissioning" /
-                "again.log")  # fmt: skip
+    shutil.copy(
+        g / "M01" / "commissioning" / "normal.log", g / "M02" / "commissioning" / "again.log"
+    )
     shutil.copy(g / "M02" / "logs" / "day02.log", g / "M02" / "logs" / "day04.log")
-    proc = subprocess.run(fleet_cmd(str(g), "--out", str(res), "--workers", "1"),
-                          capture_output=True, text=True, env=env())  # fmt: skip
+    proc = subprocess.run(
+        fleet_cmd(str(g), "--out", str(res), "--workers", "1"),
+        capture_output=True,
+        text=True,
+        env=env(),
+    )
     assert proc.returncode == 3, proc.stderr  # run1's failed logs are still there
     assert "reused" not in proc.stderr
     assert (res / "models" / "M02.model.npz").read_bytes() != old_model
     meta = json.loads((res / "models" / "M02.trained-from.json").read_text())
-    assert sorted(meta["commissioning"]) == ["M02/commissioning/again.log",
-                                             "M02/commissioning/normal.log"]  # fmt: skip
+    assert sorted(meta["commissioning"]) == [
+        "M02/commissioning/again.log",
+        "M02/commissioning/normal.log",
+    ]
 
 
 def test_a_model_trained_with_other_settings_is_commissioned_again(run1, tmp_path):
@@ -192,8 +241,12 @@ def test_a_model_trained_with_other_settings_is_commissioned_again(run1, tmp_pat
     del meta["train"]
     meta_path.write_text(json.dumps(meta))
     shutil.copy(g / "M01" / "logs" / "day02.log", g / "M01" / "logs" / "day04.log")
-    proc = subprocess.run(fleet_cmd(str(g), "--out", str(res), "--workers", "1"),
-                          capture_output=True, text=True, env=env())  # fmt: skip
+    proc = subprocess.run(
+        fleet_cmd(str(g), "--out", str(res), "--workers", "1"),
+        capture_output=True,
+        text=True,
+        env=env(),
+    )
     assert proc.returncode == 3, proc.stderr  # run1's failed logs are still there
     assert "reused" not in proc.stderr
     again = json.loads(meta_path.read_text())
@@ -205,9 +258,13 @@ def _started_with_a_finished_log(fleet, tmp_path) -> tuple[Path, Path, subproces
     """A run on a copy of ``fleet`` in its own process group, once it has a finished log."""
     f = copy_fleet(fleet, tmp_path / "fleet")
     out = tmp_path / "results"
-    proc = subprocess.Popen(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
-                            stderr=subprocess.PIPE, text=True, env=env(),
-                            start_new_session=True)  # fmt: skip
+    proc = subprocess.Popen(
+        fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env(),
+        start_new_session=True,
+    )
     parts = out / "parts"
     wait_for(lambda: parts.is_dir() and any(parts.glob("*.json")), "a first finished log", proc)
     return f, out, proc
@@ -217,8 +274,12 @@ def _rerun_resumes(f: Path, out: Path) -> None:
     """A second run judges only what the first did not finish, and every log has one row."""
     finished = len(list((out / "parts").glob("*.json")))
     total = len(list(f.glob("*/logs/*.log")))
-    again = subprocess.run(fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
-                           capture_output=True, text=True, env=env())  # fmt: skip
+    again = subprocess.run(
+        fleet_cmd(str(f), "--out", str(out), "--workers", "2"),
+        capture_output=True,
+        text=True,
+        env=env(),
+    )
     assert again.returncode == 0, again.stderr
     assert f"{total - finished} new this run, {finished} already in results" in again.stderr
     logs = [r["log"] for r in rows(out)]
@@ -247,9 +308,21 @@ def test_ctrl_c_stops_in_one_line_with_130_leaves_no_table_and_a_rerun_resumes(f
     assert "run again to resume" in lines[-1]
     assert all(ln.startswith("fleet: ") for ln in lines[:-1]), err  # nothing of Dask's
     assert not (out / "logs.parquet").exists() and not (out / "events.parquet").exists()
-    report = subprocess.run([sys.executable, "-m", "monitor", "fleet", "report", str(out),
-                             "--out", str(tmp_path / "page")], capture_output=True, text=True,
-                            env=env())  # fmt: skip
+    report = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "fleet",
+            "report",
+            str(out),
+            "--out",
+            str(tmp_path / "page"),
+        ],
+        capture_output=True,
+        text=True,
+        env=env(),
+    )
     assert report.returncode == 2 and "run `monitor fleet run` first" in report.stderr
     assert len(report.stderr.strip().splitlines()) == 1
     _rerun_resumes(f, out)

@@ -40,8 +40,12 @@ def judged(tmp_path_factory):
     for day, name in ((1, "normal.log"), (2, "piston_wear.log")):
         shutil.copyfile(resource_path("replay", name), fleet / "M04" / "logs" / f"day{day:02d}.log")
     results = where / "results"
-    proc = subprocess.run(fleet_cmd(str(fleet), "--out", str(results), "--workers", "1"),
-                          capture_output=True, text=True, env=env())  # fmt: skip
+    proc = subprocess.run(
+        fleet_cmd(str(fleet), "--out", str(results), "--workers", "1"),
+        capture_output=True,
+        text=True,
+        env=env(),
+    )
     assert proc.returncode == 0, proc.stderr
     return fleet, results
 
@@ -53,10 +57,18 @@ def browser(tmp_path_factory):
     opts = webdriver.ChromeOptions()
     opts.binary_location = str(CHROMIUM)
     profile = tmp_path_factory.mktemp("chromium-profile")
-    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-                 "--no-first-run", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", f"--user-data-dir={profile}",
-                 "--window-size=1400,1100"):  # fmt: skip
+    for flag in (
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={profile}",
+        "--window-size=1400,1100",
+    ):
         opts.add_argument(flag)
     driver = webdriver.Chrome(service=Service(str(DRIVER)), options=opts)
     driver.implicitly_wait(20)  # a generous bound for the page to render, not a timing check
@@ -96,9 +108,23 @@ def _plot_drawn(driver) -> bool:
 def test_the_static_page_opens_from_disk_with_its_plots_and_names(judged, browser, tmp_path):
     fleet, results = judged
     out = tmp_path / "page"
-    proc = subprocess.run([sys.executable, "-m", "monitor", "fleet", "report", str(results),
-                           "--html", str(out), "--fleet", str(fleet)],
-                          capture_output=True, text=True, env=env())  # fmt: skip
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "fleet",
+            "report",
+            str(results),
+            "--html",
+            str(out),
+            "--fleet",
+            str(fleet),
+        ],
+        capture_output=True,
+        text=True,
+        env=env(),
+    )
     assert proc.returncode == 0, proc.stderr
     browser.get((out / "index.html").as_uri())
     assert _plot_drawn(browser)  # plotly.min.js beside the page, no network
@@ -124,12 +150,25 @@ def test_serve_drills_down_and_acknowledges_an_alarm_into_the_file(judged, brows
     results = tmp_path / "results"
     port = free_port()
     log = (tmp_path / "serve.log").open("w")
-    proc = subprocess.Popen([sys.executable, "-m", "monitor", "fleet", "serve", str(results),
-                             "--fleet", str(fleet), "--port", str(port)], stderr=log,
-                            env=env(), start_new_session=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "fleet",
+            "serve",
+            str(results),
+            "--fleet",
+            str(fleet),
+            "--port",
+            str(port),
+        ],
+        stderr=log,
+        env=env(),
+        start_new_session=True,
+    )
     try:
-        wait_for(lambda: "http://" in (tmp_path / "serve.log").read_text(), "the address",
-                 proc)  # fmt: skip
+        wait_for(lambda: "http://" in (tmp_path / "serve.log").read_text(), "the address", proc)
         browser.get(f"http://127.0.0.1:{port}/")
         browser.find_element(By.LINK_TEXT, "M03").click()
         assert "SENSOR FAULT" in _text_after_click(browser, "h1", "M03")
@@ -146,16 +185,17 @@ def test_serve_drills_down_and_acknowledges_an_alarm_into_the_file(judged, brows
         row.find_element(By.NAME, "by").send_keys("Ana Field")
         row.find_element(By.NAME, "note").send_keys("parts ordered")
         row.find_element(By.CSS_SELECTOR, "button[value=acknowledge]").click()
-        status = _text_after_click(browser, f'tr[data-alarm="{alarm}"] td.status',
-                                   "acknowledged")  # fmt: skip
-        assert re.match(r"acknowledged by Ana Field at \d{4}-\d\d-\d\d \d\d:\d\d: parts ordered",
-                        status), status  # fmt: skip
+        status = _text_after_click(browser, f'tr[data-alarm="{alarm}"] td.status', "acknowledged")
+        assert re.match(
+            r"acknowledged by Ana Field at \d{4}-\d\d-\d\d \d\d:\d\d: parts ordered", status
+        ), status
         browser.save_screenshot(str(tmp_path / "alarms.png"))
         # The machine page shows it too (made anew on each request).
         link = browser.find_element(By.CSS_SELECTOR, f'tr[data-alarm="{alarm}"] a')
         browser.get(link.get_attribute("href"))
-        assert "acknowledged by Ana Field" in _text_after_click(browser, "#episodes",
-                                                                 "acknowledged")  # fmt: skip
+        assert "acknowledged by Ana Field" in _text_after_click(
+            browser, "#episodes", "acknowledged"
+        )
     finally:
         kill(proc)
         log.close()

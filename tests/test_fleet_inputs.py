@@ -21,9 +21,24 @@ LINK = "refused: a symbolic link, not followed (only files inside the fleet fold
 
 def _fleet_run(fleet: Path, out: Path, timeout_s: float = 300) -> subprocess.CompletedProcess:
     # A bound, not a timing: before, a FIFO or a /dev/zero link hung the run forever.
-    return subprocess.run([sys.executable, "-m", "monitor", "fleet", "run", str(fleet), "--out",
-                           str(out), "--isolation", "none"], capture_output=True, text=True,
-                          env=env(), timeout=timeout_s)  # fmt: skip
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "fleet",
+            "run",
+            str(fleet),
+            "--out",
+            str(out),
+            "--isolation",
+            "none",
+        ],
+        capture_output=True,
+        text=True,
+        env=env(),
+        timeout=timeout_s,
+    )
 
 
 def _hostile(where: Path) -> Path:
@@ -78,7 +93,8 @@ def test_a_second_run_on_held_results_stops_at_once_in_one_line(tmp_path):
     assert busy.returncode == 2, busy.stderr
     assert busy.stderr.strip().splitlines() == [
         f"monitor fleet: error: {out}: another `monitor fleet run` is writing these results "
-        f"(pid {os.getpid()}, started " + busy.stderr.split(", started ")[1].split(")")[0]
+        f"(pid {os.getpid()}, started "
+        + busy.stderr.split(", started ")[1].split(")")[0]
         + "); wait for it to end, or give another --out"
     ]
     assert not (out / "logs.parquet").exists() and not (out / "parts").exists()
@@ -101,8 +117,11 @@ def test_a_full_disk_under_results_is_one_line_and_exit_3(tmp_path):
     # cluster up.  Before: a traceback.
     disk = tmp_path / "disk"
     disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=512k", "tmpfs", str(disk)],
-                             capture_output=True, text=True)  # fmt: skip
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=512k", "tmpfs", str(disk)],
+        capture_output=True,
+        text=True,
+    )
     if mounted.returncode:
         pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.strip()}")
     try:
@@ -114,7 +133,9 @@ def test_a_full_disk_under_results_is_one_line_and_exit_3(tmp_path):
         subprocess.run(["umount", "-l", str(disk)], check=True)
     assert proc.returncode == 3, proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert lines[-1] == (f"monitor fleet: error: {disk / 'results'}: cannot write the results: "
-                         "No space left on device; finished logs are kept, run again once it "
-                         "can be written")  # fmt: skip
+    assert lines[-1] == (
+        f"monitor fleet: error: {disk / 'results'}: cannot write the results: "
+        "No space left on device; finished logs are kept, run again once it "
+        "can be written"
+    )
     assert all(ln.startswith("fleet: ") for ln in lines[:-1]), proc.stderr

@@ -14,9 +14,17 @@ from monitor.fleet.store import LOG_SCHEMA
 def _row(machine: str, i: int, ratio: float | None, **kw) -> dict:
     r = {name: None for name in LOG_SCHEMA.names}
     p95 = None if ratio is None else ratio * 0.8
-    r |= {"machine": machine, "log": f"{machine}/logs/day{i:02d}.log", "sha256": f"{i}",
-          "verdict": "healthy", "alarm": False, "sensor_fault": False, "max_j_ratio": ratio,
-          "p95_j_ratio": p95, "model": "commissioned"}  # fmt: skip
+    r |= {
+        "machine": machine,
+        "log": f"{machine}/logs/day{i:02d}.log",
+        "sha256": f"{i}",
+        "verdict": "healthy",
+        "alarm": False,
+        "sensor_fault": False,
+        "max_j_ratio": ratio,
+        "p95_j_ratio": p95,
+        "model": "commissioned",
+    }
     return r | kw
 
 

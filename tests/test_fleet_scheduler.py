@@ -10,8 +10,13 @@ from tests.fleet_support import env, fleet_cmd, free_port, kill, make_fleet, row
 
 
 def _start(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", *args], env=env(), start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-m", *args],
+        env=env(),
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
 
 
 def test_external_scheduler_and_a_worker_killed_mid_run(tmp_path):
@@ -20,17 +25,39 @@ def test_external_scheduler_and_a_worker_killed_mid_run(tmp_path):
     fleet = make_fleet(tmp_path)
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    procs = [_start("distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port",
-                    str(port), "--dashboard-address", "127.0.0.1:0")]  # fmt: skip
+    procs = [
+        _start(
+            "distributed.cli.dask_scheduler",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--dashboard-address",
+            "127.0.0.1:0",
+        )
+    ]
     try:
         for _ in range(2):
-            procs.append(_start("distributed.cli.dask_worker", address, "--nthreads", "1",
-                                "--no-dashboard", "--host", "127.0.0.1"))  # fmt: skip
+            procs.append(
+                _start(
+                    "distributed.cli.dask_worker",
+                    address,
+                    "--nthreads",
+                    "1",
+                    "--no-dashboard",
+                    "--host",
+                    "127.0.0.1",
+                )
+            )
         with Client(address, timeout="120s") as c:
             c.wait_for_workers(2, timeout=300)
         out = tmp_path / "results"
-        run = subprocess.Popen(fleet_cmd(str(fleet), "--out", str(out), "--scheduler", address),
-                               stderr=subprocess.PIPE, text=True, env=env())  # fmt: skip
+        run = subprocess.Popen(
+            fleet_cmd(str(fleet), "--out", str(out), "--scheduler", address),
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env(),
+        )
         parts = out / "parts"
         wait_for(lambda: parts.is_dir() and any(parts.glob("*.json")), "a finished log", run)
         kill(procs[1])  # one worker dies mid-run; Dask reruns its tasks on the other

@@ -22,10 +22,17 @@ def _rows(machine: str, levels: list[float], alarm_from: int | None = None) -> l
     for i, level in enumerate(levels):
         alarm = alarm_from is not None and i + 1 >= alarm_from
         r = {name: None for name in LOG_SCHEMA.names}
-        r |= {"machine": machine, "log": f"{machine}/logs/day{i // 4 + 1:02d}-{i % 4 + 1}.log",
-              "sha256": f"{i}", "verdict": "fault" if alarm else "healthy", "alarm": alarm,
-              "sensor_fault": False, "max_j_ratio": level, "p50_j_ratio": level / 2,
-              "model": "commissioned"}  # fmt: skip
+        r |= {
+            "machine": machine,
+            "log": f"{machine}/logs/day{i // 4 + 1:02d}-{i % 4 + 1}.log",
+            "sha256": f"{i}",
+            "verdict": "fault" if alarm else "healthy",
+            "alarm": alarm,
+            "sensor_fault": False,
+            "max_j_ratio": level,
+            "p50_j_ratio": level / 2,
+            "model": "commissioned",
+        }
         out.append(r)
     return out
 
@@ -51,8 +58,10 @@ def test_a_straight_rise_warns_at_the_fourth_log_and_forecasts_the_alarm_log():
     assert w.forecast.logs_to_alarm == pytest.approx(12.0)
     assert w.forecast.logs_to_alarm_range == pytest.approx((12.0, 12.0))
     assert (w.alarm_log, w.alarm_name, w.lead_logs, w.lead_days) == (16, "day04-4", 12, 3)
-    assert w.text == ("log 4 (day01-4): crossing in 12.0 logs (12..12); alarm at log 16 "
-                      "(day04-4), 12 logs, 3 d later")  # fmt: skip
+    assert w.text == (
+        "log 4 (day01-4): crossing in 12.0 logs (12..12); alarm at log 16 "
+        "(day04-4), 12 logs, 3 d later"
+    )
 
 
 def test_a_dip_before_the_rise_warns_once_the_forecast_is_bounded():
@@ -111,9 +120,14 @@ def test_logs_are_counted_as_the_page_counts_them_unjudged_ones_included_and_day
     # An unreadable log between logs 2 and 3 of the straight rise: the fit skips it, so the
     # fourth *judged* log (now the fifth log) warns; the page's log numbers count every row.
     rows = _rows("A", RISE[:6])
-    bad = rows[0] | {"log": "A/logs/x.log", "sha256": "bad", "max_j_ratio": None,
-                     "p50_j_ratio": None, "verdict": "not_judged",
-                     "error": "unreadable"}  # fmt: skip
+    bad = rows[0] | {
+        "log": "A/logs/x.log",
+        "sha256": "bad",
+        "max_j_ratio": None,
+        "p50_j_ratio": None,
+        "verdict": "not_judged",
+        "error": "unreadable",
+    }
     rows = [*rows[:2], bad, *rows[2:]]
     for r in rows:  # names without a day: no lead in days
         r["log"] = r["log"].replace("/day", "/run")
@@ -132,8 +146,10 @@ def test_the_page_has_the_first_warning_column(tmp_path):
     assert main(["fleet", "report", str(tmp_path), "--out", str(out)]) == 0
     page = (out / "fleet.md").read_text()
     assert "| predicted crossing of 1.0 | first warning | alarms |" in page
-    assert ("| at or above 1.0 | log 4 (day01-4): crossing in 12.0 logs (12..12); alarm at "
-            "log 16 (day04-4), 12 logs, 3 d later | 5 |") in page  # fmt: skip
+    assert (
+        "| at or above 1.0 | log 4 (day01-4): crossing in 12.0 logs (12..12); alarm at "
+        "log 16 (day04-4), 12 logs, 3 d later | 5 |"
+    ) in page
     assert "| no upward trend | - | 0 |" in page
     assert "| no warning before the alarm at log 1 (day01-1) | 8 |" in page
     assert (out / "health.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -22,9 +22,13 @@ from monitor.fleet.actions import FAULT_ACTIONS, SENSOR_ACTIONS, markdown_table
 from monitor.fleet.episodes import log_episodes, machine_fault
 from monitor.fleet.store import LOG_SCHEMA
 
-J1939 = SimpleNamespace(fault_spn=dtc.DEFAULT_FAULT_SPN, fault_fmi=dtc.DEFAULT_FAULT_FMI,
-                        sensor_spn=dtc.DEFAULT_SENSOR_SPN, sensor_fmi=dtc.DEFAULT_SENSOR_FMI,
-                        check_fmi=dtc.DEFAULT_CHECK_FMI)  # fmt: skip
+J1939 = SimpleNamespace(
+    fault_spn=dtc.DEFAULT_FAULT_SPN,
+    fault_fmi=dtc.DEFAULT_FAULT_FMI,
+    sensor_spn=dtc.DEFAULT_SENSOR_SPN,
+    sensor_fmi=dtc.DEFAULT_SENSOR_FMI,
+    check_fmi=dtc.DEFAULT_CHECK_FMI,
+)
 # By hand from J1939-71's proprietary range (first SPN 520192) and our numbering:
 PISTON = (520192, 7)  # piston_wear: the first fault SPN, FMI 7 (mechanical, out of adjustment)
 SPOOL = (520194, 7)  # spool_wear: the third
@@ -32,18 +36,35 @@ QP_FROZEN = (520192 + 16 + 7, 10)  # QP: the 8th sensor SPN from 520208; frozen:
 
 
 def _ep(kind, start, end, name, votes=None, check=None, spn_fmi=PISTON):
-    return {"kind": kind, "start_t": start, "end_t": end, "duration_s": end - start,
-            "open": False, "name": name, "check": check, "votes": votes or {},
-            "spn": spn_fmi[0], "fmi": spn_fmi[1]}  # fmt: skip
+    return {
+        "kind": kind,
+        "start_t": start,
+        "end_t": end,
+        "duration_s": end - start,
+        "open": False,
+        "name": name,
+        "check": check,
+        "votes": votes or {},
+        "spn": spn_fmi[0],
+        "fmi": spn_fmi[1],
+    }
 
 
 def _row(machine, day, verdict="healthy", level=0.3, episodes=(), **kw):
     r = {name: None for name in LOG_SCHEMA.names}
-    r |= {"machine": machine, "log": f"{machine}/logs/day{day:02d}.log", "sha256": f"{day}",
-          "verdict": verdict, "alarm": verdict == "fault",
-          "sensor_fault": verdict == "sensor_fault", "max_j_ratio": level,
-          "p50_j_ratio": level / 3, "model": "commissioned", "judged_s": 60.0,
-          "episodes": json.dumps(list(episodes))}  # fmt: skip
+    r |= {
+        "machine": machine,
+        "log": f"{machine}/logs/day{day:02d}.log",
+        "sha256": f"{day}",
+        "verdict": verdict,
+        "alarm": verdict == "fault",
+        "sensor_fault": verdict == "sensor_fault",
+        "max_j_ratio": level,
+        "p50_j_ratio": level / 3,
+        "model": "commissioned",
+        "judged_s": 60.0,
+        "episodes": json.dumps(list(episodes)),
+    }
     return r | kw
 
 
@@ -51,30 +72,74 @@ def _results(tmp_path):
     """M01: piston seal from day 3, its episodes named differently one by one; M02 healthy;
     M03: QP frozen from day 2."""
     rows = [_row("M01", 1), _row("M01", 2)]
-    rows.append(_row("M01", 3, "fault", 2.5, [
-        _ep("fault", 10.0, 20.0, "spool_wear", {"spool_wear": 30, "piston_wear": 10},
-            spn_fmi=SPOOL)]))
-    rows.append(_row("M01", 4, "fault", 3.1, [
-        _ep("fault", 5.0, 40.0, "piston_wear", {"piston_wear": 50, "unknown": 9}),
-        _ep("fault", 50.0, 55.0, "spool_wear", {"spool_wear": 5, "piston_wear": 3},
-            spn_fmi=SPOOL)]))
+    rows.append(
+        _row(
+            "M01",
+            3,
+            "fault",
+            2.5,
+            [
+                _ep(
+                    "fault",
+                    10.0,
+                    20.0,
+                    "spool_wear",
+                    {"spool_wear": 30, "piston_wear": 10},
+                    spn_fmi=SPOOL,
+                )
+            ],
+        )
+    )
+    rows.append(
+        _row(
+            "M01",
+            4,
+            "fault",
+            3.1,
+            [
+                _ep("fault", 5.0, 40.0, "piston_wear", {"piston_wear": 50, "unknown": 9}),
+                _ep(
+                    "fault",
+                    50.0,
+                    55.0,
+                    "spool_wear",
+                    {"spool_wear": 5, "piston_wear": 3},
+                    spn_fmi=SPOOL,
+                ),
+            ],
+        )
+    )
     rows += [_row("M02", d) for d in (1, 2, 3, 4)]
     rows += [_row("M03", 1)] + [
-        _row("M03", d, "sensor_fault", 0.2,
-             [_ep("sensor_fault", 31.0, 60.0, "QP", check="frozen", spn_fmi=QP_FROZEN)])
-        for d in (2, 3, 4)]  # fmt: skip
+        _row(
+            "M03",
+            d,
+            "sensor_fault",
+            0.2,
+            [_ep("sensor_fault", 31.0, 60.0, "QP", check="frozen", spn_fmi=QP_FROZEN)],
+        )
+        for d in (2, 3, 4)
+    ]
     pq.write_table(pa.Table.from_pylist(rows, LOG_SCHEMA), tmp_path / "logs.parquet")
     return tmp_path
 
 
 def test_a_log_episode_carries_the_dm1_code_the_daemon_sends():
-    named = [{"start_t": 3.0, "end_t": None, "votes": {"unknown": 4, "piston_wear": 2},
-              "fault": "piston_wear"}]  # fmt: skip
-    events = [{"t": 0.0, "state": "normal"},
-              {"t": 1.0, "state": "sensor_fault", "sensor": None, "sensor_check": None},
-              {"t": 1.5, "state": "sensor_fault", "sensor": "QP", "sensor_check": "frozen"},
-              {"t": 2.0, "state": "normal"},
-              {"t": 3.0, "state": "fault"}]  # fmt: skip
+    named = [
+        {
+            "start_t": 3.0,
+            "end_t": None,
+            "votes": {"unknown": 4, "piston_wear": 2},
+            "fault": "piston_wear",
+        }
+    ]
+    events = [
+        {"t": 0.0, "state": "normal"},
+        {"t": 1.0, "state": "sensor_fault", "sensor": None, "sensor_check": None},
+        {"t": 1.5, "state": "sensor_fault", "sensor": "QP", "sensor_check": "frozen"},
+        {"t": 2.0, "state": "normal"},
+        {"t": 3.0, "state": "fault"},
+    ]
     eps = json.loads(log_episodes(named, events, 9.0, J1939))
     sensor, fault = eps
     assert (sensor["kind"], sensor["name"], sensor["check"]) == ("sensor_fault", "QP", "frozen")
@@ -85,8 +150,11 @@ def test_a_log_episode_carries_the_dm1_code_the_daemon_sends():
 
 
 def test_a_stale_signal_keeps_its_spn_with_the_stale_fmi_and_an_unnamed_one_is_unknown():
-    events = [{"t": 1.0, "state": "sensor_fault", "sensor": "PA", "sensor_check": "stale"},
-              {"t": 4.0, "state": "normal"}, {"t": 5.0, "state": "sensor_fault"}]  # fmt: skip
+    events = [
+        {"t": 1.0, "state": "sensor_fault", "sensor": "PA", "sensor_check": "stale"},
+        {"t": 4.0, "state": "normal"},
+        {"t": 5.0, "state": "sensor_fault"},
+    ]
     pa_, unknown = json.loads(log_episodes([], events, 6.0, J1939))
     assert (pa_["spn"], pa_["fmi"]) == (520192 + 16 + 5, 9)  # PA: 6th sensor; FMI 9 rate
     assert (unknown["name"], unknown["spn"], unknown["fmi"]) == ("unknown", 520192 + 31, 9)
@@ -98,8 +166,11 @@ def test_the_machine_is_named_from_every_episodes_votes_not_from_the_last_episod
     # spool_wear on their own evidence; the machine is piston_wear, 63 / 107 = 59 %.
     per = _rows_by_machine(_results_rows())
     f = machine_fault(per["M01"])
-    assert f.name == "piston_wear" and f.votes == {"spool_wear": 35, "piston_wear": 63,
-                                                   "unknown": 9}  # fmt: skip
+    assert f.name == "piston_wear" and f.votes == {
+        "spool_wear": 35,
+        "piston_wear": 63,
+        "unknown": 9,
+    }
     assert (f.episodes, f.renamed) == (3, 2)
     assert f.evidence == "isolation 59 % of 107 fault samples over 3 episodes, 2 named otherwise"
 
@@ -142,10 +213,13 @@ def test_the_html_page_names_state_fault_since_and_action_and_loads_nothing_remo
     # Episodes per code and day (days 02, 03, 04): each episode under the code of its own
     # name, as DM1 sent it: piston_wear once on day 4, spool_wear on days 3 and 4, QP every
     # day from day 2.
-    codes = index[index.index('id="codes"'):]
-    for (spn, _fmi), want in ((PISTON, ["", "", "1"]), (SPOOL, ["", "1", "1"]),
-                              (QP_FROZEN, ["1", "1", "1"])):
-        line = codes[codes.index(f'<td class="num">{spn}</td>'):].split("</tr>")[0]
+    codes = index[index.index('id="codes"') :]
+    for (spn, _fmi), want in (
+        (PISTON, ["", "", "1"]),
+        (SPOOL, ["", "1", "1"]),
+        (QP_FROZEN, ["1", "1", "1"]),
+    ):
+        line = codes[codes.index(f'<td class="num">{spn}</td>') :].split("</tr>")[0]
         assert re.findall(r'<td class="num">(\d*)</td>', line)[2:] == want
     # Offline: every script is a file beside the page, none from a network.
     for page in out.glob("*.html"):
@@ -156,7 +230,7 @@ def test_the_html_page_names_state_fault_since_and_action_and_loads_nothing_remo
     assert "--fleet FLEET" in machine  # no fleet folder given: says how to get the signals
     # An episode named otherwise says so, and what to do follows the machine's name.
     alarms = (out / "alarms.html").read_text()
-    odd = alarms[alarms.index('data-alarm="M01/logs/day04.log#fault@50.00"'):].split("</tr>")[0]
+    odd = alarms[alarms.index('data-alarm="M01/logs/day04.log#fault@50.00"') :].split("</tr>")[0]
     assert "worn valve spool suspected (this episode); the machine: piston seal suspected" in odd
     assert "inspect the boom cylinder" in odd
     assert "monitor fleet serve RESULTS" in (out / "alarms.html").read_text()
@@ -164,13 +238,25 @@ def test_the_html_page_names_state_fault_since_and_action_and_loads_nothing_remo
 
 def _table_row(html: str, machine: str) -> str:
     start = html.index(f'<tr id="row-{machine}">')
-    return html[start: html.index("</tr>", start)]
+    return html[start : html.index("</tr>", start)]
 
 
 def test_the_markdown_report_still_works_beside_the_html_one(tmp_path):
     res = _results(tmp_path)
-    assert main(["fleet", "report", str(res), "--out", str(tmp_path / "md"), "--html",
-                 str(tmp_path / "html")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "fleet",
+                "report",
+                str(res),
+                "--out",
+                str(tmp_path / "md"),
+                "--html",
+                str(tmp_path / "html"),
+            ]
+        )
+        == 0
+    )
     assert "| M01 | 4 | fault |" in (tmp_path / "md" / "fleet.md").read_text()
     assert (tmp_path / "html" / "index.html").is_file()
 
@@ -186,8 +272,15 @@ def test_acknowledgements_append_and_the_newest_line_is_the_status(tmp_path):
 
     t0 = dt.datetime(2026, 1, 5, 8, 0, tzinfo=dt.timezone.utc)
     record(tmp_path, "M01/logs/day03.log#fault@10.00", "acknowledge", "Ana", now=t0)
-    record(tmp_path, "M01/logs/day03.log#fault@10.00", "shelve", "Ben", "parts ordered",
-           shelve_days=2, now=t0 + dt.timedelta(hours=1))  # fmt: skip
+    record(
+        tmp_path,
+        "M01/logs/day03.log#fault@10.00",
+        "shelve",
+        "Ben",
+        "parts ordered",
+        shelve_days=2,
+        now=t0 + dt.timedelta(hours=1),
+    )
     lines = (tmp_path / "alarm-acks.jsonl").read_text().splitlines()
     assert len(lines) == 2  # appended, never rewritten
     s = read_acks(tmp_path)["M01/logs/day03.log#fault@10.00"]
@@ -209,18 +302,20 @@ def test_serve_acknowledges_through_the_form_and_keeps_it_beside_the_results(tmp
     before = (res / "logs.parquet").read_bytes()
     site = Site(res, load_rows(res))
     site.write(tmp_path / "pages")
-    server = ThreadingHTTPServer(("127.0.0.1", 0), _handler(site, tmp_path / "pages",
-                                                             threading.Lock()))  # fmt: skip
+    server = ThreadingHTTPServer(
+        ("127.0.0.1", 0), _handler(site, tmp_path / "pages", threading.Lock())
+    )
     threading.Thread(target=server.serve_forever, daemon=True).start()
     base = f"http://127.0.0.1:{server.server_address[1]}"
     try:
         page = urllib.request.urlopen(f"{base}/alarms.html").read().decode()
         alarm = re.findall(r'data-alarm="([^"]+)"', page)[0]
         assert 'name="by"' in page  # live: the form is there
-        form = urllib.parse.urlencode({"alarm": alarm, "action": "acknowledge", "by": "Ana",
-                                       "note": "seal kit ordered"}).encode()  # fmt: skip
+        form = urllib.parse.urlencode(
+            {"alarm": alarm, "action": "acknowledge", "by": "Ana", "note": "seal kit ordered"}
+        ).encode()
         after = urllib.request.urlopen(f"{base}/ack", data=form).read().decode()  # 303 followed
-        row = after[after.index(f'data-alarm="{alarm}"'):].split("</tr>")[0]
+        row = after[after.index(f'data-alarm="{alarm}"') :].split("</tr>")[0]
         assert "acknowledged by Ana at" in row and "seal kit ordered" in row
         bad = urllib.parse.urlencode({"alarm": alarm, "action": "acknowledge"}).encode()
         with pytest.raises(urllib.error.HTTPError) as e:
@@ -235,16 +330,32 @@ def test_serve_acknowledges_through_the_form_and_keeps_it_beside_the_results(tmp
 
 def test_query_answers_which_machines_had_qp_faults(tmp_path, capsys):
     res = _results(tmp_path)
-    sql = ("SELECT machine, count(*) AS episodes, min(log) AS first FROM episodes "
-           "WHERE name = 'QP' GROUP BY machine")  # fmt: skip
+    sql = (
+        "SELECT machine, count(*) AS episodes, min(log) AS first FROM episodes "
+        "WHERE name = 'QP' GROUP BY machine"
+    )
     assert main(["fleet", "query", str(res), sql]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].split() == ["machine", "episodes", "first"]
     assert out[2].split() == ["M03", "3", "M03/logs/day02.log"] and out[-1] == "(1 row)"
-    assert main(["fleet", "query", str(res), "SELECT verdict, count(*) n FROM logs GROUP BY "
-                 "verdict ORDER BY verdict", "--csv"]) == 0  # fmt: skip
-    assert capsys.readouterr().out.splitlines() == ["verdict,n", "fault,2", "healthy,7",
-                                                    "sensor_fault,3"]  # fmt: skip
+    assert (
+        main(
+            [
+                "fleet",
+                "query",
+                str(res),
+                "SELECT verdict, count(*) n FROM logs GROUP BY verdict ORDER BY verdict",
+                "--csv",
+            ]
+        )
+        == 0
+    )
+    assert capsys.readouterr().out.splitlines() == [
+        "verdict,n",
+        "fault,2",
+        "healthy,7",
+        "sensor_fault,3",
+    ]
 
 
 def test_a_bad_query_is_one_line_and_a_non_zero_exit(tmp_path, capsys):
@@ -267,8 +378,10 @@ def test_a_judged_log_names_its_episode_from_every_fault_sample_of_it():
     from monitor.model.modelfile import load_model
     from monitor.resources import resource_path
 
-    model_path, log = resource_path("config", "boom_default.model.npz"), resource_path(
-        "replay", "piston_wear.log")  # fmt: skip
+    model_path, log = (
+        resource_path("config", "boom_default.model.npz"),
+        resource_path("replay", "piston_wear.log"),
+    )
     judged = judge_log(model_path.read_bytes(), str(log))
     (ep,) = json.loads(judged.row["episodes"])
     raised = [e for e in judged.events if e["state"] == "fault"]
@@ -317,12 +430,32 @@ def test_a_sensor_finding_reads_as_signal_and_what_is_wrong():
 def test_a_machine_in_fault_is_named_by_its_fault_though_a_sensor_episode_came_later():
     from monitor.fleet.fleetview import machine_view
 
-    rows = [_row("M05", 1, "fault", 2.0, [
-        _ep("fault", 5.0, 30.0, "piston_wear", {"piston_wear": 40}),
-        _ep("sensor_fault", 40.0, 50.0, "QP", check="frozen", spn_fmi=QP_FROZEN)])]
+    rows = [
+        _row(
+            "M05",
+            1,
+            "fault",
+            2.0,
+            [
+                _ep("fault", 5.0, 30.0, "piston_wear", {"piston_wear": 40}),
+                _ep("sensor_fault", 40.0, 50.0, "QP", check="frozen", spn_fmi=QP_FROZEN),
+            ],
+        )
+    ]
     v = machine_view("M05", rows)
     assert (v.state, v.finding) == ("fault", "piston_wear: piston seal suspected")
     assert v.what_to_do.startswith("inspect the boom cylinder")
-    v = machine_view("M05", [*rows, _row("M05", 2, "sensor_fault", 0.3, [
-        _ep("sensor_fault", 1.0, 9.0, "QP", check="frozen", spn_fmi=QP_FROZEN)])])
+    v = machine_view(
+        "M05",
+        [
+            *rows,
+            _row(
+                "M05",
+                2,
+                "sensor_fault",
+                0.3,
+                [_ep("sensor_fault", 1.0, 9.0, "QP", check="frozen", spn_fmi=QP_FROZEN)],
+            ),
+        ],
+    )
     assert (v.state, v.finding, v.since) == ("sensor_fault", "QP frozen", "day01")

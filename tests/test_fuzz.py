@@ -104,8 +104,9 @@ def near_valid_logs(draw) -> bytes:
     ends = ["\n"] * n
     for _ in range(draw(st.integers(0, 4))):
         i = draw(st.integers(0, n - 1))
-        edit = draw(st.sampled_from(["jump", "jump", "jump", "swap", "drop", "stamp", "line",
-                                     "end"]))  # fmt: skip
+        edit = draw(
+            st.sampled_from(["jump", "jump", "jump", "swap", "drop", "stamp", "line", "end"])
+        )
         if edit == "jump":  # the clock of every later frame moves
             dt = draw(st.sampled_from([0.005, -0.005, -3.0, -3600.0, 59.9, 61.0, 3600.0, 1e6]))
             times[i:] = [t + dt for t in times[i:]]
@@ -123,8 +124,13 @@ def near_valid_logs(draw) -> bytes:
     for t, s, rest, end in zip(times, stamps, rests, ends, strict=True):
         if not rest:
             continue
-        line = rest[1:] if rest.startswith("\0") else f"({t:.6f}){rest}" if s is None \
-            else f"({s}){rest}"  # fmt: skip
+        line = (
+            rest[1:]
+            if rest.startswith("\0")
+            else f"({t:.6f}){rest}"
+            if s is None
+            else f"({s}){rest}"
+        )
         out.append(line + end)
     data = "".join(out).encode("utf-8", "surrogatepass")
     if draw(st.integers(0, 5)) == 0:  # stray bytes somewhere
@@ -164,16 +170,20 @@ def test_candump_readers_on_near_valid_logs(work, data: bytes) -> None:
     """Also: the bulk path and the daemon's frame-by-frame path agree (same frames, same
     rows, or the same error)."""
     path = _write(work / "near.log", data)
-    got = {name: outcome(f"{name}, near-valid logs", lambda r=read: r(path), path)
-           for name, read in CANDUMP_READERS.items()}  # fmt: skip
+    got = {
+        name: outcome(f"{name}, near-valid logs", lambda r=read: r(path), path)
+        for name, read in CANDUMP_READERS.items()
+    }
     (k1, frames), (k2, msgs) = got["candump bulk frames"], got["candump python-can"]
     assert k1 == k2
     if k1 == "ok":
         assert frames.timestamp.tolist() == [m.timestamp for m in msgs]
     elif not _READ_TIME_REFUSAL.search(frames):
         assert frames == msgs
-    (k1, bulk), (k2, slow) = got["candump recording (bulk)"], \
-        got["candump recording (frame by frame)"]  # fmt: skip
+    (k1, bulk), (k2, slow) = (
+        got["candump recording (bulk)"],
+        got["candump recording (frame by frame)"],
+    )
     assert k1 == k2
     if k1 == "ok":
         assert np.array_equal(bulk.t, slow.t)
@@ -246,8 +256,9 @@ json_scalar = st.one_of(
 )
 json_value = st.recursive(
     json_scalar,
-    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner,
-                                                                max_size=4),  # fmt: skip
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4)
+    ),
     max_leaves=12,
 )
 
@@ -290,8 +301,10 @@ def _config_with_paths(doc: Any) -> Any:
     # The shipped config's dbc and model are relative to config/; the fuzzed copy lives
     # elsewhere, so point them at the shipped files unless the fuzzer changed them.
     if isinstance(doc, dict):
-        for key, name in (("dbc", ("dbc", "monitor.dbc")),
-                          ("model", ("config", "boom_default.model.npz"))):  # fmt: skip
+        for key, name in (
+            ("dbc", ("dbc", "monitor.dbc")),
+            ("model", ("config", "boom_default.model.npz")),
+        ):
             if doc.get(key) == _CONFIG.get(key):
                 doc[key] = str(resource_path(*name))
     return doc
@@ -311,13 +324,31 @@ def test_config_loader_on_mutated_configs(work, doc: Any) -> None:
 yaml_text = st.one_of(
     st.text(max_size=300),
     st.lists(
-        st.sampled_from(["bus:", "  channel: can0", "alarm: {raise_samples: 1e400}", "- x",
-                         "&a [*a]", "? x", "!!python/object:os.system x", "loops:", "  - {",
-                         "event_log: {path: ''}", "dbc: .", "\t", "'", "%YAML 1.1", "---",
-                         "detector: {horizon: .nan}", "storage: {quota_mb: -1}", "[[[[[["]),
+        st.sampled_from(
+            [
+                "bus:",
+                "  channel: can0",
+                "alarm: {raise_samples: 1e400}",
+                "- x",
+                "&a [*a]",
+                "? x",
+                "!!python/object:os.system x",
+                "loops:",
+                "  - {",
+                "event_log: {path: ''}",
+                "dbc: .",
+                "\t",
+                "'",
+                "%YAML 1.1",
+                "---",
+                "detector: {horizon: .nan}",
+                "storage: {quota_mb: -1}",
+                "[[[[[[",
+            ]
+        ),
         max_size=12,
     ).map("\n".join),
-)  # fmt: skip
+)
 
 
 @fuzz(200)
@@ -369,9 +400,15 @@ def test_model_loader_on_corrupted_files(work, data) -> None:
 @given(header=mutated(_HEADER))
 # found: a bad spec quoted whole; a bad name without a stored envelope (ValueError)
 @example(header={**_HEADER, "spec": {**_HEADER["spec"], "outputs": None}})
-@example(header={**{k: v for k, v in _HEADER.items() if k != "validity"},
-                 "normalizer": {**_HEADER["normalizer"],
-                                "names": [None, *_HEADER["normalizer"]["names"][1:]]}})
+@example(
+    header={
+        **{k: v for k, v in _HEADER.items() if k != "validity"},
+        "normalizer": {
+            **_HEADER["normalizer"],
+            "names": [None, *_HEADER["normalizer"]["names"][1:]],
+        },
+    }
+)
 def test_model_loader_on_mutated_headers(work, header: Any) -> None:
     path = _save(work / "header.model.npz", _MODEL, header)
     outcome("model, mutated header (valid checksum)", lambda: load_model(path), path)
@@ -381,8 +418,11 @@ array_change = st.sampled_from(["nan", "inf", "shape", "dtype", "empty", "drop",
 
 
 @fuzz(150)
-@given(name=st.sampled_from(sorted(k for k in _MODEL if k not in ("header", "checksum"))),
-       change=array_change, seed=st.integers(0, 2**32 - 1))  # fmt: skip
+@given(
+    name=st.sampled_from(sorted(k for k in _MODEL if k not in ("header", "checksum"))),
+    change=array_change,
+    seed=st.integers(0, 2**32 - 1),
+)
 def test_model_loader_on_mutated_arrays(work, name: str, change: str, seed: int) -> None:
     rng = np.random.default_rng(seed)
     arrays = {k: v for k, v in _MODEL.items() if k not in ("header", "checksum")}

@@ -1,4 +1,5 @@
 """The blind benchmark plant against hand physics, and its CSVs against the public CLI."""
+
 from __future__ import annotations
 
 import subprocess
@@ -17,8 +18,15 @@ AR = AC - np.pi / 4 * 0.036**2
 
 def run(p, spool, n=400, disp=100.0, temp=40.0):
     p[P["duration_s"]] = n / 100
-    return simulate(p, np.asarray(spool, float), np.full(n, disp), np.full(n, 2200.0),
-                    np.full(n, temp), 1e-4, 100)
+    return simulate(
+        p,
+        np.asarray(spool, float),
+        np.full(n, disp),
+        np.full(n, 2200.0),
+        np.full(n, temp),
+        1e-4,
+        100,
+    )
 
 
 def test_held_load_balances_gravity():
@@ -49,8 +57,9 @@ def test_walther_matches_vg46_points():
     assert F.walther_nu_cst(70) < 20
 
 
-@pytest.mark.parametrize("effect", [e for e in F.EFFECTS if e not in ("sensor_lag",
-                                                                      "sensor_calibration")])
+@pytest.mark.parametrize(
+    "effect", [e for e in F.EFFECTS if e not in ("sensor_lag", "sensor_calibration")]
+)
 def test_each_formulation_changes_the_plant(effect):
     n = 400
     u = np.zeros(n)
@@ -65,16 +74,29 @@ def test_each_formulation_changes_the_plant(effect):
 
 
 def test_generator_writes_csvs_monitor_accepts(tmp_path):
-    keys = generate(tmp_path, seed=7, n_per_effect=1, tolerances=[5.0], duration_s=30,
-                    progress=False)
+    keys = generate(
+        tmp_path, seed=7, n_per_effect=1, tolerances=[5.0], duration_s=30, progress=False
+    )
     assert {k["effect"] for k in keys} >= set(F.EFFECTS) | {"none", "unexplained"}
-    again = generate(tmp_path / "b", seed=7, n_per_effect=1, tolerances=[5.0], duration_s=30,
-                     progress=False)
+    again = generate(
+        tmp_path / "b", seed=7, n_per_effect=1, tolerances=[5.0], duration_s=30, progress=False
+    )
     first = (tmp_path / keys[0]["file"]).read_text()
     assert first == (tmp_path / "b" / again[0]["file"]).read_text()
     rec = tmp_path / keys[0]["file"]
-    r = subprocess.run([sys.executable, "-m", "monitor", "detect", str(rec), "--summary",
-                        str(tmp_path / "s.json")], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "detect",
+            str(rec),
+            "--summary",
+            str(tmp_path / "s.json"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode in (0, 3) and "Traceback" not in r.stderr, r.stderr
 
 

@@ -20,8 +20,13 @@ from monitor.sim.simulate import simulate
 
 M = load_machine()
 #: Another machine of the same type: a few percent off the nominal values.
-MACHINE_TOLERANCE = {"mass": 1.04, "gravity_load": 0.97, "viscous_friction": 1.05,
-                     "valve_gain": 0.97, "volumes": 1.03}  # fmt: skip
+MACHINE_TOLERANCE = {
+    "mass": 1.04,
+    "gravity_load": 0.97,
+    "viscous_friction": 1.05,
+    "valve_gain": 0.97,
+    "volumes": 1.03,
+}
 SIGNALS = ("PP", "PA", "PB", "QP")
 
 
@@ -62,8 +67,16 @@ def test_deadband_recording_gets_its_verdict_fitted_value_and_reduction(deadband
 def test_report_keeps_the_contract_keys(deadband_run):
     _, out, report_dir = deadband_run
     rep = json.loads(out.read_text())
-    for key in ("verdict", "also", "params", "calibrated", "confidence", "where", "ranking",
-                "shrink"):  # fmt: skip
+    for key in (
+        "verdict",
+        "also",
+        "params",
+        "calibrated",
+        "confidence",
+        "where",
+        "ranking",
+        "shrink",
+    ):
         assert key in rep
     assert set(rep["where"]) >= {"signals", "regimes", "bands", "windows"}
     assert {s["name"] for s in rep["where"]["signals"]} == set(SIGNALS)
@@ -80,10 +93,20 @@ def test_report_keeps_the_contract_keys(deadband_run):
     assert set(rep["shrink"]["before"]) == compared == set(rep["shrink"]["after"])
     for s in SIGNALS:
         assert rep["shrink"]["after"][s] < rep["shrink"]["before"][s]
-    assert set(rep["calibrated"]) == {"mass", "gravity_load", "viscous_friction", "valve_gain",
-                                      "volumes"}  # fmt: skip
-    for name in ("summary.txt", "traces_worst_window.png", "residual_by_regime.png",
-                 "residual_spectra.png", "candidates.png"):  # fmt: skip
+    assert set(rep["calibrated"]) == {
+        "mass",
+        "gravity_load",
+        "viscous_friction",
+        "valve_gain",
+        "volumes",
+    }
+    for name in (
+        "summary.txt",
+        "traces_worst_window.png",
+        "residual_by_regime.png",
+        "residual_spectra.png",
+        "candidates.png",
+    ):
         assert (report_dir / name).stat().st_size > 1000
     first = (report_dir / "summary.txt").read_text().splitlines()[0]
     assert first.startswith(f"Gap mostly in {rep['where']['signals'][0]['name']}")
@@ -112,8 +135,10 @@ def test_a_tolerance_at_its_bound_is_said_in_the_json_and_the_first_lines(deadba
     assert "Tolerance at its bound" not in summary_text(rep)
     rep["calibrated"] = d
     first = summary_text(rep).split("\n\n")[1]  # the verdict block, before the tables
-    assert "Tolerance at its bound: mass +15.0 % (band +-15 %), valve_gain -14.9 % (band " \
-           "+-15 %). The machine is outside" in first  # fmt: skip
+    assert (
+        "Tolerance at its bound: mass +15.0 % (band +-15 %), valve_gain -14.9 % (band "
+        "+-15 %). The machine is outside" in first
+    )
 
 
 def test_sensor_lag_recording_is_named_and_its_delay_fitted():

@@ -105,7 +105,7 @@ def test_the_summary_says_which_effect_was_not_named_and_why():
             "above_hz": 5.0,
             "practical_nrmse": 0.02,
             "signals": {"PP": sig},
-        },  # fmt: skip
+        },
         "ranking": [{"effect": "oil_viscosity", "heldout_reduction": 0.47, "members": {}}],
         "pairs": [],
         "trade_off": {
@@ -115,7 +115,7 @@ def test_the_summary_says_which_effect_was_not_named_and_why():
             "signal": "QP",
             "growth_share": 0.0565,
             "bootstrap_share": 1.0,
-        },  # fmt: skip
+        },
         "confidence": 1.0,
         "calibrated": {},
         "shrink": {"before": {}, "after": {}, "noise_floor_nrmse": {}},
@@ -126,7 +126,7 @@ def test_the_summary_says_which_effect_was_not_named_and_why():
             "calibration_s": 150,
             "heldout_s": 150,
             "rodpos": "integrated from QP",
-        },  # fmt: skip
+        },
         "timings_s": {"total": 10.0},
     }
     lines = summary_text(report).splitlines()

@@ -185,8 +185,16 @@ def test_an_effect_the_calibration_absorbed_is_judged_against_its_own_tolerances
     assert (d.verdict, d.chosen, d.confidence) == ("cylinder_friction", c, 1.0)
     # Only the best is judged that way: the same simulator given for another effect
     # changes nothing.
-    other = decide(False, [c], [], all_sums, calibrated, IDX, FLOOR,
-                   against={"entrained_air": (own_without, own_without)})  # fmt: skip
+    other = decide(
+        False,
+        [c],
+        [],
+        all_sums,
+        calibrated,
+        IDX,
+        FLOOR,
+        against={"entrained_air": (own_without, own_without)},
+    )
     assert other.verdict == "unexplained"
 
 

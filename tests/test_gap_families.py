@@ -58,8 +58,10 @@ def _hose_residual(cylinder_cm3_bar: float, line_cm3_bar: float):
     def residual(factors, effects):
         e = effects[0]
         if e.labels["law"] == "added_capacitance":
-            cyl, line = (e.params["cylinder_capacitance_cm3_per_bar"],
-                         e.params["line_capacitance_cm3_per_bar"])  # fmt: skip
+            cyl, line = (
+                e.params["cylinder_capacitance_cm3_per_bar"],
+                e.params["line_capacitance_cm3_per_bar"],
+            )
         else:
             cyl, line = 0.03 / e.params["wall_modulus_gpa"], 0.05 / e.params["wall_modulus_gpa"]
         return 100.0 * np.array([cyl - cylinder_cm3_bar, line - line_cm3_bar])
@@ -105,11 +107,17 @@ def test_oil_leaking_across_the_valve_clearances_is_named_with_that_member():
     # Thin oil leaking across the spool's clearances (no pump leakage): the pump-leak
     # formulation alone cannot make the held pressure's drift; the family's can.
     fx = Effect.make(
-        "oil_viscosity", pump_leak_lpm_per_100bar=0.0, friction_share=0.0,
+        "oil_viscosity",
+        pump_leak_lpm_per_100bar=0.0,
+        friction_share=0.0,
         valve_leak_lpm_per_100bar=0.3,
-    )  # fmt: skip
-    d = _diagnosed({"mass": 1.03, "viscous_friction": 0.96, "valve_gain": 1.02}, fx, 4,
-                   ("oil_viscosity", "spool_dynamics", "load_variation"))  # fmt: skip
+    )
+    d = _diagnosed(
+        {"mass": 1.03, "viscous_friction": 0.96, "valve_gain": 1.02},
+        fx,
+        4,
+        ("oil_viscosity", "spool_dynamics", "load_variation"),
+    )
     assert d.verdict == "oil_viscosity"
     best = d.singles[0]
     assert member_names(best)["oil_viscosity"] in ("seal_and_valve", "all_paths")
@@ -121,8 +129,12 @@ def test_entrained_air_on_a_machine_with_larger_volumes_is_found_with_one_local_
     # only friction keeps a second local fit (``TWO_LOCAL_FITS``), one local fit from the
     # best start must still find the air that was put in.
     fx = Effect.make("entrained_air", air_fraction=0.02)
-    d = _diagnosed({"volumes": 1.05, "mass": 0.97}, fx, 6,
-                   ("entrained_air", "hose_compliance", "load_variation"))  # fmt: skip
+    d = _diagnosed(
+        {"volumes": 1.05, "mass": 0.97},
+        fx,
+        6,
+        ("entrained_air", "hose_compliance", "load_variation"),
+    )
     assert d.verdict == "entrained_air"
     assert d.singles[0].effects[0].params["air_fraction"] == pytest.approx(0.02, rel=0.3)
 
@@ -132,11 +144,17 @@ def test_hoses_on_the_cylinder_lines_are_named_with_the_cylinder_hoses_member():
     # line: the series modulus softens every volume in proportion to it, the pump line's
     # most, and cannot draw that; the family's second member can.
     fx = Effect.make(
-        "hose_compliance", law="added_capacitance", line_capacitance_cm3_per_bar=0.0,
+        "hose_compliance",
+        law="added_capacitance",
+        line_capacitance_cm3_per_bar=0.0,
         cylinder_capacitance_cm3_per_bar=0.03,
-    )  # fmt: skip
-    d = _diagnosed({"mass": 0.97, "valve_gain": 1.02}, fx, 8,
-                   ("entrained_air", "hose_compliance", "load_variation"))  # fmt: skip
+    )
+    d = _diagnosed(
+        {"mass": 0.97, "valve_gain": 1.02},
+        fx,
+        8,
+        ("entrained_air", "hose_compliance", "load_variation"),
+    )
     assert d.verdict == "hose_compliance"
     best = d.singles[0]
     assert member_names(best)["hose_compliance"] == "cylinder_hoses"
@@ -148,10 +166,15 @@ def test_hoses_on_the_cylinder_lines_are_named_with_the_cylinder_hoses_member():
 def test_a_ringing_pump_is_named_with_the_second_order_member_and_its_frequency():
     # A swashplate that rings at 7 Hz after every command step (zeta 0.4): a first-order lag
     # cannot swing back, and a spool's ringing moves the cylinder's flow, not the pump's.
-    fx = Effect.make("pump_control_dynamics", law="second_order", natural_freq_hz=7.0,
-                     damping_ratio=0.4)  # fmt: skip
-    d = _diagnosed({"mass": 1.02, "valve_gain": 0.98}, fx, 9,
-                   ("pump_control_dynamics", "spool_dynamics", "sensor_lag"))  # fmt: skip
+    fx = Effect.make(
+        "pump_control_dynamics", law="second_order", natural_freq_hz=7.0, damping_ratio=0.4
+    )
+    d = _diagnosed(
+        {"mass": 1.02, "valve_gain": 0.98},
+        fx,
+        9,
+        ("pump_control_dynamics", "spool_dynamics", "sensor_lag"),
+    )
     assert d.verdict == "pump_control_dynamics"
     best = d.singles[0]
     assert member_names(best)["pump_control_dynamics"] == "second_order"

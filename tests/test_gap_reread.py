@@ -68,8 +68,7 @@ def test_reread_rod_path_is_the_one_of_the_true_flow(clean, gain, offset):
     assert again is not None
     # Read through the exact inverse, the flow is the true one again: the rod path is the
     # one integrated from the true flow, sample for sample.
-    expected, _ = rod_from_flow(clean["SpoolCmd"], clean["PP"], clean["PA"], clean["PB"],
-                                true_q, M)  # fmt: skip
+    expected, _ = rod_from_flow(clean["SpoolCmd"], clean["PP"], clean["PA"], clean["PB"], true_q, M)
     np.testing.assert_allclose(again.rod_mm, expected, atol=1e-6)
     # Fair to the other candidates: the compared readings (raw QP), the samples left out
     # and the scales are those of the recording as prepared.

@@ -25,8 +25,13 @@ from monitor.sim.simulate import simulate
 M = load_machine()
 #: Another machine of the same type: a few percent off the nominal values (as in
 #: test_gap_cli), so the tolerance calibration has work to do besides the sensor.
-MACHINE_TOLERANCE = {"mass": 1.04, "gravity_load": 0.97, "viscous_friction": 1.05,
-                     "valve_gain": 0.97, "volumes": 1.03}  # fmt: skip
+MACHINE_TOLERANCE = {
+    "mass": 1.04,
+    "gravity_load": 0.97,
+    "viscous_friction": 1.05,
+    "valve_gain": 0.97,
+    "volumes": 1.03,
+}
 #: Short recordings keep the tests at a few seconds each.
 SECONDS = 90.0
 
@@ -43,8 +48,9 @@ def _report(rec: Recording) -> dict:
 
 
 def test_true_start_reads_the_start_pressure_through_the_inverse_calibration():
-    start = _Start(pp_pa=150 * BAR, pa_pa=60 * BAR, pb_pa=5 * BAR, rod_m=0.2, vel_m_s=0.1,
-                   spool=0.0)  # fmt: skip
+    start = _Start(
+        pp_pa=150 * BAR, pa_pa=60 * BAR, pb_pa=5 * BAR, rod_m=0.2, vel_m_s=0.1, spool=0.0
+    )
     cal = Effect.make("sensor_calibration", signal="PA", gain=1.2, offset=3.0)
     # Measured 60 bar = 1.2 true + 3 bar: true 47.5 bar; the other values are kept.
     assert _true_start(start, cal).pa_pa == pytest.approx(47.5 * BAR)
@@ -59,11 +65,16 @@ def test_true_start_reads_the_start_pressure_through_the_inverse_calibration():
 
 def test_cli_names_a_pa_gain_with_signal_named_params(tmp_path):
     csv = tmp_path / "pa_gain.csv"
-    write_csv(csv, _recording([parse_effect("sensor_calibration:signal=PA,gain=1.1,offset=0")],
-                              seed=41))  # fmt: skip
+    write_csv(
+        csv, _recording([parse_effect("sensor_calibration:signal=PA,gain=1.1,offset=0")], seed=41)
+    )
     out = tmp_path / "gap.json"
-    proc = subprocess.run([sys.executable, "-m", "monitor", "gap", "--real", str(csv), "--json",
-                           str(out)], capture_output=True, text=True, check=False)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "monitor", "gap", "--real", str(csv), "--json", str(out)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert proc.returncode == 0, proc.stderr
     rep = json.loads(out.read_text())
     assert rep["verdict"] == "sensor_calibration"
@@ -134,8 +145,9 @@ PP_NOISE_BAR = 0.3
 
 def test_a_pp_offset_is_named_and_the_plant_terms_explain_less():
     offset_bar = -8.0
-    rec = _recording([Effect.make("sensor_calibration", signal="PP", gain=1.0, offset=offset_bar)],
-                     seed=8)  # fmt: skip
+    rec = _recording(
+        [Effect.make("sensor_calibration", signal="PP", gain=1.0, offset=offset_bar)], seed=8
+    )
     rep = _report(rec)
     assert rep["verdict"] == "sensor_calibration"
     fitted = rep["params"]["sensor_calibration"]
@@ -162,8 +174,10 @@ def test_a_compensator_setting_is_not_called_a_pp_sensor_error():
     # compensator pressure, as a PP offset would, but less flow passes the valve.
     shift_bar = -30.0
     m = apply(M, MACHINE_TOLERANCE)
-    m = m.with_changes(compensator_start_pa=m.compensator_start_pa + shift_bar * BAR,
-                       compensator_full_pa=m.compensator_full_pa + shift_bar * BAR)  # fmt: skip
+    m = m.with_changes(
+        compensator_start_pa=m.compensator_start_pa + shift_bar * BAR,
+        compensator_full_pa=m.compensator_full_pa + shift_bar * BAR,
+    )
     rep = _report(simulate(make_cycle("boom", SECONDS, 6), m, seed=6))
     assert rep["verdict"] == "unexplained"
     first = rep["suggestion"][0]

@@ -26,8 +26,13 @@ from monitor.sim.simulate import simulate
 
 M = load_machine()
 #: Another machine of the same type, a few percent off nominal (as in test_gap_sensor_cal).
-MACHINE_TOLERANCE = {"mass": 1.04, "gravity_load": 0.97, "viscous_friction": 1.05,
-                     "valve_gain": 0.97, "volumes": 1.03}  # fmt: skip
+MACHINE_TOLERANCE = {
+    "mass": 1.04,
+    "gravity_load": 0.97,
+    "viscous_friction": 1.05,
+    "valve_gain": 0.97,
+    "volumes": 1.03,
+}
 SECONDS = 120.0
 #: Pressure sensor noise (bar rms) and cap / rod side areas (m^2): a force on the rod
 #: shows in PA A_A - PB A_B, read with noise 0.3 bar x sqrt(A_A^2 + A_B^2) = 108 N.
@@ -37,8 +42,12 @@ A_B = math.pi / 4 * (0.063**2 - 0.036**2)
 
 
 def _report(corrections: dict[str, float], seed: int) -> dict:
-    rec = simulate(make_cycle("boom", SECONDS, seed), apply(M, MACHINE_TOLERANCE), seed=seed,
-                   corrections=corrections)  # fmt: skip
+    rec = simulate(
+        make_cycle("boom", SECONDS, seed),
+        apply(M, MACHINE_TOLERANCE),
+        seed=seed,
+        corrections=corrections,
+    )
     diag = diagnose(rec, M)
     return build_report(diag, M, simulate_all(diag, M))
 
@@ -48,8 +57,11 @@ def test_a_periodic_load_is_suggested_with_its_amplitude_and_frequency():
     # 0.0215 against 0.02, below it in a fifth of the bootstrap resamples: `none`).
     amp_n, f_hz = 1000.0, 0.8
     w = 2 * math.pi * f_hz
-    corr = {"force_cos": amp_n * math.cos(1.0), "force_sin": -amp_n * math.sin(1.0),
-            "force_omega": w}  # fmt: skip
+    corr = {
+        "force_cos": amp_n * math.cos(1.0),
+        "force_sin": -amp_n * math.sin(1.0),
+        "force_omega": w,
+    }
     rep = _report(corr, seed=3)
     assert rep["verdict"] == "unexplained"
     first = rep["suggestion"][0]
@@ -84,8 +96,12 @@ def test_an_a_to_tank_leak_is_suggested_with_its_path_and_coefficient():
 
 
 def test_a_catalogue_effect_gets_no_suggestion():
-    rec = simulate(make_cycle("boom", SECONDS, 4), apply(M, MACHINE_TOLERANCE), seed=4,
-                   effects=[parse_effect("valve_deadband:overlap_pct=12")])  # fmt: skip
+    rec = simulate(
+        make_cycle("boom", SECONDS, 4),
+        apply(M, MACHINE_TOLERANCE),
+        seed=4,
+        effects=[parse_effect("valve_deadband:overlap_pct=12")],
+    )
     diag = diagnose(rec, M)
     rep = build_report(diag, M, simulate_all(diag, M))
     assert rep["verdict"] == "valve_deadband"
@@ -123,8 +139,9 @@ def _suggester(corr: dict):
     """A +-5 % machine (seed 3) with the correction ``corr``, split, calibrated at the
     machine's own tolerances (the calibration's place): ``suggest`` on it with keyword
     arguments, and the calibrated machine's held-out readings."""
-    rec = simulate(make_cycle("boom", SECONDS, 3), apply(M, MACHINE_TOLERANCE), seed=3,
-                   corrections=corr)  # fmt: skip
+    rec = simulate(
+        make_cycle("boom", SECONDS, 3), apply(M, MACHINE_TOLERANCE), seed=3, corrections=corr
+    )
     prep = prepare(rec, M)
     cal, held = split(make_segments(prep))
     fit_segs = spread(cal, FIT_BUDGET_S)
@@ -137,9 +154,16 @@ def _suggester(corr: dict):
     n_eff = S.effective_n(prep, held, base)
 
     def run(**kw):
-        return suggest(prep, (fit_segs, SegmentPlant(prep, fit_segs), fit_m),
-                       (held, held_plant, held_m), MACHINE_TOLERANCE, floor, gap0, n_eff,
-                       **kw)  # fmt: skip
+        return suggest(
+            prep,
+            (fit_segs, SegmentPlant(prep, fit_segs), fit_m),
+            (held, held_plant, held_m),
+            MACHINE_TOLERANCE,
+            floor,
+            gap0,
+            n_eff,
+            **kw,
+        )
 
     return run, base
 

@@ -60,8 +60,9 @@ def test_operating_state_by_hand() -> None:
 
 # The evidence rules off (monitor.detection.evidence): an edit that makes the oil jump by
 # 37 degC in one sample is what they doubt, rightly; here the warm-up itself is under test.
-AT_ONCE = GatingConfig(operating=OperatingConfig(oil_rate_max_c_per_s=0.0, engine_confirm_s=0.0,
-                                                 oil_confirm_s=0.0))  # fmt: skip
+AT_ONCE = GatingConfig(
+    operating=OperatingConfig(oil_rate_max_c_per_s=0.0, engine_confirm_s=0.0, oil_confirm_s=0.0)
+)
 
 
 def test_warm_up_is_inactive_and_reported(model) -> None:
@@ -102,8 +103,9 @@ def test_operation_outside_the_envelope_is_out_of_range_not_a_fault(model) -> No
     assert s["out_of_range_samples"] == len(rec) - 6000
     assert s["out_of_range_signals"] == {"PumpDispCmd": len(rec) - 6000}
     assert [(e["t"], e["state"], e["out_of_range_signal"]) for e in det.events] == [
-        (0.0, "normal", None), (60.0, "normal", "PumpDispCmd")
-    ]  # fmt: skip
+        (0.0, "normal", None),
+        (60.0, "normal", "PumpDispCmd"),
+    ]
     assert np.all(np.isnan(det.j[6000:]))
     _, events = tick_recording(Ticker(model, CFG.alarm, 1, gating=GatingConfig()), rec)
     assert [(e["t"], e["state"], e["out_of_range"]) for e in events] == [
@@ -238,6 +240,7 @@ def test_daemon_logs_and_announces_the_operating_state(tmp_path, model) -> None:
     listener.shutdown()
     lines = cfg.event_log.path.read_text().splitlines()
     live = [json.loads(x) for x in lines]
+
     # J to rounding; mono and seq are the daemon's own (monotonic clock, log sequence).
     def strip(evs):
         return [{k: v for k, v in e.items() if k not in ("J", "mono", "seq")} for e in evs]
@@ -246,6 +249,9 @@ def test_daemon_logs_and_announces_the_operating_state(tmp_path, model) -> None:
     assert {e["out_of_range_signal"] for e in live} == {None, "PumpDispCmd"}
     assert live[-1]["op_state"] == "warm_up" and live[-1]["state"] == "inactive"
     codec = FrameCodec.from_dbc(CFG.dbc)
-    status = [codec.decode_message(m).values for m in frames
-              if m.arbitration_id == codec.message("MON_Status").frame_id]  # fmt: skip
+    status = [
+        codec.decode_message(m).values
+        for m in frames
+        if m.arbitration_id == codec.message("MON_Status").frame_id
+    ]
     assert status[-1]["OpState"] == OpState.WARM_UP and status[-1]["State"] == 3

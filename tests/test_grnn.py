@@ -269,10 +269,16 @@ def test_from_arrays_round_trip():
     X, Y = _series(n=800)
     g = GRNN(min_distance=0.05).fit(X, Y)
     h = GRNN.from_arrays(
-        g.patterns_, g.targets_, g.sigma_, counts_=g.counts_, sigma_rule_=g.sigma_rule_,
+        g.patterns_,
+        g.targets_,
+        g.sigma_,
+        counts_=g.counts_,
+        sigma_rule_=g.sigma_rule_,
         thinning_=g.thinning_,
-        loo_error_=g.loo_error_, pattern_index_=g.pattern_index_, exclude_neighbours_=50,
-    )  # fmt: skip
+        loo_error_=g.loo_error_,
+        pattern_index_=g.pattern_index_,
+        exclude_neighbours_=50,
+    )
     np.testing.assert_array_equal(h.predict(X[:50]), g.predict(X[:50])[:, None])
     assert h.sigma_rule_ == "loo" and h.thinning_ == g.thinning_
 

@@ -152,9 +152,10 @@ def test_same_decisions_on_reduced_eval_sim_runs(shipped):
         fast, exact = _same_decisions(shipped, simulate_run(spec))
         alarms += fast.summary["alarm"]
         nout = shipped.spec.outputs
-        rel = np.nanmax(np.abs(fast.y_hat - exact.y_hat), axis=0) / shipped.normalizer.std_[
-            [shipped.normalizer.names_.index(o) for o in nout]
-        ]
+        rel = (
+            np.nanmax(np.abs(fast.y_hat - exact.y_hat), axis=0)
+            / shipped.normalizer.std_[[shipped.normalizer.names_.index(o) for o in nout]]
+        )
         assert np.all(rel <= 1e-5)
     assert alarms >= 3  # the check covers alarm decisions, not only quiet runs
 

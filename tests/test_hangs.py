@@ -42,8 +42,13 @@ def test_a_fifo_as_config_is_refused_at_once(tmp_path) -> None:
     os.mkfifo(fifo)
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     try:  # the timeout detects a hang; it is no timing
-        r = subprocess.run([sys.executable, "-m", "monitor", "run", "--config", str(fifo)],
-                           capture_output=True, text=True, env=env, timeout=120)  # fmt: skip
+        r = subprocess.run(
+            [sys.executable, "-m", "monitor", "run", "--config", str(fifo)],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=120,
+        )
     except subprocess.TimeoutExpired:
         pytest.fail("monitor run hung on a FIFO as --config")
     assert r.returncode == 2
@@ -74,9 +79,11 @@ def _model_claiming(tmp_path: Path, shape: tuple[int, ...]) -> Path:
                 npy.read_magic(fh)
                 _, fortran, dtype = npy.read_array_header_1_0(fh)
                 head = io.BytesIO()
-                npy.write_array_header_1_0(head, {"descr": npy.dtype_to_descr(dtype),
-                                                  "fortran_order": fortran, "shape": shape})
-                data = head.getvalue() + data[fh.tell():]  # fmt: skip
+                npy.write_array_header_1_0(
+                    head,
+                    {"descr": npy.dtype_to_descr(dtype), "fortran_order": fortran, "shape": shape},
+                )
+                data = head.getvalue() + data[fh.tell() :]
             zout.writestr(info, data)
     return out
 
@@ -136,6 +143,11 @@ def test_watch_counts_a_dm1_frame_too_short_for_its_lamps(data: bytes) -> None:
     state = WatchState(FrameCodec.from_dbc(None))
     state.feed(can.Message(arbitration_id=0x18FECAA0, data=data, is_extended_id=True))
     assert state.rejected == {"DM1": 1} and state.dm1 == {}
-    state.feed(can.Message(arbitration_id=0x18FECAA0, is_extended_id=True,
-                           data=bytes([0x04, 0xFF, 0x00, 0xF0, 0xE7, 0x01, 0xFF, 0xFF])))
+    state.feed(
+        can.Message(
+            arbitration_id=0x18FECAA0,
+            is_extended_id=True,
+            data=bytes([0x04, 0xFF, 0x00, 0xF0, 0xE7, 0x01, 0xFF, 0xFF]),
+        )
+    )
     assert [(d.spn, d.fmi, d.oc) for d in state.dm1[0xA0][1]] == [(520192, 7, 1)]

@@ -198,7 +198,12 @@ def test_to_dict_round_trip() -> None:
     d = json.loads(json.dumps(hold.to_dict()))  # as the model file's JSON header holds it
     back = HoldModel.from_dict(d)
     assert (back.window_n, back.min_count, back.settle_n, back.outputs, back.h0) == (
-        6000, 300, 200, (1, 2), 2.0)  # fmt: skip
+        6000,
+        300,
+        200,
+        (1, 2),
+        2.0,
+    )
     assert np.array_equal(back.scale, hold.scale)
     assert back.to_dict() == hold.to_dict()
 
@@ -223,8 +228,13 @@ def test_fit_scale_is_the_per_output_max_of_the_definition() -> None:
     es = [r[0] for r in recs]
     spools = [r[1] for r in recs]
     got = fit_hold_scale(es, [hold_flags(s) for s in spools], 60, 5, 3, (1, 2))
-    want = [max(np.nanmax(hold_statistic(e, s, (o,), [1.0], 60, 3, 5))
-                for e, s in zip(es, spools, strict=True)) for o in (1, 2)]  # fmt: skip
+    want = [
+        max(
+            np.nanmax(hold_statistic(e, s, (o,), [1.0], 60, 3, 5))
+            for e, s in zip(es, spools, strict=True)
+        )
+        for o in (1, 2)
+    ]
     np.testing.assert_allclose(got, want, rtol=1e-9)
 
 
@@ -235,7 +245,8 @@ def test_fit_scale_needs_settled_holds_in_a_full_window() -> None:
     with pytest.raises(InputFileError):  # never a full window
         fit_hold_scale([e[:5]], [hold_flags(np.zeros(5))], 6, 2, 0, (0, 1))
     np.testing.assert_array_equal(
-        fit_hold_scale([e[:6]], [hold_flags(np.zeros(6))], 6, 2, 0, (0, 1)), [1.0, 1.0])
+        fit_hold_scale([e[:6]], [hold_flags(np.zeros(6))], 6, 2, 0, (0, 1)), [1.0, 1.0]
+    )
 
 
 J = np.array([np.nan, 1.0, 1.0, 1.0, 3.0, 1.0])  # / eps0 2: nan, 0.5, 0.5, 0.5, 1.5, 0.5
@@ -270,8 +281,14 @@ def test_model_file_keeps_h(tmp_path, model) -> None:
     assert again.hold is None and "hold" not in again.header()
 
 
-GOOD = {"window_n": 6000, "min_count": 300, "settle_n": 200, "outputs": [1, 2],
-        "scale": [0.3, 0.7], "h0": 2.0}  # fmt: skip
+GOOD = {
+    "window_n": 6000,
+    "min_count": 300,
+    "settle_n": 200,
+    "outputs": [1, 2],
+    "scale": [0.3, 0.7],
+    "h0": 2.0,
+}
 
 
 def test_crafted_good_hold_header_loads(tmp_path) -> None:
@@ -281,8 +298,15 @@ def test_crafted_good_hold_header_loads(tmp_path) -> None:
 
 @pytest.mark.parametrize(
     "change",
-    [{"window_n": 0}, {"h0": -1.0}, {"scale": [0.3]}, {"outputs": [1, 4]}, {"min_count": 0},
-     {"settle_n": -1}, {"settle_n": 2.5}],
+    [
+        {"window_n": 0},
+        {"h0": -1.0},
+        {"scale": [0.3]},
+        {"outputs": [1, 4]},
+        {"min_count": 0},
+        {"settle_n": -1},
+        {"settle_n": 2.5},
+    ],
 )
 def test_a_malformed_hold_header_is_a_model_file_error_naming_hold(tmp_path, change) -> None:
     with pytest.raises(ModelFileError, match="hold") as exc:

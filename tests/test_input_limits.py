@@ -35,8 +35,12 @@ def _pressure_frames(n: int) -> list[str]:
 
 def _spaced_log(path: Path, n: int, step_s: float) -> Path:
     """``n`` pressure frames ``step_s`` apart (under the sampler's 60 s gap limit)."""
-    path.write_text("".join(f"({1_700_000_000 + i * step_s:.6f}){rest}\n"
-                            for i, rest in enumerate(_pressure_frames(n))))  # fmt: skip
+    path.write_text(
+        "".join(
+            f"({1_700_000_000 + i * step_s:.6f}){rest}\n"
+            for i, rest in enumerate(_pressure_frames(n))
+        )
+    )
     return path
 
 
@@ -68,8 +72,10 @@ def test_log_needing_more_rows_than_the_limit_is_refused(tmp_path, reader) -> No
         reader(log)
     msg = str(err.value)
     assert "\n" not in msg
-    assert msg.startswith(f"{log}: would need 365391 rows of 10 ms for 62 frames spanning "
-                          "3653.9 s of log time, more than the limit of 360000")  # fmt: skip
+    assert msg.startswith(
+        f"{log}: would need 365391 rows of 10 ms for 62 frames spanning "
+        "3653.9 s of log time, more than the limit of 360000"
+    )
     assert "split it" in msg
 
 
@@ -206,10 +212,15 @@ def _peak_bytes(fn) -> int:
 
 @pytest.mark.parametrize(
     "read",
-    [read_candump_frames, lambda p: list(read_candump(p)), read_recording,
-     recording_from_candump, read_csv],
+    [
+        read_candump_frames,
+        lambda p: list(read_candump(p)),
+        read_recording,
+        recording_from_candump,
+        read_csv,
+    ],
     ids=["bulk", "python-can", "read_recording", "frame", "csv"],
-)  # fmt: skip
+)
 def test_sparse_file_is_refused_reading_a_little_of_it(tmp_path, read) -> None:
     """A 1 GB sparse file (all NULs, no newline) is refused at its first line, having read
     a chunk of it, not the gigabyte (numpy's and Python's allocations are both traced)."""
@@ -238,8 +249,12 @@ def test_cli_refuses_a_sparse_log_in_one_line(tmp_path) -> None:
     with path.open("wb"):
         pass
     os.truncate(path, 1 << 31)
-    out = subprocess.run([sys.executable, "-m", "monitor", "detect", str(path)],
-                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-m", "monitor", "detect", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 2
     assert out.stderr.strip() == (
         f"monitor detect: error: {path}:1: line longer than 1000 bytes, not a candump -L log"

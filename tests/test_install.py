@@ -94,9 +94,9 @@ def test_every_package_of_the_tree_is_in_the_wheel_list():
     """A package missing from pyproject's list works in a checkout and fails once installed."""
     import tomllib
 
-    listed = set(tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"][
-        "packages"
-    ])
+    listed = set(
+        tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
     found = {
         ".".join(p.parent.relative_to(REPO).parts)
         for p in (REPO / "monitor").rglob("__init__.py")
@@ -117,15 +117,32 @@ class _Blocked:
         return None
 sys.meta_path.insert(0, _Blocked())
 """
-_DAEMON_PACKAGES = ("bus", "codec", "config", "detection", "io", "jit", "live", "model",
-                    "sampling", "schema", "watch")  # fmt: skip
+_DAEMON_PACKAGES = (
+    "bus",
+    "codec",
+    "config",
+    "detection",
+    "io",
+    "jit",
+    "live",
+    "model",
+    "sampling",
+    "schema",
+    "watch",
+)
 _LEAN_COMMANDS = ("demo", "run", "detect", "replay", "watch", "encode")
 
 
 def _lean(code: str, *args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run([sys.executable, "-c", _LEAN + code, *args], capture_output=True,
-                          text=True, env=env, timeout=600, cwd=REPO)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-c", _LEAN + code, *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+        cwd=REPO,
+    )
 
 
 def test_the_daemons_modules_and_detect_need_none_of_the_extras(tmp_path):
@@ -152,8 +169,21 @@ print(json.dumps({{"rc": rc, "loaded": loaded}}))
     assert lean.returncode == 0, lean.stderr
     assert json.loads(lean.stdout.splitlines()[-1]) == {"rc": 0, "loaded": []}
     # The same detection as with every extra installed (this process).
-    assert main(["detect", log, "--summary", str(tmp_path / "full.json"), "--j-every", "0",
-                 "--events", str(tmp_path / "full.jsonl")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "detect",
+                log,
+                "--summary",
+                str(tmp_path / "full.json"),
+                "--j-every",
+                "0",
+                "--events",
+                str(tmp_path / "full.jsonl"),
+            ]
+        )
+        == 0
+    )
     for name in ("json", "jsonl"):
         assert (tmp_path / f"lean.{name}").read_text() == (tmp_path / f"full.{name}").read_text()
     assert json.loads((tmp_path / "lean.json").read_text())["fault"] == "spool_wear"
@@ -168,14 +198,20 @@ print(json.dumps({{"rc": rc, "loaded": loaded}}))
         (["simulate", "--duration", "40", "--seed", "1", "--out", "SIM"], "analysis", "scipy"),
     ],
 )
-def test_a_command_of_an_extra_says_which_extra_in_one_line_and_exit_2(tmp_path, args, extra,
-                                                                       module):  # fmt: skip
+def test_a_command_of_an_extra_says_which_extra_in_one_line_and_exit_2(
+    tmp_path, args, extra, module
+):
     from monitor.resources import resource_path
 
     (tmp_path / "FLEET" / "M01" / "logs").mkdir(parents=True)
-    where = {"FLEET": tmp_path / "FLEET", "RESULTS": tmp_path / "RESULTS", "PAGE": tmp_path / "p",
-             "LOG": resource_path("replay", "normal.log"), "PLOT": tmp_path / "x.png",
-             "SIM": tmp_path / "sim.log"}
+    where = {
+        "FLEET": tmp_path / "FLEET",
+        "RESULTS": tmp_path / "RESULTS",
+        "PAGE": tmp_path / "p",
+        "LOG": resource_path("replay", "normal.log"),
+        "PLOT": tmp_path / "x.png",
+        "SIM": tmp_path / "sim.log",
+    }
     argv = [str(where.get(a, a)) for a in args]
     done = _lean("from monitor.cli import main; sys.exit(main(sys.argv[1:]))", *argv)
     assert done.returncode == 2, done.stderr

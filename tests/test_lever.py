@@ -125,8 +125,9 @@ def test_hand_worked_sequence() -> None:
 def _cycles(n: int = 3000):
     """Lever cycles of 3 s at 100 Hz: 1 s raising at 95 %, 0.5 s at 30 %, 1 s lowering at
     -95 %, 0.5 s at -30 %."""
-    one = np.concatenate([np.full(100, 95.0), np.full(50, 30.0), np.full(100, -95.0),
-                          np.full(50, -30.0)])  # fmt: skip
+    one = np.concatenate(
+        [np.full(100, 95.0), np.full(50, 30.0), np.full(100, -95.0), np.full(50, -30.0)]
+    )
     return np.resize(one, n)
 
 

@@ -191,15 +191,15 @@ def test_frames_with_unbelievable_timestamps_are_ignored_and_counted(tmp_path) -
     good = frames()
     stamps = [1e20, float("inf"), float("nan"), -5.0]
     bad = [
-        can.Message(timestamp=ts, arbitration_id=m.arbitration_id, is_extended_id=True,
-                    data=m.data)
+        can.Message(timestamp=ts, arbitration_id=m.arbitration_id, is_extended_id=True, data=m.data)
         for ts, m in zip(stamps, good[1500:1504], strict=True)
-    ]  # fmt: skip
+    ]
     _, clean = run_daemon(tmp_path / "a", good)
     events: list[dict] = []
     daemon = Daemon(live_config(tmp_path / "b"), on_event=events.append)
-    with can.Bus(interface="virtual", channel=daemon.cfg.bus.channel,
-                 preserve_timestamps=True) as sender:  # fmt: skip
+    with can.Bus(
+        interface="virtual", channel=daemon.cfg.bus.channel, preserve_timestamps=True
+    ) as sender:
         daemon.start()
         try:
             n = send_all(sender, good[:1500] + bad + good[1500:])

@@ -92,8 +92,11 @@ def test_run_reloads_on_sighup_and_stops_cleanly_on_sigterm(tmp_path) -> None:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(
         [sys.executable, "-m", "monitor", "run", "--config", str(cfg)],
-        stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
-    )  # fmt: skip
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+    )
     lines: list[str] = []
     try:
         _wait_for(proc, "monitoring virtual:sig", lines, 60.0)

@@ -31,8 +31,7 @@ def run(tmp_path_factory) -> dict[str, Any]:
     tmp = tmp_path_factory.mktemp("e2e")
     cfg = live_config(tmp)
     daemon, live_events, frames, counts = run_daemon(cfg, replay_settled(LOG))
-    return {"cfg": cfg, "daemon": daemon, "counts": counts, "frames": frames,
-            "events": live_events}  # fmt: skip
+    return {"cfg": cfg, "daemon": daemon, "counts": counts, "frames": frames, "events": live_events}
 
 
 @pytest.fixture(scope="module")
@@ -97,8 +96,9 @@ def test_black_box_spans_before_and_after_the_alarm(run, offline) -> None:
 def test_cli_replay_puts_the_log_on_a_virtual_bus() -> None:
     listener = can.Bus(interface="virtual", channel="replay-cli")
     try:
-        rc = main(["replay", str(LOG), "--bus", "replay-cli", "--interface", "virtual",
-                   "--speed", "1000"])  # fmt: skip
+        rc = main(
+            ["replay", str(LOG), "--bus", "replay-cli", "--interface", "virtual", "--speed", "1000"]
+        )
         n = 0
         while listener.recv(0) is not None:
             n += 1
@@ -110,8 +110,7 @@ def test_cli_replay_puts_the_log_on_a_virtual_bus() -> None:
 
 def test_cli_replay_bad_arguments_exit_2(tmp_path, capsys) -> None:
     assert main(["replay", str(LOG), "--bus", "x", "--interface", "virtual", "--speed", "0"]) == 2
-    assert main(["replay", str(tmp_path / "none.log"), "--bus", "x",
-                 "--interface", "virtual"]) == 2  # fmt: skip
+    assert main(["replay", str(tmp_path / "none.log"), "--bus", "x", "--interface", "virtual"]) == 2
     assert "no such file" in capsys.readouterr().err
 
 
@@ -125,8 +124,9 @@ def test_demo_runs_and_reports_the_alarm(capsys) -> None:
 def test_status_heartbeat_carries_the_counters(run) -> None:
     codec = FrameCodec.from_dbc()
     status_id = codec.message("MON_Status").frame_id
-    values = [codec.decode_message(m).values for m in run["frames"]
-              if m.arbitration_id == status_id]  # fmt: skip
+    values = [
+        codec.decode_message(m).values for m in run["frames"] if m.arbitration_id == status_id
+    ]
     assert values, "no MON_Status frame"
     rx = [v["RxFrames"] for v in values]
     assert rx == sorted(rx) and rx[-1] > 0  # no wrap in a 36k-frame run

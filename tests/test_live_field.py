@@ -53,9 +53,12 @@ CONTROLLER_NICE = 5
 
 def _hogs() -> list[subprocess.Popen]:
     """One busy process per core, at the same priority as the monitor."""
-    return [subprocess.Popen([sys.executable, "-c", "while True: pass"],
-                             preexec_fn=lambda: os.nice(CONTROLLER_NICE))
-            for _ in range(os.cpu_count() or 2)]  # fmt: skip
+    return [
+        subprocess.Popen(
+            [sys.executable, "-c", "while True: pass"], preexec_fn=lambda: os.nice(CONTROLLER_NICE)
+        )
+        for _ in range(os.cpu_count() or 2)
+    ]
 
 
 RECIPE = REPO / "docs" / "how-to" / "try-without-hardware.md"
@@ -82,8 +85,9 @@ class BusLog:
     def __init__(self, channel: str, port: int, speed: float) -> None:
         from monitor.bus.reader import BusConfig, open_bus
 
-        self.bus = open_bus(BusConfig(interface="udp_multicast", channel=channel,
-                                      options={"port": port}))  # fmt: skip
+        self.bus = open_bus(
+            BusConfig(interface="udp_multicast", channel=channel, options={"port": port})
+        )
         self.speed, self.frames, self._stop = speed, [], threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -144,10 +148,25 @@ def _field_run(tmp_path: Path, log: Path, speed: float, channel: str) -> list[di
         env = {**os.environ, "PYTHONPATH": str(REPO), **port}
         listener = BusLog(channel, udp_port, speed)
         replay = subprocess.run(
-            [sys.executable, "-m", "monitor", "replay", str(log), "--bus", channel,
-             "--interface", "udp_multicast", "--speed", str(speed)],
-            capture_output=True, text=True, env=env, timeout=7200, check=False,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "monitor",
+                "replay",
+                str(log),
+                "--bus",
+                channel,
+                "--interface",
+                "udp_multicast",
+                "--speed",
+                str(speed),
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=7200,
+            check=False,
+        )
         assert replay.returncode == 0, replay.stderr
         if listener is not None:
             _caught_up(tmp_path / "events.jsonl", listener, daemon)

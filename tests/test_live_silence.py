@@ -34,9 +34,17 @@ def pipeline(reader: Reader, changes: list) -> FramePipeline:
     codec = FrameCodec.from_dbc(cfg.dbc)
     columns, views = row_layout(cfg, codec)
     loops = [Loop(lc, cfg, codec, v) for lc, v in zip(cfg.monitored_loops, views, strict=True)]
-    return FramePipeline(codec, columns, loops, lambda msg: None,
-                         lambda tick, lp: changes.append(tick.state.label), 0.5, 1.0,
-                         lambda: reader.heard_until, lambda: reader.backlog)  # fmt: skip
+    return FramePipeline(
+        codec,
+        columns,
+        loops,
+        lambda msg: None,
+        lambda tick, lp: changes.append(tick.state.label),
+        0.5,
+        1.0,
+        lambda: reader.heard_until,
+        lambda: reader.backlog,
+    )
 
 
 def fed(p: FramePipeline, seconds: float) -> None:
@@ -82,8 +90,7 @@ def test_a_frame_of_any_kind_proves_time_passed() -> None:
     fed(p, 5.0)
     last = p.last_t_s
     t_bus = p.bus_time(last) + 3.0  # a foreign frame 3 s after the last sensor frame
-    p.feed(can.Message(arbitration_id=0x123, data=b"\x00", is_extended_id=False,
-                       timestamp=t_bus))  # fmt: skip
+    p.feed(can.Message(arbitration_id=0x123, data=b"\x00", is_extended_id=False, timestamp=t_bus))
     assert p.last_t_s == pytest.approx(last + 3.0, abs=0.011)
     assert changes[-1] == "inactive"
 
@@ -102,10 +109,18 @@ def test_a_time_scale_the_sampler_cannot_honour_is_refused(scale: float, tmp_pat
 def _pipeline(tmp_path: Path, reader: dict) -> tuple[FramePipeline, Daemon]:
     cfg = live_config(tmp_path, silent_s=0.5)
     daemon = Daemon(cfg)  # not started: its codec and loops only
-    pipe = FramePipeline(daemon.codec, daemon.columns, daemon.loops, lambda m: None,
-                         lambda t, lp: None, cfg.bus.silent_s, 1.0,
-                         heard_until=lambda: reader["heard"], backlog=lambda: reader["backlog"],
-                         received_at=lambda: reader["rx"])  # fmt: skip
+    pipe = FramePipeline(
+        daemon.codec,
+        daemon.columns,
+        daemon.loops,
+        lambda m: None,
+        lambda t, lp: None,
+        cfg.bus.silent_s,
+        1.0,
+        heard_until=lambda: reader["heard"],
+        backlog=lambda: reader["backlog"],
+        received_at=lambda: reader["rx"],
+    )
     return pipe, daemon
 
 
@@ -161,12 +176,18 @@ def test_frames_stamped_ahead_of_the_readers_clock_do_not_run_the_clock_on(tmp_p
         ahead = frames[-1].timestamp + 300.0
         for k in range(200):
             reader["rx"] = 1000.0 + k * 0.001
-            pipe.feed(can.Message(arbitration_id=0x123, data=bytes(8), is_extended_id=False,
-                                  timestamp=ahead + k))  # fmt: skip
+            pipe.feed(
+                can.Message(
+                    arbitration_id=0x123, data=bytes(8), is_extended_id=False, timestamp=ahead + k
+                )
+            )
         assert pipe.last_t_s == t_last  # 0.2 s by the reader's clock: under bus.silent_s
         reader["rx"] = 1003.0
-        pipe.feed(can.Message(arbitration_id=0x123, data=bytes(8), is_extended_id=False,
-                              timestamp=ahead + 500))  # fmt: skip
+        pipe.feed(
+            can.Message(
+                arbitration_id=0x123, data=bytes(8), is_extended_id=False, timestamp=ahead + 500
+            )
+        )
         assert pipe.last_t_s == pytest.approx(t_last + 3.0, abs=0.011)
     finally:
         daemon.reader.bus.shutdown()
@@ -202,8 +223,11 @@ def test_the_bus_socket_gets_a_receive_buffer_of_seconds_not_milliseconds() -> N
     from monitor.bus.reader import RCVBUF_BYTES, BusConfig, open_bus
 
     rmem_max = int(Path("/proc/sys/net/core/rmem_max").read_text())
-    bus = open_bus(BusConfig(interface="udp_multicast", channel="239.74.163.12",
-                             options={"port": own_udp_port()}))  # fmt: skip
+    bus = open_bus(
+        BusConfig(
+            interface="udp_multicast", channel="239.74.163.12", options={"port": own_udp_port()}
+        )
+    )
     try:
         import socket
 

@@ -35,7 +35,8 @@ def test_slowed_replay_gives_the_events_of_the_log(tmp_path) -> None:
     finally:
         daemon.stop()
     shipped = load_config()
-    offline = detect(load_model(shipped.model), recording_from_candump(LOG), shipped.alarm,
-                     shipped.horizon)  # fmt: skip
+    offline = detect(
+        load_model(shipped.model), recording_from_candump(LOG), shipped.alarm, shipped.horizon
+    )
     assert any(e["state"] == "fault" for e in offline.events)
     assert_same_events(events, offline)

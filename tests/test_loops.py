@@ -36,8 +36,7 @@ from monitor.sampling.sampler import ROW_COLUMNS
 
 CONFIG = resource_path("config", "excavator4.yaml")
 ONSET_S = 45.0
-TRUTH = {"boom": "normal", "stick": "piston_wear", "bucket": "spool_wear",
-         "swing": "spool_stroke"}  # fmt: skip
+TRUTH = {"boom": "normal", "stick": "piston_wear", "bucket": "spool_wear", "swing": "spool_stroke"}
 ALARM_SA = {"boom": 0xA0, "stick": 0xA1, "bucket": 0xA2, "swing": 0xA3}
 FAULT_SPN = {"piston_wear": 520192, "spool_stroke": 520193, "spool_wear": 520194}
 
@@ -59,8 +58,7 @@ def four_log(tmp_path_factory) -> Path:
 def run(tmp_path_factory, four_log) -> dict[str, Any]:
     cfg = live_config(tmp_path_factory.mktemp("loops-live"), CONFIG)
     daemon, events, frames, counts = run_daemon(cfg, replay_settled(four_log))
-    return {"cfg": cfg, "daemon": daemon, "events": events, "frames": frames,
-            "t0": counts.first_ts}  # fmt: skip
+    return {"cfg": cfg, "daemon": daemon, "events": events, "frames": frames, "t0": counts.first_ts}
 
 
 def test_each_loop_reads_its_own_signals_and_shares_engine_and_oil() -> None:
@@ -136,8 +134,12 @@ def _decoded(run: dict[str, Any], message: str) -> list[tuple[float, dict[str, f
 
 def test_each_loop_has_its_own_alarm_frame(run) -> None:
     codes = {"piston_wear": 1, "spool_stroke": 2, "spool_wear": 3}  # MON_Alarm's value table
-    messages = {"boom": "MON_Alarm", "stick": "MON_Alarm_Stick", "bucket": "MON_Alarm_Bucket",
-                "swing": "MON_Alarm_Swing"}  # fmt: skip
+    messages = {
+        "boom": "MON_Alarm",
+        "stick": "MON_Alarm_Stick",
+        "bucket": "MON_Alarm_Bucket",
+        "swing": "MON_Alarm_Swing",
+    }
     for loop, message in messages.items():
         frames = _decoded(run, message)
         assert frames[0][1]["State"] == 0
@@ -149,9 +151,9 @@ def test_each_loop_has_its_own_alarm_frame(run) -> None:
             # The fault code the loop sends longest is its own fault.
             named = collections.Counter(v["Fault"] for _, v in fault)
             assert named.most_common(1)[0][0] == codes[TRUTH[loop]], f"{loop}: {named}"
-        assert (0x0CFF4000 | ALARM_SA[loop]) == FrameCodec.from_dbc(
-            run["cfg"].dbc
-        ).message(message).frame_id
+        assert (0x0CFF4000 | ALARM_SA[loop]) == FrameCodec.from_dbc(run["cfg"].dbc).message(
+            message
+        ).frame_id
 
 
 def _dm1_dtcs(run: dict[str, Any], sa: int) -> list[list[tuple[int, int]]]:
@@ -197,8 +199,20 @@ def test_counts_sum_over_the_loops(run) -> None:
 
 def test_detect_cli_reads_one_loop(four_log, tmp_path, capsys) -> None:
     summary = tmp_path / "s.json"
-    rc = main(["detect", str(four_log), "--config", str(CONFIG), "--loop", "bucket",
-               "--summary", str(summary), "--j-every", "0"])  # fmt: skip
+    rc = main(
+        [
+            "detect",
+            str(four_log),
+            "--config",
+            str(CONFIG),
+            "--loop",
+            "bucket",
+            "--summary",
+            str(summary),
+            "--j-every",
+            "0",
+        ]
+    )
     assert rc == 0
     s = json.loads(summary.read_text())
     assert s["loop"] == "bucket" and s["alarm"] and s["fault"] == "spool_wear"
@@ -208,9 +222,11 @@ def test_detect_cli_reads_one_loop(four_log, tmp_path, capsys) -> None:
 
 def _config(tmp_path: Path, loops: str) -> Path:
     p = tmp_path / "m.yaml"
-    p.write_text(f"dbc: {resource_path('dbc', 'excavator4.dbc')}\n"
-                 f"model: {resource_path('config', 'boom_default.model.npz')}\n"
-                 f"loops:\n{loops}")  # fmt: skip
+    p.write_text(
+        f"dbc: {resource_path('dbc', 'excavator4.dbc')}\n"
+        f"model: {resource_path('config', 'boom_default.model.npz')}\n"
+        f"loops:\n{loops}"
+    )
     return p
 
 
@@ -220,18 +236,26 @@ MODEL = resource_path("config", "boom_default.model.npz")
 @pytest.mark.parametrize(
     "loops, says",
     [
-        (f"  - {{name: boom, model: {MODEL}}}\n  - {{name: boom, model: {MODEL}}}\n",
-         "loops[1].name 'boom' is also loops[0]'s"),
-        (f"  - {{name: stick, model: {MODEL}, signals: {{PX: Stick_PP}}}}\n",
-         "loops[0].signals: unknown signal 'PX'"),
-        (f"  - {{name: stick, model: {MODEL}, signals: {{PP: Stick_PP, PA: Stick_PP}}}}\n",
-         "DBC signal 'Stick_PP' would carry two"),
+        (
+            f"  - {{name: boom, model: {MODEL}}}\n  - {{name: boom, model: {MODEL}}}\n",
+            "loops[1].name 'boom' is also loops[0]'s",
+        ),
+        (
+            f"  - {{name: stick, model: {MODEL}, signals: {{PX: Stick_PP}}}}\n",
+            "loops[0].signals: unknown signal 'PX'",
+        ),
+        (
+            f"  - {{name: stick, model: {MODEL}, signals: {{PP: Stick_PP, PA: Stick_PP}}}}\n",
+            "DBC signal 'Stick_PP' would carry two",
+        ),
         (f"  - {{name: Stick, model: {MODEL}}}\n", "loops[0].name must be lower case"),
         ("  - {name: stick, model: nowhere.npz}\n", "loops[0].model: no such file"),
-        (f"  - {{name: stick, model: {MODEL}, source_address: 254}}\n",
-         "loops[0].source_address must be a whole number 0..253"),
+        (
+            f"  - {{name: stick, model: {MODEL}, source_address: 254}}\n",
+            "loops[0].source_address must be a whole number 0..253",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_loops_section_is_one_config_error(tmp_path, loops, says) -> None:
     path = _config(tmp_path, loops)
     with pytest.raises(ConfigError) as info:
@@ -309,8 +333,11 @@ def test_reload_swaps_each_loops_model_and_keeps_the_loop_layout(tmp_path, caplo
 
 def _request(pgn: int, to: int) -> can.Message:
     """A J1939 request (PGN 59904 = 0xEA00) from a service tool at 0xF9 (J1939-21)."""
-    return can.Message(arbitration_id=0x18EA0000 | to << 8 | 0xF9, is_extended_id=True,
-                       data=pgn.to_bytes(3, "little"))  # fmt: skip
+    return can.Message(
+        arbitration_id=0x18EA0000 | to << 8 | 0xF9,
+        is_extended_id=True,
+        data=pgn.to_bytes(3, "little"),
+    )
 
 
 def test_a_request_to_all_reaches_every_loop_one_to_an_address_only_its_loop(tmp_path) -> None:
@@ -324,8 +351,16 @@ def test_a_request_to_all_reaches_every_loop_one_to_an_address_only_its_loop(tmp
 
 
 def test_a_log_without_the_loops_frames_is_exit_3_naming_the_loop(capsys) -> None:
-    rc = main(["detect", str(resource_path("replay", "normal.log")), "--config", str(CONFIG),
-               "--loop", "stick"])  # fmt: skip
+    rc = main(
+        [
+            "detect",
+            str(resource_path("replay", "normal.log")),
+            "--config",
+            str(CONFIG),
+            "--loop",
+            "stick",
+        ]
+    )
     assert rc == 3
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no frame carries loop stick's own signals (Stick_SpoolCmd" in err[0]

@@ -53,9 +53,10 @@ def test_arrays_of_another_dtype_are_refused(tmp_path, dtype) -> None:
 def test_a_huge_extra_array_is_not_unpacked(tmp_path, monkeypatch) -> None:
     path = craft_model(tmp_path)
     # 64 MB of zeros compress to ~64 kB; an unknown member is neither read nor counted.
-    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as zf, zf.open(
-        "patterns_extra.npy", "w", force_zip64=True
-    ) as fh:
+    with (
+        zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as zf,
+        zf.open("patterns_extra.npy", "w", force_zip64=True) as fh,
+    ):
         for _ in range(64):
             fh.write(bytes(1 << 20))
     assert path.stat().st_size < 2_000_000

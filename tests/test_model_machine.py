@@ -21,10 +21,22 @@ from monitor.model.machinecard import ModelCard
 from monitor.model.modelfile import load_model, save_model
 from monitor.resources import resource_path
 
-REFERENCE = {"bore_mm": 63.0, "rod_mm": 36.0, "mass_kg": 400.0, "gravity_load_n": 6000.0,
-             "pump_disp_cc_rev": 11.0, "valve_rated_flow_lpm": 20.0}  # config/simulator.yaml
-BIG = {"bore_mm": 90.0, "rod_mm": 50.0, "mass_kg": 1500.0, "gravity_load_n": 15000.0,
-       "pump_disp_cc_rev": 16.0, "valve_rated_flow_lpm": 35.0}  # the attack's machine
+REFERENCE = {
+    "bore_mm": 63.0,
+    "rod_mm": 36.0,
+    "mass_kg": 400.0,
+    "gravity_load_n": 6000.0,
+    "pump_disp_cc_rev": 11.0,
+    "valve_rated_flow_lpm": 20.0,
+}  # config/simulator.yaml
+BIG = {
+    "bore_mm": 90.0,
+    "rod_mm": 50.0,
+    "mass_kg": 1500.0,
+    "gravity_load_n": 15000.0,
+    "pump_disp_cc_rev": 16.0,
+    "valve_rated_flow_lpm": 35.0,
+}  # the attack's machine
 LOG = resource_path("replay", "normal.log")
 
 
@@ -54,8 +66,10 @@ def test_a_stick_model_for_the_boom_loop_is_refused_naming_both(tmp_path, capsys
     rc = main(["detect", str(LOG), "--config", str(cfg), "--loop", "boom"])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "\n" not in err and "Traceback" not in err
-    assert err == (f"monitor detect: error: {model}: a model of loop 'stick', given to {cfg}: "
-                   "loops[0], loop 'boom': train one for this loop (monitor train --loop boom)")
+    assert err == (
+        f"monitor detect: error: {model}: a model of loop 'stick', given to {cfg}: "
+        "loops[0], loop 'boom': train one for this loop (monitor train --loop boom)"
+    )
     # ... and for the stick loop it loads.
     assert main(["detect", str(LOG), "--config", str(cfg), "--loop", "stick"]) == 3  # no frames
 
@@ -77,10 +91,13 @@ def test_a_model_of_another_machine_is_refused_naming_both(tmp_path, capsys) -> 
     err = capsys.readouterr().err.strip()
     assert "\n" not in err
     assert "trained on a machine with bore 90 mm, rod 50 mm, mass 1500 kg" in err
-    assert "has bore 63 mm, rod 36 mm, mass 400 kg, load 6000 N, pump 11 cc/rev, " \
-           "valve 20 L/min" in err  # fmt: skip
-    assert "(bore_mm, rod_mm, mass_kg, gravity_load_n, pump_disp_cc_rev, " \
-           "valve_rated_flow_lpm differ)" in err  # fmt: skip
+    assert (
+        "has bore 63 mm, rod 36 mm, mass 400 kg, load 6000 N, pump 11 cc/rev, valve 20 L/min" in err
+    )
+    assert (
+        "(bore_mm, rod_mm, mass_kg, gravity_load_n, pump_disp_cc_rev, "
+        "valve_rated_flow_lpm differ)" in err
+    )
 
 
 def test_a_model_trained_on_flows_the_machine_cannot_deliver_is_refused(tmp_path, capsys) -> None:
@@ -115,8 +132,10 @@ def test_the_record_round_trips_and_train_writes_the_configured_one(tmp_path) ->
 
     model = load_model(SHIPPED)
     n = 100
-    cols = {s: np.full(n, 20.0) for s in ("SpoolCmd", "PumpDispCmd", "EngineSpeed",
-                                            "OilTemp", "PP", "PA", "PB", "QP")}  # fmt: skip
+    cols = {
+        s: np.full(n, 20.0)
+        for s in ("SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp", "PP", "PA", "PB", "QP")
+    }
     rec = Recording(np.arange(n) * 0.01, cols)
     model.card = train_card(load_config(), None, [rec])
     assert model.card.loop == "boom" and model.card.machine == REFERENCE

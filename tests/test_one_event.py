@@ -60,24 +60,39 @@ def test_the_fleet_page_says_which_machine_rests_on_one_event(tmp_path):
     (results / "models").mkdir(parents=True)
     model = load_model(resource_path("config", "boom_default.model.npz"))
     plain = load_model(resource_path("config", "boom_default.model.npz"))
-    model.training = dict(model.training, threshold_one_event={
-        "source": "/data/fleet/M01/commissioning/normal.log", "t_s": 570.0, "j": 8.3e-3,
-        "ratio": 6.4})  # fmt: skip
+    model.training = dict(
+        model.training,
+        threshold_one_event={
+            "source": "/data/fleet/M01/commissioning/normal.log",
+            "t_s": 570.0,
+            "j": 8.3e-3,
+            "ratio": 6.4,
+        },
+    )
     save_model(results / "models" / "M01.model.npz", model)
     save_model(results / "models" / "M02.model.npz", plain)
     rows = []
     for mid in ("M01", "M02"):
         for i in range(4):
             r = {name: None for name in LOG_SCHEMA.names}
-            r |= {"machine": mid, "log": f"{mid}/logs/day{i:02d}.log", "sha256": f"{mid}{i}",
-                  "verdict": "healthy", "alarm": False, "sensor_fault": False,
-                  "max_j_ratio": 0.3, "p95_j_ratio": 0.2, "model": "commissioned"}  # fmt: skip
+            r |= {
+                "machine": mid,
+                "log": f"{mid}/logs/day{i:02d}.log",
+                "sha256": f"{mid}{i}",
+                "verdict": "healthy",
+                "alarm": False,
+                "sensor_fault": False,
+                "max_j_ratio": 0.3,
+                "p95_j_ratio": 0.2,
+                "model": "commissioned",
+            }
             rows.append(r)
     pq.write_table(pa.Table.from_pylist(rows, schema=LOG_SCHEMA), results / "logs.parquet")
     assert main(["fleet", "report", str(results), "--out", str(tmp_path / "page")]) == 0
     table = (tmp_path / "page" / "fleet.md").read_text()
     m01 = next(line for line in table.splitlines() if line.startswith("| M01 "))
     m02 = next(line for line in table.splitlines() if line.startswith("| M02 "))
-    assert m01.endswith("| commissioned; J0 rests on one event (6.4 x any other window's, "
-                        "normal.log at 9.5 min) |")  # fmt: skip
+    assert m01.endswith(
+        "| commissioned; J0 rests on one event (6.4 x any other window's, normal.log at 9.5 min) |"
+    )
     assert m02.endswith("| commissioned |")

@@ -63,13 +63,13 @@ def test_daemon_cap_is_exact_over_a_second(tmp_path, monkeypatch) -> None:
     """The daemon's own cap on every frame it sends (``outputs.frames_max_per_s`` 50), its
     wall clock replaced by one stepped 5 ms per frame offered: at most 50 in any second."""
     cfg = live_config(tmp_path)
-    cfg = dataclasses.replace(cfg, outputs=dataclasses.replace(cfg.outputs,
-                                                               frames_max_per_s=50.0))
+    cfg = dataclasses.replace(cfg, outputs=dataclasses.replace(cfg.outputs, frames_max_per_s=50.0))
     listener = can.Bus(interface="virtual", channel=cfg.bus.channel)
     daemon = Daemon(cfg)
     clock = {"t": 1000.0}
-    monkeypatch.setattr("monitor.live.daemon.time", SimpleNamespace(
-        monotonic=lambda: clock["t"], time=time.time))  # fmt: skip
+    monkeypatch.setattr(
+        "monitor.live.daemon.time", SimpleNamespace(monotonic=lambda: clock["t"], time=time.time)
+    )
     sent = []
     try:
         for i in range(600):
@@ -88,8 +88,7 @@ def test_daemon_cap_is_exact_over_a_second(tmp_path, monkeypatch) -> None:
 
 def test_a_request_flood_never_makes_the_monitor_flood_the_bus(tmp_path) -> None:
     cfg = live_config(tmp_path)
-    cfg = dataclasses.replace(cfg, outputs=dataclasses.replace(cfg.outputs,
-                                                               frames_max_per_s=5.0))
+    cfg = dataclasses.replace(cfg, outputs=dataclasses.replace(cfg.outputs, frames_max_per_s=5.0))
     msgs = list(itertools.islice(read_candump(resource_path("replay", "spool_wear.log")), 9000))
     listener = can.Bus(interface="virtual", channel=cfg.bus.channel)
     daemon = Daemon(cfg)

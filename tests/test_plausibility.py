@@ -106,9 +106,11 @@ def test_a_flow_reading_pinned_at_zero_while_the_valve_passes_oil_is_frozen() ->
 
 @pytest.mark.parametrize(
     "spool, pp, pa, pb",
-    [(50.0, 200.0, 195.0, 5.0),  # at the end stop: A has risen to the pump, no drop, no flow
-     (10.0, 180.0, 120.0, 5.0),  # spool barely open (below relation_spool_pct)
-     (-50.0, 180.0, 120.0, 175.0)],  # fed port B at the pump (A high does not count)
+    [
+        (50.0, 200.0, 195.0, 5.0),  # at the end stop: A has risen to the pump, no drop, no flow
+        (10.0, 180.0, 120.0, 5.0),  # spool barely open (below relation_spool_pct)
+        (-50.0, 180.0, 120.0, 175.0),
+    ],  # fed port B at the pump (A high does not count)
 )
 def test_a_flow_reading_of_zero_without_flow_through_the_valve_is_not_frozen(
     spool: float, pp: float, pa: float, pb: float
@@ -242,8 +244,14 @@ def test_detect_and_ticks_give_the_same_sensor_events(model, normal_run) -> None
     "cfg",
     [
         PlausibilityConfig(),
-        PlausibilityConfig(frozen_s=0.3, stuck_s=2.0, relation_s=0.2, rest_settle_s=1.0,
-                           range_s=0.05, rest_max_bar=2.0),  # fmt: skip
+        PlausibilityConfig(
+            frozen_s=0.3,
+            stuck_s=2.0,
+            relation_s=0.2,
+            rest_settle_s=1.0,
+            range_s=0.05,
+            rest_max_bar=2.0,
+        ),
     ],
     ids=["defaults", "short-times"],
 )

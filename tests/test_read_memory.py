@@ -67,8 +67,10 @@ def test_a_csv_costs_its_columns_not_its_rows_as_text(tmp_path: Path, monkeypatc
     path = tmp_path / "rows.csv"
     with path.open("w") as fh:
         fh.write("t,SpoolCmd,PumpDispCmd,EngineSpeed,OilTemp,PP,PA,PB,QP\n")
-        fh.writelines(f"{i / 100:.2f},{i % 200 - 100},100,2200,45.5,{100 + i % 50}.25,80.5,"
-                      "20.25,15.5\n" for i in range(n))  # fmt: skip
+        fh.writelines(
+            f"{i / 100:.2f},{i % 200 - 100},100,2200,45.5,{100 + i % 50}.25,80.5,20.25,15.5\n"
+            for i in range(n)
+        )
     rec, peak = _peak(read_csv, path)
     kept = rec.t.nbytes + sum(v.nbytes for v in rec.columns.values())
     assert kept == n * 9 * 8

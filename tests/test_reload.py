@@ -74,8 +74,9 @@ def _run_with_reload(
 
 def _offline() -> list[dict]:
     cfg = load_config()
-    return detect(load_model(cfg.model), read_recording(LOG), cfg.alarm, cfg.horizon,
-                  gating=cfg.gating).events  # fmt: skip
+    return detect(
+        load_model(cfg.model), read_recording(LOG), cfg.alarm, cfg.horizon, gating=cfg.gating
+    ).events
 
 
 def test_reload_with_the_same_model_changes_no_event(tmp_path, caplog) -> None:

@@ -107,8 +107,17 @@ def test_start_mid_operation_is_warming_until_every_signal_was_seen() -> None:
     """A start mid-operation: the 1 Hz OilTemp comes 0.43 s after the first frame, and RodPos
     (optional) never.  The rows before it are warming, not emitted; row t = 0 is the first
     instant with every required signal fresh."""
-    cycles = {"SpoolCmd": 0.01, "PumpDispCmd": 0.01, "EngineSpeed": 0.01, "PP": 0.01,
-              "PA": 0.01, "PB": 0.01, "QP": 0.01, "OilTemp": 1.0, "RodPos": 0.01}  # fmt: skip
+    cycles = {
+        "SpoolCmd": 0.01,
+        "PumpDispCmd": 0.01,
+        "EngineSpeed": 0.01,
+        "PP": 0.01,
+        "PA": 0.01,
+        "PB": 0.01,
+        "QP": 0.01,
+        "OilTemp": 1.0,
+        "RodPos": 0.01,
+    }
     frames = []
     for k in range(100):
         t = 50.0 + k * 0.01

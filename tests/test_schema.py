@@ -32,10 +32,16 @@ def test_a_yaml_bomb_is_refused_at_its_first_alias(tmp_path: Path, loader) -> No
 @pytest.mark.parametrize(
     ("text", "loader", "message"),
     [
-        ("bus:\n  channel: can0\n  channel: can1\n", load_config,
-         "line 3: key 'channel' is given twice"),
-        ("alarm:\n  min_engine_rpm: .nan\n", load_config,
-         "alarm.min_engine_rpm must be a finite number"),
+        (
+            "bus:\n  channel: can0\n  channel: can1\n",
+            load_config,
+            "line 3: key 'channel' is given twice",
+        ),
+        (
+            "alarm:\n  min_engine_rpm: .nan\n",
+            load_config,
+            "alarm.min_engine_rpm must be a finite number",
+        ),
         ("storage:\n  quota_mb: .inf\n", load_config, "storage.quota_mb must be a finite number"),
         ("detector:\n  horizon: 0\n", load_config, "detector.horizon must be >= 1"),
         ("load:\n  mass_kg: 400\n  mass_kg: 500\n", load_machine, "key 'mass_kg' is given twice"),
@@ -43,7 +49,7 @@ def test_a_yaml_bomb_is_refused_at_its_first_alias(tmp_path: Path, loader) -> No
         ("bus: [1, 2\n", load_config, "line 2"),
     ],
     ids=["duplicate", "nan", "inf", "horizon", "sim-duplicate", "sim-inf", "broken"],
-)  # fmt: skip
+)
 def test_bad_values_are_one_line_naming_file_key_and_value(tmp_path, text, loader, message):
     path = tmp_path / "c.yaml"
     path.write_text(text)

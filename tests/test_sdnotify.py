@@ -84,8 +84,13 @@ def test_abstract_socket_and_watchdog_for_this_process_only(tmp_path) -> None:
     sock.bind(b"\0" + name.encode())
     sock.settimeout(5.0)
     try:
-        n = Notifier({"NOTIFY_SOCKET": "@" + name, "WATCHDOG_USEC": "3000000",
-                      "WATCHDOG_PID": str(os.getpid())})  # fmt: skip
+        n = Notifier(
+            {
+                "NOTIFY_SOCKET": "@" + name,
+                "WATCHDOG_USEC": "3000000",
+                "WATCHDOG_PID": str(os.getpid()),
+            }
+        )
         assert n.watchdog_s == 3.0
         assert n.watchdog()
         assert sock.recv(100) == b"WATCHDOG=1"

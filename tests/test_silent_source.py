@@ -40,8 +40,13 @@ ENGINE_SPN = 520192 + 16 + 2  # proprietary sensor SPNs in the order of dtc.py's
 SPOOL_SPN, PUMP_SPN = 520192 + 16, 520192 + 16 + 1
 
 
-def cut_log(tmp_path: Path, name: str, start_s: float, end_s: float = 1e9,
-            ids: tuple[str, ...] = (COMMANDS,)) -> Path:  # fmt: skip
+def cut_log(
+    tmp_path: Path,
+    name: str,
+    start_s: float,
+    end_s: float = 1e9,
+    ids: tuple[str, ...] = (COMMANDS,),
+) -> Path:
     """spool_wear.log without the frames of ``ids`` (all frames for ``("",)``) from
     ``start_s`` to ``end_s`` (log time from the first frame)."""
     lines = LOG.read_text().splitlines()
@@ -59,10 +64,21 @@ def cut_log(tmp_path: Path, name: str, start_s: float, end_s: float = 1e9,
 def detect_cli(log: Path, tmp_path: Path) -> tuple[int, dict[str, Any], list[dict[str, Any]]]:
     summary, events = tmp_path / "s.json", tmp_path / "e.jsonl"
     proc = subprocess.run(
-        [sys.executable, "-m", "monitor", "detect", str(log), "--summary", str(summary),
-         "--events", str(events)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "detect",
+            str(log),
+            "--summary",
+            str(summary),
+            "--events",
+            str(events),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     lines = [json.loads(x) for x in events.read_text().splitlines()]
     changes = [e for e in lines if e["event"] == "state"]  # not the J once a second
     return proc.returncode, json.loads(summary.read_text()), changes
@@ -89,8 +105,9 @@ def test_silence_starts_after_the_settle_time_with_flow_and_holds_while_pp_is_up
     got = silent_source(engine, pp, qp, 5.0, 2.0, 2)
     assert got.tolist() == [bool(x) for x in expected]
     tracker = SilenceTracker(5.0, 2.0, 2)
-    steps = [tracker.step(float(e), float(p), float(q)) for e, p, q in zip(engine, pp, qp,
-                                                                        strict=True)]  # fmt: skip
+    steps = [
+        tracker.step(float(e), float(p), float(q)) for e, p, q in zip(engine, pp, qp, strict=True)
+    ]
     assert steps == got.tolist()
 
 
@@ -105,13 +122,21 @@ def test_detect_names_the_silent_commands_instead_of_engine_off(tmp_path: Path) 
     sf = [e for e in events if e["state"] == "sensor_fault"]
     assert sf and t_stale + SETTLE_S - 1e-6 <= sf[0]["t"] < t_stale + SETTLE_S + 1.0
     assert (sf[0]["sensor"], sf[0]["sensor_check"], sf[0]["op_state"]) == (
-        "EngineSpeed", "stale", "normal")  # fmt: skip
+        "EngineSpeed",
+        "stale",
+        "normal",
+    )
     # Until the end of the log: one sensor fault, never inactive again, no alarm.
     assert not [e for e in events if e["t"] > sf[0]["t"] and e["state"] != "sensor_fault"]
     assert s["verdict"] == "sensor_fault" and not s["alarm"]
-    assert s["sensor_checks"] == [{"sensor": "EngineSpeed", "check": "stale",
-                                   "first_t": sf[0]["t"],
-                                   "samples": round((90.0 - sf[0]["t"]) / 0.01) + 1}]  # fmt: skip
+    assert s["sensor_checks"] == [
+        {
+            "sensor": "EngineSpeed",
+            "check": "stale",
+            "first_t": sf[0]["t"],
+            "samples": round((90.0 - sf[0]["t"]) / 0.01) + 1,
+        }
+    ]
 
 
 def test_rejected_commands_frames_are_a_silent_source_too(tmp_path: Path) -> None:
@@ -174,8 +199,9 @@ def test_every_message_silent_is_inactive_not_a_sensor_fault(tmp_path: Path) -> 
     rc, s, events = detect_cli(cut_log(tmp_path, "quiet.log", 30.0, 40.0, ("",)), tmp_path)
     gap = [e for e in events if 30.0 <= e["t"] < 40.0]
     assert [e["state"] for e in gap] == ["inactive"]
-    assert not any(c["check"] == "stale" and c["sensor"] == "EngineSpeed"
-                   for c in s["sensor_checks"])  # fmt: skip
+    assert not any(
+        c["check"] == "stale" and c["sensor"] == "EngineSpeed" for c in s["sensor_checks"]
+    )
 
 
 def _edited(rec: Recording, start: int, **cols: float) -> Recording:
@@ -211,9 +237,7 @@ def test_a_stopped_machine_stays_inactive(model, case: str, cols: dict[str, floa
 # -- the daemon and its DM1 ----------------------------------------------------------------
 
 
-def test_daemon_gives_the_sensor_fault_and_a_dm1_naming_engine_speed(
-    model, tmp_path: Path
-) -> None:
+def test_daemon_gives_the_sensor_fault_and_a_dm1_naming_engine_speed(model, tmp_path: Path) -> None:
     log = cut_log(tmp_path, "nocmd.log", 30.0, 40.0)
     cfg = live_config(tmp_path)
     assert cfg.j1939.enabled
@@ -225,8 +249,11 @@ def test_daemon_gives_the_sensor_fault_and_a_dm1_naming_engine_speed(
     # The DM1 during the sensor fault: the three HYD_Commands signals the model uses, each
     # with its SPN and FMI 9 (abnormal update rate), first occurrence.
     j1939 = [m for m in frames if m.arbitration_id in (TP_CM_ID, TP_DT_ID)]
-    dm1 = [(g["t"] - counts.first_ts, decode_dm(g["data"])[1]) for g in reassemble(j1939)
-           if g["pgn"] == PGN_DM1]  # fmt: skip
+    dm1 = [
+        (g["t"] - counts.first_ts, decode_dm(g["data"])[1])
+        for g in reassemble(j1939)
+        if g["pgn"] == PGN_DM1
+    ]
     silent = [(ENGINE_SPN, 9, 1), (PUMP_SPN, 9, 1), (SPOOL_SPN, 9, 1)]
     assert dm1 and all(sorted(d, reverse=True) == silent for _, d in dm1)
     assert dm1[0][0] == pytest.approx(t_on + 0.1, abs=0.011)  # BAM: 2 data packets later

@@ -22,8 +22,9 @@ PROFILE = [(0.5, 2.0, 60.0), (3.0, 4.0, -50.0), (4.5, 5.0, 15.0)]
 
 
 def _arrays(trace) -> np.ndarray:
-    return np.column_stack([trace.pp_pa, trace.pa_pa, trace.pb_pa, trace.qp_m3_s,
-                            trace.rod_pos_m, trace.rod_vel_m_s])  # fmt: skip
+    return np.column_stack(
+        [trace.pp_pa, trace.pa_pa, trace.pb_pa, trace.qp_m3_s, trace.rod_pos_m, trace.rod_vel_m_s]
+    )
 
 
 def test_zero_corrections_leave_the_simulation_bit_identical():
@@ -57,8 +58,9 @@ def test_pump_to_tank_leak_is_what_the_pump_delivers_at_dead_head(shape):
 
 def test_coulomb_term_adds_to_the_force_balance_at_constant_speed():
     # Metered raise at 20 % spool: PA A_A - PB A_B = 6 kN + 2000 N s/m v + 500 N.
-    rec = simulate(commands([(0.5, 3.0, 20.0)], 3.0), M, seed=None,
-                   corrections={"force_sign": 500.0})  # fmt: skip
+    rec = simulate(
+        commands([(0.5, 3.0, 20.0)], 3.0), M, seed=None, corrections={"force_sign": 500.0}
+    )
     v = at(rec, "RodVel", 2.0) / 1e3
     assert v > 0.01
     force = (at(rec, "PA", 2.0) * A_A - at(rec, "PB", 2.0) * A_B) * BAR

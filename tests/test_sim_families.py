@@ -35,8 +35,11 @@ def test_defaults_of_the_new_parameters_leave_every_trace_as_before():
             # with the correction terms beside the load); any change of a formula moves
             # these traces by orders of magnitude more.
             np.testing.assert_allclose(
-                np.asarray(rec[sig], dtype=np.float64), ref[f"{name}.{sig}"], rtol=1e-12,
-                atol=1e-9, err_msg=f"{name} {sig}",
+                np.asarray(rec[sig], dtype=np.float64),
+                ref[f"{name}.{sig}"],
+                rtol=1e-12,
+                atol=1e-9,
+                err_msg=f"{name} {sig}",
             )
 
 
@@ -62,9 +65,11 @@ def test_valve_clearance_leak_is_laminar_and_follows_viscosity(temp_c, nu_cst):
     # k (pp - p) with k = 0.5 L/min per 100 bar at 46 cSt, times 46/nu (laminar).
     k = 0.5 / 60000 / 1e7 * 46.0 / nu_cst
     fx = Effect.make(
-        "oil_viscosity", pump_leak_lpm_per_100bar=0.0, friction_share=0.0,
+        "oil_viscosity",
+        pump_leak_lpm_per_100bar=0.0,
+        friction_share=0.0,
         valve_leak_lpm_per_100bar=0.5,
-    )  # fmt: skip
+    )
     rec = simulate(_hold(temp_c), M, effects=[fx], seed=None)
     pp, pa, pb = (at(rec, s, 7.0) * 1e5 for s in ("PP", "PA", "PB"))
     expected_lpm = k * ((pp - pa) + (pp - pb)) * 60000
@@ -74,8 +79,13 @@ def test_valve_clearance_leak_is_laminar_and_follows_viscosity(temp_c, nu_cst):
 
 def _friction_force(exponent: float, v_m_s: float) -> float:
     """Friction the kernel applies at rod speed v (from dv/dt with no pressure force)."""
-    fx = Effect.make("cylinder_friction", coulomb_n=500.0, static_n=800.0,
-                     stribeck_velocity_mm_s=10.0, stribeck_exponent=exponent)  # fmt: skip
+    fx = Effect.make(
+        "cylinder_friction",
+        coulomb_n=500.0,
+        static_n=800.0,
+        stribeck_velocity_mm_s=10.0,
+        stribeck_exponent=exponent,
+    )
     prm = pack_params(M, [fx])
     y = np.zeros(K.N_STATES)
     y[K.S_X], y[K.S_V] = 0.25, v_m_s
@@ -110,8 +120,13 @@ def test_dissolving_air_is_stiff_above_its_pressure_and_softer_below():
     # linearly from 1 at atmosphere to 0 at the dissolving pressure; the node's compliance
     # per volume is (1/beta - g'(p)) / (1 + g(p)), g' by central differences here.
     a, n, p_diss_bar = 0.02, 1.4, 30.0
-    fx = Effect.make("entrained_air", air_fraction=a, polytropic_index=n,
-                     law="dissolving", dissolved_at_bar=p_diss_bar)  # fmt: skip
+    fx = Effect.make(
+        "entrained_air",
+        air_fraction=a,
+        polytropic_index=n,
+        law="dissolving",
+        dissolved_at_bar=p_diss_bar,
+    )
     prm = pack_params(M, [fx])
     beta, p0, pc = M.bulk_modulus_pa, 101325.0, p_diss_bar * 1e5 + 101325.0
 
@@ -134,8 +149,9 @@ def test_second_order_pump_displacement_is_a_mass_spring_damper_on_its_target():
     # x'' = wn^2 (target - x) - 2 zeta wn x'; target = the displacement command (50 %)
     # while the line is below the compensator's start (20 bar here).  At x = 0.2, x' = 1.5/s,
     # 8 Hz and zeta 0.3: wn = 50.265 rad/s, x'' = 2526.6 x 0.3 - 30.159 x 1.5 = 712.74 /s^2.
-    fx = Effect.make("pump_control_dynamics", law="second_order", natural_freq_hz=8.0,
-                     damping_ratio=0.3)  # fmt: skip
+    fx = Effect.make(
+        "pump_control_dynamics", law="second_order", natural_freq_hz=8.0, damping_ratio=0.3
+    )
     prm = pack_params(M, [fx])
     y = np.zeros(K.N_STATES)
     y[K.S_PP], y[K.S_X], y[K.S_DISP], y[K.S_DISP_RATE] = 20e5, 0.25, 0.2, 1.5
@@ -155,11 +171,14 @@ def test_a_ringing_pump_overshoots_where_a_lag_does_not():
     cmds = commands([(0.5, 6.0, 100.0)], 6.0)
     cmds.columns["PumpDispCmd"] = np.where(cmds.t < 3.0, 30.0, 60.0)
     lag = Effect.make("pump_control_dynamics", time_constant_ms=60.0)
-    ring = Effect.make("pump_control_dynamics", law="second_order", natural_freq_hz=4.0,
-                       damping_ratio=0.2)  # fmt: skip
+    ring = Effect.make(
+        "pump_control_dynamics", law="second_order", natural_freq_hz=4.0, damping_ratio=0.2
+    )
     after = (cmds.t > 3.0) & (cmds.t < 4.5)
-    recs = {name: simulate(cmds, M, effects=[fx], seed=None) for name, fx in
-            (("lag", lag), ("ring", ring))}  # fmt: skip
+    recs = {
+        name: simulate(cmds, M, effects=[fx], seed=None)
+        for name, fx in (("lag", lag), ("ring", ring))
+    }
     settled = {name: at(rec, "QP", 5.8) for name, rec in recs.items()}
     peak = {name: float(np.max(rec["QP"][after])) for name, rec in recs.items()}
     assert settled["ring"] == pytest.approx(settled["lag"], rel=0.02)

@@ -231,9 +231,12 @@ def test_hose_compliance_lowers_the_natural_frequency():
 
 
 def _added(line_cm3_bar: float, cylinder_cm3_bar: float) -> Effect:
-    return Effect.make("hose_compliance", law="added_capacitance",
-                       line_capacitance_cm3_per_bar=line_cm3_bar,
-                       cylinder_capacitance_cm3_per_bar=cylinder_cm3_bar)  # fmt: skip
+    return Effect.make(
+        "hose_compliance",
+        law="added_capacitance",
+        line_capacitance_cm3_per_bar=line_cm3_bar,
+        cylinder_capacitance_cm3_per_bar=cylinder_cm3_bar,
+    )
 
 
 def test_hoses_as_added_capacitances_match_the_series_modulus_they_stand_for():
@@ -241,8 +244,9 @@ def test_hoses_as_added_capacitances_match_the_series_modulus_they_stand_for():
     # on the pump line, 0.3 L / 0.5 GPa = 0.06 cm^3/bar on each cylinder line.
     assert M.line_volume_m3 == 0.5e-3 and M.dead_volume_a_m3 == M.dead_volume_b_m3 == 0.3e-3
     cmds = commands([(0.5, 1.5, 60.0), (3.0, 3.8, -50.0)], 5.0)
-    series = simulate(cmds, M, effects=[Effect.make("hose_compliance", wall_modulus_gpa=0.5)],
-                      seed=None)  # fmt: skip
+    series = simulate(
+        cmds, M, effects=[Effect.make("hose_compliance", wall_modulus_gpa=0.5)], seed=None
+    )
     added = simulate(cmds, M, effects=[_added(0.1, 0.06)], seed=None)
     for sig in ("PP", "PA", "PB", "QP", "RodPosTrue"):
         assert np.allclose(added[sig], series[sig], rtol=1e-9, atol=1e-9), sig

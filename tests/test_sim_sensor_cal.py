@@ -15,8 +15,20 @@ from monitor.sim.simulate import simulate
 
 M = load_machine()
 CMDS = make_cycle("boom", 20.0, seed=5)
-COLUMNS = ("SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp", "PP", "PA", "PB", "QP", "RodPos",
-           "SpoolPos", "RodPosTrue", "RodVel")  # fmt: skip
+COLUMNS = (
+    "SpoolCmd",
+    "PumpDispCmd",
+    "EngineSpeed",
+    "OilTemp",
+    "PP",
+    "PA",
+    "PB",
+    "QP",
+    "RodPos",
+    "SpoolPos",
+    "RodPosTrue",
+    "RodVel",
+)
 
 
 @pytest.fixture(scope="module")
@@ -45,8 +57,9 @@ def test_pressure_gain_and_offset_scale_that_signal_only(nominal):
 
 def test_flow_offset_alone_adds_the_offset(nominal):
     # Only the offset given: the gain is 1 (the effect's 1.1 is for neither given).
-    rec = simulate(CMDS, M, effects=[parse_effect("sensor_calibration:signal=QP,offset=-1.5")],
-                   seed=None)  # fmt: skip
+    rec = simulate(
+        CMDS, M, effects=[parse_effect("sensor_calibration:signal=QP,offset=-1.5")], seed=None
+    )
     _others_identical(nominal, rec, "QP")
     r = dbc_resolutions()["QP"][0]
     # The flow sensor clips at 0 L/min: a dead-headed pump reads 0, not -1.5.
@@ -62,8 +75,12 @@ def test_the_default_is_a_gain_of_1_1_and_an_offset_alone_has_gain_1() -> None:
 
 
 def test_rodpos_reading_is_exactly_gain_true_plus_offset_clipped_and_quantised(nominal):
-    rec = simulate(CMDS, M, effects=[parse_effect("sensor_calibration:signal=RodPos,gain=1.05,"
-                                                  "offset=-5")], seed=None)  # fmt: skip
+    rec = simulate(
+        CMDS,
+        M,
+        effects=[parse_effect("sensor_calibration:signal=RodPos,gain=1.05,offset=-5")],
+        seed=None,
+    )
     _others_identical(nominal, rec, "RodPos")
     # The true rod position is in the output (RodPosTrue), so the reading is known exactly:
     # gain x true + offset, clipped to the sensor's 0..500 mm, on the DBC's grid.
@@ -93,8 +110,10 @@ def test_with_noise_the_other_signals_keep_their_noise_bit_for_bit():
 def test_bad_sensor_calibrations_are_refused_with_one_line(text, words, tmp_path, capsys):
     with pytest.raises(ConfigError, match=words):
         parse_effect(text)
-    assert main(["simulate", "--duration", "1", "--effect", text, "--out",
-                 str(tmp_path / "x.csv")]) == 2  # fmt: skip
+    assert (
+        main(["simulate", "--duration", "1", "--effect", text, "--out", str(tmp_path / "x.csv")])
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert words in err and "\n" not in err
 
@@ -102,6 +121,13 @@ def test_bad_sensor_calibrations_are_refused_with_one_line(text, words, tmp_path
 def test_help_lists_signal_gain_and_offset_with_units_and_ranges(capsys):
     assert main(["simulate", "--help"]) == 0
     text = capsys.readouterr().out
-    for words in ("sensor_calibration", "signal [name]", "PP|PA|PB|QP|RodPos", "gain [-]",
-                  "range 0.5..1.5", "offset [signal unit]", "L/min (QP; within +-10)"):  # fmt: skip
+    for words in (
+        "sensor_calibration",
+        "signal [name]",
+        "PP|PA|PB|QP|RodPos",
+        "gain [-]",
+        "range 0.5..1.5",
+        "offset [signal unit]",
+        "L/min (QP; within +-10)",
+    ):
         assert words in text

@@ -11,8 +11,22 @@ from monitor.cli import main
 
 def test_several_logs_a_day_are_named_in_time_order_and_wear_rises_log_by_log(tmp_path):
     out = tmp_path / "F"
-    args = ["simulate-fleet", str(out), "--machines", "1", "--days", "2", "--logs-per-day", "2",
-            "--log-s", "60", "--commissioning-s", "180", "--wear-max", "0.6"]  # fmt: skip
+    args = [
+        "simulate-fleet",
+        str(out),
+        "--machines",
+        "1",
+        "--days",
+        "2",
+        "--logs-per-day",
+        "2",
+        "--log-s",
+        "60",
+        "--commissioning-s",
+        "180",
+        "--wear-max",
+        "0.6",
+    ]
     assert main(args) == 0
     logs = sorted(p.name for p in (out / "M01" / "logs").iterdir())
     assert logs == ["day01-1.log", "day01-2.log", "day02-1.log", "day02-2.log"]
@@ -27,8 +41,16 @@ def test_several_logs_a_day_are_named_in_time_order_and_wear_rises_log_by_log(tm
 
 
 def test_too_many_logs_a_day_is_one_line_and_exit_2(tmp_path, capsys):
-    args = ["simulate-fleet", str(tmp_path / "F"), "--machines", "1", "--days", "2",
-            "--logs-per-day", "30"]  # fmt: skip
+    args = [
+        "simulate-fleet",
+        str(tmp_path / "F"),
+        "--machines",
+        "1",
+        "--days",
+        "2",
+        "--logs-per-day",
+        "30",
+    ]
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["monitor simulate-fleet: error: --logs-per-day must be 1..24, got 30"]

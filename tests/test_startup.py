@@ -44,8 +44,9 @@ print(json.dumps(heavy), file=sys.stderr)
     ids=lambda a: " ".join(a) or "(none)",
 )
 def test_help_and_argument_errors_load_no_numba_or_scipy(argv: list[str]) -> None:
-    out = subprocess.run([sys.executable, "-c", PROBE, json.dumps(argv)],
-                         capture_output=True, text=True, check=False)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE, json.dumps(argv)], capture_output=True, text=True, check=False
+    )
     heavy = json.loads(out.stderr.strip().splitlines()[-1])
     assert heavy == [], out.stderr
 
@@ -55,8 +56,16 @@ def warm(tmp_path_factory) -> tuple[list[str], Path]:
     """``monitor warm-up`` twice into a cache of its own: (stderr of each run, cache dir)."""
     cache = tmp_path_factory.mktemp("warm") / "cache"
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
-    runs = [subprocess.run([sys.executable, "-m", "monitor", "warm-up"], capture_output=True,
-                           text=True, env=env, check=True).stderr for _ in range(2)]  # fmt: skip
+    runs = [
+        subprocess.run(
+            [sys.executable, "-m", "monitor", "warm-up"],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+        ).stderr
+        for _ in range(2)
+    ]
     return runs, cache
 
 
@@ -111,14 +120,19 @@ def test_the_tick_kernels_compiled_ahead_of_time_decide_as_the_jit(
     runs, cache = warm
     if shutil.which("g++") is None:  # numba's pycc compiles through distutils' C++ driver
         pytest.skip("no C++ compiler (g++): `monitor warm-up` cannot compile the tick kernels")
-    assert "16 of 16 kernels (live tick, offline detection) compiled ahead of time" in runs[-1], \
+    assert "16 of 16 kernels (live tick, offline detection) compiled ahead of time" in runs[-1], (
         runs[-1]
+    )
     rec = read_recording(resource_path("replay", "spool_wear.log"))
     np.save(tmp_path / "rows.npy", rows_of(rec))
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "MONITOR_AOT": aot}
-    out = subprocess.run([sys.executable, "-c", TICKS, str(tmp_path / "rows.npy"),
-                          repr(rec.meta["start_time_s"])],
-                         capture_output=True, text=True, env=env, check=True)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", TICKS, str(tmp_path / "rows.npy"), repr(rec.meta["start_time_s"])],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    )
     got = json.loads(out.stdout.strip().splitlines()[-1])
     assert got["numba"] is (aot == "0")
     cfg = load_config()
@@ -140,9 +154,7 @@ print(json.dumps({"numba": "numba" in sys.modules}))
 """
 
 
-def test_monitor_detect_after_warm_up_loads_no_numba_and_judges_as_the_jit(
-    warm, tmp_path
-) -> None:
+def test_monitor_detect_after_warm_up_loads_no_numba_and_judges_as_the_jit(warm, tmp_path) -> None:
     """The offline kernels (candump scan, sample clock, DGRNN over a series on one thread,
     J, B) compiled ahead of time give `monitor detect` the JIT's verdict, events and alarm
     times; only sums may differ in the last bits (pycc compiles without fast-math)."""
@@ -158,12 +170,19 @@ def test_monitor_detect_after_warm_up_loads_no_numba_and_judges_as_the_jit(
     for aot in ("1", "0"):
         summary, events = tmp_path / f"s{aot}.json", tmp_path / f"e{aot}.jsonl"
         env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "MONITOR_AOT": aot}
-        out = subprocess.run([sys.executable, "-c", DETECT, str(log), str(summary), str(events)],
-                             capture_output=True, text=True, env=env, check=True)  # fmt: skip
+        out = subprocess.run(
+            [sys.executable, "-c", DETECT, str(log), str(summary), str(events)],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+        )
         probe = json.loads(out.stdout.strip().splitlines()[-1])
         assert probe["numba"] is (aot == "0"), out.stderr
-        got[aot] = (json.loads(summary.read_text()),
-                    [json.loads(x) for x in events.read_text().splitlines()])  # fmt: skip
+        got[aot] = (
+            json.loads(summary.read_text()),
+            [json.loads(x) for x in events.read_text().splitlines()],
+        )
     (s_aot, e_aot), (s_jit, e_jit) = got["1"], got["0"]
     assert s_aot["verdict"] == s_jit["verdict"] == "fault"
     assert s_aot["first_alarm_t"] == s_jit["first_alarm_t"]
@@ -193,8 +212,9 @@ def test_an_ahead_of_time_kernel_hands_other_argument_types_to_the_jit(warm) -> 
     if shutil.which("g++") is None:
         pytest.skip("no C++ compiler (g++): `monitor warm-up` cannot compile the kernels")
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "MONITOR_AOT": "1"}
-    out = subprocess.run([sys.executable, "-c", GUARD], capture_output=True, text=True,
-                         env=env, check=True)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", GUARD], capture_output=True, text=True, env=env, check=True
+    )
     got = json.loads(out.stdout.strip().splitlines()[-1])
     assert got["aot_only"] and got["numba"]
     expected = [-1.0, -1.0] + [1.0] * 8  # the mean of three ones, from the third sample on

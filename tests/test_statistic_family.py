@@ -71,8 +71,7 @@ class Shift(Statistic):
 
     def unscaled(self, held: HeldOut) -> ShiftModel:
         unit = ShiftModel(self.window_n_setting, 1.0)
-        tops = [np.nanmax(s) for e in held.residuals
-                if np.isfinite(s := _series(unit, e)).any()]  # fmt: skip
+        tops = [np.nanmax(s) for e in held.residuals if np.isfinite(s := _series(unit, e)).any()]
         return ShiftModel(self.window_n_setting, float(max(tops)))
 
     def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
@@ -134,9 +133,12 @@ def test_fit_sets_the_threshold_by_the_rule(shift, model, normal_e) -> None:
     rec, e = normal_e
     judged = np.isfinite(_series(stat.params_, e)).sum()
     assert stat.support_["judged_h"] == pytest.approx(judged * 0.01 / 3600, abs=1e-4)
-    assert stat.support_["windows"] == int(np.sum(
-        np.isfinite(_series(stat.params_, e))[: len(e) // 500 * 500].reshape(-1, 500).sum(1)
-        >= 250))  # fmt: skip
+    assert stat.support_["windows"] == int(
+        np.sum(
+            np.isfinite(_series(stat.params_, e))[: len(e) // 500 * 500].reshape(-1, 500).sum(1)
+            >= 250
+        )
+    )
 
 
 def test_detect_and_ticker_carry_a_fifth_statistic(shift, model, normal_e) -> None:
@@ -220,14 +222,25 @@ def test_summary_says_which_statistics_were_on_and_why(model) -> None:
 
     entries = statistics_entries(model)
     assert list(entries) == ["J", "B", "L", "H"]
-    assert [entries[n]["threshold"] for n in "JBLH"] == [model.eps0, model.bias.b0,
-                                                         model.lever.l0, model.hold.h0]
+    assert [entries[n]["threshold"] for n in "JBLH"] == [
+        model.eps0,
+        model.bias.b0,
+        model.lever.l0,
+        model.hold.h0,
+    ]
     assert all(e["on"] for e in entries.values())
-    assert entries["B"]["support"] == {"validation": "held out", "parts": 120,
-                                       "rule": "2 x the max of held-out normal values"}
+    assert entries["B"]["support"] == {
+        "validation": "held out",
+        "parts": 120,
+        "rule": "2 x the max of held-out normal values",
+    }
     off = dataclasses.replace(model, bias=None, training=dict(model.training, bias="off: short"))
-    assert statistics_entries(off)["B"] == {"on": False, "threshold": None, "why": "off: short",
-                                            "support": {}}
+    assert statistics_entries(off)["B"] == {
+        "on": False,
+        "threshold": None,
+        "why": "off: short",
+        "support": {},
+    }
 
 
 def test_eval_sim_and_fleet_carry_a_fifth_statistic(shift, model, normal_e, tmp_path) -> None:
@@ -247,8 +260,17 @@ def test_eval_sim_and_fleet_carry_a_fifth_statistic(shift, model, normal_e, tmp_
     assert s["max_m_ratio"] == pytest.approx(1.0 / stat.threshold_, rel=1e-9)  # max M is 1
     assert judged_without_m(model, log) is None
     store = ResultStore(tmp_path / "results")
-    store.add({**s, "machine": "M01", "log": "M01/logs/a.log", "sha256": "x", "model": "own",
-               "error": None}, judged.events)  # fmt: skip
+    store.add(
+        {
+            **s,
+            "machine": "M01",
+            "log": "M01/logs/a.log",
+            "sha256": "x",
+            "model": "own",
+            "error": None,
+        },
+        judged.events,
+    )
     store.compact()
     table = pq.read_table(tmp_path / "results" / "logs.parquet").to_pylist()
     assert table[0]["max_m_ratio"] == pytest.approx(s["max_m_ratio"])

@@ -87,8 +87,11 @@ def test_quota_keeps_unsent_alarms(store) -> None:
     assert q.enforce() == 2200  # unreadable: nothing counts as acknowledged
     (ev.parent / "ev.jsonl.acked").write_text("2")
     assert q.enforce() == 1500
-    assert _names(boxes, ev) == ["alarm-20260101T020000.000000Z-c.log", "ev.jsonl",
-                                 "ev.jsonl.acked"]  # fmt: skip
+    assert _names(boxes, ev) == [
+        "alarm-20260101T020000.000000Z-c.log",
+        "ev.jsonl",
+        "ev.jsonl.acked",
+    ]
 
 
 def test_sensor_fault_is_an_alarm_inactive_and_bus_lines_are_not(tmp_path) -> None:
@@ -121,8 +124,10 @@ def test_event_log_rotates_by_size_and_keeps_the_newest(tmp_path) -> None:
     rotated = rotated_logs(path)
     assert [p.name for p in rotated] == ["ev.jsonl.2", "ev.jsonl.1"]
     assert [[e["seq"] for e in _lines([p])] for p in [*rotated, path]] == [
-        [1, 2, 3], [4, 5, 6], [7, 8, 9],
-    ]  # fmt: skip
+        [1, 2, 3],
+        [4, 5, 6],
+        [7, 8, 9],
+    ]
     assert all(p.stat().st_size == 90 for p in [*rotated, path])
     # 270 B over a 200 B quota: the oldest file goes, events 4-9 stay.
     assert Quota(200, tmp_path / "bb", path).enforce() == 180
@@ -169,8 +174,9 @@ def test_line_torn_by_a_power_cut_stays_on_its_own(tmp_path) -> None:
 
 def _frame(i: int) -> can.Message:
     # candump line: "(1700000000.015625) can0 123#0000000000000000\n" = 19+1+4+1+4+16+1 = 46 B
-    return can.Message(timestamp=T0 + i * DT, arbitration_id=0x123, is_extended_id=False,
-                       data=bytes(8))  # fmt: skip
+    return can.Message(
+        timestamp=T0 + i * DT, arbitration_id=0x123, is_extended_id=False, data=bytes(8)
+    )
 
 
 def test_black_box_quota_deletes_oldest_box_never_the_one_recording(tmp_path) -> None:
@@ -198,13 +204,15 @@ def test_black_box_quota_deletes_oldest_box_never_the_one_recording(tmp_path) ->
     [
         ("storage:\n  quota_mb: 0\n", "storage.quota_mb must be > 0"),
         ("storage:\n  quota_mb: lots\n", "storage.quota_mb must be a number"),
-        ("storage:\n  quota_mb: 10\n", "storage.quota_mb (10) must be more than twice "
-         "event_log.rotate_mb (8)"),
+        (
+            "storage:\n  quota_mb: 10\n",
+            "storage.quota_mb (10) must be more than twice event_log.rotate_mb (8)",
+        ),
         ("storage:\n  quota: 10\n", "unknown key storage.quota"),
         ("storage:\n  writer_queue: 2\n", "storage.writer_queue must be >= 10"),
         ("event_log:\n  rotate_mb: -1\n", "event_log.rotate_mb must be >= 0.001"),
     ],
-)  # fmt: skip
+)
 def test_bad_storage_config_is_one_clear_error(tmp_path, extra: str, message: str) -> None:
     with pytest.raises(ConfigError) as exc:
         load_config(write_config(tmp_path, extra))
@@ -212,8 +220,9 @@ def test_bad_storage_config_is_one_clear_error(tmp_path, extra: str, message: st
 
 
 def test_storage_config_in_bytes(tmp_path) -> None:
-    cfg = load_config(write_config(tmp_path, "storage:\n  quota_mb: 1.5\nevent_log:\n"
-                                             "  rotate_mb: 0.25\n"))  # fmt: skip
+    cfg = load_config(
+        write_config(tmp_path, "storage:\n  quota_mb: 1.5\nevent_log:\n  rotate_mb: 0.25\n")
+    )
     assert (cfg.storage.quota_bytes, cfg.event_log.rotate_bytes) == (1_500_000, 250_000)
 
 
@@ -228,8 +237,9 @@ def test_daemon_events_carry_wall_and_monotonic_time_and_restart_appends(tmp_pat
         cfg = live_config(tmp_path / run)
         cfg = dataclasses.replace(cfg, event_log=dataclasses.replace(cfg.event_log, path=path))
         daemon = Daemon(cfg, on_event=hooked.append)
-        with can.Bus(interface="virtual", channel=cfg.bus.channel,
-                     preserve_timestamps=True) as sender:  # fmt: skip
+        with can.Bus(
+            interface="virtual", channel=cfg.bus.channel, preserve_timestamps=True
+        ) as sender:
             daemon.start()
             try:
                 settle(daemon, send_all(sender, msgs))

@@ -56,8 +56,14 @@ def test_rows_at_62_5_hz_are_resampled_linear_and_held(tmp_path) -> None:
     # (k * 10 ms) is the row at or before it: (10 k) // 16.
     n = 101  # 0 .. 1.6 s
     times = [round(i * 0.016, 6) for i in range(n)]
-    rec = read_csv(_csv(tmp_path, times, spool=[float(i) for i in range(n)],
-                        pp=[100.0 + 10.0 * t for t in times]))  # fmt: skip
+    rec = read_csv(
+        _csv(
+            tmp_path,
+            times,
+            spool=[float(i) for i in range(n)],
+            pp=[100.0 + 10.0 * t for t in times],
+        )
+    )
     assert len(rec) == 161  # 0 .. 1.6 s every 10 ms
     np.testing.assert_allclose(rec.t, np.arange(161) * 0.01, atol=1e-12)
     np.testing.assert_allclose(rec["PP"], 100.0 + 10.0 * np.arange(161) * 0.01, atol=1e-9)
@@ -109,9 +115,11 @@ def test_the_resampling_is_said_in_one_line(tmp_path, capsys) -> None:
     assert main(["encode", str(path), "--out", str(tmp_path / "out.log")]) == 0
     err = capsys.readouterr().err
     note = [line for line in err.splitlines() if "resampled" in line]
-    assert note == [f"monitor encode: warning: {path}: 100 rows every 20 ms (50 Hz) "
-                    "resampled to 199 rows at 100 Hz (pressures and flows linear, commands "
-                    "held)"]  # fmt: skip
+    assert note == [
+        f"monitor encode: warning: {path}: 100 rows every 20 ms (50 Hz) "
+        "resampled to 199 rows at 100 Hz (pressures and flows linear, commands "
+        "held)"
+    ]
 
 
 # ------------------------------------------------------------- bad time columns

@@ -29,8 +29,10 @@ def runs(tmp_path_factory) -> dict[str, Path]:
     normal run (seed 4) write."""
     tmp = tmp_path_factory.mktemp("train_input")
     out = {}
-    for name, seed, faults in (("piston", 3, [parse_fault("piston_wear:0.5@0")]),
-                               ("normal", 4, [])):  # fmt: skip
+    for name, seed, faults in (
+        ("piston", 3, [parse_fault("piston_wear:0.5@0")]),
+        ("normal", 4, []),
+    ):
         rec = simulate(make_cycle("boom", 150.0, seed), load_machine(), faults=faults, seed=seed)
         out[name] = tmp / f"{name}.csv"
         write_csv(out[name], rec)
@@ -48,16 +50,18 @@ def test_a_recording_with_piston_wear_is_named_with_the_fault(runs, tmp_path, ca
 
 def test_fault_check_refuse_stops_before_fitting(runs, tmp_path, capsys) -> None:
     model = tmp_path / "m.npz"
-    rc = main(["train", str(runs["piston"]), "--out", str(model), "--fault-check", "refuse",
-               *QUICK])  # fmt: skip
+    rc = main(
+        ["train", str(runs["piston"]), "--out", str(model), "--fault-check", "refuse", *QUICK]
+    )
     err = capsys.readouterr().err
     assert rc == 2
     assert f"{runs['piston']} looks like piston_wear" in err
     assert "--fault-check warn" in err  # how to train on it anyway
     assert "fitting" not in err and not model.exists()
     # The same option on a normal recording trains.
-    rc = main(["train", str(runs["normal"]), "--out", str(model), "--fault-check", "refuse",
-               *QUICK])  # fmt: skip
+    rc = main(
+        ["train", str(runs["normal"]), "--out", str(model), "--fault-check", "refuse", *QUICK]
+    )
     assert rc == 0 and model.exists()
 
 
@@ -86,8 +90,7 @@ def test_envelope_warning_names_the_signal_and_ranges() -> None:
         "machine works at (at least 10 degC apart)"
     ]
     # Two days at 38 and 55 degC: wide enough.
-    assert envelope_warnings([_oil(np.full(100, 38.0)), _oil(np.full(100, 55.0))],
-                             CFG.gating) == []  # fmt: skip
+    assert envelope_warnings([_oil(np.full(100, 38.0)), _oil(np.full(100, 55.0))], CFG.gating) == []
     # A cold start from 10 degC does not widen it: below the warm-up line nothing is judged.
     cold = _oil(np.concatenate([np.linspace(10.0, 29.0, 500), np.full(500, 40.5)]))
     assert envelope_warnings([cold], CFG.gating)[0].startswith("OilTemp spans 40.5-40.5 degC only")

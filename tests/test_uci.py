@@ -79,12 +79,15 @@ def _corrupt(path: Path, line: int, fn) -> None:
         ("PS2.txt", None, "PS2.txt: file not found"),
         ("PS2.txt", (3, lambda s: s.rsplit("\t", 1)[0]), "PS2.txt:3: 59 tab-separated columns"),
         ("FS1.txt", (2, lambda s: "abc\t" + s.split("\t", 1)[1]), "FS1.txt:2: column 1: 'abc'"),
-        ("EPS1.txt", (5, lambda s: s.replace("\t", "\tnan\t", 1).rsplit("\t", 1)[0]),
-         "EPS1.txt:5: column 2: value is not finite"),
+        (
+            "EPS1.txt",
+            (5, lambda s: s.replace("\t", "\tnan\t", 1).rsplit("\t", 1)[0]),
+            "EPS1.txt:5: column 2: value is not finite",
+        ),
         ("profile.txt", (7, lambda s: "50" + s[3:]), "profile.txt:7: column 1 (cooler) is 50"),
         ("cycles.txt", (4, lambda s: "1.5"), "cycles.txt:4: cycle number must be an integer"),
     ],
-)  # fmt: skip
+)
 def test_loader_errors_name_file_and_line(tmp_path, file, edit, expected) -> None:
     write_rig(tmp_path / "rig")
     path = tmp_path / "rig" / file
@@ -144,8 +147,19 @@ def test_separate_folders_drop_test_cycles_that_were_trained_on(tmp_path) -> Non
     write_rig(tmp_path / "a", seed=1)
     shutil.copytree(tmp_path / "a", tmp_path / "b")
     out = tmp_path / "uci.json"
-    args = ["eval-uci", "--train", str(tmp_path / "a"), "--test", str(tmp_path / "b"),
-            "--json", str(out), "--preset", "rig", "--window", "9"]  # fmt: skip
+    args = [
+        "eval-uci",
+        "--train",
+        str(tmp_path / "a"),
+        "--test",
+        str(tmp_path / "b"),
+        "--json",
+        str(out),
+        "--preset",
+        "rig",
+        "--window",
+        "9",
+    ]
     assert main(args) == 0
     res = json.loads(out.read_text())
     assert res["split"]["test_cycles_dropped_as_also_in_train"] == 48
@@ -157,8 +171,15 @@ def test_separate_folders_drop_test_cycles_that_were_trained_on(tmp_path) -> Non
 
 
 def test_missing_folder_exits_2_with_one_line(tmp_path, capsys) -> None:
-    args = ["eval-uci", "--train", str(tmp_path / "none"), "--test", str(tmp_path / "none"),
-            "--json", str(tmp_path / "x.json")]  # fmt: skip
+    args = [
+        "eval-uci",
+        "--train",
+        str(tmp_path / "none"),
+        "--test",
+        str(tmp_path / "none"),
+        "--json",
+        str(tmp_path / "x.json"),
+    ]
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("monitor eval-uci: error:") and "none" in err[0]
@@ -186,8 +207,19 @@ def test_malformed_file_and_no_healthy_cycles_exit_2(tmp_path, capsys) -> None:
 @pytest.mark.skipif(not UCI_DIR.is_dir(), reason=f"real rig data not present at {UCI_DIR}")
 def test_real_rig_json_keys(tmp_path) -> None:
     out = tmp_path / "uci.json"
-    args = ["eval-uci", "--train", str(UCI_DIR), "--test", str(UCI_DIR), "--json", str(out),
-            "--max-cycles", "300", "--window", "19"]  # fmt: skip
+    args = [
+        "eval-uci",
+        "--train",
+        str(UCI_DIR),
+        "--test",
+        str(UCI_DIR),
+        "--json",
+        str(out),
+        "--max-cycles",
+        "300",
+        "--window",
+        "19",
+    ]
     assert main(args) == 0
     res = json.loads(out.read_text())
     assert set(res["detection"]) == {f"{c}={v}" for c, v in DETECTION_KEYS}

@@ -12,9 +12,19 @@ from monitor.model.threshold import ThresholdRule
 
 def test_phase_means_by_hand() -> None:
     # One cycle of 7 s, two outputs, phases of 3 s: seconds 0-2, 3-5; second 6 is left out.
-    e = np.array([[[np.nan, 1.0], [2.0, 1.0], [4.0, 1.0],
-                   [1.0, -3.0], [1.0, np.nan], [1.0, 0.0],
-                   [9.0, 9.0]]])  # fmt: skip
+    e = np.array(
+        [
+            [
+                [np.nan, 1.0],
+                [2.0, 1.0],
+                [4.0, 1.0],
+                [1.0, -3.0],
+                [1.0, np.nan],
+                [1.0, 0.0],
+                [9.0, 9.0],
+            ]
+        ]
+    )
     got = phase_means(e, 3)
     np.testing.assert_allclose(got, [[[3.0, 1.0], [1.0, -1.5]]])
     assert np.isnan(phase_means(np.full((1, 3, 1), np.nan), 3)[0, 0, 0])  # nothing predicted

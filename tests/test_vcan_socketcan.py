@@ -54,8 +54,10 @@ from monitor.io.candump import format_line
 from monitor.model.modelfile import load_model
 from monitor.resources import resource_path
 
-pytestmark = [pytest.mark.vcan, pytest.mark.skipif(vcan_missing() is not None,
-                                                   reason=str(vcan_missing()))]  # fmt: skip
+pytestmark = [
+    pytest.mark.vcan,
+    pytest.mark.skipif(vcan_missing() is not None, reason=str(vcan_missing())),
+]
 
 START_S = 600.0  # wall: a daemon's start (imports, model, numba cache) in a slow VM
 FAULT_LOG = resource_path("replay", "spool_wear.log")  # abrupt spool wear at 45 s
@@ -78,8 +80,12 @@ def model(tmp_path_factory) -> Path:
         return Path(given)
     out = tmp_path_factory.mktemp("model") / "vcan.model.npz"
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    subprocess.run(["bash", str(REPO / "tests" / "vcan_model.sh"), str(out)], check=True,
-                   env=env, capture_output=True)  # fmt: skip
+    subprocess.run(
+        ["bash", str(REPO / "tests" / "vcan_model.sh"), str(out)],
+        check=True,
+        env=env,
+        capture_output=True,
+    )
     return out
 
 
@@ -128,8 +134,7 @@ class Session:
 def _caught_up(cap: Capture) -> bool:
     """Two heartbeats with the same counters: the daemon's queue is drained."""
     last = [s for _, s in decode(cap.snapshot(), "MON_Status")][-2:]
-    return len(last) == 2 and all(last[0][k] == last[1][k]
-                                  for k in ("RxFrames", "RejectedFrames"))  # fmt: skip
+    return len(last) == 2 and all(last[0][k] == last[1][k] for k in ("RxFrames", "RejectedFrames"))
 
 
 def _cansend(m, data: bytes) -> None:
@@ -148,9 +153,27 @@ def _hostile(s: Session, cap: Capture) -> None:
         _cansend(m, bytes(m.data))
     s.phases("cansend: 2 wrong DLC, 2 bad CRC, 2 valid with a counter jump")
     t = time.monotonic()
-    subprocess.run(["cangen", CHANNEL, "-e", "-I", f"{pressures:08X}", "-L", "8", "-D", "r",
-                    "-g", "0", "-p", "100", "-n", str(N_FLOOD)], check=True,
-                   timeout=600)  # fmt: skip
+    subprocess.run(
+        [
+            "cangen",
+            CHANNEL,
+            "-e",
+            "-I",
+            f"{pressures:08X}",
+            "-L",
+            "8",
+            "-D",
+            "r",
+            "-g",
+            "0",
+            "-p",
+            "100",
+            "-n",
+            str(N_FLOOD),
+        ],
+        check=True,
+        timeout=600,
+    )
     s.wall["flood_rate"] = N_FLOOD / (time.monotonic() - t)
     s.phases(f"cangen flood of {N_FLOOD} frames ({s.wall['flood_rate']:.0f} frames/s)")
     wait_until(lambda: s.caught_up(cap), 600.0)
@@ -171,16 +194,32 @@ def session(tmp_path_factory, model) -> Session:
         s.wall["replay"] = time.time()
         env = {**os.environ, "PYTHONPATH": str(REPO)}
         replay = subprocess.Popen(
-            [sys.executable, "-m", "monitor", "replay", str(slice_log), "--bus", CHANNEL,
-             "--interface", "socketcan"],
-            env=env, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "monitor",
+                "replay",
+                str(slice_log),
+                "--bus",
+                CHANNEL,
+                "--interface",
+                "socketcan",
+            ],
+            env=env,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         s.procs.append(replay)
         plain = tmp / "fault_segment.log"  # at its own speed, for the offline reference
         slowed_copy(FAULT_LOG, plain, *FAULT_SEGMENT, slower=1.0)
         slowed_copy(FAULT_LOG, tmp / "fault_slowed.log", *FAULT_SEGMENT)
-        slowed_copy(NORMAL_LOG, tmp / "flow_stops.log", 0.0, NORMAL_END_S,
-                    drop_id_after=(frame_id("HYD_Flow"), FLOW_STOP_S))  # fmt: skip
+        slowed_copy(
+            NORMAL_LOG,
+            tmp / "flow_stops.log",
+            0.0,
+            NORMAL_END_S,
+            drop_id_after=(frame_id("HYD_Flow"), FLOW_STOP_S),
+        )
         s.phases("slowed copies of the logs")
         s.replay_stderr = replay.communicate(timeout=START_S)[1]
         s.rc["replay"] = replay.returncode
@@ -189,8 +228,13 @@ def session(tmp_path_factory, model) -> Session:
         s.wall["daemon1"] = time.time()
         first, first_log = s.start("daemon1")
         cfg = load_config(s.config)
-        s.offline = detect(load_model(cfg.model), recording_from_candump(plain), cfg.alarm,
-                           cfg.horizon, gating=cfg.gating)  # fmt: skip
+        s.offline = detect(
+            load_model(cfg.model),
+            recording_from_candump(plain),
+            cfg.alarm,
+            cfg.horizon,
+            gating=cfg.gating,
+        )
         s.phases("offline reference (monitor detect) of the fault segment")
         s.ready(first, first_log)
         s.phases("daemon 1 start (with the reference)")
@@ -322,8 +366,10 @@ def test_malformed_and_flood_traffic_is_counted_and_survived(session) -> None:
     assert last["DroppedFrames"] == dropped % 256
     hostile = decode(_between(session, "hostile", "flow_stops"), "MON_Alarm")
     assert all(s["State"] != STATE["fault"] for _, s in hostile)
-    print(f"[vcan] flood: {session.wall['flood_rate']:.0f} frames/s, {flood_seen} received, "
-          f"{dropped} dropped")  # fmt: skip
+    print(
+        f"[vcan] flood: {session.wall['flood_rate']:.0f} frames/s, {flood_seen} received, "
+        f"{dropped} dropped"
+    )
 
 
 def test_a_sensor_that_stops_is_a_sensor_fault_never_a_hydraulic_one(session) -> None:
@@ -381,16 +427,20 @@ def _resume_to_fault(events: list[dict[str, Any]], after_t: float) -> float:
 @pytest.fixture(scope="module")
 def recovery(tmp_path_factory, model) -> dict[str, Any]:
     tmp = tmp_path_factory.mktemp("recovery")
-    cfg = write_config(tmp, vcan_config(tmp, model, "  reopen_initial_s: 0.1\n"
-                                        "  reopen_max_s: 2.0\n"), model=model)  # fmt: skip
+    cfg = write_config(
+        tmp, vcan_config(tmp, model, "  reopen_initial_s: 0.1\n  reopen_max_s: 2.0\n"), model=model
+    )
     first, split, last = RECOVERY_SEGMENT
     before = slowed_copy(FAULT_LOG, tmp / "before.log", first, split)
     after = slowed_copy(FAULT_LOG, tmp / "after.log", split, last)
     with (tmp / "gapped.log").open("w") as fh:  # the same data with a gap, for the desk
         for part, shift in ((before, 0.0), (after, GAP_REF_S)):
             for m in part:
-                fh.write(format_line(m.timestamp + shift, CHANNEL, m.arbitration_id,
-                                     m.is_extended_id, m.data))  # fmt: skip
+                fh.write(
+                    format_line(
+                        m.timestamp + shift, CHANNEL, m.arbitration_id, m.is_extended_id, m.data
+                    )
+                )
     r: dict[str, Any] = {"tmp": tmp, "wall": {}}
     log = tmp / "daemon3.log"
     events_path = tmp / "events.jsonl"
@@ -405,8 +455,13 @@ def recovery(tmp_path_factory, model) -> dict[str, Any]:
     cap = Capture(tmp / "capture_before.log")  # candump ends when the link goes down
     try:
         loaded = load_config(cfg)
-        r["offline"] = detect(load_model(loaded.model), recording_from_candump(tmp / "gapped.log"),
-                              loaded.alarm, loaded.horizon, gating=loaded.gating)  # fmt: skip
+        r["offline"] = detect(
+            load_model(loaded.model),
+            recording_from_candump(tmp / "gapped.log"),
+            loaded.alarm,
+            loaded.horizon,
+            gating=loaded.gating,
+        )
         wait_for_text(log, f"monitoring socketcan:{CHANNEL}", daemon, START_S)
         phases("daemon 3 start (with the reference)")
         player = subprocess.Popen(["canplayer", "-I", str(tmp / "before.log")])
@@ -432,8 +487,9 @@ def recovery(tmp_path_factory, model) -> dict[str, Any]:
         time.sleep(0.5)  # candump's socket is bound before the first frame
         player = subprocess.Popen(["canplayer", "-I", str(tmp / "after.log")])
         procs.append(player)
-        wait_until(lambda: any(e["state"] == "fault" for e in events()), _replay_wall_s(
-            last - split))  # fmt: skip
+        wait_until(
+            lambda: any(e["state"] == "fault" for e in events()), _replay_wall_s(last - split)
+        )
         player.kill()
         phases("rest of the fault log until the alarm")
         for frame, kind in ERROR_FRAMES:
@@ -441,8 +497,7 @@ def recovery(tmp_path_factory, model) -> dict[str, Any]:
             subprocess.run(["cansend", CHANNEL, frame], check=True, timeout=60)
             wait_until(lambda k=kind: [e["bus"] for e in events() if "bus" in e][-1] == k, 300.0)
             if kind == "bus_off":  # the restart must reach the reopened socket
-                wait_until(lambda n=before_n: log.read_text().count("CAN bus reopened") > n,
-                           300.0)  # fmt: skip
+                wait_until(lambda n=before_n: log.read_text().count("CAN bus reopened") > n, 300.0)
         phases("controller error frames by cansend")
         r["running"] = daemon.poll() is None
         r["rc"] = stop(daemon)
@@ -464,8 +519,11 @@ def test_link_down_and_up_is_survived_logged_and_counted(recovery) -> None:
     log = recovery["log"]
     # What python-can raises on SocketCAN when vcan0 goes down: CanOperationError with
     # errno ENETDOWN, on recv (or on a send, whichever takes the socket's report first).
-    assert re.search(r"CAN bus down \((receive: Error receiving|send: Failed to transmit): "
-                     r"Network is down \[Error Code 100\]\)", log), log  # fmt: skip
+    assert re.search(
+        r"CAN bus down \((receive: Error receiving|send: Failed to transmit): "
+        r"Network is down \[Error Code 100\]\)",
+        log,
+    ), log
     counts = _stopped_counts(log)
     assert counts["bus_down"] == 1 and counts["bus_off"] == 1 and counts["error_passive"] == 1
     # Opening works on a link that is down; those reopens failed at their first recv (at

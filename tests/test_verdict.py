@@ -23,10 +23,22 @@ WINDOW_S = 30.0  # the shipped model's J window: N = 3000 samples at 100 Hz
 def detect_cli(rec: Path, tmp_path: Path, *extra: str) -> tuple[int, dict, str, list[dict]]:
     summary, events = tmp_path / "s.json", tmp_path / "e.jsonl"
     proc = subprocess.run(
-        [sys.executable, "-m", "monitor", "detect", str(rec), "--summary", str(summary),
-         "--events", str(events), *extra],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "detect",
+            str(rec),
+            "--summary",
+            str(summary),
+            "--events",
+            str(events),
+            *extra,
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     lines = [json.loads(x) for x in events.read_text().splitlines()] if events.exists() else []
     return proc.returncode, json.loads(summary.read_text()), proc.stderr, lines
 
@@ -110,8 +122,13 @@ def test_an_engine_off_gap_inside_a_fault_is_one_episode(tmp_path: Path, model) 
     t = rec.t - rec.t[0]
     cols = {k: v.copy() for k, v in rec.columns.items()}
     cols["EngineSpeed"][(t >= 70.0) & (t < 73.0)] = 0.0
-    det = detect(model, Recording(rec.t, cols, "gap", dict(rec.meta)), cfg.alarm, cfg.horizon,
-                 gating=cfg.gating)  # fmt: skip
+    det = detect(
+        model,
+        Recording(rec.t, cols, "gap", dict(rec.meta)),
+        cfg.alarm,
+        cfg.horizon,
+        gating=cfg.gating,
+    )
     states = [(e["state"], e["fault"]) for e in det.events]
     assert det.summary["alarm_episodes"] == 1
     i = states.index(("inactive", None))
@@ -154,6 +171,13 @@ def test_not_judged_names_the_signal_outside_the_trained_range(tmp_path: Path, m
     expected = f"outside the trained range 100% of the time (OilTemp 110 degC, {trained})"
     assert expected in s["not_judged_why"]
     assert f"not judged: {expected}" in err
-    assert s["out_of_range_values"] == {"OilTemp": {
-        "samples": s["out_of_range_samples"], "min": 110.0, "max": 110.0,
-        "trained_min": round(lo, 3), "trained_max": round(hi, 3), "unit": "degC"}}  # fmt: skip
+    assert s["out_of_range_values"] == {
+        "OilTemp": {
+            "samples": s["out_of_range_samples"],
+            "min": 110.0,
+            "max": 110.0,
+            "trained_min": round(lo, 3),
+            "trained_max": round(hi, 3),
+            "unit": "degC",
+        }
+    }

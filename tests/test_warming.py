@@ -111,14 +111,23 @@ def test_daemon_restart_mid_operation_sends_no_sensor_fault(tmp_path) -> None:
     _, events, frames, _ = run_daemon(cfg, replay_settled(log))
     codec = FrameCodec.from_dbc()
     alarm_id = codec.message(ALARM).frame_id
-    states = [codec.decode_message(m).values["State"] for m in frames
-              if m.arbitration_id == alarm_id]  # fmt: skip
+    states = [
+        codec.decode_message(m).values["State"] for m in frames if m.arbitration_id == alarm_id
+    ]
     assert states and 2 not in states
-    dm1 = [decode_dm(g["data"])[1] for g in reassemble(m for m in frames if m.arbitration_id
-                                                        == DM1_ID) if g["pgn"] == PGN_DM1]
+    dm1 = [
+        decode_dm(g["data"])[1]
+        for g in reassemble(m for m in frames if m.arbitration_id == DM1_ID)
+        if g["pgn"] == PGN_DM1
+    ]
     assert dm1 and all(dtcs == [(0, 0, 0)] for dtcs in dm1)  # no DTC active, ever
     assert "sensor_fault" not in {e["state"] for e in events}
     offline = load_config()
-    det = detect(load_model(offline.model), recording_from_candump_bulk(log), offline.alarm,
-                 offline.horizon, gating=offline.gating)  # fmt: skip
+    det = detect(
+        load_model(offline.model),
+        recording_from_candump_bulk(log),
+        offline.alarm,
+        offline.horizon,
+        gating=offline.gating,
+    )
     assert_same_events([e for e in events if e["t"] <= det.t[-1] + 1e-6], det)

@@ -63,18 +63,19 @@ def test_watch_in_a_terminal_shows_the_bus_and_quits_on_q(tmp_path: Path) -> Non
     ours = [m for m in frames if (m.arbitration_id & 0xFF) == 0xA0]  # our source address
     session, group, port = f"watch{os.getpid()}", "239.74.163.7", own_udp_port()
     env = f"PYTHONPATH={REPO} CAN_CONFIG='{{\"port\": {port}}}'"
-    cmd = (f"{env} {sys.executable} -m monitor watch --interface udp_multicast "
-           f"--channel {group}")  # fmt: skip
-    subprocess.run(["tmux", "new-session", "-d", "-s", session, "-x", "160", "-y", "30", cmd],
-                   check=True)  # fmt: skip
+    cmd = f"{env} {sys.executable} -m monitor watch --interface udp_multicast --channel {group}"
+    subprocess.run(
+        ["tmux", "new-session", "-d", "-s", session, "-x", "160", "-y", "30", cmd], check=True
+    )
     try:
         bus = can.Bus(interface="udp_multicast", channel=group, port=port)
         screen = ""
         for _ in range(300):  # until the screen shows the fault (the TUI needs a moment)
             for m in ours[-200:]:
                 bus.send(m)
-            screen = subprocess.run(["tmux", "capture-pane", "-p", "-t", session],
-                                    capture_output=True, text=True).stdout  # fmt: skip
+            screen = subprocess.run(
+                ["tmux", "capture-pane", "-p", "-t", session], capture_output=True, text=True
+            ).stdout
             if "spool_wear" in screen and "SPN" in screen:
                 break
             time.sleep(0.1)
@@ -82,8 +83,12 @@ def test_watch_in_a_terminal_shows_the_bus_and_quits_on_q(tmp_path: Path) -> Non
         assert "FAULT" in screen and "spool_wear" in screen and "SPN" in screen, screen
         subprocess.run(["tmux", "send-keys", "-t", session, "q"], check=True)
         for _ in range(100):
-            alive = subprocess.run(["tmux", "has-session", "-t", session],
-                                   capture_output=True).returncode == 0  # fmt: skip
+            alive = (
+                subprocess.run(
+                    ["tmux", "has-session", "-t", session], capture_output=True
+                ).returncode
+                == 0
+            )
             if not alive:
                 break
             time.sleep(0.1)

@@ -43,8 +43,10 @@ def _vcan_missing() -> str | None:
     if not hasattr(socket, "AF_CAN"):
         return "no SocketCAN in this Python/OS"
     if not Path(f"/sys/class/net/{CHANNEL}").exists():
-        return (f"no {CHANNEL} (ip link add dev {CHANNEL} type vcan && ip link set {CHANNEL} "
-                "up; or .ci/vm/run-in-vm.sh)")  # fmt: skip
+        return (
+            f"no {CHANNEL} (ip link add dev {CHANNEL} type vcan && ip link set {CHANNEL} "
+            "up; or .ci/vm/run-in-vm.sh)"
+        )
     missing = [t for t in CAN_UTILS if shutil.which(t) is None]
     if missing:
         return f"can-utils missing: {', '.join(missing)} (apt install can-utils)"
@@ -140,8 +142,11 @@ class Capture:
 def decode(msgs: list[can.Message], name: str) -> list[tuple[float, dict]]:
     """(timestamp, signals) of every ``name`` frame, decoded by cantools from the DBC."""
     frame_id = DBC.get_message_by_name(name).frame_id
-    return [(m.timestamp, DBC.decode_message(frame_id, m.data, decode_choices=False))
-            for m in msgs if m.arbitration_id == frame_id]  # fmt: skip
+    return [
+        (m.timestamp, DBC.decode_message(frame_id, m.data, decode_choices=False))
+        for m in msgs
+        if m.arbitration_id == frame_id
+    ]
 
 
 def frame_id(name: str) -> int:

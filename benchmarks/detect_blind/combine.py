@@ -22,20 +22,25 @@ def combine(results: list[dict]) -> dict:
         for tname, t in res["types"].items():
             pooled = types.setdefault(tname, {"rows": [], "trains": {}})
             pooled["rows"] += t["rows"]
-            pooled["trains"].update({f"seed{res['seed']}/{m}": rc
-                                     for m, rc in t["train_exit"].items()})
+            pooled["trains"].update(
+                {f"seed{res['seed']}/{m}": rc for m, rc in t["train_exit"].items()}
+            )
     fleets = [r["fleet"] for r in results if r.get("fleet")]
-    return {"seed": "+".join(str(r["seed"]) for r in results),
-            "blind": any(r["blind"] for r in results),
-            "types": {k: summarise_type(v["rows"], v["trains"]) for k, v in types.items()},
-            "fleet": fleets[0] if len(fleets) == 1 else None,
-            "fleets": fleets}
+    return {
+        "seed": "+".join(str(r["seed"]) for r in results),
+        "blind": any(r["blind"] for r in results),
+        "types": {k: summarise_type(v["rows"], v["trains"]) for k, v in types.items()},
+        "fleet": fleets[0] if len(fleets) == 1 else None,
+        "fleets": fleets,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.detect_blind.combine",
-                                 description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.detect_blind.combine",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     ap.add_argument("results", nargs="+", type=Path, help="JSON files the scorer wrote")
     ap.add_argument("--md", type=Path)
     ap.add_argument("--json", type=Path)

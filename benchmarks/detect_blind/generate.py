@@ -53,8 +53,14 @@ def child_seed(*path: int) -> int:
 def _normal_spec(rng: np.random.Generator, minutes: float, seed: int) -> RunSpec:
     start = rng.uniform(30.0, 60.0)
     end = float(np.clip(start + rng.uniform(-3.0, 3.0), 30.0, 60.0))
-    return RunSpec(minutes * 60.0, str(rng.choice(STYLES)), start, end,
-                   payload=float(rng.uniform(0.7, 1.3)), seed=seed)
+    return RunSpec(
+        minutes * 60.0,
+        str(rng.choice(STYLES)),
+        start,
+        end,
+        payload=float(rng.uniform(0.7, 1.3)),
+        seed=seed,
+    )
 
 
 def commissioning_spec(minutes: float, seed: int) -> RunSpec:
@@ -69,9 +75,14 @@ def type_plan(seed: int, scale: Scale) -> list[tuple[str, Machine, str, RunSpec]
         for mi in range(scale.machines_per_type):
             m = Machine.draw(f"{tname}_m{mi}", tol, child_seed(seed, 1, ti, mi))
             base = f"types/{tname}/{m.name}"
-            plan.append((f"{base}/commissioning/commissioning.csv", m, "commissioning",
-                         commissioning_spec(scale.commissioning_min,
-                                            child_seed(seed, 2, ti, mi))))
+            plan.append(
+                (
+                    f"{base}/commissioning/commissioning.csv",
+                    m,
+                    "commissioning",
+                    commissioning_spec(scale.commissioning_min, child_seed(seed, 2, ti, mi)),
+                )
+            )
             rng = np.random.default_rng(child_seed(seed, 3, ti, mi))
             n_logs = int(np.ceil(scale.normal_hours * 60.0 / scale.normal_log_min))
             for k in range(n_logs):
@@ -80,14 +91,24 @@ def type_plan(seed: int, scale: Scale) -> list[tuple[str, Machine, str, RunSpec]
             for fi, fault in enumerate(FAULTS):
                 for si, sev in enumerate(scale.severities):
                     for r in range(scale.fault_runs):
-                        spec = _normal_spec(rng, scale.fault_log_min,
-                                            child_seed(seed, 5, ti, mi, fi, si, r))
+                        spec = _normal_spec(
+                            rng, scale.fault_log_min, child_seed(seed, 5, ti, mi, fi, si, r)
+                        )
                         onset = float(rng.uniform(120.0, min(240.0, spec.duration_s / 2)))
-                        spec = RunSpec(spec.duration_s, spec.style, spec.temp_start_c,
-                                       spec.temp_end_c, spec.payload, fault, sev, onset,
-                                       spec.seed)
-                        plan.append((f"{base}/fault/{fault}_{sev:.2f}_{r:02d}.csv", m, "fault",
-                                     spec))
+                        spec = RunSpec(
+                            spec.duration_s,
+                            spec.style,
+                            spec.temp_start_c,
+                            spec.temp_end_c,
+                            spec.payload,
+                            fault,
+                            sev,
+                            onset,
+                            spec.seed,
+                        )
+                        plan.append(
+                            (f"{base}/fault/{fault}_{sev:.2f}_{r:02d}.csv", m, "fault", spec)
+                        )
     return plan
 
 
@@ -100,8 +121,14 @@ def fleet_plan(seed: int, scale: Scale) -> list[tuple[str, Machine, str, RunSpec
         wear = mi >= n - scale.fleet_wearing
         uncommissioned = not wear and mi >= n - scale.fleet_wearing - scale.fleet_uncommissioned
         if not uncommissioned:
-            plan.append((f"fleet/{m.name}/commissioning/commissioning.log", m, "commissioning",
-                         commissioning_spec(scale.commissioning_min, child_seed(seed, 12, mi))))
+            plan.append(
+                (
+                    f"fleet/{m.name}/commissioning/commissioning.log",
+                    m,
+                    "commissioning",
+                    commissioning_spec(scale.commissioning_min, child_seed(seed, 12, mi)),
+                )
+            )
         rng = np.random.default_rng(child_seed(seed, 13, mi))
         fault = FAULTS[(mi - (n - scale.fleet_wearing)) % len(FAULTS)] if wear else "normal"
         for d in range(scale.fleet_days):
@@ -109,8 +136,17 @@ def fleet_plan(seed: int, scale: Scale) -> list[tuple[str, Machine, str, RunSpec
             kind = "normal"
             if wear:
                 sev = round(0.6 * d / max(scale.fleet_days - 1, 1), 3)
-                spec = RunSpec(spec.duration_s, spec.style, spec.temp_start_c, spec.temp_end_c,
-                               spec.payload, fault, sev, 0.0, spec.seed)
+                spec = RunSpec(
+                    spec.duration_s,
+                    spec.style,
+                    spec.temp_start_c,
+                    spec.temp_end_c,
+                    spec.payload,
+                    fault,
+                    sev,
+                    0.0,
+                    spec.seed,
+                )
                 kind = "wear"
             plan.append((f"fleet/{m.name}/logs/day{d:02d}.log", m, kind, spec))
     return plan
@@ -146,8 +182,13 @@ def generate(seed: int, out: Path, scale: Scale, progress=print) -> dict:
     for i, (rel, m, kind, spec) in enumerate(plan):
         if not (out / rel).exists():
             write_item(out, rel, m, spec)
-        entry = {"path": rel, "machine": m.name, "tolerance": m.tolerance, "kind": kind,
-                 **{k: v for k, v in asdict(spec).items() if k != "meta"}}
+        entry = {
+            "path": rel,
+            "machine": m.name,
+            "tolerance": m.tolerance,
+            "kind": kind,
+            **{k: v for k, v in asdict(spec).items() if k != "meta"},
+        }
         key["files"].append(entry)
         key["machines"][m.name] = {"tolerance": m.tolerance, "params": m.params.tolist()}
         progress(f"generate: {i + 1}/{len(plan)} {rel}")
@@ -159,15 +200,21 @@ def scale_arguments(ap: argparse.ArgumentParser) -> None:
     """The Scale's fields as options (shared with the scorer)."""
     d = Scale()
     ap.add_argument("--machines-per-type", type=int, default=d.machines_per_type)
-    ap.add_argument("--normal-hours", type=float, default=d.normal_hours,
-                    help="hours of normal logs per machine")
+    ap.add_argument(
+        "--normal-hours",
+        type=float,
+        default=d.normal_hours,
+        help="hours of normal logs per machine",
+    )
     ap.add_argument("--normal-log-min", type=float, default=d.normal_log_min)
-    ap.add_argument("--severities", default=",".join(str(s) for s in d.severities),
-                    help="comma-separated fault severities (0.1-0.6)")
+    ap.add_argument(
+        "--severities",
+        default=",".join(str(s) for s in d.severities),
+        help="comma-separated fault severities (0.1-0.6)",
+    )
     ap.add_argument("--fault-runs", type=int, default=d.fault_runs)
     ap.add_argument("--fault-log-min", type=float, default=d.fault_log_min)
-    ap.add_argument("--fleet-machines", type=int, default=d.fleet_machines,
-                    help="0: no fleet")
+    ap.add_argument("--fleet-machines", type=int, default=d.fleet_machines, help="0: no fleet")
     ap.add_argument("--fleet-days", type=int, default=d.fleet_days)
     ap.add_argument("--fleet-log-min", type=float, default=d.fleet_log_min)
 
@@ -176,23 +223,37 @@ def scale_from(args: argparse.Namespace) -> Scale:
     sev = tuple(float(s) for s in args.severities.split(",") if s.strip())
     if not sev or any(not 0.0 < s <= 1.0 for s in sev):
         raise SystemExit(f"--severities: {args.severities!r}: need values in (0, 1]")
-    return Scale(args.machines_per_type, args.normal_hours, args.normal_log_min, sev,
-                 args.fault_runs, args.fault_log_min, fleet_machines=args.fleet_machines,
-                 fleet_days=args.fleet_days, fleet_log_min=args.fleet_log_min,
-                 fleet_wearing=min(3, args.fleet_machines),
-                 fleet_uncommissioned=1 if args.fleet_machines >= 5 else 0)
+    return Scale(
+        args.machines_per_type,
+        args.normal_hours,
+        args.normal_log_min,
+        sev,
+        args.fault_runs,
+        args.fault_log_min,
+        fleet_machines=args.fleet_machines,
+        fleet_days=args.fleet_days,
+        fleet_log_min=args.fleet_log_min,
+        fleet_wearing=min(3, args.fleet_machines),
+        fleet_uncommissioned=1 if args.fleet_machines >= 5 else 0,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.detect_blind.generate",
-                                 description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.detect_blind.generate",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     ap.add_argument("--seed", type=int, required=True)
     ap.add_argument("--out", type=Path, required=True)
     scale_arguments(ap)
     args = ap.parse_args(argv)
-    generate(args.seed, args.out, scale_from(args),
-             progress=lambda s: print(s, file=sys.stderr, flush=True))
+    generate(
+        args.seed,
+        args.out,
+        scale_from(args),
+        progress=lambda s: print(s, file=sys.stderr, flush=True),
+    )
     return 0
 
 

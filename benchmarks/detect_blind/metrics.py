@@ -44,8 +44,12 @@ def rate_per_hour(events: int, hours: float) -> dict:
     """Events per hour and the 95 % upper bound of the rate."""
     if hours <= 0:
         return {"events": events, "hours": hours, "per_h": None, "upper95_per_h": None}
-    return {"events": events, "hours": round(hours, 3), "per_h": events / hours,
-            "upper95_per_h": poisson_upper(events) / hours}
+    return {
+        "events": events,
+        "hours": round(hours, 3),
+        "per_h": events / hours,
+        "upper95_per_h": poisson_upper(events) / hours,
+    }
 
 
 def detection(rows: list[dict]) -> dict:
@@ -55,10 +59,16 @@ def detection(rows: list[dict]) -> dict:
     onset is an early alarm (a false alarm on the run's healthy part), not a detection. A run
     the monitor did not judge (verdict not_judged) counts as not detected, and apart.
     """
-    detected = [r for r in rows if r["alarm"] and r["first_alarm_t"] is not None
-                and r["first_alarm_t"] >= r["onset_s"]]
-    early = [r for r in rows if r["alarm"] and r["first_alarm_t"] is not None
-             and r["first_alarm_t"] < r["onset_s"]]
+    detected = [
+        r
+        for r in rows
+        if r["alarm"] and r["first_alarm_t"] is not None and r["first_alarm_t"] >= r["onset_s"]
+    ]
+    early = [
+        r
+        for r in rows
+        if r["alarm"] and r["first_alarm_t"] is not None and r["first_alarm_t"] < r["onset_s"]
+    ]
     delays = [r["first_alarm_t"] - r["onset_s"] for r in detected]
     named = [r for r in detected if r["fault_named"] == r["fault"]]
     skipped = [r for r in rows if unjudged(r)]

@@ -33,8 +33,7 @@ class Style:
 
 
 STYLES = {
-    "aggressive": Style((0.6, 1.0), (3.0, 5.0), (0.3, 1.5), (0.2, 1.2), 0.05, (3, 15), 0.05,
-                        0.08),
+    "aggressive": Style((0.6, 1.0), (3.0, 5.0), (0.3, 1.5), (0.2, 1.2), 0.05, (3, 15), 0.05, 0.08),
     "gentle": Style((0.3, 0.7), (0.8, 1.5), (0.5, 2.5), (0.8, 3.0), 0.10, (5, 30), 0.15, 0.03),
     "fine": Style((0.25, 0.5), (0.5, 1.2), (0.8, 4.0), (0.5, 2.5), 0.10, (5, 20), 0.6, 0.0),
     "mixed": Style((0.3, 1.0), (1.0, 4.0), (0.3, 2.5), (0.3, 3.0), 0.08, (3, 40), 0.2, 0.05),
@@ -85,9 +84,18 @@ class Trace:
     state: np.ndarray  # (n, plant.N_STATE)
 
 
-def operate(p: np.ndarray, style: Style, duration_s: float, temp_c, rng: np.random.Generator,
-            fault: str = "normal", severity: float = 0.0, onset_s: float = 0.0,
-            payload: float = 1.0, speed_set_rpm: float = 2200.0) -> Trace:
+def operate(
+    p: np.ndarray,
+    style: Style,
+    duration_s: float,
+    temp_c,
+    rng: np.random.Generator,
+    fault: str = "normal",
+    severity: float = 0.0,
+    onset_s: float = 0.0,
+    payload: float = 1.0,
+    speed_set_rpm: float = 2200.0,
+) -> Trace:
     """Run the plant for duration_s with this operator; temp_c(t_array) gives the oil's."""
     n = int(round(duration_s / SAMPLE_S))
     stroke = p[IDX["stroke_m"]]
@@ -104,11 +112,20 @@ def operate(p: np.ndarray, style: Style, duration_s: float, temp_c, rng: np.rand
     while k < n:
         seg = segment(rng, style, float(s[plant.X] / stroke))
         m = min(len(seg), n - k)
-        spool[k:k + m] = seg[:m]
+        spool[k : k + m] = seg[:m]
         # The engine droops a little with the lever (load) around its governor's set speed.
-        speed[k:k + m] = speed_set_rpm - 30.0 * np.abs(seg[:m]) + rng.normal(0.0, 2.0, m)
-        state[k:k + m] = plant.simulate(p, s, t[k], spool[k:k + m], disp[k:k + m],
-                                        speed[k:k + m], temp[k:k + m], sev[k:k + m], fault,
-                                        payload)
+        speed[k : k + m] = speed_set_rpm - 30.0 * np.abs(seg[:m]) + rng.normal(0.0, 2.0, m)
+        state[k : k + m] = plant.simulate(
+            p,
+            s,
+            t[k],
+            spool[k : k + m],
+            disp[k : k + m],
+            speed[k : k + m],
+            temp[k : k + m],
+            sev[k : k + m],
+            fault,
+            payload,
+        )
         k += m
     return Trace(spool, disp, speed, temp, state)

@@ -25,8 +25,12 @@ P_VAPOUR = -0.9e5  # gauge: the oil cavitates below it
 FLOW_SENSOR_TAU_S = 0.015  # gear flowmeter and its electronics
 
 NONE, PISTON_WEAR, SPOOL_WEAR, SPOOL_STROKE = 0, 1, 2, 3
-FAULTS = {"normal": NONE, "piston_wear": PISTON_WEAR, "spool_wear": SPOOL_WEAR,
-          "spool_stroke": SPOOL_STROKE}
+FAULTS = {
+    "normal": NONE,
+    "piston_wear": PISTON_WEAR,
+    "spool_wear": SPOOL_WEAR,
+    "spool_stroke": SPOOL_STROKE,
+}
 PISTON_LEAK_MAX = 6e-12  # m^3/(s Pa) across the piston at severity 1 and 40 degC
 SPOOL_WEAR_AREA = 0.08  # share of a full opening each worn edge leaks at centre, severity 1
 SPOOL_WEAR_REACH = 0.25  # the worn band: the leak fades to nothing at 25 % stroke
@@ -36,17 +40,86 @@ N_STATE = 9
 X, V, PA, PB, PP, EPS, U, DU, QS = range(N_STATE)
 
 _i = IDX  # short alias for the kernel's constant indices
-(I_DISP, I_TAU, I_CCR, I_CFU, I_PLEAK, I_RIP, I_RCR, I_RFU, I_VLINE, I_BLINE, I_BOIL, I_AIR,
- I_RHO, I_NU40, I_NU100, I_KV, I_DPL, I_OVP, I_OVT, I_AEXP, I_VLEAK, I_WN, I_ZETA, I_PT,
- I_BORE, I_ROD, I_STROKE, I_V0, I_MASS, I_GRAV, I_VISC, I_COUL, I_STRB, I_VSTR, I_SEAL,
- I_STOPK, I_STOPC) = (_i[n] for n in (
-    "pump_disp_m3", "pump_tau_s", "comp_crack_pa", "comp_full_pa", "pump_leak_m3_spa",
-    "pump_ripple", "relief_crack_pa", "relief_full_pa", "line_volume_m3", "line_beta_pa",
-    "oil_beta_pa", "air_fraction", "rho_kg_m3", "nu40_cst", "nu100_cst", "kv_full",
-    "dp_lam_pa", "overlap_p", "overlap_t", "area_exp", "valve_leak_m3_spa",
-    "spool_wn_rad_s", "spool_zeta", "tank_pa", "bore_m", "rod_m", "stroke_m",
-    "dead_volume_m3", "mass_kg", "gravity_n", "visc_friction_ns_m", "coulomb_n",
-    "stribeck_ratio", "stribeck_v_m_s", "seal_drag", "stop_k_n_m", "stop_c_ns_m"))
+(
+    I_DISP,
+    I_TAU,
+    I_CCR,
+    I_CFU,
+    I_PLEAK,
+    I_RIP,
+    I_RCR,
+    I_RFU,
+    I_VLINE,
+    I_BLINE,
+    I_BOIL,
+    I_AIR,
+    I_RHO,
+    I_NU40,
+    I_NU100,
+    I_KV,
+    I_DPL,
+    I_OVP,
+    I_OVT,
+    I_AEXP,
+    I_VLEAK,
+    I_WN,
+    I_ZETA,
+    I_PT,
+    I_BORE,
+    I_ROD,
+    I_STROKE,
+    I_V0,
+    I_MASS,
+    I_GRAV,
+    I_VISC,
+    I_COUL,
+    I_STRB,
+    I_VSTR,
+    I_SEAL,
+    I_STOPK,
+    I_STOPC,
+) = (
+    _i[n]
+    for n in (
+        "pump_disp_m3",
+        "pump_tau_s",
+        "comp_crack_pa",
+        "comp_full_pa",
+        "pump_leak_m3_spa",
+        "pump_ripple",
+        "relief_crack_pa",
+        "relief_full_pa",
+        "line_volume_m3",
+        "line_beta_pa",
+        "oil_beta_pa",
+        "air_fraction",
+        "rho_kg_m3",
+        "nu40_cst",
+        "nu100_cst",
+        "kv_full",
+        "dp_lam_pa",
+        "overlap_p",
+        "overlap_t",
+        "area_exp",
+        "valve_leak_m3_spa",
+        "spool_wn_rad_s",
+        "spool_zeta",
+        "tank_pa",
+        "bore_m",
+        "rod_m",
+        "stroke_m",
+        "dead_volume_m3",
+        "mass_kg",
+        "gravity_n",
+        "visc_friction_ns_m",
+        "coulomb_n",
+        "stribeck_ratio",
+        "stribeck_v_m_s",
+        "seal_drag",
+        "stop_k_n_m",
+        "stop_c_ns_m",
+    )
+)
 
 
 @njit(cache=True)
@@ -122,8 +195,9 @@ def friction(p, v, pA, pB, a_cap, a_ann, visc_ratio):
     fc = p[I_COUL] + p[I_SEAL] * (abs(pA) * a_cap + abs(pB) * a_ann)
     fs = p[I_STRB] * fc
     vr = v / p[I_VSTR]
-    return ((fc + (fs - fc) * math.exp(-vr * vr)) * math.tanh(v / 1e-3)
-            + p[I_VISC] * (1.0 / visc_ratio) ** 0.3 * v)
+    return (fc + (fs - fc) * math.exp(-vr * vr)) * math.tanh(v / 1e-3) + p[I_VISC] * (
+        1.0 / visc_ratio
+    ) ** 0.3 * v
 
 
 @njit(cache=True)
@@ -144,8 +218,7 @@ def derivatives(p, s, uc, disp_cmd, speed, visc_ratio, fault, sev, payload, t, o
     vb = p[I_V0] + a_ann * (stroke - min(max(x, 0.0), stroke))
     out[PA] = bulk_modulus(pA, p[I_BOIL], p[I_AIR]) / va * (q_pa - q_at - a_cap * v - q_ab)
     out[PB] = bulk_modulus(pB, p[I_BOIL], p[I_AIR]) / vb * (q_pb - q_bt + a_ann * v + q_ab)
-    out[PP] = (bulk_modulus(pP, p[I_BLINE], p[I_AIR]) / p[I_VLINE]
-               * (q_out - q_pa - q_pb - q_rel))
+    out[PP] = bulk_modulus(pP, p[I_BLINE], p[I_AIR]) / p[I_VLINE] * (q_out - q_pa - q_pb - q_rel)
     force = pA * a_cap - pB * a_ann - payload * p[I_GRAV] * gravity_shape(x / stroke)
     force -= friction(p, v, pA, pB, a_cap, a_ann, visc_ratio)
     if x < 0.0:
@@ -220,8 +293,9 @@ def initial_state(p: np.ndarray, x0_m: float, payload: float) -> np.ndarray:
     s[X] = x0_m
     s[PB] = p[IDX["tank_pa"]]
     a_ann = a_cap - np.pi / 4 * p[IDX["rod_m"]] ** 2
-    s[PA] = (payload * p[IDX["gravity_n"]] * gravity_shape(x0_m / p[IDX["stroke_m"]])
-             + s[PB] * a_ann) / a_cap
+    s[PA] = (
+        payload * p[IDX["gravity_n"]] * gravity_shape(x0_m / p[IDX["stroke_m"]]) + s[PB] * a_ann
+    ) / a_cap
     s[PP] = p[IDX["comp_full_pa"]]
     return s
 
@@ -235,9 +309,17 @@ def visc_ratio(p: np.ndarray, temp_c: float) -> float:
 def simulate(p, s, t0, spool, disp, speed, temp, sev, fault: str, payload: float):
     """Run the plant over the sample arrays from state s (updated in place); states per sample."""
     out = np.empty((len(spool), N_STATE))
-    run_kernel(p, s, float(t0), np.ascontiguousarray(spool, dtype=np.float64),
-               np.ascontiguousarray(disp, dtype=np.float64),
-               np.ascontiguousarray(speed, dtype=np.float64),
-               np.ascontiguousarray(temp, dtype=np.float64),
-               np.ascontiguousarray(sev, dtype=np.float64), FAULTS[fault], float(payload), out)
+    run_kernel(
+        p,
+        s,
+        float(t0),
+        np.ascontiguousarray(spool, dtype=np.float64),
+        np.ascontiguousarray(disp, dtype=np.float64),
+        np.ascontiguousarray(speed, dtype=np.float64),
+        np.ascontiguousarray(temp, dtype=np.float64),
+        np.ascontiguousarray(sev, dtype=np.float64),
+        FAULTS[fault],
+        float(payload),
+        out,
+    )
     return out

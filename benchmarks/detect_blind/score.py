@@ -60,8 +60,9 @@ def train(data: Path, work: Path, machine_dir: str, resume: bool) -> tuple[Path,
     if resume and model.exists():
         return model, 0
     comm = sorted((data / machine_dir / "commissioning").glob("*.csv"))
-    rc = run_monitor(["train", *map(str, comm), "--out", str(model)],
-                     model.with_suffix(".train.txt"))
+    rc = run_monitor(
+        ["train", *map(str, comm), "--out", str(model)], model.with_suffix(".train.txt")
+    )
     return model, rc
 
 
@@ -71,18 +72,36 @@ def detect(data: Path, work: Path, entry: dict, model: Path, resume: bool) -> di
     summary, events = base.with_suffix(".summary.json"), base.with_suffix(".events.jsonl")
     rc = 0
     if not (resume and summary.exists()):
-        rc = run_monitor(["detect", str(data / entry["path"]), "--model", str(model),
-                          "--summary", str(summary), "--events", str(events)],
-                         base.with_suffix(".detect.txt"))
+        rc = run_monitor(
+            [
+                "detect",
+                str(data / entry["path"]),
+                "--model",
+                str(model),
+                "--summary",
+                str(summary),
+                "--events",
+                str(events),
+            ],
+            base.with_suffix(".detect.txt"),
+        )
     s = json.loads(summary.read_text()) if summary.exists() else {}
-    return {**entry, "rc": rc, "alarm": bool(s.get("alarm")), "verdict": s.get("verdict"),
-            "first_alarm_t": s.get("first_alarm_t"), "fault_named": s.get("fault"),
-            "sensor_fault": bool(s.get("sensor_fault")), "judged_s": s.get("judged_s") or 0.0,
-            "max_J": s.get("max_J"), "threshold": s.get("threshold"),
-            "episodes": s.get("alarm_episodes", alarm_episodes(events)),
-            "not_judged_why": s.get("not_judged_why"),
-            "out_of_range_signals": s.get("out_of_range_signals"),
-            "error": None if s else f"exit {rc}"}
+    return {
+        **entry,
+        "rc": rc,
+        "alarm": bool(s.get("alarm")),
+        "verdict": s.get("verdict"),
+        "first_alarm_t": s.get("first_alarm_t"),
+        "fault_named": s.get("fault"),
+        "sensor_fault": bool(s.get("sensor_fault")),
+        "judged_s": s.get("judged_s") or 0.0,
+        "max_J": s.get("max_J"),
+        "threshold": s.get("threshold"),
+        "episodes": s.get("alarm_episodes", alarm_episodes(events)),
+        "not_judged_why": s.get("not_judged_why"),
+        "out_of_range_signals": s.get("out_of_range_signals"),
+        "error": None if s else f"exit {rc}",
+    }
 
 
 def score_types(data: Path, work: Path, key: dict, resume: bool, progress) -> dict:
@@ -113,8 +132,11 @@ def summarise_type(rows: list[dict], trains: dict) -> dict:
         for sev in sorted({r["severity"] for r in rows if r["fault"] == fault}):
             runs = [r for r in rows if r["fault"] == fault and r["severity"] == sev]
             faults[f"{fault}@{sev:.2f}"] = metrics.detection(runs)
-    detected = [r for r in rows if r["kind"] == "fault" and r["alarm"]
-                and (r["first_alarm_t"] or 0) >= r["onset_s"]]
+    detected = [
+        r
+        for r in rows
+        if r["kind"] == "fault" and r["alarm"] and (r["first_alarm_t"] or 0) >= r["onset_s"]
+    ]
     return {
         "train_exit": trains,
         "logs": len(rows),
@@ -127,8 +149,11 @@ def summarise_type(rows: list[dict], trains: dict) -> dict:
         "sensor_fault_normal_logs": sum(r["sensor_fault"] for r in normal),
         "errors": sum(r["error"] is not None for r in rows),
         "faults": faults,
-        "isolation_all": (sum(r["fault_named"] == r["fault"] for r in detected) / len(detected)
-                          if detected else None),
+        "isolation_all": (
+            sum(r["fault_named"] == r["fault"] for r in detected) / len(detected)
+            if detected
+            else None
+        ),
         "rows": rows,
     }
 
@@ -144,8 +169,10 @@ def score_fleet(data: Path, work: Path, key: dict, resume: bool, progress) -> di
     rc = 0
     if not (resume and table.exists()):
         shutil.rmtree(results, ignore_errors=True)
-        rc = run_monitor(["fleet", "run", str(data / "fleet"), "--out", str(results),
-                          "--workers", "1"], work / "fleet_run.txt")
+        rc = run_monitor(
+            ["fleet", "run", str(data / "fleet"), "--out", str(results), "--workers", "1"],
+            work / "fleet_run.txt",
+        )
         progress(f"score: fleet run exit {rc}")
     if not table.exists():
         return {"exit": rc, "error": "no logs.parquet"}
@@ -154,16 +181,23 @@ def score_fleet(data: Path, work: Path, key: dict, resume: bool, progress) -> di
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.detect_blind.score",
-                                 description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seed", type=int, required=True,
-                    help=f"1-{DEV_SEEDS_MAX}: development; larger: a blind seed (README.md)")
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.detect_blind.score",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ap.add_argument(
+        "--seed",
+        type=int,
+        required=True,
+        help=f"1-{DEV_SEEDS_MAX}: development; larger: a blind seed (README.md)",
+    )
     ap.add_argument("--work", type=Path, required=True, help="data and results go here")
     ap.add_argument("--json", type=Path, required=True)
     ap.add_argument("--md", type=Path, required=True)
-    ap.add_argument("--resume", action="store_true",
-                    help="reuse models and summaries already in --work")
+    ap.add_argument(
+        "--resume", action="store_true", help="reuse models and summaries already in --work"
+    )
     scale_arguments(ap)
     args = ap.parse_args(argv)
     scale = scale_from(args)
@@ -173,9 +207,13 @@ def main(argv: list[str] | None = None) -> int:
 
     data = args.work / "data"
     key = generate(args.seed, data, scale, progress)
-    result = {"seed": args.seed, "blind": args.seed > DEV_SEEDS_MAX, "scale": key["scale"],
-              "types": score_types(data, args.work, key, args.resume, progress),
-              "fleet": score_fleet(data, args.work, key, args.resume, progress)}
+    result = {
+        "seed": args.seed,
+        "blind": args.seed > DEV_SEEDS_MAX,
+        "scale": key["scale"],
+        "types": score_types(data, args.work, key, args.resume, progress),
+        "fleet": score_fleet(data, args.work, key, args.resume, progress),
+    }
     args.json.write_text(json.dumps(result, indent=1, default=str))
     args.md.write_text(report.markdown(result))
     print(args.md.read_text())

@@ -37,10 +37,20 @@ class Transducer:
     gain: float  # span error: reading = gain * value + offset
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, full_scale: float, noise_rms: float,
-             offset_limit_fs: float = 0.005, gain_limit: float = 0.005) -> Transducer:
-        return cls(full_scale, noise_rms, float(rng.uniform(-offset_limit_fs, offset_limit_fs)),
-                   float(1.0 + rng.uniform(-gain_limit, gain_limit)))
+    def draw(
+        cls,
+        rng: np.random.Generator,
+        full_scale: float,
+        noise_rms: float,
+        offset_limit_fs: float = 0.005,
+        gain_limit: float = 0.005,
+    ) -> Transducer:
+        return cls(
+            full_scale,
+            noise_rms,
+            float(rng.uniform(-offset_limit_fs, offset_limit_fs)),
+            float(1.0 + rng.uniform(-gain_limit, gain_limit)),
+        )
 
     def current_ma(self, value: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Loop current for the true value: calibration error, noise, saturation."""
@@ -60,11 +70,13 @@ def draw_transducers(rng: np.random.Generator) -> dict[str, Transducer]:
     return {name: Transducer.draw(rng, fs, noise) for name, (fs, noise) in TRANSDUCERS.items()}
 
 
-def oil_temp_reading(temp_c: np.ndarray, rng: np.random.Generator, sample_s: float = 0.01,
-                     offset_c: float = 0.0) -> np.ndarray:
+def oil_temp_reading(
+    temp_c: np.ndarray, rng: np.random.Generator, sample_s: float = 0.01, offset_c: float = 0.0
+) -> np.ndarray:
     """An oil temperature sensor read at 1 Hz (held between readings), 0.1 degC resolution."""
     per = int(round(1.0 / sample_s))
     held = np.repeat(temp_c[::per], per)[: len(temp_c)]
-    noisy = held + offset_c + np.repeat(rng.normal(0.0, 0.1, len(temp_c[::per])), per)[
-        : len(temp_c)]
+    noisy = (
+        held + offset_c + np.repeat(rng.normal(0.0, 0.1, len(temp_c[::per])), per)[: len(temp_c)]
+    )
     return np.round(noisy, 1)

@@ -31,9 +31,11 @@ from generate import EFFECTS, cases, generate  # noqa: E402
 def _diagnose_one(rec: Path, out: Path) -> tuple[float, str]:
     start = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-m", "monitor", "gap", "--real", str(rec), "--json", str(out),
-         "--quiet"], capture_output=True, text=True, check=False
-    )  # fmt: skip
+        [sys.executable, "-m", "monitor", "gap", "--real", str(rec), "--json", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     if proc.returncode != 0:
         out.write_text(json.dumps({"error": proc.stderr.strip(), "verdict": "error"}))
     said = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else proc.stderr.strip()
@@ -49,9 +51,10 @@ def diagnose_blind(
     """
     results_dir.mkdir(parents=True, exist_ok=True)
     todo = [
-        r for r in sorted(data_dir.glob("*.csv"))
+        r
+        for r in sorted(data_dir.glob("*.csv"))
         if not (reuse and (results_dir / (r.stem + ".json")).exists())
-    ]  # fmt: skip
+    ]
     times = {}
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         futures = {pool.submit(_diagnose_one, r, results_dir / (r.stem + ".json")): r for r in todo}

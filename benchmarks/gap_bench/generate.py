@@ -42,7 +42,7 @@ from plant import (
     nominal,
     run,
     sensors,
-)  # fmt: skip
+)
 
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
@@ -54,13 +54,23 @@ from monitor.sim.simulate import simulate
 
 TOLERANCE = 0.05
 EFFECTS = (
-    "entrained_air", "oil_viscosity", "cylinder_friction", "spool_dynamics", "valve_deadband",
-    "pump_control_dynamics", "hose_compliance", "sensor_lag", "load_variation",
-)  # fmt: skip
+    "entrained_air",
+    "oil_viscosity",
+    "cylinder_friction",
+    "spool_dynamics",
+    "valve_deadband",
+    "pump_control_dynamics",
+    "hose_compliance",
+    "sensor_lag",
+    "load_variation",
+)
 DISTURBANCES = ("periodic_load", "blocked_return", "cross_port_leak")
 #: Pairs whose second effect is large enough to matter next to the first.
-PAIRS = (("valve_deadband", "sensor_lag"), ("cylinder_friction", "load_variation"),
-         ("entrained_air", "pump_control_dynamics"))  # fmt: skip
+PAIRS = (
+    ("valve_deadband", "sensor_lag"),
+    ("cylinder_friction", "load_variation"),
+    ("entrained_air", "pump_control_dynamics"),
+)
 
 
 def _u(rng: np.random.Generator, lo: float, hi: float) -> float:
@@ -75,8 +85,11 @@ def catalogue_params(name: str, rng: np.random.Generator) -> dict[str, float]:
         return {"pump_leak_lpm_per_100bar": _u(rng, 1.5, 4.0), "friction_share": _u(rng, 0.3, 1)}
     if name == "cylinder_friction":
         c = _u(rng, 500, 2000)
-        return {"coulomb_n": c, "static_n": c * _u(rng, 1.2, 2.0),
-                "stribeck_velocity_mm_s": _u(rng, 5, 20)}  # fmt: skip
+        return {
+            "coulomb_n": c,
+            "static_n": c * _u(rng, 1.2, 2.0),
+            "stribeck_velocity_mm_s": _u(rng, 5, 20),
+        }
     if name == "spool_dynamics":
         return {"natural_freq_hz": _u(rng, 3, 12), "damping_ratio": _u(rng, 0.5, 1.0)}
     if name == "valve_deadband":
@@ -165,13 +178,14 @@ def _from_plant(cmds: Recording, names: list[str], tol: dict, rng) -> tuple[dict
 def _from_sim(cmds: Recording, names: list[str], tol: dict, rng, seed: int):
     m = load_machine()
     m = m.with_changes(
-        mass_kg=m.mass_kg * tol["mass"], gravity_load_n=m.gravity_load_n * tol["gravity"],
+        mass_kg=m.mass_kg * tol["mass"],
+        gravity_load_n=m.gravity_load_n * tol["gravity"],
         viscous_friction_n_s_m=m.viscous_friction_n_s_m * tol["friction"],
         valve_rated_flow_m3_s=m.valve_rated_flow_m3_s * tol["valve"],
         dead_volume_a_m3=m.dead_volume_a_m3 * tol["vol_a"],
         dead_volume_b_m3=m.dead_volume_b_m3 * tol["vol_b"],
         line_volume_m3=m.line_volume_m3 * tol["vol_line"],
-    )  # fmt: skip
+    )
     params = {n: catalogue_params(n, rng) for n in names}
     fx = [Effect.make(n, **params[n]) for n in names]
     rec = simulate(cmds, m, effects=fx, seed=seed)
@@ -190,8 +204,15 @@ def cases(per_effect: int, n_none: int, n_unexplained: int, n_pairs: int) -> lis
         out.append({"kind": "none", "truth": "none", "second": None, "generator": gen})
     for i in range(n_unexplained):
         d = DISTURBANCES[i % len(DISTURBANCES)]
-        out.append({"kind": "unexplained", "truth": "unexplained", "disturbance": d,
-                    "second": None, "generator": "alternative"})  # fmt: skip
+        out.append(
+            {
+                "kind": "unexplained",
+                "truth": "unexplained",
+                "disturbance": d,
+                "second": None,
+                "generator": "alternative",
+            }
+        )
     for i in range(n_pairs):
         a, b = PAIRS[i % len(PAIRS)]
         gen = "catalogue" if i % 2 == 0 else "alternative"
@@ -217,8 +238,12 @@ def generate(
         rng = np.random.default_rng(case_seed)
         cmds = make_cycle("boom", duration_s, case_seed)
         tol = _tolerances(rng)
-        names = {"effect": [case["truth"]], "pair": [case["truth"], case["second"]],
-                 "none": [], "unexplained": [case.get("disturbance")]}[case["kind"]]  # fmt: skip
+        names = {
+            "effect": [case["truth"]],
+            "pair": [case["truth"], case["second"]],
+            "none": [],
+            "unexplained": [case.get("disturbance")],
+        }[case["kind"]]
         if case["generator"] == "catalogue":
             cols, params = _from_sim(cmds, names, tol, rng, case_seed)
         else:

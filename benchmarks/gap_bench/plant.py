@@ -27,9 +27,49 @@ from numba import njit
 from scipy.signal import bilinear, lfilter
 
 # Parameter vector indices.
-(BETA, VL, V0A, V0B, AA, AB, STROKE, MASS, FG, CV, KV, DPL, DMAX, CS, CF, RC, RG,
- AIR, AIRN, LUGRE, FC, FS, VS, SIG0, SIG1, SPOOL, WN, ZETA, SVMAX, OVL, PTAU, PRATE,
- EWALL, LEAK, K1, K2, XREF, PAMP, PFREQ, KRET, XLEAK) = range(41)  # fmt: skip
+(
+    BETA,
+    VL,
+    V0A,
+    V0B,
+    AA,
+    AB,
+    STROKE,
+    MASS,
+    FG,
+    CV,
+    KV,
+    DPL,
+    DMAX,
+    CS,
+    CF,
+    RC,
+    RG,
+    AIR,
+    AIRN,
+    LUGRE,
+    FC,
+    FS,
+    VS,
+    SIG0,
+    SIG1,
+    SPOOL,
+    WN,
+    ZETA,
+    SVMAX,
+    OVL,
+    PTAU,
+    PRATE,
+    EWALL,
+    LEAK,
+    K1,
+    K2,
+    XREF,
+    PAMP,
+    PFREQ,
+    KRET,
+    XLEAK,
+) = range(41)
 N_P = 41
 NS = 9  # pp, pa, pb, x, v, xs, vs, disp, z
 P_ATM = 101325.0
@@ -37,8 +77,16 @@ P_ATM = 101325.0
 
 def nominal(tol: dict[str, float] | None = None) -> np.ndarray:
     """The reference machine (docs/reference/contracts.md), optional multiplicative tolerances."""
-    t = {"mass": 1.0, "gravity": 1.0, "friction": 1.0, "valve": 1.0, "vol_a": 1.0,
-         "vol_b": 1.0, "vol_line": 1.0, **(tol or {})}  # fmt: skip
+    t = {
+        "mass": 1.0,
+        "gravity": 1.0,
+        "friction": 1.0,
+        "valve": 1.0,
+        "vol_a": 1.0,
+        "vol_b": 1.0,
+        "vol_line": 1.0,
+        **(tol or {}),
+    }
     p = np.zeros(N_P)
     p[BETA] = 1.5e9
     p[VL] = 0.5e-3 * t["vol_line"]
@@ -224,9 +272,13 @@ def run(
 ) -> np.ndarray:
     """Plant record at 1 kHz: columns PP, PA, PB (Pa), QP (m^3/s), x (m)."""
     inputs = np.column_stack(
-        [np.clip(spool_pct, -100, 100) / 100, np.clip(disp_pct, 0, 100) / 100, rpm / 60.0,
-         viscosity_ratio(oil_c)]
-    )  # fmt: skip
+        [
+            np.clip(spool_pct, -100, 100) / 100,
+            np.clip(disp_pct, 0, 100) / 100,
+            rpm / 60.0,
+            viscosity_ratio(oil_c),
+        ]
+    )
     dt = float(t[1] - t[0])
     n_sub = int(round(dt / 2e-4))
     y0 = np.zeros(NS)
@@ -248,9 +300,13 @@ def sensors(
     fs = 1000.0
     out = {}
     for j, (name, unit, noise, hi) in enumerate(
-        (("PP", 1e5, 0.3, 400.0), ("PA", 1e5, 0.3, 400.0), ("PB", 1e5, 0.3, 400.0),
-         ("QP", 1e-3 / 60, 0.1, 60.0))
-    ):  # fmt: skip
+        (
+            ("PP", 1e5, 0.3, 400.0),
+            ("PA", 1e5, 0.3, 400.0),
+            ("PB", 1e5, 0.3, 400.0),
+            ("QP", 1e-3 / 60, 0.1, 60.0),
+        )
+    ):
         x = rec_1khz[:, j] / unit
         if filter_hz > 0.0:
             w = 2 * math.pi * filter_hz

@@ -25,6 +25,7 @@ plant vector p}.  Ranges:
 - sensor_calibration: `gain` (0.85-0.93 or 1.07-1.15) or `offset` (5-15 bar, 1.5-4 L/min, 10-30 mm)
   on one of PP, PA, PB, QP, RodPos.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -58,35 +59,52 @@ def air_iso(rng, p, temps):
 
 
 def air_adiab(rng, p, temps):
-    _set(p, air_mode=2, air_frac=_u(rng, 0.005, 0.03), air_n=1.4,
-         air_pdiss_Pa=_u(rng, 30, 80) * BAR)
+    _set(
+        p, air_mode=2, air_frac=_u(rng, 0.005, 0.03), air_n=1.4, air_pdiss_Pa=_u(rng, 30, 80) * BAR
+    )
 
 
 def _leaks(rng, p, all_paths):
     # reference leak conductances at 40 degC (m^3/s/Pa): pump 0.5-1.5 L/min at 200 bar,
     # seal 0.1-0.4 L/min at 100 bar, valve 0.05-0.2 L/min at 100 bar
-    _set(p, leak_pump=_u(rng, 0.5, 1.5) / 60000 / 200e5,
-         leak_seal=_u(rng, 0.1, 0.4) / 60000 / 100e5)
+    _set(
+        p, leak_pump=_u(rng, 0.5, 1.5) / 60000 / 200e5, leak_seal=_u(rng, 0.1, 0.4) / 60000 / 100e5
+    )
     if all_paths:
         _set(p, leak_valve=_u(rng, 0.05, 0.2) / 60000 / 100e5)
 
 
 def visc_walther(rng, p, temps):
     _leaks(rng, p, True)
-    _set(p, visc_mode=1, visc_ratio0=46.0 / walther_nu_cst(temps[0]),
-         visc_ratio1=46.0 / walther_nu_cst(temps[1]))
+    _set(
+        p,
+        visc_mode=1,
+        visc_ratio0=46.0 / walther_nu_cst(temps[0]),
+        visc_ratio1=46.0 / walther_nu_cst(temps[1]),
+    )
 
 
 def visc_andrade(rng, p, temps):
     _leaks(rng, p, False)
-    _set(p, visc_mode=2, visc_ratio0=float(np.exp(0.034 * (temps[0] - 40))),
-         visc_ratio1=float(np.exp(0.034 * (temps[1] - 40))))
+    _set(
+        p,
+        visc_mode=2,
+        visc_ratio0=float(np.exp(0.034 * (temps[0] - 40))),
+        visc_ratio1=float(np.exp(0.034 * (temps[1] - 40))),
+    )
 
 
 def _fric(rng, p, mode):
     fc = _u(rng, 300, 800)
-    _set(p, fric_mode=mode, fc_N=fc, fs_N=fc * _u(rng, 1.2, 1.8), vs_mps=_u(rng, 0.005, 0.02),
-         sigma0=_u(rng, 1e6, 1e7), sigma1=_u(rng, 1e3, 5e3))
+    _set(
+        p,
+        fric_mode=mode,
+        fc_N=fc,
+        fs_N=fc * _u(rng, 1.2, 1.8),
+        vs_mps=_u(rng, 0.005, 0.02),
+        sigma0=_u(rng, 1e6, 1e7),
+        sigma1=_u(rng, 1e3, 5e3),
+    )
 
 
 def fric_stribeck(rng, p, temps):
@@ -134,8 +152,12 @@ def load_slope(rng, p, temps):
 
 
 def load_cos(rng, p, temps):
-    _set(p, load_mode=2, load_theta0=np.radians(_u(rng, 20, 50)),
-         load_dtheta=np.radians(_u(rng, 30, 60)))
+    _set(
+        p,
+        load_mode=2,
+        load_theta0=np.radians(_u(rng, 20, 50)),
+        load_dtheta=np.radians(_u(rng, 30, 60)),
+    )
 
 
 # post-processing effects (sensor_lag, sensor_calibration) are described by dicts

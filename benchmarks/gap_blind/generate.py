@@ -4,6 +4,7 @@
 
 Seeds 1-99 are development seeds; the blind seed is chosen by the lead at scoring time.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,7 +33,7 @@ def boom_cycle(rng: np.random.Generator, duration_s: float) -> np.ndarray:
         # lowering runs with gravity and is faster than raising: shorter lower phases keep
         # the boom off its bottom stop most of the time
         d = int(rng.uniform(1, 2) * FS_HZ) if sign < 0 else int(rng.uniform(1, 4) * FS_HZ)
-        target[i:i + d] = sign * rng.uniform(40, 100)
+        target[i : i + d] = sign * rng.uniform(40, 100)
         i, k = i + d, k + 1
     out = np.empty(n)
     y, step = 0.0, 200.0 / FS_HZ
@@ -76,8 +77,13 @@ def record(p, post, rng, duration_s, temps, with_rodpos):
     temp = np.interp(np.floor(t), [0, duration_s], temps)  # 1 Hz sample and hold
     p[P["duration_s"]] = duration_s
     o = simulate(p, spool, disp, speed, temp, 1e-4, 100)
-    cols = {"PP": o[:, 0] / BAR, "PA": o[:, 1] / BAR, "PB": o[:, 2] / BAR, "QP": o[:, 3] / LPM,
-            "RodPos": o[:, 4] * 1000}
+    cols = {
+        "PP": o[:, 0] / BAR,
+        "PA": o[:, 1] / BAR,
+        "PB": o[:, 2] / BAR,
+        "QP": o[:, 3] / LPM,
+        "RodPos": o[:, 4] * 1000,
+    }
     for k in ("PP", "PA", "PB", "QP"):
         cols[k] = _lag(cols[k], post)
     for k, s in NOISE.items():
@@ -85,8 +91,14 @@ def record(p, post, rng, duration_s, temps, with_rodpos):
     sig = post.get("signal")
     if sig:
         cols[sig] = cols[sig] * post.get("gain", 1.0) + post.get("offset", 0.0)
-    table = {"t": t, "SpoolCmd": spool, "PumpDispCmd": disp, "EngineSpeed": speed,
-             "OilTemp": np.round(temp, 1), **cols}
+    table = {
+        "t": t,
+        "SpoolCmd": spool,
+        "PumpDispCmd": disp,
+        "EngineSpeed": speed,
+        "OilTemp": np.round(temp, 1),
+        **cols,
+    }
     if not with_rodpos:
         table.pop("RodPos")
     return table
@@ -118,8 +130,9 @@ def cases(n_per_effect: int):
     return out
 
 
-def generate(out: Path, seed: int, n_per_effect: int, tolerances, duration_s=300.0,
-             progress=True) -> list[dict]:
+def generate(
+    out: Path, seed: int, n_per_effect: int, tolerances, duration_s=300.0, progress=True
+) -> list[dict]:
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     keys = []
@@ -136,10 +149,19 @@ def generate(out: Path, seed: int, n_per_effect: int, tolerances, duration_s=300
         with_rodpos = rodpos_column(rng, post)
         name = f"r{i:03d}_{eff}_{form}_tol{tol}.csv"
         write_csv(out / name, record(p, post, rng, duration_s, temps, with_rodpos))
-        keys.append({"file": name, "effect": eff, "formulation": form,
-                     "signal": post.get("signal"), "expected_suggestion": expected,
-                     "tolerance_pct": tol, "machine": draw, "oil_temp_c": temps,
-                     "rodpos": with_rodpos})
+        keys.append(
+            {
+                "file": name,
+                "effect": eff,
+                "formulation": form,
+                "signal": post.get("signal"),
+                "expected_suggestion": expected,
+                "tolerance_pct": tol,
+                "machine": draw,
+                "oil_temp_c": temps,
+                "rodpos": with_rodpos,
+            }
+        )
         if progress:
             print(f"[{i + 1}/{len(todo)}] {name}", file=sys.stderr, flush=True)
     (out / "key.json").write_text(json.dumps({"seed": seed, "recordings": keys}, indent=1))
@@ -147,11 +169,16 @@ def generate(out: Path, seed: int, n_per_effect: int, tolerances, duration_s=300
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.gap_blind.generate",
-                                 description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.gap_blind.generate", description=__doc__.splitlines()[0]
+    )
     ap.add_argument("out", type=Path)
-    ap.add_argument("--seed", type=int, required=True,
-                    help="1-99: development seeds; the blind seed is the lead's")
+    ap.add_argument(
+        "--seed",
+        type=int,
+        required=True,
+        help="1-99: development seeds; the blind seed is the lead's",
+    )
     ap.add_argument("--n-per-effect", type=int, default=5)
     ap.add_argument("--tolerance", default="5,15", help="machine tolerances in %% (comma list)")
     ap.add_argument("--duration", type=float, default=300.0, help="seconds per recording")

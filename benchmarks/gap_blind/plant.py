@@ -5,25 +5,70 @@ valve/pump models; Canudas de Wit et al. (1995) LuGre; Armstrong-Helouvry (1994)
 ASTM D341 Walther viscosity; entrained air mixture law (Yu 1994, Gholizadeh 2011 review).
 All quantities SI inside.  Parameters travel in one float array indexed by the names in P.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
 NAMES = (
-    "mass_kg", "gravity_N", "visc_Nspm", "kv", "va0_m3", "vb0_m3", "vp_m3", "bulk_Pa",
-    "ac_m2", "ar_m2", "stroke_m", "disp_m3", "comp_lo_Pa", "comp_hi_Pa", "relief_lo_Pa",
-    "relief_hi_Pa", "relief_q_m3s",
+    "mass_kg",
+    "gravity_N",
+    "visc_Nspm",
+    "kv",
+    "va0_m3",
+    "vb0_m3",
+    "vp_m3",
+    "bulk_Pa",
+    "ac_m2",
+    "ar_m2",
+    "stroke_m",
+    "disp_m3",
+    "comp_lo_Pa",
+    "comp_hi_Pa",
+    "relief_lo_Pa",
+    "relief_hi_Pa",
+    "relief_q_m3s",
     # effect switches (0 = off) and parameters
-    "fric_mode", "fc_N", "fs_N", "vs_mps", "sigma0", "sigma1",
-    "air_mode", "air_frac", "air_n", "air_pdiss_Pa",
-    "visc_mode", "visc_ratio0", "visc_ratio1", "leak_pump", "leak_seal", "leak_valve",
-    "spool_mode", "spool_wn", "spool_zeta", "spool_tau", "spool_rate",
-    "db_mode", "db_overlap",
-    "pump_mode", "pump_tau", "pump_wn", "pump_zeta",
-    "hose_mode", "hose_bulk_Pa", "hose_c_m3pPa",
-    "load_mode", "load_k", "load_theta0", "load_dtheta",
-    "ooc_mode", "ooc_amp", "ooc_freq", "ooc_leak", "ooc_comp_shift_Pa",
+    "fric_mode",
+    "fc_N",
+    "fs_N",
+    "vs_mps",
+    "sigma0",
+    "sigma1",
+    "air_mode",
+    "air_frac",
+    "air_n",
+    "air_pdiss_Pa",
+    "visc_mode",
+    "visc_ratio0",
+    "visc_ratio1",
+    "leak_pump",
+    "leak_seal",
+    "leak_valve",
+    "spool_mode",
+    "spool_wn",
+    "spool_zeta",
+    "spool_tau",
+    "spool_rate",
+    "db_mode",
+    "db_overlap",
+    "pump_mode",
+    "pump_tau",
+    "pump_wn",
+    "pump_zeta",
+    "hose_mode",
+    "hose_bulk_Pa",
+    "hose_c_m3pPa",
+    "load_mode",
+    "load_k",
+    "load_theta0",
+    "load_dtheta",
+    "ooc_mode",
+    "ooc_amp",
+    "ooc_freq",
+    "ooc_leak",
+    "ooc_comp_shift_Pa",
     "duration_s",
 )
 P = {n: i for i, n in enumerate(NAMES)}
@@ -36,12 +81,29 @@ def nominal() -> np.ndarray:
     p = np.zeros(len(NAMES))
     ac = np.pi / 4 * 0.063**2
     ar = ac - np.pi / 4 * 0.036**2
-    vals = dict(mass_kg=400.0, gravity_N=6000.0, visc_Nspm=2000.0,
-                kv=20 * LPM / np.sqrt(10 * BAR), va0_m3=0.3e-3, vb0_m3=0.3e-3, vp_m3=0.5e-3,
-                bulk_Pa=1.5e9, ac_m2=ac, ar_m2=ar, stroke_m=0.5, disp_m3=11e-6,
-                comp_lo_Pa=190 * BAR, comp_hi_Pa=200 * BAR, relief_lo_Pa=210 * BAR,
-                relief_hi_Pa=220 * BAR, relief_q_m3s=40 * LPM, visc_ratio0=1.0,
-                visc_ratio1=1.0, air_n=1.0, duration_s=300.0)
+    vals = dict(
+        mass_kg=400.0,
+        gravity_N=6000.0,
+        visc_Nspm=2000.0,
+        kv=20 * LPM / np.sqrt(10 * BAR),
+        va0_m3=0.3e-3,
+        vb0_m3=0.3e-3,
+        vp_m3=0.5e-3,
+        bulk_Pa=1.5e9,
+        ac_m2=ac,
+        ar_m2=ar,
+        stroke_m=0.5,
+        disp_m3=11e-6,
+        comp_lo_Pa=190 * BAR,
+        comp_hi_Pa=200 * BAR,
+        relief_lo_Pa=210 * BAR,
+        relief_hi_Pa=220 * BAR,
+        relief_q_m3s=40 * LPM,
+        visc_ratio0=1.0,
+        visc_ratio1=1.0,
+        air_n=1.0,
+        duration_s=300.0,
+    )
     for k, v in vals.items():
         p[P[k]] = v
     return p
@@ -134,10 +196,10 @@ def simulate(p, spool_pct, disp_pct, speed_rpm, temp_c, dt, sub):
             ff = visc * v
             if p[17] == 1.0:
                 fc, fs, vsx = p[18], p[19], p[20]
-                ff += (fc + (fs - fc) * np.exp(-(v / vsx) ** 2)) * np.tanh(v / 1e-3)
+                ff += (fc + (fs - fc) * np.exp(-((v / vsx) ** 2))) * np.tanh(v / 1e-3)
             elif p[17] == 2.0:
                 fc, fs, vsx, s0, s1 = p[18], p[19], p[20], p[21], p[22]
-                gv = (fc + (fs - fc) * np.exp(-(v / vsx) ** 2)) / s0
+                gv = (fc + (fs - fc) * np.exp(-((v / vsx) ** 2))) / s0
                 dz = v - abs(v) * z / gv
                 z += dz * dt
                 ff += s0 * z + s1 * dz

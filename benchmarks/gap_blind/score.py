@@ -5,6 +5,7 @@
 JSON keys read from each `monitor gap` report: verdict, params.sensor_calibration,
 suggestion[0].term, shrink.heldout_reduction.  A missing key fails loudly.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -16,13 +17,26 @@ from pathlib import Path
 
 import numpy as np
 
-KEYS_READ = ("verdict", "params.sensor_calibration", "suggestion[0].term",
-             "shrink.heldout_reduction")
+KEYS_READ = (
+    "verdict",
+    "params.sensor_calibration",
+    "suggestion[0].term",
+    "shrink.heldout_reduction",
+)
 
 
 def run_gap(rec: Path, out_json: Path) -> dict:
-    cmd = [sys.executable, "-m", "monitor", "gap", "--real", str(rec), "--json", str(out_json),
-           "--quiet"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "monitor",
+        "gap",
+        "--real",
+        str(rec),
+        "--json",
+        str(out_json),
+        "--quiet",
+    ]
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode != 0:
         return {"_error": f"exit {r.returncode}: {r.stderr.strip()[-300:]}"}
@@ -68,20 +82,23 @@ def judge(key: dict, rep: dict) -> dict:
 def summarise(rows: list[dict]) -> dict:
     def rate(sel):
         return {"right": sum(r["ok"] for r in sel), "n": len(sel)}
+
     single = [r for r in rows if r["effect"] not in ("none", "unexplained")]
     red = [r["reduction"] for r in single if r.get("reduction") is not None]
-    return {"single_top1": rate(single),
-            "healthy_none": rate([r for r in rows if r["effect"] == "none"]),
-            "sensor_calibration_signal": rate([r for r in rows
-                                               if r["effect"] == "sensor_calibration"]),
-            "unexplained_suggestion": rate([r for r in rows if r["effect"] == "unexplained"]),
-            "median_heldout_reduction": float(np.median(red)) if red else None,
-            "keys_read": list(KEYS_READ)}
+    return {
+        "single_top1": rate(single),
+        "healthy_none": rate([r for r in rows if r["effect"] == "none"]),
+        "sensor_calibration_signal": rate([r for r in rows if r["effect"] == "sensor_calibration"]),
+        "unexplained_suggestion": rate([r for r in rows if r["effect"] == "unexplained"]),
+        "median_heldout_reduction": float(np.median(red)) if red else None,
+        "keys_read": list(KEYS_READ),
+    }
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.gap_blind.score",
-                                 description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.gap_blind.score", description=__doc__.splitlines()[0]
+    )
     ap.add_argument("out", type=Path)
     ap.add_argument("--json", type=Path, required=True)
     ap.add_argument("--jobs", type=int, default=1)
@@ -102,8 +119,12 @@ def main(argv=None) -> int:
         with ThreadPoolExecutor(max(1, a.jobs)) as ex:
             for i, row in enumerate(ex.map(one, keys)):
                 rows.append(row)
-                print(f"[{i + 1}/{len(keys)}] {row['file']}: {row['verdict']} "
-                      f"{'ok' if row['ok'] else 'WRONG'}", file=sys.stderr, flush=True)
+                print(
+                    f"[{i + 1}/{len(keys)}] {row['file']}: {row['verdict']} "
+                    f"{'ok' if row['ok'] else 'WRONG'}",
+                    file=sys.stderr,
+                    flush=True,
+                )
     except KeyError as e:  # the public JSON contract changed: say so, do not score
         print(f"score: {e.args[0]}", file=sys.stderr)
         return 2

@@ -19,8 +19,7 @@ def _ramp(level: np.ndarray, rate_per_s: float) -> np.ndarray:
     return out
 
 
-def boom_cycles(duration_s: float, rng: np.random.Generator,
-                warmup: bool) -> dict[str, np.ndarray]:
+def boom_cycles(duration_s: float, rng: np.random.Generator, warmup: bool) -> dict[str, np.ndarray]:
     """Commands, engine set speed, oil temperature and engine ripple, one row per 10 ms."""
     n = int(round(duration_s * FS))
     spool = np.zeros(n)
@@ -38,15 +37,15 @@ def boom_cycles(duration_s: float, rng: np.random.Generator,
         k = int(dur * FS)
         if rng.random() < 0.15:
             disp_level = rng.uniform(0.6, 1.0)
-        spool[i:i + k] = amp if up else -amp
-        disp[i:i + k] = disp_level
+        spool[i : i + k] = amp if up else -amp
+        disp[i : i + k] = disp_level
         i += k + int(rng.uniform(0.8, 4.0) * FS)
     spool = _ramp(spool, rng.uniform(2.5, 10.0))
     n_set = np.full(n, 2200.0)
     if rng.random() < 0.3:  # the operator changes the throttle now and then
         for _ in range(rng.integers(1, 4)):
             a = int(rng.uniform(0, duration_s - 30) * FS)
-            n_set[a:a + int(rng.uniform(10, 30) * FS)] = rng.choice([1800.0, 2000.0])
+            n_set[a : a + int(rng.uniform(10, 30) * FS)] = rng.choice([1800.0, 2000.0])
         n_set = _ramp(n_set, 400.0)
     t = np.arange(n) / FS
     if warmup:

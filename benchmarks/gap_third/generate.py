@@ -31,9 +31,17 @@ def scenarios(seed: int, kind: str, duration_s: float) -> list[Scenario]:
     def add(effect: str, tol: float, warmup: bool | None = None) -> None:
         k = len(out)
         wu = bool(rng.random() < 0.25) if warmup is None else warmup
-        out.append(Scenario(name=f"s{seed}_{k:02d}_{effect}_{int(tol * 100)}pct", effect=effect,
-                            seed=seed * 1000 + k, tolerance=tol, rodpos=bool(k % 3 != 2),
-                            warmup=wu, duration_s=duration_s))
+        out.append(
+            Scenario(
+                name=f"s{seed}_{k:02d}_{effect}_{int(tol * 100)}pct",
+                effect=effect,
+                seed=seed * 1000 + k,
+                tolerance=tol,
+                rodpos=bool(k % 3 != 2),
+                warmup=wu,
+                duration_s=duration_s,
+            )
+        )
 
     for tol, n in spec["per_effect"].items():
         for effect in machine.CATALOGUE:
@@ -51,8 +59,9 @@ def scenarios(seed: int, kind: str, duration_s: float) -> list[Scenario]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.gap_third.generate",
-                                 description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.gap_third.generate", description=__doc__.split("\n\n")[0]
+    )
     ap.add_argument("out", type=Path)
     ap.add_argument("--seed", type=int, required=True)
     ap.add_argument("--set", dest="kind", choices=sorted(SETS), default="full")

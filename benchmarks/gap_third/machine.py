@@ -13,34 +13,110 @@ CM3_PER_BAR = 1e-6 / BAR  # m^3/Pa
 
 # Parameters a machine's tolerance moves (each drawn on its own); pressure settings move a
 # quarter as much (valves are set to within a few bar).
-TOLERANCED = ("inertia", "grav_moment", "c_visc", "kv_pa", "kv_at", "kv_pb", "kv_bt", "v0a",
-              "v0b", "v_line", "beta0", "d_max", "tau_cp", "wn_spool", "pump_slip40", "dpt0",
-              "eta_m", "flow_force", "hose_cap")
+TOLERANCED = (
+    "inertia",
+    "grav_moment",
+    "c_visc",
+    "kv_pa",
+    "kv_at",
+    "kv_pb",
+    "kv_bt",
+    "v0a",
+    "v0b",
+    "v_line",
+    "beta0",
+    "d_max",
+    "tau_cp",
+    "wn_spool",
+    "pump_slip40",
+    "dpt0",
+    "eta_m",
+    "flow_force",
+    "hose_cap",
+)
 SETTINGS = ("p_comp_start", "p_comp_full", "p_relief_crack", "p_relief_full")
 
-CATALOGUE = ("entrained_air", "oil_viscosity", "cylinder_friction", "spool_dynamics",
-             "valve_deadband", "pump_control_dynamics", "hose_compliance", "sensor_lag",
-             "load_variation", "sensor_calibration")
+CATALOGUE = (
+    "entrained_air",
+    "oil_viscosity",
+    "cylinder_friction",
+    "spool_dynamics",
+    "valve_deadband",
+    "pump_control_dynamics",
+    "hose_compliance",
+    "sensor_lag",
+    "load_variation",
+    "sensor_calibration",
+)
 # out-of-catalogue effects and the mechanism (suggestion kind) a diagnosis should name first
-OUT_OF_CATALOGUE = {"worn_pump": "leakage", "check_valve_leak": "leakage",
-                    "compensator_low": "pump_setting", "relief_low": "pump_setting",
-                    "periodic_force": "force_periodic", "scored_rod": "force_velocity"}
+OUT_OF_CATALOGUE = {
+    "worn_pump": "leakage",
+    "check_valve_leak": "leakage",
+    "compensator_low": "pump_setting",
+    "relief_low": "pump_setting",
+    "periodic_force": "force_periodic",
+    "scored_rod": "force_velocity",
+}
 
 
 def nominal() -> np.ndarray:
     """The reference machine's values in this plant's formulation (SI)."""
-    v = dict(rho=870.0, beta0=1.5e9, beta_slope=8.0, nu40=46e-6, d_max=11e-6, tau_cp=0.012,
-             rate_cp=30.0, p_comp_start=190 * BAR, p_comp_full=200 * BAR,
-             p_relief_crack=210 * BAR, p_relief_full=220 * BAR, v_line=0.5e-3,
-             notch=0.15, overlap=0.0, dpt0=0.3 * BAR, k_clear=0.005 * LPM / (100 * BAR),
-             wn_spool=2 * np.pi * 60, zeta_spool=0.8, rate_spool=40.0, flow_force=0.02,
-             area_a=np.pi / 4 * 0.063**2, stroke=0.5, v0a=0.3e-3, v0b=0.3e-3, c_visc=2000.0,
-             visc_p_share=0.2, arm_a=0.9, arm_r=0.5, len0=0.54, tilt=np.radians(1.0),
-             stick_moment=0.0, stick_angle=0.0, fc=0.0, fs=0.0, vs=0.01, sigma0=0.0,
-             sigma1=0.0, pump_slip40=0.1 * LPM / (100 * BAR), slip_visc_exp=1.0, c_int=0.0,
-             c_check=0.0, air=0.0, hose_cap=0.004 * CM3_PER_BAR, hose_p=50 * BAR,
-             tau_engine=0.3, droop=1.0, eta_m=0.9, pt0=0.5 * BAR, kt=4.5e11, f_per=0.0,
-             w_per=0.0, k_stop=5e7, c_stop=2e5, visc_fric_exp=0.2)
+    v = dict(
+        rho=870.0,
+        beta0=1.5e9,
+        beta_slope=8.0,
+        nu40=46e-6,
+        d_max=11e-6,
+        tau_cp=0.012,
+        rate_cp=30.0,
+        p_comp_start=190 * BAR,
+        p_comp_full=200 * BAR,
+        p_relief_crack=210 * BAR,
+        p_relief_full=220 * BAR,
+        v_line=0.5e-3,
+        notch=0.15,
+        overlap=0.0,
+        dpt0=0.3 * BAR,
+        k_clear=0.005 * LPM / (100 * BAR),
+        wn_spool=2 * np.pi * 60,
+        zeta_spool=0.8,
+        rate_spool=40.0,
+        flow_force=0.02,
+        area_a=np.pi / 4 * 0.063**2,
+        stroke=0.5,
+        v0a=0.3e-3,
+        v0b=0.3e-3,
+        c_visc=2000.0,
+        visc_p_share=0.2,
+        arm_a=0.9,
+        arm_r=0.5,
+        len0=0.54,
+        tilt=np.radians(1.0),
+        stick_moment=0.0,
+        stick_angle=0.0,
+        fc=0.0,
+        fs=0.0,
+        vs=0.01,
+        sigma0=0.0,
+        sigma1=0.0,
+        pump_slip40=0.1 * LPM / (100 * BAR),
+        slip_visc_exp=1.0,
+        c_int=0.0,
+        c_check=0.0,
+        air=0.0,
+        hose_cap=0.004 * CM3_PER_BAR,
+        hose_p=50 * BAR,
+        tau_engine=0.3,
+        droop=1.0,
+        eta_m=0.9,
+        pt0=0.5 * BAR,
+        kt=4.5e11,
+        f_per=0.0,
+        w_per=0.0,
+        k_stop=5e7,
+        c_stop=2e5,
+        visc_fric_exp=0.2,
+    )
     kv = 20 * LPM / np.sqrt(10 * BAR)
     v.update(kv_pa=kv, kv_at=kv, kv_pb=kv, kv_bt=kv, area_b=np.pi / 4 * (0.063**2 - 0.036**2))
     v["q_max"] = v["d_max"] * 2200 / 60
@@ -80,8 +156,9 @@ def slope_n_per_mm(prm: np.ndarray, dx: float = 0.05) -> float:
     return (plant.load_force(prm, 0.25 + dx) - plant.load_force(prm, 0.25 - dx)) / (2e3 * dx)
 
 
-def apply_effect(name: str, prm: np.ndarray, rng: np.random.Generator,
-                 rodpos: bool) -> tuple[dict, dict]:
+def apply_effect(
+    name: str, prm: np.ndarray, rng: np.random.Generator, rodpos: bool
+) -> tuple[dict, dict]:
     """Set one effect in `prm`; returns (answer-key params, sensor settings)."""
     u = rng.uniform
     sens: dict = {}
@@ -92,8 +169,10 @@ def apply_effect(name: str, prm: np.ndarray, rng: np.random.Generator,
         leak = u(1.5, 3.0) if name == "oil_viscosity" else u(2.0, 4.0)
         prm[IX["pump_slip40"]] = leak * LPM / (100 * BAR)
         prm[IX["slip_visc_exp"]] = 1.0 if name == "oil_viscosity" else 0.0
-        key = {"pump_leak_lpm_per_100bar_at_40c": leak,
-               "follows_viscosity": name == "oil_viscosity"}
+        key = {
+            "pump_leak_lpm_per_100bar_at_40c": leak,
+            "follows_viscosity": name == "oil_viscosity",
+        }
         if name == "oil_viscosity":
             prm[IX["visc_fric_exp"]] = u(0.5, 1.0)
             key["friction_viscosity_exponent"] = prm[IX["visc_fric_exp"]]
@@ -102,12 +181,22 @@ def apply_effect(name: str, prm: np.ndarray, rng: np.random.Generator,
         fc = u(400, 900)
         m = prm[IX["inertia"]] / 0.5**2
         sigma0 = u(1e6, 4e6)
-        vals = dict(fc=fc, fs=fc * u(1.3, 1.8), vs=u(0.005, 0.02), sigma0=sigma0,
-                    sigma1=2 * 0.4 * np.sqrt(sigma0 * m))
+        vals = dict(
+            fc=fc,
+            fs=fc * u(1.3, 1.8),
+            vs=u(0.005, 0.02),
+            sigma0=sigma0,
+            sigma1=2 * 0.4 * np.sqrt(sigma0 * m),
+        )
         for k, val in vals.items():
             prm[IX[k]] = val
-        return {"law": "lugre", "coulomb_n": fc, "static_n": vals["fs"],
-                "stribeck_velocity_mm_s": vals["vs"] * 1e3, "sigma0_n_per_m": sigma0}, sens
+        return {
+            "law": "lugre",
+            "coulomb_n": fc,
+            "static_n": vals["fs"],
+            "stribeck_velocity_mm_s": vals["vs"] * 1e3,
+            "sigma0_n_per_m": sigma0,
+        }, sens
     if name == "spool_dynamics":
         f, z, rate = u(3, 8), u(0.5, 1.0), u(3, 8)
         prm[IX["wn_spool"]], prm[IX["zeta_spool"]], prm[IX["rate_spool"]] = 2 * np.pi * f, z, rate
@@ -117,22 +206,30 @@ def apply_effect(name: str, prm: np.ndarray, rng: np.random.Generator,
         return {"overlap_pct": 100 * prm[IX["overlap"]]}, sens
     if name == "pump_control_dynamics":
         prm[IX["tau_cp"]], prm[IX["rate_cp"]] = u(0.06, 0.25), u(2, 6)
-        return {"time_constant_ms": 1e3 * prm[IX["tau_cp"]],
-                "slew_limit_per_s": prm[IX["rate_cp"]]}, sens
+        return {
+            "time_constant_ms": 1e3 * prm[IX["tau_cp"]],
+            "slew_limit_per_s": prm[IX["rate_cp"]],
+        }, sens
     if name == "hose_compliance":
         cap, p_h = u(0.05, 0.3), u(50, 150)
         prm[IX["hose_cap"]], prm[IX["hose_p"]] = cap * CM3_PER_BAR, p_h * BAR
         return {"hose_capacitance_cm3_per_bar_at_0bar": cap, "stiffening_bar": p_h}, sens
     if name == "sensor_lag":
-        sens = {"delay_ms": u(15, 60), "time_constant_ms": u(0, 30),
-                "update_ms": float(rng.choice([1, 10, 20])), "signals": ["PP", "PA", "PB", "QP"]}
+        sens = {
+            "delay_ms": u(15, 60),
+            "time_constant_ms": u(0, 30),
+            "update_ms": float(rng.choice([1, 10, 20])),
+            "signals": ["PP", "PA", "PB", "QP"],
+        }
         return dict(sens), sens
     if name == "load_variation":
         prm[IX["stick_moment"]] = u(1500, 3500)
         prm[IX["stick_angle"]] = np.radians(u(40, 70)) * rng.choice([-1, 1])
-        return {"stick_moment_nm": prm[IX["stick_moment"]],
-                "stick_angle_deg": np.degrees(prm[IX["stick_angle"]]),
-                "slope_n_per_mm": slope_n_per_mm(prm)}, sens
+        return {
+            "stick_moment_nm": prm[IX["stick_moment"]],
+            "stick_angle_deg": np.degrees(prm[IX["stick_angle"]]),
+            "slope_n_per_mm": slope_n_per_mm(prm),
+        }, sens
     if name == "sensor_calibration":
         return _calibration(rng, rodpos)
     return _out_of_catalogue(name, prm, rng), sens

@@ -11,8 +11,18 @@ import numpy as np
 from benchmarks.gap_third import cycles, machine, plant, sensors
 
 DT_S = 1e-4  # RK4 step; the stiffest mode (valve edge near closed, 0.3 L) is ~1e4 1/s
-COLUMNS = ("t", "SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp", "PP", "PA", "PB", "QP",
-           "RodPos")
+COLUMNS = (
+    "t",
+    "SpoolCmd",
+    "PumpDispCmd",
+    "EngineSpeed",
+    "OilTemp",
+    "PP",
+    "PA",
+    "PB",
+    "QP",
+    "RodPos",
+)
 
 
 @dataclass
@@ -34,8 +44,9 @@ class Scenario:
 
     def to_json(self) -> dict:
         d = asdict(self)
-        d["params"] = {k: (round(v, 6) if isinstance(v, float) else v)
-                       for k, v in self.params.items()}
+        d["params"] = {
+            k: (round(v, 6) if isinstance(v, float) else v) for k, v in self.params.items()
+        }
         return d
 
 
@@ -47,8 +58,9 @@ def build(sc: Scenario) -> tuple[np.ndarray, dict, dict]:
     sens: dict = {}
     if sc.effect != "none":
         sc.params, sens = machine.apply_effect(sc.effect, prm, rng, sc.rodpos)
-    sc.expected = sc.effect if sc.effect in machine.CATALOGUE or sc.effect == "none" \
-        else "unexplained"
+    sc.expected = (
+        sc.effect if sc.effect in machine.CATALOGUE or sc.effect == "none" else "unexplained"
+    )
     sc.mechanism = machine.OUT_OF_CATALOGUE.get(sc.effect)
     sc.signal = sens.get("signal") if sc.effect == "sensor_calibration" else None
     inputs = cycles.boom_cycles(sc.duration_s, rng, sc.warmup)
@@ -65,8 +77,16 @@ def initial_state(prm: np.ndarray) -> np.ndarray:
 
 def simulate(prm: np.ndarray, inputs: dict) -> np.ndarray:
     """The plant's 1 kHz states for these inputs."""
-    return plant.run(prm, initial_state(prm), inputs["spool"], inputs["disp"], inputs["n_set"],
-                     inputs["temp"], inputs["ripple"], DT_S)
+    return plant.run(
+        prm,
+        initial_state(prm),
+        inputs["spool"],
+        inputs["disp"],
+        inputs["n_set"],
+        inputs["temp"],
+        inputs["ripple"],
+        DT_S,
+    )
 
 
 def record(sc: Scenario, path: Path) -> dict:
@@ -75,8 +95,9 @@ def record(sc: Scenario, path: Path) -> dict:
     states = simulate(prm, inputs)
     if not np.all(np.isfinite(states)):
         raise RuntimeError(f"{sc.name}: the plant diverged")
-    cols = sensors.read(states, inputs, sens, sc.effect, sc.rodpos,
-                        np.random.default_rng(sc.seed + 7_000_003))
+    cols = sensors.read(
+        states, inputs, sens, sc.effect, sc.rodpos, np.random.default_rng(sc.seed + 7_000_003)
+    )
     names = [c for c in COLUMNS if c in cols]
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)

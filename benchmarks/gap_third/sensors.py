@@ -14,8 +14,17 @@ from benchmarks.gap_third.plant import BAR
 
 NOISE = {"PP": 0.3, "PA": 0.3, "PB": 0.3, "QP": 0.1, "RodPos": 0.5}
 RANGE = {"PP": (0, 400), "PA": (0, 400), "PB": (0, 400), "QP": (0, 60), "RodPos": (0, 500)}
-STEP = {"PP": 0.05, "PA": 0.05, "PB": 0.05, "QP": 0.05, "RodPos": 0.1, "SpoolCmd": 0.1,
-        "PumpDispCmd": 0.1, "EngineSpeed": 0.125, "OilTemp": 1.0}
+STEP = {
+    "PP": 0.05,
+    "PA": 0.05,
+    "PB": 0.05,
+    "QP": 0.05,
+    "RodPos": 0.1,
+    "SpoolCmd": 0.1,
+    "PumpDispCmd": 0.1,
+    "EngineSpeed": 0.125,
+    "OilTemp": 1.0,
+}
 BASE_TAU_MS = {"PP": 1.0, "PA": 1.0, "PB": 1.0, "QP": 4.0, "RodPos": 0.0}
 
 
@@ -37,11 +46,22 @@ def lagged(x: np.ndarray, delay_ms: float, tau_ms: float, update_ms: float) -> n
     return y[(np.arange(len(y)) // u) * u]
 
 
-def read(states: np.ndarray, inputs: dict, sens: dict, effect: str, rodpos: bool,
-         rng: np.random.Generator) -> dict[str, np.ndarray]:
+def read(
+    states: np.ndarray,
+    inputs: dict,
+    sens: dict,
+    effect: str,
+    rodpos: bool,
+    rng: np.random.Generator,
+) -> dict[str, np.ndarray]:
     """Columns of the contract CSV (units of the contract) from the plant's 1 kHz output."""
-    true = {"PP": states[:, 0] / BAR, "PA": states[:, 1] / BAR, "PB": states[:, 2] / BAR,
-            "QP": states[:, 3] * 60000.0, "RodPos": states[:, 4] * 1e3}
+    true = {
+        "PP": states[:, 0] / BAR,
+        "PA": states[:, 1] / BAR,
+        "PB": states[:, 2] / BAR,
+        "QP": states[:, 3] * 60000.0,
+        "RodPos": states[:, 4] * 1e3,
+    }
     n = len(inputs["spool"])
     jitter = np.clip(rng.normal(0, 0.8, n), -3, 3)  # ms
     t_ms = np.arange(n) * 10.0 + jitter

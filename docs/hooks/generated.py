@@ -81,16 +81,23 @@ def _config() -> str:
 
     out = []
     for section in dataclasses.fields(MonitorConfig):
-        default = section.default_factory if section.default_factory is not dataclasses.MISSING \
-            else None  # fmt: skip
+        default = (
+            section.default_factory if section.default_factory is not dataclasses.MISSING else None
+        )
         cls = default() if callable(default) else None
         if not dataclasses.is_dataclass(cls):
             continue
         cls = type(cls)
         doc = inspect.getdoc(cls) or ""
         comments = _field_comments(cls)
-        out += [f"## `{section.name}`", "", doc.split("\n\n")[0], "",
-                "| key | type | default | meaning |", "|---|---|---|---|"]  # fmt: skip
+        out += [
+            f"## `{section.name}`",
+            "",
+            doc.split("\n\n")[0],
+            "",
+            "| key | type | default | meaning |",
+            "|---|---|---|---|",
+        ]
         for f in dataclasses.fields(cls):
             meaning = f.metadata.get("doc") or comments.get(f.name, "")
             unit = f.metadata.get("unit")
@@ -109,8 +116,7 @@ def _dbc() -> str:
     for dbc in sorted((REPO / "dbc").glob("*.dbc")):
         db = cantools.database.load_file(str(dbc))
         header = "| frame ID | message | cycle | signals (unit, range) |"
-        out += [f"## `dbc/{dbc.name}`", "", header,
-                "|---|---|---|---|"]  # fmt: skip
+        out += [f"## `dbc/{dbc.name}`", "", header, "|---|---|---|---|"]
         for m in sorted(db.messages, key=lambda m: m.frame_id):
             width = 8 if m.is_extended_frame else 3
             cycle = f"{m.cycle_time} ms" if m.cycle_time else "on event"
@@ -155,5 +161,11 @@ def _actions() -> str:
     return markdown_table()
 
 
-_GENERATORS = {"cli": _cli, "config": _config, "dbc": _dbc, "dtc": _dtc, "errors": _errors,
-               "actions": _actions}  # fmt: skip
+_GENERATORS = {
+    "cli": _cli,
+    "config": _config,
+    "dbc": _dbc,
+    "dtc": _dtc,
+    "errors": _errors,
+    "actions": _actions,
+}

@@ -55,8 +55,9 @@ class Sizes:
     fault_at_s: float  # onset of the fault in the detect log
 
 
-FULL = Sizes((2_000, 20_000, 200_000), (1, 10, 50), 20_000, 300.0, 600.0, 1.0, 3600.0,
-             180.0, 3300.0)  # fmt: skip
+FULL = Sizes(
+    (2_000, 20_000, 200_000), (1, 10, 50), 20_000, 300.0, 600.0, 1.0, 3600.0, 180.0, 3300.0
+)
 QUICK = Sizes((300, 2_000), (1, 10), 2_000, 40.0, 10.0, 5.0, 90.0, 10.0, 30.0)
 
 
@@ -118,8 +119,12 @@ def monitor_model(work: Path, n_patterns: int, train_s: float, say: Progress) ->
     fit_part, val_part = split_normal(recs, cfg.validation_fraction)
     spec = model.spec
     tables = [model.normalizer.transform(table(r, spec.variables)) for r in fit_part]
-    grnn = GRNN(exclude_neighbours=cfg.exclude_neighbours, max_patterns=n_patterns,
-                min_distance=1e-3, cluster_weights=False)  # fmt: skip
+    grnn = GRNN(
+        exclude_neighbours=cfg.exclude_neighbours,
+        max_patterns=n_patterns,
+        min_distance=1e-3,
+        cluster_weights=False,
+    )
     model.dgrnn = DGRNN(spec, grnn).fit(tables)
     say(f"  refitted: {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g}")
     model.residual_clip = None
@@ -131,8 +136,12 @@ def monitor_model(work: Path, n_patterns: int, train_s: float, say: Progress) ->
     j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
     model.j0, model.eps0 = cfg.threshold.eps0(j_val)
     model.isolation_labels, model.isolation_centroids = simulated_signatures(model, cfg, say)
-    model.training = {**model.training, "max_patterns": n_patterns, "isolation": "sim",
-                      "note": "GRNN refitted by monitor.bench.data with min_distance 1e-3"}
+    model.training = {
+        **model.training,
+        "max_patterns": n_patterns,
+        "isolation": "sim",
+        "note": "GRNN refitted by monitor.bench.data with min_distance 1e-3",
+    }
     save_model(path, model)
     return path
 

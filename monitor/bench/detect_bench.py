@@ -49,8 +49,12 @@ def _ours(model_path: Path, log: Path, out: Path) -> tuple[float, dict[str, floa
     with out.open("w", encoding="utf-8") as fh:
         fh.writelines(json.dumps(e) + "\n" for e in det.events)
     t4 = time.perf_counter()
-    parts = {"load_model_s": t1 - t0, "read_log_s": t2 - t1, "detect_s": t3 - t2,
-             "write_s": t4 - t3}  # fmt: skip
+    parts = {
+        "load_model_s": t1 - t0,
+        "read_log_s": t2 - t1,
+        "detect_s": t3 - t2,
+        "write_s": t4 - t3,
+    }
     return t4 - t0, parts, det.summary
 
 
@@ -136,8 +140,14 @@ def _slice(log: Path, seconds: float, out: Path) -> int:
     return n
 
 
-def measure(model_path: Path, log: Path, duration_s: float, reference_s: float,
-            say: Progress, repeats: int = 3) -> dict[str, Any]:  # fmt: skip
+def measure(
+    model_path: Path,
+    log: Path,
+    duration_s: float,
+    reference_s: float,
+    say: Progress,
+    repeats: int = 3,
+) -> dict[str, Any]:
     tmp = Path(tempfile.mkdtemp(prefix="monitor-bench-detect-"))
     with log.open("rb") as fh:
         frames = sum(1 for _ in fh)
@@ -158,10 +168,24 @@ def measure(model_path: Path, log: Path, duration_s: float, reference_s: float,
     no_isolation_s = time.perf_counter() - t0
     cli_start = time.perf_counter()
     subprocess.run(
-        [sys.executable, "-m", "monitor", "detect", str(log), "--model", str(model_path),
-         "--horizon", "1", "--j-every", "0", "--events", str(tmp / "cli.jsonl")],
-        check=True, capture_output=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "detect",
+            str(log),
+            "--model",
+            str(model_path),
+            "--horizon",
+            "1",
+            "--j-every",
+            "0",
+            "--events",
+            str(tmp / "cli.jsonl"),
+        ],
+        check=True,
+        capture_output=True,
+    )
     cli_s = time.perf_counter() - cli_start
 
     piece = tmp / "slice.log"

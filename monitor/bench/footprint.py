@@ -53,8 +53,9 @@ def cli_help(runs: int = 5) -> dict[str, float]:
     walls, rss = [], []
     for _ in range(runs):
         t0 = time.perf_counter()
-        out = subprocess.run([sys.executable, "-c", _HELP_PROBE], capture_output=True,
-                             text=True, check=True)  # fmt: skip
+        out = subprocess.run(
+            [sys.executable, "-c", _HELP_PROBE], capture_output=True, text=True, check=True
+        )
         walls.append(time.perf_counter() - t0)
         rss.append(float(out.stderr.split()[-1]) / 1024.0)  # kB
     return {"cli_help_s": statistics.median(walls), "cli_help_rss_mb": max(rss)}
@@ -67,17 +68,23 @@ def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.
     side, with numba's JIT (``MONITOR_AOT=0``)."""
     work = Path(tempfile.mkdtemp(prefix="monitor-footprint-"))
     config = work / "monitor.yaml"
-    config.write_text(f'bus: {{interface: udp_multicast, channel: "{group}"}}\n'
-                      f"event_log: {{path: {work / 'events.jsonl'}}}\n"
-                      f"black_box: {{directory: {work / 'bb'}}}\n")  # fmt: skip
+    config.write_text(
+        f'bus: {{interface: udp_multicast, channel: "{group}"}}\n'
+        f"event_log: {{path: {work / 'events.jsonl'}}}\n"
+        f"black_box: {{directory: {work / 'bb'}}}\n"
+    )
     out: dict[str, Any] = {}
     say("footprint: daemon start, empty numba cache")
     out["first_run_s"] = _start(config, work, group, 20.0, {"NUMBA_CACHE_DIR": str(work / "c")})
     warm = {"NUMBA_CACHE_DIR": str(work / "w")}
     say("footprint: monitor warm-up (numba cache and the kernels ahead of time)")
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "monitor", "warm-up"], env=_env(warm), check=True,
-                   capture_output=True)  # fmt: skip
+    subprocess.run(
+        [sys.executable, "-m", "monitor", "warm-up"],
+        env=_env(warm),
+        check=True,
+        capture_output=True,
+    )
     out["warm_up_s"] = time.perf_counter() - t0
     for tag, extra in (("", warm), ("_jit", {**warm, "MONITOR_AOT": "0"})):
         kind = "JIT" if tag else "ahead of time"
@@ -86,8 +93,12 @@ def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.
         say(f"footprint: daemon start, warm cache, kernels {kind}")
         out[f"daemon_start{tag}_s"] = _start(config, work, group, 20.0, extra)
         say(f"footprint: daemon RSS over {seconds:.0f} s of the shipped normal log ({kind})")
-        out.update({f"{k}{tag}" if tag else k: v
-                    for k, v in _rss(config, work, group, seconds, extra).items()})  # fmt: skip
+        out.update(
+            {
+                f"{k}{tag}" if tag else k: v
+                for k, v in _rss(config, work, group, seconds, extra).items()
+            }
+        )
     return out
 
 
@@ -96,14 +107,22 @@ def _detect(extra: dict[str, str], runs: int = 3) -> dict[str, float]:
     log = resource_path("replay", "spool_wear.log")
     walls, rss, numba = [], [], []
     for _ in range(runs):
-        done = subprocess.run([sys.executable, "-c", _DETECT_PROBE, str(log)], env=_env(extra),
-                              capture_output=True, text=True, check=True)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-c", _DETECT_PROBE, str(log)],
+            env=_env(extra),
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         wall, hwm, loaded = done.stderr.split()[-3:]
         walls.append(float(wall))
         rss.append(float(hwm) / 1024.0)  # kB
         numba.append(float(loaded))
-    return {"detect_s": statistics.median(walls), "detect_rss_mb": max(rss),
-            "detect_numba_loaded": max(numba)}  # fmt: skip
+    return {
+        "detect_s": statistics.median(walls),
+        "detect_rss_mb": max(rss),
+        "detect_numba_loaded": max(numba),
+    }
 
 
 def _env(extra: dict[str, str]) -> dict[str, str]:
@@ -113,17 +132,33 @@ def _env(extra: dict[str, str]) -> dict[str, str]:
 
 def _replayer(group: str, log: Path, env: dict[str, str]) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "monitor", "replay", str(log), "--bus", group,
-         "--interface", "udp_multicast"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "replay",
+            str(log),
+            "--bus",
+            group,
+            "--interface",
+            "udp_multicast",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
 
 
 def _daemon(config: Path, work: Path, env: dict[str, str]) -> tuple[subprocess.Popen, Path]:
     err = work / f"daemon-{time.monotonic_ns()}.log"
     with err.open("wb") as fh:
-        proc = subprocess.Popen([sys.executable, "-m", "monitor", "run", "--config", str(config)],
-                                stderr=fh, stdin=subprocess.DEVNULL, cwd=work, env=env)  # fmt: skip
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "monitor", "run", "--config", str(config)],
+            stderr=fh,
+            stdin=subprocess.DEVNULL,
+            cwd=work,
+            env=env,
+        )
     return proc, err
 
 
@@ -174,10 +209,15 @@ def _rss(config: Path, work: Path, group: str, seconds: float, extra: dict) -> d
         proc.wait(30)
     second_half = samples[len(samples) // 2 :] or samples
     tenth = max(1, len(samples) // 10)
-    growth = statistics.median(samples[-tenth:]) - statistics.median(samples[tenth : 2 * tenth]
-                                                                      or samples)  # fmt: skip
-    return {"daemon_rss_mb": statistics.median(second_half), "daemon_peak_rss_mb": peak,
-            "daemon_rss_growth_mb": growth, "daemon_rss_samples": len(samples)}  # fmt: skip
+    growth = statistics.median(samples[-tenth:]) - statistics.median(
+        samples[tenth : 2 * tenth] or samples
+    )
+    return {
+        "daemon_rss_mb": statistics.median(second_half),
+        "daemon_peak_rss_mb": peak,
+        "daemon_rss_growth_mb": growth,
+        "daemon_rss_samples": len(samples),
+    }
 
 
 def _status_kb(pid: int, key: str) -> float:

@@ -118,18 +118,27 @@ def measure(sizes: Sizes, say: Progress, budget_s: float = 1.5) -> dict[str, Any
         fast_q = _per_query_s(g.cutoff_index(), X, g.sigma_, budget_s)
         plain_q = _per_query_s(g.cutoff_index(exact=True), X, g.sigma_, budget_s)
         py_q = _pygrnn_per_query_s(g.patterns_, g.targets_, g.sigma_, X, budget_s)
-        models[n] = {"patterns": int(g.patterns_.shape[0]), "inputs": int(X.shape[1]),
-                     "sigma": float(g.sigma_), "cutoff_c": float(g.cutoff_index().cut)}
+        models[n] = {
+            "patterns": int(g.patterns_.shape[0]),
+            "inputs": int(X.shape[1]),
+            "sigma": float(g.sigma_),
+            "cutoff_c": float(g.cutoff_index().cut),
+        }
         for p in sizes.horizons:
             fast_t = _per_tick_s(TickPredictor(model, p), Z, budget_s)
             plain_t = _per_tick_s(TickPredictor(model, p, exact=True), Z, budget_s)
-            cells.append({
-                "patterns": int(g.patterns_.shape[0]), "p": p,
-                "cutoff_us_per_query": fast_q * 1e6, "plain_us_per_query": plain_q * 1e6,
-                "pygrnn_us_per_query": None if py_q is None else py_q * 1e6,
-                "cutoff_us_per_tick": fast_t * 1e6, "plain_us_per_tick": plain_t * 1e6,
-                "pygrnn_us_per_tick_derived": None if py_q is None else p * py_q * 1e6,
-            })  # fmt: skip
+            cells.append(
+                {
+                    "patterns": int(g.patterns_.shape[0]),
+                    "p": p,
+                    "cutoff_us_per_query": fast_q * 1e6,
+                    "plain_us_per_query": plain_q * 1e6,
+                    "pygrnn_us_per_query": None if py_q is None else py_q * 1e6,
+                    "cutoff_us_per_tick": fast_t * 1e6,
+                    "plain_us_per_tick": plain_t * 1e6,
+                    "pygrnn_us_per_tick_derived": None if py_q is None else p * py_q * 1e6,
+                }
+            )
             py_text = "" if py_q is None else f", pyGRNN {py_q * 1e6:.0f} us"
             say(
                 f"  {n} patterns, p={p}: cutoff {fast_t * 1e6:.1f} us/tick, plain "
@@ -183,8 +192,13 @@ def plot(result: dict[str, Any], path) -> None:
         rows = [c for c in cells if c["patterns"] == size]
         ps = [c["p"] for c in rows]
         line = b.loglog(ps, [c["cutoff_us_per_tick"] for c in rows], "o-", label=f"{size} cut-off")
-        b.loglog(ps, [c["plain_us_per_tick"] for c in rows], "s--", color=line[0].get_color(),
-                 label=f"{size} plain")  # fmt: skip
+        b.loglog(
+            ps,
+            [c["plain_us_per_tick"] for c in rows],
+            "s--",
+            color=line[0].get_color(),
+            label=f"{size} plain",
+        )
     b.axhline(1000.0, color="k", lw=0.8, ls=":")
     b.text(ps[0], 1100.0, "1 ms (tick goal)", fontsize=8)
     b.set_xlabel("prediction horizon p (queries per tick)")

@@ -109,11 +109,13 @@ def _config(model: Path, horizon: int, loops: int, channel: str, tmp: Path) -> M
         base, loops=tuple(dataclasses.replace(lc, model=model) for lc in base.loops)
     )
     return dataclasses.replace(
-        base, model=model, horizon=horizon,
+        base,
+        model=model,
+        horizon=horizon,
         bus=BusConfig(interface="virtual", channel=channel, queue_frames=200_000),
         event_log=dataclasses.replace(base.event_log, path=tmp / "events.jsonl"),
         black_box=dataclasses.replace(base.black_box, directory=tmp / "blackbox"),
-    )  # fmt: skip
+    )
 
 
 def run(
@@ -139,8 +141,13 @@ def run(
     alarm_ids = {daemon.codec.message(lp.cfg.alarm_message).frame_id for lp in daemon.loops}
     latency, cpu, alarm_latency, row_t, change_t = [], [], [], [], []
     # changed: this loop's tick changed state (its MON_Alarm follows); row_changed: any loop's
-    current = {"arrival": 0.0, "changed": False, "row_changed": False, "stopping": False,
-               "cpu": 0.0}  # fmt: skip
+    current = {
+        "arrival": 0.0,
+        "changed": False,
+        "row_changed": False,
+        "stopping": False,
+        "cpu": 0.0,
+    }
     frame, send = daemon._frame, daemon._send
     last = len(daemon.loops) - 1
 
@@ -256,8 +263,13 @@ def run(
     }
 
 
-_SUMMARY = {"tick_p50_ms": ("lat", 50), "tick_p99_ms": ("lat", 99), "tick_max_ms": ("lat", 100),
-            "tick_cpu_median_ms": ("cpu", 50), "tick_cpu_p99_ms": ("cpu", 99)}  # fmt: skip
+_SUMMARY = {
+    "tick_p50_ms": ("lat", 50),
+    "tick_p99_ms": ("lat", 99),
+    "tick_max_ms": ("lat", 100),
+    "tick_cpu_median_ms": ("cpu", 50),
+    "tick_cpu_p99_ms": ("cpu", 99),
+}
 
 
 def compare(
@@ -278,8 +290,10 @@ def compare(
             rss_mb = rss_mb or runs[mode][-1]["peak_rss_mb"]
     out: dict[str, Any] = {}
     for mode, rs in runs.items():
-        pooled = {"lat": np.concatenate([r.pop("_latency_ms") for r in rs]),
-                  "cpu": np.concatenate([r.pop("_cpu_ms") for r in rs])}  # fmt: skip
+        pooled = {
+            "lat": np.concatenate([r.pop("_latency_ms") for r in rs]),
+            "cpu": np.concatenate([r.pop("_cpu_ms") for r in rs]),
+        }
         summary: dict[str, float | None] = {
             k: float(np.percentile(pooled[a], q)) for k, (a, q) in _SUMMARY.items()
         }
@@ -304,18 +318,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--horizon", type=int, default=10)
     ap.add_argument("--seconds", type=float, default=600.0)
     ap.add_argument("--speed", type=float, default=5.0)
-    ap.add_argument("--writes", default="thread",
-                    help="thread, inline, or both comma-separated (default thread)")  # fmt: skip
+    ap.add_argument(
+        "--writes",
+        default="thread",
+        help="thread, inline, or both comma-separated (default thread)",
+    )
     ap.add_argument("--rounds", type=int, default=1, help="daemons per write mode (default 1)")
-    ap.add_argument("--loops", type=int, default=1, choices=(1, 4),
-                    help="loops in the daemon: 1 or 4 (config/excavator4.yaml)")  # fmt: skip
+    ap.add_argument(
+        "--loops",
+        type=int,
+        default=1,
+        choices=(1, 4),
+        help="loops in the daemon: 1 or 4 (config/excavator4.yaml)",
+    )
     ap.add_argument("--json", type=Path, required=True)
     args = ap.parse_args(argv)
     modes = args.writes.split(",")
     if not set(modes) <= {"thread", "inline"} or args.rounds < 1:
         ap.error("--writes takes thread and/or inline; --rounds >= 1")
-    result = compare(args.model, args.horizon, args.seconds, args.speed, modes, args.rounds,
-                     args.loops)  # fmt: skip
+    result = compare(
+        args.model, args.horizon, args.seconds, args.speed, modes, args.rounds, args.loops
+    )
     args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
     return 0
 

@@ -49,7 +49,8 @@ def markdown(result: dict[str, Any]) -> str:
         f"Machine: {m['cpu']}, {m['cores']} cores ({m['numba_threads']} numba threads), "
         f"Python {m['python']}, numba {m['numba']}; load average {result['load_before']} "
         f"before, {result['load_after']} after"
-        + (" (quick run: reduced sizes)" if result["quick"] else "") + ".",
+        + (" (quick run: reduced sizes)" if result["quick"] else "")
+        + ".",
         "",
         "| measurement | value | goal | met |",
         "|---|---|---|---|",

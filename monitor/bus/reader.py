@@ -54,11 +54,14 @@ class BusConfig:
 
     interface: str = setting("socketcan", doc="any python-can interface")
     channel: str = setting("can0", doc="the CAN channel (can0, vcan0, a multicast group...)")
-    bitrate: int = setting(500_000, check=lambda v: 10_000 <= v <= 1_000_000,
-                           demand="between 10000 and 1000000", unit="bit/s")  # fmt: skip
+    bitrate: int = setting(
+        500_000,
+        check=lambda v: 10_000 <= v <= 1_000_000,
+        demand="between 10000 and 1000000",
+        unit="bit/s",
+    )
     # Bounded receive buffer (~5 s of a full 500 kbit/s bus); overflow is counted as dropped.
-    queue_frames: int = setting(20_000, check=lambda v: v >= 100, demand=">= 100",
-                                unit="frames")  # fmt: skip
+    queue_frames: int = setting(20_000, check=lambda v: v >= 100, demand=">= 100", unit="frames")
     kernel_filters: bool = setting(True, doc="only the DBC's sensor IDs reach user space")
     # No frame this long: the sample clock runs on, rows go stale (proven silence only).
     silent_s: float = setting(0.5, unit="s")
@@ -69,10 +72,12 @@ class BusConfig:
     options: dict[str, Any] = setting(factory=dict)
     # A bus that fails (link down, bus-off) is reopened after a delay that starts here and
     # doubles per failed attempt up to reopen_max_s (monitor/bus/recovery.py).
-    reopen_initial_s: float = setting(0.1, check=lambda v: 0.001 <= v <= 3600,
-                                      demand="between 0.001 and 3600", unit="s")  # fmt: skip
-    reopen_max_s: float = setting(10.0, check=lambda v: 0.001 <= v <= 3600,
-                                  demand="between 0.001 and 3600", unit="s")  # fmt: skip
+    reopen_initial_s: float = setting(
+        0.1, check=lambda v: 0.001 <= v <= 3600, demand="between 0.001 and 3600", unit="s"
+    )
+    reopen_max_s: float = setting(
+        10.0, check=lambda v: 0.001 <= v <= 3600, demand="between 0.001 and 3600", unit="s"
+    )
 
     def __post_init__(self) -> None:
         # The sampler keeps a signal fresh for 3 of its cycles.  A bus whose frames come at
@@ -325,8 +330,12 @@ class BusReader:
         while True:
             delay = self.backoff.next()
             self.recovery.reopen_attempts += 1
-            log.warning("CAN bus %s (%s); reopening in %.3g s",
-                        "off" if self.link == BUS_OFF else "down", detail, delay)  # fmt: skip
+            log.warning(
+                "CAN bus %s (%s); reopening in %.3g s",
+                "off" if self.link == BUS_OFF else "down",
+                detail,
+                delay,
+            )
             stopping = self._sleep(delay)
             # A send that failed before this outage was known reported it too: it is the
             # same outage (nothing is sent while the bus is down), not a new one.
@@ -352,15 +361,21 @@ class BusReader:
         down_s = self._clock() - self._down_since
         self.link = UP
         self._event("up", detail, down_s)
-        log.info("CAN bus up again after %.1f s (%s; %d reopens so far)", down_s, detail,
-                 self.recovery.reopens)  # fmt: skip
+        log.info(
+            "CAN bus up again after %.1f s (%s; %d reopens so far)",
+            down_s,
+            detail,
+            self.recovery.reopens,
+        )
 
 
 def _bring_up_hint(channel: str, bitrate: int) -> str:
     """The command that brings ``channel`` up: a vcan needs the module and no bitrate."""
     if channel.startswith("vcan"):
-        return (f"`sudo modprobe vcan && sudo ip link add dev {channel} type vcan && "
-                f"sudo ip link set {channel} up`")  # fmt: skip
+        return (
+            f"`sudo modprobe vcan && sudo ip link add dev {channel} type vcan && "
+            f"sudo ip link set {channel} up`"
+        )
     return f"`sudo ip link set {channel} up type can bitrate {bitrate}`"
 
 

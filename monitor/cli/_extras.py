@@ -27,8 +27,10 @@ def missing_extra(exc: ModuleNotFoundError) -> str | None:
     extra = EXTRA_OF.get(top)
     if extra is None:
         return None
-    return (f"needs the [{extra}] extra ({top} is not installed): "
-            f"pip install 'hydraulic-monitor[{extra}]'")  # fmt: skip
+    return (
+        f"needs the [{extra}] extra ({top} is not installed): "
+        f"pip install 'hydraulic-monitor[{extra}]'"
+    )
 
 
 def require(*modules: str) -> None:

@@ -10,12 +10,18 @@ from pathlib import Path
 
 def add_page_options(p: argparse.ArgumentParser) -> None:
     """What the web page needs besides RESULTS (report --html and serve)."""
-    p.add_argument("--fleet", type=Path, default=None, metavar="FLEET",
-                   help="the fleet folder the results were judged from: each machine page "
-                   "then plots the signals and statistics around its alarms, read from the "
-                   "log itself (without it, no signal plots)")  # fmt: skip
-    p.add_argument("--config", type=Path, default=None,
-                   help="monitor YAML the run used (default: shipped)")  # fmt: skip
+    p.add_argument(
+        "--fleet",
+        type=Path,
+        default=None,
+        metavar="FLEET",
+        help="the fleet folder the results were judged from: each machine page "
+        "then plots the signals and statistics around its alarms, read from the "
+        "log itself (without it, no signal plots)",
+    )
+    p.add_argument(
+        "--config", type=Path, default=None, help="monitor YAML the run used (default: shipped)"
+    )
 
 
 def add_serve(sub: argparse._SubParsersAction) -> None:
@@ -29,10 +35,12 @@ def add_serve(sub: argparse._SubParsersAction) -> None:
     )
     s.add_argument("results", type=Path, metavar="RESULTS")
     s.add_argument("--port", type=int, default=8765, help="TCP port (default 8765; 0: any)")
-    s.add_argument("--host", default="127.0.0.1",
-                   help="address to listen on (default 127.0.0.1, this machine only)")
-    s.add_argument("--last", type=int, default=6, metavar="K",
-                   help="logs in the trend (default 6)")  # fmt: skip
+    s.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (default 127.0.0.1, this machine only)",
+    )
+    s.add_argument("--last", type=int, default=6, metavar="K", help="logs in the trend (default 6)")
     add_page_options(s)
     s.set_defaults(func=serve)
 
@@ -83,8 +91,9 @@ def serve(args: argparse.Namespace) -> int:
     if args.last < 3:
         raise ConfigError("--last must be at least 3 logs")
     site = Site(args.results, load_rows(args.results), _fleet(args), _config(args), args.last)
-    return serve_site(site, args.host, args.port,
-                      say=lambda m: print(m, file=sys.stderr, flush=True))  # fmt: skip
+    return serve_site(
+        site, args.host, args.port, say=lambda m: print(m, file=sys.stderr, flush=True)
+    )
 
 
 def query(args: argparse.Namespace) -> int:

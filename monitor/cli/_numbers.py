@@ -40,8 +40,10 @@ def number(
 #: Longest simulation (s): the simulator holds the whole run in memory, some 0.3 GB a
 #: simulated hour (7,200 s peaked at 0.84 GB RSS; 6 h at 2.29 GB).
 DURATION_MAX_S = 7_200.0
-DURATION_WHY = "the run is held in memory, some 0.3 GB a simulated hour; simulate longer " \
+DURATION_WHY = (
+    "the run is held in memory, some 0.3 GB a simulated hour; simulate longer "
     "spans as several runs with other seeds"
+)
 SEED_MAX = 2**32 - 1  # numpy's SeedSequence takes any non-negative int; keep it printable
 WINDOW_MAX = 360_000  # one hour of 100 Hz samples
 EPOCH_MAX_S = 4_102_444_800.0  # 2100-01-01: a candump timestamp beyond is not a recording

@@ -57,25 +57,56 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         description=_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--json", type=output_file, default=Path("bench.json"), metavar="F",
-                   help="result file (default bench.json)")  # fmt: skip
-    p.add_argument("--markdown", type=output_file, default=None, metavar="F.md",
-                   help="markdown table (default: beside --json, .md)")  # fmt: skip
-    p.add_argument("--plot", type=output_file, default=None, metavar="F.png",
-                   help="growth curves (default: beside --json, .png)")  # fmt: skip
-    p.add_argument("--footprint-s", type=number(5.0, 86400.0, unit="s"), default=None,
-                   metavar="S",
-                   help="seconds of the daemon's RSS sampling, each of AOT and JIT (default 90, "
-                   "20 with --quick; 3600 for the hour-long soak that shows a leak as "
-                   "daemon_rss_growth_mb)")  # fmt: skip
-    p.add_argument("--quick", action="store_true",
-                   help="reduced sizes (2,000 patterns, 90 s log): checks, not speed")  # fmt: skip
-    p.add_argument("--work-dir", type=output_dir, default=None, metavar="DIR",
-                   help="cache for the long log and the models (default: a folder in the "
-                   "system's temp dir)")  # fmt: skip
-    p.add_argument("--live-speed", type=float, default=None, metavar="X",
-                   help="replay speed of the live run (default 1: real time, 10 minutes; "
-                   "faster replays queue more ticks behind a stall)")  # fmt: skip
+    p.add_argument(
+        "--json",
+        type=output_file,
+        default=Path("bench.json"),
+        metavar="F",
+        help="result file (default bench.json)",
+    )
+    p.add_argument(
+        "--markdown",
+        type=output_file,
+        default=None,
+        metavar="F.md",
+        help="markdown table (default: beside --json, .md)",
+    )
+    p.add_argument(
+        "--plot",
+        type=output_file,
+        default=None,
+        metavar="F.png",
+        help="growth curves (default: beside --json, .png)",
+    )
+    p.add_argument(
+        "--footprint-s",
+        type=number(5.0, 86400.0, unit="s"),
+        default=None,
+        metavar="S",
+        help="seconds of the daemon's RSS sampling, each of AOT and JIT (default 90, "
+        "20 with --quick; 3600 for the hour-long soak that shows a leak as "
+        "daemon_rss_growth_mb)",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="reduced sizes (2,000 patterns, 90 s log): checks, not speed",
+    )
+    p.add_argument(
+        "--work-dir",
+        type=output_dir,
+        default=None,
+        metavar="DIR",
+        help="cache for the long log and the models (default: a folder in the system's temp dir)",
+    )
+    p.add_argument(
+        "--live-speed",
+        type=float,
+        default=None,
+        metavar="X",
+        help="replay speed of the live run (default 1: real time, 10 minutes; "
+        "faster replays queue more ticks behind a stall)",
+    )
     p.set_defaults(func=run)
 
 
@@ -85,10 +116,24 @@ def _say(msg: str) -> None:
 
 def _live(model: Path, seconds: float, speed: float, tmp: Path, loops: int) -> dict[str, Any]:
     out = tmp / f"live{loops}.json"
-    cmd = [sys.executable, "-m", "monitor.bench.live", "--model", str(model), "--horizon",
-           "10", "--seconds", str(seconds), "--speed", str(speed), "--json", str(out),
-           "--loops", str(loops)]
-    proc = subprocess.run(cmd, capture_output=True, text=True)  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "monitor.bench.live",
+        "--model",
+        str(model),
+        "--horizon",
+        "10",
+        "--seconds",
+        str(seconds),
+        "--speed",
+        str(speed),
+        "--json",
+        str(out),
+        "--loops",
+        str(loops),
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         tail = proc.stderr.strip().splitlines()[-1:] or ["(no output)"]
         raise MonitorError(f"the live benchmark failed: {tail[0]}")
@@ -112,8 +157,11 @@ def run(args: argparse.Namespace) -> int:
             raise MonitorError(f"cannot write {path}: folder {path.parent} does not exist")
     tmp = Path(tempfile.mkdtemp(prefix="monitor-bench-"))
     started = time.perf_counter()
-    result: dict[str, Any] = {"quick": bool(args.quick), "machine": report.machine(),
-                              "load_before": report.load_average()}  # fmt: skip
+    result: dict[str, Any] = {
+        "quick": bool(args.quick),
+        "machine": report.machine(),
+        "load_before": report.load_average(),
+    }
 
     _say("footprint: monitor --help, 5 processes")
     foot = footprint.cli_help()
@@ -135,28 +183,33 @@ def run(args: argparse.Namespace) -> int:
     det = detect_bench.measure(model_path, log, sizes.log_s, sizes.reference_s, _say)
     det["model_summary"] = summary
 
-    result.update({
-        "grnn_us_per_query": grnn["grnn_us_per_query"],
-        "grnn_speedup_vs_numba_loop": grnn["grnn_speedup_vs_numba_loop"],
-        "grnn_speedup_vs_pygrnn": grnn["grnn_speedup_vs_pygrnn"],
-        "grnn_max_rel_error": grnn["grnn_max_rel_error"],
-        "tick_p50_ms": live["tick_p50_ms"],
-        "tick_p99_ms": live["tick_p99_ms"],
-        "tick_max_ms": live["tick_max_ms"],
-        "live_bench_peak_rss_mb": live["peak_rss_mb"],  # with the bench's own simulation
-        **foot,
-        "four_loop_tick_p50_ms": four["tick_p50_ms"],
-        "four_loop_tick_p99_ms": four["tick_p99_ms"],
-        "four_loop_tick_cpu_median_ms": four["tick_cpu_median_ms"],
-        "four_loop_tick_cpu_p99_ms": four["tick_cpu_p99_ms"],
-        "four_loop_peak_rss_mb": four["peak_rss_mb"],
-        "detect_frames_per_s": det["detect_frames_per_s"],
-        "detect_realtime_factor": det["detect_realtime_factor"],
-        "detect_speedup_vs_reference_pipeline": det["detect_speedup_vs_reference_pipeline"],
-        "grnn": grnn, "live": live, "four_loop": four, "detect": det,
-        "load_after": report.load_average(),
-        "wall_s": time.perf_counter() - started,
-    })  # fmt: skip
+    result.update(
+        {
+            "grnn_us_per_query": grnn["grnn_us_per_query"],
+            "grnn_speedup_vs_numba_loop": grnn["grnn_speedup_vs_numba_loop"],
+            "grnn_speedup_vs_pygrnn": grnn["grnn_speedup_vs_pygrnn"],
+            "grnn_max_rel_error": grnn["grnn_max_rel_error"],
+            "tick_p50_ms": live["tick_p50_ms"],
+            "tick_p99_ms": live["tick_p99_ms"],
+            "tick_max_ms": live["tick_max_ms"],
+            "live_bench_peak_rss_mb": live["peak_rss_mb"],  # with the bench's own simulation
+            **foot,
+            "four_loop_tick_p50_ms": four["tick_p50_ms"],
+            "four_loop_tick_p99_ms": four["tick_p99_ms"],
+            "four_loop_tick_cpu_median_ms": four["tick_cpu_median_ms"],
+            "four_loop_tick_cpu_p99_ms": four["tick_cpu_p99_ms"],
+            "four_loop_peak_rss_mb": four["peak_rss_mb"],
+            "detect_frames_per_s": det["detect_frames_per_s"],
+            "detect_realtime_factor": det["detect_realtime_factor"],
+            "detect_speedup_vs_reference_pipeline": det["detect_speedup_vs_reference_pipeline"],
+            "grnn": grnn,
+            "live": live,
+            "four_loop": four,
+            "detect": det,
+            "load_after": report.load_average(),
+            "wall_s": time.perf_counter() - started,
+        }
+    )
     result["goals"] = {
         k: {"text": text, "met": result[k] is not None and bool(ok(result[k]))}
         for k, (text, ok) in GOALS.items()

@@ -39,10 +39,20 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--speed times real time onto a python-can virtual bus, runs the live monitor on it "
         "and prints alarms as they happen, a progress line and a summary. Under a minute.",
     )
-    p.add_argument("--speed", type=float, default=5.0, metavar="X",
-                   help="replay speed factor (default 5: the 90 s log in 18 s)")  # fmt: skip
-    p.add_argument("--out", type=output_dir, default=None, metavar="DIR",
-                   help="keep the event log and black box here (default: a temp dir)")  # fmt: skip
+    p.add_argument(
+        "--speed",
+        type=float,
+        default=5.0,
+        metavar="X",
+        help="replay speed factor (default 5: the 90 s log in 18 s)",
+    )
+    p.add_argument(
+        "--out",
+        type=output_dir,
+        default=None,
+        metavar="DIR",
+        help="keep the event log and black box here (default: a temp dir)",
+    )
     p.set_defaults(func=run)
 
 
@@ -121,13 +131,17 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
         if tty:
             print("\r" + " " * 100 + "\r", end="")
         fault = f", isolated: {ev['fault']}" if ev["fault"] else ""
-        print(f"[log t={ev['t']:6.2f} s] state -> {ev['state'].upper()} ({_levels(daemon)}{fault})",
-              flush=True)  # fmt: skip
+        print(
+            f"[log t={ev['t']:6.2f} s] state -> {ev['state'].upper()} ({_levels(daemon)}{fault})",
+            flush=True,
+        )
         if ev["state"] == "fault":
             alarms.append(ev)
 
-    print(f"monitor demo: replaying {log_path.name} (spool wear from {DEMO_ONSET_S:.0f} s) at "
-          f"{speed:g}x real time on virtual CAN bus {channel!r}")  # fmt: skip
+    print(
+        f"monitor demo: replaying {log_path.name} (spool wear from {DEMO_ONSET_S:.0f} s) at "
+        f"{speed:g}x real time on virtual CAN bus {channel!r}"
+    )
     daemon = Daemon(cfg, on_event=on_event)
     listener = can.Bus(interface="virtual", channel=channel)
     sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
@@ -144,8 +158,13 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
             if m is not None and m.arbitration_id == alarm_id:
                 d = listen_codec.decode_message(m)
                 if d.values is not None:
-                    frames.append((m.timestamp, int(d.values["State"]),
-                                   names.get(int(d.values["Fault"]), "?")))  # fmt: skip
+                    frames.append(
+                        (
+                            m.timestamp,
+                            int(d.values["State"]),
+                            names.get(int(d.values["Fault"]), "?"),
+                        )
+                    )
 
     listen_thread = threading.Thread(target=listen, name="demo-listener", daemon=True)
     listen_thread.start()
@@ -153,8 +172,9 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
     start = time.monotonic()
     daemon.start()
     try:
-        counts = replay_log(log_path, sender, speed,
-                            on_frame=lambda m, c: progress.show(daemon, c, span_s))  # fmt: skip
+        counts = replay_log(
+            log_path, sender, speed, on_frame=lambda m, c: progress.show(daemon, c, span_s)
+        )
         time.sleep(0.3)  # let the detector drain the last frames
     finally:
         daemon.stop()
@@ -172,15 +192,19 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
     print(f"\nsummary ({time.monotonic() - start:.1f} s wall for {span_s:.0f} s of log):")
     if alarms:
         first = alarms[0]
-        print(f"  hydraulic fault raised at {first['t']:.2f} s of the log, "
-              f"{first['t'] - DEMO_ONSET_S:.2f} s after the fault's onset at {DEMO_ONSET_S:.0f} s;"
-              f" isolated: {first['fault']}")  # fmt: skip
+        print(
+            f"  hydraulic fault raised at {first['t']:.2f} s of the log, "
+            f"{first['t'] - DEMO_ONSET_S:.2f} s after the fault's onset at {DEMO_ONSET_S:.0f} s;"
+            f" isolated: {first['fault']}"
+        )
     else:
         print("  no hydraulic fault raised")
     if fault_frames:
-        print(f"  MON_Alarm frames read back off the bus: {len(frames)} "
-              f"({len(fault_frames)} in fault, first at {fault_frames[0][0] - t0:.2f} s, "
-              f"fault {fault_frames[0][2]})")  # fmt: skip
+        print(
+            f"  MON_Alarm frames read back off the bus: {len(frames)} "
+            f"({len(fault_frames)} in fault, first at {fault_frames[0][0] - t0:.2f} s, "
+            f"fault {fault_frames[0][2]})"
+        )
     else:
         print(f"  MON_Alarm frames read back off the bus: {len(frames)}")
     print(
@@ -190,6 +214,8 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
     if kept:
         print(f"  event log: {cfg.event_log.path}; black box: {cfg.black_box.directory}")
     else:
-        print("  event log and black box were written to a temporary folder, removed on exit "
-              "(keep them with --out DIR)")  # fmt: skip
+        print(
+            "  event log and black box were written to a temporary folder, removed on exit "
+            "(keep them with --out DIR)"
+        )
     return 0

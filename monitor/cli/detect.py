@@ -149,16 +149,24 @@ def run(args: argparse.Namespace) -> int:
     # The alarm compares the level (each statistic over its threshold, the largest) with 1:
     # its largest value says how close.
     level = "" if s["max_level"] is None else f", max level {s['max_level']:.3g} (1 = alarm)"
-    print(f"{args.recording}: {_result_line(s)} (max J {max_j}, eps0 {s['threshold']:.4g}"
-          f"{level}, judged {s['judged_s']:.1f} s)", file=sys.stderr)  # fmt: skip
+    print(
+        f"{args.recording}: {_result_line(s)} (max J {max_j}, eps0 {s['threshold']:.4g}"
+        f"{level}, judged {s['judged_s']:.1f} s)",
+        file=sys.stderr,
+    )
     return 3 if s["verdict"] == "not_judged" else 0
 
 
 def _result_line(s: dict[str, Any]) -> str:
     if s["verdict"] == "not_judged":
         return f"not judged: {s['not_judged_why']}"
-    line = (f"FAULT from {s['first_alarm_t']:.2f} s, isolated: {s['fault']}" if s["alarm"]
-            else "no hydraulic fault" if s["verdict"] == "healthy" else "sensor fault")  # fmt: skip
+    line = (
+        f"FAULT from {s['first_alarm_t']:.2f} s, isolated: {s['fault']}"
+        if s["alarm"]
+        else "no hydraulic fault"
+        if s["verdict"] == "healthy"
+        else "sensor fault"
+    )
     if s["sensor_fault"] and s["alarm"]:
         line += "; sensor fault seen"
     for c in s["sensor_checks"]:

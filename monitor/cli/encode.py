@@ -32,10 +32,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         description=_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("csv", metavar="CSV", type=Path,
-                   help="contract CSV of physical signals")
-    p.add_argument("--out", metavar="LOG", type=output_file, required=True,
-                   help="candump log to write")
+    p.add_argument("csv", metavar="CSV", type=Path, help="contract CSV of physical signals")
+    p.add_argument(
+        "--out", metavar="LOG", type=output_file, required=True, help="candump log to write"
+    )
     p.add_argument(
         "--dbc", metavar="FILE", type=Path, default=None, help="DBC file (default: the shipped one)"
     )
@@ -46,8 +46,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         default=DEFAULT_START_TIME_S,
         help=f"log time of t = 0 [s since the Unix epoch] (default {DEFAULT_START_TIME_S:.0f})",
     )
-    p.add_argument("--channel", default="can0",
-                   help="interface name in the log (default can0)")
+    p.add_argument("--channel", default="can0", help="interface name in the log (default can0)")
     p.set_defaults(func=run)
 
 
@@ -58,9 +57,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--start-time {args.start_time}: must be >= 0 s")
     codec = FrameCodec.from_dbc(args.dbc)
     rec = read_csv(args.csv)
-    counts = write_candump(
-        args.out, rec, codec, start_time_s=args.start_time, channel=args.channel
-    )
+    counts = write_candump(args.out, rec, codec, start_time_s=args.start_time, channel=args.channel)
     total = sum(counts.values())
     per_message = ", ".join(f"{name} {n}" for name, n in counts.items())
     print(f"{args.out}: {total} frames from {len(rec)} rows ({per_message})")

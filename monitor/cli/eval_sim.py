@@ -46,6 +46,7 @@ preset, 6000 patterns, p=1).  The full default evaluation (600 fault runs, 100 h
 presets) takes about an hour with --workers 2 on a 2-core machine; --quick about a minute.
 """
 
+
 @dataclass(frozen=True)
 class _Scale:
     """The defaults of an evaluation's size (each option given on the command line wins)."""
@@ -124,57 +125,135 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", metavar="F", type=output_file, required=True, help="results to write")
     p.add_argument("--markdown", metavar="F.md", type=output_file, help="tables (default: stdout)")
     p.add_argument(
-        "--model", metavar="MODEL", action="append", default=None,
+        "--model",
+        metavar="MODEL",
+        action="append",
+        default=None,
         help="evaluate this model file (repeatable; 'shipped' = config's model); without "
         "--presets, nothing is trained",
-    )  # fmt: skip
+    )
     p.add_argument(
-        "--presets", metavar="LIST", type=_names(tuple(PRESETS)), default=None,
+        "--presets",
+        metavar="LIST",
+        type=_names(tuple(PRESETS)),
+        default=None,
         help="presets to train afresh (default default,paper; --quick default; none with --model)",
-    )  # fmt: skip
+    )
     p.add_argument(
-        "--train-seeds", metavar="SEEDS", type=_seeds, default=None,
+        "--train-seeds",
+        metavar="SEEDS",
+        type=_seeds,
+        default=None,
         help="seeds of the normal training runs (default 1-48; --quick 1-8)",
-    )  # fmt: skip
-    p.add_argument("--train-duration", metavar="S", type=float, default=300.0,
-                   help="length of each training run (default 300 s)")  # fmt: skip
-    p.add_argument("--runs", metavar="K", type=int, default=None,
-                   help="runs per fault, severity and onset (default 10; --quick 2)")  # fmt: skip
+    )
     p.add_argument(
-        "--severities", metavar="LIST", type=_floats, default=None,
+        "--train-duration",
+        metavar="S",
+        type=float,
+        default=300.0,
+        help="length of each training run (default 300 s)",
+    )
+    p.add_argument(
+        "--runs",
+        metavar="K",
+        type=int,
+        default=None,
+        help="runs per fault, severity and onset (default 10; --quick 2)",
+    )
+    p.add_argument(
+        "--severities",
+        metavar="LIST",
+        type=_floats,
+        default=None,
         help="fault severities (default 0.1,0.2,...,1.0; --quick 0.5,1.0)",
-    )  # fmt: skip
-    p.add_argument("--faults", metavar="LIST", type=_names(FAULT_NAMES), default=FAULT_NAMES,
-                   help=f"faults to simulate (default all: {','.join(FAULT_NAMES)})")  # fmt: skip
-    p.add_argument("--onsets", metavar="LIST", type=_names(ONSETS), default=ONSETS,
-                   help="abrupt,gradual (default both)")  # fmt: skip
-    p.add_argument("--normal-hours", metavar="H", type=float, default=None,
-                   help="hours of normal test runs (default 100; --quick 1/6)")  # fmt: skip
-    p.add_argument("--duration", metavar="S", type=float, default=120.0,
-                   help="abrupt fault run length (default 120 s; gradual: + ramp)")  # fmt: skip
-    p.add_argument("--onset", metavar="S", type=float, default=30.0,
-                   help="fault onset (default 30 s)")  # fmt: skip
-    p.add_argument("--ramp", metavar="S", type=float, default=30.0,
-                   help="ramp of a gradual fault (default 30 s)")  # fmt: skip
-    p.add_argument("--horizon", metavar="P", type=int, default=None,
-                   help="prediction horizon p (default: config's, 1)")  # fmt: skip
-    p.add_argument("--config", metavar="FILE", type=Path, default=None,
-                   help="monitor config for the alarm debounce and shipped model")  # fmt: skip
-    p.add_argument("--workers", type=number(1, 256, whole=True), default=1, metavar="N",
-                   help="Dask worker processes on this machine (LocalCluster; default 1: one "
-                   "process, no Dask); the rows are the same either way")
-    p.add_argument("--seed-set", type=number(0, MAX_SEED_SET, whole=True), default=0,
-                   metavar="K", help="test seeds shifted by K x 10,000,000: 0 (default) are "
-                   "the development seeds; report a blind result on a set nobody tuned on")
-    p.add_argument("--no-twins", dest="twins", action="store_false",
-                   help="skip the noise-free twins of each fault run (with and without the "
-                   "fault) that give fault_j_ratio and the 'exercised' columns")  # fmt: skip
-    p.add_argument("--twin-residuals", action="store_true",
-                   help="also run each model on both twins: fault_residual_level_ratio, the "
-                   "alarm level the fault alone gives this detector (two more predictions per "
-                   "fault run and model)")  # fmt: skip
-    p.add_argument("--quick", action="store_true",
-                   help="the reduced set CI runs (~1 min); explicit options win")  # fmt: skip
+    )
+    p.add_argument(
+        "--faults",
+        metavar="LIST",
+        type=_names(FAULT_NAMES),
+        default=FAULT_NAMES,
+        help=f"faults to simulate (default all: {','.join(FAULT_NAMES)})",
+    )
+    p.add_argument(
+        "--onsets",
+        metavar="LIST",
+        type=_names(ONSETS),
+        default=ONSETS,
+        help="abrupt,gradual (default both)",
+    )
+    p.add_argument(
+        "--normal-hours",
+        metavar="H",
+        type=float,
+        default=None,
+        help="hours of normal test runs (default 100; --quick 1/6)",
+    )
+    p.add_argument(
+        "--duration",
+        metavar="S",
+        type=float,
+        default=120.0,
+        help="abrupt fault run length (default 120 s; gradual: + ramp)",
+    )
+    p.add_argument(
+        "--onset", metavar="S", type=float, default=30.0, help="fault onset (default 30 s)"
+    )
+    p.add_argument(
+        "--ramp",
+        metavar="S",
+        type=float,
+        default=30.0,
+        help="ramp of a gradual fault (default 30 s)",
+    )
+    p.add_argument(
+        "--horizon",
+        metavar="P",
+        type=int,
+        default=None,
+        help="prediction horizon p (default: config's, 1)",
+    )
+    p.add_argument(
+        "--config",
+        metavar="FILE",
+        type=Path,
+        default=None,
+        help="monitor config for the alarm debounce and shipped model",
+    )
+    p.add_argument(
+        "--workers",
+        type=number(1, 256, whole=True),
+        default=1,
+        metavar="N",
+        help="Dask worker processes on this machine (LocalCluster; default 1: one "
+        "process, no Dask); the rows are the same either way",
+    )
+    p.add_argument(
+        "--seed-set",
+        type=number(0, MAX_SEED_SET, whole=True),
+        default=0,
+        metavar="K",
+        help="test seeds shifted by K x 10,000,000: 0 (default) are "
+        "the development seeds; report a blind result on a set nobody tuned on",
+    )
+    p.add_argument(
+        "--no-twins",
+        dest="twins",
+        action="store_false",
+        help="skip the noise-free twins of each fault run (with and without the "
+        "fault) that give fault_j_ratio and the 'exercised' columns",
+    )
+    p.add_argument(
+        "--twin-residuals",
+        action="store_true",
+        help="also run each model on both twins: fault_residual_level_ratio, the "
+        "alarm level the fault alone gives this detector (two more predictions per "
+        "fault run and model)",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="the reduced set CI runs (~1 min); explicit options win",
+    )
     p.set_defaults(func=run)
 
 

@@ -31,28 +31,33 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         description=_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--train", metavar="DIR", type=Path, required=True,
-                   help="rig folder to fit on")
-    p.add_argument("--test", metavar="DIR", type=Path, required=True,
-                   help="rig folder to score")
-    p.add_argument("--json", metavar="FILE", type=output_file, required=True,
-                   help="results to write")
+    p.add_argument("--train", metavar="DIR", type=Path, required=True, help="rig folder to fit on")
+    p.add_argument("--test", metavar="DIR", type=Path, required=True, help="rig folder to score")
     p.add_argument(
-        "--preset", choices=tuple(UCI_PRESETS), action="append", default=None,
+        "--json", metavar="FILE", type=output_file, required=True, help="results to write"
+    )
+    p.add_argument(
+        "--preset",
+        choices=tuple(UCI_PRESETS),
+        action="append",
+        default=None,
         help="preset(s) to try (repeatable; default: all, the best on --train is the default)",
-    )  # fmt: skip
+    )
     p.add_argument(
-        "--window", metavar="N", type=int, action="append", default=None,
+        "--window",
+        metavar="N",
+        type=int,
+        action="append",
+        default=None,
         help=f"J window N to try (repeatable; default {', '.join(map(str, WINDOWS))})",
-    )  # fmt: skip
+    )
     p.add_argument(
         "--threshold-rule",
         choices=THRESHOLD_RULES,
         default="max",
         help="how J0 is taken from held-out healthy cycles (default max)",
     )
-    p.add_argument("--factor", type=float, default=2.0,
-                   help="eps0 = factor * J0 (default 2)")
+    p.add_argument("--factor", type=float, default=2.0, help="eps0 = factor * J0 (default 2)")
     p.add_argument(
         "--max-cycles",
         metavar="K",
@@ -74,13 +79,14 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--json {args.json}: folder {args.json.parent} does not exist")
     rule = ThresholdRule(args.threshold_rule, factor=args.factor)
     result = evaluate(
-        args.train, args.test,
+        args.train,
+        args.test,
         presets=tuple(args.preset or UCI_PRESETS),
         windows=tuple(args.window or WINDOWS),
         rule=rule,
         max_cycles=args.max_cycles,
         progress=lambda msg: print(f"eval-uci: {msg}", file=sys.stderr, flush=True),
-    )  # fmt: skip
+    )
     try:
         args.json.write_text(json.dumps(result, indent=2) + "\n")
     except OSError as exc:
@@ -103,8 +109,11 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"default: {result['default_preset']} (N={ch['window_N']}, sigma={ch['sigma']:.4g}, "
         f"J0={ch['J0']:.4g}, eps0={ch['eps0']:.4g}, "
-        + (f"B over {ch['bias_phase_s']} s phases, b0={ch['b0']:.3g}" if ch["bias_phase_s"]
-           else "J alone")
+        + (
+            f"B over {ch['bias_phase_s']} s phases, b0={ch['b0']:.3g}"
+            if ch["bias_phase_s"]
+            else "J alone"
+        )
         + f"); {result['split']['test_cycles']} test "
         f"cycles; {result['runtime_s']:.0f} s; -> {args.json}"
     )

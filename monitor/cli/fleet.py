@@ -86,10 +86,20 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "commissioning run: a bounded crossing forecast).",
     )
     rep.add_argument("results", type=Path, metavar="RESULTS")
-    rep.add_argument("--out", type=output_dir, default=None, metavar="DIR",
-                     help="the Markdown page with PNG pictures into DIR")
-    rep.add_argument("--html", type=output_dir, default=None, metavar="DIR",
-                     help="the web page into DIR (index.html)")
+    rep.add_argument(
+        "--out",
+        type=output_dir,
+        default=None,
+        metavar="DIR",
+        help="the Markdown page with PNG pictures into DIR",
+    )
+    rep.add_argument(
+        "--html",
+        type=output_dir,
+        default=None,
+        metavar="DIR",
+        help="the web page into DIR (index.html)",
+    )
     rep.add_argument(
         "--last", type=int, default=6, metavar="K", help="logs in the trend (default 6)"
     )
@@ -120,8 +130,10 @@ def run(args: argparse.Namespace) -> int:
     if not args.fleet.is_dir():
         raise ConfigError(f"{args.fleet}: no such fleet folder")
     if (args.fleet / "logs").is_dir() or (args.fleet / "commissioning").is_dir():
-        raise ConfigError(f"{args.fleet}: one machine's folder (it holds logs/ or "
-                          "commissioning/); give the fleet folder above it")  # fmt: skip
+        raise ConfigError(
+            f"{args.fleet}: one machine's folder (it holds logs/ or "
+            "commissioning/); give the fleet folder above it"
+        )
 
     opts = RunOptions(
         workers=args.workers,
@@ -152,9 +164,11 @@ def report(args: argparse.Namespace) -> int:
         print(f"wrote {_fleet_web.write_html(args)}", file=sys.stderr)
     unmerged = len(list((args.results / "parts").glob("*.json")))
     if unmerged:  # an interrupted or running `fleet run`: the page shows the tables only
-        print(f"monitor fleet report: note: {unmerged} finished log(s) of an unfinished run "
-              "are not in the tables yet (`monitor fleet run` again merges them)",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"monitor fleet report: note: {unmerged} finished log(s) of an unfinished run "
+            "are not in the tables yet (`monitor fleet run` again merges them)",
+            file=sys.stderr,
+        )
     return 0
 
 

@@ -50,8 +50,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--real", type=Path, required=True, metavar="REC",
-                   help="the recording")
+    p.add_argument("--real", type=Path, required=True, metavar="REC", help="the recording")
     p.add_argument(
         "--config",
         type=Path,
@@ -59,8 +58,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="simulator YAML (default: the shipped config/simulator.yaml)",
     )
-    p.add_argument("--json", type=output_file, required=True, metavar="F",
-                   help="write the report here")
+    p.add_argument(
+        "--json", type=output_file, required=True, metavar="F", help="write the report here"
+    )
     p.add_argument(
         "--report",
         type=output_dir,
@@ -68,8 +68,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="also write PNG plots and summary.txt into DIR (created)",
     )
-    p.add_argument("--quiet", action="store_true",
-                   help="no progress lines on stderr")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run)
 
 

@@ -32,11 +32,20 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("log", type=Path, metavar="LOG")
     p.add_argument("--bus", required=True, metavar="CHANNEL", help="e.g. can0, vcan0")
-    p.add_argument("--interface", default="socketcan", metavar="NAME",
-                   help="python-can interface (default socketcan)")  # fmt: skip
+    p.add_argument(
+        "--interface",
+        default="socketcan",
+        metavar="NAME",
+        help="python-can interface (default socketcan)",
+    )
     p.add_argument("--bitrate", type=int, default=500_000, help="for interfaces that set it")
-    p.add_argument("--speed", type=_speed, default=1.0, metavar="X",
-                   help="time factor: 2 plays twice as fast (default 1)")  # fmt: skip
+    p.add_argument(
+        "--speed",
+        type=_speed,
+        default=1.0,
+        metavar="X",
+        help="time factor: 2 plays twice as fast (default 1)",
+    )
     p.set_defaults(func=run)
 
 

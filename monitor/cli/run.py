@@ -90,16 +90,20 @@ def run(args: argparse.Namespace) -> int:
                 if now - daemon.loop_mono < ping_s:
                     notifier.watchdog()
                 else:
-                    log.warning("detector loop stalled for %.1f s; no watchdog ping",
-                                now - daemon.loop_mono)  # fmt: skip
+                    log.warning(
+                        "detector loop stalled for %.1f s; no watchdog ping", now - daemon.loop_mono
+                    )
             time.sleep(min(0.1, ping_s or 0.1))
     finally:
         notifier.stopping()
         daemon.stop()  # ordered: reader, detector, outputs (fsynced), bus
         notifier.close()
     if daemon.unwritten:
-        log.error("%d event(s) could not be written to %s (see the errors above)",
-                  daemon.unwritten, cfg.event_log.path)  # fmt: skip
+        log.error(
+            "%d event(s) could not be written to %s (see the errors above)",
+            daemon.unwritten,
+            cfg.event_log.path,
+        )
         return 1
     return 0
 
@@ -112,10 +116,17 @@ def _log_start_up() -> None:
 
     took = time.monotonic() - STARTED_MONO
     if not numba_loaded():
-        log.info("ready %.2f s after the start; tick kernels compiled ahead of time (numba "
-                 "not loaded)", took)  # fmt: skip
+        log.info(
+            "ready %.2f s after the start; tick kernels compiled ahead of time (numba not loaded)",
+            took,
+        )
         return
     s = cache_stats()
     hint = " (run `monitor warm-up` once after an install)"
-    log.info("ready %.2f s after the start; numba kernels: %d loaded from the cache, %d "
-             "compiled%s", took, s["hits"], s["misses"], hint)  # fmt: skip
+    log.info(
+        "ready %.2f s after the start; numba kernels: %d loaded from the cache, %d compiled%s",
+        took,
+        s["hits"],
+        s["misses"],
+        hint,
+    )

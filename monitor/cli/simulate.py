@@ -58,10 +58,13 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--duration", type=number(0.01, DURATION_MAX_S, unit="s", why=DURATION_WHY),
-                   required=True, metavar="S",
-                   help=f"length in seconds (at most {DURATION_MAX_S:g}: "
-                   f"{DURATION_WHY})")  # fmt: skip
+    p.add_argument(
+        "--duration",
+        type=number(0.01, DURATION_MAX_S, unit="s", why=DURATION_WHY),
+        required=True,
+        metavar="S",
+        help=f"length in seconds (at most {DURATION_MAX_S:g}: {DURATION_WHY})",
+    )
     p.add_argument(
         "--seed",
         type=number(0, SEED_MAX, whole=True),

@@ -20,13 +20,22 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "the middle day on; the rest are healthy. OUT/answer_key.json says which is which.",
     )
     p.add_argument("out", type=output_dir, metavar="OUT", help="fleet folder to write (created)")
-    p.add_argument("--machines", type=int, required=True, metavar="N",
-                   help="machines to simulate (M01, M02, ...; roles as above)")  # fmt: skip
-    p.add_argument("--days", type=int, required=True, metavar="D",
-                   help="days of logs per machine")  # fmt: skip
-    p.add_argument("--logs-per-day", type=int, default=1, metavar="L",
-                   help="logs per machine and day (default 1: dayDD.log; more: dayDD-1.log, "
-                   "dayDD-2.log, ..., as a machine that uploads after every few hours)")
+    p.add_argument(
+        "--machines",
+        type=int,
+        required=True,
+        metavar="N",
+        help="machines to simulate (M01, M02, ...; roles as above)",
+    )
+    p.add_argument("--days", type=int, required=True, metavar="D", help="days of logs per machine")
+    p.add_argument(
+        "--logs-per-day",
+        type=int,
+        default=1,
+        metavar="L",
+        help="logs per machine and day (default 1: dayDD.log; more: dayDD-1.log, "
+        "dayDD-2.log, ..., as a machine that uploads after every few hours)",
+    )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="default 0")
     p.add_argument(
         "--log-s",
@@ -64,15 +73,27 @@ def run(args: argparse.Namespace) -> int:
     if args.days * args.logs_per_day > 999:
         raise ConfigError("--days x --logs-per-day must be at most 999 logs per machine")
     if args.log_s < 60 or args.commissioning_s < 180:
-        raise ConfigError("--log-s must be at least 60 s and --commissioning-s at least 180 s "
-                          "(the J window is 30 s)")  # fmt: skip
+        raise ConfigError(
+            "--log-s must be at least 60 s and --commissioning-s at least 180 s "
+            "(the J window is 30 s)"
+        )
     if not 0.0 <= args.wear_max <= 1.0:
         raise ConfigError(f"--wear-max must be a severity in [0, 1], got {args.wear_max:g}")
     if args.out.exists() and any(args.out.iterdir()):
         raise ConfigError(f"{args.out}: exists and is not empty")
-    plan = FleetPlan(args.machines, args.days, args.seed, args.log_s, args.commissioning_s,
-                     wear_max=args.wear_max, logs_per_day=args.logs_per_day)  # fmt: skip
+    plan = FleetPlan(
+        args.machines,
+        args.days,
+        args.seed,
+        args.log_s,
+        args.commissioning_s,
+        wear_max=args.wear_max,
+        logs_per_day=args.logs_per_day,
+    )
     simulate_fleet(args.out, plan, say=lambda m: print(m, file=sys.stderr))
-    print(f"wrote {args.machines} machines x {args.days} days x {args.logs_per_day} log(s) "
-          f"to {args.out}", file=sys.stderr)
+    print(
+        f"wrote {args.machines} machines x {args.days} days x {args.logs_per_day} log(s) "
+        f"to {args.out}",
+        file=sys.stderr,
+    )
     return 0

@@ -36,8 +36,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="REC",
         help="normal recordings: contract CSVs or candump logs",
     )
-    p.add_argument("--out", type=output_file, required=True, metavar="MODEL",
-                   help="model file (.npz)")
+    p.add_argument(
+        "--out", type=output_file, required=True, metavar="MODEL", help="model file (.npz)"
+    )
     p.add_argument(
         "--preset",
         choices=sorted(PRESETS),
@@ -76,20 +77,26 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "max (default: factor x the largest), quantile, mean (the paper's literal reading), "
         "or evt (a Gumbel fit of the per-window maxima, for --rate false alarms per hour)",
     )
-    p.add_argument("--quantile", type=float, default=0.999,
-                   help="for --threshold-rule quantile")
-    p.add_argument("--factor", type=float, default=2.0,
-                   help="eps0 = factor x J0, b0 = factor x the held-out B (default 2; not "
-                   "for evt)")
-    p.add_argument("--rate", type=number(1e-7, 1.0), default=1e-3, metavar="PER_H",
-                   help="for --threshold-rule evt: false alarms per hour (default 0.001)")
+    p.add_argument("--quantile", type=float, default=0.999, help="for --threshold-rule quantile")
+    p.add_argument(
+        "--factor",
+        type=float,
+        default=2.0,
+        help="eps0 = factor x J0, b0 = factor x the held-out B (default 2; not for evt)",
+    )
+    p.add_argument(
+        "--rate",
+        type=number(1e-7, 1.0),
+        default=1e-3,
+        metavar="PER_H",
+        help="for --threshold-rule evt: false alarms per hour (default 0.001)",
+    )
     p.add_argument(
         "--validation-fraction",
         type=float,
         default=0.25,
         metavar="F",
-        help="share of the normal data held out for J0 (default 0.25; not used with "
-        "--held-out)",
+        help="share of the normal data held out for J0 (default 0.25; not used with --held-out)",
     )
     p.add_argument(
         "--held-out",
@@ -154,8 +161,12 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="train on this loop of candump logs with several loops' frames (needs "
         "--config with `loops:`); the fault signatures still come from the boom simulator",
     )
-    p.add_argument("--config", type=Path, default=None,
-                   help="monitor YAML for --loop and for the model `--reference shipped` names")
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="monitor YAML for --loop and for the model `--reference shipped` names",
+    )
     p.add_argument(
         "--isolation",
         choices=("sim", "none"),
@@ -195,11 +206,16 @@ def _card(monitor_cfg: MonitorConfig, loop_name: str | None, recordings: list) -
     machine = loop.machine
     if machine is not None:
         for rec in recordings:
-            seen = {s: float(np.nanmax(rec[s], initial=0.0)) for s in ("PP", "PA", "PB", "QP")
-                    if rec.has(s)}  # fmt: skip
+            seen = {
+                s: float(np.nanmax(rec[s], initial=0.0))
+                for s in ("PP", "PA", "PB", "QP")
+                if rec.has(s)
+            }
             check_seen(seen, machine, f"{rec.source}: shows", where)
     source = None if loop.machine_source is None else str(loop.machine_source)
     return card_for(loop.name, loop.machine, source)
+
+
 def _check_input(
     args: argparse.Namespace,
     monitor_cfg: MonitorConfig,
@@ -222,20 +238,34 @@ def _check_input(
     if reference is not None:
         name = "shipped" if args.reference == "shipped" else args.reference
     else:
-        loop_model = next((lc.model for lc in monitor_cfg.monitored_loops
-                           if lc.name == args.loop), None)  # fmt: skip
+        loop_model = next(
+            (lc.model for lc in monitor_cfg.monitored_loops if lc.name == args.loop), None
+        )
         name = str(loop_model or monitor_cfg.model)
         reference = load_model(loop_model or monitor_cfg.model)
     paths = [*args.recordings, *(args.held_out or ())]
-    print(f"checking {len(paths)} recording(s) against the reference model {name} "
-          "(--fault-check off skips)", file=sys.stderr)  # fmt: skip
-    suspects = fault_suspects([*recordings, *held_out], paths, reference, name,
-                              monitor_cfg.alarm, monitor_cfg.horizon, monitor_cfg.gating)
+    print(
+        f"checking {len(paths)} recording(s) against the reference model {name} "
+        "(--fault-check off skips)",
+        file=sys.stderr,
+    )
+    suspects = fault_suspects(
+        [*recordings, *held_out],
+        paths,
+        reference,
+        name,
+        monitor_cfg.alarm,
+        monitor_cfg.horizon,
+        monitor_cfg.gating,
+    )
     if args.fault_check == "warn":
         for s in suspects:
-            print(f"warning: {s.message()}, unless this machine differs from the reference "
-                  "model's: check the recording, leave it out if faulty (trained on it; "
-                  "--fault-check refuse stops here)", file=sys.stderr)  # fmt: skip
+            print(
+                f"warning: {s.message()}, unless this machine differs from the reference "
+                "model's: check the recording, leave it out if faulty (trained on it; "
+                "--fault-check refuse stops here)",
+                file=sys.stderr,
+            )
     elif suspects:
         more = f" (and {len(suspects) - 1} more)" if len(suspects) > 1 else ""
         raise SuspectRecordingError(
@@ -281,8 +311,13 @@ def run(args: argparse.Namespace) -> int:
         shipped = args.reference == "shipped"
         reference = load_model(monitor_cfg.model if shipped else Path(args.reference))
     _check_input(args, monitor_cfg, recordings, held_out, reference)
-    model = train(recordings, cfg, progress=lambda msg: print(msg, file=sys.stderr),
-                  held_out=held_out or None, reference=reference)  # fmt: skip
+    model = train(
+        recordings,
+        cfg,
+        progress=lambda msg: print(msg, file=sys.stderr),
+        held_out=held_out or None,
+        reference=reference,
+    )
     model.card = card
     try:
         save_model(args.out, model)

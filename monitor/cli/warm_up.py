@@ -25,10 +25,12 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "(about 110 MB less memory).",
     )
     p.add_argument(
-        "--no-aot", dest="aot", action="store_false",
+        "--no-aot",
+        dest="aot",
+        action="store_false",
         help="do not compile the kernels ahead of time (numba pycc, needs a C++ "
         "compiler, g++); the daemon then loads numba and uses the JIT kernels",
-    )  # fmt: skip
+    )
     p.set_defaults(func=run)
 
 
@@ -46,34 +48,47 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config()
     model = load_model(cfg.model)
     steps = [
-        ("log reading and offline detection",
-         lambda: detect(model, read_recording(resource_path("replay", "spool_wear.log")),
-                        cfg.alarm, cfg.horizon, gating=cfg.gating)),
+        (
+            "log reading and offline detection",
+            lambda: detect(
+                model,
+                read_recording(resource_path("replay", "spool_wear.log")),
+                cfg.alarm,
+                cfg.horizon,
+                gating=cfg.gating,
+            ),
+        ),
         # The one-thread form `monitor detect` runs ahead of time (a cache hit of the
         # parallel driver does not tell numba the types of the kernel it calls).
         ("offline prediction on one thread", lambda: _serial_prediction(model)),
-        ("per-tick detector", lambda: _ticks(Ticker(model, cfg.alarm, cfg.horizon,
-                                                    gating=cfg.gating))),
+        (
+            "per-tick detector",
+            lambda: _ticks(Ticker(model, cfg.alarm, cfg.horizon, gating=cfg.gating)),
+        ),
         ("live sample clock", _sample_clock),
         ("simulator", _simulator),
         # A statistic may be opt-in for `monitor train` (H: ``--hold on``): each member's
         # kernels typed here whatever the configured model carries, so any model with it
         # finds them ahead of time.
         ("statistics", _statistics),
-    ]  # fmt: skip
+    ]
     for name, step in steps:
         t0 = time.perf_counter()
         if step() is False:
-            print(f"warm-up: {name}: skipped (the [analysis] extra is not installed)",
-                  file=sys.stderr)  # fmt: skip
+            print(
+                f"warm-up: {name}: skipped (the [analysis] extra is not installed)", file=sys.stderr
+            )
             continue
         print(f"warm-up: {name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     s = cache_stats()
     where = os.environ.get("NUMBA_CACHE_DIR") or "next to the installed package (__pycache__)"
     cpu = os.environ.get("NUMBA_CPU_NAME") or "this CPU"
-    print(f"warm-up: {s['kernels']} kernels, {s['hits']} signatures loaded from the cache, "
-          f"{s['misses']} compiled, {time.perf_counter() - start:.1f} s; cache: {where}; "
-          f"code for: {cpu}", file=sys.stderr)  # fmt: skip
+    print(
+        f"warm-up: {s['kernels']} kernels, {s['hits']} signatures loaded from the cache, "
+        f"{s['misses']} compiled, {time.perf_counter() - start:.1f} s; cache: {where}; "
+        f"code for: {cpu}",
+        file=sys.stderr,
+    )
     del os.environ["MONITOR_AOT"]
     if args.aot:
         _build_aot()
@@ -90,14 +105,19 @@ def _build_aot() -> None:
     try:
         path = aot.build(tick)
     except Exception as exc:  # no C++ compiler, no setuptools: the JIT kernels serve
-        print(f"warm-up: kernels not compiled ahead of time ({type(exc).__name__}: "
-              f"{exc}); the JIT kernels serve", file=sys.stderr)  # fmt: skip
+        print(
+            f"warm-up: kernels not compiled ahead of time ({type(exc).__name__}: "
+            f"{exc}); the JIT kernels serve",
+            file=sys.stderr,
+        )
         return
     found = [aot.compiled_function(k.py_func) is not None for k in tick]
-    print(f"warm-up: {sum(found)} of {len(tick)} kernels (live tick, offline detection) "
-          f"compiled ahead of time in {time.perf_counter() - t0:.1f} s: {path} (the daemon "
-          f"and monitor detect load no numba)",
-          file=sys.stderr)  # fmt: skip
+    print(
+        f"warm-up: {sum(found)} of {len(tick)} kernels (live tick, offline detection) "
+        f"compiled ahead of time in {time.perf_counter() - t0:.1f} s: {path} (the daemon "
+        f"and monitor detect load no numba)",
+        file=sys.stderr,
+    )
 
 
 def _simulator() -> bool:

@@ -22,11 +22,20 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "decoded PP, PA, PB [bar] and QP [L/min] with frame and reject counts per message. "
         "It only listens, so it runs beside the daemon on the machine. q quits.",
     )
-    p.add_argument("--interface", default="socketcan", metavar="NAME",
-                   help="python-can interface (default socketcan)")  # fmt: skip
+    p.add_argument(
+        "--interface",
+        default="socketcan",
+        metavar="NAME",
+        help="python-can interface (default socketcan)",
+    )
     p.add_argument("--channel", default="can0", metavar="CHANNEL", help="default can0")
-    p.add_argument("--dbc", type=Path, default=None, metavar="FILE",
-                   help="DBC of the machine (default: the shipped one)")  # fmt: skip
+    p.add_argument(
+        "--dbc",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="DBC of the machine (default: the shipped one)",
+    )
     p.set_defaults(func=run)
 
 

@@ -61,9 +61,10 @@ def decode_frames(codec: FrameCodec, frames: Frames) -> dict[str, DecodedMessage
     out: dict[str, DecodedMessage] = {}
     for info in codec.messages.values():
         rows = np.flatnonzero(
-            ~frames.error & (frames.can_id == info.frame_id)
+            ~frames.error
+            & (frames.can_id == info.frame_id)
             & (frames.extended == info.is_extended_id)
-        )  # fmt: skip
+        )
         known[rows] = True
         dlc_ok = (frames.length[rows] == FRAME_LENGTH) & ~frames.remote[rows]
         counts.reject(info.name, Rejection.DLC.value, int((~dlc_ok).sum()))

@@ -70,8 +70,9 @@ class DecodeCounts:
     frames: int = 0
     decoded: int = 0
     ignored: int = 0  # unknown id: foreign traffic, not an error
-    rejected: dict[str, int] = field(default_factory=lambda: {r.value: 0 for r in Rejection
-                                                              if r is not Rejection.UNKNOWN_ID})
+    rejected: dict[str, int] = field(
+        default_factory=lambda: {r.value: 0 for r in Rejection if r is not Rejection.UNKNOWN_ID}
+    )
     counter_jumps: int = 0
     per_message: dict[str, int] = field(default_factory=dict)  # decoded frames per message
     # message -> reason (dlc, crc, range, counter_jump) -> frames; only non-zero entries

@@ -98,8 +98,19 @@ def signal_info(msg: DbcMessage, sig) -> SignalInfo:
         shift, big = sig.start, False
     else:  # start_bit: the msb's position counted from byte 0's msb
         shift, big = 8 * FRAME_LENGTH - start_bit(sig) - sig.length, True
-    return SignalInfo(sig.name, scale, offset, lo_raw, hi_raw, min(p1, p2), max(p1, p2),
-                      shift, sig.length, bool(sig.is_signed), big)  # fmt: skip
+    return SignalInfo(
+        sig.name,
+        scale,
+        offset,
+        lo_raw,
+        hi_raw,
+        min(p1, p2),
+        max(p1, p2),
+        shift,
+        sig.length,
+        bool(sig.is_signed),
+        big,
+    )
 
 
 def message_info(msg: DbcMessage) -> MessageInfo:

@@ -79,8 +79,9 @@ def write_candump(
                 name, names, _ = plans[k]
                 info = codec.messages[name]
                 data = codec.encode(name, {n: lists[n][i] for n in names})
-                buf.append(format_line(stamps[i], channel, info.frame_id, info.is_extended_id,
-                                       data))
+                buf.append(
+                    format_line(stamps[i], channel, info.frame_id, info.is_extended_id, data)
+                )
                 counts[name] += 1
                 if len(buf) >= 4096:
                     fh.writelines(buf)

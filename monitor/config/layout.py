@@ -62,8 +62,10 @@ def _check_alarm_message(name: str, codec: FrameCodec, where: str, cfg: MonitorC
         raise ConfigError(f"{where}.alarm_message: no message {name!r} in {cfg.dbc}")
     missing = [s for s in _ALARM_SIGNALS if s not in info.signal_names]
     if missing:
-        raise ConfigError(f"{where}.alarm_message: {name} in {cfg.dbc} lacks MON_Alarm's "
-                          f"signal(s) {', '.join(missing)}")  # fmt: skip
+        raise ConfigError(
+            f"{where}.alarm_message: {name} in {cfg.dbc} lacks MON_Alarm's "
+            f"signal(s) {', '.join(missing)}"
+        )
 
 
 def _view(lp: LoopConfig, columns: list[str]) -> tuple[str, ...]:
@@ -77,12 +79,12 @@ def rod_columns(loops: Iterable[LoopConfig]) -> set[str]:
     return {s for lc in loops if (s := lc.dbc_signal(ROD_POS.name)) is not None}
 
 
-def check_loop_model(model: MonitorModel, lc: LoopConfig, cfg: MonitorConfig,
-                     path: str | Path | None = None) -> None:
+def check_loop_model(
+    model: MonitorModel, lc: LoopConfig, cfg: MonitorConfig, path: str | Path | None = None
+) -> None:
     """Refuse ``model`` (from ``path``, default the loop's) for loop ``lc`` of ``cfg`` when
     it was trained on another loop or machine (``monitor.model.machinecard``)."""
     where = f"{cfg.source}: loops[{cfg.loops.index(lc)}]" if lc in cfg.loops else str(cfg.source)
     if lc.machine_source is not None:
         where += f" (machine {lc.machine_source.name})"
-    check_model_for_loop(model.card, model.envelope, path or lc.model, lc.name, lc.machine,
-                         where)  # fmt: skip
+    check_model_for_loop(model.card, model.envelope, path or lc.model, lc.name, lc.machine, where)

@@ -58,8 +58,15 @@ def default_loops(
     machine_source: Path | None = None,
 ) -> tuple[LoopConfig, ...]:
     """The single loop of a config without ``loops`` (``machine``: the top-level key's)."""
-    return (LoopConfig(DEFAULT_LOOP, model, source_address=source_address, machine=machine,
-                       machine_source=machine_source),)  # fmt: skip
+    return (
+        LoopConfig(
+            DEFAULT_LOOP,
+            model,
+            source_address=source_address,
+            machine=machine,
+            machine_source=machine_source,
+        ),
+    )
 
 
 def parse_loops(
@@ -75,8 +82,10 @@ def parse_loops(
         for i, lp in enumerate(loops):
             value = getattr(lp, key)
             if value in seen:
-                raise ConfigError(f"{source}: loops[{i}].{key} {shown(value)} is also loops"
-                                  f"[{seen[value]}]'s; each loop needs its own")  # fmt: skip
+                raise ConfigError(
+                    f"{source}: loops[{i}].{key} {shown(value)} is also loops"
+                    f"[{seen[value]}]'s; each loop needs its own"
+                )
             seen[value] = i
     return tuple(loops)
 
@@ -89,41 +98,61 @@ def _loop(
         raise ConfigError(f"{source}: {where} must be a mapping with name and model")
     unknown = set(item) - set(_KEYS)
     if unknown:
-        raise ConfigError(f"{source}: unknown key {where}.{sorted(map(key_text, unknown))[0]}; "
-                          f"known: {', '.join(_KEYS)}")  # fmt: skip
+        raise ConfigError(
+            f"{source}: unknown key {where}.{sorted(map(key_text, unknown))[0]}; "
+            f"known: {', '.join(_KEYS)}"
+        )
     for key in ("name", "model"):
         if key not in item:
             raise ConfigError(f"{source}: {where} misses key {key!r}")
     name = item["name"]
     if not isinstance(name, str) or not _NAME.match(name):
-        raise ConfigError(f"{source}: {where}.name must be lower case letters, digits and _ "
-                          f"(starting with a letter, at most 32), got {shown(name)}")  # fmt: skip
+        raise ConfigError(
+            f"{source}: {where}.name must be lower case letters, digits and _ "
+            f"(starting with a letter, at most 32), got {shown(name)}"
+        )
     signals = item.get("signals") or {}
     if not isinstance(signals, dict):
-        raise ConfigError(f"{source}: {where}.signals must be a mapping of contract names to "
-                          "DBC signal names")  # fmt: skip
+        raise ConfigError(
+            f"{source}: {where}.signals must be a mapping of contract names to DBC signal names"
+        )
     for contract, dbc_name in signals.items():
         if contract not in ROW_COLUMNS:
-            raise ConfigError(f"{source}: {where}.signals: unknown signal {shown(contract)}; "
-                              f"known: {', '.join(ROW_COLUMNS)}")  # fmt: skip
+            raise ConfigError(
+                f"{source}: {where}.signals: unknown signal {shown(contract)}; "
+                f"known: {', '.join(ROW_COLUMNS)}"
+            )
         if dbc_name is None and contract == ROD_POS.name:
             continue  # optional: this loop has no rod position
         if not isinstance(dbc_name, str) or not dbc_name:
-            raise ConfigError(f"{source}: {where}.signals.{contract} must be a DBC signal "
-                              f"name, got {shown(dbc_name)}")  # fmt: skip
+            raise ConfigError(
+                f"{source}: {where}.signals.{contract} must be a DBC signal "
+                f"name, got {shown(dbc_name)}"
+            )
     targets = [signals.get(c, c) for c in ROW_COLUMNS]
     doubled = sorted({t for t in targets if t is not None and targets.count(t) > 1})
     if doubled:
-        raise ConfigError(f"{source}: {where}.signals: DBC signal {shown(doubled[0])} would carry "
-                          "two of the loop's signals")  # fmt: skip
+        raise ConfigError(
+            f"{source}: {where}.signals: DBC signal {shown(doubled[0])} would carry "
+            "two of the loop's signals"
+        )
     alarm = item.get("alarm_message", ALARM_MESSAGE)
     if not isinstance(alarm, str) or not alarm:
-        raise ConfigError(f"{source}: {where}.alarm_message must be a DBC message name, "
-                          f"got {shown(alarm)}")  # fmt: skip
+        raise ConfigError(
+            f"{source}: {where}.alarm_message must be a DBC message name, got {shown(alarm)}"
+        )
     sa = item.get("source_address", address)
     if isinstance(sa, bool) or not isinstance(sa, int) or not 0 <= sa <= 253:
-        raise ConfigError(f"{source}: {where}.source_address must be a whole number 0..253, "
-                          f"got {shown(sa)}")  # fmt: skip
+        raise ConfigError(
+            f"{source}: {where}.source_address must be a whole number 0..253, got {shown(sa)}"
+        )
     machine = None if item.get("machine") is None else path_of(item["machine"], f"{where}.machine")
-    return LoopConfig(name, path_of(item["model"], f"{where}.model"), dict(signals), alarm, sa,
-                      None if machine is None else load_machine(machine), machine)  # fmt: skip
+    return LoopConfig(
+        name,
+        path_of(item["model"], f"{where}.model"),
+        dict(signals),
+        alarm,
+        sa,
+        None if machine is None else load_machine(machine),
+        machine,
+    )

@@ -48,24 +48,39 @@ def _NON_NEG(v: float) -> bool:  # noqa: N802
 class OutputConfig:
     """Rates of the monitor's own frames (sample-clock seconds for alarms)."""
 
-    alarm_repeat_s: float = setting(1.0, check=_POSITIVE, demand="> 0", unit="s",
-                                    doc="MON_Alarm repeated this often while in fault")  # fmt: skip
-    alarm_max_per_s: float = setting(10.0, check=_POSITIVE, demand="> 0", unit="1/s",
-                                     doc="hard cap on MON_Alarm frames")  # fmt: skip
-    status_period_s: float = setting(1.0, check=_POSITIVE, demand="> 0", unit="s",
-                                     doc="MON_Status heartbeat (wall clock)")  # fmt: skip
+    alarm_repeat_s: float = setting(
+        1.0,
+        check=_POSITIVE,
+        demand="> 0",
+        unit="s",
+        doc="MON_Alarm repeated this often while in fault",
+    )
+    alarm_max_per_s: float = setting(
+        10.0, check=_POSITIVE, demand="> 0", unit="1/s", doc="hard cap on MON_Alarm frames"
+    )
+    status_period_s: float = setting(
+        1.0, check=_POSITIVE, demand="> 0", unit="s", doc="MON_Status heartbeat (wall clock)"
+    )
     frames_max_per_s: float = setting(
-        50.0, check=_POSITIVE, demand="> 0", unit="1/s",
+        50.0,
+        check=_POSITIVE,
+        demand="> 0",
+        unit="1/s",
         doc="hard cap on every frame the monitor sends (alarms, status, J1939), wall clock "
         "(divided by bus.time_scale below 1); frames over it are dropped and counted",
-    )  # fmt: skip
+    )
 
 
 @dataclass(frozen=True)
 class EventLogConfig:
     path: Path = setting(Path("monitor-events.jsonl"), doc="append-only JSON lines, fsynced")
-    rotate_mb: float = setting(8.0, check=lambda v: v >= 0.001, demand=">= 0.001 (1 kB)",
-                               unit="MB", doc="the file is renamed to .1 at this size")  # fmt: skip
+    rotate_mb: float = setting(
+        8.0,
+        check=lambda v: v >= 0.001,
+        demand=">= 0.001 (1 kB)",
+        unit="MB",
+        doc="the file is renamed to .1 at this size",
+    )
 
     @property
     def rotate_bytes(self) -> int:
@@ -75,14 +90,22 @@ class EventLogConfig:
 @dataclass(frozen=True)
 class BlackBoxConfig:
     directory: Path = setting(Path("monitor-blackbox"), doc="one candump file per alarm")
-    pre_s: float = setting(30.0, check=_NON_NEG, demand=">= 0", unit="s",
-                           doc="raw frames kept from before the alarm")  # fmt: skip
-    post_s: float = setting(10.0, check=_NON_NEG, demand=">= 0", unit="s",
-                            doc="and recorded after it")  # fmt: skip
-    max_frames: int = setting(200_000, check=_POSITIVE, demand=">= 1", unit="frames",
-                              doc="bound of the pre-alarm buffer (~50 s at 4 kHz)")  # fmt: skip
-    max_files: int = setting(50, check=_POSITIVE, demand=">= 1",
-                             doc="oldest (by alarm seq) deleted beyond this")  # fmt: skip
+    pre_s: float = setting(
+        30.0, check=_NON_NEG, demand=">= 0", unit="s", doc="raw frames kept from before the alarm"
+    )
+    post_s: float = setting(
+        10.0, check=_NON_NEG, demand=">= 0", unit="s", doc="and recorded after it"
+    )
+    max_frames: int = setting(
+        200_000,
+        check=_POSITIVE,
+        demand=">= 1",
+        unit="frames",
+        doc="bound of the pre-alarm buffer (~50 s at 4 kHz)",
+    )
+    max_files: int = setting(
+        50, check=_POSITIVE, demand=">= 1", doc="oldest (by alarm seq) deleted beyond this"
+    )
 
 
 @dataclass(frozen=True)
@@ -90,14 +113,26 @@ class StorageConfig:
     """Disk use of the daemon's files and the thread that writes them (``monitor.live.storage``,
     ``monitor.live.writer``)."""
 
-    quota_mb: float = setting(256.0, check=_POSITIVE, demand="> 0", unit="MB",
-                              doc="black boxes + event log files together")  # fmt: skip
-    writer_queue: int = setting(1000, check=lambda v: v >= 10, demand=">= 10",
-                                doc="disk-writer jobs queued at most (black-box work beyond: "
-                                "dropped)")  # fmt: skip
-    event_block_s: float = setting(0.1, check=lambda v: 0 <= v <= 5, demand="between 0 and 5",
-                                   unit="s", doc="an event waits this long for room in a "
-                                   "full queue")  # fmt: skip
+    quota_mb: float = setting(
+        256.0,
+        check=_POSITIVE,
+        demand="> 0",
+        unit="MB",
+        doc="black boxes + event log files together",
+    )
+    writer_queue: int = setting(
+        1000,
+        check=lambda v: v >= 10,
+        demand=">= 10",
+        doc="disk-writer jobs queued at most (black-box work beyond: dropped)",
+    )
+    event_block_s: float = setting(
+        0.1,
+        check=lambda v: 0 <= v <= 5,
+        demand="between 0 and 5",
+        unit="s",
+        doc="an event waits this long for room in a full queue",
+    )
 
     @property
     def quota_bytes(self) -> int:
@@ -111,25 +146,42 @@ class J1939Config:
     (SPN and FMI per fault name); a sensor fault one DTC per stale signal."""
 
     enabled: bool = False
-    source_address: int = setting(0xA0, check=lambda v: 0 <= v <= 253,
-                                  demand="0..253 (254 null, 255 global)",
-                                  doc="our J1939 address, as in the MON_* frame IDs")  # fmt: skip
-    priority: int = setting(6, check=lambda v: 0 <= v <= 7, demand="0..7",
-                            doc="DM1 priority (J1939-73); BAM frames go at 7")  # fmt: skip
+    source_address: int = setting(
+        0xA0,
+        check=lambda v: 0 <= v <= 253,
+        demand="0..253 (254 null, 255 global)",
+        doc="our J1939 address, as in the MON_* frame IDs",
+    )
+    priority: int = setting(
+        6,
+        check=lambda v: 0 <= v <= 7,
+        demand="0..7",
+        doc="DM1 priority (J1939-73); BAM frames go at 7",
+    )
     fault_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_SPN))
     fault_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_FAULT_FMI))
     sensor_spn: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_SENSOR_SPN))
-    sensor_fmi: int = setting(j1939_dtc.DEFAULT_SENSOR_FMI,
-                              check=lambda v: 0 <= v <= 31, demand="0..31")  # fmt: skip
+    sensor_fmi: int = setting(
+        j1939_dtc.DEFAULT_SENSOR_FMI, check=lambda v: 0 <= v <= 31, demand="0..31"
+    )
     check_fmi: dict[str, int] = field(default_factory=lambda: dict(j1939_dtc.DEFAULT_CHECK_FMI))
     fault_lamp: str = "amber"  # none, protect, amber, red or mil; :slow / :fast to flash
     sensor_lamp: str = "amber"
     repeat_when_clear: bool = True  # the no-DTC DM1 every second (else only on the change)
-    bam_gap_s: float = setting(0.05, check=lambda v: 0.05 <= v <= 0.2,
-                               demand="between 0.05 and 0.2 (J1939-21)", unit="s",
-                               doc="between BAM data packets")  # fmt: skip
-    max_frames_per_s: float = setting(10.0, check=lambda v: v >= 2, demand=">= 2", unit="1/s",
-                                      doc="cap on J1939 frames in any second")  # fmt: skip
+    bam_gap_s: float = setting(
+        0.05,
+        check=lambda v: 0.05 <= v <= 0.2,
+        demand="between 0.05 and 0.2 (J1939-21)",
+        unit="s",
+        doc="between BAM data packets",
+    )
+    max_frames_per_s: float = setting(
+        10.0,
+        check=lambda v: v >= 2,
+        demand=">= 2",
+        unit="1/s",
+        doc="cap on J1939 frames in any second",
+    )
 
     def __post_init__(self) -> None:
         dtc = j1939_dtc
@@ -152,9 +204,13 @@ class J1939Config:
 class DetectorSection:
     """``detector:`` section."""
 
-    horizon: int | None = setting(None, check=lambda v: v is None or v >= 1, demand=">= 1",
-                                  unit="samples", doc="prediction horizon p (eq. 7); "
-                                  "default: the model's")  # fmt: skip
+    horizon: int | None = setting(
+        None,
+        check=lambda v: v is None or v >= 1,
+        demand=">= 1",
+        unit="samples",
+        doc="prediction horizon p (eq. 7); default: the model's",
+    )
 
 
 @dataclass(frozen=True)
@@ -186,17 +242,28 @@ class MonitorConfig:
     @property
     def monitored_loops(self) -> tuple[LoopConfig, ...]:
         """The loops the daemon monitors: ``loops``, or the one ``boom`` loop of ``model``."""
-        return self.loops or default_loops(self.model, self.j1939.source_address,
-                                           self.machine_params, self.machine)  # fmt: skip
+        return self.loops or default_loops(
+            self.model, self.j1939.source_address, self.machine_params, self.machine
+        )
 
 
 _TOP_KEYS = {
-    "dbc", "model", "detector", "alarm", "bus", "outputs", "event_log", "black_box",
+    "dbc",
+    "model",
+    "detector",
+    "alarm",
+    "bus",
+    "outputs",
+    "event_log",
+    "black_box",
     "storage",
     "j1939",
-    "operating", "plausibility", "validity",
-    "loops", "machine",
-}  # fmt: skip
+    "operating",
+    "plausibility",
+    "validity",
+    "loops",
+    "machine",
+}
 
 
 def _path(value: Any, key: str, base: Path, source: Path) -> Path:
@@ -218,8 +285,7 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
     unknown = set(data) - _TOP_KEYS
     if unknown:
         raise ConfigError(
-            f"{source}: unknown key(s) {keys_text(unknown)}; "
-            f"known: {', '.join(sorted(_TOP_KEYS))}"
+            f"{source}: unknown key(s) {keys_text(unknown)}; known: {', '.join(sorted(_TOP_KEYS))}"
         )
     base = source.parent
 
@@ -230,8 +296,10 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
     black_box = section(BlackBoxConfig, "black_box")
     bus = section(BusConfig, "bus")
     if bus.reopen_max_s < bus.reopen_initial_s:
-        raise ConfigError(f"{source}: bus.reopen_max_s ({bus.reopen_max_s}) must be >= "
-                          f"bus.reopen_initial_s ({bus.reopen_initial_s})")  # fmt: skip
+        raise ConfigError(
+            f"{source}: bus.reopen_max_s ({bus.reopen_max_s}) must be >= "
+            f"bus.reopen_initial_s ({bus.reopen_initial_s})"
+        )
     event_log = section(EventLogConfig, "event_log")
     storage = section(StorageConfig, "storage")
     if storage.quota_mb <= 2 * event_log.rotate_mb:
@@ -241,18 +309,22 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             "rotated file must fit"
         )
     j1939 = section(J1939Config, "j1939")
-    machine = None if data.get("machine") is None else _path(data["machine"], "machine", base,
-                                                             source)  # fmt: skip
+    machine = (
+        None if data.get("machine") is None else _path(data["machine"], "machine", base, source)
+    )
     loops: tuple[LoopConfig, ...] = ()
     if "loops" in data:
-        loops = parse_loops(data["loops"], source, lambda v, k: _path(v, k, base, source),
-                            j1939.source_address)  # fmt: skip
+        loops = parse_loops(
+            data["loops"], source, lambda v, k: _path(v, k, base, source), j1939.source_address
+        )
     return MonitorConfig(
         source=source,
         # Without ``dbc`` or ``model`` the shipped ones (the reference boom loop).
-        dbc=_path(data["dbc"], "dbc", base, source) if "dbc" in data
+        dbc=_path(data["dbc"], "dbc", base, source)
+        if "dbc" in data
         else resource_path("dbc", "monitor.dbc"),
-        model=_path(data["model"], "model", base, source) if "model" in data
+        model=_path(data["model"], "model", base, source)
+        if "model" in data
         else resource_path("config", "boom_default.model.npz"),
         horizon=horizon,
         alarm=section(AlarmConfig, "alarm"),

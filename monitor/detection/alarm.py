@@ -41,8 +41,12 @@ class AlarmConfig:
     episode_gap_samples: int = 6000
 
     def __post_init__(self) -> None:
-        for name in ("raise_samples", "clear_samples", "sensor_recover_samples",
-                     "episode_gap_samples"):  # fmt: skip
+        for name in (
+            "raise_samples",
+            "clear_samples",
+            "sensor_recover_samples",
+            "episode_gap_samples",
+        ):
             if int(getattr(self, name)) < 1:
                 raise ConfigError(f"alarm.{name} must be at least 1 sample")
         if not 0.0 < self.clear_ratio <= 1.0:

@@ -91,14 +91,16 @@ class Decider:
         evidence (``monitor.detection.evidence``), not as one EngineSpeed reading says."""
         sensor_ok = inputs_ok and check == 0
         on = check == STALE or op_state != OpState.ENGINE_OFF
-        state = self.machine.step(j, sensor_ok, engine_rpm if on else math.nan, e, regime,
-                                  op_state != OpState.WARM_UP, on)  # fmt: skip
+        state = self.machine.step(
+            j, sensor_ok, engine_rpm if on else math.nan, e, regime, op_state != OpState.WARM_UP, on
+        )
         status = Status(state, int(op_state), int(oor), int(check), int(sensor))
         prev = self.status
         self.status = status
         m = self.machine
-        return Decision(state, status != prev, prev is None or state is not prev.state,
-                        m.raised, m.episode_open)  # fmt: skip
+        return Decision(
+            state, status != prev, prev is None or state is not prev.state, m.raised, m.episode_open
+        )
 
     def quiet(self) -> bool:
         """The last sample was quiet: a run of quiet samples may go to ``skip_quiet``."""
@@ -138,5 +140,8 @@ def event_record(
         "threshold": float(eps0),
         "fault": fault if state is State.FAULT else None,
         **status_keys(int(op_state), out_of_range, int(check), int(sensor)),
-    } | ({"sensor": stale_signal, "sensor_check": "stale"}
-         if state is State.SENSOR_FAULT and check == 0 and stale_signal else {})  # fmt: skip
+    } | (
+        {"sensor": stale_signal, "sensor_check": "stale"}
+        if state is State.SENSOR_FAULT and check == 0 and stale_signal
+        else {}
+    )

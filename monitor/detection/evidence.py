@@ -49,8 +49,12 @@ class OilBelief:
         if oil_c != oil_c:  # missing: no evidence either way
             return self.value
         allowed = self.rate * max(self.age_n * SAMPLE_PERIOD_S, 1.0)
-        if (self.value != self.value or self.rate <= 0 or abs(oil_c - self.value) <= allowed
-                or self.doubt_n + 1 >= self.confirm_n):  # fmt: skip
+        if (
+            self.value != self.value
+            or self.rate <= 0
+            or abs(oil_c - self.value) <= allowed
+            or self.doubt_n + 1 >= self.confirm_n
+        ):
             self.value, self.age_n, self.doubt_n = oil_c, 0, 0
         else:
             self.doubt_n += 1

@@ -150,8 +150,9 @@ class Gate:
 
         plaus = self.cfg.plausibility
         engine = col("EngineSpeed")
-        silent = silent_source(engine, col("PP"), col("QP"), plaus.rest_max_bar,
-                               plaus.move_flow_lpm, self._settle_n)  # fmt: skip
+        silent = silent_source(
+            engine, col("PP"), col("QP"), plaus.rest_max_bar, plaus.move_flow_lpm, self._settle_n
+        )
         # A silent source is not an engine off: the pump shows the engine running.
         running = np.where(silent, self.min_engine_rpm, engine)
         oil = believed_oil(col("OilTemp"), *self._oil_args)
@@ -169,9 +170,14 @@ class Gate:
     def validity_values(self, rec: Recording, oil_c: np.ndarray | None = None) -> np.ndarray:
         """The validity signals' values per sample (``oil_c``: OilTemp to use instead)."""
         n = len(rec)
-        cols = [oil_c if s == "OilTemp" and oil_c is not None
-                else rec[s] if rec.has(s) else np.full(n, np.nan)
-                for s in self.validity.signals]  # fmt: skip
+        cols = [
+            oil_c
+            if s == "OilTemp" and oil_c is not None
+            else rec[s]
+            if rec.has(s)
+            else np.full(n, np.nan)
+            for s in self.validity.signals
+        ]
         return np.column_stack(cols) if cols else np.empty((n, 0))
 
     def gated(self, g: GateSeries, inputs_ok: np.ndarray) -> np.ndarray:

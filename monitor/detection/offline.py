@@ -165,17 +165,37 @@ def detect(
         "source": rec.source,
     }
     period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
-    summary["out_of_range_values"] = out_of_range_values(gate.validity_values(rec), g.oor,
-                                                         gate.validity)  # fmt: skip
+    summary["out_of_range_values"] = out_of_range_values(
+        gate.validity_values(rec), g.oor, gate.validity
+    )
     summary["verdict"], summary["judged_s"], summary["not_judged_why"] = verdict(
-        summary, states, j, g.op_state, g.oor, inputs_ok, rec["EngineSpeed"], model.window_n,
-        period, describe(summary["out_of_range_values"]),
+        summary,
+        states,
+        j,
+        g.op_state,
+        g.oor,
+        inputs_ok,
+        rec["EngineSpeed"],
+        model.window_n,
+        period,
+        describe(summary["out_of_range_values"]),
     )
     summary["rejected"] = rejected_counts(rec)
     summary["statistics"] = statistics_entries(model)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)
-    return Detection(rec.t, y_hat, e, j, states, run.events, summary, gates=g, level=level,
-                     series=series, episodes=run.named)  # fmt: skip
+    return Detection(
+        rec.t,
+        y_hat,
+        e,
+        j,
+        states,
+        run.events,
+        summary,
+        gates=g,
+        level=level,
+        series=series,
+        episodes=run.named,
+    )
 
 
 @dataclass
@@ -192,8 +212,15 @@ class _Run:
 
 
 def _decide_all(
-    decider: Decider, model: MonitorModel, rec: Recording, gate: Gate, g: GateSeries,
-    e: np.ndarray, j: np.ndarray, level: np.ndarray, missing: np.ndarray,
+    decider: Decider,
+    model: MonitorModel,
+    rec: Recording,
+    gate: Gate,
+    g: GateSeries,
+    e: np.ndarray,
+    j: np.ndarray,
+    level: np.ndarray,
+    missing: np.ndarray,
 ) -> _Run:
     """The shared per-sample decision over every sample of the recording, in order."""
     n = len(rec)
@@ -206,8 +233,13 @@ def _decide_all(
     # nothing in NORMAL but the isolation ring: runs of them go to skip_quiet at once, the
     # rest are decided one by one.  J finite means the sample was not gated (nor out of range).
     with np.errstate(invalid="ignore"):
-        quiet = (g.op_state == OpState.NORMAL) & inputs_ok & (g.check == 0) & (g.oor < 0) \
+        quiet = (
+            (g.op_state == OpState.NORMAL)
+            & inputs_ok
+            & (g.check == 0)
+            & (g.oor < 0)
             & (level <= 1.0)
+        )
     stops = np.append(np.flatnonzero(~quiet), n)
     start = rec.meta.get("start_time_s")
     start_s = float(start) if isinstance(start, (int, float)) else None
@@ -227,8 +259,17 @@ def _decide_all(
             i = r
             continue
         oor, check, sensor = int(g.oor[i]), int(g.check[i]), int(g.sensor[i])
-        d = decider.decide(level[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]),
-                           int(g.op_state[i]), oor, check, sensor)  # fmt: skip
+        d = decider.decide(
+            level[i],
+            bool(inputs_ok[i]),
+            engine[i],
+            e[i],
+            int(regimes[i]),
+            int(g.op_state[i]),
+            oor,
+            check,
+            sensor,
+        )
         states[i] = d.state
         run.episodes += d.raised
         if d.raised and run.first_alarm_t is None:
@@ -246,11 +287,21 @@ def _decide_all(
                 votes[decider.fault] = votes.get(decider.fault, 0) + 1
             in_first = d.episode_open
         if d.changed:
-            run.events.append(event_record(
-                float(t_rel[i]), d.state, float(j[i]), model.eps0, decider.fault, start_s,
-                int(g.op_state[i]), gate.validity.signals[oor] if oor >= 0 else None, check,
-                sensor, model.spec.variables[stale[i]] if stale[i] >= 0 else None,
-            ))  # fmt: skip
+            run.events.append(
+                event_record(
+                    float(t_rel[i]),
+                    d.state,
+                    float(j[i]),
+                    model.eps0,
+                    decider.fault,
+                    start_s,
+                    int(g.op_state[i]),
+                    gate.validity.signals[oor] if oor >= 0 else None,
+                    check,
+                    sensor,
+                    model.spec.variables[stale[i]] if stale[i] >= 0 else None,
+                )
+            )
         i += 1
     run.first_fault = vote_name(votes)
     for ep in run.named:
@@ -267,7 +318,10 @@ def vote_name(votes: dict[str, int]) -> str | None:
 
 
 def stale_checks(
-    rec: Recording, states: np.ndarray, check: np.ndarray, missing: np.ndarray,
+    rec: Recording,
+    states: np.ndarray,
+    check: np.ndarray,
+    missing: np.ndarray,
     names: tuple[str, ...],
 ) -> list[dict[str, Any]]:
     """Sensor faults from missing data (frames stale, rejected or never sent), per signal."""
@@ -277,8 +331,14 @@ def stale_checks(
     for k, name in enumerate(names):
         rows = np.flatnonzero(mine & missing[:, k])
         if rows.size:
-            out.append({"sensor": name, "check": "stale", "first_t": round(float(t[rows[0]]), 6),
-                        "samples": int(rows.size)})  # fmt: skip
+            out.append(
+                {
+                    "sensor": name,
+                    "check": "stale",
+                    "first_t": round(float(t[rows[0]]), 6),
+                    "samples": int(rows.size),
+                }
+            )
     return out
 
 
@@ -298,17 +358,24 @@ def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:
     period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
     op_s = {s.label: round(float(np.sum(g.op_state == s)) * period, 3) for s in OpState}
     oor = {
-        name: int(np.sum(g.oor == k)) for k, name in enumerate(gate.validity.signals)
+        name: int(np.sum(g.oor == k))
+        for k, name in enumerate(gate.validity.signals)
         if np.any(g.oor == k)
-    }  # fmt: skip
+    }
     idx = np.flatnonzero(g.check != 0)
     codes = g.check[idx].astype(np.int64) * 256 + g.sensor[idx]
     uniq, first, count = np.unique(codes, return_index=True, return_counts=True)
     checks = []
     for code, k, c in sorted(zip(uniq, first, count, strict=True), key=lambda u: u[1]):
         sensor, name = finding(int(code) // 256, int(code) % 256)
-        checks.append({"sensor": sensor, "check": name, "first_t": round(float(t[idx[k]]), 6),
-                       "samples": int(c)})  # fmt: skip
+        checks.append(
+            {
+                "sensor": sensor,
+                "check": name,
+                "first_t": round(float(t[idx[k]]), 6),
+                "samples": int(c),
+            }
+        )
     normal = g.op_state == OpState.NORMAL
     env = gate.validity.envelope
     return {
@@ -320,4 +387,3 @@ def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:
         "envelope": None if env is None else env.source,
         "sparse_coverage": gate.validity.sparse_shares(gate.validity_values(rec), normal),
     }
-

@@ -71,20 +71,25 @@ class OperatingConfig:
 
     def __post_init__(self) -> None:
         if not -40.0 <= self.warmup_oil_c <= 150.0:
-            raise ConfigError(f"operating.warmup_oil_c must be within -40..150 degC, got "
-                              f"{self.warmup_oil_c}")  # fmt: skip
+            raise ConfigError(
+                f"operating.warmup_oil_c must be within -40..150 degC, got {self.warmup_oil_c}"
+            )
         if self.warmup_hysteresis_c < 0:
             raise ConfigError("operating.warmup_hysteresis_c must be >= 0")
         if not 0.0 <= self.silent_settle_s <= 60.0:
-            raise ConfigError(f"operating.silent_settle_s must be within 0..60 s, got "
-                              f"{self.silent_settle_s}")  # fmt: skip
+            raise ConfigError(
+                f"operating.silent_settle_s must be within 0..60 s, got {self.silent_settle_s}"
+            )
         if not self.oil_rate_max_c_per_s >= 0:
-            raise ConfigError(f"operating.oil_rate_max_c_per_s must be >= 0 (0: off), got "
-                              f"{self.oil_rate_max_c_per_s}")  # fmt: skip
+            raise ConfigError(
+                f"operating.oil_rate_max_c_per_s must be >= 0 (0: off), got "
+                f"{self.oil_rate_max_c_per_s}"
+            )
         for name in ("engine_confirm_s", "oil_confirm_s"):
             if not 0.0 <= getattr(self, name) <= 60.0:
-                raise ConfigError(f"operating.{name} must be within 0..60 s, got "
-                                  f"{getattr(self, name)}")  # fmt: skip
+                raise ConfigError(
+                    f"operating.{name} must be within 0..60 s, got {getattr(self, name)}"
+                )
 
 
 def op_states(

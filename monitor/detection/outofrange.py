@@ -26,18 +26,24 @@ def out_of_range_values(values: np.ndarray, oor: np.ndarray, validity: Validity)
         name = validity.signals[k]
         v = values[oor == k, k]
         lo, hi = env.range_of(name)
-        out[name] = {"samples": int(v.size), "min": round(float(np.min(v)), 3),
-                     "max": round(float(np.max(v)), 3), "trained_min": round(lo, 3),
-                     "trained_max": round(hi, 3), "unit": UNITS.get(name, "")}  # fmt: skip
+        out[name] = {
+            "samples": int(v.size),
+            "min": round(float(np.min(v)), 3),
+            "max": round(float(np.max(v)), 3),
+            "trained_min": round(lo, 3),
+            "trained_max": round(hi, 3),
+            "unit": UNITS.get(name, ""),
+        }
     return out
 
 
 def describe(values: dict[str, Any]) -> str:
-    """"OilTemp 12.0-14.1 degC, trained 40.1-57.2 degC" for each signal, most samples first."""
+    """ "OilTemp 12.0-14.1 degC, trained 40.1-57.2 degC" for each signal, most samples first."""
     parts = []
     for name, d in values.items():
         unit = f" {d['unit']}" if d["unit"] else ""
         seen = f"{d['min']:.4g}" if d["min"] == d["max"] else f"{d['min']:.4g}-{d['max']:.4g}"
-        parts.append(f"{name} {seen}{unit}, trained {d['trained_min']:.4g}-"
-                     f"{d['trained_max']:.4g}{unit}")  # fmt: skip
+        parts.append(
+            f"{name} {seen}{unit}, trained {d['trained_min']:.4g}-{d['trained_max']:.4g}{unit}"
+        )
     return "; ".join(parts)

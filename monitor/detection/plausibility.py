@@ -88,8 +88,20 @@ DBC_RANGES: dict[str, tuple[float, float]] = {
 
 # Indices of the kernel's parameter vector (``PlausibilityConfig.params``): numba takes one
 # float array, and names keep its order from drifting between the two sides.
-(P_RANGE_N, P_FROZEN_N, P_STUCK_N, P_BAND_BAR, P_BAND_LPM, P_MOVE_SPOOL, P_MOVE_FLOW,
- P_REL_SPOOL, P_REL_MARGIN, P_REL_N, P_REST_N, P_REST_MAX) = range(12)  # fmt: skip
+(
+    P_RANGE_N,
+    P_FROZEN_N,
+    P_STUCK_N,
+    P_BAND_BAR,
+    P_BAND_LPM,
+    P_MOVE_SPOOL,
+    P_MOVE_FLOW,
+    P_REL_SPOOL,
+    P_REL_MARGIN,
+    P_REL_N,
+    P_REST_N,
+    P_REST_MAX,
+) = range(12)
 N_PARAMS = 12
 
 
@@ -124,9 +136,11 @@ class PlausibilityConfig:
         if self.flow_max_lpm <= 0:
             raise ConfigError("plausibility.flow_max_lpm must be > 0")
         if not self.range_tolerance_fs <= 0.1:
-            raise ConfigError(f"plausibility.range_tolerance_fs is a share of full scale "
-                              f"within 0..0.1 (0.01 = 1 %), got "
-                              f"{self.range_tolerance_fs}")  # fmt: skip
+            raise ConfigError(
+                f"plausibility.range_tolerance_fs is a share of full scale "
+                f"within 0..0.1 (0.01 = 1 %), got "
+                f"{self.range_tolerance_fs}"
+            )
 
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) sensor range per column (COLUMNS order)."""
@@ -203,8 +217,11 @@ def _run(  # pragma: no cover - numba
                 last[c] = v
                 continue  # commands and oil temperature: range only
             # frozen
-            if v == last[c] and running and (lo[c] < v < hi[c]
-                                             or (c == _QP and v == lo[c] and passing)):
+            if (
+                v == last[c]
+                and running
+                and (lo[c] < v < hi[c] or (c == _QP and v == lo[c] and passing))
+            ):
                 counters[1, c] += 1
                 if frozen_n > 0 and counters[1, c] >= frozen_n:
                     active[1, c] = True
@@ -301,9 +318,23 @@ class Plausibility:
         return self.check
 
     def _kernel(self, x: np.ndarray, cols: np.ndarray, check: np.ndarray, sig: np.ndarray) -> None:
-        _run(x, cols, self._lo, self._hi, self._rlo, self._rhi, self._p, self._counters,
-             self._ref, self._last, self._active, self._misc, self.min_engine_rpm, check,
-             sig)  # fmt: skip
+        _run(
+            x,
+            cols,
+            self._lo,
+            self._hi,
+            self._rlo,
+            self._rhi,
+            self._p,
+            self._counters,
+            self._ref,
+            self._last,
+            self._active,
+            self._misc,
+            self.min_engine_rpm,
+            check,
+            sig,
+        )
 
 
 #: The gate's finding after the kernel's checks (``monitor.detection.gating``): EngineSpeed

@@ -56,9 +56,18 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
     if det.gates is not None and np.any(det.gates.oor >= 0):
         # Outside the training envelope: not judged (hatched, so it reads over a state colour).
         oor = det.gates.oor >= 0
-        ax_j.fill_between(t, 0, 1, where=oor, transform=ax_j.get_xaxis_transform(),
-                          facecolor="none", edgecolor="tab:purple", hatch="//", lw=0,
-                          label="out of range")  # fmt: skip
+        ax_j.fill_between(
+            t,
+            0,
+            1,
+            where=oor,
+            transform=ax_j.get_xaxis_transform(),
+            facecolor="none",
+            edgecolor="tab:purple",
+            hatch="//",
+            lw=0,
+            label="out of range",
+        )
         ax_j.legend(loc="upper left", fontsize=7)
     s = det.summary
     verdict = (
@@ -67,8 +76,9 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
         else "no hydraulic fault"
     )
     top = "n/a" if s.get("max_level") is None else f"{s['max_level']:.3g}"
-    fig.suptitle(f"{Path(str(s['source'])).name}: {verdict}; max level {top} (1 = alarm)",
-                 fontsize=10)  # fmt: skip
+    fig.suptitle(
+        f"{Path(str(s['source'])).name}: {verdict}; max level {top} (1 = alarm)", fontsize=10
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -84,8 +94,13 @@ def _levels(ax: Any, t: np.ndarray, det: Detection) -> None:
             continue
         v = np.where(values > 0, values, np.nan)
         name, thr = stat.name, stat.threshold_key
-        ax.semilogy(t, v / threshold, lw=0.8, color=stat.colour,
-                    label=f"{name} / {thr} ({thr} = {threshold:.3g}{stat.unit})")  # fmt: skip
+        ax.semilogy(
+            t,
+            v / threshold,
+            lw=0.8,
+            color=stat.colour,
+            label=f"{name} / {thr} ({thr} = {threshold:.3g}{stat.unit})",
+        )
     ax.axhline(1.0, color="tab:red", ls="--", lw=1, label="alarm threshold")
     ax.set_ylabel("level (1 = alarm)")
     ax.set_ylim(bottom=1e-2)  # below a hundredth of the threshold nothing is close

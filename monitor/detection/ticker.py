@@ -159,17 +159,47 @@ class Ticker:
             level = raise_level(level, v, thresholds[k])
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
         stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))
-        d = self.decider.decide(level, inputs_ok, engine, e, regime_of(spool), gate.op_state,
-                                gate.oor, gate.check, gate.sensor)  # fmt: skip
+        d = self.decider.decide(
+            level,
+            inputs_ok,
+            engine,
+            e,
+            regime_of(spool),
+            gate.op_state,
+            gate.oor,
+            gate.check,
+            gate.sensor,
+        )
         self.ticks += 1
-        return Tick(float(row[0]), d.state, j, d.changed, gate.op_state, gate.oor_name(gate.oor),
-                    gate.check, gate.sensor, d.state_changed, d.raised,
-                    self._names[stale] if stale >= 0 else None, d.episode_open,
-                    level)  # fmt: skip
+        return Tick(
+            float(row[0]),
+            d.state,
+            j,
+            d.changed,
+            gate.op_state,
+            gate.oor_name(gate.oor),
+            gate.check,
+            gate.sensor,
+            d.state_changed,
+            d.raised,
+            self._names[stale] if stale >= 0 else None,
+            d.episode_open,
+            level,
+        )
 
 
 def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> dict[str, Any]:
     """The JSON-lines event of a state change, schema shared with ``monitor detect``."""
-    return event_record(tick.t_s, tick.state, tick.j, eps0, fault, start_time_s,
-                        tick.op_state, tick.out_of_range, tick.check, tick.sensor,
-                        tick.stale_signal)  # fmt: skip
+    return event_record(
+        tick.t_s,
+        tick.state,
+        tick.j,
+        eps0,
+        fault,
+        start_time_s,
+        tick.op_state,
+        tick.out_of_range,
+        tick.check,
+        tick.sensor,
+        tick.stale_signal,
+    )

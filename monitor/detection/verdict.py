@@ -60,8 +60,11 @@ def verdict(
         return "sensor_fault", judged_s, None
     if judged.any():
         return "healthy", judged_s, None
-    return "not_judged", judged_s, _why(states, op_state, oor, inputs_ok, engine_rpm, window_n,
-                                        period_s, oor_named)  # fmt: skip
+    return (
+        "not_judged",
+        judged_s,
+        _why(states, op_state, oor, inputs_ok, engine_rpm, window_n, period_s, oor_named),
+    )
 
 
 def _why(
@@ -78,8 +81,10 @@ def _why(
     if n and not np.isfinite(engine_rpm).any():
         return "no commands (EngineSpeed never received: HYD_Commands missing)"
     if n < window_n:
-        return (f"shorter than the J window ({n * period_s:.1f} s of samples, the window is "
-                f"{window_n * period_s:.1f} s)")  # fmt: skip
+        return (
+            f"shorter than the J window ({n * period_s:.1f} s of samples, the window is "
+            f"{window_n * period_s:.1f} s)"
+        )
     reasons = {
         "engine off": np.mean(op_state == OpState.ENGINE_OFF),
         "warm-up": np.mean(op_state == OpState.WARM_UP),
@@ -87,8 +92,11 @@ def _why(
         "model signals missing": np.mean((op_state == OpState.NORMAL) & (oor < 0) & ~inputs_ok),
     }
     named = {"outside the trained range": f" ({oor_named})" if oor_named else ""}
-    shares = [f"{name} {share:.0%} of the time{named.get(name, '')}" for name, share in
-              sorted(reasons.items(), key=lambda kv: -kv[1]) if share > 0]  # fmt: skip
+    shares = [
+        f"{name} {share:.0%} of the time{named.get(name, '')}"
+        for name, share in sorted(reasons.items(), key=lambda kv: -kv[1])
+        if share > 0
+    ]
     if not shares:
         return f"no full J window ({window_n * period_s:.1f} s) of judged samples"
     return ", ".join(shares) + f"; no full J window ({window_n * period_s:.1f} s) judged"

@@ -70,7 +70,6 @@ def exercised_markdown(per_severity: Sequence[dict[str, Any]]) -> list[str]:
         cells = [_of(c["detected"], n)]
         for name in names:
             k = c[name]
-            cells += [str(k), _of(c[f"detected_{name}"], k),
-                      _of(c[f"detected_not_{name}"], n - k)]  # fmt: skip
+            cells += [str(k), _of(c[f"detected_{name}"], k), _of(c[f"detected_not_{name}"], n - k)]
         out.append(f"| {row['fault']} | {row['severity']:g} | " + " | ".join(cells) + " |")
     return out

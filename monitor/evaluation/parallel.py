@@ -46,7 +46,9 @@ def score_batch(paths: tuple[str, ...], specs: list[RunSpec], cfg: EvalConfig) -
 
 
 def run_parallel(
-    models: Sequence[ModelUnderTest], cfg: EvalConfig, workers: int,
+    models: Sequence[ModelUnderTest],
+    cfg: EvalConfig,
+    workers: int,
     progress: Progress | None = None,
 ) -> dict[str, float]:
     """``sim_eval.run_all`` on ``workers`` Dask worker processes; the same rows, in plan order."""
@@ -66,11 +68,11 @@ def run_parallel(
             path = Path(tmp) / f"model{k}.npz"
             save_model(path, m.model)
             paths.append(str(path))
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address="127.0.0.1:0")  # fmt: skip
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0"
+        )
         with cluster, Client(cluster) as client:
-            say(f"Dask LocalCluster, {workers} workers, dashboard "
-                f"{client.dashboard_link}")  # fmt: skip
+            say(f"Dask LocalCluster, {workers} workers, dashboard {client.dashboard_link}")
             first = client.submit(score_batch, tuple(paths), batches[0], cfg, pure=False)
             results[0] = first.result()
             for spec in batches[0]:

@@ -170,9 +170,11 @@ def planned_seeds(cfg: EvalConfig) -> set[int]:
 def simulate_run(spec: RunSpec) -> Recording:
     """The seeded duty cycle with the run's fault (seed drives commands and sensor noise)."""
     return simulate(
-        make_cycle(spec.cycle, spec.duration_s, spec.seed), _machine(), _faults(spec),
+        make_cycle(spec.cycle, spec.duration_s, spec.seed),
+        _machine(),
+        _faults(spec),
         seed=spec.seed,
-    )  # fmt: skip
+    )
 
 
 def _faults(spec: RunSpec) -> list[Fault]:
@@ -210,8 +212,12 @@ def train_presets(
         def progress(m: str, tag: str = tag) -> None:
             say(tag + m)
 
-        model = train(fit, TrainConfig(preset=preset, isolation_runs=8), progress=progress,
-                      held_out=held or None)  # fmt: skip
+        model = train(
+            fit,
+            TrainConfig(preset=preset, isolation_runs=8),
+            progress=progress,
+            held_out=held or None,
+        )
         source = f"trained: preset {preset}, seeds {_seed_text(seeds)} x {duration_s:g} s"
         out.append(ModelUnderTest(preset, model, source, train_s=time.perf_counter() - t0))
     return out
@@ -243,8 +249,10 @@ def score_run(det: Detection, spec: RunSpec) -> dict[str, Any]:
         "seed": spec.seed,
         "duration_s": round(float(t[-1]), 2),
         # Each statistic's largest value over its threshold (max_J_over_eps0, ...).
-        **{f"max_{s.name}_over_{s.threshold_key}": _rounded(s.peak_ratio(det.summary))
-           for s in registry()},  # fmt: skip
+        **{
+            f"max_{s.name}_over_{s.threshold_key}": _rounded(s.peak_ratio(det.summary))
+            for s in registry()
+        },
         "max_level": None if level is None else round(level, 4),
         "sensor_fault": bool(det.summary["sensor_fault"]),
     }
@@ -318,7 +326,9 @@ def score_spec(
 
 
 def collect(
-    models: Sequence[ModelUnderTest], spec: RunSpec, rows: list[dict[str, Any]],
+    models: Sequence[ModelUnderTest],
+    spec: RunSpec,
+    rows: list[dict[str, Any]],
     det_s: list[float],
 ) -> None:
     """File one run's rows with their models."""
@@ -342,8 +352,7 @@ class Eta:
         if now - self.last >= 5.0 or self.k == self.n:
             self.last = now
             eta = (now - self.started) / self.done * (self.total - self.done)
-            self.say(f"{self.k}/{self.n} runs, {now - self.started:.0f} s elapsed, "
-                     f"ETA {_hms(eta)}")  # fmt: skip
+            self.say(f"{self.k}/{self.n} runs, {now - self.started:.0f} s elapsed, ETA {_hms(eta)}")
 
 
 def run_all(

@@ -165,7 +165,10 @@ def score(rc: RigCycles, alarms: np.ndarray) -> dict[str, Any]:
 
 
 def _selection(
-    jmax: np.ndarray, means: np.ndarray | None, rc: RigCycles, j0_idx: np.ndarray,
+    jmax: np.ndarray,
+    means: np.ndarray | None,
+    rc: RigCycles,
+    j0_idx: np.ndarray,
     rule: ThresholdRule,
 ) -> dict[str, Any]:
     """Held-out score on --train: detection on its faulty cycles (never used for patterns or
@@ -253,8 +256,11 @@ def evaluate(
             jtests[f"{name}/{N}"] = (jm, cycle_j(e_test, N))
             for phase in phases:
                 key = str(N) if phase is None else f"{N}+B{phase}s"
-                sel[key] = {"window_N": N, "bias_phase_s": phase,
-                            **_selection(jm, means[phase][0], train, j0_idx, rule)}  # fmt: skip
+                sel[key] = {
+                    "window_N": N,
+                    "bias_phase_s": phase,
+                    **_selection(jm, means[phase][0], train, j0_idx, rule),
+                }
                 if best is None or sel[key]["score"] > best[0] + 1e-12:
                     best = (sel[key]["score"], name, N)
         g = model.grnn
@@ -294,8 +300,11 @@ def evaluate(
         t = results[name]["test"] = score(test, cr.alarms(jm_test, m_test))
         # How close the healthy test cycles came to the threshold (1.0 = at eps0).
         t["max_J_healthy_over_eps0"] = float(np.max(jm_test[test.healthy], initial=0) / eps0)
-        t["max_B_healthy_over_b0"] = None if m_test is None or cr.scale is None else float(
-            np.max(cycle_b(m_test[test.healthy], cr.scale), initial=0) / cr.b0)  # fmt: skip
+        t["max_B_healthy_over_b0"] = (
+            None
+            if m_test is None or cr.scale is None
+            else float(np.max(cycle_b(m_test[test.healthy], cr.scale), initial=0) / cr.b0)
+        )
         # Detection delay within the cycle: J needs N + 1 residuals, so >= max_lag + N s; B
         # is judged at the end of a phase.
         fa = first_alarm_s(j_test, eps0)

@@ -74,8 +74,9 @@ class CycleRule:
     b0: float = float("nan")
 
     @classmethod
-    def fit(cls, jmax: np.ndarray, means: np.ndarray | None, idx: np.ndarray,
-            rule: ThresholdRule) -> CycleRule:  # fmt: skip
+    def fit(
+        cls, jmax: np.ndarray, means: np.ndarray | None, idx: np.ndarray, rule: ThresholdRule
+    ) -> CycleRule:
         """Thresholds from the healthy cycles ``idx``."""
         _, eps0 = rule.eps0(jmax[idx])
         if means is None:

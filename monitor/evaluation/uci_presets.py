@@ -51,8 +51,14 @@ MIN_STD = {
 
 #: Detection keys of the JSON contract: (profile column, value).
 DETECTION_KEYS: tuple[tuple[str, int], ...] = (
-    ("pump_leak", 1), ("pump_leak", 2),
-    ("valve", 90), ("valve", 80), ("valve", 73),
-    ("accumulator", 115), ("accumulator", 100), ("accumulator", 90),
-    ("cooler", 20), ("cooler", 3),
-)  # fmt: skip
+    ("pump_leak", 1),
+    ("pump_leak", 2),
+    ("valve", 90),
+    ("valve", 80),
+    ("valve", 73),
+    ("accumulator", 115),
+    ("accumulator", 100),
+    ("accumulator", 90),
+    ("cooler", 20),
+    ("cooler", 3),
+)

@@ -31,8 +31,11 @@ class AckStatus:
     note: str
 
     def shelved(self, now: dt.datetime) -> bool:
-        return (self.action == "shelve" and self.until is not None
-                and dt.datetime.fromisoformat(self.until) > now)  # fmt: skip
+        return (
+            self.action == "shelve"
+            and self.until is not None
+            and dt.datetime.fromisoformat(self.until) > now
+        )
 
     @property
     def text(self) -> str:
@@ -56,8 +59,9 @@ def read_acks(results: Path) -> dict[str, AckStatus]:
     for line in path.read_text(encoding="utf-8").splitlines():
         try:
             d = json.loads(line)
-            out[d["alarm"]] = AckStatus(d["action"], d["by"], d["at"], d.get("until"),
-                                        d.get("note", ""))  # fmt: skip
+            out[d["alarm"]] = AckStatus(
+                d["action"], d["by"], d["at"], d.get("until"), d.get("note", "")
+            )
         except (ValueError, KeyError, TypeError):
             continue
     return out
@@ -82,8 +86,11 @@ def record(
     if not alarm:
         raise ConfigError("no alarm given")
     now = now or dt.datetime.now(dt.timezone.utc)
-    until = (now + dt.timedelta(days=shelve_days)).isoformat(timespec="seconds") \
-        if action == "shelve" else None  # fmt: skip
+    until = (
+        (now + dt.timedelta(days=shelve_days)).isoformat(timespec="seconds")
+        if action == "shelve"
+        else None
+    )
     at = now.isoformat(timespec="seconds")
     line = {"alarm": alarm, "action": action, "by": by, "at": at, "until": until, "note": note}
     path = ack_path(results)

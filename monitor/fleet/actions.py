@@ -9,36 +9,54 @@ from __future__ import annotations
 
 #: fault name -> (what is suspected, what to do)
 FAULT_ACTIONS: dict[str, tuple[str, str]] = {
-    "piston_wear": ("piston seal suspected",
-                    "inspect the boom cylinder for internal leakage (drift test: load held "
-                    "with the valve centred, rod creeping)"),
-    "spool_wear": ("worn valve spool suspected",
-                   "inspect the boom section of the directional valve for worn metering "
-                   "edges (leakage across the lands at centre)"),
-    "spool_stroke": ("spool stroke limited",
-                     "check the boom spool's pilot pressure, solenoid current and end "
-                     "stops: the spool does not reach full stroke"),
-    "unknown": ("hydraulic fault, not isolated",
-                "the loop no longer behaves as commissioned; look at the signals around "
-                "the alarm, then check cylinder, valve and pump"),
-}  # fmt: skip
+    "piston_wear": (
+        "piston seal suspected",
+        "inspect the boom cylinder for internal leakage (drift test: load held "
+        "with the valve centred, rod creeping)",
+    ),
+    "spool_wear": (
+        "worn valve spool suspected",
+        "inspect the boom section of the directional valve for worn metering "
+        "edges (leakage across the lands at centre)",
+    ),
+    "spool_stroke": (
+        "spool stroke limited",
+        "check the boom spool's pilot pressure, solenoid current and end "
+        "stops: the spool does not reach full stroke",
+    ),
+    "unknown": (
+        "hydraulic fault, not isolated",
+        "the loop no longer behaves as commissioned; look at the signals around "
+        "the alarm, then check cylinder, valve and pump",
+    ),
+}
 
 #: sensor check -> (what is wrong, read after the signal's name: "QP frozen"; what to do)
 SENSOR_ACTIONS: dict[str, tuple[str, str]] = {
-    "frozen": ("frozen", "check the sensor and its wiring; its reading no longer changes "
-               "while the engine runs"),
-    "stuck": ("stuck", "check the sensor: it no longer follows the loop while the machine "
-              "moves"),
-    "signal_range": ("out of range", "check the sensor, its supply and wiring (open or "
-                     "short circuit)"),
-    "pump_below_port": ("offset (reads above the pump)", "calibrate or replace the pressure "
-                        "sensor: a port reads above the pump while the valve feeds it"),
-    "rest_offset": ("offset at rest", "calibrate or replace the sensor: it reads away from "
-                    "tank pressure with the engine off"),
-    "stale": ("silent (no frames)", "check the sensor's CAN node, connector and bus wiring: "
-              "its frames stopped"),
+    "frozen": (
+        "frozen",
+        "check the sensor and its wiring; its reading no longer changes while the engine runs",
+    ),
+    "stuck": ("stuck", "check the sensor: it no longer follows the loop while the machine moves"),
+    "signal_range": (
+        "out of range",
+        "check the sensor, its supply and wiring (open or short circuit)",
+    ),
+    "pump_below_port": (
+        "offset (reads above the pump)",
+        "calibrate or replace the pressure "
+        "sensor: a port reads above the pump while the valve feeds it",
+    ),
+    "rest_offset": (
+        "offset at rest",
+        "calibrate or replace the sensor: it reads away from tank pressure with the engine off",
+    ),
+    "stale": (
+        "silent (no frames)",
+        "check the sensor's CAN node, connector and bus wiring: its frames stopped",
+    ),
     "unknown": ("faulty", "check the machine's sensors and CAN wiring"),
-}  # fmt: skip
+}
 
 #: The machine states of the fleet table, with what to do when nothing is named.
 STATE_ACTIONS: dict[str, str] = {

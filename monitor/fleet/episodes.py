@@ -30,11 +30,19 @@ def fault_episodes(named: list[dict[str, Any]], end_s: float, j1939: Any) -> lis
         name = ep.get("fault") or UNKNOWN
         key = name if name in j1939.fault_spn else UNKNOWN
         end = ep["end_t"]
-        out.append({"kind": "fault", "start_t": ep["start_t"],
-                    "end_t": end_s if end is None else end, "open": end is None,
-                    "name": name, "check": None, "votes": dict(ep["votes"]),
-                    "spn": int(j1939.fault_spn[key]),
-                    "fmi": int(j1939.fault_fmi[key])})  # fmt: skip
+        out.append(
+            {
+                "kind": "fault",
+                "start_t": ep["start_t"],
+                "end_t": end_s if end is None else end,
+                "open": end is None,
+                "name": name,
+                "check": None,
+                "votes": dict(ep["votes"]),
+                "spn": int(j1939.fault_spn[key]),
+                "fmi": int(j1939.fault_fmi[key]),
+            }
+        )
     return out
 
 
@@ -51,8 +59,15 @@ def sensor_episodes(events: list[dict[str, Any]], end_s: float, j1939: Any) -> l
                 cur = None
             continue
         if cur is None:
-            cur = {"kind": "sensor_fault", "start_t": float(e["t"]), "end_t": end_s,
-                   "open": True, "name": UNKNOWN, "check": None, "votes": {}}  # fmt: skip
+            cur = {
+                "kind": "sensor_fault",
+                "start_t": float(e["t"]),
+                "end_t": end_s,
+                "open": True,
+                "name": UNKNOWN,
+                "check": None,
+                "votes": {},
+            }
         if cur["name"] == UNKNOWN and e.get("sensor"):
             cur["name"], cur["check"] = e["sensor"], e.get("sensor_check")
     if cur is not None:
@@ -103,8 +118,10 @@ class MachineFault:
             return ""
         other = f", {self.renamed} named otherwise" if self.renamed else ""
         n = sum(self.votes.values())
-        return (f"isolation {self.share * 100:.0f} % of {n:,} fault samples over "
-                f"{self.episodes} episode{'s' if self.episodes != 1 else ''}{other}")  # fmt: skip
+        return (
+            f"isolation {self.share * 100:.0f} % of {n:,} fault samples over "
+            f"{self.episodes} episode{'s' if self.episodes != 1 else ''}{other}"
+        )
 
 
 def machine_fault(rows: list[dict[str, Any]]) -> MachineFault:

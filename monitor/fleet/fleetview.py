@@ -80,10 +80,24 @@ def _alarm(row: dict[str, Any], ep: dict[str, Any]) -> Alarm:
         what, action = fault_action(ep["name"])
     else:
         what, action = sensor_label(ep["name"], ep.get("check")), sensor_action(ep.get("check"))[1]
-    return Alarm(alarm_id(row, ep), row["machine"], log_name(row), period(row), ep["kind"],
-                 ep["name"], ep.get("check"), ep["start_t"], ep["end_t"], ep["duration_s"],
-                 bool(ep.get("open")), ep["spn"], ep["fmi"], ep.get("votes") or {}, what,
-                 action)  # fmt: skip
+    return Alarm(
+        alarm_id(row, ep),
+        row["machine"],
+        log_name(row),
+        period(row),
+        ep["kind"],
+        ep["name"],
+        ep.get("check"),
+        ep["start_t"],
+        ep["end_t"],
+        ep["duration_s"],
+        bool(ep.get("open")),
+        ep["spn"],
+        ep["fmi"],
+        ep.get("votes") or {},
+        what,
+        action,
+    )
 
 
 @dataclass
@@ -107,8 +121,7 @@ class MachineView:
         return f"machine-{self.machine}.html"
 
 
-def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFault,
-             state: str):  # fmt: skip
+def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFault, state: str):
     """(finding, evidence, since, last seen, action): of the kind of the machine's state
     (fault or sensor fault) when it has such episodes, else of the newest episode's kind."""
     if not alarms:
@@ -128,8 +141,13 @@ def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFaul
     same = [a for a in alarms if a.kind == "sensor_fault" and a.name == newest.name]
     checks = [a for a in same if a.check]
     check = checks[-1].check if checks else None
-    return (sensor_label(newest.name, check), "", same[0].log, same[-1].log,
-            sensor_action(check)[1])  # fmt: skip
+    return (
+        sensor_label(newest.name, check),
+        "",
+        same[0].log,
+        same[-1].log,
+        sensor_action(check)[1],
+    )
 
 
 def machine_view(machine: str, rows: list[dict[str, Any]], k: int = 6) -> MachineView:
@@ -162,9 +180,21 @@ def machine_view(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Machin
     else:
         todo = STATE_ACTIONS.get(state, "")
     judged = [r for r in rows if health_index(r) is not None and not r.get("error")]
-    return MachineView(machine, rows, state, finding, evidence, since, last_seen, todo,
-                       first_warning(machine, rows, k), fault,
-                       health_index(judged[-1]) if judged else None, d, alarms)  # fmt: skip
+    return MachineView(
+        machine,
+        rows,
+        state,
+        finding,
+        evidence,
+        since,
+        last_seen,
+        todo,
+        first_warning(machine, rows, k),
+        fault,
+        health_index(judged[-1]) if judged else None,
+        d,
+        alarms,
+    )
 
 
 def fleet_views(per: dict[str, list[dict[str, Any]]], k: int = 6) -> list[MachineView]:
@@ -189,8 +219,9 @@ def code_groups(views: list[MachineView]) -> tuple[list[CodeGroup], list[str]]:
     periods: set[str] = set()
     for v in views:
         for a in v.alarms:
-            g = groups.setdefault((a.spn, a.fmi), CodeGroup(a.spn, a.fmi, a.what, [],
-                                                            defaultdict(int)))  # fmt: skip
+            g = groups.setdefault(
+                (a.spn, a.fmi), CodeGroup(a.spn, a.fmi, a.what, [], defaultdict(int))
+            )
             if a.machine not in g.machines:
                 g.machines.append(a.machine)
             g.per_period[a.period] += 1

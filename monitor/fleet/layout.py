@@ -104,8 +104,9 @@ def scan_fleet(root: Path) -> Fleet:
                 refused.append(Refused(d.name, f"{d.name}/", not_regular(mode) or ""))
             continue  # files beside the machines (answer_key.json, ...) are not machines
         commissioning = _recordings(d / "commissioning", d.name, root, refused)
-        machines.append(Machine(d.name, commissioning, _recordings(d / "logs", d.name, root,
-                                                                   refused)))  # fmt: skip
+        machines.append(
+            Machine(d.name, commissioning, _recordings(d / "logs", d.name, root, refused))
+        )
     if not machines and not refused:
         raise InputFileError(f"{root}: no machine folders (expected FLEET/<machine_id>/logs/)")
     return Fleet(root, tuple(machines), tuple(refused))

@@ -30,8 +30,9 @@ class Outcome:
     reasons: list[str] = field(default_factory=list)
 
     @classmethod
-    def of(cls, rows: Iterable[dict[str, Any]], keys: set[tuple[str, str]], new: int,
-           skipped: int) -> Outcome:  # fmt: skip
+    def of(
+        cls, rows: Iterable[dict[str, Any]], keys: set[tuple[str, str]], new: int, skipped: int
+    ) -> Outcome:
         judged = not_judged = 0
         failed: list[dict[str, Any]] = []
         for r in sorted(rows, key=lambda r: r["log"]):
@@ -53,8 +54,10 @@ class Outcome:
 
     def line(self) -> str:
         total = self.judged + self.not_judged + self.failed
-        text = (f"fleet: {total} logs: {self.judged} judged, {self.not_judged} not judged, "
-                f"{self.failed} failed")  # fmt: skip
+        text = (
+            f"fleet: {total} logs: {self.judged} judged, {self.not_judged} not judged, "
+            f"{self.failed} failed"
+        )
         if self.reasons:
             more = self.failed - len(self.reasons)
             text += " (" + "; ".join(self.reasons) + (f"; {more} more" if more else "") + ")"

@@ -126,8 +126,10 @@ def threshold_note(model_path: Path) -> str | None:
         return None
     if not event:
         return None
-    return (f"J0 rests on one event ({event['ratio']:.1f} x any other window's, "
-            f"{Path(event['source']).name} at {event['t_s'] / 60:.1f} min)")  # fmt: skip
+    return (
+        f"J0 rests on one event ({event['ratio']:.1f} x any other window's, "
+        f"{Path(event['source']).name} at {event['t_s'] / 60:.1f} min)"
+    )
 
 
 def ratio_column(name: str) -> str:

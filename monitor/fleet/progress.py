@@ -70,8 +70,7 @@ class Progress:
             rate = self.logs_done / (now - since)
             parts.append(f"{rate:.2f} logs/s, {self.frames / (now - since):,.0f} frames/s")
             if self.logs_done < self.logs_total:
-                parts.append(f"about {_duration((self.logs_total - self.logs_done) / rate)} "
-                             "left")  # fmt: skip
+                parts.append(f"about {_duration((self.logs_total - self.logs_done) / rate)} left")
         parts.append(f"{_duration(now - self.start)} elapsed")
         return "fleet: " + ", ".join(parts)
 

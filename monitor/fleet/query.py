@@ -11,9 +11,11 @@ from typing import Any
 
 from monitor.errors import ConfigError, InputFileError
 
-_EPISODE = ('{"kind": "VARCHAR", "name": "VARCHAR", "check": "VARCHAR", "start_t": "DOUBLE", '
-            '"end_t": "DOUBLE", "duration_s": "DOUBLE", "spn": "INTEGER", "fmi": "INTEGER", '
-            '"open": "BOOLEAN"}')  # fmt: skip
+_EPISODE = (
+    '{"kind": "VARCHAR", "name": "VARCHAR", "check": "VARCHAR", "start_t": "DOUBLE", '
+    '"end_t": "DOUBLE", "duration_s": "DOUBLE", "spn": "INTEGER", "fmi": "INTEGER", '
+    '"open": "BOOLEAN"}'
+)
 
 
 def _sql_path(path: Path) -> str:

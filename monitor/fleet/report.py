@@ -28,8 +28,12 @@ from monitor.fleet.health import (
 )
 from monitor.fleet.pipeline import statistics, threshold_note
 
-_COLOURS = {"fault": "tab:red", "sensor_fault": "tab:orange", "healthy": "tab:green",
-            "not_judged": "0.6"}  # fmt: skip
+_COLOURS = {
+    "fault": "tab:red",
+    "sensor_fault": "tab:orange",
+    "healthy": "tab:green",
+    "not_judged": "0.6",
+}
 
 
 def load_rows(results: Path) -> dict[str, list[dict[str, Any]]]:
@@ -39,8 +43,10 @@ def load_rows(results: Path) -> dict[str, list[dict[str, Any]]]:
         raise InputFileError(f"{path}: no such file (run `monitor fleet run` first)")
     table = pq.read_table(path).to_pylist()
     if not table:
-        raise InputFileError(f"{path}: no rows yet (a first run stopped before its end?): "
-                             "run `monitor fleet run` again")  # fmt: skip
+        raise InputFileError(
+            f"{path}: no rows yet (a first run stopped before its end?): "
+            "run `monitor fleet run` again"
+        )
     per: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in sorted(table, key=lambda r: r["log"]):
         per[r["machine"]].append(r)
@@ -67,10 +73,12 @@ def _table(
     warns: dict[str, FirstWarning],
     notes: dict[str, str],
 ) -> list[str]:
-    out = ["| machine | logs | last verdict | health index (last max level) | drift from "
-           "commissioning | trend per log | predicted crossing of 1.0 | first warning | alarms "
-           "| sensor faults | errors | model |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    out = [
+        "| machine | logs | last verdict | health index (last max level) | drift from "
+        "commissioning | trend per log | predicted crossing of 1.0 | first warning | alarms "
+        "| sensor faults | errors | model |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for mid, rows in per.items():
         p = progs[mid]
         last = rows[-1]
@@ -152,8 +160,9 @@ def _health_png(
     handles, labels = axes[0][0].get_legend_handles_labels()
     if any(w.warning_log is not None for w in warns.values()) and "first warning" not in labels:
         # The legend sits on the first machine, which may not have warned itself.
-        handles.append(plt.Line2D([], [], color="tab:purple", ls=":", lw=1.5,
-                                  label="first warning"))  # fmt: skip
+        handles.append(
+            plt.Line2D([], [], color="tab:purple", ls=":", lw=1.5, label="first warning")
+        )
     axes[0][0].legend(handles=handles, fontsize=7)
     fig.suptitle("Health index per machine (1.0 = alarm threshold)")
     fig.tight_layout()
@@ -173,8 +182,13 @@ def _drift_png(per: dict[str, list[dict[str, Any]]], path: Path) -> bool:
 
     fig, ax = plt.subplots(figsize=(8, 4))
     for mid, v in series.items():
-        ax.plot(range(1, len(v) + 1), [float("nan") if x is None else x for x in v], "o-",
-                ms=3, label=mid)  # fmt: skip
+        ax.plot(
+            range(1, len(v) + 1),
+            [float("nan") if x is None else x for x in v],
+            "o-",
+            ms=3,
+            label=mid,
+        )
     ax.axhline(DRIFT_FLAG, color="tab:red", lw=1, ls="--", label=f"{DRIFT_FLAG:g} x: wearing?")
     ax.axhline(1.0, color="0.4", lw=1)
     ax.set_yscale("log")
@@ -210,9 +224,9 @@ def _timeline_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.invert_yaxis()
     ax.set_xlabel("log (time order)")
-    handles = [plt.Line2D([], [], marker="s", ls="", color=c, label=v) for v, c in
-               _COLOURS.items()] + [plt.Line2D([], [], marker="x", ls="", color="k",
-                                               label="error")]  # fmt: skip
+    handles = [
+        plt.Line2D([], [], marker="s", ls="", color=c, label=v) for v, c in _COLOURS.items()
+    ] + [plt.Line2D([], [], marker="x", ls="", color="k", label="error")]
     ax.legend(handles=handles, ncol=5, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     ax.set_title("Verdict per log (orange dot: sensor fault beside an alarm)")
     fig.tight_layout()
@@ -237,24 +251,34 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     _health_png(per, progs, warns, out / "health.png", k)
     _timeline_png(per, out / "timeline.png")
-    drift_pic = ["![drift from commissioning](drift.png)", ""] if _drift_png(
-        per, out / "drift.png") else []  # fmt: skip
-    lines = ["# Fleet report", "",
-             f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
-             f"the largest alarm level of a log, max({_ratios()}) (1.0 raises the alarm); "
-             f"trend: Theil-Sen over the last {k} judged logs of their typical level (median J /"
-             " eps0, which follows wear, scaled by the machine's peak-to-median ratio; the peak "
-             "itself scatters with each log's manoeuvres), counted when Kendall's tau makes a "
-             f"rise unlikely to be scatter (one-sided p < {TREND_P:g}, so at least 4 logs); "
-             "crossing: logs until the trend reaches 1.0 (90 % interval); drift from "
-             f"commissioning: median J of the last {DRIFT_LOGS} logs over the commissioning "
-             f"run's, whatever eps0 is ({DRIFT_FLAG:g} x and above: wearing?); first warning: "
-             "the page replayed log by log, the first log, before any alarm, at which the "
-             f"drift reached {DRIFT_FLAG:g} x (machines without a commissioning run: at which "
-             "the prognosis forecast a crossing with a bounded interval; dotted line on the "
-             "plot), and how many logs (days) later the first alarm came.", "",
-             *_table(per, progs, warns, notes), "", "![health index](health.png)", "",
-             *drift_pic, "![verdict timeline](timeline.png)", ""]  # fmt: skip
+    drift_pic = (
+        ["![drift from commissioning](drift.png)", ""] if _drift_png(per, out / "drift.png") else []
+    )
+    lines = [
+        "# Fleet report",
+        "",
+        f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
+        f"the largest alarm level of a log, max({_ratios()}) (1.0 raises the alarm); "
+        f"trend: Theil-Sen over the last {k} judged logs of their typical level (median J /"
+        " eps0, which follows wear, scaled by the machine's peak-to-median ratio; the peak "
+        "itself scatters with each log's manoeuvres), counted when Kendall's tau makes a "
+        f"rise unlikely to be scatter (one-sided p < {TREND_P:g}, so at least 4 logs); "
+        "crossing: logs until the trend reaches 1.0 (90 % interval); drift from "
+        f"commissioning: median J of the last {DRIFT_LOGS} logs over the commissioning "
+        f"run's, whatever eps0 is ({DRIFT_FLAG:g} x and above: wearing?); first warning: "
+        "the page replayed log by log, the first log, before any alarm, at which the "
+        f"drift reached {DRIFT_FLAG:g} x (machines without a commissioning run: at which "
+        "the prognosis forecast a crossing with a bounded interval; dotted line on the "
+        "plot), and how many logs (days) later the first alarm came.",
+        "",
+        *_table(per, progs, warns, notes),
+        "",
+        "![health index](health.png)",
+        "",
+        *drift_pic,
+        "![verdict timeline](timeline.png)",
+        "",
+    ]
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
     if errors:
         lines += ["## Logs that could not be judged", ""]

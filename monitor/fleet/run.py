@@ -60,12 +60,29 @@ def train_task(paths: list[str], config: str | None, isolation: str, reference: 
 
 
 def _empty_row(machine: str, log: str, sha: str | None, model: str, error: str) -> dict:
-    return {"machine": machine, "log": log, "sha256": sha, "verdict": "not_judged",
-            "alarm": False, "fault": None, "sensor_fault": False, "max_j_ratio": None,
-            "p95_j_ratio": None, "judged_s": 0.0, "first_alarm_t": None, "frames": None,
-            "rejected": "{}", "model": model, "error": error, "max_j": None, "eps0": None,
-            "samples": None, "max_level": None, "p50_j_ratio": None,
-            "p50_j_drift": None}  # fmt: skip
+    return {
+        "machine": machine,
+        "log": log,
+        "sha256": sha,
+        "verdict": "not_judged",
+        "alarm": False,
+        "fault": None,
+        "sensor_fault": False,
+        "max_j_ratio": None,
+        "p95_j_ratio": None,
+        "judged_s": 0.0,
+        "first_alarm_t": None,
+        "frames": None,
+        "rejected": "{}",
+        "model": model,
+        "error": error,
+        "max_j": None,
+        "eps0": None,
+        "samples": None,
+        "max_level": None,
+        "p50_j_ratio": None,
+        "p50_j_drift": None,
+    }
 
 
 class FleetInterrupted(KeyboardInterrupt):
@@ -134,8 +151,12 @@ def _client(opts: RunOptions, say: Say) -> Iterator[Any]:
         say(f"fleet: Dask scheduler {opts.scheduler}, {n} workers")
     else:
         with _quiet_workers():
-            cluster = LocalCluster(n_workers=opts.workers, threads_per_worker=1,
-                                   processes=True, dashboard_address="127.0.0.1:0")  # fmt: skip
+            cluster = LocalCluster(
+                n_workers=opts.workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address="127.0.0.1:0",
+            )
         client = Client(cluster)
         say(f"fleet: Dask LocalCluster, {opts.workers} workers")
     if client.dashboard_link:
@@ -165,20 +186,32 @@ def _settings(default: bytes, opts: RunOptions) -> dict[str, Any]:
     """What every machine's model is trained with besides its own commissioning files (hashed
     once per run: the default model is megabytes)."""
     config = None if opts.config is None else sha256_file(Path(opts.config))
-    return {"reference_sha256": hashlib.sha256(default).hexdigest(),
-            "isolation": opts.isolation, "config_sha256": config,
-            "train": pipeline.COMMISSIONING}  # fmt: skip
+    return {
+        "reference_sha256": hashlib.sha256(default).hexdigest(),
+        "isolation": opts.isolation,
+        "config_sha256": config,
+        "train": pipeline.COMMISSIONING,
+    }
 
 
 def _manifest(m: Machine, fleet: Fleet, settings: dict[str, Any]) -> dict[str, Any]:
     """What a machine's model is trained from: a stored model trained from the same is
     reused, so a daily rerun commissions only new or changed machines."""
-    return {"commissioning": {fleet.relative(p): sha256_file(p) for p in m.commissioning},
-            **settings}  # fmt: skip
+    return {
+        "commissioning": {fleet.relative(p): sha256_file(p) for p in m.commissioning},
+        **settings,
+    }
 
 
-def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, needed: set[str],
-            stop: _Stop, progress: Progress) -> dict:  # fmt: skip
+def _models(
+    client: Any,
+    fleet: Fleet,
+    store: ResultStore,
+    opts: RunOptions,
+    needed: set[str],
+    stop: _Stop,
+    progress: Progress,
+) -> dict:
     """machine id -> (future or bytes of its model, model label), for the ``needed`` ones."""
     say = progress.say
     default = pipeline.default_model_bytes(opts.default_model, opts.config)
@@ -204,9 +237,15 @@ def _models(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, nee
     for i, m in enumerate(to_train):
         # The default model floors the commissioned thresholds (minutes cannot show the
         # tail of hours: monitor.training.train.floor_thresholds).
-        fut = client.submit(train_task, [str(p) for p in m.commissioning], opts.config,
-                            opts.isolation, default, key=f"train-{m.machine_id}",
-                            pure=False)  # fmt: skip
+        fut = client.submit(
+            train_task,
+            [str(p) for p in m.commissioning],
+            opts.config,
+            opts.isolation,
+            default,
+            key=f"train-{m.machine_id}",
+            pure=False,
+        )
         if i == 0:  # alone: it fills numba's cache for the training kernels
             _wait([fut], stop, progress)  # a failure is reported below, with the others'
         out[m.machine_id] = (fut, "training")
@@ -240,11 +279,11 @@ def _todo(fleet: Fleet, store: ResultStore) -> tuple[Todo, list[dict], set[tuple
     key of every row this fleet has now (what the closing line counts)."""
     done = store.done()
     todo, keys = [], set()
-    bad = [_empty_row(r.machine, r.name, None, "-", f"refused: {r.reason}")
-           for r in fleet.refused]  # fmt: skip
+    bad = [_empty_row(r.machine, r.name, None, "-", f"refused: {r.reason}") for r in fleet.refused]
     for m in fleet.machines:
-        if not m.logs and not any(r.name.startswith(f"{m.machine_id}/logs/")
-                                  for r in fleet.refused):  # fmt: skip
+        if not m.logs and not any(
+            r.name.startswith(f"{m.machine_id}/logs/") for r in fleet.refused
+        ):
             why = "no logs (expected FLEET/<machine>/logs/*.log|*.csv)"
             bad.append(_empty_row(m.machine_id, f"{m.machine_id}/logs/", None, "-", why))
         for p in m.logs:
@@ -263,8 +302,15 @@ def _todo(fleet: Fleet, store: ResultStore) -> tuple[Todo, list[dict], set[tuple
     return todo, bad, keys
 
 
-def _judge(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, todo: Todo,
-           stop: _Stop, progress: Progress) -> None:  # fmt: skip
+def _judge(
+    client: Any,
+    fleet: Fleet,
+    store: ResultStore,
+    opts: RunOptions,
+    todo: Todo,
+    stop: _Stop,
+    progress: Progress,
+) -> None:
     """Commission the machines of ``todo`` and judge its logs, each row stored as it comes."""
     from distributed import as_completed
 
@@ -273,8 +319,14 @@ def _judge(client: Any, fleet: Fleet, store: ResultStore, opts: RunOptions, todo
     futures: dict[Any, tuple[Machine, Path, str]] = {}
     progress.judging(len(todo))
     for i, (m, p, sha) in enumerate(todo):
-        fut = client.submit(judge_task, models[m.machine_id][0], str(p), opts.config,
-                            key=f"judge-{sha[:16]}-{i}", pure=False)  # fmt: skip
+        fut = client.submit(
+            judge_task,
+            models[m.machine_id][0],
+            str(p),
+            opts.config,
+            key=f"judge-{sha[:16]}-{i}",
+            pure=False,
+        )
         futures[fut] = (m, p, sha)
         if i == 0:  # alone: it fills numba's cache for the detection kernels
             _wait([fut], stop, progress)
@@ -320,9 +372,11 @@ def run_fleet(root: Path, out: Path, opts: RunOptions, progress: Progress) -> Ou
         if isinstance(exc, MonitorError):
             raise
         where = f" ({exc.filename})" if exc.filename else ""
-        raise ResultsWriteError(f"{out}: cannot write the results: {exc.strerror or exc}"
-                                f"{where}; finished logs are kept, run again once it can "
-                                "be written") from None  # fmt: skip
+        raise ResultsWriteError(
+            f"{out}: cannot write the results: {exc.strerror or exc}"
+            f"{where}; finished logs are kept, run again once it can "
+            "be written"
+        ) from None
     finally:
         progress.end()
 
@@ -334,8 +388,10 @@ def _run(fleet: Fleet, store: ResultStore, opts: RunOptions, progress: Progress)
         for row in bad:
             store.add(row, [])
         n_logs = sum(len(m.logs) for m in fleet.machines)
-        progress.say(f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new"
-                     + (f", {len(fleet.refused)} refused" if fleet.refused else ""))  # fmt: skip
+        progress.say(
+            f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new"
+            + (f", {len(fleet.refused)} refused" if fleet.refused else "")
+        )
         try:
             stop.check()  # hashing a large fleet takes a while: a Ctrl-C starts no cluster
             if todo:
@@ -346,9 +402,10 @@ def _run(fleet: Fleet, store: ResultStore, opts: RunOptions, progress: Progress)
         except FleetInterrupted:
             progress.close()
             finished = store.pending()
-            raise FleetInterrupted(f"{finished} finished log(s) kept in {store.parts}, "
-                                   f"the tables as before the run; run again to resume"
-                                   ) from None  # fmt: skip
+            raise FleetInterrupted(
+                f"{finished} finished log(s) kept in {store.parts}, "
+                f"the tables as before the run; run again to resume"
+            ) from None
         store.compact()
     skipped = sum(1 for _log, sha in keys if sha) - len(todo)
     return Outcome.of(store.rows(), keys, new=len(todo), skipped=skipped)

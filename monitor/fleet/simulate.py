@@ -28,9 +28,17 @@ from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
 
 # Parameters drawn per machine (MachineParams fields), each within +-tolerance.
-_TOLERANCED = ("bulk_modulus_pa", "pump_disp_m3_rev", "valve_rated_flow_m3_s", "mass_kg",
-               "gravity_load_n", "viscous_friction_n_s_m", "dead_volume_a_m3",
-               "dead_volume_b_m3", "line_volume_m3")  # fmt: skip
+_TOLERANCED = (
+    "bulk_modulus_pa",
+    "pump_disp_m3_rev",
+    "valve_rated_flow_m3_s",
+    "mass_kg",
+    "gravity_load_n",
+    "viscous_friction_n_s_m",
+    "dead_volume_a_m3",
+    "dead_volume_b_m3",
+    "line_volume_m3",
+)
 
 
 @dataclass(frozen=True)
@@ -73,8 +81,15 @@ def _write(path: Path, rec: Any) -> None:
         write_candump(path, rec)
 
 
-def _one(path: Path, machine: Any, duration_s: float, seed: int, oil_c: tuple[float, float],
-         faults: list[Fault], freeze_at_s: float | None) -> None:  # fmt: skip
+def _one(
+    path: Path,
+    machine: Any,
+    duration_s: float,
+    seed: int,
+    oil_c: tuple[float, float],
+    faults: list[Fault],
+    freeze_at_s: float | None,
+) -> None:
     commands = make_cycle("boom", duration_s, seed)
     commands.columns["OilTemp"] = np.linspace(oil_c[0], oil_c[1], len(commands))
     effects = [parse_effect("oil_viscosity")]
@@ -99,16 +114,22 @@ def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, An
     key: dict[str, Any] = {"plan": plan.__dict__, "oil_temp_c_per_day": oil, "machines": {}}
     for i, role in enumerate(_roles(plan.machines)):
         mid = f"M{i + 1:02d}"
-        draw = {f: float(rng.uniform(1 - plan.tolerance, 1 + plan.tolerance))
-                for f in _TOLERANCED}  # fmt: skip
+        draw = {f: float(rng.uniform(1 - plan.tolerance, 1 + plan.tolerance)) for f in _TOLERANCED}
         machine = nominal.with_changes(**{f: getattr(nominal, f) * k for f, k in draw.items()})
         base = plan.seed * 100_000 + i * 1000
         (out / mid / "commissioning").mkdir(parents=True, exist_ok=True)
         (out / mid / "logs").mkdir(parents=True, exist_ok=True)
         # Commissioning spans the days' oil temperatures (the machine warms up from cold):
         # the model's validity range covers them, so no day is unjudged for its temperature.
-        _one(out / mid / "commissioning" / "normal.log", machine, plan.commissioning_s, base,
-             _COMMISSIONING_OIL_C, [], None)  # fmt: skip
+        _one(
+            out / mid / "commissioning" / "normal.log",
+            machine,
+            plan.commissioning_s,
+            base,
+            _COMMISSIONING_OIL_C,
+            [],
+            None,
+        )
         days = []
         n_logs = plan.days * plan.logs_per_day
         for j in range(n_logs):
@@ -118,10 +139,24 @@ def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, An
             freeze = plan.log_s / 2 if role == "frozen_QP" and d >= plan.days // 2 else None
             name = _log_name(d, part, plan.logs_per_day)
             # Seeds base + 1 + j: with one log a day, the same logs as before logs_per_day.
-            _one(out / mid / "logs" / name, machine, plan.log_s, base + 1 + j,
-                 (oil[d], oil[d]), faults, freeze)  # fmt: skip
-            days.append({"log": f"{mid}/logs/{name}", "day": d + 1, "severity": round(sev, 4),
-                         "sensor_frozen_from_s": freeze, "oil_temp_c": oil[d]})  # fmt: skip
+            _one(
+                out / mid / "logs" / name,
+                machine,
+                plan.log_s,
+                base + 1 + j,
+                (oil[d], oil[d]),
+                faults,
+                freeze,
+            )
+            days.append(
+                {
+                    "log": f"{mid}/logs/{name}",
+                    "day": d + 1,
+                    "severity": round(sev, 4),
+                    "sensor_frozen_from_s": freeze,
+                    "oil_temp_c": oil[d],
+                }
+            )
         key["machines"][mid] = {"role": role, "factors": draw, "days": days}
         say(f"simulate-fleet: {mid} ({role}) written")
     (out / "answer_key.json").write_text(json.dumps(key, indent=2) + "\n", encoding="utf-8")

@@ -18,26 +18,40 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-LOG_SCHEMA = pa.schema([
-    ("machine", pa.string()), ("log", pa.string()), ("sha256", pa.string()),
-    ("verdict", pa.string()), ("alarm", pa.bool_()), ("fault", pa.string()),
-    ("sensor_fault", pa.bool_()), ("max_j_ratio", pa.float64()), ("p95_j_ratio", pa.float64()),
-    ("judged_s", pa.float64()), ("first_alarm_t", pa.float64()), ("frames", pa.int64()),
-    ("rejected", pa.string()), ("model", pa.string()), ("error", pa.string()),
-    ("max_j", pa.float64()), ("eps0", pa.float64()), ("samples", pa.int64()),
-    # max(J / eps0, B / b0, L / l0, H / h0): the level the alarm compares with 1 (results
-    # written before it existed read it as null; the health index then falls back to
-    # max_j_ratio).
-    ("max_level", pa.float64()),
-    # median J / eps0 of the log: what the prognosis trends (null in older results).
-    ("p50_j_ratio", pa.float64()),
-    # median J of the log / median J of the model's own normal data (out of sample): the
-    # drift from commissioning, whatever eps0 is (null for models without it).
-    ("p50_j_drift", pa.float64()),
-    # JSON text: the log's alarm episodes (monitor.fleet.episodes), each with kind, start_t,
-    # end_t, duration_s, name, check, votes, spn, fmi (null in older results).
-    ("episodes", pa.string()),
-])  # fmt: skip
+LOG_SCHEMA = pa.schema(
+    [
+        ("machine", pa.string()),
+        ("log", pa.string()),
+        ("sha256", pa.string()),
+        ("verdict", pa.string()),
+        ("alarm", pa.bool_()),
+        ("fault", pa.string()),
+        ("sensor_fault", pa.bool_()),
+        ("max_j_ratio", pa.float64()),
+        ("p95_j_ratio", pa.float64()),
+        ("judged_s", pa.float64()),
+        ("first_alarm_t", pa.float64()),
+        ("frames", pa.int64()),
+        ("rejected", pa.string()),
+        ("model", pa.string()),
+        ("error", pa.string()),
+        ("max_j", pa.float64()),
+        ("eps0", pa.float64()),
+        ("samples", pa.int64()),
+        # max(J / eps0, B / b0, L / l0, H / h0): the level the alarm compares with 1 (results
+        # written before it existed read it as null; the health index then falls back to
+        # max_j_ratio).
+        ("max_level", pa.float64()),
+        # median J / eps0 of the log: what the prognosis trends (null in older results).
+        ("p50_j_ratio", pa.float64()),
+        # median J of the log / median J of the model's own normal data (out of sample): the
+        # drift from commissioning, whatever eps0 is (null for models without it).
+        ("p50_j_drift", pa.float64()),
+        # JSON text: the log's alarm episodes (monitor.fleet.episodes), each with kind, start_t,
+        # end_t, duration_s, name, check, votes, spn, fmi (null in older results).
+        ("episodes", pa.string()),
+    ]
+)
 
 
 def log_schema() -> pa.Schema:
@@ -46,15 +60,23 @@ def log_schema() -> pa.Schema:
     from monitor.fleet.pipeline import statistics
 
     more = [column for _, _, column in statistics()]
-    return pa.schema([*LOG_SCHEMA, *((c, pa.float64()) for c in more
-                                     if c not in LOG_SCHEMA.names)])  # fmt: skip
+    return pa.schema([*LOG_SCHEMA, *((c, pa.float64()) for c in more if c not in LOG_SCHEMA.names)])
 
 
-EVENT_SCHEMA = pa.schema([
-    ("machine", pa.string()), ("log", pa.string()), ("sha256", pa.string()),
-    ("t", pa.float64()), ("time", pa.string()), ("state", pa.string()), ("J", pa.float64()),
-    ("threshold", pa.float64()), ("fault", pa.string()), ("event", pa.string()),
-])  # fmt: skip
+EVENT_SCHEMA = pa.schema(
+    [
+        ("machine", pa.string()),
+        ("log", pa.string()),
+        ("sha256", pa.string()),
+        ("t", pa.float64()),
+        ("time", pa.string()),
+        ("state", pa.string()),
+        ("J", pa.float64()),
+        ("threshold", pa.float64()),
+        ("fault", pa.string()),
+        ("event", pa.string()),
+    ]
+)
 
 
 def _key(log: str, sha256: str | None) -> tuple[str, str]:
@@ -166,10 +188,18 @@ class ResultStore:
 
     @staticmethod
     def _event(row: dict[str, Any], e: dict[str, Any]) -> dict[str, Any]:
-        return {"machine": row["machine"], "log": row["log"], "sha256": row["sha256"],
-                "t": e["t"], "time": e.get("time"), "state": e["state"], "J": e.get("J"),
-                "threshold": e.get("threshold"), "fault": e.get("fault"),
-                "event": json.dumps(e)}  # fmt: skip
+        return {
+            "machine": row["machine"],
+            "log": row["log"],
+            "sha256": row["sha256"],
+            "t": e["t"],
+            "time": e.get("time"),
+            "state": e["state"],
+            "J": e.get("J"),
+            "threshold": e.get("threshold"),
+            "fault": e.get("fault"),
+            "event": json.dumps(e),
+        }
 
     @staticmethod
     def _write_table(path: Path, table: pa.Table) -> None:

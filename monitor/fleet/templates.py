@@ -38,7 +38,9 @@ STATE = """{% macro state(s) -%}
 'not_judged': 'not judged', 'error': 'error'}.get(s, s) }}</span>
 {%- endmacro %}"""
 
-INDEX = STATE + """{% extends "base" %}{% block body %}
+INDEX = (
+    STATE
+    + """{% extends "base" %}{% block body %}
 <h1>Fleet: {{ views|length }} machines, {{ n_logs }} logs</h1>
 <p class="note">State: the newest log's verdict (WEARING?: healthy, but its typical residual
 has doubled since commissioning). Fault / sensor: what the alarms name; a fault is named from
@@ -78,8 +80,11 @@ name), as the monitor on the machine sends them in DM1.</p>
 {% if errors %}<h2>Logs that could not be judged</h2><ul>
 {% for r in errors %}<li><code>{{ r.log }}</code>: {{ r.error }}</li>{% endfor %}</ul>{% endif %}
 {% endblock %}"""
+)
 
-MACHINE = STATE + """{% extends "base" %}{% block body %}
+MACHINE = (
+    STATE
+    + """{% extends "base" %}{% block body %}
 <h1>{{ v.machine }} {{ state(v.state) }}</h1>
 <p><b>Fault / sensor:</b> {{ v.finding or 'none' }}{% if v.since %} (first seen {{ v.since }},
 last {{ v.last_seen }}){% endif %}{% if v.evidence %}; {{ v.evidence }}{% endif %}<br>
@@ -113,6 +118,7 @@ endfor %}
 <td>{{ r.error or '' }}</td></tr>
 {% endfor %}</table>
 {% endblock %}"""
+)
 
 ALARMS = """{% extends "base" %}{% block body %}
 <h1>Alarm list</h1>

@@ -31,11 +31,16 @@ def _fmt(x: float | None) -> str:
 def _env():  # noqa: ANN202 - jinja2.Environment, imported lazily
     import jinja2
 
-    loader = jinja2.DictLoader({"base": templates.BASE, "index": templates.INDEX,
-                                "machine": templates.MACHINE, "alarms": templates.ALARMS})
+    loader = jinja2.DictLoader(
+        {
+            "base": templates.BASE,
+            "index": templates.INDEX,
+            "machine": templates.MACHINE,
+            "alarms": templates.ALARMS,
+        }
+    )
     env = jinja2.Environment(loader=loader, autoescape=True, undefined=jinja2.StrictUndefined)
-    env.globals.update(fmt=_fmt, index=health_index,
-                       n_episodes=lambda r: len(row_episodes(r)))  # fmt: skip
+    env.globals.update(fmt=_fmt, index=health_index, n_episodes=lambda r: len(row_episodes(r)))
     return env
 
 
@@ -88,12 +93,24 @@ class Site:
         unacked = sum(a.id not in acks for v in self.views for a in v.alarms)
         errors = [r for v in self.views for r in v.rows if r.get("error")]
         # Rows judged before episodes were kept: their alarms are in no list below.
-        older = sum(r.get("episodes") is None and bool(r["alarm"] or r["sensor_fault"])
-                    for v in self.views for r in v.rows)  # fmt: skip
-        return self._render("index", title="Fleet", plots=True, views=self.views,
-                            n_logs=sum(len(v.rows) for v in self.views), groups=groups,
-                            periods=periods, unacked=unacked, errors=errors, older=older,
-                            fleet_plot=fleet_plot(self.views))  # fmt: skip
+        older = sum(
+            r.get("episodes") is None and bool(r["alarm"] or r["sensor_fault"])
+            for v in self.views
+            for r in v.rows
+        )
+        return self._render(
+            "index",
+            title="Fleet",
+            plots=True,
+            views=self.views,
+            n_logs=sum(len(v.rows) for v in self.views),
+            groups=groups,
+            periods=periods,
+            unacked=unacked,
+            errors=errors,
+            older=older,
+            fleet_plot=fleet_plot(self.views),
+        )
 
     def alarms_html(self, live: bool) -> str:
         acks = read_acks(self.results)
@@ -102,9 +119,17 @@ class Site:
         every.sort(key=lambda a: (a.period, a.log, a.start_t), reverse=True)  # newest first
         shelved = [a for a in every if a.id in acks and acks[a.id].shelved(now)]
         active = [a for a in every if a not in shelved]
-        return self._render("alarms", title="Alarm list", plots=False, alarms=active,
-                            shelved=shelved, acks=acks, live=live, shelve_days=SHELVE_DAYS,
-                            ack_file=str(ack_path(self.results)))  # fmt: skip
+        return self._render(
+            "alarms",
+            title="Alarm list",
+            plots=False,
+            alarms=active,
+            shelved=shelved,
+            acks=acks,
+            live=live,
+            shelve_days=SHELVE_DAYS,
+            ack_file=str(ack_path(self.results)),
+        )
 
     def machine_html(self, v: MachineView) -> str:
         from monitor.fleet.webplots import health_plot
@@ -112,11 +137,16 @@ class Site:
         if v.machine not in self._plots:
             self._plots[v.machine] = self._signal_plots(v)
         plots, note = self._plots[v.machine]
-        return self._render("machine", title=f"{v.machine}", plots=True, v=v,
-                            acks=read_acks(self.results), signal_plots=plots,
-                            signals_note=note,
-                            health_plot=health_plot(v.rows, [log_name(r) for r in v.rows],
-                                                    v.warning.warning_log))  # fmt: skip
+        return self._render(
+            "machine",
+            title=f"{v.machine}",
+            plots=True,
+            v=v,
+            acks=read_acks(self.results),
+            signal_plots=plots,
+            signals_note=note,
+            health_plot=health_plot(v.rows, [log_name(r) for r in v.rows], v.warning.warning_log),
+        )
 
     def _signal_plots(self, v: MachineView) -> tuple[list[str], str]:
         from monitor.fleet.pipeline import trace_log
@@ -125,8 +155,10 @@ class Site:
         if not v.alarms:
             return [], "No alarm episodes."
         if self.fleet is None:
-            return [], ("Give the fleet folder (--fleet FLEET) to see the signals and "
-                        "statistics around each alarm, read from the log itself.")  # fmt: skip
+            return [], (
+                "Give the fleet folder (--fleet FLEET) to see the signals and "
+                "statistics around each alarm, read from the log itself."
+            )
         model = self.results / "models" / f"{v.machine}.model.npz"
         if not model.is_file():
             return [], f"{model}: no such model file (needed to judge the log again)."
@@ -155,4 +187,3 @@ class Site:
         index = out / "index.html"
         index.write_text(self.index_html(), encoding="utf-8")
         return index
-

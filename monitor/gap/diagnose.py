@@ -360,8 +360,9 @@ def _diagnose(
         (smooth, base.smooth_nominal),
         against,
     )
-    d, lag_checked = _check_lag(d, singles, pairs, sums, base, idx, floor, smooth, noise_only,
-                                readings, held, against)  # fmt: skip
+    d, lag_checked = _check_lag(
+        d, singles, pairs, sums, base, idx, floor, smooth, noise_only, readings, held, against
+    )
     if lag_checked is not None:
         say(
             f"sensor lag against the engine's speed ripple: readings {lag_checked['readings']}"

@@ -416,8 +416,11 @@ def summary_text(report: dict) -> str:
             f"(90 % bootstrap interval {100 * lo:.0f}..{100 * hi:.0f} %)"
         )
     lines.append(f"Confidence: {report['confidence']:.2f}")
-    bounded = [f"{n} {c['change_pct']:+.1f} % (band +-{c['band_pct']:g} %)"
-               for n, c in report["calibrated"].items() if c.get("at_bound")]  # fmt: skip
+    bounded = [
+        f"{n} {c['change_pct']:+.1f} % (band +-{c['band_pct']:g} %)"
+        for n, c in report["calibrated"].items()
+        if c.get("at_bound")
+    ]
     if bounded:
         lines.append(
             f"Tolerance at its bound: {', '.join(bounded)}. The machine is outside the "

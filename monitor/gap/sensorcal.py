@@ -179,8 +179,12 @@ def _rod_offset(
     grid = sorted(tried)
     i = min(range(len(grid)), key=lambda k: tried[grid[k]][0])
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-    res = minimize_scalar(lambda o: cost(o)[0], bounds=(lo, hi), method="bounded",
-                          options={"xatol": 0.5, "maxiter": 12})  # fmt: skip
+    res = minimize_scalar(
+        lambda o: cost(o)[0],
+        bounds=(lo, hi),
+        method="bounded",
+        options={"xatol": 0.5, "maxiter": 12},
+    )
     best = min(cost(float(res.x)), tried[grid[i]], key=lambda c: c[0])
     # Without end-stop events in the fit segments the objective is flat in the offset, and
     # a drifting offset starts held-out rods off the stops they rest on (a RodPos gain of

@@ -209,8 +209,10 @@ def _refit_with_tolerances(runs: _Runs, f: Fitted, factors: dict[str, float]) ->
     def residual(x: np.ndarray) -> np.ndarray:
         return runs.residual([(term, x[:n])], fac(x))
 
-    starts = [np.array([*f.coefs[0], *(factors.get(t.name, 1.0) for t in tols)]),
-              np.array([*f.coefs[0], *([1.0] * len(tols))])]  # fmt: skip
+    starts = [
+        np.array([*f.coefs[0], *(factors.get(t.name, 1.0) for t in tols)]),
+        np.array([*f.coefs[0], *([1.0] * len(tols))]),
+    ]
     tried = [(float(np.mean(r**2)), x, r) for x in starts for r in [residual(x)]]
     cost, x, r = min(tried, key=lambda c: c[0])
     for _ in range(JOINT_STEPS):
@@ -307,12 +309,15 @@ def suggest(
     lines = periodic_frequencies_hz(prep, fit[0], fit_runs.base)
     plant_terms = [*library(), *(periodic(2 * math.pi * f) for f in lines)]
 
-    screened = sorted((_fit_plant(fit_runs, t, r0, 1) for t in plant_terms),
-                      key=lambda f: f.fit_cost)  # fmt: skip
+    screened = sorted(
+        (_fit_plant(fit_runs, t, r0, 1) for t in plant_terms), key=lambda f: f.fit_cost
+    )
     refined = [_fit_plant(fit_runs, _plant(f), r0, 2) for f in screened[:REFINE]]
     refined.sort(key=lambda f: f.fit_cost)
-    sensors = sorted((_sensor_fitted(fit_runs, t) for t in fit_sensor_terms(prep, fit[0],
-                      fit_runs.base)), key=lambda f: f.fit_cost)  # fmt: skip
+    sensors = sorted(
+        (_sensor_fitted(fit_runs, t) for t in fit_sensor_terms(prep, fit[0], fit_runs.base)),
+        key=lambda f: f.fit_cost,
+    )
 
     def scored(f: Fitted) -> Fitted:
         sums = S.segment_sums(prep, held_runs.segments, held_runs.pred(_pairs(f), f.factors))

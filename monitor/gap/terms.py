@@ -109,7 +109,7 @@ def _leakage_terms() -> list[PlantTerm]:
                 (0.0,),
                 (20.0,),
                 _corr(f"leak_{code}_lin", _LIN),
-            )  # fmt: skip
+            )
         )
         out.append(
             PlantTerm(
@@ -121,7 +121,7 @@ def _leakage_terms() -> list[PlantTerm]:
                 (0.0,),
                 (20.0,),
                 _corr(f"leak_{code}_sqrt", _SQRT),
-            )  # fmt: skip
+            )
         )
     out.append(
         PlantTerm(
@@ -133,7 +133,7 @@ def _leakage_terms() -> list[PlantTerm]:
             (0.0,),
             (20.0,),
             _corr("leak_at_sq", _SQ),
-        )  # fmt: skip
+        )
     )
     return out
 
@@ -145,26 +145,82 @@ def library() -> list[PlantTerm]:
     """Every plant term but the periodic force (its frequency comes from the data)."""
     terms = _leakage_terms()
     terms += [
-        PlantTerm("force_velocity", "rod", "c v", "N s/m", (300.0,), (-5000.0,), (5000.0,),
-                  _corr("force_velocity", 1.0)),
-        PlantTerm("force_sign", "rod", "F sign(v)", "N", (200.0,), (-3000.0,), (3000.0,),
-                  _corr("force_sign", 1.0)),
-        PlantTerm("force_position", "rod", "k (x - x_ref)", "N/mm", (2.0,), (-50.0,), (50.0,),
-                  _corr("force_position", 1e3)),
-    ]  # fmt: skip
+        PlantTerm(
+            "force_velocity",
+            "rod",
+            "c v",
+            "N s/m",
+            (300.0,),
+            (-5000.0,),
+            (5000.0,),
+            _corr("force_velocity", 1.0),
+        ),
+        PlantTerm(
+            "force_sign",
+            "rod",
+            "F sign(v)",
+            "N",
+            (200.0,),
+            (-3000.0,),
+            (3000.0,),
+            _corr("force_sign", 1.0),
+        ),
+        PlantTerm(
+            "force_position",
+            "rod",
+            "k (x - x_ref)",
+            "N/mm",
+            (2.0,),
+            (-50.0,),
+            (50.0,),
+            _corr("force_position", 1e3),
+        ),
+    ]
     terms += [
-        PlantTerm("valve_setting", edge, "edge gain", "% change", (5.0,), (-90.0,), (100.0,),
-                  _corr(f"kv_{code}_rel", 0.01))
+        PlantTerm(
+            "valve_setting",
+            edge,
+            "edge gain",
+            "% change",
+            (5.0,),
+            (-90.0,),
+            (100.0,),
+            _corr(f"kv_{code}_rel", 0.01),
+        )
         for edge, code in _EDGES
-    ]  # fmt: skip
+    ]
     terms += [
-        PlantTerm("pump_setting", "compensator", "start and full pressure shift", "bar", (3.0,),
-                  (-40.0,), (40.0,), _shift(("compensator_start_pa", "compensator_full_pa"), BAR)),
-        PlantTerm("pump_setting", "displacement", "max displacement", "% change", (3.0,),
-                  (-30.0,), (30.0,), _scale("pump_disp_m3_rev")),
-        PlantTerm("pump_setting", "relief", "crack and full pressure shift", "bar", (3.0,),
-                  (-40.0,), (40.0,), _shift(("relief_crack_pa", "relief_full_pa"), BAR)),
-    ]  # fmt: skip
+        PlantTerm(
+            "pump_setting",
+            "compensator",
+            "start and full pressure shift",
+            "bar",
+            (3.0,),
+            (-40.0,),
+            (40.0,),
+            _shift(("compensator_start_pa", "compensator_full_pa"), BAR),
+        ),
+        PlantTerm(
+            "pump_setting",
+            "displacement",
+            "max displacement",
+            "% change",
+            (3.0,),
+            (-30.0,),
+            (30.0,),
+            _scale("pump_disp_m3_rev"),
+        ),
+        PlantTerm(
+            "pump_setting",
+            "relief",
+            "crack and full pressure shift",
+            "bar",
+            (3.0,),
+            (-40.0,),
+            (40.0,),
+            _shift(("relief_crack_pa", "relief_full_pa"), BAR),
+        ),
+    ]
     return terms
 
 

@@ -80,8 +80,13 @@ def skip_odd_line(
     if text.startswith("#"):
         return
     if unterminated:
-        log.warning("%s:%d: torn last line skipped (no newline at the end: the log was cut "
-                    "off mid-line): %r", path, line_no, shown)  # fmt: skip
+        log.warning(
+            "%s:%d: torn last line skipped (no newline at the end: the log was cut "
+            "off mid-line): %r",
+            path,
+            line_no,
+            shown,
+        )
         return
     problem = problem or "not a candump -L line"
     raise InputFileError(

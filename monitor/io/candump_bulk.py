@@ -81,17 +81,32 @@ class Frames:
     def messages(self) -> Iterator[can.Message]:
         """The frames as python-can messages, in file order (as python-can's reader makes
         them of the lines, without the interface name and direction)."""
-        cols = zip(self.timestamp.tolist(), self.can_id.tolist(), self.extended.tolist(),
-                   self.remote.tolist(), self.error.tolist(), self.length.tolist(),
-                   self.fd.tolist(), self.brs.tolist(), self.esi.tolist(), strict=True)  # fmt: skip
+        cols = zip(
+            self.timestamp.tolist(),
+            self.can_id.tolist(),
+            self.extended.tolist(),
+            self.remote.tolist(),
+            self.error.tolist(),
+            self.length.tolist(),
+            self.fd.tolist(),
+            self.brs.tolist(),
+            self.esi.tolist(),
+            strict=True,
+        )
         for i, (ts, can_id, ext, remote, error, n, fd, brs, esi) in enumerate(cols):
             if error:
                 yield can.Message(timestamp=ts, is_error_frame=True)
                 continue
             yield can.Message(
-                timestamp=ts, arbitration_id=can_id, is_extended_id=ext, is_remote_frame=remote,
-                dlc=None if remote else n, data=None if remote else self.data[i, :n].tobytes(),
-                is_fd=fd, bitrate_switch=brs, error_state_indicator=esi,
+                timestamp=ts,
+                arbitration_id=can_id,
+                is_extended_id=ext,
+                is_remote_frame=remote,
+                dlc=None if remote else n,
+                data=None if remote else self.data[i, :n].tobytes(),
+                is_fd=fd,
+                bitrate_switch=brs,
+                error_state_indicator=esi,
             )
 
 
@@ -130,11 +145,21 @@ def _concat(parts: list[Frames]) -> Frames:
     if len(parts) == 1:
         return parts[0]
     width = max(f.data.shape[1] for f in parts)
-    data = np.concatenate([np.pad(f.data, ((0, 0), (0, width - f.data.shape[1])))
-                           for f in parts])  # fmt: skip
-    cols = {k: np.concatenate([getattr(f, k) for f in parts])
-            for k in ("timestamp", "can_id", "extended", "remote", "error", "length", "fd", "brs",
-                      "esi")}  # fmt: skip
+    data = np.concatenate([np.pad(f.data, ((0, 0), (0, width - f.data.shape[1]))) for f in parts])
+    cols = {
+        k: np.concatenate([getattr(f, k) for f in parts])
+        for k in (
+            "timestamp",
+            "can_id",
+            "extended",
+            "remote",
+            "error",
+            "length",
+            "fd",
+            "brs",
+            "esi",
+        )
+    }
     return Frames(data=data, **cols)
 
 
@@ -164,12 +189,22 @@ def _read_blocks(p: Path) -> Iterator[tuple[bytearray, int, bool]]:
             tail = arr.size - 1 - nl[-1] if nl.size else line_len + arr.size
             # The first offending line, as the line-by-line reader meets it (length first).
             long = np.flatnonzero(lengths > MAX_LINE_BYTES)
-            long_no = lines_before + int(long[0]) + 1 if long.size else \
-                lines_before + nl.size + 1 if tail > MAX_LINE_BYTES + 1 else math.inf  # fmt: skip
+            long_no = (
+                lines_before + int(long[0]) + 1
+                if long.size
+                else lines_before + nl.size + 1
+                if tail > MAX_LINE_BYTES + 1
+                else math.inf
+            )
             nuls = np.flatnonzero(arr == 0)
             k = int(np.searchsorted(nl, nuls[0])) if nuls.size else -1  # its line in the chunk
-            nul_no = pending_nul if pending_nul and nl.size else \
-                lines_before + k + 1 if 0 <= k < nl.size else math.inf  # fmt: skip
+            nul_no = (
+                pending_nul
+                if pending_nul and nl.size
+                else lines_before + k + 1
+                if 0 <= k < nl.size
+                else math.inf
+            )
             if long_no <= nul_no and long_no < math.inf:
                 raise too_long_line(p, int(long_no))
             if nul_no < math.inf:
@@ -239,8 +274,14 @@ def _scan_lines(buf):  # pragma: no cover - numba
             a, b, h = sp1[m], sp2[m], hs[m]
             idl, dl = h - b - 1, e - h - 1
             good = (
-                buf[s] == 40 and buf[a - 1] == 41 and a >= s + 4 and b >= a + 2 and h > b
-                and (idl == 3 or idl == 8) and 0 <= dl <= 16 and dl % 2 == 0
+                buf[s] == 40
+                and buf[a - 1] == 41
+                and a >= s + 4
+                and b >= a + 2
+                and h > b
+                and (idl == 3 or idl == 8)
+                and 0 <= dl <= 16
+                and dl % 2 == 0
             )
         ok[m] = good
         m += 1
@@ -253,7 +294,15 @@ def _parse_fast(buf, starts, ends, pos) -> tuple[dict[str, np.ndarray], np.ndarr
     fit (it is then read the slow way, which names it if it is malformed)."""
     width = int((pos["sp1"] - starts - 2).max()) if starts.size else 1
     ts, exact, ts_chars, can_id, length, data, good = _fields(
-        buf, starts, ends, pos["sp1"], pos["sp2"], pos["hash"], _HEX, _POW10, max(width, 1),
+        buf,
+        starts,
+        ends,
+        pos["sp1"],
+        pos["sp2"],
+        pos["hash"],
+        _HEX,
+        _POW10,
+        max(width, 1),
         MAX_TIMESTAMP_DIGITS,
     )
     # Timestamps of 2^53 and more digits: numpy's bytes -> float64, correctly rounded as
@@ -263,8 +312,13 @@ def _parse_fast(buf, starts, ends, pos) -> tuple[dict[str, np.ndarray], np.ndarr
         ts[slow] = ts_chars[slow].view(f"S{ts_chars.shape[1]}").ravel().astype(np.float64)
     # Out of range: read the slow way, where line_problem names it.
     good &= ts <= MAX_TIMESTAMP_S
-    out = {"timestamp": ts, "can_id": can_id, "extended": (pos["hash"] - pos["sp2"] - 1) > 3,
-           "length": length, "data": data}  # fmt: skip
+    out = {
+        "timestamp": ts,
+        "can_id": can_id,
+        "extended": (pos["hash"] - pos["sp2"] - 1) > 3,
+        "length": length,
+        "data": data,
+    }
     return out, good
 
 
@@ -361,8 +415,18 @@ def _merge(
         error = ((fast["can_id"] & CAN_ERR_FLAG) != 0) & ((fast["can_id"] & CAN_ERR_BUSERROR) != 0)
         can_id = np.where(error, 0, fast["can_id"] & 0x1FFFFFFF)
         no = np.zeros(nf, dtype=bool)
-        return Frames(fast["timestamp"], can_id, fast["extended"] | error, no, error,
-                      fast["length"], fast["data"], no, no, no)  # fmt: skip
+        return Frames(
+            fast["timestamp"],
+            can_id,
+            fast["extended"] | error,
+            no,
+            error,
+            fast["length"],
+            fast["data"],
+            no,
+            no,
+            no,
+        )
     width = max([8] + [len(m.data or b"") for _, m in slow])
     line = np.concatenate([fast_lines, np.array([i for i, _ in slow], dtype=np.int64)])
     order = np.argsort(line, kind="stable")
@@ -386,5 +450,15 @@ def _merge(
         payload = b"" if m.is_remote_frame or m.data is None else bytes(m.data)
         length[k] = len(payload)
         data[k, : len(payload)] = np.frombuffer(payload, dtype=np.uint8)
-    return Frames(ts[order], can_id[order], extended[order], remote[order], error[order],
-                  length[order], data[order], fd[order], brs[order], esi[order])  # fmt: skip
+    return Frames(
+        ts[order],
+        can_id[order],
+        extended[order],
+        remote[order],
+        error[order],
+        length[order],
+        data[order],
+        fd[order],
+        brs[order],
+        esi[order],
+    )

@@ -40,8 +40,10 @@ def _lines(fh: TextIO, p: Path) -> Iterator[str]:
     while line := fh.readline(MAX_LINE_CHARS + 2):  # and a CR LF
         line_no += 1
         if len(line.rstrip("\r\n")) > MAX_LINE_CHARS:
-            raise InputFileError(f"{p}:{line_no}: line longer than {MAX_LINE_CHARS} "
-                                 "characters (a binary or corrupt file?)")  # fmt: skip
+            raise InputFileError(
+                f"{p}:{line_no}: line longer than {MAX_LINE_CHARS} "
+                "characters (a binary or corrupt file?)"
+            )
         if "\x00" in line:
             raise InputFileError(f"{p}:{line_no}: NUL bytes, not a text file")
         yield line
@@ -154,9 +156,13 @@ def _rows(
 
 
 def _convert(
-    p: Path, header: list[str], rows: list[list[str]], lines: list[int],
-    parts: dict[str, list[np.ndarray]], dropped: set[str],
-) -> None:  # fmt: skip
+    p: Path,
+    header: list[str],
+    rows: list[list[str]],
+    lines: list[int],
+    parts: dict[str, list[np.ndarray]],
+    dropped: set[str],
+) -> None:
     """One block of rows onto ``parts``; a column holding text is dropped (``dropped``)
     unless it is required (``InputFileError`` naming its line)."""
     required = set(CSV_COLUMNS)
@@ -216,9 +222,7 @@ def _format_column(values: np.ndarray, fmt: str) -> list[str]:
     return out
 
 
-def write_csv(
-    path: str | Path, rec: Recording, extra_columns: Sequence[str] | None = None
-) -> None:
+def write_csv(path: str | Path, rec: Recording, extra_columns: Sequence[str] | None = None) -> None:
     """Write ``rec`` as a contract CSV.
 
     Columns: ``t`` and the contract signals first, then ``extra_columns`` (default: every

@@ -60,25 +60,33 @@ def check_time(
     bad = np.flatnonzero(~np.isfinite(t) | (np.abs(t) > MAX_ABS_T_S))
     if bad.size:
         i = int(bad[0])
-        raise InputFileError(f"{_at(source, lines, i)}: column 't': {float(t[i]):.10g} s is not a "
-                             f"time (beyond ±{MAX_ABS_T_S:.0e} s, some 300 years)")  # fmt: skip
+        raise InputFileError(
+            f"{_at(source, lines, i)}: column 't': {float(t[i]):.10g} s is not a "
+            f"time (beyond ±{MAX_ABS_T_S:.0e} s, some 300 years)"
+        )
     steps = np.diff(t)
     back = np.flatnonzero(steps <= 0)
     if back.size:
         i = int(back[0]) + 1
-        raise InputFileError(f"{_at(source, lines, i)}: column 't': {float(t[i])!r} s is not "
-                             f"after the previous {float(t[i - 1])!r} s")  # fmt: skip
+        raise InputFileError(
+            f"{_at(source, lines, i)}: column 't': {float(t[i])!r} s is not "
+            f"after the previous {float(t[i - 1])!r} s"
+        )
     jump = np.flatnonzero(steps > MAX_STEP_S)
     if jump.size:
         i = int(jump[0]) + 1
-        raise InputFileError(f"{_at(source, lines, i)}: column 't' jumps {float(steps[i - 1]):.6g}"
-                             f" s after the previous row ({float(t[i - 1])!r} s), more than "
-                             f"{MAX_STEP_S:g} s: is t in seconds? (split a file holding two "
-                             "recordings)")  # fmt: skip
+        raise InputFileError(
+            f"{_at(source, lines, i)}: column 't' jumps {float(steps[i - 1]):.6g}"
+            f" s after the previous row ({float(t[i - 1])!r} s), more than "
+            f"{MAX_STEP_S:g} s: is t in seconds? (split a file holding two "
+            "recordings)"
+        )
     if t.size and t[-1] - t[0] > MAX_SPAN_S:
         i = int(np.searchsorted(t - t[0], MAX_SPAN_S, side="right"))
-        raise InputFileError(f"{_at(source, lines, i)}: column 't': {float(t[i])!r} s is more "
-                             f"than a year after the first row ({float(t[0])!r} s)")  # fmt: skip
+        raise InputFileError(
+            f"{_at(source, lines, i)}: column 't': {float(t[i])!r} s is more "
+            f"than a year after the first row ({float(t[0])!r} s)"
+        )
     if steps.size == 0:
         return TimeBase(SAMPLE_PERIOD_S, resample=False)
     step = float(np.median(steps))
@@ -91,8 +99,10 @@ def check_time(
             why = f"below {MIN_RATE_HZ:g} Hz, too slow to resample to {SAMPLE_RATE_HZ:g} Hz"
         else:
             why = f"above {MAX_RATE_HZ:g} Hz: is t in seconds?"
-        raise InputFileError(f"{source}: column 't': rows every {_ms(step)} ({_hz(rate)}, "
-                             f"the median step), {why}; the contract's rows are 10 ms apart")
+        raise InputFileError(
+            f"{source}: column 't': rows every {_ms(step)} ({_hz(rate)}, "
+            f"the median step), {why}; the contract's rows are 10 ms apart"
+        )
     return TimeBase(step, resample=True)
 
 
@@ -143,6 +153,8 @@ def resample(
 
 def resample_note(source: str, n_rows: int, step_s: float, n_out: int) -> str:
     """The one line that says a recording was resampled, and how."""
-    return (f"{source}: {n_rows} rows every {_ms(step_s)} ({_hz(1 / step_s)}) resampled to "
-            f"{n_out} rows at {SAMPLE_RATE_HZ:g} Hz (pressures and flows linear, commands "
-            "held)")  # fmt: skip
+    return (
+        f"{source}: {n_rows} rows every {_ms(step_s)} ({_hz(1 / step_s)}) resampled to "
+        f"{n_out} rows at {SAMPLE_RATE_HZ:g} Hz (pressures and flows linear, commands "
+        "held)"
+    )

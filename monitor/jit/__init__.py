@@ -26,8 +26,16 @@ FASTMATH: set[str] = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-__all__ = ["FASTMATH", "Kernel", "cache_stats", "jit", "pjit", "prange", "get_num_threads",
-           "numba_loaded"]  # fmt: skip
+__all__ = [
+    "FASTMATH",
+    "Kernel",
+    "cache_stats",
+    "jit",
+    "pjit",
+    "prange",
+    "get_num_threads",
+    "numba_loaded",
+]
 
 #: Every kernel declared through ``jit``/``pjit``, so start-up can say what the cache gave.
 KERNELS: list[Any] = []
@@ -39,7 +47,6 @@ _numba: Any = None  # the numba module, once loaded
 def prange(*args: int) -> range:
     """``range`` in plain Python; numba's ``prange`` inside a compiled kernel."""
     return range(*args)
-
 
 
 class Kernel:

@@ -148,8 +148,10 @@ def _fits(value: Any, spec: Any) -> bool:
             return False
         return layout == "A" or (flags.c_contiguous if layout == "C" else flags.f_contiguous)
     if kind == "tuple":
-        return isinstance(value, tuple) and len(value) == len(spec[1]) and all(
-            map(_fits, value, spec[1])
+        return (
+            isinstance(value, tuple)
+            and len(value) == len(spec[1])
+            and all(map(_fits, value, spec[1]))
         )
     if kind == "int":
         return isinstance(value, (int, np.integer))

@@ -135,10 +135,12 @@ class BlackBox:
         for i in range(0, len(frames), _CHUNK_LINES):
             if i:
                 time.sleep(pause)
-            fh.write("".join(
-                format_line(m.timestamp, ch, m.arbitration_id, m.is_extended_id, bytes(m.data))
-                for m in frames[i : i + _CHUNK_LINES]
-            ))  # fmt: skip
+            fh.write(
+                "".join(
+                    format_line(m.timestamp, ch, m.arbitration_id, m.is_extended_id, bytes(m.data))
+                    for m in frames[i : i + _CHUNK_LINES]
+                )
+            )
 
     def _start(self, path: Path, frames: Sequence[can.Message]) -> None:
         self._finish(self._fh_path)

@@ -93,14 +93,24 @@ class Daemon:
             extra = Diagnostics.rx_filters() if cfg.j1939.enabled else []
             opener = partial(open_bus, cfg.bus, sensor_filters(self.codec, self.columns) + extra)
         backoff = Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s)
-        self.reader = BusReader(bus if bus is not None else opener(), cfg.bus.queue_frames,
-                                opener=opener if self._own_bus else None,
-                                backoff=backoff)  # fmt: skip
-        self.pipeline = FramePipeline(self.codec, self.columns, self.loops, self._send,
-                                      self._state_change, cfg.bus.silent_s, cfg.bus.time_scale,
-                                      lambda: self.reader.heard_until,
-                                      lambda: not self.reader.queue.empty(),
-                                      lambda: self.reader.received_at)  # fmt: skip
+        self.reader = BusReader(
+            bus if bus is not None else opener(),
+            cfg.bus.queue_frames,
+            opener=opener if self._own_bus else None,
+            backoff=backoff,
+        )
+        self.pipeline = FramePipeline(
+            self.codec,
+            self.columns,
+            self.loops,
+            self._send,
+            self._state_change,
+            cfg.bus.silent_s,
+            cfg.bus.time_scale,
+            lambda: self.reader.heard_until,
+            lambda: not self.reader.queue.empty(),
+            lambda: self.reader.received_at,
+        )
         self.tx_errors = 0
         self.tx_capped = 0  # own frames dropped by outputs.frames_max_per_s
         self._last_cap_log = 0.0
@@ -127,9 +137,13 @@ class Daemon:
         for lp in self.loops:
             log.info(
                 "monitoring %s:%s, loop %s: model %s (eps0 %.4g, window %d)",
-                self.cfg.bus.interface, self.cfg.bus.channel, lp.name, lp.cfg.model,
-                lp.model.eps0, lp.model.window_n,
-            )  # fmt: skip
+                self.cfg.bus.interface,
+                self.cfg.bus.channel,
+                lp.name,
+                lp.cfg.model,
+                lp.model.eps0,
+                lp.model.window_n,
+            )
 
     def request_reload(self) -> None:
         """SIGHUP: parse and load on a thread of its own (``monitor.live.reload``); the
@@ -281,14 +295,25 @@ class Daemon:
         ev = lp.event(tick, self.pipeline.start_time_s)
         self._log_event(ev)
         level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
-        log.log(level, "t=%.2f s: %s%s (J %s, eps0 %.4g%s)", ev["t"],
-                f"{lp.name}: " if lp.tag else "", ev["state"],
-                "n/a" if ev["J"] is None else f"{ev['J']:.4g}", ev["threshold"],
-                f", fault {ev['fault']}" if ev["fault"] else "")  # fmt: skip
+        log.log(
+            level,
+            "t=%.2f s: %s%s (J %s, eps0 %.4g%s)",
+            ev["t"],
+            f"{lp.name}: " if lp.tag else "",
+            ev["state"],
+            "n/a" if ev["J"] is None else f"{ev['J']:.4g}",
+            ev["threshold"],
+            f", fault {ev['fault']}" if ev["fault"] else "",
+        )
         if tick.op_state or tick.out_of_range or tick.check:  # gating news (detection.gating)
-            log.info("t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
-                     ev["t"], ev["op_state"], ev["out_of_range_signal"], ev["sensor"],
-                     ev["sensor_check"])  # fmt: skip
+            log.info(
+                "t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
+                ev["t"],
+                ev["op_state"],
+                ev["out_of_range_signal"],
+                ev["sensor"],
+                ev["sensor_check"],
+            )
         if tick.raised:  # a new episode; a fault back after a short gap is the same one
             self.black_box.trigger(self.pipeline.bus_time(tick.t_s), lp.alarm_label(), ev["seq"])
         if self.on_event is not None:
@@ -303,8 +328,11 @@ class Daemon:
             now = time.monotonic()
             if now - self._last_cap_log > 5.0:
                 self._last_cap_log = now
-                log.error("own frames over outputs.frames_max_per_s (%g/s): %d dropped so far",
-                          self.cfg.outputs.frames_max_per_s, self.tx_capped)  # fmt: skip
+                log.error(
+                    "own frames over outputs.frames_max_per_s (%g/s): %d dropped so far",
+                    self.cfg.outputs.frames_max_per_s,
+                    self.tx_capped,
+                )
             return
         try:
             self.bus.send(msg, timeout=0.05)
@@ -314,8 +342,9 @@ class Daemon:
             now = time.monotonic()
             if now - self._last_tx_error_log > 5.0:
                 self._last_tx_error_log = now
-                log.error("cannot send %X (%s); %d send errors", msg.arbitration_id, exc,
-                          self.tx_errors)  # fmt: skip
+                log.error(
+                    "cannot send %X (%s); %d send errors", msg.arbitration_id, exc, self.tx_errors
+                )
 
     def _status(self) -> None:
         now = time.monotonic()
@@ -334,10 +363,20 @@ class Daemon:
         gates = [lp.ticker.gate for lp in self.loops]  # the operating state is shared
         oor, check = any(g.oor >= 0 for g in gates), any(g.check != 0 for g in gates)
         rc = self.reader.recovery
-        self._send(self.frames.status(self.state, r.received, rejected, r.dropped, time.time(),
-                                      int(gates[0].op_state), oor, check,
-                                      rc.bus_down + rc.bus_off + rc.error_passive,
-                                      disk_error))  # fmt: skip
+        self._send(
+            self.frames.status(
+                self.state,
+                r.received,
+                rejected,
+                r.dropped,
+                time.time(),
+                int(gates[0].op_state),
+                oor,
+                check,
+                rc.bus_down + rc.bus_off + rc.error_passive,
+                disk_error,
+            )
+        )
 
     def _bus_events(self) -> None:
         events = self.reader.take_events()
@@ -346,8 +385,12 @@ class Daemon:
         state = self.state
         lp = next(lp for lp in self.loops if lp.state is state)  # the loop the state is of
         for ev in events:
-            self._log_event(bus_event_record(ev, self.last_t_s, state, lp.last_j,
-                                             lp.ticker.eps0, lp.ticker.fault) | lp.tag)  # fmt: skip
+            self._log_event(
+                bus_event_record(
+                    ev, self.last_t_s, state, lp.last_j, lp.ticker.eps0, lp.ticker.fault
+                )
+                | lp.tag
+            )
 
     def _log_event(self, ev: dict[str, Any]) -> None:
         """Queue an event-log line for the disk writer (which writes and fsyncs it)."""
@@ -381,12 +424,22 @@ class Daemon:
         for lp, lc, new in zip(self.loops, cfg.monitored_loops, loaded, strict=True):
             lp.swap(lc, cfg, new)
             if new is None:
-                log.info("reloaded %s: loop %s, model %s unchanged; its J window and alarm "
-                         "state go on", cfg.source, lp.name, lc.model)  # fmt: skip
+                log.info(
+                    "reloaded %s: loop %s, model %s unchanged; its J window and alarm state go on",
+                    cfg.source,
+                    lp.name,
+                    lc.model,
+                )
             else:
-                log.info("reloaded %s: loop %s, model %s (eps0 %.4g); its J window starts "
-                         "again and the alarm state (%s) holds until it has judged a full "
-                         "window", cfg.source, lp.name, lc.model, new[0].eps0,
-                         lp.state.label)  # fmt: skip
+                log.info(
+                    "reloaded %s: loop %s, model %s (eps0 %.4g); its J window starts "
+                    "again and the alarm state (%s) holds until it has judged a full "
+                    "window",
+                    cfg.source,
+                    lp.name,
+                    lc.model,
+                    new[0].eps0,
+                    lp.state.label,
+                )
         self.cfg = cfg
         self.reloads += 1

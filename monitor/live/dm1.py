@@ -154,8 +154,11 @@ class Diagnostics:
         if episode_open and state is not State.FAULT and self._named_episode is not None:
             name = self._named_episode
             keys = keys | {(self.cfg.fault_spn[name], self.cfg.fault_fmi[name]): self._fault_lamp}
-        self._named_episode = (self._named or "unknown") if state is State.FAULT else (
-            self._named_episode if episode_open else None)  # fmt: skip
+        self._named_episode = (
+            (self._named or "unknown")
+            if state is State.FAULT
+            else (self._named_episode if episode_open else None)
+        )
         if not self._started or keys.keys() != self.active.keys():
             self._update(keys)
             self._want.add(PGN_DM1)

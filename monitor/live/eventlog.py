@@ -92,9 +92,15 @@ class EventLog:
         on_disk = max(max(tails), _read_seq(self._seq_fd))
         acked = acked_seq(self.path)
         if acked > on_disk:  # the logs and .seq were moved away or lost, .acked was not
-            log.warning("event log: %s acknowledges seq %d, above the %d found in the logs "
-                        "and %s; numbering goes on from %d", ack_path(self.path), acked,
-                        on_disk, seq_path(self.path), acked + 1)  # fmt: skip
+            log.warning(
+                "event log: %s acknowledges seq %d, above the %d found in the logs "
+                "and %s; numbering goes on from %d",
+                ack_path(self.path),
+                acked,
+                on_disk,
+                seq_path(self.path),
+                acked + 1,
+            )
         return max(on_disk, acked)
 
     @property
@@ -114,8 +120,11 @@ class EventLog:
         if len(self._pending) >= MAX_PENDING:
             self._pending.popleft()
             self.lost += 1
-            log.error("event log: %d events waiting for the disk; the oldest given up "
-                      "(%d lost)", MAX_PENDING, self.lost)  # fmt: skip
+            log.error(
+                "event log: %d events waiting for the disk; the oldest given up (%d lost)",
+                MAX_PENDING,
+                self.lost,
+            )
         seq = record.get("seq")
         self._pending.append((seq if isinstance(seq, int) else None, _line(record)))
         self.retry()
@@ -127,8 +136,10 @@ class EventLog:
             try:
                 self._append(line)
             except OSError as exc:
-                self._error(f"cannot write event seq {seq} to {self.path}: {exc.strerror}; "
-                            f"{len(self._pending)} event(s) kept in memory")  # fmt: skip
+                self._error(
+                    f"cannot write event seq {seq} to {self.path}: {exc.strerror}; "
+                    f"{len(self._pending)} event(s) kept in memory"
+                )
                 return False
             self._pending.popleft()
             self.written += 1
@@ -150,8 +161,10 @@ class EventLog:
         except OSError as exc:
             if exc.errno not in NO_SPACE or self.quota is None or not self.quota.make_room():
                 raise
-            log.warning("event log: disk full; black boxes and acknowledged logs deleted to "
-                        "make room for an event")  # fmt: skip
+            log.warning(
+                "event log: disk full; black boxes and acknowledged logs deleted to "
+                "make room for an event"
+            )
             append_all(self._fd, line, self._size)
         self._size += len(line)
         os.fsync(self._fd)
@@ -198,8 +211,9 @@ class EventLog:
         if self._pending:
             self.retry()
         if self._pending:
-            log.error("event log: %d event(s) could not be written to %s", len(self._pending),
-                      self.path)  # fmt: skip
+            log.error(
+                "event log: %d event(s) could not be written to %s", len(self._pending), self.path
+            )
         for fd in (self._fd, self._seq_fd):
             if fd is not None:
                 with suppress(OSError):

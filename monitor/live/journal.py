@@ -9,8 +9,13 @@ class JournalFormatter(logging.Formatter):
     """``<priority>message``: journald reads the syslog priority prefix from stderr and adds
     its own timestamps, so none here."""
 
-    _PRIORITY = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4, logging.ERROR: 3,
-                 logging.CRITICAL: 2}  # fmt: skip
+    _PRIORITY = {
+        logging.DEBUG: 7,
+        logging.INFO: 6,
+        logging.WARNING: 4,
+        logging.ERROR: 3,
+        logging.CRITICAL: 2,
+    }
 
     def format(self, record: logging.LogRecord) -> str:
         prio = self._PRIORITY.get(record.levelno, 6)

@@ -99,5 +99,6 @@ class Loop:
         if self.diag is None:
             return []
         named = finding(tick.check, tick.sensor)
-        return self.diag.tick(tick.t_s, bus_time_s, tick.state, self.ticker.fault, row, named,
-                              tick.episode_open)  # fmt: skip
+        return self.diag.tick(
+            tick.t_s, bus_time_s, tick.state, self.ticker.fault, row, named, tick.episode_open
+        )

@@ -111,4 +111,3 @@ class AlarmFrames:
             "DiskError": int(bool(disk_error)),
         }
         return self.codec.encode_message(STATUS, values, bus_time_s)
-

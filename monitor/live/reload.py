@@ -74,8 +74,10 @@ def ticker_rules(cfg: MonitorConfig) -> tuple[Any, ...]:
 def loop_layout(cfg: MonitorConfig) -> list[tuple[Any, ...]]:
     """What a reload cannot change: each loop's name, signals, alarm message and address
     (the single loop's address is ``j1939.source_address``, whose changes wait anyway)."""
-    return [(lc.name, lc.signals, lc.alarm_message, lc.source_address if cfg.loops else None)
-            for lc in cfg.monitored_loops]  # fmt: skip
+    return [
+        (lc.name, lc.signals, lc.alarm_message, lc.source_address if cfg.loops else None)
+        for lc in cfg.monitored_loops
+    ]
 
 
 class Reloader:
@@ -137,5 +139,7 @@ class Reloader:
             again, self._again = self._again, False
         if again:  # a SIGHUP that came while it hung
             self.request()
-        return TimeoutError(f"still not parsed after {self.limit_s:g} s; given up ({self.hung} "
-                            "hung so far), the next SIGHUP reloads again")  # fmt: skip
+        return TimeoutError(
+            f"still not parsed after {self.limit_s:g} s; given up ({self.hung} "
+            "hung so far), the next SIGHUP reloads again"
+        )

@@ -81,8 +81,9 @@ def acked_seq(path: Path) -> int:
     try:
         raw = read_small(ack_path(path))
     except OSError as exc:
-        log.warning("cannot read %s (%s): treating every event as unsent", ack_path(path),
-                    exc.strerror)  # fmt: skip
+        log.warning(
+            "cannot read %s (%s): treating every event as unsent", ack_path(path), exc.strerror
+        )
         return 0
     if raw is None:
         return 0
@@ -92,8 +93,11 @@ def acked_seq(path: Path) -> int:
             raise ValueError(text)
         return int(text)
     except ValueError:
-        log.warning("%s holds %r, not a whole number: treating every event as unsent",
-                    ack_path(path), text[:40])  # fmt: skip
+        log.warning(
+            "%s holds %r, not a whole number: treating every event as unsent",
+            ack_path(path),
+            text[:40],
+        )
         return 0
 
 
@@ -199,10 +203,14 @@ class Quota:
         if over:
             self.over_quota += 1
             if not self._over:  # once per excursion, not at every event
-                log.warning("storage quota exceeded: %d of %d bytes; the rest holds unsent "
-                            "alarms (acknowledged up to seq %s in %s) or the current files",
-                            used, self.quota_bytes, acked_seq(self.event_log_path),
-                            ack_path(self.event_log_path))  # fmt: skip
+                log.warning(
+                    "storage quota exceeded: %d of %d bytes; the rest holds unsent "
+                    "alarms (acknowledged up to seq %s in %s) or the current files",
+                    used,
+                    self.quota_bytes,
+                    acked_seq(self.event_log_path),
+                    ack_path(self.event_log_path),
+                )
         self._over = over
         return used
 

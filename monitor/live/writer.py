@@ -84,9 +84,13 @@ class DiskWriter:
                     self._cond.wait_for(lambda: len(self._jobs) < self.capacity, self.event_block_s)
                 if len(self._jobs) >= self.capacity:
                     self.counts.events_over_bound += 1
-                    log.error("disk writer: queue full (%d jobs) for %.2f s; event queued "
-                              "beyond the bound (%d so far)", len(self._jobs),
-                              self.event_block_s, self.counts.events_over_bound)  # fmt: skip
+                    log.error(
+                        "disk writer: queue full (%d jobs) for %.2f s; event queued "
+                        "beyond the bound (%d so far)",
+                        len(self._jobs),
+                        self.event_block_s,
+                        self.counts.events_over_bound,
+                    )
                 self._append(job)
         if direct:
             self._call(job)
@@ -101,9 +105,12 @@ class DiskWriter:
                     now = time.monotonic()
                     if now - self._last_drop_log > 5.0:
                         self._last_drop_log = now
-                        log.error("disk writer: queue full (%d jobs); black-box frames "
-                                  "dropped: %d so far", len(self._jobs),
-                                  self.counts.frames_dropped)  # fmt: skip
+                        log.error(
+                            "disk writer: queue full (%d jobs); black-box frames "
+                            "dropped: %d so far",
+                            len(self._jobs),
+                            self.counts.frames_dropped,
+                        )
                     return False
                 self._append(job)
         if direct:
@@ -138,8 +145,11 @@ class DiskWriter:
         if self._thread.is_alive():
             self._thread.join(timeout_s)
         if self._thread.is_alive():
-            log.error("disk writer: %d job(s) not done after %.0f s (disk hung?)",
-                      self.pending(), timeout_s)  # fmt: skip
+            log.error(
+                "disk writer: %d job(s) not done after %.0f s (disk hung?)",
+                self.pending(),
+                timeout_s,
+            )
             return False
         return True  # the thread drained the queue; later jobs run in the caller's thread
 

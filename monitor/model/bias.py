@@ -104,8 +104,12 @@ class BiasModel:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> BiasModel:
-        return cls(int(d["window_n"]), int(d["min_count"]),
-                   np.asarray(d["scale"], dtype=np.float64), float(d["b0"]))  # fmt: skip
+        return cls(
+            int(d["window_n"]),
+            int(d["min_count"]),
+            np.asarray(d["scale"], dtype=np.float64),
+            float(d["b0"]),
+        )
 
 
 def fit_scale(residuals: list[np.ndarray], regimes: list[np.ndarray]) -> np.ndarray:
@@ -138,8 +142,9 @@ _POS, _COUNT, _PUSHES = 0, 1, 2
 
 
 @jit(aot=True)
-def _push(ring_e, ring_r, sums, counts, state, e, regime, scale, min_count,
-          resum_every):  # pragma: no cover - numba
+def _push(
+    ring_e, ring_r, sums, counts, state, e, regime, scale, min_count, resum_every
+):  # pragma: no cover - numba
     """One sample into the window; returns B (NaN: paused, the window not yet full, or no
     regime counted)."""
     n_out = e.shape[0]
@@ -193,8 +198,9 @@ def _series(e, regimes, scale, window, min_count, resum_every):  # pragma: no co
     counts = np.zeros(scale.shape[0])
     state = np.zeros(3, dtype=np.int64)
     for i in range(n):
-        out[i] = _push(ring_e, ring_r, sums, counts, state, e[i], regimes[i], scale, min_count,
-                       resum_every)  # fmt: skip
+        out[i] = _push(
+            ring_e, ring_r, sums, counts, state, e[i], regimes[i], scale, min_count, resum_every
+        )
     return out
 
 
@@ -224,16 +230,39 @@ class BiasWindow:
     def push(self, e: np.ndarray, regime: int) -> float:
         """One sample's residuals (outputs) and bias regime; returns B."""
         b = self.bias
-        return float(_push(self._ring_e, self._ring_r, self._sums, self._counts, self._state,
-                           e, regime, b.scale, b.min_count, self._resum))  # fmt: skip
+        return float(
+            _push(
+                self._ring_e,
+                self._ring_r,
+                self._sums,
+                self._counts,
+                self._state,
+                e,
+                regime,
+                b.scale,
+                b.min_count,
+                self._resum,
+            )
+        )
 
     def step(self, e: np.ndarray, row: np.ndarray) -> float:
         """One sampler row's residuals; the regime from its SpoolCmd; returns B."""
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
         b = self.bias
-        return float(_push(self._ring_e, self._ring_r, self._sums, self._counts, self._state,
-                           e, bias_regime(spool), b.scale, b.min_count,
-                           self._resum))  # fmt: skip
+        return float(
+            _push(
+                self._ring_e,
+                self._ring_r,
+                self._sums,
+                self._counts,
+                self._state,
+                e,
+                bias_regime(spool),
+                b.scale,
+                b.min_count,
+                self._resum,
+            )
+        )
 
 
 def alarm_level(
@@ -305,8 +334,7 @@ class Bias(Statistic):
         for e, rec in zip(held.residuals, held.recordings, strict=True):
             ok = np.isfinite(e).all(axis=1)
             counts += np.bincount(bias_regimes(rec["SpoolCmd"])[ok], minlength=N_BIAS_REGIMES)
-        return {"regime_samples": dict(zip(REGIME_NAMES, (int(c) for c in counts),
-                                           strict=True))}  # fmt: skip
+        return {"regime_samples": dict(zip(REGIME_NAMES, (int(c) for c in counts), strict=True))}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> BiasModel:

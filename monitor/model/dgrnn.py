@@ -152,8 +152,9 @@ def _predict_rows(Z, tree, inv2s2, cut, stack_len, fvar, flag, nout, p, delta, l
     pred = np.empty((p, nout))
     scratch = (np.empty(stack_len, np.int64), np.empty(npat), np.empty(npat, np.int64))
     for t in range(lo, hi):
-        _predict_at(Z, t, tree, inv2s2, cut, fvar, flag, nout, p, delta, xbuf, pred, scratch,
-                    out[t])  # fmt: skip
+        _predict_at(
+            Z, t, tree, inv2s2, cut, fvar, flag, nout, p, delta, xbuf, pred, scratch, out[t]
+        )
 
 
 @pjit
@@ -162,8 +163,21 @@ def _predict_series(Z, tree, inv2s2, cut, stack_len, fvar, flag, nout, p, delta,
     out = np.full((n, nout), np.nan)
     nchunk = max(1, min(n, nchunk))
     for c in prange(nchunk):
-        _predict_rows(Z, tree, inv2s2, cut, stack_len, fvar, flag, nout, p, delta,
-                      c * n // nchunk, (c + 1) * n // nchunk, out)  # fmt: skip
+        _predict_rows(
+            Z,
+            tree,
+            inv2s2,
+            cut,
+            stack_len,
+            fvar,
+            flag,
+            nout,
+            p,
+            delta,
+            c * n // nchunk,
+            (c + 1) * n // nchunk,
+            out,
+        )
     return out
 
 
@@ -180,7 +194,10 @@ def _index(model: DGRNN, exact: bool) -> tuple[GRNN, CutoffIndex]:
 
 
 def predict_series(
-    model: DGRNN, data: Any, horizon: int | None = None, exact: bool = False,
+    model: DGRNN,
+    data: Any,
+    horizon: int | None = None,
+    exact: bool = False,
     serial: bool = False,
 ) -> np.ndarray:
     """Offline: y_hat(t) for every row t of z-scored ``data`` (columns ``spec.variables``).
@@ -197,8 +214,18 @@ def predict_series(
     fvar, flag = model.spec.feature_columns()
     p = _horizon(model, horizon)
     nout = len(model.spec.outputs)
-    args = (Z, index.tree, 0.5 / g.sigma_**2, index.cut, index.scratch()[0].shape[0], fvar,
-            flag, nout, p, model.spec.delta_mask())  # fmt: skip
+    args = (
+        Z,
+        index.tree,
+        0.5 / g.sigma_**2,
+        index.cut,
+        index.scratch()[0].shape[0],
+        fvar,
+        flag,
+        nout,
+        p,
+        model.spec.delta_mask(),
+    )
     if serial or (not numba_loaded() and _predict_rows.runs_ahead_of_time):
         # One thread of ahead-of-time code (``monitor warm-up``): no numba, ~100 MB less.
         out = np.full((Z.shape[0], nout), np.nan)
@@ -244,10 +271,21 @@ class TickPredictor:
                 f"a tick row needs {len(self.model.spec.variables)} columns, got {window.shape[1]}"
             )
         ok = _predict_at(
-            window, window.shape[0] - 1, self._index.tree, self._inv, self._index.cut,
-            self._fvar, self._flag, self._nout, self.horizon, self._delta, self._xbuf,
-            self._pred, self._scratch, o,
-        )  # fmt: skip
+            window,
+            window.shape[0] - 1,
+            self._index.tree,
+            self._inv,
+            self._index.cut,
+            self._fvar,
+            self._flag,
+            self._nout,
+            self.horizon,
+            self._delta,
+            self._xbuf,
+            self._pred,
+            self._scratch,
+            o,
+        )
         if not ok:
             o[:] = np.nan
         return o

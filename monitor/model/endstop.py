@@ -67,14 +67,23 @@ class StrokeModel:
             )
 
     def to_dict(self) -> dict[str, float | int]:
-        return {"volume_up_l": float(self.volume_up_l), "volume_down_l": float(self.volume_down_l),
-                "margin": float(self.margin), "q_stall_lpm": float(self.q_stall_lpm),
-                "n_stall": int(self.n_stall)}  # fmt: skip
+        return {
+            "volume_up_l": float(self.volume_up_l),
+            "volume_down_l": float(self.volume_down_l),
+            "margin": float(self.margin),
+            "q_stall_lpm": float(self.q_stall_lpm),
+            "n_stall": int(self.n_stall),
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> StrokeModel:
-        return cls(float(d["volume_up_l"]), float(d["volume_down_l"]),
-                   float(d["margin"]), float(d["q_stall_lpm"]), int(d["n_stall"]))  # fmt: skip
+        return cls(
+            float(d["volume_up_l"]),
+            float(d["volume_down_l"]),
+            float(d["margin"]),
+            float(d["q_stall_lpm"]),
+            int(d["n_stall"]),
+        )
 
 
 # State vector of the step kernel: the interval and the stall count.
@@ -88,8 +97,9 @@ def new_state() -> np.ndarray:
 
 
 @jit(aot=True)
-def _step(state, spool, qp, inv_up, inv_down, margin, q_stall, n_stall, per_min,
-          hold_pct):  # pragma: no cover - numba
+def _step(
+    state, spool, qp, inv_up, inv_down, margin, q_stall, n_stall, per_min, hold_pct
+):  # pragma: no cover - numba
     """One sample; returns 1 when the rod may be within ``margin`` of an end, else 0.
     ``inv_up`` / ``inv_down``: strokes per litre; ``per_min``: minutes per sample."""
     if np.isnan(spool) or np.isnan(qp):
@@ -116,19 +126,28 @@ def _step(state, spool, qp, inv_up, inv_down, margin, q_stall, n_stall, per_min,
 
 
 @jit(aot=True)
-def _series(spool, qp, state, inv_up, inv_down, margin, q_stall, n_stall, per_min,
-            hold_pct):  # pragma: no cover - numba
+def _series(
+    spool, qp, state, inv_up, inv_down, margin, q_stall, n_stall, per_min, hold_pct
+):  # pragma: no cover - numba
     out = np.empty(spool.shape[0], dtype=np.int64)
     for i in range(spool.shape[0]):
-        out[i] = _step(state, spool[i], qp[i], inv_up, inv_down, margin, q_stall, n_stall,
-                       per_min, hold_pct)  # fmt: skip
+        out[i] = _step(
+            state, spool[i], qp[i], inv_up, inv_down, margin, q_stall, n_stall, per_min, hold_pct
+        )
     return out
 
 
 def _args(stroke: StrokeModel) -> tuple[float, ...]:
     per_min = SAMPLE_PERIOD_S / 60.0
-    return (1.0 / stroke.volume_up_l, 1.0 / stroke.volume_down_l, stroke.margin,
-            stroke.q_stall_lpm, float(stroke.n_stall), per_min, HOLD_PCT)  # fmt: skip
+    return (
+        1.0 / stroke.volume_up_l,
+        1.0 / stroke.volume_down_l,
+        stroke.margin,
+        stroke.q_stall_lpm,
+        float(stroke.n_stall),
+        per_min,
+        HOLD_PCT,
+    )
 
 
 def near_stop_series(spool_pct: np.ndarray, qp_lpm: np.ndarray, stroke: StrokeModel) -> np.ndarray:
@@ -170,8 +189,14 @@ def stroke_equations(spool_pct: np.ndarray, qp_lpm: np.ndarray) -> tuple[np.ndar
     A gap (NaN command or flow) between two stalls drops that pair."""
     s = np.asarray(spool_pct, dtype=np.float64)
     q = np.asarray(qp_lpm, dtype=np.float64)
-    ends = _stall_ends(np.ascontiguousarray(s), np.ascontiguousarray(q), new_state(),
-                       Q_STALL_LPM, float(N_STALL), HOLD_PCT)  # fmt: skip
+    ends = _stall_ends(
+        np.ascontiguousarray(s),
+        np.ascontiguousarray(q),
+        new_state(),
+        Q_STALL_LPM,
+        float(N_STALL),
+        HOLD_PCT,
+    )
     with np.errstate(invalid="ignore"):
         litres = np.where(np.isfinite(q), np.maximum(q, 0.0), 0.0) * SAMPLE_PERIOD_S / 60.0
         up = np.where((s > HOLD_PCT) & (ends == 0), litres, 0.0)

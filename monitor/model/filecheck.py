@@ -44,8 +44,10 @@ def read_members(path: Path) -> dict[str, np.ndarray]:
     for name, a in data.items():
         dtype, rank = LAYOUT[name]
         if a.dtype != np.dtype(dtype) or a.ndim > rank:
-            raise ValueError(f"array {name} is {a.dtype} of shape {a.shape}, expected {dtype} "
-                             f"of at most {rank} dimension(s)")  # fmt: skip
+            raise ValueError(
+                f"array {name} is {a.dtype} of shape {a.shape}, expected {dtype} "
+                f"of at most {rank} dimension(s)"
+            )
     return data
 
 
@@ -78,8 +80,10 @@ def check_header(header: Any) -> None:
     clip = header.get("residual_clip")
     if clip is not None and not (
         isinstance(clip, list)
-        and all(not isinstance(c, bool) and isinstance(c, (int, float)) and math.isfinite(c)
-                and c > 0 for c in clip)  # fmt: skip
+        and all(
+            not isinstance(c, bool) and isinstance(c, (int, float)) and math.isfinite(c) and c > 0
+            for c in clip
+        )
     ):
         raise ValueError("header residual_clip must be null or a list of finite numbers > 0")
     # The statistics (J's window and threshold, B's, L's, H's and any other member's
@@ -88,4 +92,3 @@ def check_header(header: Any) -> None:
 
     for stat in registry():
         stat.check_header(header)
-

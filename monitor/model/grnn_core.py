@@ -244,9 +244,7 @@ def grnn_predict(
     return predict_cutoff(exact_index(P, Y, counts), Xq, s, n_chunks())
 
 
-def cluster(
-    X: Any, Y: Any, seeds: Any
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def cluster(X: Any, Y: Any, seeds: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Specht's clusters: every row of X joins its nearest seed (a kept row).
 
     Returns (assign, counts, centroids, mean targets): ``assign[j]`` is row j's cluster; a

@@ -61,8 +61,9 @@ def hold_flags(spool_pct: np.ndarray) -> np.ndarray:
         return (np.abs(s) <= HOLD_PCT).astype(np.int64)  # NaN compares False: not a hold
 
 
-def counted_holds(spool_pct: np.ndarray, qp_lpm: np.ndarray, stroke: StrokeModel | None
-                  ) -> np.ndarray:
+def counted_holds(
+    spool_pct: np.ndarray, qp_lpm: np.ndarray, stroke: StrokeModel | None
+) -> np.ndarray:
     """Per sample: 1 where the lever is in hold and the rod is surely off the end stops
     (``monitor.model.endstop``; every hold when ``stroke`` is None), else 0."""
     flags = hold_flags(spool_pct)
@@ -101,18 +102,28 @@ class HoldModel:
         object.__setattr__(self, "scale", np.ascontiguousarray(s))
 
     def to_dict(self) -> dict[str, object]:
-        return {"window_n": int(self.window_n), "min_count": int(self.min_count),
-                "settle_n": int(self.settle_n), "outputs": list(self.outputs),
-                "scale": [float(v) for v in self.scale], "h0": float(self.h0),
-                **({} if self.stroke is None else {"stroke": self.stroke.to_dict()})}  # fmt: skip
+        return {
+            "window_n": int(self.window_n),
+            "min_count": int(self.min_count),
+            "settle_n": int(self.settle_n),
+            "outputs": list(self.outputs),
+            "scale": [float(v) for v in self.scale],
+            "h0": float(self.h0),
+            **({} if self.stroke is None else {"stroke": self.stroke.to_dict()}),
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> HoldModel:
         stroke = d.get("stroke")
-        return cls(int(d["window_n"]), int(d["min_count"]), int(d["settle_n"]),
-                   tuple(int(o) for o in d["outputs"]),
-                   np.asarray(d["scale"], dtype=np.float64), float(d["h0"]),
-                   None if stroke is None else StrokeModel.from_dict(stroke))  # fmt: skip
+        return cls(
+            int(d["window_n"]),
+            int(d["min_count"]),
+            int(d["settle_n"]),
+            tuple(int(o) for o in d["outputs"]),
+            np.asarray(d["scale"], dtype=np.float64),
+            float(d["h0"]),
+            None if stroke is None else StrokeModel.from_dict(stroke),
+        )
 
 
 # State vector layout of the step kernel.
@@ -121,8 +132,9 @@ _STATE = 5
 
 
 @jit(aot=True)
-def _push(ring_e, ring_c, sums, state, e, hold, outputs, scale, settle_n, min_count,
-          resum_every):  # pragma: no cover - numba
+def _push(
+    ring_e, ring_c, sums, state, e, hold, outputs, scale, settle_n, min_count, resum_every
+):  # pragma: no cover - numba
     """One sample into the window; returns H (NaN: paused, window not full, or too few
     settled hold samples)."""
     for o in range(e.shape[0]):
@@ -166,8 +178,9 @@ def _push(ring_e, ring_c, sums, state, e, hold, outputs, scale, settle_n, min_co
 
 
 @jit(aot=True)
-def _series(e, flags, outputs, scale, window, settle_n, min_count,
-            resum_every):  # pragma: no cover - numba
+def _series(
+    e, flags, outputs, scale, window, settle_n, min_count, resum_every
+):  # pragma: no cover - numba
     n = e.shape[0]
     out = np.empty(n)
     ring_e = np.zeros((window, outputs.shape[0]))
@@ -175,8 +188,19 @@ def _series(e, flags, outputs, scale, window, settle_n, min_count,
     sums = np.zeros(outputs.shape[0])
     state = np.zeros(_STATE, dtype=np.int64)
     for i in range(n):
-        out[i] = _push(ring_e, ring_c, sums, state, e[i], flags[i], outputs, scale, settle_n,
-                       min_count, resum_every)  # fmt: skip
+        out[i] = _push(
+            ring_e,
+            ring_c,
+            sums,
+            state,
+            e[i],
+            flags[i],
+            outputs,
+            scale,
+            settle_n,
+            min_count,
+            resum_every,
+        )
     return out
 
 
@@ -187,22 +211,37 @@ def hold_series(e: np.ndarray, flags: np.ndarray, hold: HoldModel) -> np.ndarray
         raise InputFileError(f"residuals {a.shape} have no outputs {hold.outputs} for H")
     f = np.ascontiguousarray(flags, dtype=np.int64)
     outs = np.asarray(hold.outputs, dtype=np.int64)
-    return _series(a, f, outs, hold.scale, hold.window_n, hold.settle_n, hold.min_count,
-                   resum_interval(hold.window_n))  # fmt: skip
+    return _series(
+        a,
+        f,
+        outs,
+        hold.scale,
+        hold.window_n,
+        hold.settle_n,
+        hold.min_count,
+        resum_interval(hold.window_n),
+    )
 
 
 def fit_hold_scale(
-    residuals: list[np.ndarray], flags: list[np.ndarray], window_n: int, min_count: int,
-    settle_n: int, outputs: tuple[int, ...],
+    residuals: list[np.ndarray],
+    flags: list[np.ndarray],
+    window_n: int,
+    min_count: int,
+    settle_n: int,
+    outputs: tuple[int, ...],
 ) -> np.ndarray:
     """Per watched output, the largest |window mean| of its residual over held-out normal
     data (the statistic's own windows: H's series with that output alone, unit scale).
     ``InputFileError`` when no window has ``min_count`` settled hold samples: the held-out
     data never held the lever long enough."""
     units = [HoldModel(window_n, min_count, settle_n, (o,), np.ones(1)) for o in outputs]
-    top = np.array([largest_finite(hold_series(e, f, unit)
-                                   for e, f in zip(residuals, flags, strict=True))
-                    for unit in units])  # fmt: skip
+    top = np.array(
+        [
+            largest_finite(hold_series(e, f, unit) for e, f in zip(residuals, flags, strict=True))
+            for unit in units
+        ]
+    )
     if not np.all(top > 0):
         raise InputFileError(
             f"the held-out normal data never has {min_count / 100:g} s of holds settled for "
@@ -232,8 +271,19 @@ class HoldWindow:
         # The tracker sees every sample, a hold or not: the rod's travel is in the moves.
         near = 0 if self._stops is None else self._stops.push(spool_pct, qp_lpm)
         flag = 1 if abs(spool_pct) <= HOLD_PCT and not near else 0
-        value = _push(self._ring_e, self._ring_c, self._sums, self._state, e, flag,
-                      self._outputs, h.scale, h.settle_n, h.min_count, self._resum)  # fmt: skip
+        value = _push(
+            self._ring_e,
+            self._ring_c,
+            self._sums,
+            self._state,
+            e,
+            flag,
+            self._outputs,
+            h.scale,
+            h.settle_n,
+            h.min_count,
+            self._resum,
+        )
         return float(value)
 
     def step(self, e: np.ndarray, row: np.ndarray) -> float:
@@ -243,9 +293,21 @@ class HoldWindow:
         h = self.hold  # ``push``'s body, one call less per tick
         near = 0 if self._stops is None else self._stops.push(spool, qp)
         flag = 1 if abs(spool) <= HOLD_PCT and not near else 0
-        return float(_push(self._ring_e, self._ring_c, self._sums, self._state, e, flag,
-                           self._outputs, h.scale, h.settle_n, h.min_count,
-                           self._resum))  # fmt: skip
+        return float(
+            _push(
+                self._ring_e,
+                self._ring_c,
+                self._sums,
+                self._state,
+                e,
+                flag,
+                self._outputs,
+                h.scale,
+                h.settle_n,
+                h.min_count,
+                self._resum,
+            )
+        )
 
 
 @register
@@ -260,8 +322,13 @@ class Hold(Statistic):
     counts = ("window_n", "min_count")
     order = 3
 
-    def __init__(self, window_n: int = 6000, min_count: int = 300, settle_n: int = 200,
-                 outputs: tuple[int, ...] = (1, 2)) -> None:  # fmt: skip
+    def __init__(
+        self,
+        window_n: int = 6000,
+        min_count: int = 300,
+        settle_n: int = 200,
+        outputs: tuple[int, ...] = (1, 2),
+    ) -> None:
         self.window_n_setting = window_n
         self.min_count = min_count
         self.settle_n = settle_n
@@ -273,8 +340,12 @@ class Hold(Statistic):
             return "off (not asked for: --hold on)"
         if "B" not in on or not all(o in outputs for o in HOLD_OUTPUTS):
             return "off (with the bias statistic, on a model that predicts PA and PB)"
-        return cls(settings.bias_window_n, settings.hold_min_count, settings.hold_settle_n,
-                   tuple(outputs.index(o) for o in HOLD_OUTPUTS))  # fmt: skip
+        return cls(
+            settings.bias_window_n,
+            settings.hold_min_count,
+            settings.hold_settle_n,
+            tuple(outputs.index(o) for o in HOLD_OUTPUTS),
+        )
 
     def unscaled(self, held: HeldOut) -> HoldModel:
         # The boom cylinder's swept volumes from every normal recording given: geometry,
@@ -284,14 +355,22 @@ class Hold(Statistic):
         every = held.every or held.recordings
         stroke = fit_stroke([r["SpoolCmd"] for r in every], [r["QP"] for r in every])
         flags = [counted_holds(r["SpoolCmd"], r["QP"], stroke) for r in held.recordings]
-        scale = fit_hold_scale(list(held.residuals), flags, self.window_n_setting,
-                               self.min_count, self.settle_n, self.outputs)  # fmt: skip
-        return HoldModel(self.window_n_setting, self.min_count, self.settle_n, self.outputs,
-                         scale, stroke=stroke)  # fmt: skip
+        scale = fit_hold_scale(
+            list(held.residuals),
+            flags,
+            self.window_n_setting,
+            self.min_count,
+            self.settle_n,
+            self.outputs,
+        )
+        return HoldModel(
+            self.window_n_setting, self.min_count, self.settle_n, self.outputs, scale, stroke=stroke
+        )
 
     def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
-        flags = counted_holds(signal(rec, "SpoolCmd", 0.0), signal(rec, "QP", np.nan),
-                              self.params_.stroke)  # fmt: skip
+        flags = counted_holds(
+            signal(rec, "SpoolCmd", 0.0), signal(rec, "QP", np.nan), self.params_.stroke
+        )
         return hold_series(e, flags, self.params_)
 
     def window(self, columns: Sequence[str], n_out: int) -> HoldWindow:
@@ -319,8 +398,9 @@ class Hold(Statistic):
     @classmethod
     def check_outputs(cls, params: HoldModel, n_out: int) -> None:
         if max(params.outputs) >= n_out:
-            raise ValueError(f"hold outputs {params.outputs} are not among the model's {n_out} "
-                             "outputs")  # fmt: skip
+            raise ValueError(
+                f"hold outputs {params.outputs} are not among the model's {n_out} outputs"
+            )
 
     @classmethod
     def check_more(cls, section: dict[str, Any]) -> None:
@@ -333,8 +413,12 @@ def _check_stroke(stroke: Any) -> None:
     """H's end-stop estimate (``monitor.model.endstop``): volumes, margin and stall rule."""
     if not isinstance(stroke, dict):
         raise ValueError("header hold.stroke must be an object")
-    for key, low, strict in (("volume_up_l", 0.0, True), ("volume_down_l", 0.0, True),
-                             ("margin", 0.0, False), ("q_stall_lpm", 0.0, True)):  # fmt: skip
+    for key, low, strict in (
+        ("volume_up_l", 0.0, True),
+        ("volume_down_l", 0.0, True),
+        ("margin", 0.0, False),
+        ("q_stall_lpm", 0.0, True),
+    ):
         try:
             check_number(stroke, key, low, strict)
         except ValueError as exc:

@@ -76,14 +76,23 @@ class LeverModel:
         object.__setattr__(self, "scale", np.ascontiguousarray(s))
 
     def to_dict(self) -> dict[str, object]:
-        return {"window_n": int(self.window_n), "min_count": int(self.min_count),
-                "output": int(self.output), "scale": [float(v) for v in self.scale],
-                "l0": float(self.l0)}  # fmt: skip
+        return {
+            "window_n": int(self.window_n),
+            "min_count": int(self.min_count),
+            "output": int(self.output),
+            "scale": [float(v) for v in self.scale],
+            "l0": float(self.l0),
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> LeverModel:
-        return cls(int(d["window_n"]), int(d["min_count"]), int(d["output"]),
-                   np.asarray(d["scale"], dtype=np.float64), float(d["l0"]))  # fmt: skip
+        return cls(
+            int(d["window_n"]),
+            int(d["min_count"]),
+            int(d["output"]),
+            np.asarray(d["scale"], dtype=np.float64),
+            float(d["l0"]),
+        )
 
 
 # State vector layout of the step kernel.
@@ -91,8 +100,9 @@ _POS, _COUNT, _PUSHES = 0, 1, 2
 
 
 @jit(aot=True)
-def _push(ring_e, ring_d, sums, counts, state, e, direction, output, scale, min_count,
-          resum_every):  # pragma: no cover - numba
+def _push(
+    ring_e, ring_d, sums, counts, state, e, direction, output, scale, min_count, resum_every
+):  # pragma: no cover - numba
     """One sample into the window; returns L (NaN: paused, window not full, or no direction
     counted)."""
     for o in range(e.shape[0]):
@@ -139,8 +149,19 @@ def _series(e, directions, output, scale, window, min_count, resum_every):  # pr
     counts = np.zeros(N_DIRECTIONS + 1)
     state = np.zeros(3, dtype=np.int64)
     for i in range(n):
-        out[i] = _push(ring_e, ring_d, sums, counts, state, e[i], directions[i], output, scale,
-                       min_count, resum_every)  # fmt: skip
+        out[i] = _push(
+            ring_e,
+            ring_d,
+            sums,
+            counts,
+            state,
+            e[i],
+            directions[i],
+            output,
+            scale,
+            min_count,
+            resum_every,
+        )
     return out
 
 
@@ -150,12 +171,22 @@ def lever_series(e: np.ndarray, directions: np.ndarray, lever: LeverModel) -> np
     if a.ndim != 2 or not 0 <= lever.output < a.shape[1]:
         raise InputFileError(f"residuals {a.shape} have no output {lever.output} for L")
     d = np.ascontiguousarray(directions, dtype=np.int64)
-    return _series(a, d, lever.output, lever.scale, lever.window_n, lever.min_count,
-                   resum_interval(lever.window_n))  # fmt: skip
+    return _series(
+        a,
+        d,
+        lever.output,
+        lever.scale,
+        lever.window_n,
+        lever.min_count,
+        resum_interval(lever.window_n),
+    )
 
 
 def fit_lever_scale(
-    residuals: list[np.ndarray], directions: list[np.ndarray], window_n: int, min_count: int,
+    residuals: list[np.ndarray],
+    directions: list[np.ndarray],
+    window_n: int,
+    min_count: int,
     output: int,
 ) -> np.ndarray:
     """Per direction, the largest |window mean| of the output's residual over held-out normal
@@ -163,9 +194,15 @@ def fit_lever_scale(
     when a direction never counts: the held-out data never held the lever that far."""
     unit = LeverModel(window_n, min_count, output, np.ones(N_DIRECTIONS))
     # One direction at a time: the other direction's samples do not count.
-    top = np.array([largest_finite(lever_series(e, np.where(d == k + 1, d, 0), unit)
-                                   for e, d in zip(residuals, directions, strict=True))
-                    for k in range(N_DIRECTIONS)])  # fmt: skip
+    top = np.array(
+        [
+            largest_finite(
+                lever_series(e, np.where(d == k + 1, d, 0), unit)
+                for e, d in zip(residuals, directions, strict=True)
+            )
+            for k in range(N_DIRECTIONS)
+        ]
+    )
     if not np.all(top > 0):
         raise InputFileError(
             f"the held-out normal data never has {min_count / 100:g} s of lever beyond "
@@ -191,17 +228,38 @@ class LeverWindow:
     def push(self, e: np.ndarray, direction: int) -> float:
         """One sample's residuals (outputs) and lever direction; returns L."""
         lv = self.lever
-        value = _push(self._ring_e, self._ring_d, self._sums, self._counts, self._state, e,
-                      direction, lv.output, lv.scale, lv.min_count, self._resum)  # fmt: skip
+        value = _push(
+            self._ring_e,
+            self._ring_d,
+            self._sums,
+            self._counts,
+            self._state,
+            e,
+            direction,
+            lv.output,
+            lv.scale,
+            lv.min_count,
+            self._resum,
+        )
         return float(value)
 
     def step(self, e: np.ndarray, row: np.ndarray) -> float:
         """One sampler row's residuals; the direction from its SpoolCmd; returns L."""
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
         lv = self.lever
-        value = _push(self._ring_e, self._ring_d, self._sums, self._counts, self._state, e,
-                      lever_direction(spool), lv.output, lv.scale, lv.min_count,
-                      self._resum)  # fmt: skip
+        value = _push(
+            self._ring_e,
+            self._ring_d,
+            self._sums,
+            self._counts,
+            self._state,
+            e,
+            lever_direction(spool),
+            lv.output,
+            lv.scale,
+            lv.min_count,
+            self._resum,
+        )
         return float(value)
 
 
@@ -226,13 +284,13 @@ class Lever(Statistic):
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Lever | str:
         if "B" not in on or LEVER_OUTPUT not in outputs:
             return "off (with the bias statistic, on a model that predicts PP)"
-        return cls(settings.bias_window_n, settings.lever_min_count,
-                   outputs.index(LEVER_OUTPUT))  # fmt: skip
+        return cls(settings.bias_window_n, settings.lever_min_count, outputs.index(LEVER_OUTPUT))
 
     def unscaled(self, held: HeldOut) -> LeverModel:
         directions = [lever_directions(r["SpoolCmd"]) for r in held.recordings]
-        scale = fit_lever_scale(list(held.residuals), directions, self.window_n_setting,
-                                self.min_count, self.output)  # fmt: skip
+        scale = fit_lever_scale(
+            list(held.residuals), directions, self.window_n_setting, self.min_count, self.output
+        )
         return LeverModel(self.window_n_setting, self.min_count, self.output, scale)
 
     def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
@@ -246,8 +304,7 @@ class Lever(Statistic):
         counts = np.zeros(N_DIRECTIONS + 1, dtype=np.int64)
         for e, rec in zip(held.residuals, held.recordings, strict=True):
             ok = np.isfinite(e).all(axis=1)
-            counts += np.bincount(lever_directions(rec["SpoolCmd"])[ok],
-                                  minlength=N_DIRECTIONS + 1)  # fmt: skip
+            counts += np.bincount(lever_directions(rec["SpoolCmd"])[ok], minlength=N_DIRECTIONS + 1)
         return {"full_lever_samples": {"raise": int(counts[1]), "lower": int(counts[2])}}
 
     @classmethod
@@ -257,5 +314,6 @@ class Lever(Statistic):
     @classmethod
     def check_outputs(cls, params: LeverModel, n_out: int) -> None:
         if params.output >= n_out:
-            raise ValueError(f"lever output {params.output} is not among the model's {n_out} "
-                             "outputs")  # fmt: skip
+            raise ValueError(
+                f"lever output {params.output} is not among the model's {n_out} outputs"
+            )

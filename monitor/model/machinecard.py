@@ -61,8 +61,12 @@ class ModelCard:
         if loop is not None and not isinstance(loop, str):
             raise ValueError("header machine.loop must be a loop name or null")
         if params is not None:
-            if not isinstance(params, dict) or set(params) != set(MACHINE_KEYS) or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in params.values()
+            if (
+                not isinstance(params, dict)
+                or set(params) != set(MACHINE_KEYS)
+                or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in params.values()
+                )
             ):
                 raise ValueError(f"header machine.parameters must hold {', '.join(MACHINE_KEYS)}")
             params = {k: float(params[k]) for k in MACHINE_KEYS}
@@ -71,8 +75,9 @@ class ModelCard:
 
 def machine_values(params: MachineParams) -> dict[str, float]:
     """``params`` in the header's units (mm, kg, N, cc/rev, L/min)."""
-    return {k: round(getattr(params, f) * factor, 6) for k, (f, factor, _, _) in
-            MACHINE_KEYS.items()}  # fmt: skip
+    return {
+        k: round(getattr(params, f) * factor, 6) for k, (f, factor, _, _) in MACHINE_KEYS.items()
+    }
 
 
 def card_for(loop: str | None, params: MachineParams | None, source: str | None) -> ModelCard:
@@ -84,16 +89,21 @@ def card_for(loop: str | None, params: MachineParams | None, source: str | None)
 
 def describe(values: dict[str, float]) -> str:
     """``bore 90 mm, rod 50 mm, mass 1500 kg, ...``"""
-    return ", ".join(f"{label} {values[k]:g} {unit}" for k, (_, _, label, unit) in
-                     MACHINE_KEYS.items())  # fmt: skip
+    return ", ".join(
+        f"{label} {values[k]:g} {unit}" for k, (_, _, label, unit) in MACHINE_KEYS.items()
+    )
 
 
 def _capability(params: MachineParams) -> dict[str, tuple[float, str]]:
     """The most each measured signal can read on ``params``' machine (header units)."""
     flow = params.pump_disp_m3_rev * params.nominal_speed_rpm / 60.0 / LPM
     relief = params.relief_full_pa / BAR
-    return {"QP": (flow, "L/min"), "PP": (relief, "bar"), "PA": (relief, "bar"),
-            "PB": (relief, "bar")}  # fmt: skip
+    return {
+        "QP": (flow, "L/min"),
+        "PP": (relief, "bar"),
+        "PA": (relief, "bar"),
+        "PB": (relief, "bar"),
+    }
 
 
 def check_model_for_loop(
@@ -108,22 +118,32 @@ def check_model_for_loop(
     config's, ``where`` the config and loop) trained on another loop or machine than the
     loop ``loop`` it is given, whose machine is ``params`` (None: not configured)."""
     if card is None:
-        log.info("%s: the model file records no loop or machine (a file from before they were "
-                 "recorded): loop and machine unknown, not checked against %s", model_path,
-                 where)  # fmt: skip
+        log.info(
+            "%s: the model file records no loop or machine (a file from before they were "
+            "recorded): loop and machine unknown, not checked against %s",
+            model_path,
+            where,
+        )
     elif card.loop is not None and card.loop != loop:
-        raise ModelFileError(f"{model_path}: a model of loop {card.loop!r}, given to {where}, "
-                             f"loop {loop!r}: train one for this loop (monitor train --loop "
-                             f"{loop})")  # fmt: skip
+        raise ModelFileError(
+            f"{model_path}: a model of loop {card.loop!r}, given to {where}, "
+            f"loop {loop!r}: train one for this loop (monitor train --loop "
+            f"{loop})"
+        )
     if params is None:
         return
     mine = machine_values(params)
     if card is not None and card.machine is not None:
-        off = [k for k in MACHINE_KEYS
-               if abs(card.machine[k] - mine[k]) > MACHINE_TOLERANCE * max(abs(mine[k]), 1e-9)]
+        off = [
+            k
+            for k in MACHINE_KEYS
+            if abs(card.machine[k] - mine[k]) > MACHINE_TOLERANCE * max(abs(mine[k]), 1e-9)
+        ]
         if off:
-            raise ModelFileError(f"{model_path}: trained on a machine with {describe(card.machine)}"
-                                 f"; {where} has {describe(mine)} ({', '.join(off)} differ)")
+            raise ModelFileError(
+                f"{model_path}: trained on a machine with {describe(card.machine)}"
+                f"; {where} has {describe(mine)} ({', '.join(off)} differ)"
+            )
     if envelope is not None and envelope.source == "training":
         seen = {s: envelope.range_of(s)[1] for s in envelope.signals}
         check_seen(seen, params, f"{model_path}: trained on", where)
@@ -135,7 +155,9 @@ def check_seen(seen: dict[str, float], params: MachineParams, what: str, where: 
     nominal speed or its relief pressure.  ``what`` starts the message."""
     for signal, (most, unit) in _capability(params).items():
         if seen.get(signal, 0.0) > CAPABILITY_MARGIN * most:
-            raise ModelFileError(f"{what} {signal} up to {seen[signal]:.4g} {unit}, more than "
-                                 f"{CAPABILITY_MARGIN:g} x the {most:.4g} {unit} of {where}'s "
-                                 f"machine ({describe(machine_values(params))}): another "
-                                 "machine")  # fmt: skip
+            raise ModelFileError(
+                f"{what} {signal} up to {seen[signal]:.4g} {unit}, more than "
+                f"{CAPABILITY_MARGIN:g} x the {most:.4g} {unit} of {where}'s "
+                f"machine ({describe(machine_values(params))}): another "
+                "machine"
+            )

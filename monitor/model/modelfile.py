@@ -192,10 +192,15 @@ def load_model(path: str | Path) -> MonitorModel:
     if derived and model.envelope is not None:
         log.info(
             "%s: no stored training envelope (a model file from before it existed); validity "
-            "ranges derived from its patterns: %s", path,
-            ", ".join(f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(
-                model.envelope.signals, model.envelope.lo, model.envelope.hi, strict=True)),
-        )  # fmt: skip
+            "ranges derived from its patterns: %s",
+            path,
+            ", ".join(
+                f"{s} {a:.4g}..{b:.4g}"
+                for s, a, b in zip(
+                    model.envelope.signals, model.envelope.lo, model.envelope.hi, strict=True
+                )
+            ),
+        )
     return model
 
 

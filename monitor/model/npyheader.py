@@ -45,5 +45,7 @@ def check_npz_headers(path: Path, names: Container[str]) -> None:
                 data_bytes = info.file_size - fh.tell()
             claimed = math.prod(shape) * np.dtype(dtype).itemsize
             if claimed != data_bytes:
-                raise ValueError(f"array {name}: its header claims shape {shape} "
-                                 f"({claimed:,} bytes), the file holds {data_bytes:,}")  # fmt: skip
+                raise ValueError(
+                    f"array {name}: its header claims shape {shape} "
+                    f"({claimed:,} bytes), the file holds {data_bytes:,}"
+                )

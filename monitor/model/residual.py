@@ -279,8 +279,7 @@ class J(Statistic):
 
     @classmethod
     def write(cls, header: dict[str, Any], params: JModel) -> None:
-        header.update(window_n=int(params.window_n), j0=float(params.j0),
-                      eps0=float(params.eps0))  # fmt: skip
+        header.update(window_n=int(params.window_n), j0=float(params.j0), eps0=float(params.eps0))
 
     @classmethod
     def read(cls, header: dict[str, Any], n_out: int) -> JModel:
@@ -289,10 +288,13 @@ class J(Statistic):
     @classmethod
     def check_header(cls, header: dict[str, Any]) -> None:
         window = header.get("window_n")
-        if isinstance(window, bool) or not isinstance(window, int) or not (
-            1 <= window <= MAX_WINDOW_N
+        if (
+            isinstance(window, bool)
+            or not isinstance(window, int)
+            or not (1 <= window <= MAX_WINDOW_N)
         ):
-            raise ValueError(f"header window_n must be a whole number 1..{MAX_WINDOW_N}, "
-                             f"got {str(window)[:40]}")  # fmt: skip
+            raise ValueError(
+                f"header window_n must be a whole number 1..{MAX_WINDOW_N}, got {str(window)[:40]}"
+            )
         check_number(header, "j0", 0.0, strict=False)
         check_number(header, "eps0", 0.0, strict=True)

@@ -33,8 +33,12 @@ from monitor.model.filecheck import MAX_WINDOW_N, check_number, check_whole
 from monitor.model.threshold import ThresholdRule
 
 #: The members shipped with the monitor, imported (and so registered) before any is used.
-BUILTIN = ("monitor.model.residual", "monitor.model.bias", "monitor.model.lever",
-           "monitor.model.hold")  # fmt: skip
+BUILTIN = (
+    "monitor.model.residual",
+    "monitor.model.bias",
+    "monitor.model.lever",
+    "monitor.model.hold",
+)
 _REGISTRY: dict[str, type[Statistic]] = {}
 
 
@@ -116,8 +120,9 @@ def registry() -> tuple[type[Statistic], ...]:
     for module in BUILTIN:
         importlib.import_module(module)
     names = list(_REGISTRY)
-    return tuple(sorted(_REGISTRY.values(),
-                        key=lambda c: (c.optional, c.order, names.index(c.name))))  # fmt: skip
+    return tuple(
+        sorted(_REGISTRY.values(), key=lambda c: (c.optional, c.order, names.index(c.name)))
+    )
 
 
 def active(model: Any) -> list[Statistic]:
@@ -210,9 +215,13 @@ class Statistic(ABC):
             if rec.has("OilTemp"):
                 temps.append(rec["OilTemp"][judged & np.isfinite(rec["OilTemp"])])
         oil = np.concatenate(temps) if temps else np.zeros(0)
-        out: dict[str, Any] = {"validation": held.validation, "parts": len(parts),
-                               "judged_h": round(hours, 4), "windows": windows,
-                               "window_s": round(self.window_n * 0.01, 3)}  # fmt: skip
+        out: dict[str, Any] = {
+            "validation": held.validation,
+            "parts": len(parts),
+            "judged_h": round(hours, 4),
+            "windows": windows,
+            "window_s": round(self.window_n * 0.01, 3),
+        }
         if oil.size:
             out["oil_temp_c"] = [round(float(oil.min()), 2), round(float(oil.max()), 2)]
         return out | self.coverage(held)
@@ -334,10 +343,17 @@ class Statistic(ABC):
             return {"on": False, "threshold": None, "why": why, "support": {}}
         threshold = cls().use(params).threshold_
         on = math.isfinite(threshold)
-        why = (note if isinstance(note, str) else "on") if on else \
-            "off: no threshold (computed, never alarms)"
-        return {"on": on, "threshold": threshold if on else None, "why": why,
-                "support": cls.known_support(training)}  # fmt: skip
+        why = (
+            (note if isinstance(note, str) else "on")
+            if on
+            else "off: no threshold (computed, never alarms)"
+        )
+        return {
+            "on": on,
+            "threshold": threshold if on else None,
+            "why": why,
+            "support": cls.known_support(training),
+        }
 
     @classmethod
     def known_support(cls, training: dict[str, Any]) -> dict[str, Any]:

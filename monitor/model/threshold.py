@@ -94,21 +94,33 @@ class ThresholdRule:
         p = self.rate_per_h * block * period_s / 3600.0  # exceedance probability per block
         level = float(gumbel_r.ppf(1.0 - p, loc, scale))
         top = max(maxima)
-        return {"loc": float(loc), "scale": float(scale), "blocks": float(len(maxima)),
-                "block_s": block * period_s, "max": top, "level": max(level, top)}  # fmt: skip
+        return {
+            "loc": float(loc),
+            "scale": float(scale),
+            "blocks": float(len(maxima)),
+            "block_s": block * period_s,
+            "max": top,
+            "level": max(level, top),
+        }
 
     def describe(self) -> str:
         """The rule in one line, for the model file and ``monitor train``."""
         if self.rule == "evt":
-            return (f"chosen for < 1 false alarm per {1.0 / self.rate_per_h:g} h at the "
-                    "held-out data's duty cycle (Gumbel fit of per-window maxima)")  # fmt: skip
+            return (
+                f"chosen for < 1 false alarm per {1.0 / self.rate_per_h:g} h at the "
+                "held-out data's duty cycle (Gumbel fit of per-window maxima)"
+            )
         if self.rule == "quantile":
             return f"{self.factor:g} x the {self.quantile:g} quantile of held-out normal values"
         return f"{self.factor:g} x the {self.rule} of held-out normal values"
 
     def to_dict(self) -> dict[str, object]:
-        return {"rule": self.rule, "quantile": self.quantile, "factor": self.factor,
-                "rate_per_h": self.rate_per_h}  # fmt: skip
+        return {
+            "rule": self.rule,
+            "quantile": self.quantile,
+            "factor": self.factor,
+            "rate_per_h": self.rate_per_h,
+        }
 
 
 def _blocks(series: np.ndarray, block: int, partial: bool = False):  # noqa: ANN202
@@ -127,8 +139,12 @@ def one_event(parts: Sequence[np.ndarray], block: int) -> dict[str, float] | Non
     (a J window spans two blocks); None when no block stands out by ``ONE_EVENT_RATIO``.
     Such a threshold is that much less sensitive, unless the event is the machine's
     normal work: the engineer should know which minute it was."""
-    blocks = [(i, k, float(v.max())) for i, x in enumerate(parts)  # (part, block, max J)
-              for k, v in _blocks(x, block, partial=True) if v.size]  # fmt: skip
+    blocks = [
+        (i, k, float(v.max()))
+        for i, x in enumerate(parts)  # (part, block, max J)
+        for k, v in _blocks(x, block, partial=True)
+        if v.size
+    ]
     if len(blocks) < 3:
         return None
     top = max(blocks, key=lambda b: b[2])

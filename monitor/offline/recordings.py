@@ -40,11 +40,13 @@ def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording
         if not contract.startswith(OTHER) and wide.has(col)
     }
     # The signals the loop renames are its own; a log without any of them is not its log.
-    own = [col for col, c in zip(columns, view, strict=True)
-           if not c.startswith(OTHER) and col != c]  # fmt: skip
+    own = [
+        col for col, c in zip(columns, view, strict=True) if not c.startswith(OTHER) and col != c
+    ]
     if own and not any(wide.has(c) and np.isfinite(wide[c]).any() for c in own):
-        raise NoHydraulicDataError(f"{path}: no frame carries loop {name}'s own signals "
-                                   f"({', '.join(own)}) in {cfg.dbc}")  # fmt: skip
+        raise NoHydraulicDataError(
+            f"{path}: no frame carries loop {name}'s own signals ({', '.join(own)}) in {cfg.dbc}"
+        )
     rod = picked.get(ROD_POS.name)
     if rod is not None and not np.isfinite(rod).any():
         del picked[ROD_POS.name]  # as without a rod sensor: the column is left out

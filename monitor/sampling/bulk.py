@@ -134,8 +134,9 @@ def recording_from_candump_bulk(
     rows, msg_of, pos_in_msg = rows[by_time], msg_of[by_time], pos_in_msg[by_time]
     ts = np.ascontiguousarray(frames.timestamp[rows])
     period = sampler.period_s
-    st, applied, resumes, tc, newest = _clock(ts, period, sampler.max_gap_s,
-                                              sampler.resync_frames, _EPS_S, OUTAGE_S)
+    st, applied, resumes, tc, newest = _clock(
+        ts, period, sampler.max_gap_s, sampler.resync_frames, _EPS_S, OUTAGE_S
+    )
     # Rows emitted before each applied frame: a running maximum over application order.
     first_row = np.maximum.accumulate(np.ceil((st[applied] - _EPS_S) / period)).astype(np.int64)
     n_rows = max(int(first_row[-1]), math.floor((newest + _EPS_S) / period) + 1)
@@ -144,8 +145,9 @@ def recording_from_candump_bulk(
     time_counts = TimeCounts(*(int(v) for v in tc))
     if err := runs_backwards(path, ts.size, time_counts.as_dict()):
         raise err
-    cols, first_seen = _columns(sampler, parts, (msg_of, pos_in_msg), applied, first_row, st,
-                                resumes, n_rows)  # fmt: skip
+    cols, first_seen = _columns(
+        sampler, parts, (msg_of, pos_in_msg), applied, first_row, st, resumes, n_rows
+    )
     warm = min(warm_row(first_seen[list(sampler.required)], sampler.deadline_rows), n_rows)
     # Row t = 0 is the first one past warming; its log time as the sampler computes it.
     start = float(ts[0]) + warm * period if warm < n_rows else None
@@ -155,8 +157,7 @@ def recording_from_candump_bulk(
         "counts": {**counts, **time_counts.as_dict()},
     }
     cols = {name: col[warm:] for name, col in cols.items()}
-    return Recording(t=np.arange(n_rows - warm) * period, columns=cols, source=str(path),
-                     meta=meta)  # fmt: skip
+    return Recording(t=np.arange(n_rows - warm) * period, columns=cols, source=str(path), meta=meta)
 
 
 def _columns(

@@ -84,8 +84,9 @@ def warm_row(first_seen_rows: Iterable[float], deadline_rows: Iterable[int]) -> 
     """First row that is not warming: by it every required signal has been seen (its first
     frame visible from row ``first_seen_rows[i]``, inf if not yet) or is past its deadline
     (``deadline_rows[i]``, from ``deadline_row``)."""
-    return int(max((min(s, d) for s, d in zip(first_seen_rows, deadline_rows, strict=True)),
-                   default=0))  # fmt: skip
+    return int(
+        max((min(s, d) for s, d in zip(first_seen_rows, deadline_rows, strict=True)), default=0)
+    )
 
 
 def row_limit(frames: int) -> int:
@@ -220,8 +221,16 @@ class Sampler:
             self.first_time_s = float(timestamp_s)
             self._state, self._counts = new_state(float(timestamp_s))  # sampler time 0
         state = self._state
-        st = clock_step(float(timestamp_s), state, self._counts, self.period_s, self.max_gap_s,
-                        self.resync_frames, _EPS_S, OUTAGE_S)  # fmt: skip
+        st = clock_step(
+            float(timestamp_s),
+            state,
+            self._counts,
+            self.period_s,
+            self.max_gap_s,
+            self.resync_frames,
+            _EPS_S,
+            OUTAGE_S,
+        )
         if st != st:  # held back as possibly older
             self._behind.append((timestamp_s, message_name, values))
             if state[S_HELD] == 0:  # a clock reset: replay them on the new time base
@@ -311,9 +320,7 @@ class Sampler:
 def hydraulic_messages(codec: FrameCodec, columns: tuple[str, ...] = ROW_COLUMNS) -> set[str]:
     """Names of the DBC messages that carry at least one row signal."""
     wanted = set(columns)
-    return {
-        info.name for info in codec.messages.values() if wanted.intersection(info.signal_names)
-    }
+    return {info.name for info in codec.messages.values() if wanted.intersection(info.signal_names)}
 
 
 def no_hydraulic_data(path: str | Path, counts: Mapping[str, Any]) -> NoHydraulicDataError:

@@ -37,6 +37,7 @@ def keys_text(keys: Any) -> str:
     more = f", ... ({len(names)} in all)" if len(names) > 5 else ""
     return ", ".join(names[:5]) + more
 
+
 Check = Callable[[Any], bool]
 
 

@@ -29,8 +29,10 @@ class _StrictLoader(yaml.SafeLoader):
     def compose_node(self, parent: Any, index: Any) -> Any:
         if self.check_event(yaml.AliasEvent):
             event = self.peek_event()
-            raise _Refused(f"line {event.start_mark.line + 1}: YAML aliases (*name) are not "
-                           "allowed in a configuration")  # fmt: skip
+            raise _Refused(
+                f"line {event.start_mark.line + 1}: YAML aliases (*name) are not "
+                "allowed in a configuration"
+            )
         # PyYAML composes recursively: 5,000 nested brackets would end in a RecursionError.
         self._depth = getattr(self, "_depth", 0) + 1
         try:
@@ -46,19 +48,21 @@ class _StrictLoader(yaml.SafeLoader):
         for key_node, _ in node.value:
             key = self.construct_object(key_node, deep=deep)
             if key in seen:
-                raise _Refused(f"line {key_node.start_mark.line + 1}: key {str(key)[:40]!r} "
-                               "is given twice")  # fmt: skip
+                raise _Refused(
+                    f"line {key_node.start_mark.line + 1}: key {str(key)[:40]!r} is given twice"
+                )
             seen.add(key)
         return super().construct_mapping(node, deep)
-
 
     def construct_yaml_int(self, node: Any) -> Any:
         try:
             return super().construct_yaml_int(node)
         except ValueError:  # more digits than Python converts (4,300): a ValueError traceback
-            raise _Refused(f"line {node.start_mark.line + 1}: an integer of "
-                           f"{len(node.value)} characters is not a number a configuration "
-                           "holds") from None  # fmt: skip
+            raise _Refused(
+                f"line {node.start_mark.line + 1}: an integer of "
+                f"{len(node.value)} characters is not a number a configuration "
+                "holds"
+            ) from None
 
 
 _StrictLoader.add_constructor("tag:yaml.org,2002:int", _StrictLoader.construct_yaml_int)
@@ -75,11 +79,13 @@ def _read_text(path: Path, what: str) -> str:
     with os.fdopen(fd, "rb") as fh:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise ConfigError(f"{path}: not a regular file (a FIFO, device or directory); a "
-                              f"{what} must be a file")  # fmt: skip
+            raise ConfigError(
+                f"{path}: not a regular file (a FIFO, device or directory); a {what} must be a file"
+            )
         if st.st_size > MAX_BYTES:
-            raise ConfigError(f"{path}: {st.st_size} bytes is too large for a {what} "
-                              f"(at most {MAX_BYTES})")  # fmt: skip
+            raise ConfigError(
+                f"{path}: {st.st_size} bytes is too large for a {what} (at most {MAX_BYTES})"
+            )
         data = fh.read(MAX_BYTES + 1)
     if len(data) > MAX_BYTES:  # grew since the stat
         raise ConfigError(f"{path}: too large for a {what} (at most {MAX_BYTES} bytes)")

@@ -83,14 +83,17 @@ def cross_fitted_residuals(
         fold_grnn = GRNN(**{**_params(grnn), "sigma": grnn.sigma_})
         fold_dgrnn = DGRNN(spec, fold_grnn).fit(parts)
         lent = lend(fold_dgrnn) if lend is not None else 0
-        fold = MonitorModel(fold_dgrnn, model.normalizer, model.window_n, model.threshold,
-                            model.j0, model.eps0)  # fmt: skip
+        fold = MonitorModel(
+            fold_dgrnn, model.normalizer, model.window_n, model.threshold, model.j0, model.eps0
+        )
         for rec, f, e_out in zip(recordings, ids, out, strict=True):
             mine = f == k
             if mine.any():
                 e = residuals(fold, rec)
                 e_out[mine] = e[mine]
-        say(f"  fold {k + 1}/{folds}: {fold_grnn.patterns_.shape[0] - lent} patterns from "
+        say(
+            f"  fold {k + 1}/{folds}: {fold_grnn.patterns_.shape[0] - lent} patterns from "
             f"{sum(len(p) for p in parts)} samples"
-            + (f", {lent} lent by the reference" if lent else ""))  # fmt: skip
+            + (f", {lent} lent by the reference" if lent else "")
+        )
     return out

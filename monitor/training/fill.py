@@ -63,8 +63,6 @@ def lend_patterns(dgrnn: DGRNN, normalizer: Normalizer, reference: MonitorModel)
     # Model files keep counts as whole numbers of rows: at least one each.
     lent_counts = np.maximum(1.0, np.rint(ref.counts_[far] * weight))
     own.counts_ = np.concatenate([own.counts_, lent_counts])
-    own.pattern_index_ = np.concatenate(
-        [own.pattern_index_, start + np.arange(n, dtype=np.int64)]
-    )
+    own.pattern_index_ = np.concatenate([own.pattern_index_, start + np.arange(n, dtype=np.int64)])
     own.thinning_ = {**own.thinning_, "lent_from_reference": n}
     return n

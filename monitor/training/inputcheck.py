@@ -57,10 +57,12 @@ class Suspect:
     reference: str
 
     def message(self) -> str:
-        return (f"{self.path} looks like {self.fault} (the reference model {self.reference} "
-                f"raises {self.fault} from {self.first_alarm_t:.1f} s, max level "
-                f"{self.max_level:.3g}; 1 = alarm): a model trained on it would call that "
-                "fault healthy")  # fmt: skip
+        return (
+            f"{self.path} looks like {self.fault} (the reference model {self.reference} "
+            f"raises {self.fault} from {self.first_alarm_t:.1f} s, max level "
+            f"{self.max_level:.3g}; 1 = alarm): a model trained on it would call that "
+            "fault healthy"
+        )
 
 
 def envelope_warnings(
@@ -81,10 +83,12 @@ def envelope_warnings(
         return []
     validity = gating.validity
     margin = max(validity.margin_fraction * (hi - lo), validity.margin_c)
-    return [f"OilTemp spans {lo:.1f}-{hi:.1f} degC only; logs outside {lo - margin:.1f}-"
-            f"{hi + margin:.1f} degC (the trained range and its margin) will be not judged: "
-            f"train on data across the oil temperatures the machine works at (at least "
-            f"{cfg.oil_span_min_c:g} degC apart)"]  # fmt: skip
+    return [
+        f"OilTemp spans {lo:.1f}-{hi:.1f} degC only; logs outside {lo - margin:.1f}-"
+        f"{hi + margin:.1f} degC (the trained range and its margin) will be not judged: "
+        f"train on data across the oil temperatures the machine works at (at least "
+        f"{cfg.oil_span_min_c:g} degC apart)"
+    ]
 
 
 def fault_suspects(
@@ -102,6 +106,13 @@ def fault_suspects(
     for rec, path in zip(recordings, paths, strict=True):
         s = detect(reference, rec, alarm, horizon, gating=gating).summary
         if s["alarm"] and s["fault"] in FAULT_NAMES:
-            out.append(Suspect(Path(path), s["fault"], float(s["first_alarm_t"]),
-                               float(s["max_level"]), reference_name))  # fmt: skip
+            out.append(
+                Suspect(
+                    Path(path),
+                    s["fault"],
+                    float(s["first_alarm_t"]),
+                    float(s["max_level"]),
+                    reference_name,
+                )
+            )
     return out

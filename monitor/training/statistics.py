@@ -59,10 +59,14 @@ def said(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str:
     """One line on a fitted statistic for ``monitor train``'s progress."""
     if not stat.optional:  # J: J0 and eps0 (eq. 10)
         kind = "cross-fitted" if held.validation.startswith("cross") else "held-out"
-        return (f"  J0 {stat.params_.j0:.4g} ({rule.rule} of J on {len(held.recordings)} "
-                f"{kind} part(s)), eps0 {stat.threshold_:.4g}: {rule.describe()}")  # fmt: skip
-    return (f"  {stat.title} over {stat.window_n / 100:g} s, {stat.threshold_key} "
-            f"{stat.threshold_:.4g}: {rule.describe()}")  # fmt: skip
+        return (
+            f"  J0 {stat.params_.j0:.4g} ({rule.rule} of J on {len(held.recordings)} "
+            f"{kind} part(s)), eps0 {stat.threshold_:.4g}: {rule.describe()}"
+        )
+    return (
+        f"  {stat.title} over {stat.window_n / 100:g} s, {stat.threshold_key} "
+        f"{stat.threshold_:.4g}: {rule.describe()}"
+    )
 
 
 def check_reference(reference: MonitorModel, spec: DGRNNSpec, window_n: int) -> None:
@@ -71,8 +75,9 @@ def check_reference(reference: MonitorModel, spec: DGRNNSpec, window_n: int) -> 
         return
 
     def what(s: DGRNNSpec, n: int) -> str:
-        return (f"{'/'.join(s.outputs)} from {'/'.join(s.variables)}, horizon {s.horizon}, "
-                f"J window {n}")  # fmt: skip
+        return (
+            f"{'/'.join(s.outputs)} from {'/'.join(s.variables)}, horizon {s.horizon}, J window {n}"
+        )
 
     raise ConfigError(
         f"the reference model ({what(reference.spec, reference.window_n)}) does not match the "
@@ -102,4 +107,3 @@ def floor_thresholds(model: MonitorModel, reference: MonitorModel) -> str:
             notes.append(f"{cls.threshold_key} {own.threshold_:.4g} -> {ref.threshold_:.4g}")
             cls.put(model, own.with_threshold(ref.threshold_))
     return ", ".join(notes) or "own thresholds already above the reference's"
-

@@ -89,8 +89,11 @@ def train(
         if missing:
             raise InputFileError(f"{rec.source}: missing signal(s) {', '.join(missing)}")
     block_n = int(round(cfg.fold_block_s * 100))
-    crossfit = not held_out and cfg.folds >= 2 and n_blocks(
-        [len(r) for r in recordings], block_n) >= 2 * cfg.folds  # fmt: skip
+    crossfit = (
+        not held_out
+        and cfg.folds >= 2
+        and n_blocks([len(r) for r in recordings], block_n) >= 2 * cfg.folds
+    )
     if held_out:
         fit_part, val_part = list(recordings), list(held_out)
     elif crossfit:
@@ -98,9 +101,11 @@ def train(
     else:
         fit_part, val_part = split_normal(recordings, cfg.validation_fraction)
         if cfg.folds >= 2:
-            say(f"  too short to cross-fit {cfg.folds} folds of {cfg.fold_block_s:g} s blocks "
+            say(
+                f"  too short to cross-fit {cfg.folds} folds of {cfg.fold_block_s:g} s blocks "
                 f"(needs {2 * cfg.folds * cfg.fold_block_s / 60:g} min): the last "
-                f"{cfg.validation_fraction:.0%} held out for the thresholds")  # fmt: skip
+                f"{cfg.validation_fraction:.0%} held out for the thresholds"
+            )
     tables = [table(r, spec.variables) for r in fit_part]
     normalizer = Normalizer().fit(np.concatenate(tables), spec.variables)
     started = time.perf_counter()
@@ -121,16 +126,25 @@ def train(
         def lend(d: DGRNN) -> int:
             return lend_patterns(d, normalizer, reference)
 
-        say(f"  {lend(dgrnn)} patterns lent by the reference model where this machine's own "
-            "data has none")  # fmt: skip
+        say(
+            f"  {lend(dgrnn)} patterns lent by the reference model where this machine's own "
+            "data has none"
+        )
     model = MonitorModel(dgrnn, normalizer, cfg.window_n, cfg.threshold, math.nan, math.nan)
     # Held-out residuals once, unbounded; the bound (if any) is learnt from them and then
     # applied exactly as the detector applies it.
     if crossfit:
         say(f"  thresholds cross-fitted: {cfg.folds} folds of {cfg.fold_block_s:g} s blocks")
         e_val = cross_fitted_residuals(
-            model, [normalizer.transform(t) for t in tables], val_part, cfg.folds, block_n,
-            normal_residuals, say, lend)  # fmt: skip
+            model,
+            [normalizer.transform(t) for t in tables],
+            val_part,
+            cfg.folds,
+            block_n,
+            normal_residuals,
+            say,
+            lend,
+        )
     else:
         e_val = [normal_residuals(model, r) for r in val_part]
     if cfg.residual_clip_quantile is not None:
@@ -138,8 +152,11 @@ def train(
         model.residual_clip = tuple(float(c) for c in clip)
         say(f"  residual bound |e| <= {', '.join(f'{c:.3g}' for c in clip)} (z, per output)")
         e_val = [np.clip(e, -clip, clip) for e in e_val]
-    validation = (f"cross-fitted, {cfg.folds} folds of {cfg.fold_block_s:g} s blocks"
-                  if crossfit else "held out")  # fmt: skip
+    validation = (
+        f"cross-fitted, {cfg.folds} folds of {cfg.fold_block_s:g} s blocks"
+        if crossfit
+        else "held out"
+    )
     everything = [*recordings, *(held_out or ())]
     held = HeldOut(e_val, val_part, spec.outputs, everything, validation)
     notes, support = fit_statistics(model, held, cfg, say)
@@ -156,17 +173,22 @@ def train(
         rec = val_part[int(found.pop("part"))]
         t_s = float(rec.t[min(int(found.pop("start")), len(rec) - 1)])
         event = {"source": rec.source, "t_s": t_s, **found}
-        say(f"  note: J0 rests on one event, {rec.source} at {t_s / 60:.1f} min "
+        say(
+            f"  note: J0 rests on one event, {rec.source} at {t_s / 60:.1f} min "
             f"({found['ratio']:.1f} x any other window's J): the threshold is that much less "
             "sensitive unless such events are this machine's normal work; check what it did "
-            "then")  # fmt: skip
+            "then"
+        )
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
     model.envelope = envelope_from_recordings(everything, AlarmConfig().min_engine_rpm)
     env = model.envelope
-    say("  trained envelope: " + ", ".join(
-        f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(env.signals, env.lo, env.hi, strict=True)
-    ))  # fmt: skip
+    say(
+        "  trained envelope: "
+        + ", ".join(
+            f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(env.signals, env.lo, env.hi, strict=True)
+        )
+    )
     if cfg.isolation == "sim":
         labels, centroids = simulated_signatures(model, cfg, say)
         model.isolation_labels, model.isolation_centroids = labels, centroids

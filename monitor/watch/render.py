@@ -31,8 +31,10 @@ def render(state: WatchState, source: str, now_mono: float, width: int = 100) ->
     for name, a in sorted(state.alarms.items()):
         age = now_mono - a.seen_mono
         stale = f"  ({age:.0f} s ago)" if age > 3.0 else ""
-        out.append(f"{name:<18}{a.state.upper():<14}{j_bar(a.ratio, bar):<{bar + 9}}"
-                   f"{a.fault:<14}{a.alarms}{stale}")  # fmt: skip
+        out.append(
+            f"{name:<18}{a.state.upper():<14}{j_bar(a.ratio, bar):<{bar + 9}}"
+            f"{a.fault:<14}{a.alarms}{stale}"
+        )
     out.append("")
     s = state.status
     if s:
@@ -55,20 +57,25 @@ def render(state: WatchState, source: str, now_mono: float, width: int = 100) ->
             out.append(f"DM1 from 0x{sa:02X}: {lit}; no active DTC")
         for d in dtcs:
             what = _NAMES.get(d.spn, "")
-            out.append(f"DM1 from 0x{sa:02X}: {lit}; SPN {d.spn} FMI {d.fmi} OC {d.oc}"
-                       + (f" ({what})" if what else ""))  # fmt: skip
+            out.append(
+                f"DM1 from 0x{sa:02X}: {lit}; SPN {d.spn} FMI {d.fmi} OC {d.oc}"
+                + (f" ({what})" if what else "")
+            )
     out.append("")
-    out.append("  ".join(
-        f"{k} {state.values[k]:7.2f} {_UNITS[k]}" if k in state.values else f"{k} -"
-        for k in SENSORS
-    ))  # fmt: skip
+    out.append(
+        "  ".join(
+            f"{k} {state.values[k]:7.2f} {_UNITS[k]}" if k in state.values else f"{k} -"
+            for k in SENSORS
+        )
+    )
     names = sorted(set(state.frames) | set(state.rejected))
     if not names:
         out.append("frames seen here: none decoded yet")
     line = "frames seen here:"
     for n in names:
         item = f" {n} {state.frames.get(n, 0)}" + (
-            f" ({state.rejected[n]} rejected)" if state.rejected.get(n) else "")
+            f" ({state.rejected[n]} rejected)" if state.rejected.get(n) else ""
+        )
         if len(line) + len(item) > width:
             out.append(line)
             line = " " * 17

@@ -77,10 +77,12 @@ class WatchState:
         if d.name.startswith("MON_Alarm"):
             self.alarms[d.name] = AlarmView(
                 _label(self.codec, d.name, "State", values.get("State")),
-                values.get("J"), values.get("Threshold"),
+                values.get("J"),
+                values.get("Threshold"),
                 _label(self.codec, d.name, "Fault", values.get("Fault")),
-                int(values.get("AlarmCount", 0)), now,
-            )  # fmt: skip
+                int(values.get("AlarmCount", 0)),
+                now,
+            )
         elif d.name == "MON_Status":
             self.status = {k: _label(self.codec, d.name, k, v) for k, v in values.items()}
             self.status_mono = now
@@ -118,8 +120,11 @@ class WatchState:
         if len(payload) < 2:  # no lamp bytes (a 0-byte frame, an empty BAM): not a DM1
             self.rejected["DM1"] = self.rejected.get("DM1", 0) + 1
             return
-        lamps = [name for k, name in enumerate(("protect", "amber", "red", "mil"))
-                 if (payload[0] >> (2 * k)) & 0b11 == 0b01]  # fmt: skip
+        lamps = [
+            name
+            for k, name in enumerate(("protect", "amber", "red", "mil"))
+            if (payload[0] >> (2 * k)) & 0b11 == 0b01
+        ]
         dtcs = []
         for k in range(2, len(payload) - 3, 4):
             b = payload[k : k + 4]
