@@ -19,6 +19,23 @@ os.environ["PYTHONPATH"] = os.pathsep.join(
 )
 
 
+@pytest.fixture(autouse=True)
+def _daemon_logging_removed():
+    """`monitor run` called in-process (tests of its start and stop) sets the root logger up
+    for journald, at INFO: taken off after the test, so a later test's in-process command
+    does not print the daemon's INFO lines on its stderr."""
+    import logging
+
+    from monitor.live.journal import JournalFormatter
+
+    root = logging.getLogger()
+    level = root.level
+    yield
+    for h in [h for h in root.handlers if isinstance(h.formatter, JournalFormatter)]:
+        root.removeHandler(h)
+    root.setLevel(level)
+
+
 @pytest.fixture(scope="session")
 def shipped_config():
     """config/monitor.yaml as shipped (DBC, model and gating defaults)."""
