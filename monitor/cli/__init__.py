@@ -30,6 +30,7 @@ _ORDER = (
     "eval_uci",
     "bench",
     "warm_up",
+    "build_controller",
 )
 
 

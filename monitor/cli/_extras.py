@@ -18,6 +18,7 @@ EXTRA_OF = {
     "scipy": "analysis",
     "matplotlib": "analysis",
     "threadpoolctl": "analysis",
+    "numba": "jit",
 }
 
 

@@ -35,16 +35,36 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monitor.jit import cache_stats
+
+    start = time.perf_counter()
+    through_jit(simulator=True)
+    s = cache_stats()
+    where = os.environ.get("NUMBA_CACHE_DIR") or "next to the installed package (__pycache__)"
+    cpu = os.environ.get("NUMBA_CPU_NAME") or "this CPU"
+    print(
+        f"warm-up: {s['kernels']} kernels, {s['hits']} signatures loaded from the cache, "
+        f"{s['misses']} compiled, {time.perf_counter() - start:.1f} s; cache: {where}; "
+        f"code for: {cpu}",
+        file=sys.stderr,
+    )
+    if args.aot:
+        _build_aot()
+    return 0
+
+
+def through_jit(simulator: bool) -> None:
+    """Every compiled path once through the JIT (the ahead-of-time module off), so that numba
+    knows the kernels' argument types; the simulator's too when ``simulator``."""
     from monitor.config.settings import load_config
     from monitor.detection.offline import detect
     from monitor.detection.ticker import Ticker
-    from monitor.jit import cache_stats
     from monitor.model.modelfile import load_model
     from monitor.resources import resource_path
     from monitor.sampling.read import read_recording
 
+    before = os.environ.get("MONITOR_AOT")
     os.environ["MONITOR_AOT"] = "0"  # through the JIT: numba learns the kernels' types
-    start = time.perf_counter()
     cfg = load_config()
     model = load_model(cfg.model)
     steps = [
@@ -66,33 +86,27 @@ def run(args: argparse.Namespace) -> int:
             lambda: _ticks(Ticker(model, cfg.alarm, cfg.horizon, gating=cfg.gating)),
         ),
         ("live sample clock", _sample_clock),
-        ("simulator", _simulator),
+        *([("simulator", _simulator)] if simulator else []),
         # A statistic may be opt-in for `monitor train` (H: ``--hold on``): each member's
         # kernels typed here whatever the configured model carries, so any model with it
         # finds them ahead of time.
         ("statistics", _statistics),
     ]
-    for name, step in steps:
-        t0 = time.perf_counter()
-        if step() is False:
-            print(
-                f"warm-up: {name}: skipped (the [analysis] extra is not installed)", file=sys.stderr
-            )
-            continue
-        print(f"warm-up: {name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
-    s = cache_stats()
-    where = os.environ.get("NUMBA_CACHE_DIR") or "next to the installed package (__pycache__)"
-    cpu = os.environ.get("NUMBA_CPU_NAME") or "this CPU"
-    print(
-        f"warm-up: {s['kernels']} kernels, {s['hits']} signatures loaded from the cache, "
-        f"{s['misses']} compiled, {time.perf_counter() - start:.1f} s; cache: {where}; "
-        f"code for: {cpu}",
-        file=sys.stderr,
-    )
-    del os.environ["MONITOR_AOT"]
-    if args.aot:
-        _build_aot()
-    return 0
+    try:
+        for name, step in steps:
+            t0 = time.perf_counter()
+            if step() is False:
+                print(
+                    f"warm-up: {name}: skipped (the [analysis] extra is not installed)",
+                    file=sys.stderr,
+                )
+                continue
+            print(f"warm-up: {name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    finally:
+        if before is None:
+            del os.environ["MONITOR_AOT"]
+        else:
+            os.environ["MONITOR_AOT"] = before
 
 
 def _build_aot() -> None:

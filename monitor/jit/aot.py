@@ -15,6 +15,12 @@ and Python versions and ``NUMBA_CPU_NAME``, so an upgraded monitor or numba neve
 code: it builds a new one at its next warm-up and uses the JIT until then.  ``MONITOR_AOT=0``
 turns the module off (the side-by-side benchmark does).  Where: ``NUMBA_CACHE_DIR`` when set
 (the systemd unit sets it), else ``__pycache__`` beside this file.
+
+A controller's wheel (``monitor build-controller``) ships the module inside the package
+(``compiled/`` beside this file), built for a CPU family (``generic``), so the controller
+needs neither numba, LLVM nor a compiler.  Its name carries the digest of the kernels'
+sources only (the Python ABI is in the file's suffix): numba is not there to ask its version,
+and the module needs none of it at run time.  The warm-up's own module comes first.
 """
 
 from __future__ import annotations
@@ -58,12 +64,30 @@ def module_name() -> str:
         h.update(b"no numba")
     h.update(sys.version.encode())
     h.update(os.environ.get("NUMBA_CPU_NAME", "host").encode())
+    _hash_sources(h)
+    return f"monitor_aot_{h.hexdigest()[:16]}"
+
+
+@cache
+def shipped_name() -> str:
+    """``monitor_aot_<digest>`` of the kernels' sources alone: the module a controller's
+    wheel ships (``shipped_directory``)."""
+    h = hashlib.sha256(b"shipped")
+    _hash_sources(h)
+    return f"monitor_aot_{h.hexdigest()[:16]}"
+
+
+def shipped_directory() -> Path:
+    """Where a controller's wheel carries its module: ``compiled/`` in this package."""
+    return Path(__file__).resolve().parent / "compiled"
+
+
+def _hash_sources(h: Any) -> None:
     for path in sorted(_PACKAGE.rglob("*.py")):
         text = path.read_bytes()
         if b"monitor.jit import" in text:  # a module that declares kernels
             h.update(path.relative_to(_PACKAGE).as_posix().encode())
             h.update(text)
-    return f"monitor_aot_{h.hexdigest()[:16]}"
 
 
 def export_name(fn: Any) -> str:
@@ -71,12 +95,20 @@ def export_name(fn: Any) -> str:
 
 
 @cache
-def _module() -> Any:
-    """The compiled module, or None (absent, turned off, or it does not load)."""
+def _module() -> tuple[Any, dict[str, Any]]:
+    """The compiled module and its kernels' argument types, or (None, {}) (absent, turned
+    off, or it does not load): the warm-up's, else the one a controller's wheel ships."""
     if not enabled():
-        return None
-    name = module_name()
-    for path in sorted(directory().glob(f"{name}.*")):
+        return None, {}
+    for where, name in ((directory(), module_name()), (shipped_directory(), shipped_name())):
+        mod = _load(where, name)
+        if mod is not None:
+            return mod, _read_specs(where / f"{name}.json")
+    return None, {}
+
+
+def _load(where: Path, name: str) -> Any:
+    for path in sorted(where.glob(f"{name}.*")):
         if not path.name.endswith(tuple(_suffixes())):
             continue
         try:
@@ -92,6 +124,12 @@ def _module() -> Any:
     return None
 
 
+def loaded_from() -> str | None:
+    """The file of the compiled module in use, or None (loads it)."""
+    mod = _module()[0]
+    return None if mod is None else str(mod.__file__)
+
+
 def _suffixes() -> list[str]:
     from importlib.machinery import EXTENSION_SUFFIXES
 
@@ -101,10 +139,10 @@ def _suffixes() -> list[str]:
 def compiled_function(fn: Any) -> Any:
     """The ahead-of-time compiled form of kernel function ``fn``, guarded by the argument
     types it was compiled for (``Guarded``), or None."""
-    mod = _module()
+    mod, specs = _module()
     name = export_name(fn)
     compiled = None if mod is None else getattr(mod, name, None)
-    spec = _specs().get(name)
+    spec = specs.get(name)
     return None if compiled is None or spec is None else Guarded(compiled, spec)
 
 
@@ -181,27 +219,29 @@ def _describe(t: Any) -> Any:
     raise RuntimeError(f"argument type {t} cannot be checked before an ahead-of-time call")
 
 
-@cache
-def _specs() -> dict[str, Any]:
-    path = directory() / f"{module_name()}.json"
+def _read_specs(path: Path) -> dict[str, Any]:
     try:
         return dict(json.loads(path.read_text(encoding="utf-8")))
     except (OSError, ValueError, TypeError):
         return {}
 
 
-def build(kernels: list[Any]) -> Path:
+def build(
+    kernels: list[Any], out: Path | None = None, name: str | None = None, cpu: str | None = None
+) -> Path:
     """Compile ``kernels`` (``Kernel``s already run through the JIT once, so numba knows
-    their argument types) into the module; returns its path.  Needs a C++ compiler (numba's
-    pycc builds through distutils' C++ driver)."""
+    their argument types) into the module; returns its path.  Default: the warm-up's module
+    (``directory``, ``module_name``, ``NUMBA_CPU_NAME`` or this CPU).  Needs a C++ compiler
+    (numba's pycc builds through distutils' C++ driver)."""
     from numba.pycc import CC
 
-    out = directory()
+    out = out or directory()
+    name = name or module_name()
     out.mkdir(parents=True, exist_ok=True)
-    cc = CC(module_name())
+    cc = CC(name)
     cc.output_dir = str(out)
     cc.verbose = False
-    cc.target_cpu = os.environ.get("NUMBA_CPU_NAME", "host")
+    cc.target_cpu = cpu or os.environ.get("NUMBA_CPU_NAME", "host")
     specs = {}
     for k in kernels:
         sigs = k.dispatcher.nopython_signatures
@@ -210,10 +250,9 @@ def build(kernels: list[Any]) -> Path:
         specs[export_name(k.py_func)] = [_describe(t) for t in sigs[0].args]
         cc.export(export_name(k.py_func), sigs[0])(k.py_func)
     cc.compile()
-    (out / f"{module_name()}.json").write_text(json.dumps(specs), encoding="utf-8")
+    (out / f"{name}.json").write_text(json.dumps(specs), encoding="utf-8")
     _module.cache_clear()
-    _specs.cache_clear()
-    found = sorted(out.glob(f"{module_name()}.*"))
+    found = sorted(p for p in out.glob(f"{name}.*") if p.name.endswith(tuple(_suffixes())))
     if not found:
         raise RuntimeError(f"pycc wrote no module to {out}")
     return found[0]
