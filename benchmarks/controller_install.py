@@ -172,6 +172,9 @@ def _run(py: str, log: str, work: Path, port: int) -> dict[str, Any]:
     spawn_to_ready = time.perf_counter() - t0
     feed = subprocess.Popen(
         [
+            # at bus priority (the sensors do not wait for the CPU): a starved replayer
+            # really leaves the bus silent, and the daemon rightly says so (inactive, stale)
+            *("nice", "-n", "-10"),
             py,
             "-m",
             "monitor",

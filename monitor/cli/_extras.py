@@ -18,13 +18,17 @@ EXTRA_OF = {
     "scipy": "analysis",
     "matplotlib": "analysis",
     "threadpoolctl": "analysis",
-    "numba": "jit",
 }
 
 
 def missing_extra(exc: ModuleNotFoundError) -> str | None:
     """The one line for a module an extra installs, else None (a bug, left to propagate)."""
     top = (exc.name or "").split(".")[0]
+    if top in ("numba", "llvmlite"):  # the controller's wheel: its kernels are compiled
+        return (
+            "needs numba (the controller's install carries only the daemon's and `monitor "
+            "detect`'s kernels, compiled): pip install numba, or install the monitor from source"
+        )
     extra = EXTRA_OF.get(top)
     if extra is None:
         return None

@@ -3,7 +3,7 @@
 The controller's install then needs neither numba, LLVM nor a compiler: the wheel carries the
 kernels of the live tick and of ``monitor detect`` compiled ahead of time by numba's ``pycc``
 from their one (numba) source, in ``monitor/jit/compiled/`` (``monitor.jit.aot`` finds them
-there), and its requirements are the package's own, which name no numba.  Built from the
+there), and its requirements are the package's without numba.  Built from the
 monitor's source tree, on the controllers' architecture (pycc compiles for the machine it runs
 on; ``--cpu generic`` makes the code serve every CPU of that architecture).
 """
@@ -11,14 +11,18 @@ on; ``--cpu generic`` makes the code serve every CPU of that architecture).
 from __future__ import annotations
 
 import argparse
+import re
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 from monitor.errors import MonitorError
+
+_NUMBA_LINE = re.compile(r'^\s*"numba[<>=!~ ][^"]*",\s*(#.*)?$')
 
 #: What the wheel is built from: pyproject.toml's inputs (the package and its data folders).
 _SOURCES = ("pyproject.toml", "README.md", "monitor", "dbc", "config", "replay")
@@ -108,6 +112,17 @@ def _stage(root: Path, stage: Path) -> None:
         else:
             shutil.copy2(src, stage / name)
     (stage / "setup.py").write_text(_SETUP_PY, encoding="utf-8")
+    _drop_numba(stage / "pyproject.toml")
+
+
+def _drop_numba(pyproject: Path) -> None:
+    """The package's requirements without numba (the wheel carries its kernels compiled);
+    ``_wheel`` checks the built wheel's metadata."""
+    lines = pyproject.read_text(encoding="utf-8").splitlines(keepends=True)
+    kept = [line for line in lines if not _NUMBA_LINE.match(line)]
+    if len(kept) != len(lines) - 1:
+        raise MonitorError(f"{pyproject}: not one numba line in [project] dependencies")
+    pyproject.write_text("".join(kept), encoding="utf-8")
 
 
 def _compile(out: Path, cpu: str) -> int:
@@ -128,6 +143,16 @@ def _compile(out: Path, cpu: str) -> int:
     return len(kernels)
 
 
+def _requirements(wheel: Path) -> list[str]:
+    """The wheel's Requires-Dist without those of an extra."""
+    from email.parser import Parser
+
+    with zipfile.ZipFile(wheel) as z:
+        meta = next(n for n in z.namelist() if n.endswith(".dist-info/METADATA"))
+        parsed = Parser().parsestr(z.read(meta).decode("utf-8"))
+    return [r for r in parsed.get_all("Requires-Dist") or [] if "extra ==" not in r]
+
+
 def _wheel(stage: Path, out: Path) -> Path:
     """``pip wheel`` of the staged tree into ``out`` (setuptools and wheel from the index,
     as any build of the package); the wheel's path."""
@@ -143,6 +168,9 @@ def _wheel(stage: Path, out: Path) -> Path:
             last = (done.stderr.strip().splitlines() or ["(no output)"])[-1]
             raise MonitorError(f"pip wheel failed (exit {done.returncode}): {last}")
         (built,) = Path(tmp).glob("*.whl")
+        needs = _requirements(built)
+        if any(r.lower().startswith(("numba", "llvmlite")) for r in needs):
+            raise MonitorError(f"the wheel still requires numba: {needs}")
         target = out / built.name
         shutil.move(str(built), target)
     return target
