@@ -27,6 +27,10 @@ class NoNumba:
             raise ModuleNotFoundError(f"No module named {name!r}", name=name)
         return None
 sys.meta_path.insert(0, NoNumba())
+if sys.argv[1] == "warm-up":  # a command that needs numba's JIT
+    import runpy
+    sys.argv = ["monitor", "warm-up"]
+    runpy.run_module("monitor", run_name="__main__")
 from pathlib import Path
 from live_support import live_config, replay_settled, run_daemon
 from monitor.jit import aot
@@ -109,3 +113,16 @@ def test_the_daemon_from_the_wheel_without_numba_gives_detects_events(
         ("fault", "spool_wear"),
     ]
     assert_same_events(got["events"], offline)
+
+    # A command the wheel has no compiled kernels for: one line, exit 2, no traceback.
+    warm = subprocess.run(
+        [sys.executable, "-c", NO_NUMBA, "warm-up"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        check=False,
+    )
+    assert warm.returncode == 2, warm.stderr[-3000:]
+    assert warm.stderr.strip().splitlines()[-1].startswith("monitor warm-up: error: needs numba")
+    assert "Traceback" not in warm.stderr
