@@ -57,6 +57,9 @@ def main() -> None:
     ap.add_argument("venv", type=Path)
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--log", default="spool_wear.log", help="a log shipped in replay/")
+    ap.add_argument(
+        "--daemon-nice", type=int, default=5, help="niceness of `monitor run` (the replayer: -10)"
+    )
     args = ap.parse_args()
     args.venv = args.venv.resolve()
     py = str(args.venv / "bin" / "python")
@@ -82,7 +85,10 @@ def main() -> None:
                 [py, "-c", _VIRTUAL, log, tmp], capture_output=True, text=True, check=True
             ).stdout.splitlines()[-1]
         )
-        runs = [_run(py, log, Path(tmp) / f"run{i}", 43300 + i) for i in range(args.runs)]
+        runs = [
+            _run(py, log, Path(tmp) / f"run{i}", 43300 + i, args.daemon_nice)
+            for i in range(args.runs)
+        ]
     out["detect_state_events"] = detect
     for key in ("spawn_to_ready_s", "ready_line_s", "rss_median_mb", "rss_peak_mb"):
         out[key] = [r[key] for r in runs]
@@ -142,10 +148,10 @@ def _detect(py: str, log: str, tmp: Path) -> list[list[Any]]:
     return _states(events)
 
 
-def _run(py: str, log: str, work: Path, port: int) -> dict[str, Any]:
-    """`monitor run` (niced 5, as the how-to advises on a busy computer) on a udp_multicast
-    group and port of its own; the log replayed in real time once the daemon is ready; RSS
-    every 0.2 s."""
+def _run(py: str, log: str, work: Path, port: int, nice: int) -> dict[str, Any]:
+    """`monitor run` (niced ``nice``; the how-to advises 5 on a busy computer) on a
+    udp_multicast group and port of its own; the log replayed in real time once the daemon is
+    ready; RSS every 0.2 s."""
     work.mkdir()
     group = "239.74.171.9"
     config = work / "monitor.yaml"
@@ -159,7 +165,7 @@ def _run(py: str, log: str, work: Path, port: int) -> dict[str, Any]:
     t0 = time.perf_counter()
     with err.open("wb") as fh:
         proc = subprocess.Popen(
-            ["nice", "-n", "5", py, "-m", "monitor", "run", "--config", str(config)],
+            ["nice", "-n", str(nice), py, "-m", "monitor", "run", "--config", str(config)],
             stderr=fh,
             stdin=subprocess.DEVNULL,
             cwd=work,
