@@ -219,3 +219,27 @@ def _messages(lines: _CheckedLines, path: Path) -> Iterator[can.Message]:
         raise InputFileError(f"{path}:{lines.line_no}: unreadable candump line: {exc}") from None
     finally:
         lines.close()
+
+
+def counter_believed(counters: list[int], resync: int = 3) -> list[bool]:
+    """Which frames of one message the alive-counter rule believes, by its prose: the first
+    frame, then a frame 1 or 2 after the last believed one (one frame lost); any other is
+    not believed, until ``resync`` frames in a row have counters each 1 after the one
+    before, the last of them believed again.  A plain loop over a list of the frames seen
+    since the last believed one."""
+    out: list[bool] = []
+    trusted: int | None = None
+    since: list[int] = []  # counters not believed since the last believed frame
+    for c in counters:
+        if trusted is None or (c - trusted) % 16 in (1, 2):
+            ok = True
+        else:
+            since.append(c)
+            tail = 1
+            while tail < len(since) and (since[-tail] - since[-tail - 1]) % 16 == 1:
+                tail += 1
+            ok = tail >= resync
+        if ok:
+            trusted, since = c, []
+        out.append(ok)
+    return out

@@ -227,9 +227,14 @@ def _troubled_log(tmp_path: Path, seconds: float = 90.0) -> Path:
 
 
 def _range_violation(log: Path) -> None:
-    """A frame with a valid CRC but PP raw 0xFFFF (655.35 bar > 400): range rejection."""
+    """A frame with a valid CRC and the next alive counter but PP raw 0xFFFF (655.35 bar >
+    400): range rejection."""
     codec = FrameCodec.from_dbc()
-    frame = bytearray(codec.encode("HYD_Pressures", {"PP": 100, "PA": 50, "PB": 10}, counter=3))
+    last = [x for x in log.read_text().splitlines() if " 0CFF1021#" in x][-1]
+    counter = int(last.split("#")[1][12:14], 16) & 0x0F
+    frame = bytearray(
+        codec.encode("HYD_Pressures", {"PP": 100, "PA": 50, "PB": 10}, counter=counter + 1)
+    )
     frame[0] = frame[1] = 0xFF
     from monitor.codec.crc import crc8_sae_j1850
 
@@ -264,7 +269,7 @@ def test_same_recording_and_events_on_a_log_with_injected_trouble(troubled):
     assert_same_recording(bulk, ref)
     c = bulk.meta["counts"]
     # The trouble is really there, so the equality above covers each rule.
-    assert all(c["rejected"][k] > 0 for k in ("dlc", "crc", "range"))
+    assert all(c["rejected"][k] > 0 for k in ("dlc", "crc", "range", "sequence"))
     assert c["counter_jumps"] > 0 and c["ignored"] == 2
     assert c["time_backwards"] > 0 and c["time_skipped"] >= 1
     assert c["time_resyncs"] >= 1 and c["gaps_shortened"] >= 1

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import random
 
+import numpy as np
 import pytest
 from naive import crc8_bitwise
 
@@ -122,25 +123,76 @@ def test_rejections_and_counts(codec: FrameCodec) -> None:
     )
     c = codec.counts
     assert c.frames == 6 and c.ignored == 2 and c.decoded == 0
-    assert c.rejected == {"dlc": 2, "crc": 1, "range": 1}
+    assert c.rejected == {"dlc": 2, "crc": 1, "range": 1, "sequence": 0}
     assert c.rejected_total == 4
 
 
-def test_counter_jump_flagged_then_resynchronised(codec: FrameCodec) -> None:
-    frames = [codec.encode("HYD_Flow", {"QP": 1.0}) for _ in range(20)]
-    results = [codec.decode(0x0CFF1121, f) for f in frames[:3]]  # counters 0, 1, 2
-    assert not any(r.counter_jump for r in results)
-    jumped = codec.decode(0x0CFF1121, frames[7])  # 2 -> 7
-    assert jumped.ok and jumped.counter_jump
-    assert not codec.decode(0x0CFF1121, frames[8]).counter_jump  # resynchronised on 7
+def test_one_lost_frame_is_tolerated_a_larger_jump_rejected_until_three_in_sequence(
+    codec: FrameCodec,
+) -> None:
+    frames = [codec.encode("HYD_Flow", {"QP": 1.0}) for _ in range(40)]  # counters 0..15, 0..
+
+    def verdict(i: int) -> tuple[Rejection | None, bool]:
+        d = codec.decode(0x0CFF1121, frames[i])
+        return d.rejection, d.counter_jump
+
+    assert [verdict(i) for i in range(3)] == [(None, False)] * 3  # counters 0, 1, 2
+    assert verdict(4) == (None, True)  # 2 -> 4: one frame lost, believed
+    # 4 -> 9: four lost (or a forged frame): rejected, and so are the next frames until
+    # three in a row are in sequence (9, 10, 11): the third is the first believed again.
+    assert verdict(9) == (Rejection.SEQUENCE, True)
+    assert verdict(10) == (Rejection.SEQUENCE, False)
+    assert verdict(11) == (None, False)
     # wrap 15 -> 0 is continuous
-    assert not any(codec.decode(0x0CFF1121, f).counter_jump for f in frames[9:20])
-    assert codec.counts.counter_jumps == 1
+    assert [verdict(i) for i in range(12, 20)] == [(None, False)] * 8
+    assert verdict(19) == (Rejection.SEQUENCE, True)  # a repeat
+    assert verdict(20) == (None, False)  # the sender's next frame: in sequence
+    c = codec.counts
+    assert c.counter_jumps == 3 and c.rejected["sequence"] == 3
+    assert c.rejected_by_message == {"HYD_Flow": {"counter_jump": 3, "sequence": 3}}
     # a corrupt frame does not move the counter state
-    bad = frames[0][:7] + bytes([frames[0][7] ^ 0xFF])
+    bad = frames[21][:7] + bytes([frames[21][7] ^ 0xFF])
     assert codec.decode(0x0CFF1121, bad).rejection is Rejection.CRC
-    after = codec.encode("HYD_Flow", {"QP": 1.0}, counter=4)  # the last good one was 3
-    assert not codec.decode(0x0CFF1121, after).counter_jump
+    assert verdict(21) == (None, False)  # the last good one was 20 (counter 4)
+
+
+def test_a_forged_frame_between_the_senders_changes_nothing(codec: FrameCodec) -> None:
+    frames = [codec.encode("HYD_Flow", {"QP": 1.0}) for _ in range(10)]
+    forged = codec.encode("HYD_Flow", {"QP": 99.0}, counter=12)
+    seen = []
+    for f in frames[:5]:
+        seen.append(codec.decode(0x0CFF1121, f))
+    seen.append(codec.decode(0x0CFF1121, forged))  # 4 -> 12
+    for f in frames[5:]:
+        seen.append(codec.decode(0x0CFF1121, f))  # 12 -> 5 jumps back, yet in sequence
+    assert [d.rejection for d in seen] == [None] * 5 + [Rejection.SEQUENCE] + [None] * 5
+    assert all(d.values == {"QP": 1.0} for d in seen if d.ok)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_counter_rule_of_both_decoders_matches_the_reference(seed: int) -> None:
+    """``counter_verdicts`` (the bulk decoder's) and ``FrameCodec.decode`` frame by frame
+    believe exactly the frames the plain reference in tests/naive_frames.py believes, on
+    counter sequences with losses, repeats, restarts and random frames."""
+    from naive_frames import counter_believed
+
+    from monitor.codec.counter import OUT_OF_SEQUENCE, counter_verdicts
+
+    rnd = random.Random(seed)
+    counters, c = [], rnd.randrange(16)
+    for _ in range(3000):
+        r = rnd.random()
+        c = (c + 1) % 16 if r < 0.8 else (c + 2) % 16 if r < 0.85 else rnd.randrange(16)
+        counters.append(c)
+    expected = counter_believed(counters)
+    assert (counter_verdicts(np.array(counters)) != OUT_OF_SEQUENCE).tolist() == expected
+    codec = FrameCodec.from_dbc()
+    live = [
+        codec.decode(0x0CFF1121, codec.encode("HYD_Flow", {"QP": 1.0}, counter=k)).ok
+        for k in counters
+    ]
+    assert live == expected
+    assert 100 < expected.count(False) < 1000  # the sequences do exercise the rule
 
 
 def test_counters_are_per_message(codec: FrameCodec) -> None:

@@ -195,7 +195,7 @@ def test_round_trip_csv_log_recording(tmp_path) -> None:
     counts = back.meta["counts"]
     assert counts["frames"] == 4 * 300 + 3 and counts["decoded"] == counts["frames"]
     assert counts["ignored"] == 0 and counts["counter_jumps"] == 0
-    assert counts["rejected"] == {"dlc": 0, "crc": 0, "range": 0}
+    assert counts["rejected"] == {"dlc": 0, "crc": 0, "range": 0, "sequence": 0}
     assert back.meta["start_time_s"] == pytest.approx(1_700_000_000.0)
 
 
@@ -243,7 +243,7 @@ def test_bad_crc_wrong_dlc_and_counter_jump_counted(tmp_path) -> None:
     _rewrite(log, edit)
     back = recording_from_candump(log)
     c = back.meta["counts"]
-    assert c["rejected"] == {"dlc": 1, "crc": 1, "range": 0}
+    assert c["rejected"] == {"dlc": 1, "crc": 1, "range": 0, "sequence": 0}
     assert c["ignored"] == 1
     # each rejected or lost frame breaks the counter sequence of its message once
     assert c["counter_jumps"] == 3

@@ -1,9 +1,9 @@
 """``FrameCodec.decode`` for a whole log at once, vectorised by message ID.
 
 The checks and counts are those of ``FrameCodec.decode`` frame by frame, in the same order:
-unknown id (ignored), DLC not 8, CRC-8 over bytes 0-6, alive counter continuity (counted,
-the frame kept; only frames with a good CRC move the counter), raw value outside the DBC
-range.  Bit positions, lengths, byte order, signedness, scaling and raw ranges come from
+unknown id (ignored), DLC not 8, CRC-8 over bytes 0-6, the alive-counter rule
+(``monitor.codec.counter``, the same function; only frames with a good CRC move the
+counter), raw value outside the DBC range.  Bit positions, lengths, byte order, signedness, scaling and raw ranges come from
 the message layout (``monitor.codec.layout``, read once from the DBC with cantools) and
 the CRC from ``monitor.codec.crc``'s table, as in ``FrameCodec.decode``.
 """
@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monitor.codec.counter import OUT_OF_SEQUENCE, counter_verdicts
 from monitor.codec.crc import crc8_rows
 from monitor.codec.frames import DecodeCounts, FrameCodec, Rejection
 from monitor.codec.layout import (
@@ -77,6 +78,9 @@ def decode_frames(codec: FrameCodec, frames: Frames) -> dict[str, DecodedMessage
         jumps = int(np.count_nonzero(counter[1:] != (counter[:-1] + 1) % COUNTER_MODULO))
         counts.counter_jumps += jumps
         counts.reject(info.name, "counter_jump", jumps)
+        believed = counter_verdicts(counter) != OUT_OF_SEQUENCE
+        counts.reject(info.name, Rejection.SEQUENCE.value, int((~believed).sum()))
+        rows, data = rows[believed], data[believed]
         raw = raw_values(info, data)
         in_range = np.ones(rows.size, dtype=bool)
         for sig in info.signals:

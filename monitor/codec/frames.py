@@ -20,6 +20,7 @@ from typing import NamedTuple
 import can
 from cantools.database.can import Database
 
+from monitor.codec.counter import BELIEVED, CounterState, counter_step, is_jump
 from monitor.codec.crc import crc8_sae_j1850
 from monitor.codec.dbc import load_dbc
 from monitor.codec.layout import (
@@ -41,6 +42,7 @@ class Rejection(str, Enum):
     DLC = "dlc"  # data length is not 8
     CRC = "crc"  # byte 7 does not match the CRC of bytes 0-6
     RANGE = "range"  # a signal decodes outside its DBC [min, max]
+    SEQUENCE = "sequence"  # alive counter out of sequence (monitor.codec.counter)
     UNKNOWN_ID = "unknown_id"  # the frame is not in the DBC (foreign traffic)
 
 
@@ -49,8 +51,9 @@ class Decoded(NamedTuple):
 
     ``values`` holds physical values (DBC units) when ``rejection`` is None.  ``name`` is
     the DBC message name (None for an unknown id).  ``counter_jump`` is set when the alive
-    counter was not the previous one + 1 mod 16; the frame is still accepted and the
-    counter resynchronises on it.
+    counter was not the previous frame's + 1 mod 16; one lost frame (+ 2) is still
+    accepted, any other jump or a repeat is rejected (``Rejection.SEQUENCE``) until the
+    message is back in sequence (``monitor.codec.counter``).
     """
 
     name: str | None
@@ -73,9 +76,9 @@ class DecodeCounts:
     rejected: dict[str, int] = field(
         default_factory=lambda: {r.value: 0 for r in Rejection if r is not Rejection.UNKNOWN_ID}
     )
-    counter_jumps: int = 0
+    counter_jumps: int = 0  # frames whose counter is not the previous frame's + 1
     per_message: dict[str, int] = field(default_factory=dict)  # decoded frames per message
-    # message -> reason (dlc, crc, range, counter_jump) -> frames; only non-zero entries
+    # message -> reason (dlc, crc, range, sequence, counter_jump) -> frames; only non-zero
     rejected_by_message: dict[str, dict[str, int]] = field(default_factory=dict)
 
     @property
@@ -84,7 +87,7 @@ class DecodeCounts:
 
     def reject(self, message: str, reason: str, n: int = 1) -> None:
         """Count ``n`` frames of ``message`` rejected for ``reason`` (a counter jump is
-        counted per message only: the frame itself is accepted)."""
+        counted per message only: the frame itself may be accepted)."""
         if n <= 0:
             return
         if reason in self.rejected:
@@ -104,6 +107,9 @@ class DecodeCounts:
         }
 
 
+_FRESH = CounterState()
+
+
 class FrameCodec:
     """Encode and check frames of one DBC; keeps alive-counter state per message.
 
@@ -120,7 +126,7 @@ class FrameCodec:
             self.messages[info.name] = info
             self._by_id[(info.frame_id, info.is_extended_id)] = info
         self._tx_counter: dict[str, int] = {}
-        self._rx_counter: dict[str, int] = {}
+        self._rx_counter: dict[str, CounterState] = {}
         self.counts = DecodeCounts()
 
     @classmethod
@@ -216,12 +222,15 @@ class FrameCodec:
         # The CRC vouches for the counter, so it updates the state even if a value is out
         # of range below; a corrupt frame (bad CRC) must not resynchronise it.
         counter = data[COUNTER_BYTE] & 0x0F
-        last = self._rx_counter.get(name)
-        jump = last is not None and counter != (last + 1) % COUNTER_MODULO
-        self._rx_counter[name] = counter
+        state = self._rx_counter.get(name, _FRESH)
+        jump = is_jump(state, counter)
+        verdict, self._rx_counter[name] = counter_step(state, counter)
         if jump:
             counts.counter_jumps += 1
             counts.reject(name, "counter_jump")
+        if verdict not in BELIEVED:
+            counts.reject(name, Rejection.SEQUENCE.value)
+            return Decoded(name, None, Rejection.SEQUENCE, jump)
         little, big = int.from_bytes(data, "little"), int.from_bytes(data, "big")
         values: dict[str, float] = {}
         for sig in info.signals:

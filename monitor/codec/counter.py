@@ -1,0 +1,115 @@
+"""The alive-counter rule: which frames of one message are believed, by their counter alone.
+
+Byte 6's low nibble counts the frames of a message (+1 mod 16).  A frame whose counter is
+the last believed one + 1 is in sequence; + 2 means one frame was lost on the way, which a
+bus does, and is believed too.  Any other counter (a repeat, or a jump over two or more
+frames) is not believed: it is a frame out of sequence, as a forged one is (about one
+random frame in 256 passes CRC-8, and then its counter is random).  The message is believed
+again only after ``RESYNC_FRAMES`` frames in a row in sequence with each other, the last of
+them the first believed; a frame in sequence with the last believed one meanwhile is
+believed at once (an intruder's frame between two of the sender's changes nothing).
+
+``RESYNC_FRAMES`` is 3, from the cycle times: the sampler calls a signal stale when its last
+value is older than 3 of its message's cycle times (``GenMsgCycleTime``: 10 ms for the
+hydraulic messages, 1 s for HYD_OilTemp), and a sender that restarts its counter (no frame
+lost) is then blind for the 2 frames before the third: a gap of 3 cycles, which is not
+stale, for every message whatever its cycle time.  A larger N would turn every counter
+restart into a sensor fault; N = 2 would let two random frames that pass CRC-8 with
+consecutive counters (1 in 16 once two passed) take a message over.  With 3, it takes three
+frames that pass CRC-8 (1 in 256 each), in sequence (1 in 256 for the last two), all
+between two frames of the sender: for HYD_OilTemp, whose sender is silent for a whole
+second, about once in 500 s of a bus saturated with random frames on its ID (about 7 of
+them pass CRC-8 a second), and for a 10 ms message practically never.
+
+The very first frame of a message is believed: a start mid-operation has nothing to compare
+it with.
+
+``counter_step`` is the rule for one frame (the live decoder, ``monitor.codec.frames``, calls
+it per frame); ``counter_verdicts`` applies it to every frame of one message of a log (the
+bulk decoder, ``monitor.codec.bulk``), stepping only where a counter is not the previous
+one + 1, so a healthy hour costs a few numpy operations.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from monitor.codec.layout import COUNTER_MODULO
+
+#: Frames in sequence with each other a message needs to be believed again after a frame out
+#: of sequence (the last of them is the first believed); why 3: the module docstring.
+RESYNC_FRAMES = 3
+
+# Verdicts of ``counter_step`` (int8 in ``counter_verdicts``).
+IN_SEQUENCE = 0  # the last believed + 1 (or the message's first frame): believed
+LOST_ONE = 1  # the last believed + 2: one frame lost, believed
+RESYNCED = 2  # the RESYNC_FRAMES-th frame of a run in sequence: believed again
+OUT_OF_SEQUENCE = 3  # a repeat, a larger jump or a run still too short: not believed
+BELIEVED = (IN_SEQUENCE, LOST_ONE, RESYNCED)
+
+
+class CounterState(NamedTuple):
+    """One message's counter state: the last believed counter (-1: no frame yet), the last
+    counter not believed (-1: none since the last believed) and how many frames in
+    sequence end with it."""
+
+    last: int = -1
+    candidate: int = -1
+    run: int = 0
+
+    @property
+    def previous(self) -> int:
+        """The counter of the latest frame seen (believed or not); -1 before the first."""
+        return self.candidate if self.candidate >= 0 else self.last
+
+
+def counter_step(state: CounterState, counter: int) -> tuple[int, CounterState]:
+    """The verdict on a frame with alive counter ``counter`` (0-15) and the message's new
+    state (module docstring)."""
+    last, candidate, run = state
+    if last < 0:
+        return IN_SEQUENCE, CounterState(counter)
+    step = (counter - last) % COUNTER_MODULO
+    if step == 1:
+        return IN_SEQUENCE, CounterState(counter)
+    if step == 2:
+        return LOST_ONE, CounterState(counter)
+    run = run + 1 if candidate >= 0 and counter == (candidate + 1) % COUNTER_MODULO else 1
+    if run >= RESYNC_FRAMES:
+        return RESYNCED, CounterState(counter)
+    return OUT_OF_SEQUENCE, CounterState(last, counter, run)
+
+
+def is_jump(state: CounterState, counter: int) -> bool:
+    """Whether ``counter`` breaks the sequence of the frames seen (not the latest + 1): what
+    the ``counter_jumps`` count counts, believed or not."""
+    prev = state.previous
+    return prev >= 0 and counter != (prev + 1) % COUNTER_MODULO
+
+
+def counter_verdicts(counters: np.ndarray) -> np.ndarray:
+    """``counter_step``'s verdict (int8) on each of one message's frames in order, from a
+    fresh state; the same values as stepping frame by frame."""
+    c = np.asarray(counters, dtype=np.int64)
+    n = c.size
+    out = np.full(n, IN_SEQUENCE, dtype=np.int8)
+    # Frames that are not the previous one + 1: only there (and after a frame not believed)
+    # does the state do anything but follow the counter.
+    breaks = np.flatnonzero(c[1:] != (c[:-1] + 1) % COUNTER_MODULO) + 1
+    state = CounterState()
+    i = 0
+    for b in (0, *breaks.tolist()):
+        if b < i:  # already stepped over
+            continue
+        if b > 0:  # frames i..b-1 each the previous + 1 after a believed one
+            state = CounterState(int(c[b - 1]))
+        i = b
+        while i < n:
+            verdict, state = counter_step(state, int(c[i]))
+            out[i] = verdict
+            i += 1
+            if verdict != OUT_OF_SEQUENCE:
+                break
+    return out
