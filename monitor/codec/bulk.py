@@ -1,9 +1,9 @@
 """``FrameCodec.decode`` for a whole log at once, vectorised by message ID.
 
 The checks and counts are those of ``FrameCodec.decode`` frame by frame, in the same order:
-unknown id (ignored), DLC not 8, CRC-8 over bytes 0-6, the alive-counter rule
-(``monitor.codec.counter``, the same function; only frames with a good CRC move the
-counter), raw value outside the DBC range.  Bit positions, lengths, byte order, signedness, scaling and raw ranges come from
+unknown id (ignored), DLC not 8, CRC-8 over bytes 0-6, raw value outside the DBC range,
+the alive-counter rule (``monitor.codec.counter``, the same function; only frames that
+passed CRC and range move the counter).  Bit positions, lengths, byte order, signedness, scaling and raw ranges come from
 the message layout (``monitor.codec.layout``, read once from the DBC with cantools) and
 the CRC from ``monitor.codec.crc``'s table, as in ``FrameCodec.decode``.
 """
@@ -74,25 +74,26 @@ def decode_frames(codec: FrameCodec, frames: Frames) -> dict[str, DecodedMessage
         crc_ok = crc8_rows(data[:, :CRC_BYTE]) == data[:, CRC_BYTE]
         counts.reject(info.name, Rejection.CRC.value, int((~crc_ok).sum()))
         rows, data = rows[crc_ok], data[crc_ok]
+        raw = raw_values(info, data)
+        in_range = np.ones(rows.size, dtype=bool)
+        for sig in info.signals:
+            in_range &= (raw[sig.name] >= sig.raw_min) & (raw[sig.name] <= sig.raw_max)
+        counts.reject(info.name, Rejection.RANGE.value, int((~in_range).sum()))
+        rows, data = rows[in_range], data[in_range]
+        raw = {k: v[in_range] for k, v in raw.items()}
         counter = (data[:, COUNTER_BYTE] & 0x0F).astype(np.int64)
         jumps = int(np.count_nonzero(counter[1:] != (counter[:-1] + 1) % COUNTER_MODULO))
         counts.counter_jumps += jumps
         counts.reject(info.name, "counter_jump", jumps)
         believed = counter_verdicts(counter) != OUT_OF_SEQUENCE
         counts.reject(info.name, Rejection.SEQUENCE.value, int((~believed).sum()))
-        rows, data = rows[believed], data[believed]
-        raw = raw_values(info, data)
-        in_range = np.ones(rows.size, dtype=bool)
-        for sig in info.signals:
-            in_range &= (raw[sig.name] >= sig.raw_min) & (raw[sig.name] <= sig.raw_max)
-        counts.reject(info.name, Rejection.RANGE.value, int((~in_range).sum()))
-        good = int(in_range.sum())
+        good = int(believed.sum())
         counts.decoded += good
         if good:
             counts.per_message[info.name] = good
         values = {
-            sig.name: raw[sig.name][in_range] * sig.scale + sig.offset for sig in info.signals
+            sig.name: raw[sig.name][believed] * sig.scale + sig.offset for sig in info.signals
         }
-        out[info.name] = DecodedMessage(rows[in_range], values)
+        out[info.name] = DecodedMessage(rows[believed], values)
     counts.ignored = int(n - known.sum())
     return out

@@ -219,8 +219,16 @@ class FrameCodec:
         if crc8_sae_j1850(data[:CRC_BYTE]) != data[CRC_BYTE]:
             counts.reject(name, Rejection.CRC.value)
             return Decoded(name, None, Rejection.CRC)
-        # The CRC vouches for the counter, so it updates the state even if a value is out
-        # of range below; a corrupt frame (bad CRC) must not resynchronise it.
+        little, big = int.from_bytes(data, "little"), int.from_bytes(data, "big")
+        values: dict[str, float] = {}
+        for sig in info.signals:
+            r = sig.raw(little, big)
+            if r < sig.raw_min or r > sig.raw_max:
+                counts.reject(name, Rejection.RANGE.value)
+                return Decoded(name, None, Rejection.RANGE)
+            values[sig.name] = r * sig.scale + sig.offset
+        # Only a frame that passed CRC and range moves the counter state: a corrupt or
+        # forged frame caught by them must not shift the sequence the sender's frames keep.
         counter = data[COUNTER_BYTE] & 0x0F
         state = self._rx_counter.get(name, _FRESH)
         jump = is_jump(state, counter)
@@ -231,14 +239,6 @@ class FrameCodec:
         if verdict not in BELIEVED:
             counts.reject(name, Rejection.SEQUENCE.value)
             return Decoded(name, None, Rejection.SEQUENCE, jump)
-        little, big = int.from_bytes(data, "little"), int.from_bytes(data, "big")
-        values: dict[str, float] = {}
-        for sig in info.signals:
-            r = sig.raw(little, big)
-            if r < sig.raw_min or r > sig.raw_max:
-                counts.reject(name, Rejection.RANGE.value)
-                return Decoded(name, None, Rejection.RANGE, jump)
-            values[sig.name] = r * sig.scale + sig.offset
         counts.decoded += 1
         counts.per_message[name] = counts.per_message.get(name, 0) + 1
         return Decoded(name, values, None, jump)
