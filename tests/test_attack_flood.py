@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 from attack_support import AttackRig, multicast_error
 from naive_frames import counter_believed, read_candump_lines
+from naive_frames import recording_from_candump as recording_from_frames
 
 from monitor.codec.crc import crc8_sae_j1850
 from monitor.codec.frames import FrameCodec
@@ -50,8 +51,17 @@ def detect_events(log: Path, tmp_path: Path) -> tuple[list[tuple], dict]:
     """``monitor detect LOG``'s state changes (the keys that make a decision) and summary."""
     summary, events = tmp_path / f"{log.stem}.json", tmp_path / f"{log.stem}.jsonl"
     proc = subprocess.run(
-        [sys.executable, "-m", "monitor", "detect", str(log), "--summary", str(summary),
-         "--events", str(events)],  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "monitor",
+            "detect",
+            str(log),
+            "--summary",
+            str(summary),
+            "--events",
+            str(events),
+        ],
         capture_output=True,
         text=True,
         check=False,
@@ -105,26 +115,59 @@ def test_random_frame_flood_changes_no_decision_offline(flooded: Path, tmp_path:
     on five IDs moved the fault by 0.05-0.15 s; before, by up to 3.6 s on every seed)."""
     clean, _ = detect_events(LOG, tmp_path)
     events, summary = detect_events(flooded, tmp_path)
-    assert clean == [("normal", None, "normal", None, None, None),
-                     ("fault", "spool_wear", "normal", None, None, None)]  # fmt: skip
+    assert clean == [
+        ("normal", None, "normal", None, None, None),
+        ("fault", "spool_wear", "normal", None, None, None),
+    ]
     assert events == clean  # the fault raised at 52.5 s instead of 53.02 s before
     assert sum(r.get("sequence", 0) for r in summary["rejected"].values()) > 20
 
 
 @pytest.mark.skipif(multicast_error() is not None, reason=str(multicast_error()))
 def test_random_frame_flood_live_gives_the_offline_events(flooded: Path, tmp_path: Path) -> None:
-    """``monitor run`` (the attack harness: daemon and replayer processes of their own on
-    udp_multicast) of the flooded log makes the decisions ``monitor detect`` makes of it."""
-    offline, _ = detect_events(flooded, tmp_path)
+    """``monitor run`` (the attack harness: daemon, replayer and sniffer processes of their
+    own on udp_multicast) of the flooded log makes the decisions ``monitor detect`` makes
+    of the frames that were on the bus (a starved replayer may put real gaps there)."""
     rig = AttackRig(tmp_path, time_scale=1.0)
+    rig.sniff()
     try:
         rig.start()
         rig.replay(flooded, speed=1.0)
-        rig.wait_event(lambda e: e.get("state") == "inactive")  # the bus fell silent
+        end = rig.events()[-1]["seq"]
+        rig.wait_event(lambda e: e["seq"] > end and e.get("state") == "inactive")  # silence
         assert rig.stop() == 0
     finally:
         if rig.daemon is not None and rig.daemon.poll() is None:
             rig.kill()
+        bus = rig.sniffed()
+    bus_log = tmp_path / "bus.log"
+    t0 = bus[0].timestamp
+    bus_log.write_text(
+        "".join(
+            f"({m.timestamp:.6f}) can0 {m.arbitration_id:08X}#{m.data.hex().upper()}\n"
+            for m in bus
+            if m.is_extended_id and not m.is_error_frame and (m.arbitration_id & 0xFF) != 0xA0
+        )
+    )
+    offline, _ = detect_events(bus_log, tmp_path)
     live = [tuple(e.get(k) for k in KEYS) for e in rig.events() if e.get("kind") != "bus"]
-    assert live[-1][0] == "inactive"  # after the log's end
+    assert live[-1][0] == "inactive" and t0 > 0  # after the log's end: the bus fell silent
     assert live[:-1] == offline
+
+
+def test_a_log_with_one_dropped_frame_still_decodes_every_other_frame(tmp_path: Path) -> None:
+    from monitor.sampling.bulk import recording_from_candump_bulk
+
+    lines = LOG.read_text().splitlines(keepends=True)
+    pressures = [i for i, x in enumerate(lines) if " 0CFF1021#" in x]
+    for k in (pressures[100], pressures[2000], pressures[5000]):  # one at a time: +2
+        lines[k] = ""
+    log = tmp_path / "dropped.log"
+    log.write_text("".join(lines))
+    for counts in (
+        recording_from_candump_bulk(log).meta["counts"],
+        recording_from_frames(log).meta["counts"],
+    ):
+        assert counts["frames"] == len(lines) - 3
+        assert counts["decoded"] == counts["frames"]  # every frame but the dropped ones
+        assert counts["counter_jumps"] == 3 and counts["rejected"]["sequence"] == 0

@@ -3,9 +3,10 @@
 The checks and counts are those of ``FrameCodec.decode`` frame by frame, in the same order:
 unknown id (ignored), DLC not 8, CRC-8 over bytes 0-6, raw value outside the DBC range,
 the alive-counter rule (``monitor.codec.counter``, the same function; only frames that
-passed CRC and range move the counter).  Bit positions, lengths, byte order, signedness, scaling and raw ranges come from
-the message layout (``monitor.codec.layout``, read once from the DBC with cantools) and
-the CRC from ``monitor.codec.crc``'s table, as in ``FrameCodec.decode``.
+passed CRC and range move the counter).  Bit positions, lengths, byte order, signedness,
+scaling and raw ranges come from the message layout (``monitor.codec.layout``, read once
+from the DBC with cantools) and the CRC from ``monitor.codec.crc``'s table, as in
+``FrameCodec.decode``.
 """
 
 from __future__ import annotations
