@@ -29,7 +29,8 @@ from monitor.codec.frames import FrameCodec
 from monitor.resources import resource_path
 
 LOG = resource_path("replay", "spool_wear.log")  # spool wear raised at 53.02 s of 90 s
-HYDRAULIC_IDS = ("0CFF1021", "0CFF1121", "0CFF1203", "18FF1300")  # pressures, flow, ...
+# pressures, flow, rod position, commands, oil temperature
+HYDRAULIC_IDS = ("0CFF1021", "0CFF1121", "0CFF1421", "0CFF1203", "18FF1300")
 KEYS = ("state", "fault", "op_state", "out_of_range_signal", "sensor", "sensor_check")
 
 
@@ -49,7 +50,8 @@ def flood(src: Path, out: Path, n: int, seed: int) -> Path:
 
 
 def detect_events(log: Path, tmp_path: Path) -> tuple[list[tuple], dict]:
-    """``monitor detect LOG``'s state changes (the keys that make a decision) and summary."""
+    """``monitor detect LOG``'s state changes (time and the keys that make a decision) and
+    its summary."""
     summary, events = tmp_path / f"{log.stem}.json", tmp_path / f"{log.stem}.jsonl"
     proc = subprocess.run(
         [
@@ -69,7 +71,7 @@ def detect_events(log: Path, tmp_path: Path) -> tuple[list[tuple], dict]:
     )
     assert proc.returncode == 0, proc.stderr
     lines = [json.loads(x) for x in events.read_text().splitlines()]
-    changes = [tuple(e.get(k) for k in KEYS) for e in lines if e["event"] == "state"]
+    changes = [(e["t"], *(e.get(k) for k in KEYS)) for e in lines if e["event"] == "state"]
     return changes, json.loads(summary.read_text())
 
 
@@ -106,22 +108,22 @@ def test_random_frames_believed_only_in_sequence_with_the_sender(flooded: Path) 
     c = codec.counts
     # About 390 of the random frames pass CRC-8 (1 in 256), a quarter of them range; of
     # those, few come in sequence, and each costs the sender at most two frames.
-    assert c.rejected["crc"] > 99_000 and 20 < c.rejected["sequence"] < 200
+    assert c.rejected["crc"] > 99_000 and 50 < c.rejected["sequence"] < 200
     assert 0 < forged_ok == forged_in < 25 and sender_lost <= 2 * forged_in
 
 
 def test_random_frame_flood_changes_no_decision_offline(flooded: Path, tmp_path: Path) -> None:
-    """This flood's 5 random frames in sequence change nothing.  Not every flood's do: a
+    """This flood's random frames in sequence change nothing.  Not every flood's do: a
     random frame in sequence is a sender's frame to any receiver (seeds 3-6 of 100k frames
     on five IDs moved the fault by 0.05-0.15 s; before, by up to 3.6 s on every seed)."""
     clean, _ = detect_events(LOG, tmp_path)
     events, summary = detect_events(flooded, tmp_path)
     assert clean == [
-        ("normal", None, "normal", None, None, None),
-        ("fault", "spool_wear", "normal", None, None, None),
+        (0.0, "normal", None, "normal", None, None, None),
+        (53.02, "fault", "spool_wear", "normal", None, None, None),
     ]
     assert events == clean  # the fault raised at 52.5 s instead of 53.02 s before
-    assert sum(r.get("sequence", 0) for r in summary["rejected"].values()) > 20
+    assert sum(r.get("sequence", 0) for r in summary["rejected"].values()) > 50
 
 
 def _settled(rig: AttackRig, quiet_s: float = 3.0, timeout_s: float = 180.0) -> None:
@@ -176,7 +178,7 @@ def test_random_frame_flood_live_gives_the_offline_events(flooded: Path, tmp_pat
     offline, _ = detect_events(bus_log, tmp_path)
     live = [tuple(e.get(k) for k in KEYS) for e in rig.events() if e.get("kind") != "bus"]
     assert live[-1][0] == "inactive" and t0 > 0  # after the log's end: the bus fell silent
-    assert live[:-1] == offline
+    assert live[:-1] == [e[1:] for e in offline]  # the live clock is the daemon's
 
 
 def test_a_log_with_one_dropped_frame_still_decodes_every_other_frame(tmp_path: Path) -> None:
