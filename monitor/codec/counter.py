@@ -15,11 +15,15 @@ hydraulic messages, 1 s for HYD_OilTemp), and a sender that restarts its counter
 lost) is then blind for the 2 frames before the third: a gap of 3 cycles, which is not
 stale, for every message whatever its cycle time.  A larger N would turn every counter
 restart into a sensor fault; N = 2 would let two random frames that pass CRC-8 with
-consecutive counters (1 in 16 once two passed) take a message over.  With 3, it takes three
-frames that pass CRC-8 (1 in 256 each), in sequence (1 in 256 for the last two), all
-between two frames of the sender: for HYD_OilTemp, whose sender is silent for a whole
-second, about once in 500 s of a bus saturated with random frames on its ID (about 7 of
-them pass CRC-8 a second), and for a 10 ms message practically never.
+consecutive counters (1 in 16 once two passed) take a message over.  With 3, a random
+take-over needs three frames that pass CRC-8 (1 in 256 each) with consecutive counters
+(1 in 256 for the last two), all between two frames of the sender: for a 10 ms message
+practically never (a saturated bus fits about 20 frames between two of the sender's, 0.07
+of them passing CRC-8), for HYD_OilTemp, whose sender is silent for a second, about once a
+minute on a bus saturated with random frames on its ID (about 7 a second pass CRC-8).
+What no counter rule can refuse is a random frame whose counter happens to be the next
+one or the one after (2 in 16 of those passing CRC-8): to a receiver it is the sender's.
+The slow signals' plausibility (``monitor.detection.evidence``) is what guards them.
 
 The very first frame of a message is believed: a start mid-operation has nothing to compare
 it with.
