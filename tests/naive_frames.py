@@ -223,15 +223,21 @@ def _messages(lines: _CheckedLines, path: Path) -> Iterator[can.Message]:
 
 def counter_believed(counters: list[int], resync: int = 3) -> list[bool]:
     """Which frames of one message the alive-counter rule believes, by its prose: the first
-    frame, then a frame 1 or 2 after the last believed one (one frame lost); any other is
-    not believed, until ``resync`` frames in a row have counters each 1 after the one
-    before, the last of them believed again.  A plain loop over a list of the frames seen
-    since the last believed one."""
+    frame, then a frame 1 or 2 after the last believed one (one frame lost), or one that
+    repeats the last believed one or is one behind it while 1 or 2 after the believed one
+    before that (it takes the last one's place); any other is not believed, until
+    ``resync`` frames in a row have counters each 1 after the one before, the last of them
+    believed again (with no believed one before it).  Plain lists of the frames seen."""
     out: list[bool] = []
-    trusted: int | None = None
+    believed: list[int] = []  # believed counters since the first or the last resync
     since: list[int] = []  # counters not believed since the last believed frame
     for c in counters:
-        if trusted is None or (c - trusted) % 16 in (1, 2):
+        after = (c - believed[-1]) % 16 if believed else None
+        if after is None or after in (1, 2):
+            believed.append(c)
+            ok = True
+        elif after in (0, 15) and len(believed) > 1 and (c - believed[-2]) % 16 in (1, 2):
+            believed[-1] = c
             ok = True
         else:
             since.append(c)
@@ -239,7 +245,9 @@ def counter_believed(counters: list[int], resync: int = 3) -> list[bool]:
             while tail < len(since) and (since[-tail] - since[-tail - 1]) % 16 == 1:
                 tail += 1
             ok = tail >= resync
+            if ok:
+                believed = [c]
         if ok:
-            trusted, since = c, []
+            since = []
         out.append(ok)
     return out

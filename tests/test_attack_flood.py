@@ -82,8 +82,9 @@ def flooded(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_random_frames_believed_only_in_sequence_with_the_sender(flooded: Path) -> None:
     """Frame by frame: each message's believed frames are those the plain reference rule
-    believes; a random frame out of sequence is never believed, and the sender's frames
-    are all believed but the one or two after a random frame that was in sequence."""
+    believes; of about 90 random frames that pass CRC-8 and range, those whose counter
+    falls in sequence are believed (no receiver can tell them), and the sender's next
+    frame always takes their place; a few of the sender's frames are lost."""
     codec = FrameCodec.from_dbc()
     genuine = {(m.timestamp, bytes(m.data)) for m in read_candump_lines(LOG)}
     seen: dict[str, list[tuple[bool, bool, int]]] = {}  # per message: (sender's, ok, ctr)
@@ -93,23 +94,23 @@ def test_random_frames_believed_only_in_sequence_with_the_sender(flooded: Path) 
         if d.name is None or crc8_sae_j1850(data[:7]) != data[7] or d.rejection == "range":
             continue  # what CRC and range catch never reaches the counter
         seen.setdefault(d.name, []).append(((m.timestamp, data) in genuine, d.ok, data[6] & 15))
-    forged_ok = forged_in = sender_lost = 0
+    forged_ok = sender_lost = 0
     for name, frames in seen.items():
         assert [ok for _, ok, _ in frames] == counter_believed([c for *_, c in frames]), name
-        last = None
+        believed_forged = False  # since the sender's last frame
         for sender, ok, c in frames:
-            if not sender:
-                in_seq = last is not None and (c - last) % 16 in (1, 2)
-                forged_in += in_seq
+            if sender:
+                # The sender's next frame takes a believed random frame's place.
+                assert ok or not believed_forged, (name, c)
+                sender_lost += not ok
+                believed_forged = False
+            else:
                 forged_ok += ok
-                assert ok == in_seq, (name, c, last)
-            sender_lost += sender and not ok
-            last = c if ok else last
+                believed_forged |= ok
     c = codec.counts
-    # About 390 of the random frames pass CRC-8 (1 in 256), a quarter of them range; of
-    # those, few come in sequence, and each costs the sender at most two frames.
+    # About 390 of the random frames pass CRC-8 (1 in 256), a quarter of them range.
     assert c.rejected["crc"] > 99_000 and 50 < c.rejected["sequence"] < 200
-    assert 0 < forged_ok == forged_in < 25 and sender_lost <= 2 * forged_in
+    assert 0 < forged_ok < 40 and sender_lost < 10
 
 
 def test_random_frame_flood_changes_no_decision_offline(flooded: Path, tmp_path: Path) -> None:

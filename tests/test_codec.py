@@ -142,14 +142,18 @@ def test_one_lost_frame_is_tolerated_a_larger_jump_rejected_until_three_in_seque
     # three in a row are in sequence (9, 10, 11): the third is the first believed again.
     assert verdict(9) == (Rejection.SEQUENCE, True)
     assert verdict(10) == (Rejection.SEQUENCE, False)
-    assert verdict(11) == (None, False)
+    assert verdict(11) == (None, False)  # resynchronised: no believed frame before it
+    assert verdict(11) == (Rejection.SEQUENCE, True)  # so a repeat is not believed
+    assert verdict(12) == (None, False)
     # wrap 15 -> 0 is continuous
-    assert [verdict(i) for i in range(12, 20)] == [(None, False)] * 8
-    assert verdict(19) == (Rejection.SEQUENCE, True)  # a repeat
-    assert verdict(20) == (None, False)  # the sender's next frame: in sequence
+    assert [verdict(i) for i in range(13, 20)] == [(None, False)] * 7
+    # A repeat after two believed in sequence takes the last one's place (one of the two
+    # was an intruder's, and the later one is kept), and the sender goes on.
+    assert verdict(19) == (None, True)
+    assert verdict(20) == (None, False)
     c = codec.counts
-    assert c.counter_jumps == 3 and c.rejected["sequence"] == 3
-    assert c.rejected_by_message == {"HYD_Flow": {"counter_jump": 3, "sequence": 3}}
+    assert c.counter_jumps == 4 and c.rejected["sequence"] == 3
+    assert c.rejected_by_message == {"HYD_Flow": {"counter_jump": 4, "sequence": 3}}
     # a corrupt frame does not move the counter state
     bad = frames[21][:7] + bytes([frames[21][7] ^ 0xFF])
     assert codec.decode(0x0CFF1121, bad).rejection is Rejection.CRC
@@ -167,6 +171,14 @@ def test_a_forged_frame_between_the_senders_changes_nothing(codec: FrameCodec) -
         seen.append(codec.decode(0x0CFF1121, f))  # 12 -> 5 jumps back, yet in sequence
     assert [d.rejection for d in seen] == [None] * 5 + [Rejection.SEQUENCE] + [None] * 5
     assert all(d.values == {"QP": 1.0} for d in seen if d.ok)
+    # A forged frame with the sender's next number is believed (no receiver can tell),
+    # but the sender's frame right after it takes its place: nothing of it outlives that.
+    before = codec.encode("HYD_Flow", {"QP": 1.0}, counter=10)
+    fake = codec.encode("HYD_Flow", {"QP": 55.0}, counter=11)
+    own = codec.encode("HYD_Flow", {"QP": 1.0}, counter=11)
+    then = codec.encode("HYD_Flow", {"QP": 1.0}, counter=12)
+    got = [codec.decode(0x0CFF1121, f).values for f in (before, fake, own, then)]
+    assert got == [{"QP": 1.0}, {"QP": 55.0}, {"QP": 1.0}, {"QP": 1.0}]
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -98,11 +98,10 @@ def test_shuffled_log_is_refused_the_same_by_both_paths(tmp_path) -> None:
     log.write_text("".join(head))
     errors = _refusals(log)
     assert errors[0] == errors[1]
-    assert f"for {len(head)} frames" in errors[0]
-    assert "limit of 360000" in errors[0]  # an hour (20 per frame is less)
-    assert "resyncs): fix or sort its timestamps" in errors[0]
-    rows = int(errors[0].split("would need ")[1].split()[0])
-    assert rows > 360_000
+    # Most of its frames are out of counter sequence and never reach the clock; those that
+    # do still run backwards: refused, the log named, its timestamps to fix or sort.
+    assert errors[0].startswith(f"{log}: its clock runs backwards: ")
+    assert errors[0].endswith("a reversed log? fix or sort its timestamps")
 
 
 def test_reversed_log_is_refused_like_a_shuffled_one(tmp_path) -> None:
@@ -116,7 +115,7 @@ def test_reversed_log_is_refused_like_a_shuffled_one(tmp_path) -> None:
     errors = _refusals(log)
     assert errors[0] == errors[1]
     assert errors[0].startswith(f"{log}: its clock runs backwards: ")
-    assert f"for {len(head)} frames" in errors[0]
+    assert " frames (" in errors[0]  # the frames that reached the clock
     assert errors[0].endswith("a reversed log? fix or sort its timestamps")
     # The log in its own order is read.
     log.write_text("".join(head))

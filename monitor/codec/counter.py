@@ -2,12 +2,22 @@
 
 Byte 6's low nibble counts the frames of a message (+1 mod 16).  A frame whose counter is
 the last believed one + 1 is in sequence; + 2 means one frame was lost on the way, which a
-bus does, and is believed too.  Any other counter (a repeat, or a jump over two or more
-frames) is not believed: it is a frame out of sequence, as a forged one is (about one
+bus does, and is believed too.  Any other counter (a jump over two or more frames, a
+repeat) is not believed: it is a frame out of sequence, as a forged one is (about one
 random frame in 256 passes CRC-8, and then its counter is random).  The message is believed
 again only after ``RESYNC_FRAMES`` frames in a row in sequence with each other, the last of
 them the first believed; a frame in sequence with the last believed one meanwhile is
 believed at once (an intruder's frame between two of the sender's changes nothing).
+
+One exception, so that no intruder's value outlives the sender's next frame: a frame whose
+counter repeats the last believed one, or is one behind it, while in sequence with the
+believed frame before that (+ 1 or + 2), is believed (``DISPLACED``).  It is the sender's
+frame after an intruder's that took its number: which of two frames with one counter is
+the sender's no receiver can tell, and believing the later one bounds what the other
+changes to less than one cycle.  Refusing it instead kept a forged 0 degC HYD_OilTemp
+frame for two seconds, long enough to be confirmed as a cold machine.  A repeat of a
+frame whose predecessor was not believed (the first frame, or one after a resync) is not
+believed.
 
 ``RESYNC_FRAMES`` is 3, from the cycle times: the sampler calls a signal stale when its last
 value is older than 3 of its message's cycle times (``GenMsgCycleTime``: 10 ms for the
@@ -50,16 +60,18 @@ RESYNC_FRAMES = 3
 IN_SEQUENCE = 0  # the last believed + 1 (or the message's first frame): believed
 LOST_ONE = 1  # the last believed + 2: one frame lost, believed
 RESYNCED = 2  # the RESYNC_FRAMES-th frame of a run in sequence: believed again
-OUT_OF_SEQUENCE = 3  # a repeat, a larger jump or a run still too short: not believed
-BELIEVED = (IN_SEQUENCE, LOST_ONE, RESYNCED)
+DISPLACED = 3  # the last believed one's number, or one behind, after the one before: believed
+OUT_OF_SEQUENCE = 4  # a larger jump, a repeat or a run still too short: not believed
+BELIEVED = (IN_SEQUENCE, LOST_ONE, RESYNCED, DISPLACED)
 
 
 class CounterState(NamedTuple):
-    """One message's counter state: the last believed counter (-1: no frame yet), the last
-    counter not believed (-1: none since the last believed) and how many frames in
-    sequence end with it."""
+    """One message's counter state: the last believed counter (-1: no frame yet), the
+    believed counter before it (-1: none), the last counter not believed (-1: none since
+    the last believed) and how many frames in sequence end with it."""
 
     last: int = -1
+    before: int = -1
     candidate: int = -1
     run: int = 0
 
@@ -72,18 +84,24 @@ class CounterState(NamedTuple):
 def counter_step(state: CounterState, counter: int) -> tuple[int, CounterState]:
     """The verdict on a frame with alive counter ``counter`` (0-15) and the message's new
     state (module docstring)."""
-    last, candidate, run = state
+    last, before, candidate, run = state
     if last < 0:
         return IN_SEQUENCE, CounterState(counter)
     step = (counter - last) % COUNTER_MODULO
     if step == 1:
-        return IN_SEQUENCE, CounterState(counter)
+        return IN_SEQUENCE, CounterState(counter, last)
     if step == 2:
-        return LOST_ONE, CounterState(counter)
+        return LOST_ONE, CounterState(counter, last)
+    if (
+        step in (0, COUNTER_MODULO - 1)
+        and before >= 0
+        and (counter - before) % COUNTER_MODULO in (1, 2)
+    ):
+        return DISPLACED, CounterState(counter, before)
     run = run + 1 if candidate >= 0 and counter == (candidate + 1) % COUNTER_MODULO else 1
     if run >= RESYNC_FRAMES:
         return RESYNCED, CounterState(counter)
-    return OUT_OF_SEQUENCE, CounterState(last, counter, run)
+    return OUT_OF_SEQUENCE, CounterState(last, before, counter, run)
 
 
 def is_jump(state: CounterState, counter: int) -> bool:
@@ -107,8 +125,8 @@ def counter_verdicts(counters: np.ndarray) -> np.ndarray:
     for b in (0, *breaks.tolist()):
         if b < i:  # already stepped over
             continue
-        if b > 0:  # frames i..b-1 each the previous + 1 after a believed one
-            state = CounterState(int(c[b - 1]))
+        if b > i:  # frames i..b-1 each the previous + 1 after a believed one
+            state = CounterState(int(c[b - 1]), int(c[b - 2]))
         i = b
         while i < n:
             verdict, state = counter_step(state, int(c[i]))
