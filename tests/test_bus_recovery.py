@@ -414,7 +414,7 @@ def outage(tmp_path_factory) -> dict[str, Any]:
         link.down()  # ip link set can0 down
         wait_until(lambda: daemon.reader.recovery.bus_down == 1, 30.0)
         # Down long enough for a heartbeat to fall due and the silence to make it inactive.
-        wait_until(lambda: daemon.tx_errors >= 1 and daemon.state is State.INACTIVE, 30.0)
+        wait_until(lambda: daemon.tx.errors >= 1 and daemon.state is State.INACTIVE, 30.0)
         wait_until(lambda: daemon.reader.recovery.reopen_failures >= 2, 30.0)
         link.up = True  # ip link set can0 up
         wait_until(lambda: daemon.reader.bus_up, 30.0)
@@ -601,7 +601,7 @@ def test_mon_status_counts_bus_events_wrapping_at_16(outage) -> None:
     assert rc.bus_down + rc.bus_off + rc.error_passive == 1  # the one outage
     dbc = d.codec.message("MON_Status").dbc_message
     for n in (1, 15, 17):
-        msg = d.frames.status(State.NORMAL, 0, 0, 0, 0.0, bus_events=n)
+        msg = d.loops[0].frames.status(State.NORMAL, 0, 0, 0, 0.0, bus_events=n)
         assert dbc.decode(msg.data)["BusEvents"] == n % 16
     before = [m for m in outage["mon"] if m.arbitration_id == dbc.frame_id]
     assert before and dbc.decode(before[0].data)["BusEvents"] == 0  # sent before the outage

@@ -151,7 +151,7 @@ def test_engine_stopped_is_inactive_and_resumes(tmp_path) -> None:
     assert states(events) == ["normal", "inactive", "normal"]
     # The window was held, not restarted: J is defined 6 s after the restart, far less than
     # the window a fresh start needs.
-    assert daemon.last_j == daemon.last_j
+    assert daemon.loops[0].last_j == daemon.loops[0].last_j
 
 
 def test_whole_bus_silent_is_inactive_and_resumes(tmp_path) -> None:
@@ -176,13 +176,13 @@ def test_whole_bus_silent_is_inactive_and_resumes(tmp_path) -> None:
         sender.shutdown()
     # The daemon may also have heard the bus silent after the last frame (wall time).
     t_end = rest[-1].timestamp - t0
-    events = events_of_frames(events, t_end, daemon.last_t_s)
+    events = events_of_frames(events, t_end, daemon.pipeline.last_t_s)
     assert states(events) == ["normal", "inactive", "normal"]
     assert stop_s < events[1]["t"] < stop_s + 0.1
     # Window held: J defined 5 s after the restart.  Unless that trailing silence ran the
     # sample clock on past the last frame: its inactive ticks carry no J (events_of_frames).
-    ran_on = daemon.last_t_s > t_end + 1e-6
-    assert daemon.last_j == daemon.last_j or ran_on
+    ran_on = daemon.pipeline.last_t_s > t_end + 1e-6
+    assert daemon.loops[0].last_j == daemon.loops[0].last_j or ran_on
 
 
 def test_frames_with_unbelievable_timestamps_are_ignored_and_counted(tmp_path) -> None:

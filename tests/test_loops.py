@@ -315,17 +315,17 @@ def test_reload_swaps_each_loops_model_and_keeps_the_loop_layout(tmp_path, caplo
     daemon = Daemon(load_config(path))
     try:
         _two_loops(tmp_path, other)  # a new stick model only
-        daemon._do_reload()
+        daemon.reload_now()
         assert [lp.cfg.model for lp in daemon.loops] == [MODEL, other]
         assert daemon.reloads == 1
         _two_loops(tmp_path, MODEL, stick_pp="Bucket_PP")  # a signal moved: needs a restart
         with caplog.at_level("WARNING", logger="monitor"):
-            daemon._do_reload()
+            daemon.reload_now()
         assert "take effect at the next restart" in caplog.text
         assert daemon.loops[1].cfg.signals["PP"] == "Stick_PP"
         assert daemon.loops[1].cfg.model == other  # the whole loops section kept
         _two_loops(tmp_path, tmp_path / "gone.npz")  # a bad file keeps what runs
-        daemon._do_reload()
+        daemon.reload_now()
         assert daemon.reloads == 2 and daemon.loops[1].cfg.model == other
     finally:
         daemon.stop()
@@ -343,8 +343,8 @@ def _request(pgn: int, to: int) -> can.Message:
 def test_a_request_to_all_reaches_every_loop_one_to_an_address_only_its_loop(tmp_path) -> None:
     daemon = Daemon(live_config(tmp_path, CONFIG))
     try:
-        daemon._frame(_request(65227, 0xFF))  # DM2 from everybody
-        daemon._frame(_request(65227, 0xA2))  # DM2 from the bucket loop only
+        daemon.frame(_request(65227, 0xFF))  # DM2 from everybody
+        daemon.frame(_request(65227, 0xA2))  # DM2 from the bucket loop only
         assert [lp.diag.requests for lp in daemon.loops] == [1, 1, 2, 1]
     finally:
         daemon.stop()

@@ -74,9 +74,9 @@ def test_daemon_cap_is_exact_over_a_second(tmp_path, monkeypatch) -> None:
     try:
         for i in range(600):
             clock["t"] = 1000.0 + i * 0.005
-            capped = daemon.tx_capped
-            daemon._send(can.Message(arbitration_id=0x18FF00A0, data=bytes(8)))
-            if daemon.tx_capped == capped:
+            capped = daemon.tx.capped
+            daemon.tx.send(can.Message(arbitration_id=0x18FF00A0, data=bytes(8)))
+            if daemon.tx.capped == capped:
                 sent.append(clock["t"])
     finally:
         monkeypatch.undo()
@@ -109,5 +109,5 @@ def test_a_request_flood_never_makes_the_monitor_flood_the_bus(tmp_path) -> None
     elapsed = time.monotonic() - start
     ours = [m for m in drain(listener) if m.arbitration_id & 0xFF == 0xA0]
     assert daemon.counts()["j1939_requests"] >= 1000  # the flood reached the monitor
-    assert daemon.tx_capped > 0
+    assert daemon.tx.capped > 0
     assert len(ours) <= 5.0 * elapsed + 5

@@ -117,7 +117,7 @@ def test_a_slow_reload_never_stalls_detection(tmp_path, monkeypatch) -> None:
             for m in msgs:
                 tx.send(m)
             settle(daemon, len(msgs))
-            ticks = daemon.ticker.ticks
+            ticks = daemon.loops[0].ticker.ticks
             assert ticks > 1000 and daemon.reload_attempts == 0  # ticked while parsing
             release.set()
             wait_until(lambda: daemon.reload_attempts == 1)

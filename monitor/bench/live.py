@@ -13,7 +13,10 @@ Timing points, all ``time.perf_counter`` in this process:
 * tick: the ticker returned its result for a row.  A row is complete when the first frame
   of the next 10 ms instant arrives (the sampler cannot know earlier that no more frames of
   its instant will come), so a tick's latency is measured from that frame's arrival;
-* alarm frame: ``bus.send`` of MON_Alarm for a tick whose state changed.
+* alarm frame: the daemon's send of MON_Alarm for a tick whose state changed.
+
+The wrappers sit where the detector thread calls (the frame pipeline's ``feed``, ``send`` and
+``on_change``, each loop's ticker), so they see every frame, alarm and state change.
 
 CPU per tick is the detector thread's ``time.thread_time`` across ``Ticker.tick``.
 
@@ -118,6 +121,147 @@ def _config(model: Path, horizon: int, loops: int, channel: str, tmp: Path) -> M
     )
 
 
+class _Probe:
+    """The timed wrappers around what the daemon's detector thread calls (each loop's
+    ``Ticker.tick``, and the frame pipeline's input ``feed`` and outputs ``send`` and
+    ``on_change``), and what they note."""
+
+    def __init__(self, daemon: Daemon, arrivals: collections.deque[float]) -> None:
+        self.arrivals = arrivals
+        self.alarm_ids = {
+            daemon.codec.message(lp.cfg.alarm_message).frame_id for lp in daemon.loops
+        }
+        self.last = len(daemon.loops) - 1
+        self.latency: list[float] = []  # per row: arrival of the frame completing it -> ticked
+        self.cpu: list[float] = []  # per row: the loops' tick CPU
+        self.row_t: list[float] = []  # per row: its time
+        self.change_t: list[float] = []  # rows where any loop's tick changed
+        self.alarm_latency: list[float] = []  # MON_Alarm of a state change: arrival -> send
+        self.change_wall: list[float] = []  # what a state change cost the detector thread
+        self.change_cpu: list[float] = []
+        # state_changed: this loop's tick changed state (its MON_Alarm follows);
+        # row_changed: any loop's tick changed (state or gating: an event) in this row.
+        self.current: dict[str, Any] = {
+            "arrival": 0.0,
+            "state_changed": False,
+            "row_changed": False,
+            "stopping": False,
+            "cpu": 0.0,
+        }
+        pipeline = daemon.pipeline
+        for k, lp in enumerate(daemon.loops):
+            _wrap(lp.ticker, "tick", self._timed_tick(k, lp.ticker.tick))
+        _wrap(pipeline, "feed", self._timed_feed(pipeline.feed))
+        _wrap(pipeline, "send", self._timed_send(pipeline.send))
+        _wrap(pipeline, "on_change", self._timed_change(pipeline.on_change))
+
+    def _timed_feed(self, feed: Callable[[can.Message], None]) -> Callable[[can.Message], None]:
+        def timed_feed(msg: can.Message) -> None:
+            self.current["arrival"] = self.arrivals.popleft()
+            feed(msg)
+
+        return timed_feed
+
+    def _timed_tick(self, k: int, tick: Callable[[np.ndarray], Tick]) -> Callable[..., Tick]:
+        """Loop k's tick; the row's latency and CPU are taken at the last loop's."""
+        current = self.current
+
+        def timed_tick(row: np.ndarray) -> Tick:
+            c0 = time.thread_time()
+            out = tick(row)
+            if current["stopping"]:  # the last row, ticked at shutdown: no frame completed it
+                return out
+            current["cpu"] += time.thread_time() - c0
+            current["state_changed"] = out.state_changed
+            current["row_changed"] = out.changed or (k > 0 and current["row_changed"])
+            if k == self.last:
+                self.latency.append(time.perf_counter() - current["arrival"])
+                self.cpu.append(current["cpu"])
+                current["cpu"] = 0.0
+                self.row_t.append(out.t_s)
+                if current["row_changed"]:
+                    self.change_t.append(out.t_s)
+            return out
+
+        return timed_tick
+
+    def _timed_send(self, send: Callable[[can.Message], None]) -> Callable[[can.Message], None]:
+        def timed_send(msg: can.Message) -> None:
+            if msg.arbitration_id in self.alarm_ids and self.current["state_changed"]:
+                self.alarm_latency.append(time.perf_counter() - self.current["arrival"])
+            send(msg)
+
+        return timed_send
+
+    def _timed_change(self, change: Callable[[Tick, Loop], None]) -> Callable[[Tick, Loop], None]:
+        def timed_state_change(t: Tick, lp: Loop) -> None:
+            # What a state change costs the detector thread (event log, black box, hook).
+            w0, c0 = time.perf_counter(), time.thread_time()
+            change(t, lp)
+            self.change_wall.append(time.perf_counter() - w0)
+            self.change_cpu.append(time.thread_time() - c0)
+
+        return timed_state_change
+
+
+def _put_on_bus(
+    daemon: Daemon, channel: str, rec: Recording, dbc: Path, speed: float
+) -> tuple[float, int]:
+    """Start the daemon, send ``rec``'s frames with its timing at ``speed``, wait until the
+    daemon decoded them all (at most 60 s more); (wall s of sending, frames sent)."""
+    codec = FrameCodec.from_dbc(dbc)
+    plan = _frames(codec, rec)
+    sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
+    daemon.start()
+    started = time.perf_counter()
+    for t_s, name, values in plan:
+        due = started + t_s / speed
+        wait = due - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        sender.send(codec.encode_message(name, values, START_TIME_S + t_s))
+    sent_s = time.perf_counter() - started
+    deadline = time.monotonic() + 60.0
+    while daemon.codec.counts.frames < len(plan) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    sender.shutdown()
+    return sent_s, len(plan)
+
+
+def _tick_latencies(probe: _Probe) -> dict[str, Any]:
+    """The rows' latency and CPU, apart near a state change (its event log fsync and
+    black-box dump of the pre-alarm frames ran in the detector thread before the disk
+    writer): within 2 s of data after it."""
+    lat = np.array(probe.latency) * 1e3
+    t_rows = np.array(probe.row_t)
+    behind = np.zeros(lat.size, dtype=bool)
+    for tc in probe.change_t:
+        behind |= (t_rows >= tc) & (t_rows < tc + 2.0)
+    steady = lat[~behind] if (~behind).any() else lat
+    cpu = np.array(probe.cpu) * 1e3
+    return {
+        "ticks": int(lat.size),
+        "tick_p50_ms": float(np.percentile(lat, 50)),
+        "tick_p99_ms": float(np.percentile(lat, 99)),
+        "tick_max_ms": float(lat.max()),
+        "tick_p99_ms_away_from_state_changes": float(np.percentile(steady, 99)),
+        "ticks_near_state_changes": int(behind.sum()),
+        "tick_p99_ms_near_state_changes": float(np.percentile(lat[behind], 99))
+        if behind.any()
+        else None,
+        "state_change_detector_ms": [float(v * 1e3) for v in probe.change_wall],
+        "state_change_detector_cpu_ms": [float(v * 1e3) for v in probe.change_cpu],
+        "tick_cpu_median_ms": float(np.median(cpu)),
+        "tick_cpu_p99_ms": float(np.percentile(cpu, 99)),
+        "alarm_frame_latency_ms": [float(v * 1e3) for v in probe.alarm_latency],
+        # Where the slowest ticks were (row time s, latency ms): stalls cluster or not.
+        "slowest_ticks": [(float(probe.row_t[i]), float(lat[i])) for i in np.argsort(lat)[-10:]],
+        "ticks_over_1ms": int(np.count_nonzero(lat > 1.0)),
+        "_latency_ms": lat,
+        "_cpu_ms": cpu,
+    }
+
+
 def run(
     model: Path,
     horizon: int,
@@ -136,95 +280,13 @@ def run(
     arrivals: collections.deque[float] = collections.deque()
     bus = can.Bus(interface="virtual", channel=channel)
     daemon = Daemon(cfg, bus=_TimedBus(bus, arrivals))
-    daemon.writer.inline = writes == "inline"
+    daemon.disk.writer.inline = writes == "inline"
     rss_loaded_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    alarm_ids = {daemon.codec.message(lp.cfg.alarm_message).frame_id for lp in daemon.loops}
-    latency, cpu, alarm_latency, row_t, change_t = [], [], [], [], []
-    # changed: this loop's tick changed state (its MON_Alarm follows); row_changed: any loop's
-    current = {
-        "arrival": 0.0,
-        "changed": False,
-        "row_changed": False,
-        "stopping": False,
-        "cpu": 0.0,
-    }
-    frame, send = daemon._frame, daemon._send
-    last = len(daemon.loops) - 1
-
-    def timed_frame(msg: can.Message) -> None:
-        current["arrival"] = arrivals.popleft()
-        frame(msg)
-
-    def timed(k: int, tick: Any) -> Any:
-        """Loop k's tick; the row's latency and CPU are taken at the last loop's."""
-
-        def timed_tick(row: np.ndarray):
-            c0 = time.thread_time()
-            out = tick(row)
-            if current["stopping"]:  # the last row, ticked at shutdown: no frame completed it
-                return out
-            current["cpu"] += time.thread_time() - c0
-            current["changed"] = out.changed
-            current["row_changed"] = out.changed or (k > 0 and current["row_changed"])
-            if k == last:
-                latency.append(time.perf_counter() - current["arrival"])
-                cpu.append(current["cpu"])
-                current["cpu"] = 0.0
-                row_t.append(out.t_s)
-                if current["row_changed"]:
-                    change_t.append(out.t_s)
-            return out
-
-        return timed_tick
-
-    def timed_send(msg: can.Message) -> None:
-        if msg.arbitration_id in alarm_ids and current["changed"]:
-            alarm_latency.append(time.perf_counter() - current["arrival"])
-        send(msg)
-
-    state_change = daemon._state_change
-    change_wall, change_cpu = [], []
-
-    def timed_state_change(t: Tick, lp: Loop) -> None:
-        # What a state change costs the detector thread (event log, black box, hook).
-        w0, c0 = time.perf_counter(), time.thread_time()
-        state_change(t, lp)
-        change_wall.append(time.perf_counter() - w0)
-        change_cpu.append(time.thread_time() - c0)
-
-    for k, lp in enumerate(daemon.loops):
-        _wrap(lp.ticker, "tick", timed(k, lp.ticker.tick))
-    _wrap(daemon, "_frame", timed_frame)
-    _wrap(daemon, "_send", timed_send)
-    _wrap(daemon, "_state_change", timed_state_change)
-    codec = FrameCodec.from_dbc(cfg.dbc)
-    plan = _frames(codec, rec)
-    sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
-    daemon.start()
-    started = time.perf_counter()
-    for t_s, name, values in plan:
-        due = started + t_s / speed
-        wait = due - time.perf_counter()
-        if wait > 0:
-            time.sleep(wait)
-        sender.send(codec.encode_message(name, values, START_TIME_S + t_s))
-    sent_s = time.perf_counter() - started
-    deadline = time.monotonic() + 60.0
-    while daemon.codec.counts.frames < len(plan) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    current["stopping"] = True
+    probe = _Probe(daemon, arrivals)
+    sent_s, frames = _put_on_bus(daemon, channel, rec, cfg.dbc, speed)
+    probe.current["stopping"] = True
     daemon.stop()
-    sender.shutdown()
     bus.shutdown()
-    lat = np.array(latency) * 1e3
-    # Ticks near a state change (its event log fsync and black-box dump of the pre-alarm
-    # frames ran in the detector thread before the disk writer): within 2 s of data after it.
-    t_rows = np.array(row_t)
-    behind = np.zeros(lat.size, dtype=bool)
-    for tc in change_t:
-        behind |= (t_rows >= tc) & (t_rows < tc + 2.0)
-    steady = lat[~behind] if (~behind).any() else lat
-    counts = daemon.counts()
     events = [json.loads(x) for x in (tmp / "events.jsonl").read_text().splitlines()]
     return {
         "model": str(model),
@@ -234,30 +296,12 @@ def run(
         "seconds_of_data": seconds,
         "speed": speed,
         "wall_s": sent_s,
-        "frames": len(plan),
-        "ticks": int(lat.size),
-        "tick_p50_ms": float(np.percentile(lat, 50)),
-        "tick_p99_ms": float(np.percentile(lat, 99)),
-        "tick_max_ms": float(lat.max()),
-        "tick_p99_ms_away_from_state_changes": float(np.percentile(steady, 99)),
-        "ticks_near_state_changes": int(behind.sum()),
-        "tick_p99_ms_near_state_changes": float(np.percentile(lat[behind], 99))
-        if behind.any()
-        else None,
-        "state_change_detector_ms": [float(v * 1e3) for v in change_wall],
-        "state_change_detector_cpu_ms": [float(v * 1e3) for v in change_cpu],
-        "tick_cpu_median_ms": float(np.median(cpu) * 1e3),
-        "tick_cpu_p99_ms": float(np.percentile(np.array(cpu) * 1e3, 99)),
-        "alarm_frame_latency_ms": [float(v * 1e3) for v in alarm_latency],
-        # Where the slowest ticks were (row time s, latency ms): stalls cluster or not.
-        "slowest_ticks": [(float(row_t[i]), float(lat[i])) for i in np.argsort(lat)[-10:]],
-        "ticks_over_1ms": int(np.count_nonzero(lat > 1.0)),
+        "frames": frames,
+        **_tick_latencies(probe),
         "state_changes": [e["state"] for e in events],
-        "dropped": counts["dropped"],
-        "disk_writer": daemon.writer.counts.as_dict(),
+        "dropped": daemon.counts()["dropped"],
+        "disk_writer": daemon.disk.writer.counts.as_dict(),
         "black_box_files": len(list((tmp / "blackbox").glob("alarm-*.log"))),
-        "_latency_ms": lat,
-        "_cpu_ms": np.array(cpu) * 1e3,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "rss_after_load_mb": rss_loaded_kb / 1024.0,
     }

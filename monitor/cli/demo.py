@@ -82,10 +82,11 @@ class _Progress:
 
 def _levels(daemon: Daemon) -> str:
     """The alarm level and J's share of it: the alarm is raised above 1, by J or by B."""
-    j, level = daemon.last_j, daemon.last_level
+    lp = daemon.loops[0]  # the demo's config has one loop
+    j, level = lp.last_j, lp.last_level
     if level != level:
         return "level n/a, J warming"
-    return f"level {level:.2f}, J/eps0 {j / daemon.model.eps0:.2f}"
+    return f"level {level:.2f}, J/eps0 {j / lp.model.eps0:.2f}"
 
 
 def run(args: argparse.Namespace) -> int:

@@ -13,6 +13,11 @@ import signal
 import time
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the daemon is imported when it runs: `monitor --help` stays light
+    from monitor.live.daemon import Daemon
+    from monitor.live.sdnotify import Notifier
 
 log = logging.getLogger("monitor")
 
@@ -48,52 +53,16 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)  # a bad file is one line from the CLI, before any logging
     setup_logging(logging.DEBUG if args.verbose else logging.INFO)
-    flags = _Flags()
-
-    def on_stop(signum: int, frame: FrameType | None) -> None:
-        flags.stop = True
-
-    def on_hup(signum: int, frame: FrameType | None) -> None:
-        flags.reload = True
-
-    signal.signal(signal.SIGTERM, on_stop)
-    signal.signal(signal.SIGINT, on_stop)
-    signal.signal(signal.SIGHUP, on_hup)
+    flags = _install_handlers()
     daemon = Daemon(cfg)
     daemon.start()
     notifier = Notifier()
     where = f"monitoring {cfg.bus.interface}:{cfg.bus.channel}"
     notifier.ready(where)
     _log_start_up()
-    # Half the watchdog timeout between pings; a detector loop that has not turned for
-    # that long is stuck, and the missing ping lets systemd restart us.
-    ping_s = notifier.watchdog_s / 2 if notifier.watchdog_s else None
-    last_ping = -float("inf")
-    reload_seen: int | None = None  # reload_attempts before the pending reload
     try:
-        while not flags.stop:
-            if flags.reload:
-                flags.reload = False
-                log.info("SIGHUP: reloading %s", cfg.source)
-                notifier.reloading()
-                reload_seen = daemon.reload_attempts
-                daemon.request_reload()
-            if reload_seen is not None and daemon.reload_attempts > reload_seen:
-                reload_seen = None
-                notifier.ready(where)
-            if not daemon.healthy:
-                log.error("a monitor thread died; stopping so the service manager restarts us")
-                return 1
-            now = time.monotonic()
-            if ping_s is not None and now - last_ping >= ping_s:
-                last_ping = now
-                if now - daemon.loop_mono < ping_s:
-                    notifier.watchdog()
-                else:
-                    log.warning(
-                        "detector loop stalled for %.1f s; no watchdog ping", now - daemon.loop_mono
-                    )
-            time.sleep(min(0.1, ping_s or 0.1))
+        if not _supervise(daemon, flags, notifier, where, cfg.source):
+            return 1
     finally:
         notifier.stopping()
         daemon.stop()  # ordered: reader, detector, outputs (fsynced), bus
@@ -106,6 +75,61 @@ def run(args: argparse.Namespace) -> int:
         )
         return 1
     return 0
+
+
+def _install_handlers() -> _Flags:
+    """SIGTERM and SIGINT ask for the stop, SIGHUP for a reload: flags only."""
+    flags = _Flags()
+
+    def on_stop(signum: int, frame: FrameType | None) -> None:
+        flags.stop = True
+
+    def on_hup(signum: int, frame: FrameType | None) -> None:
+        flags.reload = True
+
+    signal.signal(signal.SIGTERM, on_stop)
+    signal.signal(signal.SIGINT, on_stop)
+    signal.signal(signal.SIGHUP, on_hup)
+    return flags
+
+
+def _supervise(
+    daemon: Daemon, flags: _Flags, notifier: Notifier, where: str, source: object
+) -> bool:
+    """The main loop until a stop is asked for (True) or a monitor thread died (False):
+    reloads on request, RELOADING=1 then READY=1 around them, watchdog pings."""
+    # Half the watchdog timeout between pings; a detector loop that has not turned for
+    # that long is stuck, and the missing ping lets systemd restart us.
+    ping_s = notifier.watchdog_s / 2 if notifier.watchdog_s else None
+    last_ping = -float("inf")
+    reload_seen: int | None = None  # reload_attempts before the pending reload
+    while not flags.stop:
+        if flags.reload:
+            flags.reload = False
+            log.info("SIGHUP: reloading %s", source)
+            notifier.reloading()
+            reload_seen = daemon.reload_attempts
+            daemon.request_reload()
+        if reload_seen is not None and daemon.reload_attempts > reload_seen:
+            reload_seen = None
+            notifier.ready(where)
+        if not daemon.healthy:
+            log.error("a monitor thread died; stopping so the service manager restarts us")
+            return False
+        now = time.monotonic()
+        if ping_s is not None and now - last_ping >= ping_s:
+            last_ping = now
+            _ping(notifier, now - daemon.loop_mono, ping_s)
+        time.sleep(min(0.1, ping_s or 0.1))
+    return True
+
+
+def _ping(notifier: Notifier, stalled_s: float, ping_s: float) -> None:
+    """WATCHDOG=1 unless the detector loop has not turned for ``ping_s``."""
+    if stalled_s < ping_s:
+        notifier.watchdog()
+    else:
+        log.warning("detector loop stalled for %.1f s; no watchdog ping", stalled_s)
 
 
 def _log_start_up() -> None:

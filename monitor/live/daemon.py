@@ -22,16 +22,19 @@ closed), bus.  ``request_reload`` makes the detector thread reload config and mo
 two frames, keeping the bus.  Disk jobs (event log, black-box files) go to the
 ``disk-writer`` thread through a bounded queue (``monitor.live.writer``): no fsync or black-box
 dump stalls a tick.
+
+The daemon composes its parts, each with one job: the reader (``monitor.bus.reader``), the
+frame pipeline (frames in, decisions out: ``monitor.live.pipeline``), the monitored loops
+(``monitor.live.loops``; ``loops[0]`` is the only one without ``loops:`` in the config), the
+disk outputs (``monitor.live.disk``), the transmitter every own frame leaves through
+(``monitor.live.transmit``), the MON_Status heartbeat (``monitor.live.status``), the
+detector thread (``monitor.live.detector``) and the reload (``monitor.live.reload``).
 """
 
 from __future__ import annotations
 
 import logging
-import queue
-import threading
-import time
 from collections.abc import Callable
-from dataclasses import replace
 from functools import partial
 from typing import Any
 
@@ -43,24 +46,21 @@ from monitor.codec.frames import FrameCodec
 from monitor.config.layout import row_layout
 from monitor.config.settings import MonitorConfig
 from monitor.detection.alarm import State
-from monitor.detection.ticker import Tick, Ticker
-from monitor.live.blackbox import BlackBox
+from monitor.detection.ticker import Tick
+from monitor.live.detector import DetectorThread
+from monitor.live.disk import DiskOutputs
 from monitor.live.dm1 import Diagnostics
 from monitor.live.eventlog import bus_event_record
 from monitor.live.loops import Loop, worst_state
-from monitor.live.outputs import AlarmFrames, EventLog
 from monitor.live.pipeline import FramePipeline
-from monitor.live.ratecap import RateCap
-from monitor.live.reload import Reload, Reloader, prepare
-from monitor.live.storage import Quota
-from monitor.live.writer import DiskWriter
-from monitor.model.modelfile import MonitorModel
-from monitor.sampling.sampler import Sampler, sensor_filters
+from monitor.live.reload import Reload, Reloader, prepare, swap_in
+from monitor.live.status import Heartbeat
+from monitor.live.transmit import Transmitter
+from monitor.sampling.sampler import sensor_filters
 
 log = logging.getLogger("monitor")
 
 EventHook = Callable[[dict[str, Any]], None]
-_RETRY_S = 5.0  # how often events the disk refused are tried again
 
 
 class Daemon:
@@ -81,29 +81,14 @@ class Daemon:
         self.loops = [
             Loop(lc, cfg, self.codec, v) for lc, v in zip(cfg.monitored_loops, views, strict=True)
         ]
-        # Disk I/O (event log, black box) runs in the disk writer's thread; see monitor.live.writer.
-        st = cfg.storage
-        self.quota = Quota(st.quota_bytes, cfg.black_box.directory, cfg.event_log.path)
-        self.event_log = EventLog(cfg.event_log.path, cfg.event_log.rotate_bytes, self.quota)
-        self.writer = DiskWriter(st.writer_queue, st.event_block_s)
-        self.black_box = BlackBox(cfg.black_box, cfg.bus.channel, self.writer, self.quota)
-        self.writer.start()
-        self._own_bus = bus is None
-        if opener is None:
-            extra = Diagnostics.rx_filters() if cfg.j1939.enabled else []
-            opener = partial(open_bus, cfg.bus, sensor_filters(self.codec, self.columns) + extra)
-        backoff = Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s)
-        self.reader = BusReader(
-            bus if bus is not None else opener(),
-            cfg.bus.queue_frames,
-            opener=opener if self._own_bus else None,
-            backoff=backoff,
-        )
+        self.disk = DiskOutputs(cfg)  # its writer thread runs from here on
+        self.reader = _reader(cfg, self.codec, self.columns, bus, opener)
+        self.tx = Transmitter(self.reader, cfg.outputs.frames_max_per_s, cfg.bus.time_scale)
         self.pipeline = FramePipeline(
             self.codec,
             self.columns,
             self.loops,
-            self._send,
+            self.tx.send,
             self._state_change,
             cfg.bus.silent_s,
             cfg.bus.time_scale,
@@ -111,28 +96,16 @@ class Daemon:
             lambda: not self.reader.queue.empty(),
             lambda: self.reader.received_at,
         )
-        self.tx_errors = 0
-        self.tx_capped = 0  # own frames dropped by outputs.frames_max_per_s
-        self._last_cap_log = 0.0
-        # A log replayed faster than real time (time_scale < 1) times its alarms faster too.
-        self._budget = RateCap(cfg.outputs.frames_max_per_s / min(1.0, cfg.bus.time_scale))
-        self.unwritten = 0  # events still not on disk when ``stop`` returned
-        self._disk_errors_sent = 0  # disk_errors at the last MON_Status
-        self._last_retry_mono = 0.0
-        self.reloads = 0
-        self.loop_mono = time.monotonic()  # last pass of the detector loop (watchdog)
+        self.heartbeat = Heartbeat(self.codec, self.loops, self.reader, self.disk, self.tx.send)
+        self.reloader = Reloader(lambda: prepare(self.cfg, self.loops, self.disk.quota))
+        self.reloads = 0  # reloads swapped in
         self.reload_attempts = 0  # reloads finished, successful or not
-        self._last_status_mono = 0.0
-        self._last_tx_error_log = 0.0
-        self._stop = threading.Event()
-        self.reloader = Reloader(lambda: prepare(self.cfg, self.loops, self.quota))
-        self._thread = threading.Thread(target=self._run, name="detector", daemon=True)
-        self.error: BaseException | None = None
+        self.detector = DetectorThread(self.reader.queue, self)
 
     # -- control (any thread) -------------------------------------------------------------
 
     def start(self) -> None:
-        self._thread.start()
+        self.detector.start()
         self.reader.start()
         for lp in self.loops:
             log.info(
@@ -150,75 +123,42 @@ class Daemon:
         detector swaps the result in between two frames."""
         self.reloader.request()
 
+    def reload_now(self) -> None:
+        """Reload at once in this thread (parse, load, swap): what a SIGHUP does in two."""
+        self._apply_reload(prepare(self.cfg, self.loops, self.disk.quota))
+
     @property
     def healthy(self) -> bool:
-        return self.error is None and self._thread.is_alive() and self.reader.alive
+        return self.error is None and self.detector.alive and self.reader.alive
+
+    @property
+    def error(self) -> BaseException | None:
+        """What ended the detector thread, if anything did."""
+        return self.detector.error
+
+    @property
+    def loop_mono(self) -> float:
+        """Monotonic time of the detector loop's last pass (the watchdog's)."""
+        return self.detector.loop_mono
 
     @property
     def state(self) -> State:
         """The most pressing loop's state (fault, sensor fault, normal, inactive)."""
         return worst_state([lp.state for lp in self.loops])
 
-    # The first loop's parts (the only loop's, without ``loops:`` in the config).
     @property
-    def ticker(self) -> Ticker:
-        return self.loops[0].ticker
-
-    @property
-    def model(self) -> MonitorModel:
-        return self.loops[0].model
-
-    @property
-    def frames(self) -> AlarmFrames:
-        return self.loops[0].frames
-
-    @property
-    def diag(self) -> Diagnostics | None:
-        return self.loops[0].diag
-
-    @property
-    def last_j(self) -> float:
-        return self.loops[0].last_j
-
-    @property
-    def last_level(self) -> float:
-        """The first loop's alarm level max(J / eps0, B / b0) at its last tick (1 = alarm)."""
-        return self.loops[0].last_level
-
-    @property
-    def sampler(self) -> Sampler:
-        return self.pipeline.sampler
-
-    @property
-    def last_t_s(self) -> float | None:
-        """Sample-clock time of the last row ticked."""
-        return self.pipeline.last_t_s
-
-    @property
-    def bus(self) -> CanBus:
-        """The bus in use (the reader replaces it when it reopens a failed one)."""
-        return self.reader.bus
+    def unwritten(self) -> int:
+        """Events still not on disk when ``stop`` returned."""
+        return self.disk.unwritten
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """Ordered shutdown; safe to call twice."""
         self.reader.stop()
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout_s)
-        self.black_box.close()  # queues the last post-alarm frames and the file's close
-        self.writer.put_event(self.event_log.close)
-        self.writer.stop(timeout_s)  # drained: every event written and fsynced, files closed
-        if self.writer.counts.frames_dropped or self.writer.counts.events_over_bound:
-            log.warning("disk writer: %s", self.writer.counts.as_dict())
-        self.unwritten = self.event_log.unwritten + self.event_log.lost + self.writer.pending()
-        if self._own_bus:
-            self.bus.shutdown()
+        self.detector.stop(timeout_s)
+        self.disk.close(timeout_s)
+        if self.reader.opener is not None:  # a bus of our own (one given is the caller's)
+            self.reader.bus.shutdown()
         log.info("stopped: %s", self.counts())
-
-    @property
-    def disk_errors(self) -> int:
-        """Failed writes, rotations and deletions of the event log and black boxes."""
-        return self.event_log.disk_errors + self.writer.counts.job_errors
 
     def counts(self) -> dict[str, Any]:
         r = self.reader.counts
@@ -231,215 +171,120 @@ class Daemon:
             "dropped": r.dropped,
             "bus_errors": r.bus_errors,
             **self.codec.counts.as_dict(),
-            **self.sampler.counts.as_dict(),
+            **self.pipeline.sampler.counts.as_dict(),
             "ticks": sum(lp.ticker.ticks for lp in self.loops),
             "alarm_frames": sum(lp.frames.sent for lp in self.loops),
             "alarm_frames_held_back": sum(lp.frames.held_back for lp in self.loops),
-            "events": self.event_log.written,
-            "disk_errors": self.disk_errors,
-            "events_unwritten": self.event_log.unwritten,
-            "tx_errors": self.tx_errors,
-            "tx_capped": self.tx_capped,
+            "events": self.disk.event_log.written,
+            "disk_errors": self.disk.disk_errors,
+            "events_unwritten": self.disk.event_log.unwritten,
+            "tx_errors": self.tx.errors,
+            "tx_capped": self.tx.capped,
             "bad_timestamps": self.pipeline.bad_timestamps,
             **diag,
             "error_frames": r.error_frames,
             **self.reader.recovery.as_dict(),
         }
 
-    # -- detector thread ------------------------------------------------------------------
+    # -- detector thread (monitor.live.detector) ------------------------------------------
 
-    def _run(self) -> None:
-        try:
-            self._loop()
-        except BaseException as exc:  # surfaced by ``healthy``; the supervisor exits
-            self.error = exc
-            log.exception("detector thread failed")
+    def reload_point(self) -> None:
+        """Between two frames: swap in a reload that finished."""
+        if self.reloader.pending:
+            result = self.reloader.poll()
+            if result is not None:
+                self._apply_reload(result)
 
-    def _loop(self) -> None:
-        q = self.reader.queue
-        while True:
-            self.loop_mono = time.monotonic()
-            if self.reloader.pending:
-                result = self.reloader.poll()
-                if result is not None:
-                    self._apply_reload(result)
-            try:
-                msg = q.get(timeout=0.05)
-            except queue.Empty:
-                if self._stop.is_set():
-                    break  # the reader is stopped first, so the queue is drained
-                self.pipeline.silence()
-            else:
-                self._frame(msg)
-                for _ in range(1000):  # drain a burst without a timeout per frame
-                    try:
-                        self._frame(q.get_nowait())
-                    except queue.Empty:
-                        break
-                    # A backlog (slow CPU, a flood) must not stall the heartbeat or make
-                    # the watchdog think the loop is stuck.
-                    self._status()
-                    self.loop_mono = time.monotonic()
-            self._status()
-            self._bus_events()
-        self.pipeline.flush()  # the instant of the last frame, as offline
-        self._bus_events()
-
-    def _frame(self, msg: can.Message) -> None:
+    def frame(self, msg: can.Message) -> None:
+        """One received frame: to the black box, then through the pipeline."""
         if not self.reader.events.empty():  # a bus event before this frame is logged first
-            self._bus_events()
-        self.black_box.add(msg)
+            self.bus_events()
+        self.disk.black_box.add(msg)
         self.pipeline.feed(msg)
 
-    def _state_change(self, tick: Tick, lp: Loop) -> None:
-        ev = lp.event(tick, self.pipeline.start_time_s)
-        self._log_event(ev)
-        level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
-        log.log(
-            level,
-            "t=%.2f s: %s%s (J %s, eps0 %.4g%s)",
-            ev["t"],
-            f"{lp.name}: " if lp.tag else "",
-            ev["state"],
-            "n/a" if ev["J"] is None else f"{ev['J']:.4g}",
-            ev["threshold"],
-            f", fault {ev['fault']}" if ev["fault"] else "",
-        )
-        if tick.op_state or tick.out_of_range or tick.check:  # gating news (detection.gating)
-            log.info(
-                "t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
-                ev["t"],
-                ev["op_state"],
-                ev["out_of_range_signal"],
-                ev["sensor"],
-                ev["sensor_check"],
-            )
-        if tick.raised:  # a new episode; a fault back after a short gap is the same one
-            self.black_box.trigger(self.pipeline.bus_time(tick.t_s), lp.alarm_label(), ev["seq"])
-        if self.on_event is not None:
-            self.on_event(ev)
+    def idle(self) -> None:
+        """No frame for a while: silence the reader has proven runs the clock on."""
+        self.pipeline.silence()
 
-    def _send(self, msg: can.Message) -> None:
-        if not self.reader.bus_up:  # down or bus-off: it would fail, or block for nothing
-            self.tx_errors += 1
-            return
-        if not self._budget.take(time.monotonic()):  # whatever the input, never a flood
-            self.tx_capped += 1
-            now = time.monotonic()
-            if now - self._last_cap_log > 5.0:
-                self._last_cap_log = now
-                log.error(
-                    "own frames over outputs.frames_max_per_s (%g/s): %d dropped so far",
-                    self.cfg.outputs.frames_max_per_s,
-                    self.tx_capped,
-                )
-            return
-        try:
-            self.bus.send(msg, timeout=0.05)
-        except (can.CanError, OSError) as exc:
-            self.tx_errors += 1
-            self.reader.report_send_error(exc)  # perhaps the only sign the link went down
-            now = time.monotonic()
-            if now - self._last_tx_error_log > 5.0:
-                self._last_tx_error_log = now
-                log.error(
-                    "cannot send %X (%s); %d send errors", msg.arbitration_id, exc, self.tx_errors
-                )
+    def beat(self) -> None:
+        self.heartbeat.beat(self.cfg.outputs.status_period_s)
 
-    def _status(self) -> None:
-        now = time.monotonic()
-        if now - self._last_status_mono < self.cfg.outputs.status_period_s:
-            return
-        self._last_status_mono = now
-        waiting = self.event_log.unwritten
-        if waiting and now - self._last_retry_mono >= _RETRY_S:  # the disk may be back
-            self._last_retry_mono = now
-            self.writer.put_event(self.event_log.retry)
-        errors = self.disk_errors
-        disk_error = bool(waiting) or errors != self._disk_errors_sent
-        self._disk_errors_sent = errors
-        r = self.reader.counts
-        rejected = self.codec.counts.rejected_total
-        gates = [lp.ticker.gate for lp in self.loops]  # the operating state is shared
-        oor, check = any(g.oor >= 0 for g in gates), any(g.check != 0 for g in gates)
-        rc = self.reader.recovery
-        self._send(
-            self.frames.status(
-                self.state,
-                r.received,
-                rejected,
-                r.dropped,
-                time.time(),
-                int(gates[0].op_state),
-                oor,
-                check,
-                rc.bus_down + rc.bus_off + rc.error_passive,
-                disk_error,
-            )
-        )
+    def finish(self) -> None:
+        self.pipeline.flush()  # the instant of the last frame, as offline
+        self.bus_events()
 
-    def _bus_events(self) -> None:
+    def bus_events(self) -> None:
+        """The reader's bus events to the event log, with the most pressing loop's state."""
         events = self.reader.take_events()
         if not events:
             return
         state = self.state
         lp = next(lp for lp in self.loops if lp.state is state)  # the loop the state is of
         for ev in events:
-            self._log_event(
+            self.disk.log_event(
                 bus_event_record(
-                    ev, self.last_t_s, state, lp.last_j, lp.ticker.eps0, lp.ticker.fault
+                    ev, self.pipeline.last_t_s, state, lp.last_j, lp.ticker.eps0, lp.ticker.fault
                 )
                 | lp.tag
             )
 
-    def _log_event(self, ev: dict[str, Any]) -> None:
-        """Queue an event-log line for the disk writer (which writes and fsyncs it)."""
-        ev["mono"] = round(time.monotonic(), 6)  # this host's monotonic clock, s
-        self.event_log.stamp(ev)
-        self.writer.put_event(partial(self.event_log.write, ev))
-
-    def _do_reload(self) -> None:
-        """Reload at once in this thread (parse, load, swap): what a SIGHUP does in two."""
-        self._apply_reload(prepare(self.cfg, self.loops, self.quota))
+    def _state_change(self, tick: Tick, lp: Loop) -> None:
+        ev = lp.event(tick, self.pipeline.start_time_s)
+        self.disk.log_event(ev)
+        _log_change(tick, lp, ev)
+        if tick.raised:  # a new episode; a fault back after a short gap is the same one
+            self.disk.black_box.trigger(
+                self.pipeline.bus_time(tick.t_s), lp.alarm_label(), ev["seq"]
+            )
+        if self.on_event is not None:
+            self.on_event(ev)
 
     def _apply_reload(self, result: Reload | Exception) -> None:
-        """Swap a prepared reload in (detector thread, between two frames)."""
         self.reload_attempts += 1
-        if isinstance(result, Exception):
-            log.error("reload failed, keeping the running config and model: %s", result)
-            return
-        cfg, loaded, event_log = result
-        if cfg.bus != self.cfg.bus or cfg.dbc != self.cfg.dbc:
-            log.warning("bus and dbc changes take effect at the next restart")
-            cfg = replace(cfg, bus=self.cfg.bus, dbc=self.cfg.dbc)
-        if cfg.j1939 != self.cfg.j1939:
-            log.warning("j1939 changes take effect at the next restart")
-            cfg = replace(cfg, j1939=self.cfg.j1939)
-        if event_log is not None:
-            self.writer.put_event(self.event_log.close)  # after its queued writes
-            self.quota.event_log_path = event_log.path
-            self.event_log = event_log
-        self.black_box.cfg = cfg.black_box
-        self.quota.quota_bytes = cfg.storage.quota_bytes
-        for lp, lc, new in zip(self.loops, cfg.monitored_loops, loaded, strict=True):
-            lp.swap(lc, cfg, new)
-            if new is None:
-                log.info(
-                    "reloaded %s: loop %s, model %s unchanged; its J window and alarm state go on",
-                    cfg.source,
-                    lp.name,
-                    lc.model,
-                )
-            else:
-                log.info(
-                    "reloaded %s: loop %s, model %s (eps0 %.4g); its J window starts "
-                    "again and the alarm state (%s) holds until it has judged a full "
-                    "window",
-                    cfg.source,
-                    lp.name,
-                    lc.model,
-                    new[0].eps0,
-                    lp.state.label,
-                )
-        self.cfg = cfg
-        self.reloads += 1
+        cfg = swap_in(result, self.cfg, self.loops, self.disk)
+        if cfg is not None:
+            self.cfg = cfg
+            self.reloads += 1
+
+
+def _reader(
+    cfg: MonitorConfig,
+    codec: FrameCodec,
+    columns: tuple[str, ...],
+    bus: CanBus | None,
+    opener: Callable[[], can.BusABC] | None,
+) -> BusReader:
+    """The reader on ``bus``, or on a bus of its own that it reopens after a failure."""
+    if opener is None:
+        extra = Diagnostics.rx_filters() if cfg.j1939.enabled else []
+        opener = partial(open_bus, cfg.bus, sensor_filters(codec, columns) + extra)
+    return BusReader(
+        bus if bus is not None else opener(),
+        cfg.bus.queue_frames,
+        opener=opener if bus is None else None,
+        backoff=Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s),
+    )
+
+
+def _log_change(tick: Tick, lp: Loop, ev: dict[str, Any]) -> None:
+    """A state change to the journal (a warning unless normal), and the gating's news."""
+    level = logging.WARNING if tick.state is not State.NORMAL else logging.INFO
+    log.log(
+        level,
+        "t=%.2f s: %s%s (J %s, eps0 %.4g%s)",
+        ev["t"],
+        f"{lp.name}: " if lp.tag else "",
+        ev["state"],
+        "n/a" if ev["J"] is None else f"{ev['J']:.4g}",
+        ev["threshold"],
+        f", fault {ev['fault']}" if ev["fault"] else "",
+    )
+    if tick.op_state or tick.out_of_range or tick.check:  # gating news (detection.gating)
+        log.info(
+            "t=%.2f s: operating state %s, out of range: %s, sensor check: %s %s",
+            ev["t"],
+            ev["op_state"],
+            ev["out_of_range_signal"],
+            ev["sensor"],
+            ev["sensor_check"],
+        )

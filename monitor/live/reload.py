@@ -3,7 +3,7 @@
 ``prepare`` parses the config, loads the models that changed and opens a new event log if
 its path changed; it runs on a thread of its own (``Reloader``), so a slow or hostile file
 never stalls detection, and the detector swaps the result in between two frames
-(``Daemon._apply_reload``).  A loop whose model file (SHA-256) and ticker settings are
+(``swap_in``).  A loop whose model file (SHA-256) and ticker settings are
 unchanged keeps its ticker: its J window and alarm state go on.  Otherwise the new ticker
 takes over the running alarm state (``Ticker.carry_over``).  What a reload cannot change
 (the loops' layout, bus, DBC, J1939) waits for a restart.  A reload not parsed within
@@ -24,6 +24,7 @@ from typing import Any, NamedTuple
 from monitor.config.settings import MonitorConfig, load_config
 from monitor.detection.ticker import Ticker
 from monitor.io.digest import sha256_file
+from monitor.live.disk import DiskOutputs
 from monitor.live.eventlog import EventLog
 from monitor.live.loops import Loop
 from monitor.live.storage import Quota
@@ -143,3 +144,48 @@ class Reloader:
             f"still not parsed after {self.limit_s:g} s; given up ({self.hung} "
             "hung so far), the next SIGHUP reloads again"
         )
+
+
+def swap_in(
+    result: Reload | Exception, running: MonitorConfig, loops: Sequence[Loop], disk: DiskOutputs
+) -> MonitorConfig | None:
+    """Swap a prepared reload in (detector thread, between two frames): the new config, or
+    None when the reload failed (the running config and models stay)."""
+    if isinstance(result, Exception):
+        log.error("reload failed, keeping the running config and model: %s", result)
+        return None
+    cfg, loaded, event_log = result
+    cfg = _restart_settings_kept(cfg, running)
+    disk.reconfigure(cfg, event_log)
+    for lp, lc, new in zip(loops, cfg.monitored_loops, loaded, strict=True):
+        lp.swap(lc, cfg, new)
+        if new is None:
+            log.info(
+                "reloaded %s: loop %s, model %s unchanged; its J window and alarm state go on",
+                cfg.source,
+                lp.name,
+                lc.model,
+            )
+        else:
+            log.info(
+                "reloaded %s: loop %s, model %s (eps0 %.4g); its J window starts "
+                "again and the alarm state (%s) holds until it has judged a full "
+                "window",
+                cfg.source,
+                lp.name,
+                lc.model,
+                new[0].eps0,
+                lp.state.label,
+            )
+    return cfg
+
+
+def _restart_settings_kept(cfg: MonitorConfig, running: MonitorConfig) -> MonitorConfig:
+    """``cfg`` with the running bus, DBC and J1939 settings: their changes wait for a restart."""
+    if cfg.bus != running.bus or cfg.dbc != running.dbc:
+        log.warning("bus and dbc changes take effect at the next restart")
+        cfg = replace(cfg, bus=running.bus, dbc=running.dbc)
+    if cfg.j1939 != running.j1939:
+        log.warning("j1939 changes take effect at the next restart")
+        cfg = replace(cfg, j1939=running.j1939)
+    return cfg
