@@ -474,7 +474,7 @@ def test_alarms_resume_after_recovery_as_the_desk_sees_the_gap(outage) -> None:
     desk = detect(model, recording_from_candump(outage["gapped"]), cfg.alarm, cfg.horizon)
     # The detector kept its state over the gap.  The daemon may also have heard the bus
     # silent after the last frame, before it was stopped: that depends on wall time.
-    events = assert_same_events_as_sent(outage["events"], desk, outage["daemon"].last_t_s)
+    events = assert_same_events_as_sent(outage["events"], desk, outage["daemon"].pipeline.last_t_s)
     states = [e["state"] for e in events]
     assert states[-1] == "fault" and "inactive" in states
     fault = next(e for e in events if e["state"] == "fault")

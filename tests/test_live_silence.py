@@ -64,11 +64,11 @@ def test_a_starved_reader_or_a_backlog_is_not_silence() -> None:
     last = p.last_t_s
     # Wall time runs on (the detector thread woke up late) but the reader has not proven
     # any silence: its last empty receive began before the last frame was taken.
-    reader.heard_until = p._last_ok_mono - 1.0
+    reader.heard_until = p.proof._last_ok_mono - 1.0
     p.silence()
     assert p.last_t_s == last
     # The reader proved 2 s of silence, but frames wait in the queue: still not silence.
-    reader.heard_until, reader.backlog = p._last_ok_mono + 2.0, True
+    reader.heard_until, reader.backlog = p.proof._last_ok_mono + 2.0, True
     p.silence()
     assert p.last_t_s == last and "inactive" not in changes
 
@@ -78,7 +78,7 @@ def test_silence_the_reader_proves_runs_the_clock_on_and_the_monitor_goes_inacti
     p = pipeline(reader, changes)
     fed(p, 5.0)
     last = p.last_t_s
-    reader.heard_until = p._last_ok_mono + 2.0  # an empty receive began 2 s after it
+    reader.heard_until = p.proof._last_ok_mono + 2.0  # an empty receive began 2 s after it
     p.silence()
     assert p.last_t_s == pytest.approx(last + 2.0, abs=0.011)
     assert changes[-1] == "inactive"  # the rows went stale: engine speed unknown

@@ -68,7 +68,7 @@ def test_daemon_cap_is_exact_over_a_second(tmp_path, monkeypatch) -> None:
     daemon = Daemon(cfg)
     clock = {"t": 1000.0}
     monkeypatch.setattr(
-        "monitor.live.daemon.time", SimpleNamespace(monotonic=lambda: clock["t"], time=time.time)
+        "monitor.live.transmit.time", SimpleNamespace(monotonic=lambda: clock["t"], time=time.time)
     )
     sent = []
     try:

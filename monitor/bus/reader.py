@@ -16,35 +16,16 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import can
 
-from monitor.bus.recovery import (
-    BUS_OFF,
-    DOWN,
-    UP,
-    Backoff,
-    BusEvent,
-    RecoveryCounts,
-    error_frame_kind,
-    is_link_error,
-)
+from monitor.bus.link import CanBus, Link
+from monitor.bus.recovery import DOWN, Backoff, BusEvent, RecoveryCounts
 from monitor.errors import BusError, ConfigError
 from monitor.schema.sections import setting
 
 log = logging.getLogger(__name__)
-
-
-class CanBus(Protocol):
-    """What the monitor uses of a bus: a python-can ``BusABC``, or a wrapper with these
-    methods (the live benchmark's bus that notes when each frame is taken off)."""
-
-    def recv(self, timeout: float | None = None) -> can.Message | None: ...
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None: ...
-
-    def shutdown(self) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -174,7 +155,8 @@ class BusReader:
     the bus and opens a new one after a backoff delay (monitor/bus_recovery.py); without
     one (a bus the caller owns) the same bus is tried again after the delay.  The thread
     never ends on a bus error; it ends on ``stop``.  Bus events (down, up, bus-off,
-    error-passive) wait in ``events`` for the detector thread, which logs them.
+    error-passive) wait in ``events`` for the detector thread, which logs them.  The link's
+    state and its recovery are the reader's ``link`` (``monitor.bus.link``).
     ``sleep`` (returns True when stopping) and ``clock`` are injectable for tests.
     """
 
@@ -191,19 +173,10 @@ class BusReader:
         self.bus: CanBus = bus
         self.queue: queue.Queue[can.Message] = queue.Queue(maxsize=queue_frames)
         self.counts = ReaderCounts()
-        self.recovery = RecoveryCounts()
-        self.link = UP  # UP, DOWN or BUS_OFF
-        self.error_passive = False
-        self.events: queue.SimpleQueue[BusEvent] = queue.SimpleQueue()
         self.poll_s = poll_s
-        self.opener = opener
-        self.backoff = backoff or Backoff(0.1, 10.0)
         self._stop = threading.Event()
-        self._sleep = sleep or self._stop.wait
+        self.link = Link(opener, backoff or Backoff(0.1, 10.0), sleep or self._stop.wait, clock)
         self._clock = clock
-        self._reports: queue.SimpleQueue[str] = queue.SimpleQueue()  # from the sender
-        self._down_since = 0.0
-        self._proven = True  # a data frame came through since the last reopen
         self._thread = threading.Thread(target=self._run, name="can-reader", daemon=True)
         self._last_drop_log = 0.0
         self._heard_until = -float("inf")
@@ -227,7 +200,7 @@ class BusReader:
         latest receive that found nothing, or now while the bus is down or bus-off (nothing
         can arrive).  Silence is proven by this, never by a thread that merely got no CPU
         for a while (see monitor.live.pipeline)."""
-        return self._clock() if self.link != UP else self._heard_until
+        return self._clock() if not self.link.up else self._heard_until
 
     @property
     def received_at(self) -> float:
@@ -238,135 +211,69 @@ class BusReader:
     @property
     def bus_up(self) -> bool:
         """Whether sending can work: the bus is neither down nor bus-off."""
-        return self.link == UP
+        return self.link.up
+
+    @property
+    def recovery(self) -> RecoveryCounts:
+        return self.link.recovery
+
+    @property
+    def opener(self) -> Callable[[], can.BusABC] | None:
+        return self.link.opener
+
+    @property
+    def error_passive(self) -> bool:
+        return self.link.error_passive
+
+    @property
+    def events(self) -> queue.SimpleQueue[BusEvent]:
+        """Bus events (down, up, bus-off, error-passive) waiting for the detector thread."""
+        return self.link.events
 
     def report_send_error(self, exc: BaseException) -> None:
-        """From the sending thread: a send failed.  A link error (ENETDOWN, ENODEV) may be
-        the only report of the link going down, so the reader treats it as its own."""
-        if is_link_error(exc):
-            self._reports.put(f"send: {exc}")
+        """From the sending thread: a send failed (``Link.report_send_error``)."""
+        self.link.report_send_error(exc)
 
     def take_events(self) -> list[BusEvent]:
-        return _drain(self.events)
+        return _drain(self.link.events)
 
     def _run(self) -> None:
-        counts, put = self.counts, self.queue.put_nowait
+        link = self.link
         while not self._stop.is_set():
-            try:
-                report = self._reports.get_nowait()
-            except queue.Empty:
-                pass
-            else:
-                self._fail(DOWN, report)
+            report = link.take_report()
+            if report is not None:
+                self.bus = link.fail(DOWN, report, self.bus)
                 continue
             asked = self._clock()
             try:
                 msg = self.bus.recv(timeout=self.poll_s)
             except (can.CanError, OSError, ValueError) as exc:
-                counts.bus_errors += 1
-                self._fail(DOWN, f"receive: {exc}")
+                self.counts.bus_errors += 1
+                self.bus = link.fail(DOWN, f"receive: {exc}", self.bus)
                 continue
             if msg is None:
                 self._heard_until = asked
-                if self.link == DOWN:  # the reopened bus works (bus-off needs more)
-                    self._up("receive works again")
+                link.empty_receive()
                 continue
             self._received_at = self._clock()
-            counts.received += 1
-            try:
-                put(msg)
-            except queue.Full:
-                counts.dropped += 1
-                now = time.monotonic()
-                if now - self._last_drop_log > 5.0:  # a flood must not flood the journal too
-                    self._last_drop_log = now
-                    log.warning("receive queue full: %d frames dropped so far", counts.dropped)
+            self._put(msg)
             if msg.is_error_frame:
-                counts.error_frames += 1
-                self._error_frame(msg)
+                self.counts.error_frames += 1
+                self.bus = link.error_frame(msg, self.bus)
             else:
-                if self.link != UP:
-                    self._up("frames again")
-                if not self._proven:  # the reopened bus carries traffic: next failure
-                    self._proven = True  # starts again from the initial delay
-                    self.backoff.reset()
+                link.data_frame()
 
-    def _error_frame(self, msg: can.Message) -> None:
-        kind = error_frame_kind(msg)
-        if kind == "bus_off":
-            self._fail(BUS_OFF, "controller bus-off (error frame)")
-        elif kind == "restarted":
-            self.error_passive = False  # a restart clears the error counters
-            if self.link == BUS_OFF:
-                self._up("controller restarted")
-        elif kind == "error_passive" and not self.error_passive:
-            self.error_passive = True
-            self.recovery.error_passive += 1
-            self._event("error_passive", f"controller error-passive (status 0x{msg.data[1]:02X})")
-            log.warning("CAN controller error-passive (status 0x%02X)", msg.data[1])
-        elif kind == "error_active" and self.error_passive:
-            self.error_passive = False
-            self._event("error_active", "controller back to error-active")
-            log.info("CAN controller back to error-active")
-
-    def _event(self, kind: str, detail: str, down_s: float | None = None) -> None:
-        self.events.put(BusEvent(kind, detail, time.time(), self.recovery.reopens, down_s))
-
-    def _fail(self, kind: str, detail: str) -> None:
-        """The bus failed (``kind`` DOWN or BUS_OFF): log it once, then reopen it."""
-        if self.link == UP:
-            if kind == DOWN:
-                self.recovery.bus_down += 1
-            else:
-                self.recovery.bus_off += 1
-            self._down_since = self._clock()
-            self._event(kind, detail)
-        else:  # the reopened bus failed before it worked: one more failed attempt
-            self.recovery.reopen_failures += 1
-        self.link = kind
-        self._reopen(detail)
-
-    def _reopen(self, detail: str) -> None:
-        while True:
-            delay = self.backoff.next()
-            self.recovery.reopen_attempts += 1
-            log.warning(
-                "CAN bus %s (%s); reopening in %.3g s",
-                "off" if self.link == BUS_OFF else "down",
-                detail,
-                delay,
-            )
-            stopping = self._sleep(delay)
-            # A send that failed before this outage was known reported it too: it is the
-            # same outage (nothing is sent while the bus is down), not a new one.
-            _drain(self._reports)
-            if stopping or self.opener is None:
-                return  # stopping, or a bus we cannot reopen: try it again as it is
-            try:
-                self.bus.shutdown()
-            except (can.CanError, OSError) as exc:
-                log.debug("closing the failed bus: %s", exc)
-            try:
-                self.bus = self.opener()
-            except (can.CanError, OSError, ValueError) as exc:  # BusError is an OSError
-                self.recovery.reopen_failures += 1
-                detail = f"open: {exc}"
-                continue
-            self.recovery.reopens += 1
-            self._proven = False
-            log.info("CAN bus reopened (%d reopens so far)", self.recovery.reopens)
-            return
-
-    def _up(self, detail: str) -> None:
-        down_s = self._clock() - self._down_since
-        self.link = UP
-        self._event("up", detail, down_s)
-        log.info(
-            "CAN bus up again after %.1f s (%s; %d reopens so far)",
-            down_s,
-            detail,
-            self.recovery.reopens,
-        )
+    def _put(self, msg: can.Message) -> None:
+        """Queue a received frame, or count it dropped (the queue is full)."""
+        self.counts.received += 1
+        try:
+            self.queue.put_nowait(msg)
+        except queue.Full:
+            self.counts.dropped += 1
+            now = time.monotonic()
+            if now - self._last_drop_log > 5.0:  # a flood must not flood the journal too
+                self._last_drop_log = now
+                log.warning("receive queue full: %d frames dropped so far", self.counts.dropped)
 
 
 def _bring_up_hint(channel: str, bitrate: int) -> str:

@@ -94,7 +94,7 @@ def _install_handlers() -> _Flags:
 
 
 def _supervise(
-    daemon: Daemon, flags: _Flags, notifier: Notifier, where: str, source: object
+    daemon: Daemon, flags: _Flags, notifier: Notifier, where: str, source: Path
 ) -> bool:
     """The main loop until a stop is asked for (True) or a monitor thread died (False):
     reloads on request, RELOADING=1 then READY=1 around them, watchdog pings."""

@@ -41,40 +41,45 @@ _EPS = 1e-6  # sample times are sums of 10 ms steps
 Key = tuple[int, int]  # (SPN, FMI)
 
 
-class Diagnostics:
-    """Builds the DM1/DM2 frames of one monitor (source address ``cfg.source_address``).
+class TroubleCodes:
+    """Which DTCs a tick makes active (with their lamps): the isolated fault's in ``fault``,
+    the stale or implausible signals' in ``sensor_fault``, none otherwise.
 
     ``signals``: the model's signals, whose staleness makes a sensor fault (every signal
     name has an SPN: the config merges its map into the defaults)."""
 
     def __init__(
-        self, cfg: J1939Config, signals: tuple[str, ...], columns: tuple[str, ...] = ROW_COLUMNS
+        self, cfg: J1939Config, signals: tuple[str, ...], columns: tuple[str, ...]
     ) -> None:
         self.cfg = cfg
         self._signals = signals
         self._idx = np.array([1 + columns.index(s) for s in signals], dtype=np.int64)
         self._fault_lamp = Lamp.parse(cfg.fault_lamp, "j1939.fault_lamp")
         self._sensor_lamp = Lamp.parse(cfg.sensor_lamp, "j1939.sensor_lamp")
-        self.active: dict[Key, Lamp] = {}
-        self.occurrences: dict[Key, int] = {}
-        self.previous: set[Key] = set()  # previously active, not active now (DM2)
         self._sensor: dict[Key, Lamp] = {}  # DTCs of the current sensor fault
         self._named: str | None = None  # the last fault isolation named in this alarm
         self._named_episode: str | None = None  # the same, kept through a gap in the episode
-        self._counted: set[Key] = set()  # DTCs counted in this episode
-        self._started = False
-        self._want: set[int] = set()  # PGNs to send as soon as possible
-        self._held = False
-        self._queue: deque[can.Message] = deque()
-        self._next_t = 0.0
-        self._last_dm1_t = -float("inf")
-        self.cap = RateCap(cfg.max_frames_per_s)
-        self.sent = {PGN_DM1: 0, PGN_DM2: 0}
-        self.frames = 0
-        self.held_back = 0  # messages the rate cap delayed
-        self.requests = 0
 
-    # -- inputs ---------------------------------------------------------------------------
+    def keys(
+        self,
+        state: State,
+        fault: str,
+        row: np.ndarray,
+        finding: tuple[str | None, str | None],
+        episode_open: bool,
+    ) -> dict[Key, Lamp]:
+        """The active DTCs of a tick.  While an alarm episode is open (``episode_open``) its
+        fault DTC stays active through a short inactive or sensor-fault gap."""
+        keys = self._keys(state, fault, row, finding)
+        if episode_open and state is not State.FAULT and self._named_episode is not None:
+            name = self._named_episode
+            keys = keys | {(self.cfg.fault_spn[name], self.cfg.fault_fmi[name]): self._fault_lamp}
+        self._named_episode = (
+            (self._named or "unknown")
+            if state is State.FAULT
+            else (self._named_episode if episode_open else None)
+        )
+        return keys
 
     def _keys(
         self, state: State, fault: str, row: np.ndarray, finding: tuple[str | None, str | None]
@@ -103,13 +108,67 @@ class Diagnostics:
             self._sensor = {(cfg.sensor_spn[signal], cfg.check_fmi[check]): self._sensor_lamp}
         return self._sensor or {(cfg.sensor_spn["unknown"], cfg.sensor_fmi): self._sensor_lamp}
 
-    def _update(self, keys: dict[Key, Lamp]) -> None:
+
+class DtcTable:
+    """The DTCs active now, previously active (DM2), and how often each became active: one
+    occurrence per episode (a stretch with any DTC active), at most 126."""
+
+    def __init__(self) -> None:
+        self.active: dict[Key, Lamp] = {}
+        self.occurrences: dict[Key, int] = {}
+        self.previous: set[Key] = set()  # previously active, not active now (DM2)
+        self._counted: set[Key] = set()  # DTCs counted in this episode
+
+    def update(self, keys: dict[Key, Lamp]) -> None:
         for k in keys.keys() - self.active.keys() - self._counted:
             self.occurrences[k] = min(self.occurrences.get(k, 0) + 1, OC_MAX)
         self._counted = (self._counted | keys.keys()) if keys else set()
         self.previous |= self.active.keys() - keys.keys()
         self.previous -= keys.keys()
         self.active = keys
+
+    def _dtcs(self, keys: set[Key] | dict[Key, Lamp]) -> list[Dtc]:
+        return [Dtc(spn, fmi, self.occurrences[(spn, fmi)]) for spn, fmi in sorted(keys)]
+
+    def payload(self, pgn: int) -> bytes:
+        """The DM1 (active) or DM2 (previously active) payload; lamps as they are now."""
+        lamps = lamp_bytes(frozenset(self.active.values()))
+        return dm_payload(lamps, self._dtcs(self.active if pgn == PGN_DM1 else self.previous))
+
+
+class Diagnostics:
+    """Builds the DM1/DM2 frames of one monitor (source address ``cfg.source_address``):
+    the trouble codes of each tick (``TroubleCodes``) kept in a ``DtcTable``, sent as J1939-73
+    says, one message at a time within the rate cap."""
+
+    def __init__(
+        self, cfg: J1939Config, signals: tuple[str, ...], columns: tuple[str, ...] = ROW_COLUMNS
+    ) -> None:
+        self.cfg = cfg
+        self.codes = TroubleCodes(cfg, signals, columns)
+        self.dtcs = DtcTable()
+        self._started = False
+        self._want: set[int] = set()  # PGNs to send as soon as possible
+        self._held = False
+        self._queue: deque[can.Message] = deque()
+        self._next_t = 0.0
+        self._last_dm1_t = -float("inf")
+        self.cap = RateCap(cfg.max_frames_per_s)
+        self.sent = {PGN_DM1: 0, PGN_DM2: 0}
+        self.frames = 0
+        self.held_back = 0  # messages the rate cap delayed
+        self.requests = 0
+
+    @property
+    def active(self) -> dict[Key, Lamp]:
+        return self.dtcs.active
+
+    @property
+    def previous(self) -> set[Key]:
+        """Previously active DTCs, not active now (DM2)."""
+        return self.dtcs.previous
+
+    # -- inputs ---------------------------------------------------------------------------
 
     def request(self, msg: can.Message) -> bool:
         """Take a request frame; True when it asked for DM1 or DM2 of ours."""
@@ -123,16 +182,6 @@ class Diagnostics:
     @staticmethod
     def rx_filters() -> list[dict[str, Any]]:
         return [dict(REQUEST_FILTER)]
-
-    # -- payloads -------------------------------------------------------------------------
-
-    def _dtcs(self, keys: set[Key] | dict[Key, Lamp]) -> list[Dtc]:
-        return [Dtc(spn, fmi, self.occurrences[(spn, fmi)]) for spn, fmi in sorted(keys)]
-
-    def payload(self, pgn: int) -> bytes:
-        """The DM1 (active) or DM2 (previously active) payload; lamps as they are now."""
-        lamps = lamp_bytes(frozenset(self.active.values()))
-        return dm_payload(lamps, self._dtcs(self.active if pgn == PGN_DM1 else self.previous))
 
     # -- the tick ---------------------------------------------------------------------------
 
@@ -150,17 +199,9 @@ class Diagnostics:
         plausibility check's (signal, check name) behind a sensor fault, if any.  While an
         alarm episode is open (``episode_open``) its fault DTC stays active through a short
         inactive or sensor-fault gap: one episode, one occurrence."""
-        keys = self._keys(state, fault, row, finding)
-        if episode_open and state is not State.FAULT and self._named_episode is not None:
-            name = self._named_episode
-            keys = keys | {(self.cfg.fault_spn[name], self.cfg.fault_fmi[name]): self._fault_lamp}
-        self._named_episode = (
-            (self._named or "unknown")
-            if state is State.FAULT
-            else (self._named_episode if episode_open else None)
-        )
-        if not self._started or keys.keys() != self.active.keys():
-            self._update(keys)
+        keys = self.codes.keys(state, fault, row, finding, episode_open)
+        if not self._started or keys.keys() != self.dtcs.active.keys():
+            self.dtcs.update(keys)
             self._want.add(PGN_DM1)
             self._started = True
         out: list[can.Message] = []
@@ -170,7 +211,7 @@ class Diagnostics:
                 self.cap.record(t_s)
                 self._next_t = t_s + self.cfg.bam_gap_s
         else:
-            periodic = (self.active or self.cfg.repeat_when_clear) and (
+            periodic = (self.dtcs.active or self.cfg.repeat_when_clear) and (
                 t_s - self._last_dm1_t + _EPS >= DM1_PERIOD_S
             )
             if periodic:
@@ -183,7 +224,8 @@ class Diagnostics:
         return out
 
     def _start(self, pgn: int, t_s: float) -> list[can.Message]:
-        frames = pgn_frames(pgn, self.payload(pgn), self.cfg.source_address, self.cfg.priority)
+        payload = self.dtcs.payload(pgn)
+        frames = pgn_frames(pgn, payload, self.cfg.source_address, self.cfg.priority)
         if not self.cap.allows(t_s, len(frames)):
             if not self._held:
                 self.held_back += 1

@@ -135,7 +135,7 @@ def recording_from_candump_bulk(
     ts = np.ascontiguousarray(frames.timestamp[rows])
     period = sampler.period_s
     st, applied, resumes, tc, newest = _clock(
-        ts, period, sampler.max_gap_s, sampler.resync_frames, _EPS_S, OUTAGE_S
+        ts, period, sampler.max_gap_s, sampler.spec.resync_frames, _EPS_S, OUTAGE_S
     )
     # Rows emitted before each applied frame: a running maximum over application order.
     first_row = np.maximum.accumulate(np.ceil((st[applied] - _EPS_S) / period)).astype(np.int64)
@@ -148,7 +148,9 @@ def recording_from_candump_bulk(
     cols, first_seen = _columns(
         sampler, parts, (msg_of, pos_in_msg), applied, first_row, st, resumes, n_rows
     )
-    warm = min(warm_row(first_seen[list(sampler.required)], sampler.deadline_rows), n_rows)
+    warm = min(
+        warm_row(first_seen[list(sampler.spec.required)], sampler.spec.deadline_rows), n_rows
+    )
     # Row t = 0 is the first one past warming; its log time as the sampler computes it.
     start = float(ts[0]) + warm * period if warm < n_rows else None
     meta: dict[str, object] = {
@@ -184,7 +186,7 @@ def _columns(
     seen: set[str] = set()
     first_seen = np.full(len(sampler.columns), np.inf)  # row from which each is visible
     columns: dict[str, np.ndarray] = {}
-    stale = dict(zip(sampler.columns, sampler.stale_s, strict=True))
+    stale = dict(zip(sampler.columns, sampler.spec.stale_s, strict=True))
     for name in sampler.columns:
         carriers = [k for k, p in enumerate(parts) if name in p.values]
         sel = np.flatnonzero(np.isin(msg_of[applied], carriers))

@@ -143,6 +143,49 @@ class TimeCounts:
         return dict(vars(self))
 
 
+@dataclass(frozen=True)
+class RowSpec:
+    """The rows a sampler makes: their columns on a clock of ``period_s``, each column's
+    staleness time, the columns that hold the first rows back while warming and the row by
+    which each must have been seen, and the clock's limits (``monitor.sampling.clock``)."""
+
+    columns: tuple[str, ...]
+    period_s: float
+    max_gap_s: float
+    resync_frames: int
+    index: dict[str, int]  # column name -> its position
+    stale_s: tuple[float, ...]  # per column: a value older than this is stale
+    required: tuple[int, ...]  # the columns that are not optional
+    deadline_rows: tuple[int, ...]  # per required column: the row it is stale by, unseen
+
+    @classmethod
+    def build(
+        cls,
+        cycle_times_s: Mapping[str, float],
+        columns: tuple[str, ...],
+        period_s: float,
+        stale_cycles: float,
+        max_gap_s: float,
+        resync_frames: int,
+        optional: Collection[str],
+    ) -> RowSpec:
+        columns, period_s = tuple(columns), float(period_s)
+        stale_s = tuple(
+            stale_cycles * cycle_times_s.get(name, period_s) + _EPS_S for name in columns
+        )
+        required = tuple(i for i, c in enumerate(columns) if c not in set(optional))
+        return cls(
+            columns,
+            period_s,
+            float(max_gap_s),
+            int(resync_frames),
+            {name: i for i, name in enumerate(columns)},
+            stale_s,
+            required,
+            tuple(deadline_row(stale_s[i], period_s) for i in required),
+        )
+
+
 class Sampler:
     """Turns (timestamp, message, physical values) into rows on a fixed sample clock."""
 
@@ -159,16 +202,9 @@ class Sampler:
         """``cycle_times_s`` maps a signal to its message's cycle time (s); a signal not
         in it is stale after ``stale_cycles`` sample periods.  ``optional`` columns (a
         sensor a machine may lack) do not hold the first rows back while warming."""
-        self.columns = tuple(columns)
-        self.period_s = float(period_s)
-        self.max_gap_s = float(max_gap_s)
-        self.resync_frames = int(resync_frames)
-        self._index = {name: i for i, name in enumerate(self.columns)}
-        self.stale_s = [
-            stale_cycles * cycle_times_s.get(name, self.period_s) + _EPS_S for name in self.columns
-        ]
-        self.required = tuple(i for i, c in enumerate(self.columns) if c not in set(optional))
-        self.deadline_rows = [deadline_row(self.stale_s[i], self.period_s) for i in self.required]
+        self.spec = RowSpec.build(
+            cycle_times_s, columns, period_s, stale_cycles, max_gap_s, resync_frames, optional
+        )
         self._warming = True  # no row emitted yet: the first ones may be warming
         self._values = [_NAN] * len(self.columns)
         self._last_t = [-math.inf] * len(self.columns)  # sampler time of each latest value
@@ -181,6 +217,18 @@ class Sampler:
         self._k = 0  # next instant to emit
         self._pending: list[list[float]] = []
         self._behind: list[tuple[float, str, Mapping[str, float]]] = []
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        return self.spec.columns
+
+    @property
+    def period_s(self) -> float:
+        return self.spec.period_s
+
+    @property
+    def max_gap_s(self) -> float:
+        return self.spec.max_gap_s
 
     @property
     def counts(self) -> TimeCounts:
@@ -227,7 +275,7 @@ class Sampler:
             self._counts,
             self.period_s,
             self.max_gap_s,
-            self.resync_frames,
+            self.spec.resync_frames,
             _EPS_S,
             OUTAGE_S,
         )
@@ -245,7 +293,7 @@ class Sampler:
         self._apply(st, values)
 
     def _apply(self, st: float, values: Mapping[str, float]) -> None:
-        index = self._index
+        index = self.spec.index
         for name, value in values.items():
             i = index.get(name)
             if i is not None:
@@ -262,7 +310,7 @@ class Sampler:
             (k - self.origin_k) * self.period_s,
             *[
                 v if inst - max(tl, back) <= stale else _NAN
-                for v, tl, stale in zip(self._values, self._last_t, self.stale_s, strict=True)
+                for v, tl, stale in zip(self._values, self._last_t, self.spec.stale_s, strict=True)
             ],
         ]
 
@@ -276,8 +324,8 @@ class Sampler:
         if end <= k0:
             return
         if self._warming:  # skip the warming rows (their frames are all applied by now)
-            seen = [0 if self._last_t[i] > -math.inf else math.inf for i in self.required]
-            k0 = min(max(k0, warm_row(seen, self.deadline_rows)), end)
+            seen = [0 if self._last_t[i] > -math.inf else math.inf for i in self.spec.required]
+            k0 = min(max(k0, warm_row(seen, self.spec.deadline_rows)), end)
             self._warming = k0 == end
             if not self._warming:
                 self.origin_k = k0
@@ -288,7 +336,7 @@ class Sampler:
             inst = np.arange(k0, end) * self.period_s
             vals = np.array(self._values)
             since = np.maximum(np.array(self._last_t), self._resumed)
-            fresh = (inst[:, None] - since[None, :]) <= np.array(self.stale_s)
+            fresh = (inst[:, None] - since[None, :]) <= np.array(self.spec.stale_s)
             t = np.arange(k0 - self.origin_k, end - self.origin_k) * self.period_s
             block = np.column_stack([t, np.where(fresh, vals[None, :], np.nan)])
             self._pending.extend(block.tolist())
