@@ -146,8 +146,8 @@ class TimeCounts:
 @dataclass(frozen=True)
 class RowSpec:
     """The rows a sampler makes: their columns on a clock of ``period_s``, each column's
-    staleness time, the columns that hold the first rows back while warming and the row by
-    which each must have been seen, and the clock's limits (``monitor.sampling.clock``)."""
+    staleness, the columns warming waits for (and the row each must be seen by), and the
+    clock's limits (``monitor.sampling.clock``)."""
 
     columns: tuple[str, ...]
     period_s: float
@@ -170,9 +170,7 @@ class RowSpec:
         optional: Collection[str],
     ) -> RowSpec:
         columns, period_s = tuple(columns), float(period_s)
-        stale_s = tuple(
-            stale_cycles * cycle_times_s.get(name, period_s) + _EPS_S for name in columns
-        )
+        stale_s = tuple(stale_cycles * cycle_times_s.get(c, period_s) + _EPS_S for c in columns)
         required = tuple(i for i, c in enumerate(columns) if c not in set(optional))
         return cls(
             columns,
@@ -258,7 +256,7 @@ class Sampler:
 
     @property
     def width(self) -> int:
-        return 1 + len(self.columns)
+        return 1 + len(self.spec.columns)
 
     # -- feeding --------------------------------------------------------------------------
 
@@ -268,14 +266,14 @@ class Sampler:
         if self.first_time_s is None:
             self.first_time_s = float(timestamp_s)
             self._state, self._counts = new_state(float(timestamp_s))  # sampler time 0
-        state = self._state
+        state, spec = self._state, self.spec
         st = clock_step(
             float(timestamp_s),
             state,
             self._counts,
-            self.period_s,
-            self.max_gap_s,
-            self.spec.resync_frames,
+            spec.period_s,
+            spec.max_gap_s,
+            spec.resync_frames,
             _EPS_S,
             OUTAGE_S,
         )
@@ -304,19 +302,20 @@ class Sampler:
     # -- rows -----------------------------------------------------------------------------
 
     def _row(self, k: int) -> list[float]:
-        inst = k * self.period_s
+        spec = self.spec
+        inst = k * spec.period_s
         back = self._resumed
         return [
-            (k - self.origin_k) * self.period_s,
+            (k - self.origin_k) * spec.period_s,
             *[
                 v if inst - max(tl, back) <= stale else _NAN
-                for v, tl, stale in zip(self._values, self._last_t, self.spec.stale_s, strict=True)
+                for v, tl, stale in zip(self._values, self._last_t, spec.stale_s, strict=True)
             ],
         ]
 
     def _emit_before(self, st: float) -> None:
         """Queue the rows of instants strictly before sampler time ``st``."""
-        end = math.ceil((st - _EPS_S) / self.period_s)  # first instant >= st - eps
+        end = math.ceil((st - _EPS_S) / self.spec.period_s)  # first instant >= st - eps
         self._emit_to(end)
 
     def _emit_to(self, end: int) -> None:
