@@ -93,9 +93,7 @@ def _install_handlers() -> _Flags:
     return flags
 
 
-def _supervise(
-    daemon: Daemon, flags: _Flags, notifier: Notifier, where: str, source: Path
-) -> bool:
+def _supervise(daemon: Daemon, flags: _Flags, notifier: Notifier, where: str, source: Path) -> bool:
     """The main loop until a stop is asked for (True) or a monitor thread died (False):
     reloads on request, RELOADING=1 then READY=1 around them, watchdog pings."""
     # Half the watchdog timeout between pings; a detector loop that has not turned for
