@@ -146,13 +146,6 @@ def _settled(rig: AttackRig, quiet_s: float = 3.0, timeout_s: float = 180.0) -> 
 
 
 @pytest.mark.skipif(multicast_error() is not None, reason=str(multicast_error()))
-@pytest.mark.xfail(
-    strict=False,
-    reason="open: a replayer starved by the load leaves the whole bus silent now and then; "
-    "at such a gap one row may have PP stale before EngineSpeed (a microsecond knife-edge, "
-    "tests/test_attack_restarts.py::test_a_silent_bus_is_engine_off_never_a_sensor_fault), "
-    "which the daemon's and the sniffer's arrival stamps decide differently",
-)
 def test_random_frame_flood_live_gives_the_offline_events(flooded: Path, tmp_path: Path) -> None:
     """``monitor run`` (the attack harness: daemon, replayer and sniffer processes of their
     own on udp_multicast) of the flooded log makes the decisions ``monitor detect`` makes

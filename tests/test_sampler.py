@@ -76,6 +76,40 @@ def test_rows_hold_latest_value_and_go_stale_after_three_cycles() -> None:
     assert s.start_time_s == 100.0
 
 
+def _pp_then_qp(k_pp: int, k_qp: int) -> np.ndarray:
+    """PP every 10 ms 0.5 ms before QP (as a sender's burst orders them), PP's last frame
+    k_pp, QP's k_qp; the rows up to 300 ms."""
+    s = sampler()
+    frames = [(100.0 + k * 0.01, "HYD_Flow", {"QP": float(k)}) for k in range(k_qp + 1)]
+    frames += [
+        (100.0 + k * 0.01 - 0.0005, "HYD_Pressures", {"PP": float(k)}) for k in range(1, k_pp + 1)
+    ]
+    for ts, name, values in sorted(frames, key=lambda f: f[0]):
+        s.feed(ts, name, values)
+    return s.advance(100.3)
+
+
+def test_a_silent_bus_takes_every_signal_on_the_same_row() -> None:
+    # The bus falls silent after PP's frame at 99.5 ms and QP's at 100 ms (sampler time).
+    # By each signal's own last frame, PP would be stale at the 130 ms row (30.5 ms old)
+    # and QP not (30 ms, within 3 cycles): a sensor failing where the bus went quiet.  Both
+    # were on schedule, so both count from the bus's newest frame (100 ms): fresh at 130 ms,
+    # stale from 140 ms on, together.
+    rows = _pp_then_qp(k_pp=10, k_qp=10)
+    pp, qp = rows[:, COL["PP"]], rows[:, COL["QP"]]
+    assert pp[13] == 10.0 and qp[13] == 10.0
+    assert np.isnan(pp[14:]).all() and np.isnan(qp[14:]).all()
+
+
+def test_one_signal_missing_on_a_live_bus_is_stale_by_its_own_last_frame() -> None:
+    # PP's last frame at 99.5 ms, QP going on: PP is stale from the 130 ms row (30.5 ms > 3
+    # cycles), QP fresh throughout.
+    rows = _pp_then_qp(k_pp=10, k_qp=29)
+    pp, qp = rows[:, COL["PP"]], rows[:, COL["QP"]]
+    assert pp[12] == 10.0 and np.isnan(pp[13:]).all()
+    assert not np.isnan(qp[:30]).any()
+
+
 def test_incremental_feed_matches_batch() -> None:
     frames = [(5.0 + k * 0.01 + 0.003, "HYD_Flow", {"QP": float(k)}) for k in range(50)]
     a, b = sampler(), sampler()

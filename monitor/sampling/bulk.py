@@ -11,8 +11,9 @@ equal to that frame-by-frame reference, ``tests/naive_frames.py``), computed in 
    decrease, and a frame is visible from row ``K = max over frames so far of
    ceil((st - eps) / period)`` on (the rows the sampler emits before applying it), so each
    signal's value in row k is that of its last frame with K <= k (one ``searchsorted``), or
-   NaN when older than its staleness (counted from the end of the last outage when that is
-   later, as the sampler does).
+   NaN when older than its staleness (the sampler's rule, ``monitor.sampling.staleness``:
+   counted from the end of the last outage when that is later, and from the bus's newest
+   frame for a signal on schedule when the bus went quiet).
 
 The kernel uses plain IEEE arithmetic (no fast-math), so every time is the float the
 frame-by-frame sampler computes.
@@ -45,6 +46,7 @@ from monitor.sampling.sampler import (
     too_many_rows,
     warm_row,
 )
+from monitor.sampling.staleness import fresh
 from monitor.signals import ROD_POS
 
 
@@ -183,10 +185,14 @@ def _columns(
     ends = np.flatnonzero(resumes)
     back_at = np.searchsorted(first_row[ends], np.arange(n_rows), side="right") - 1
     resumed = np.append(st_applied[ends], -np.inf)[back_at]  # -1: no outage yet, -inf
+    # The newest frame visible at each row (applied times never decrease).
+    visible = np.searchsorted(first_row, np.arange(n_rows), side="right") - 1
+    newest = np.append(st_applied, -np.inf)[visible]
     seen: set[str] = set()
     first_seen = np.full(len(sampler.columns), np.inf)  # row from which each is visible
     columns: dict[str, np.ndarray] = {}
     stale = dict(zip(sampler.columns, sampler.spec.stale_s, strict=True))
+    on_schedule = dict(zip(sampler.columns, sampler.spec.on_schedule_s, strict=True))
     for name in sampler.columns:
         carriers = [k for k, p in enumerate(parts) if name in p.values]
         sel = np.flatnonzero(np.isin(msg_of[applied], carriers))
@@ -202,8 +208,10 @@ def _columns(
             last = np.searchsorted(first_row[sel], np.arange(n_rows), side="right") - 1
             have = last >= 0
             li = last[have]
-            fresh = inst[have] - np.maximum(st[f[li]], resumed[have]) <= stale[name]
-            col[np.flatnonzero(have)[fresh]] = vals[li[fresh]]
+            ok = fresh(
+                inst[have], st[f[li]], newest[have], resumed[have], stale[name], on_schedule[name]
+            )
+            col[np.flatnonzero(have)[ok]] = vals[li[ok]]
         if name != ROD_POS.name or name in seen:
             columns[name] = col
     return columns, first_seen

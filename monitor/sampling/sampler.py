@@ -52,6 +52,7 @@ import numpy as np
 from monitor.codec.frames import FrameCodec
 from monitor.errors import InputFileError, NoHydraulicDataError
 from monitor.sampling.clock import S_HELD, S_NEWEST, S_OFFSET, S_RESUMES, clock_step, new_state
+from monitor.sampling.staleness import ON_SCHEDULE_CYCLES, fresh
 from monitor.signals import ROD_POS, SAMPLE_PERIOD_S, SIGNAL_NAMES
 
 #: Row columns after ``t``: the contract signals, then the optional RodPos.
@@ -155,6 +156,7 @@ class RowSpec:
     resync_frames: int
     index: dict[str, int]  # column name -> its position
     stale_s: tuple[float, ...]  # per column: a value older than this is stale
+    on_schedule_s: tuple[float, ...]  # per column: on schedule when this near the newest frame
     required: tuple[int, ...]  # the columns that are not optional
     deadline_rows: tuple[int, ...]  # per required column: the row it is stale by, unseen
 
@@ -170,7 +172,9 @@ class RowSpec:
         optional: Collection[str],
     ) -> RowSpec:
         columns, period_s = tuple(columns), float(period_s)
-        stale_s = tuple(stale_cycles * cycle_times_s.get(c, period_s) + _EPS_S for c in columns)
+        cycle_s = [cycle_times_s.get(c, period_s) for c in columns]
+        stale_s = tuple(stale_cycles * c + _EPS_S for c in cycle_s)
+        on_schedule_s = tuple(ON_SCHEDULE_CYCLES * c + _EPS_S for c in cycle_s)
         required = tuple(i for i, c in enumerate(columns) if c not in set(optional))
         return cls(
             columns,
@@ -179,6 +183,7 @@ class RowSpec:
             int(resync_frames),
             {name: i for i, name in enumerate(columns)},
             stale_s,
+            on_schedule_s,
             required,
             tuple(deadline_row(stale_s[i], period_s) for i in required),
         )
@@ -303,15 +308,11 @@ class Sampler:
 
     def _row(self, k: int) -> list[float]:
         spec = self.spec
-        inst = k * spec.period_s
-        back = self._resumed
-        return [
-            (k - self.origin_k) * spec.period_s,
-            *[
-                v if inst - max(tl, back) <= stale else _NAN
-                for v, tl, stale in zip(self._values, self._last_t, spec.stale_s, strict=True)
-            ],
-        ]
+        last = np.array(self._last_t)
+        ok = fresh(
+            k * spec.period_s, last, last.max(), self._resumed, spec.stale_s, spec.on_schedule_s
+        )
+        return [(k - self.origin_k) * spec.period_s, *np.where(ok, self._values, _NAN).tolist()]
 
     def _emit_before(self, st: float) -> None:
         """Queue the rows of instants strictly before sampler time ``st``."""
@@ -334,10 +335,17 @@ class Sampler:
         else:  # a long gap: same state throughout, vectorised
             inst = np.arange(k0, end) * self.period_s
             vals = np.array(self._values)
-            since = np.maximum(np.array(self._last_t), self._resumed)
-            fresh = (inst[:, None] - since[None, :]) <= np.array(self.spec.stale_s)
+            last = np.array(self._last_t)
+            ok = fresh(
+                inst[:, None],
+                last[None, :],
+                last.max(),
+                self._resumed,
+                self.spec.stale_s,
+                self.spec.on_schedule_s,
+            )
             t = np.arange(k0 - self.origin_k, end - self.origin_k) * self.period_s
-            block = np.column_stack([t, np.where(fresh, vals[None, :], np.nan)])
+            block = np.column_stack([t, np.where(ok, vals[None, :], np.nan)])
             self._pending.extend(block.tolist())
         self._k = end
 
