@@ -181,11 +181,13 @@ def test_commands_back_resume_the_normal_path_and_the_fault_is_raised(
     assert states[1] == (pytest.approx(t_stale), "inactive", None, None)
     assert states[2][1:] == ("sensor_fault", "EngineSpeed", "stale")
     assert t_stale + SETTLE_S - 1e-6 <= states[2][0] < t_stale + SETTLE_S + 1.0
-    # Frames again from 35.00 s: sensor fault for the recovery debounce (the 10th valid
-    # sample is normal again).
+    # Frames again from 35.00 s, their alive counter out of sequence after 15 s: the third
+    # frame in sequence (35.02 s) is the first believed (the codec's resync), then sensor
+    # fault for the recovery debounce (the 10th valid sample is normal again).
+    back_s = 35.0 + 2 * 0.01
     recover_s = (CFG.alarm.sensor_recover_samples - 1) * 0.01
-    assert states[3] == (pytest.approx(35.0), "sensor_fault", None, None)
-    assert states[4] == (pytest.approx(35.0 + recover_s), "normal", None, None)
+    assert states[3] == (pytest.approx(back_s), "sensor_fault", None, None)
+    assert states[4] == (pytest.approx(back_s + recover_s), "normal", None, None)
     assert states[5][1] == "fault" and states[5][0] > 45.0 and det.summary["fault"] == "spool_wear"
     _, live = tick_recording(Ticker(model, CFG.alarm, CFG.horizon, gating=CFG.gating), rec)
     assert_same_events(live, det)

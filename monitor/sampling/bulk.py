@@ -44,9 +44,8 @@ from monitor.sampling.sampler import (
     row_limit,
     runs_backwards,
     too_many_rows,
-    warm_row,
 )
-from monitor.sampling.staleness import fresh
+from monitor.sampling.staleness import fresh, warm_row
 from monitor.signals import ROD_POS
 
 

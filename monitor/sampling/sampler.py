@@ -42,7 +42,7 @@ daemon and the offline replay share it.
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -52,7 +52,7 @@ import numpy as np
 from monitor.codec.frames import FrameCodec
 from monitor.errors import InputFileError, NoHydraulicDataError
 from monitor.sampling.clock import S_HELD, S_NEWEST, S_OFFSET, S_RESUMES, clock_step, new_state
-from monitor.sampling.staleness import ON_SCHEDULE_CYCLES, fresh
+from monitor.sampling.staleness import ON_SCHEDULE_CYCLES, deadline_row, fresh, warm_row
 from monitor.signals import ROD_POS, SAMPLE_PERIOD_S, SIGNAL_NAMES
 
 #: Row columns after ``t``: the contract signals, then the optional RodPos.
@@ -68,26 +68,6 @@ OUTAGE_S = 1.0
 MIN_ROW_LIMIT = 360_000
 #: Rows per frame of the log a longer one may need (a normal log needs about 0.3).
 ROWS_PER_FRAME = 20
-
-
-def deadline_row(stale_s: float, period_s: float = SAMPLE_PERIOD_S) -> int:
-    """First instant k whose time ``k * period_s`` is past ``stale_s``: a signal not seen by
-    then has missed its own cycle time by the margin, and is stale rather than warming."""
-    k = math.floor(stale_s / period_s) + 1
-    while k > 0 and (k - 1) * period_s > stale_s:  # the products the rows use decide
-        k -= 1
-    while k * period_s <= stale_s:
-        k += 1
-    return k
-
-
-def warm_row(first_seen_rows: Iterable[float], deadline_rows: Iterable[int]) -> int:
-    """First row that is not warming: by it every required signal has been seen (its first
-    frame visible from row ``first_seen_rows[i]``, inf if not yet) or is past its deadline
-    (``deadline_rows[i]``, from ``deadline_row``)."""
-    return int(
-        max((min(s, d) for s, d in zip(first_seen_rows, deadline_rows, strict=True)), default=0)
-    )
 
 
 def row_limit(frames: int) -> int:

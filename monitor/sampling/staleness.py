@@ -1,10 +1,16 @@
-"""The staleness rule of a row's value: one function for the live sampler and the bulk path."""
+"""The staleness rules of a row's values, one function each for the live sampler and the bulk
+path: when a value is fresh, and when a signal not seen yet stops holding the first rows back
+(warming)."""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
+
+from monitor.signals import SAMPLE_PERIOD_S
 
 #: A signal whose last frame came at most this many of its own cycle times before the
 #: bus's newest frame was on schedule when the bus went quiet.
@@ -28,3 +34,23 @@ def fresh(
     own value is younger than ``on_schedule_s``, and so fresh anyway."""
     seen_t = np.where(newest_t - last_t <= on_schedule_s, newest_t, last_t)
     return inst - np.maximum(seen_t, resumed_t) <= stale_s
+
+
+def deadline_row(stale_s: float, period_s: float = SAMPLE_PERIOD_S) -> int:
+    """First instant k whose time ``k * period_s`` is past ``stale_s``: a signal not seen by
+    then has missed its own cycle time by the margin, and is stale rather than warming."""
+    k = math.floor(stale_s / period_s) + 1
+    while k > 0 and (k - 1) * period_s > stale_s:  # the products the rows use decide
+        k -= 1
+    while k * period_s <= stale_s:
+        k += 1
+    return k
+
+
+def warm_row(first_seen_rows: Iterable[float], deadline_rows: Iterable[int]) -> int:
+    """First row that is not warming: by it every required signal has been seen (its first
+    frame visible from row ``first_seen_rows[i]``, inf if not yet) or is past its deadline
+    (``deadline_rows[i]``, from ``deadline_row``)."""
+    return int(
+        max((min(s, d) for s, d in zip(first_seen_rows, deadline_rows, strict=True)), default=0)
+    )
