@@ -1,4 +1,5 @@
-"""The numba-compiled hydraulic loop: right-hand side and a fixed-step RK4 integrator.
+"""The numba-compiled hydraulic loop: its right-hand side, integrated by the shared RK4
+(``monitor.sim.rk4``).
 
 Everything here is SI (Pa, m^3/s, m, kg, N, s).  Parameters travel as one float64 vector
 (indices below; ``pack.py`` fills it) so the sim-to-real tool can vary any of them without
@@ -13,6 +14,7 @@ import math
 import numpy as np
 
 from monitor.jit import jit
+from monitor.sim import rk4
 
 # --- parameter vector layout -------------------------------------------------------------
 BETA, V_LINE, V0A, V0B, AA, AB, STROKE = 0, 1, 2, 3, 4, 5, 6
@@ -285,8 +287,9 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
 
 
 @jit(inline="always")
-def _project(y: np.ndarray, stroke: float) -> None:
+def _project(y: np.ndarray, prm: np.ndarray) -> None:
     """Keep the state physical after a step: no negative pressure, rod within its stops."""
+    stroke = prm[STROKE]
     for i in (S_PP, S_PA, S_PB):
         if y[i] < 0.0:
             y[i] = 0.0
@@ -298,6 +301,14 @@ def _project(y: np.ndarray, stroke: float) -> None:
         y[S_V] = min(y[S_V], 0.0)
 
 
+@jit(inline="always")
+def _derivative(
+    y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.ndarray
+) -> None:
+    """``rhs`` in the shared integrator's form (the loop needs no auxiliary outputs)."""
+    rhs(y, u, prm, dy)
+
+
 @jit
 def integrate(
     y0: np.ndarray,
@@ -307,66 +318,25 @@ def integrate(
     prm: np.ndarray,
     record_every: int,
 ) -> np.ndarray:
-    """Classic RK4 at h = input_dt / n_sub, inputs linear between their samples.
+    """Classic RK4 at h = input_dt / n_sub, inputs linear between their samples
+    (``monitor.sim.rk4.integrate``).
 
     Returns the recorded outputs (rows every ``record_every`` steps, the first at t=0).
     """
-    n_in = inputs.shape[0]
-    n_steps = (n_in - 1) * n_sub
-    n_rec = n_steps // record_every + 1
-    rec = np.empty((n_rec, N_RECORD))
-    y = y0.copy()
-    k1 = np.empty(N_STATES)
-    k2 = np.empty(N_STATES)
-    k3 = np.empty(N_STATES)
-    k4 = np.empty(N_STATES)
-    yt = np.empty(N_STATES)
-    u0 = np.empty(N_INPUTS)
-    um = np.empty(N_INPUTS)
-    u1 = np.empty(N_INPUTS)
-    h = input_dt / n_sub
-    stroke = prm[STROKE]
-    _record(rec, 0, y, inputs[0], prm, k1)
-    r = 1
-    left = record_every
-    hh = 0.5 * h
-    h6 = h / 6.0
-    for k in range(n_in - 1):
-        a = inputs[k]
-        b = inputs[k + 1]
-        for j in range(n_sub):
-            f0 = j / n_sub
-            f1 = (j + 1) / n_sub
-            fm = 0.5 * (f0 + f1)
-            for i in range(N_INPUTS):
-                d = b[i] - a[i]
-                u0[i] = a[i] + f0 * d
-                um[i] = a[i] + fm * d
-                u1[i] = a[i] + f1 * d
-            rhs(y, u0, prm, k1)
-            for i in range(N_STATES):
-                yt[i] = y[i] + hh * k1[i]
-            rhs(yt, um, prm, k2)
-            for i in range(N_STATES):
-                yt[i] = y[i] + hh * k2[i]
-            rhs(yt, um, prm, k3)
-            for i in range(N_STATES):
-                yt[i] = y[i] + h * k3[i]
-            rhs(yt, u1, prm, k4)
-            for i in range(N_STATES):
-                y[i] += h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-            _project(y, stroke)
-            left -= 1
-            if left == 0:
-                left = record_every
-                _record(rec, r, y, u1, prm, k1)
-                r += 1
-    return rec
+    return rk4.integrate(
+        _derivative, _project, _record, N_RECORD, 0, y0, inputs, n_sub, input_dt, prm, record_every
+    )
 
 
 @jit(inline="always")
 def _record(
-    rec: np.ndarray, r: int, y: np.ndarray, u: np.ndarray, prm: np.ndarray, scratch: np.ndarray
+    rec: np.ndarray,
+    r: int,
+    y: np.ndarray,
+    u: np.ndarray,
+    prm: np.ndarray,
+    scratch: np.ndarray,
+    aux: np.ndarray,
 ) -> None:
     # QP alone, not a whole right-hand side (a record every few steps made that 5-12 %).
     qp = _pump_flow(y, u, prm, _disp_target(max(y[S_PP], 0.0), u, prm))

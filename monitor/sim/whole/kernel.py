@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from monitor.jit import jit
+from monitor.sim import rk4
 from monitor.sim.kernel import _clip, _orifice
 
 #: Named for later: an open-centre valve with negative flow control (issue 39).
@@ -248,55 +249,9 @@ def integrate(
     prm: np.ndarray,
     record_every: int,
 ) -> np.ndarray:
-    """Classic RK4 at h = input_dt / n_sub, inputs linear between their samples (as the
-    boom loop's ``monitor.sim.kernel.integrate``); a row every ``record_every`` steps."""
-    n_in = inputs.shape[0]
-    n_steps = (n_in - 1) * n_sub
-    rec = np.empty((n_steps // record_every + 1, N_RECORD))
-    y = y0.copy()
-    k1 = np.empty(N_STATES)
-    k2 = np.empty(N_STATES)
-    k3 = np.empty(N_STATES)
-    k4 = np.empty(N_STATES)
-    yt = np.empty(N_STATES)
-    aux = np.empty(N_AUX)
-    u0 = np.empty(N_INPUTS)
-    um = np.empty(N_INPUTS)
-    u1 = np.empty(N_INPUTS)
-    h = input_dt / n_sub
-    hh = 0.5 * h
-    h6 = h / 6.0
-    _record(rec, 0, y, inputs[0], prm, k1, aux)
-    r = 1
-    left = record_every
-    for k in range(n_in - 1):
-        a = inputs[k]
-        bb = inputs[k + 1]
-        for j in range(n_sub):
-            f0 = j / n_sub
-            f1 = (j + 1) / n_sub
-            fm = 0.5 * (f0 + f1)
-            for i in range(N_INPUTS):
-                d = bb[i] - a[i]
-                u0[i] = a[i] + f0 * d
-                um[i] = a[i] + fm * d
-                u1[i] = a[i] + f1 * d
-            rhs(y, u0, prm, k1, aux)
-            for i in range(N_STATES):
-                yt[i] = y[i] + hh * k1[i]
-            rhs(yt, um, prm, k2, aux)
-            for i in range(N_STATES):
-                yt[i] = y[i] + hh * k2[i]
-            rhs(yt, um, prm, k3, aux)
-            for i in range(N_STATES):
-                yt[i] = y[i] + h * k3[i]
-            rhs(yt, u1, prm, k4, aux)
-            for i in range(N_STATES):
-                y[i] += h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-            _project(y, prm)
-            left -= 1
-            if left == 0:
-                left = record_every
-                _record(rec, r, y, u1, prm, k1, aux)
-                r += 1
-    return rec
+    """Classic RK4 at h = input_dt / n_sub, inputs linear between their samples (the
+    integrator the boom loop shares, ``monitor.sim.rk4.integrate``); a row every
+    ``record_every`` steps."""
+    return rk4.integrate(
+        rhs, _project, _record, N_RECORD, N_AUX, y0, inputs, n_sub, input_dt, prm, record_every
+    )
