@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -153,65 +153,96 @@ def sense(
     be read with noise (``seed``) and without (``None``), e.g. for a noise-free twin."""
     sensors = sensors or SensorParams()
     rng = np.random.default_rng(seed) if seed is not None else None
-    delay_s = tau_s = 0.0
-    cal: dict[str, tuple[float, float]] = {}  # signal: (gain, offset in its unit)
-    for effect in effects:
-        if effect.name == "sensor_lag":
-            delay_s = effect.params["delay_ms"] * 1e-3
-            tau_s = effect.params["time_constant_ms"] * 1e-3
-        elif effect.name == "sensor_calibration":
-            cal[effect.labels["signal"]] = (effect.params["gain"], effect.params["offset"])
-
-    def reading(name: str, values: np.ndarray) -> np.ndarray:
-        # The transducer's gain and offset act on what it senses; its noise, range and the
-        # bus's quantisation come after (a miscalibrated sensor still clips at its range).
-        if name not in cal:
-            return values
-        gain, offset = cal[name]
-        return gain * values + offset
-
-    t = commands.t
-    rel = trace.t_s - trace.t_s[0]
-    idx = np.minimum(np.round((t - t[0]) / (rel[1] - rel[0])).astype(int), len(rel) - 1)
-
-    def sampled(values: np.ndarray, lagged: bool) -> np.ndarray:
-        if lagged:
-            values = lag(rel, values, delay_s, tau_s)
-        return values[idx]
-
-    s = sensors
-    out: dict[str, np.ndarray] = {}
-    for name in ("SpoolCmd", "PumpDispCmd", "EngineSpeed"):
-        out[name] = quantise(name, commands[name])
-    out["OilTemp"] = quantise(
-        "OilTemp", sample_hold(t - t[0], commands["OilTemp"], s.oil_temp_period_s)
-    )
-    for name, values in (("PP", trace.pp_pa), ("PA", trace.pa_pa), ("PB", trace.pb_pa)):
-        out[name] = measure(
-            name,
-            reading(name, sampled(values, True) / PA_PER_BAR),
-            s.pressure_noise_bar,
-            s.pressure_range_bar,
-            rng,
-        )
-    out["QP"] = measure(
-        "QP",
-        reading("QP", sampled(trace.qp_m3_s, True) / M3S_PER_LPM),
-        s.flow_noise_lpm,
-        s.flow_range_lpm,
-        rng,
-    )
-    rod_mm = sampled(trace.rod_pos_m, False) * 1e3
-    out["RodPos"] = measure(
-        "RodPos", reading("RodPos", rod_mm), s.rodpos_noise_mm, s.rodpos_range_mm, rng
-    )
-    out["SpoolPos"] = sampled(trace.spool, False) * 100.0
-    out["RodPosTrue"] = rod_mm
-    out["RodVel"] = sampled(trace.rod_vel_m_s, False) * 1e3
+    out = _command_readings(commands, sensors)
+    out.update(_plant_readings(commands.t, trace, _SensorEffects.of(effects), sensors, rng))
     meta: dict[str, object] = {
         "faults": [f.__dict__ for f in faults],
         "effects": {e.name: {**e.labels, **e.params} for e in effects},
         "seed": seed,
         "step_s": machine.step_s,
     }
-    return Recording(t.copy(), out, source=f"simulation of {commands.source}", meta=meta)
+    return Recording(commands.t.copy(), out, source=f"simulation of {commands.source}", meta=meta)
+
+
+@dataclass(frozen=True)
+class _SensorEffects:
+    """What the sensor effects do to the readings: a lag, and a gain and offset per signal."""
+
+    delay_s: float = 0.0
+    time_constant_s: float = 0.0
+    calibration: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, effects: list[Effect] | tuple[Effect, ...]) -> _SensorEffects:
+        delay_s = tau_s = 0.0
+        cal: dict[str, tuple[float, float]] = {}  # signal: (gain, offset in its unit)
+        for effect in effects:
+            if effect.name == "sensor_lag":
+                delay_s = effect.params["delay_ms"] * 1e-3
+                tau_s = effect.params["time_constant_ms"] * 1e-3
+            elif effect.name == "sensor_calibration":
+                cal[effect.labels["signal"]] = (effect.params["gain"], effect.params["offset"])
+        return cls(delay_s, tau_s, cal)
+
+    def reading(self, name: str, values: np.ndarray) -> np.ndarray:
+        # The transducer's gain and offset act on what it senses; its noise, range and the
+        # bus's quantisation come after (a miscalibrated sensor still clips at its range).
+        if name not in self.calibration:
+            return values
+        gain, offset = self.calibration[name]
+        return gain * values + offset
+
+
+def _command_readings(commands: Recording, s: SensorParams) -> dict[str, np.ndarray]:
+    """The commands as the bus carries them (OilTemp held between its slow samples)."""
+    t = commands.t
+    out: dict[str, np.ndarray] = {}
+    for name in ("SpoolCmd", "PumpDispCmd", "EngineSpeed"):
+        out[name] = quantise(name, commands[name])
+    out["OilTemp"] = quantise(
+        "OilTemp", sample_hold(t - t[0], commands["OilTemp"], s.oil_temp_period_s)
+    )
+    return out
+
+
+def _plant_readings(
+    t: np.ndarray,
+    trace: PlantTrace,
+    fx: _SensorEffects,
+    s: SensorParams,
+    rng: np.random.Generator | None,
+) -> dict[str, np.ndarray]:
+    """The measured signals (PP, PA, PB, QP, RodPos, drawing noise in that order) and the
+    true internal states, at the sample times ``t``."""
+    rel = trace.t_s - trace.t_s[0]
+    idx = np.minimum(np.round((t - t[0]) / (rel[1] - rel[0])).astype(int), len(rel) - 1)
+
+    def sampled(values: np.ndarray, lagged: bool) -> np.ndarray:
+        if lagged:
+            values = lag(rel, values, fx.delay_s, fx.time_constant_s)
+        return values[idx]
+
+    out: dict[str, np.ndarray] = {}
+    for name, values in (("PP", trace.pp_pa), ("PA", trace.pa_pa), ("PB", trace.pb_pa)):
+        out[name] = measure(
+            name,
+            fx.reading(name, sampled(values, True) / PA_PER_BAR),
+            s.pressure_noise_bar,
+            s.pressure_range_bar,
+            rng,
+        )
+    out["QP"] = measure(
+        "QP",
+        fx.reading("QP", sampled(trace.qp_m3_s, True) / M3S_PER_LPM),
+        s.flow_noise_lpm,
+        s.flow_range_lpm,
+        rng,
+    )
+    rod_mm = sampled(trace.rod_pos_m, False) * 1e3
+    out["RodPos"] = measure(
+        "RodPos", fx.reading("RodPos", rod_mm), s.rodpos_noise_mm, s.rodpos_range_mm, rng
+    )
+    out["SpoolPos"] = sampled(trace.spool, False) * 100.0
+    out["RodPosTrue"] = rod_mm
+    out["RodVel"] = sampled(trace.rod_vel_m_s, False) * 1e3
+    return out
