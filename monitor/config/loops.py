@@ -94,6 +94,38 @@ def _loop(
     item: Any, i: int, source: Path, path_of: Callable[[Any, str], Path], address: int
 ) -> LoopConfig:
     where = f"loops[{i}]"
+    _check_keys(item, source, where)
+    name = item["name"]
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ConfigError(
+            f"{source}: {where}.name must be lower case letters, digits and _ "
+            f"(starting with a letter, at most 32), got {shown(name)}"
+        )
+    signals = _signals(item.get("signals") or {}, source, where)
+    alarm = item.get("alarm_message", ALARM_MESSAGE)
+    if not isinstance(alarm, str) or not alarm:
+        raise ConfigError(
+            f"{source}: {where}.alarm_message must be a DBC message name, got {shown(alarm)}"
+        )
+    sa = item.get("source_address", address)
+    if isinstance(sa, bool) or not isinstance(sa, int) or not 0 <= sa <= 253:
+        raise ConfigError(
+            f"{source}: {where}.source_address must be a whole number 0..253, got {shown(sa)}"
+        )
+    machine = None if item.get("machine") is None else path_of(item["machine"], f"{where}.machine")
+    return LoopConfig(
+        name,
+        path_of(item["model"], f"{where}.model"),
+        signals,
+        alarm,
+        sa,
+        None if machine is None else load_machine(machine),
+        machine,
+    )
+
+
+def _check_keys(item: Any, source: Path, where: str) -> None:
+    """A mapping of known keys with at least a name and a model."""
     if not isinstance(item, dict):
         raise ConfigError(f"{source}: {where} must be a mapping with name and model")
     unknown = set(item) - set(_KEYS)
@@ -105,13 +137,11 @@ def _loop(
     for key in ("name", "model"):
         if key not in item:
             raise ConfigError(f"{source}: {where} misses key {key!r}")
-    name = item["name"]
-    if not isinstance(name, str) or not _NAME.match(name):
-        raise ConfigError(
-            f"{source}: {where}.name must be lower case letters, digits and _ "
-            f"(starting with a letter, at most 32), got {shown(name)}"
-        )
-    signals = item.get("signals") or {}
+
+
+def _signals(signals: Any, source: Path, where: str) -> dict[str, str | None]:
+    """A loop's ``signals`` mapping checked: contract names to distinct DBC signal names
+    (``RodPos: null``: the loop has no rod position)."""
     if not isinstance(signals, dict):
         raise ConfigError(
             f"{source}: {where}.signals must be a mapping of contract names to DBC signal names"
@@ -136,23 +166,4 @@ def _loop(
             f"{source}: {where}.signals: DBC signal {shown(doubled[0])} would carry "
             "two of the loop's signals"
         )
-    alarm = item.get("alarm_message", ALARM_MESSAGE)
-    if not isinstance(alarm, str) or not alarm:
-        raise ConfigError(
-            f"{source}: {where}.alarm_message must be a DBC message name, got {shown(alarm)}"
-        )
-    sa = item.get("source_address", address)
-    if isinstance(sa, bool) or not isinstance(sa, int) or not 0 <= sa <= 253:
-        raise ConfigError(
-            f"{source}: {where}.source_address must be a whole number 0..253, got {shown(sa)}"
-        )
-    machine = None if item.get("machine") is None else path_of(item["machine"], f"{where}.machine")
-    return LoopConfig(
-        name,
-        path_of(item["model"], f"{where}.model"),
-        dict(signals),
-        alarm,
-        sa,
-        None if machine is None else load_machine(machine),
-        machine,
-    )
+    return dict(signals)

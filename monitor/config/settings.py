@@ -17,6 +17,7 @@ Every problem (unknown key, wrong type, missing input file, impossible value) is
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -226,18 +227,13 @@ class MonitorConfig:
     black_box: BlackBoxConfig = field(default_factory=BlackBoxConfig)
     storage: StorageConfig = field(default_factory=StorageConfig)
     j1939: J1939Config = field(default_factory=J1939Config)
-    operating: OperatingConfig = field(default_factory=OperatingConfig)
-    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
-    validity: ValidityConfig = field(default_factory=ValidityConfig)
+    #: The ``operating``, ``plausibility`` and ``validity`` sections: which samples are judged.
+    gating: GatingConfig = field(default_factory=GatingConfig)
     loops: tuple[LoopConfig, ...] = ()  # as written in the file; empty: no ``loops`` section
     #: The simulator YAML of the machine of the one loop of a config without ``loops``, and
     #: its parameters.
     machine: Path | None = None
     machine_params: MachineParams | None = None
-
-    @property
-    def gating(self) -> GatingConfig:
-        return GatingConfig(self.operating, self.plausibility, self.validity)
 
     @property
     def monitored_loops(self) -> tuple[LoopConfig, ...]:
@@ -287,13 +283,47 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
         raise ConfigError(
             f"{source}: unknown key(s) {keys_text(unknown)}; known: {', '.join(sorted(_TOP_KEYS))}"
         )
-    base = source.parent
 
     def section(cls: type, name: str) -> Any:
         return typed(cls, data.get(name), name, source)
 
     horizon = section(DetectorSection, "detector").horizon
     black_box = section(BlackBoxConfig, "black_box")
+    bus, event_log, storage = _daemon_sections(section, source)
+    j1939 = section(J1939Config, "j1939")
+    files = _Files(data, source)
+    machine = files.optional("machine")
+    loops: tuple[LoopConfig, ...] = ()
+    if "loops" in data:
+        loops = parse_loops(data["loops"], source, files.path, j1939.source_address)
+    return MonitorConfig(
+        source=source,
+        # Without ``dbc`` or ``model`` the shipped ones (the reference boom loop).
+        dbc=files.given("dbc") or resource_path("dbc", "monitor.dbc"),
+        model=files.given("model") or resource_path("config", "boom_default.model.npz"),
+        horizon=horizon,
+        alarm=section(AlarmConfig, "alarm"),
+        bus=bus,
+        outputs=section(OutputConfig, "outputs"),
+        event_log=event_log,
+        black_box=black_box,
+        storage=storage,
+        j1939=j1939,
+        gating=GatingConfig(
+            section(OperatingConfig, "operating"),
+            section(PlausibilityConfig, "plausibility"),
+            section(ValidityConfig, "validity"),
+        ),
+        loops=loops,
+        machine=machine,
+        machine_params=None if machine is None else load_machine(machine),
+    )
+
+
+def _daemon_sections(
+    section: Callable[[type, str], Any], source: Path
+) -> tuple[BusConfig, EventLogConfig, StorageConfig]:
+    """``bus``, ``event_log`` and ``storage``, checked against each other."""
     bus = section(BusConfig, "bus")
     if bus.reopen_max_s < bus.reopen_initial_s:
         raise ConfigError(
@@ -308,36 +338,24 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             f"event_log.rotate_mb ({event_log.rotate_mb:g}): the current event log and one "
             "rotated file must fit"
         )
-    j1939 = section(J1939Config, "j1939")
-    machine = (
-        None if data.get("machine") is None else _path(data["machine"], "machine", base, source)
-    )
-    loops: tuple[LoopConfig, ...] = ()
-    if "loops" in data:
-        loops = parse_loops(
-            data["loops"], source, lambda v, k: _path(v, k, base, source), j1939.source_address
-        )
-    return MonitorConfig(
-        source=source,
-        # Without ``dbc`` or ``model`` the shipped ones (the reference boom loop).
-        dbc=_path(data["dbc"], "dbc", base, source)
-        if "dbc" in data
-        else resource_path("dbc", "monitor.dbc"),
-        model=_path(data["model"], "model", base, source)
-        if "model" in data
-        else resource_path("config", "boom_default.model.npz"),
-        horizon=horizon,
-        alarm=section(AlarmConfig, "alarm"),
-        bus=bus,
-        outputs=section(OutputConfig, "outputs"),
-        event_log=event_log,
-        black_box=black_box,
-        storage=storage,
-        j1939=j1939,
-        operating=section(OperatingConfig, "operating"),
-        plausibility=section(PlausibilityConfig, "plausibility"),
-        validity=section(ValidityConfig, "validity"),
-        loops=loops,
-        machine=machine,
-        machine_params=None if machine is None else load_machine(machine),
-    )
+    return bus, event_log, storage
+
+
+@dataclass(frozen=True)
+class _Files:
+    """The config's input files, relative to its folder, each checked to exist."""
+
+    data: dict[str, Any]
+    source: Path
+
+    def path(self, value: Any, key: str) -> Path:
+        return _path(value, key, self.source.parent, self.source)
+
+    def given(self, key: str) -> Path | None:
+        """The top-level key's file (None: no such key; a null value is an error)."""
+        return self.path(self.data[key], key) if key in self.data else None
+
+    def optional(self, key: str) -> Path | None:
+        """The top-level key's file (None: no such key, or null)."""
+        value = self.data.get(key)
+        return None if value is None else self.path(value, key)
