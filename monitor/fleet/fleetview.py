@@ -45,6 +45,24 @@ def alarm_id(row: dict[str, Any], ep: dict[str, Any]) -> str:
     return f"{row['log']}#{ep['kind']}@{ep['start_t']:.2f}"
 
 
+@dataclass(frozen=True)
+class Span:
+    """When an alarm episode was active, in seconds into its log."""
+
+    start_t: float
+    end_t: float
+    duration_s: float
+    open: bool  # still active at the end of the log
+
+
+@dataclass(frozen=True)
+class TroubleCode:
+    """The J1939 DM1 trouble code an episode was sent with."""
+
+    spn: int
+    fmi: int
+
+
 @dataclass
 class Alarm:
     """One alarm episode of the alarm list."""
@@ -56,12 +74,8 @@ class Alarm:
     kind: str  # fault or sensor_fault
     name: str  # fault name or sensor signal
     check: str | None
-    start_t: float
-    end_t: float
-    duration_s: float
-    open: bool  # still active at the end of the log
-    spn: int
-    fmi: int
+    span: Span
+    code: TroubleCode
     votes: dict[str, int]
     what: str  # e.g. "piston seal suspected" or "QP frozen"
     action: str
@@ -88,12 +102,8 @@ def _alarm(row: dict[str, Any], ep: dict[str, Any]) -> Alarm:
         ep["kind"],
         ep["name"],
         ep.get("check"),
-        ep["start_t"],
-        ep["end_t"],
-        ep["duration_s"],
-        bool(ep.get("open")),
-        ep["spn"],
-        ep["fmi"],
+        Span(ep["start_t"], ep["end_t"], ep["duration_s"], bool(ep.get("open"))),
+        TroubleCode(ep["spn"], ep["fmi"]),
         ep.get("votes") or {},
         what,
         action,
@@ -219,8 +229,9 @@ def code_groups(views: list[MachineView]) -> tuple[list[CodeGroup], list[str]]:
     periods: set[str] = set()
     for v in views:
         for a in v.alarms:
+            c = a.code
             g = groups.setdefault(
-                (a.spn, a.fmi), CodeGroup(a.spn, a.fmi, a.what, [], defaultdict(int))
+                (c.spn, c.fmi), CodeGroup(c.spn, c.fmi, a.what, [], defaultdict(int))
             )
             if a.machine not in g.machines:
                 g.machines.append(a.machine)

@@ -97,12 +97,13 @@ last {{ v.last_seen }}){% endif %}{% if v.evidence %}; {{ v.evidence }}{% endif 
 <th>end [s]</th>
 <th>duration [s]</th><th>fault / sensor</th><th>isolation votes</th><th>DM1 SPN</th><th>FMI</th>
 <th>status</th></tr>
-{% for a in v.alarms %}<tr><td>{{ a.log }}</td><td class="num">{{ '%.1f'|format(a.start_t) }}</td>
-<td class="num">{{ '%.1f'|format(a.end_t) }}{% if a.open %} (open at the end of the log){% endif
-%}</td>
-<td class="num">{{ '%.1f'|format(a.duration_s) }}</td><td>{{ a.what }}</td>
-<td>{{ a.votes_text or "- (sensor check)" }}</td><td class="num">{{ a.spn }}</td>
-<td class="num">{{ a.fmi }}</td>
+{% for a in v.alarms %}<tr><td>{{ a.log }}</td><td class="num">{{ '%.1f'|format(a.span.start_t)
+}}</td>
+<td class="num">{{ '%.1f'|format(a.span.end_t) }}{% if a.span.open
+%} (open at the end of the log){% endif %}</td>
+<td class="num">{{ '%.1f'|format(a.span.duration_s) }}</td><td>{{ a.what }}</td>
+<td>{{ a.votes_text or "- (sensor check)" }}</td><td class="num">{{ a.code.spn }}</td>
+<td class="num">{{ a.code.fmi }}</td>
 <td>{{ acks[a.id].text if a.id in acks else 'active' }}</td></tr>
 {% endfor %}</table>{% else %}<p>No alarm episodes.</p>{% endif %}
 <h2>Signals around alarms</h2>
@@ -134,9 +135,9 @@ note, then the button. Shelving hides it for {{ shelve_days }} days. Kept in
 {% if live %}<th>acknowledge / shelve</th>{% endif %}</tr>
 {% for a in alarms %}<tr id="alarm-{{ loop.index }}" data-alarm="{{ a.id }}">
 <td><a href="machine-{{ a.machine }}.html">{{ a.machine }}</a></td><td>{{ a.log }}</td>
-<td class="num">{{ '%.1f'|format(a.start_t) }}</td>
-<td class="num">{{ '%.1f'|format(a.duration_s) }}</td>
-<td>{{ a.what }}</td><td>{{ a.spn }} / {{ a.fmi }}</td><td>{{ a.action }}</td>
+<td class="num">{{ '%.1f'|format(a.span.start_t) }}</td>
+<td class="num">{{ '%.1f'|format(a.span.duration_s) }}</td>
+<td>{{ a.what }}</td><td>{{ a.code.spn }} / {{ a.code.fmi }}</td><td>{{ a.action }}</td>
 <td class="status">{{ acks[a.id].text if a.id in acks else 'active' }}</td>
 {% if live %}<td><form class="ack" method="post" action="ack">
 <input type="hidden" name="alarm" value="{{ a.id }}">

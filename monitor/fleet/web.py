@@ -116,7 +116,7 @@ class Site:
         acks = read_acks(self.results)
         now = dt.datetime.now(dt.timezone.utc)
         every = [a for v in self.views for a in v.alarms]
-        every.sort(key=lambda a: (a.period, a.log, a.start_t), reverse=True)  # newest first
+        every.sort(key=lambda a: (a.period, a.log, a.span.start_t), reverse=True)  # newest first
         shelved = [a for a in every if a.id in acks and acks[a.id].shelved(now)]
         active = [a for a in every if a not in shelved]
         return self._render(

@@ -144,7 +144,7 @@ def signal_plot(trace: dict[str, Any], alarm: Any, div_id: str) -> str:
     from plotly.subplots import make_subplots
 
     t = np.asarray(trace["t"], float)
-    w = _window(t, alarm.start_t, alarm.end_t)
+    w = _window(t, alarm.span.start_t, alarm.span.end_t)
     tw = t[w]
 
     def y(x: np.ndarray) -> np.ndarray:  # float32: 7 digits are plenty on a plot
@@ -179,8 +179,8 @@ def signal_plot(trace: dict[str, Any], alarm: Any, div_id: str) -> str:
     colour = "#d62728" if alarm.kind == "fault" else "#ff7f0e"
     for r in (1, 2, 3):
         fig.add_vrect(
-            x0=alarm.start_t,
-            x1=alarm.end_t,
+            x0=alarm.span.start_t,
+            x1=alarm.span.end_t,
             fillcolor=colour,
             opacity=0.12,
             line_width=0,
@@ -190,8 +190,8 @@ def signal_plot(trace: dict[str, Any], alarm: Any, div_id: str) -> str:
     fig.update_xaxes(title_text="time in the log [s]", row=3, col=1)
     fig.update_layout(
         height=620,
-        title=f"{alarm.log}: {alarm.what} from {alarm.start_t:.1f} s "
-        f"to {alarm.end_t:.1f} s (shaded)",
+        title=f"{alarm.log}: {alarm.what} from {alarm.span.start_t:.1f} s "
+        f"to {alarm.span.end_t:.1f} s (shaded)",
         title_font_size=13,
     )
     return _div(fig, div_id)
