@@ -136,15 +136,17 @@ def test_fit_on_the_simulated_boom_finds_its_cylinder() -> None:
     from monitor.sim.simulate import simulate
 
     m = load_machine()
-    cap_l = math.pi / 4 * m.bore_m**2 * m.stroke_m * 1000.0
-    ann_l = math.pi / 4 * (m.bore_m**2 - m.rod_m**2) * m.stroke_m * 1000.0
+    cap_l = math.pi / 4 * m.cylinder.bore_m**2 * m.cylinder.stroke_m * 1000.0
+    ann_l = (
+        math.pi / 4 * (m.cylinder.bore_m**2 - m.cylinder.rod_m**2) * m.cylinder.stroke_m * 1000.0
+    )
     recs = [simulate(make_cycle("boom-cover", 300.0, seed), m, seed=seed) for seed in (3, 4)]
     fitted = fit_stroke([r["SpoolCmd"] for r in recs], [r["QP"] for r in recs])
     assert fitted.volume_up_l == pytest.approx(cap_l, rel=0.03)
     assert fitted.volume_down_l == pytest.approx(ann_l, rel=0.03)
     # And the estimate agrees with the simulator's RodPos about the holds on a stop.
     rec = simulate(make_cycle("boom", 300.0, 5), m, seed=5)
-    spool, rod = rec["SpoolCmd"], rec["RodPos"] / (1000.0 * m.stroke_m)
+    spool, rod = rec["SpoolCmd"], rec["RodPos"] / (1000.0 * m.cylinder.stroke_m)
     near = near_stop_series(spool, rec["QP"], fitted).astype(bool)
     hold = np.abs(spool) <= 5.0
     on_stop = (rod < 0.01) | (rod > 0.99)

@@ -116,7 +116,7 @@ def test_the_moments_of_arrival_on_a_stop_are_not_compared_without_rodpos():
 def test_a_centred_spool_holding_far_off_gravity_holds_the_rod_on_a_stop():
     n = 30
     spool = np.zeros(n)
-    area_a, area_b, grav = M.area_a_m2, M.area_b_m2, M.gravity_load_n
+    area_a, area_b, grav = M.cylinder.area_a_m2, M.cylinder.area_b_m2, M.load.gravity_load_n
     # Mid-stroke: PA carries the gravity load with PB at 5 bar (force = gravity).
     pa_mid = (grav / 1e5 + 5.0 * area_b) / area_a
     assert not holds_on_stop(spool, np.full(n, pa_mid), np.full(n, 5.0), M).any()
@@ -154,10 +154,10 @@ def test_log_knobs_stay_inside_their_bounds_at_the_ends():
 
 def test_tolerances_scale_their_fields():
     m = cal_mod.apply(M, {"mass": 1.1, "volumes": 0.9})
-    assert m.mass_kg == pytest.approx(440.0)
-    assert m.dead_volume_b_m3 == pytest.approx(0.27e-3)
-    assert m.line_volume_m3 == pytest.approx(0.45e-3)
-    assert m.gravity_load_n == M.gravity_load_n
+    assert m.load.mass_kg == pytest.approx(440.0)
+    assert m.cylinder.dead_volume_b_m3 == pytest.approx(0.27e-3)
+    assert m.line.line_volume_m3 == pytest.approx(0.45e-3)
+    assert m.load.gravity_load_n == M.load.gravity_load_n
 
 
 def test_where_finds_an_injected_window_and_band(clean):

@@ -175,8 +175,8 @@ def test_a_compensator_setting_is_not_called_a_pp_sensor_error():
     shift_bar = -30.0
     m = apply(M, MACHINE_TOLERANCE)
     m = m.with_changes(
-        compensator_start_pa=m.compensator_start_pa + shift_bar * BAR,
-        compensator_full_pa=m.compensator_full_pa + shift_bar * BAR,
+        compensator_start_pa=m.pump.compensator_start_pa + shift_bar * BAR,
+        compensator_full_pa=m.pump.compensator_full_pa + shift_bar * BAR,
     )
     rep = _report(simulate(make_cycle("boom", SECONDS, 6), m, seed=6))
     assert rep["verdict"] == "unexplained"

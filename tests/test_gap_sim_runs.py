@@ -68,8 +68,8 @@ def test_the_fits_coarser_step_stays_well_inside_the_sensor_noise(factor):
     stiff = cal_mod.apply(
         M, {"volumes": 0.85, "mass": 0.85, "valve_gain": 1.1, "viscous_friction": 0.7}
     )
-    coarse = stiff.with_changes(step_s=stiff.step_s * factor)
-    assert coarse.step_s > M.step_s
+    coarse = stiff.with_changes(step_s=stiff.solver.step_s * factor)
+    assert coarse.solver.step_s > M.solver.step_s
     ref = predict(prep, held, stiff, ())
     got = predict(prep, held, coarse, ())
     floor = noise_floor(prep)

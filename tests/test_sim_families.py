@@ -92,8 +92,8 @@ def _friction_force(exponent: float, v_m_s: float) -> float:
     u = np.array([0.0, 1.0, 2200 / 60, 1.0, 0.0, 1.0, 0.0])
     dy = np.zeros(K.N_STATES)
     K.rhs(y, u, prm, dy)
-    drive = -(M.gravity_load_n + prm[K.SLOPE] * (0.25 - M.reference_rod_pos_m))
-    return drive - M.mass_kg * dy[K.S_V]
+    drive = -(M.load.gravity_load_n + prm[K.SLOPE] * (0.25 - M.load.reference_rod_pos_m))
+    return drive - M.load.mass_kg * dy[K.S_V]
 
 
 def test_stribeck_exponent_shapes_the_decay_from_static_to_coulomb():
@@ -128,7 +128,7 @@ def test_dissolving_air_is_stiff_above_its_pressure_and_softer_below():
         dissolved_at_bar=p_diss_bar,
     )
     prm = pack_params(M, [fx])
-    beta, p0, pc = M.bulk_modulus_pa, 101325.0, p_diss_bar * 1e5 + 101325.0
+    beta, p0, pc = M.oil.bulk_modulus_pa, 101325.0, p_diss_bar * 1e5 + 101325.0
 
     def g(p_gauge: float) -> float:
         pabs = p_gauge + p0

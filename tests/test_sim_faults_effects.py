@@ -242,7 +242,10 @@ def _added(line_cm3_bar: float, cylinder_cm3_bar: float) -> Effect:
 def test_hoses_as_added_capacitances_match_the_series_modulus_they_stand_for():
     # A wall modulus E adds V/E to each node: 0.5 L / 0.5 GPa = 1e-12 m^3/Pa = 0.1 cm^3/bar
     # on the pump line, 0.3 L / 0.5 GPa = 0.06 cm^3/bar on each cylinder line.
-    assert M.line_volume_m3 == 0.5e-3 and M.dead_volume_a_m3 == M.dead_volume_b_m3 == 0.3e-3
+    assert (
+        M.line.line_volume_m3 == 0.5e-3
+        and M.cylinder.dead_volume_a_m3 == M.cylinder.dead_volume_b_m3 == 0.3e-3
+    )
     cmds = commands([(0.5, 1.5, 60.0), (3.0, 3.8, -50.0)], 5.0)
     series = simulate(
         cmds, M, effects=[Effect.make("hose_compliance", wall_modulus_gpa=0.5)], seed=None

@@ -108,7 +108,7 @@ def test_step_halving_changes_nothing_beyond_sensor_noise():
 
     cmds = make_cycle("step", 40.0, seed=4)
     coarse = simulate(cmds, M, seed=None)
-    fine = simulate(cmds, M.with_changes(step_s=M.step_s / 2), seed=None)
+    fine = simulate(cmds, M.with_changes(step_s=M.solver.step_s / 2), seed=None)
     for name in ("PP", "PA", "PB"):
         diff = coarse[name] - fine[name]
         assert np.sqrt(np.mean(diff**2)) < 0.05  # bar rms, vs 0.3 bar sensor noise

@@ -25,7 +25,7 @@ def test_restart_from_the_recorded_state_reproduces_the_continuous_run(restart_s
     cmds = commands([(0.3, 2.0, 60.0), (3.0, 4.0, -50.0)], 4.5)
     full = run_plant(cmds, M, rod_pos0_m=0.2, record_period_s=None)
     k = int(round(restart_s / 0.01))
-    j = int(round(restart_s / M.step_s))  # record row of the restart instant
+    j = int(round(restart_s / M.solver.step_s))  # record row of the restart instant
     y0 = measured_state(
         M,
         pack_params(M),

@@ -178,13 +178,13 @@ def _from_plant(cmds: Recording, names: list[str], tol: dict, rng) -> tuple[dict
 def _from_sim(cmds: Recording, names: list[str], tol: dict, rng, seed: int):
     m = load_machine()
     m = m.with_changes(
-        mass_kg=m.mass_kg * tol["mass"],
-        gravity_load_n=m.gravity_load_n * tol["gravity"],
-        viscous_friction_n_s_m=m.viscous_friction_n_s_m * tol["friction"],
-        valve_rated_flow_m3_s=m.valve_rated_flow_m3_s * tol["valve"],
-        dead_volume_a_m3=m.dead_volume_a_m3 * tol["vol_a"],
-        dead_volume_b_m3=m.dead_volume_b_m3 * tol["vol_b"],
-        line_volume_m3=m.line_volume_m3 * tol["vol_line"],
+        mass_kg=m.load.mass_kg * tol["mass"],
+        gravity_load_n=m.load.gravity_load_n * tol["gravity"],
+        viscous_friction_n_s_m=m.load.viscous_friction_n_s_m * tol["friction"],
+        valve_rated_flow_m3_s=m.valve.valve_rated_flow_m3_s * tol["valve"],
+        dead_volume_a_m3=m.cylinder.dead_volume_a_m3 * tol["vol_a"],
+        dead_volume_b_m3=m.cylinder.dead_volume_b_m3 * tol["vol_b"],
+        line_volume_m3=m.line.line_volume_m3 * tol["vol_line"],
     )
     params = {n: catalogue_params(n, rng) for n in names}
     fx = [Effect.make(n, **params[n]) for n in names]

@@ -130,10 +130,9 @@ def run(args: argparse.Namespace) -> int:
     faults = [parse_fault(text) for text in args.fault]
     effects = [parse_effect(text) for text in args.effect]
     machine = load_machine(args.config)
-    if not 0.0 <= args.rod_pos <= machine.stroke_m * 1e3:
-        raise ConfigError(
-            f"--rod-pos {args.rod_pos:g} mm is outside the stroke 0..{machine.stroke_m * 1e3:g}"
-        )
+    stroke_mm = machine.cylinder.stroke_m * 1e3
+    if not 0.0 <= args.rod_pos <= stroke_mm:
+        raise ConfigError(f"--rod-pos {args.rod_pos:g} mm is outside the stroke 0..{stroke_mm:g}")
     for fault in faults:
         if fault.onset_s > args.duration:
             raise ConfigError(f"--fault {fault.name}: onset {fault.onset_s:g} s is after the end")

@@ -27,7 +27,7 @@ from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
 
-# Parameters drawn per machine (MachineParams fields), each within +-tolerance.
+# Parameters drawn per machine (MachineParams parameters), each within +-tolerance.
 _TOLERANCED = (
     "bulk_modulus_pa",
     "pump_disp_m3_rev",
@@ -115,7 +115,7 @@ def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, An
     for i, role in enumerate(_roles(plan.machines)):
         mid = f"M{i + 1:02d}"
         draw = {f: float(rng.uniform(1 - plan.tolerance, 1 + plan.tolerance)) for f in _TOLERANCED}
-        machine = nominal.with_changes(**{f: getattr(nominal, f) * k for f, k in draw.items()})
+        machine = nominal.with_changes(**{f: nominal.value(f) * k for f, k in draw.items()})
         base = plan.seed * 100_000 + i * 1000
         (out / mid / "commissioning").mkdir(parents=True, exist_ok=True)
         (out / mid / "logs").mkdir(parents=True, exist_ok=True)

@@ -54,7 +54,7 @@ def apply(machine: MachineParams, factors: dict[str, float]) -> MachineParams:
     for tol in TOLERANCES:
         f = factors.get(tol.name, 1.0)
         for name in tol.fields:
-            changes[name] = getattr(machine, name) * f
+            changes[name] = machine.value(name) * f
     return machine.with_changes(**changes)
 
 
@@ -83,7 +83,7 @@ def describe(machine: MachineParams, factors: dict[str, float]) -> dict[str, dic
     out = {}
     for tol in TOLERANCES:
         f = factors.get(tol.name, 1.0)
-        nominal = getattr(machine, tol.fields[0]) * tol.to_unit
+        nominal = machine.value(tol.fields[0]) * tol.to_unit
         out[tol.name] = {
             "value": round(nominal * f, 6),
             "unit": tol.unit,

@@ -227,8 +227,8 @@ def _diagnose(
         f"{len(cal)} calibration ({sum(s.duration_s() for s in fit_segs):.0f} s fitted), "
         f"{len(held)} held out; RodPos {'measured' if prep.has_rodpos else 'from flow'}"
     )
-    fit_machine = machine.with_changes(step_s=machine.step_s * FIT_STEP_FACTOR)
-    held_machine = machine.with_changes(step_s=machine.step_s * HELDOUT_STEP_FACTOR)
+    fit_machine = machine.with_changes(step_s=machine.solver.step_s * FIT_STEP_FACTOR)
+    held_machine = machine.with_changes(step_s=machine.solver.step_s * HELDOUT_STEP_FACTOR)
     readings = _Readings(prep, (fit_segs, fit_machine), (held, held_machine))
     fit_ev, held_ev = readings.fit(None), readings.held(None)
 

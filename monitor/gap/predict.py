@@ -104,8 +104,8 @@ def _start_state(start: _Start, machine: MachineParams, prm: np.ndarray) -> np.n
     x_m = start.rod_m
     if x_m < END_STOP_SNAP_M:
         x_m = 0.0
-    elif x_m > machine.stroke_m - END_STOP_SNAP_M:
-        x_m = machine.stroke_m
+    elif x_m > machine.cylinder.stroke_m - END_STOP_SNAP_M:
+        x_m = machine.cylinder.stroke_m
     return measured_state(
         machine, prm, start.pp_pa, start.pa_pa, start.pb_pa, x_m, start.vel_m_s, spool=start.spool
     )
@@ -164,7 +164,12 @@ class SegmentPlant:
         cal = _calibration(effects)
         return [
             run_packed(
-                t0, dt, u, prm, _start_state(_true_start(start, cal), machine, prm), machine.step_s
+                t0,
+                dt,
+                u,
+                prm,
+                _start_state(_true_start(start, cal), machine, prm),
+                machine.solver.step_s,
             )
             for t0, dt, u, start in zip(
                 self._t0, self._dt, self._inputs_for(fx), self._starts, strict=True

@@ -231,7 +231,7 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         scale=scale,
         noise_var=noise_var,
         source=src,
-        stroke_mm=machine.stroke_m * 1e3,
+        stroke_mm=machine.cylinder.stroke_m * 1e3,
         unscored=unscored,
         below_zero=reads_below_zero({n: meas[n] for n in MEASURED_NAMES}),
     )
@@ -239,7 +239,7 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
 
 def _check_plausible(src: str, cols: dict[str, np.ndarray], machine: MachineParams) -> None:
     speed = np.nanpercentile(cols["EngineSpeed"], 99)
-    q_max = machine.pump_disp_m3_rev * max(speed, 1.0) / 60.0 / LPM
+    q_max = machine.pump.pump_disp_m3_rev * max(speed, 1.0) / 60.0 / LPM
     q99 = np.nanpercentile(cols["QP"], 99)
     if q99 > PLAUSIBLE_MARGIN * q_max:
         raise NoHydraulicDataError(
@@ -247,7 +247,7 @@ def _check_plausible(src: str, cols: dict[str, np.ndarray], machine: MachinePara
             f"{q_max:.1f} L/min at {speed:.0f} rpm: a recording of another machine? "
             "(pass its simulator config with --config)"
         )
-    p_max = machine.relief_full_pa / BAR
+    p_max = machine.line.relief_full_pa / BAR
     for name in ("PP", "PA", "PB"):
         p99 = np.nanpercentile(cols[name], 99)
         # Below zero by up to the largest sensor offset the diagnosis can name (plus noise):

@@ -72,9 +72,9 @@ def stalls(
 ) -> np.ndarray:
     """Per sample: +1 where the rod sits on the top stop (extension stalled), -1 on the
     bottom stop (retraction stalled), 0 elsewhere (including the first ``STALL_S``)."""
-    limit_pa = machine.relief_crack_pa
-    if machine.compensator_enabled:
-        limit_pa = min(machine.compensator_start_pa, limit_pa)
+    limit_pa = machine.line.relief_crack_pa
+    if machine.pump.compensator_enabled:
+        limit_pa = min(machine.pump.compensator_start_pa, limit_pa)
     limit_bar = limit_pa / BAR
     pp = np.nan_to_num(pp_bar)
     common = (np.nan_to_num(qp_lpm, nan=np.inf) < STALL_FLOW_LPM) & (
@@ -90,10 +90,13 @@ def holds_on_stop(
 ) -> np.ndarray:
     """Per sample: +1 where a centred spool holds the rod on the top stop, -1 on the bottom
     one (``HOLD_OFF_BALANCE``), 0 elsewhere."""
-    force = np.nan_to_num(pa_bar) * machine.area_a_m2 - np.nan_to_num(pb_bar) * machine.area_b_m2
-    off = force * BAR - machine.gravity_load_n
+    force = (
+        np.nan_to_num(pa_bar) * machine.cylinder.area_a_m2
+        - np.nan_to_num(pb_bar) * machine.cylinder.area_b_m2
+    )
+    off = force * BAR - machine.load.gravity_load_n
     centred = np.abs(spool) < CENTRE_PCT
-    margin = HOLD_OFF_BALANCE * abs(machine.gravity_load_n)
+    margin = HOLD_OFF_BALANCE * abs(machine.load.gravity_load_n)
     top = _held(centred & (off > margin), _STALL_N)
     bottom = _held(centred & (off < -margin), _STALL_N)
     return np.where(top, 1, np.where(bottom, -1, 0)).astype(np.int8)
@@ -140,12 +143,12 @@ def rod_from_flow(
     q = np.nan_to_num(qp_lpm) * LPM
     v = np.where(
         spool > CENTRE_PCT,
-        q / machine.area_a_m2,
-        np.where(spool < -CENTRE_PCT, -q / machine.area_b_m2, 0.0),
+        q / machine.cylinder.area_a_m2,
+        np.where(spool < -CENTRE_PCT, -q / machine.cylinder.area_b_m2, 0.0),
     )
     stall = stalls(spool, pp_bar, pa_bar, pb_bar, qp_lpm, machine)
     stall = np.where(stall != 0, stall, holds_on_stop(spool, pa_bar, pb_bar, machine))
-    stroke = machine.stroke_m
+    stroke = machine.cylinder.stroke_m
     dt = SAMPLE_PERIOD_S
     n = v.size
     ahead, back = np.empty(n), np.empty(n)

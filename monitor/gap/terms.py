@@ -49,7 +49,7 @@ def _shift(fields: tuple[str, ...], si_per_unit: float) -> Apply:
 
     def apply(m: MachineParams, c: np.ndarray) -> tuple[MachineParams, dict[str, float]]:
         d = float(c[0]) * si_per_unit
-        return m.with_changes(**{f: getattr(m, f) + d for f in fields}), {}
+        return m.with_changes(**{f: m.value(f) + d for f in fields}), {}
 
     return apply
 
@@ -58,7 +58,7 @@ def _scale(field: str) -> Apply:
     """A machine field scaled by (1 + coefficient / 100)."""
 
     def apply(m: MachineParams, c: np.ndarray) -> tuple[MachineParams, dict[str, float]]:
-        return m.with_changes(**{field: getattr(m, field) * (1.0 + float(c[0]) / 100.0)}), {}
+        return m.with_changes(**{field: m.value(field) * (1.0 + float(c[0]) / 100.0)}), {}
 
     return apply
 

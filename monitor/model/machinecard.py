@@ -24,7 +24,7 @@ from monitor.sim.machine import BAR, LPM, MachineParams
 
 log = logging.getLogger("monitor")
 
-#: Header name -> (MachineParams field, factor SI -> header unit, label, unit).
+#: Header name -> (MachineParams parameter, factor SI -> header unit, label, unit).
 MACHINE_KEYS: dict[str, tuple[str, float, str, str]] = {
     "bore_mm": ("bore_m", 1e3, "bore", "mm"),
     "rod_mm": ("rod_m", 1e3, "rod", "mm"),
@@ -75,9 +75,7 @@ class ModelCard:
 
 def machine_values(params: MachineParams) -> dict[str, float]:
     """``params`` in the header's units (mm, kg, N, cc/rev, L/min)."""
-    return {
-        k: round(getattr(params, f) * factor, 6) for k, (f, factor, _, _) in MACHINE_KEYS.items()
-    }
+    return {k: round(params.value(f) * factor, 6) for k, (f, factor, _, _) in MACHINE_KEYS.items()}
 
 
 def card_for(loop: str | None, params: MachineParams | None, source: str | None) -> ModelCard:
@@ -96,8 +94,8 @@ def describe(values: dict[str, float]) -> str:
 
 def _capability(params: MachineParams) -> dict[str, tuple[float, str]]:
     """The most each measured signal can read on ``params``' machine (header units)."""
-    flow = params.pump_disp_m3_rev * params.nominal_speed_rpm / 60.0 / LPM
-    relief = params.relief_full_pa / BAR
+    flow = params.pump.pump_disp_m3_rev * params.pump.nominal_speed_rpm / 60.0 / LPM
+    relief = params.line.relief_full_pa / BAR
     return {
         "QP": (flow, "L/min"),
         "PP": (relief, "bar"),

@@ -43,26 +43,26 @@ def pack_params(
     the given data-driven ``corrections`` (``monitor.sim.corrections``, SI) added."""
     m = machine
     prm = np.zeros(K.N_PARAMS)
-    prm[K.BETA] = m.bulk_modulus_pa
-    prm[K.V_LINE] = m.line_volume_m3
-    prm[K.V0A] = m.dead_volume_a_m3
-    prm[K.V0B] = m.dead_volume_b_m3
-    prm[K.AA] = m.area_a_m2
-    prm[K.AB] = m.area_b_m2
-    prm[K.STROKE] = m.stroke_m
-    prm[K.MASS] = m.mass_kg
-    prm[K.FGRAV] = m.gravity_load_n
-    prm[K.CVISC] = m.viscous_friction_n_s_m
-    prm[K.KV] = m.valve_kv
-    prm[K.DP_LAM] = m.laminar_dp_pa
-    prm[K.PTANK] = m.tank_pa
-    prm[K.DISP_MAX] = m.pump_disp_m3_rev
-    prm[K.COMP_ON] = 1.0 if m.compensator_enabled else 0.0
-    prm[K.COMP_START] = m.compensator_start_pa
-    prm[K.COMP_FULL] = m.compensator_full_pa
-    prm[K.RELIEF_CRACK] = m.relief_crack_pa
+    prm[K.BETA] = m.oil.bulk_modulus_pa
+    prm[K.V_LINE] = m.line.line_volume_m3
+    prm[K.V0A] = m.cylinder.dead_volume_a_m3
+    prm[K.V0B] = m.cylinder.dead_volume_b_m3
+    prm[K.AA] = m.cylinder.area_a_m2
+    prm[K.AB] = m.cylinder.area_b_m2
+    prm[K.STROKE] = m.cylinder.stroke_m
+    prm[K.MASS] = m.load.mass_kg
+    prm[K.FGRAV] = m.load.gravity_load_n
+    prm[K.CVISC] = m.load.viscous_friction_n_s_m
+    prm[K.KV] = m.valve.valve_kv
+    prm[K.DP_LAM] = m.valve.laminar_dp_pa
+    prm[K.PTANK] = m.valve.tank_pa
+    prm[K.DISP_MAX] = m.pump.pump_disp_m3_rev
+    prm[K.COMP_ON] = 1.0 if m.pump.compensator_enabled else 0.0
+    prm[K.COMP_START] = m.pump.compensator_start_pa
+    prm[K.COMP_FULL] = m.pump.compensator_full_pa
+    prm[K.RELIEF_CRACK] = m.line.relief_crack_pa
     prm[K.RELIEF_GAIN] = m.relief_gain_m3_s_pa
-    prm[K.XREF] = m.reference_rod_pos_m
+    prm[K.XREF] = m.load.reference_rod_pos_m
     prm[K.V_EPS] = FRICTION_SMOOTHING_M_S
     prm[K.WN] = 1.0  # harmless values for switched-off effects
     prm[K.TAU_PUMP] = 1.0
@@ -166,16 +166,16 @@ def rest_state(
     """A state at rest: rod held at ``rod_pos_m``, pump line at its dead-head pressure."""
     m = machine
     y = np.zeros(K.N_STATES)
-    x = min(max(rod_pos_m, 0.0), m.stroke_m)
+    x = min(max(rod_pos_m, 0.0), m.cylinder.stroke_m)
     pb = 2 * BAR  # a little trapped rod-side pressure
-    dx = x - m.reference_rod_pos_m
-    f_grav = m.gravity_load_n + prm[K.SLOPE] * dx + prm[K.CURV] * dx * dx
-    y[K.S_PP] = m.compensator_full_pa if m.compensator_enabled else m.relief_crack_pa
+    dx = x - m.load.reference_rod_pos_m
+    f_grav = m.load.gravity_load_n + prm[K.SLOPE] * dx + prm[K.CURV] * dx * dx
+    y[K.S_PP] = m.pump.compensator_full_pa if m.pump.compensator_enabled else m.line.relief_crack_pa
     y[K.S_PB] = pb
-    y[K.S_PA] = max((f_grav + pb * m.area_b_m2) / m.area_a_m2, 0.0)
+    y[K.S_PA] = max((f_grav + pb * m.cylinder.area_b_m2) / m.cylinder.area_a_m2, 0.0)
     y[K.S_X] = x
     y[K.S_XS] = spool
-    y[K.S_DISP] = 0.0 if m.compensator_enabled else disp
+    y[K.S_DISP] = 0.0 if m.pump.compensator_enabled else disp
     return y
 
 
@@ -201,13 +201,13 @@ def measured_state(
     y[K.S_PP] = max(pp_pa, 0.0)
     y[K.S_PA] = max(pa_pa, 0.0)
     y[K.S_PB] = max(pb_pa, 0.0)
-    y[K.S_X] = min(max(rod_pos_m, 0.0), m.stroke_m)
+    y[K.S_X] = min(max(rod_pos_m, 0.0), m.cylinder.stroke_m)
     y[K.S_V] = rod_vel_m_s
     y[K.S_XS] = spool
     if disp is None:
         disp = 1.0
-        if m.compensator_enabled:
-            span = m.compensator_full_pa - m.compensator_start_pa
-            disp = min(max((m.compensator_full_pa - pp_pa) / span, 0.0), 1.0)
+        if m.pump.compensator_enabled:
+            span = m.pump.compensator_full_pa - m.pump.compensator_start_pa
+            disp = min(max((m.pump.compensator_full_pa - pp_pa) / span, 0.0), 1.0)
     y[K.S_DISP] = disp
     return y

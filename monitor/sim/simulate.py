@@ -86,7 +86,9 @@ def run_plant(
         y0 = np.asarray(state0, dtype=np.float64)
         if y0.shape != (K.N_STATES,):
             raise ConfigError(f"state0 must have {K.N_STATES} values, got {y0.shape}")
-    return run_packed(float(commands.t[0]), input_dt, u, prm, y0, machine.step_s, record_period_s)
+    return run_packed(
+        float(commands.t[0]), input_dt, u, prm, y0, machine.solver.step_s, record_period_s
+    )
 
 
 def run_packed(
@@ -159,7 +161,7 @@ def sense(
         "faults": [f.__dict__ for f in faults],
         "effects": {e.name: {**e.labels, **e.params} for e in effects},
         "seed": seed,
-        "step_s": machine.step_s,
+        "step_s": machine.solver.step_s,
     }
     return Recording(commands.t.copy(), out, source=f"simulation of {commands.source}", meta=meta)
 
