@@ -52,6 +52,72 @@ def model(shipped_config):
     return load_model(shipped_config.model)
 
 
+# Under pytest-xdist (CI: ``-n auto --dist loadgroup``) a test file is one unit of work, run on
+# one worker, as with ``--dist loadfile``; but the files below, the heaviest, are split: each
+# test of theirs is a unit of its own, unless it uses a fixture of module (or class) scope,
+# which is then built once on one worker for all the tests that use it.  The heaviest go
+# first, so no long file starts last and leaves the other worker idle at the end: the
+# seconds are one file's share of a CI run (2 workers), measured with ``--durations``, only
+# an order (a stale figure costs balance, never a result).  Only files whose tests share no
+# bus group, port, file or CPU hog with each other are split: two of their tests may run at
+# the same time on two workers.
+HEAVY_FILES: dict[str, float] = {
+    "test_gap_sensor_cal.py": 160,
+    "test_gap_suggest.py": 110,
+    "test_eval_sim.py": 100,
+    "test_gap_families.py": 80,
+    "test_gap_cli.py": 60,
+    "test_hold.py": 50,
+    "test_gap_reread.py": 40,
+    "test_gap_rank.py": 30,
+    "test_gap_lagcheck.py": 30,
+}
+#: The heaviest files kept whole (one unit, on one worker), in the same order.
+HEAVY_WHOLE: dict[str, float] = {
+    "test_live_field.py": 160,
+    "test_bench.py": 95,
+    "test_startup.py": 90,
+    "test_attack_restart.py": 75,
+    "test_gap_bench.py": 70,
+    "test_install.py": 55,
+    "test_sim_faults_effects.py": 35,
+    "test_fleet_scheduler.py": 30,
+    "test_fleet.py": 30,
+}
+
+
+def _shares_a_fixture(item: pytest.Item) -> bool:
+    """Whether the test uses a fixture built once for several tests of its file."""
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return False
+    return any(
+        defs[-1].scope in ("module", "class", "package")
+        for name in info.names_closure
+        if (defs := info.name2fixturedefs.get(name))
+    )
+
+
+def pytest_configure(config) -> None:
+    """Under ``--dist loadgroup`` the units go out in the order of the collection (below),
+    not sorted by their number of tests (xdist's default)."""
+    if config.getoption("dist", "no") == "loadgroup":
+        config.option.loadscopereorder = False
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the xdist_group marks
+def pytest_collection_modifyitems(config, items) -> None:
+    if not getattr(config.option, "loadgroup", False):  # set in the workers of a loadgroup run
+        return
+    weight = {**HEAVY_WHOLE, **HEAVY_FILES}
+    for item in items:
+        name = item.path.name
+        if name not in HEAVY_FILES or _shares_a_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(name))
+    # Stable: the order within a file is kept, so tests sharing a fixture stay together.
+    items.sort(key=lambda item: -weight.get(item.path.name, 0.0))
+
+
 def pytest_sessionfinish(session) -> None:
     """Under pytest-xdist (CI: ``-n auto``) a worker hands its fuzz counts to the controller,
     which prints the summary."""

@@ -16,7 +16,7 @@ DOCS = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
 def test_readme_keeps_the_two_set_up_commands() -> None:
     text = (REPO / "README.md").read_text()
     assert "    pip install . && monitor demo\n" in text
-    assert "    pip install '.[test]' && python -m pytest -q -n auto --dist loadfile\n" in text
+    assert "    pip install '.[test]' && python -m pytest -q -n auto --dist loadgroup\n" in text
     assert len(text.splitlines()) <= 150
 
 
