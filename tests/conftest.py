@@ -79,6 +79,7 @@ HEAVY_WHOLE: dict[str, float] = {
     "test_startup.py": 90,
     "test_attack_restart.py": 75,
     "test_gap_bench.py": 70,
+    "test_controller_wheel.py": 60,
     "test_install.py": 55,
     "test_sim_faults_effects.py": 35,
     "test_fleet_scheduler.py": 30,
