@@ -57,10 +57,10 @@ def model(shipped_config):
 # test of theirs is a unit of its own, unless it uses a fixture of module (or class) scope,
 # which is then built once on one worker for all the tests that use it.  The heaviest go
 # first, so no long file starts last and leaves the other worker idle at the end: the
-# seconds are one file's share of a CI run (2 workers), measured with ``--durations``, only
-# an order (a stale figure costs balance, never a result).  Only files whose tests share no
-# bus group, port, file or CPU hog with each other are split: two of their tests may run at
-# the same time on two workers.
+# seconds are one file's share of a CI run (2 workers, load 3) as ``--durations`` showed it,
+# a few estimated; only an order (a stale figure costs balance, never a result).  Only files
+# whose tests share no bus group, port, file or CPU hog with each other are split: two of
+# their tests may run at the same time on two workers.
 HEAVY_FILES: dict[str, float] = {
     "test_gap_sensor_cal.py": 160,
     "test_gap_suggest.py": 110,
