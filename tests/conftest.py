@@ -56,34 +56,38 @@ def model(shipped_config):
 # one worker, as with ``--dist loadfile``; but the files below, the heaviest, are split: each
 # test of theirs is a unit of its own, unless it uses a fixture of module (or class) scope,
 # which is then built once on one worker for all the tests that use it.  The heaviest go
-# first, so no long file starts last and leaves the other worker idle at the end: the
-# seconds are one file's share of a CI run (2 workers, load 3) as ``--durations`` showed it,
-# a few estimated; only an order (a stale figure costs balance, never a result).  Only files
-# whose tests share no bus group, port, file or CPU hog with each other are split: two of
-# their tests may run at the same time on two workers.
+# first, so no long file starts last and leaves the other worker idle at the end.  The
+# seconds are one file's share of a CI run (2 workers, load 3) as ``--durations`` showed it
+# (the 25 slowest; the others from a run at load 15, divided by 5): only an order, a stale
+# figure costs balance, never a result.  Only files whose tests share no bus group, port,
+# file or CPU hog with each other are split: two of their tests may run at once.
 HEAVY_FILES: dict[str, float] = {
-    "test_gap_sensor_cal.py": 160,
-    "test_gap_suggest.py": 110,
+    "test_gap_sensor_cal.py": 200,
+    "test_gap_suggest.py": 135,
     "test_eval_sim.py": 100,
-    "test_gap_families.py": 80,
-    "test_gap_cli.py": 60,
-    "test_hold.py": 50,
-    "test_gap_reread.py": 40,
-    "test_gap_rank.py": 30,
-    "test_gap_lagcheck.py": 30,
+    "test_gap_cli.py": 75,
+    "test_gap_families.py": 70,
+    "test_hold.py": 30,
+    "test_gap_reread.py": 30,
+    "test_gap_lagcheck.py": 27,
+    "test_gap_rank.py": 18,
 }
 #: The heaviest files kept whole (one unit, on one worker), in the same order.
 HEAVY_WHOLE: dict[str, float] = {
     "test_live_field.py": 160,
-    "test_bench.py": 95,
-    "test_startup.py": 90,
+    "test_bench.py": 120,
+    "test_fleet.py": 100,
+    "test_gap_bench.py": 90,
+    "test_startup.py": 80,
     "test_attack_restart.py": 75,
-    "test_gap_bench.py": 70,
+    "test_install.py": 70,
     "test_controller_wheel.py": 60,
-    "test_install.py": 55,
-    "test_sim_faults_effects.py": 35,
-    "test_fleet_scheduler.py": 30,
-    "test_fleet.py": 30,
+    "test_fleet_browser.py": 41,
+    "test_sim_faults_effects.py": 32,
+    "test_fleet_scheduler.py": 32,
+    "test_grnn_index.py": 22,
+    "test_detector.py": 17,
+    "test_crossfit.py": 13,
 }
 
 
