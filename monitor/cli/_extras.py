@@ -27,7 +27,8 @@ def missing_extra(exc: ModuleNotFoundError) -> str | None:
     if top in ("numba", "llvmlite"):  # the controller's wheel: its kernels are compiled
         return (
             "needs numba (the controller's install carries only the daemon's and `monitor "
-            "detect`'s kernels, compiled): pip install numba, or install this package from its sources"
+            "detect`'s kernels, compiled): pip install numba, or install this package from "
+            "its sources"
         )
     extra = EXTRA_OF.get(top)
     if extra is None:
