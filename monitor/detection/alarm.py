@@ -141,6 +141,36 @@ def classify(
     return best if best_sim >= min_similarity else "unknown"
 
 
+class SeedRing:
+    """The last N residual rows and their spool regimes, oldest overwritten first: what
+    seeds the isolation when the debounce raises an alarm."""
+
+    def __init__(self, window_n: int, n_outputs: int) -> None:
+        self.e = np.full((max(window_n, 1), n_outputs), np.nan)
+        self.regime = np.zeros(max(window_n, 1), dtype=np.int64)
+        self.pos = 0
+
+    def push(self, e: np.ndarray, regime: int) -> None:
+        self.e[self.pos] = e
+        self.regime[self.pos] = regime
+        self.pos = (self.pos + 1) % self.e.shape[0]
+
+    def push_many(self, e: np.ndarray, regimes: np.ndarray) -> None:
+        """``push`` for each row in order; only the last N rows can stay."""
+        n = len(regimes)
+        if n == 0:
+            return
+        size = self.e.shape[0]
+        take = min(n, size)  # earlier samples of the run would be overwritten anyway
+        idx = (self.pos + n - take + np.arange(take)) % size
+        self.e[idx] = e[n - take :]
+        self.regime[idx] = regimes[n - take :]
+        self.pos = (self.pos + n) % size
+
+    def clear(self) -> None:
+        self.e[:] = np.nan
+
+
 class AlarmMachine:
     """Per-sample state: inactive > sensor fault > fault/normal, with debounce.
 
@@ -167,12 +197,10 @@ class AlarmMachine:
         self._above = 0
         self._below = 0
         self._valid = 0
-        # A ring of the last N residuals (and regimes) seeds the isolation when an alarm is
-        # raised: the samples that pushed J over the threshold.
+        # The last N residuals (and regimes) seed the isolation when an alarm is raised:
+        # the samples that pushed J over the threshold.
         n_out = isolator.n_outputs if isolator is not None else 0
-        self._ring_e = np.full((max(window_n, 1), n_out), np.nan)
-        self._ring_regime = np.zeros(max(window_n, 1), dtype=np.int64)
-        self._ring_pos = 0
+        self._seed = SeedRing(window_n, n_out)
 
     def step(
         self,
@@ -208,7 +236,7 @@ class AlarmMachine:
             else:
                 self._enter(State.NORMAL)
         if e is not None and self.isolator is not None:
-            self._remember(e, regime)
+            self._seed.push(e, regime)
         if j != j:  # NaN: the window is warming up or paused; the debounce counts pause too
             if self.state is State.FAULT and self.isolator is not None and e is not None:
                 self.isolator.add(e, regime)
@@ -257,20 +285,8 @@ class AlarmMachine:
         if self.state is not State.NORMAL:
             raise ValueError("skip_quiet is only for runs in the NORMAL state")
         self._above = 0
-        n = len(regimes)
-        if self.isolator is None or n == 0:
-            return
-        size = self._ring_e.shape[0]
-        take = min(n, size)  # earlier samples of the run would be overwritten anyway
-        idx = (self._ring_pos + n - take + np.arange(take)) % size
-        self._ring_e[idx] = e[n - take :]
-        self._ring_regime[idx] = regimes[n - take :]
-        self._ring_pos = (self._ring_pos + n) % size
-
-    def _remember(self, e: np.ndarray, regime: int) -> None:
-        self._ring_e[self._ring_pos] = e
-        self._ring_regime[self._ring_pos] = regime
-        self._ring_pos = (self._ring_pos + 1) % self._ring_e.shape[0]
+        if self.isolator is not None:
+            self._seed.push_many(e, regimes)
 
     def _enter(self, state: State) -> State:
         if state is not self.state:
@@ -284,11 +300,11 @@ class AlarmMachine:
                 self.fault = "unknown"
                 if self.isolator is not None:
                     self.isolator.reset()
-                    self.isolator.add_many(self._ring_e, self._ring_regime)
+                    self.isolator.add_many(self._seed.e, self._seed.regime)
                     self.fault = self.isolator.label()
             else:
                 self.fault = "none"
             if state is not State.NORMAL:
-                self._ring_e[:] = np.nan
+                self._seed.clear()
             self.state = state
         return self.state

@@ -84,6 +84,73 @@ def status_keys(op_state: int, oor_signal: str | None, check: int, sensor: int) 
     }
 
 
+@dataclass(frozen=True)
+class _Samples:
+    """The ``operating`` section's times as 100 Hz sample counts, as the trackers take them."""
+
+    settle_n: int  # silent_settle_s
+    oil_rate_max_c_per_s: float
+    oil_confirm_n: int
+    engine_confirm_n: int
+
+    @classmethod
+    def of(cls, op: OperatingConfig) -> _Samples:
+        n = lambda s: round(s / SAMPLE_PERIOD_S)  # noqa: E731
+        return cls(
+            n(op.silent_settle_s),
+            op.oil_rate_max_c_per_s,
+            n(op.oil_confirm_s),
+            n(op.engine_confirm_s),
+        )
+
+    @property
+    def oil_args(self) -> tuple[float, int]:
+        return self.oil_rate_max_c_per_s, self.oil_confirm_n
+
+    @property
+    def confirm_args(self) -> tuple[int, int]:
+        return self.engine_confirm_n, self.oil_confirm_n
+
+
+class _Trackers:
+    """What the rows so far have built up: operating state (computed and confirmed), the
+    believed OilTemp, a silent EngineSpeed and the plausibility checks.  None of it depends
+    on the model, so a reload with unchanged settings keeps it."""
+
+    def __init__(self, min_engine_rpm: float, cfg: GatingConfig, n: _Samples) -> None:
+        plaus = cfg.plausibility
+        self.op_state = OpStateTracker(min_engine_rpm, cfg.operating)
+        self.plausibility = Plausibility(plaus, min_engine_rpm)
+        self.silence = SilenceTracker(plaus.rest_max_bar, plaus.move_flow_lpm, n.settle_n)
+        self.oil_belief = OilBelief(*n.oil_args)
+        self.confirmer = StateConfirmer(*n.confirm_args)
+
+
+class _RowLayout:
+    """Where the gate's signals sit in a live row ``[t, *columns]``.  Rows are copied into
+    a (1, width + 1) buffer whose last entry is NaN, so a signal the rows lack reads as
+    missing without a branch per tick."""
+
+    def __init__(self, columns: tuple[str, ...], validity_signals: tuple[str, ...]) -> None:
+        width = 1 + len(columns)
+        pos = {name: 1 + k for k, name in enumerate(columns)}
+        self.ext = np.full((1, width + 1), np.nan)
+        self.row = self.ext[0]
+        self.head = self.ext[0, :width]
+        self.plaus_idx = np.array([pos.get(n, width) for n in COLUMNS], dtype=np.int64)
+        self.val_idx = tuple(pos.get(n, width) for n in validity_signals)
+        self.engine = pos.get("EngineSpeed", width)
+        self.oil = pos.get("OilTemp", width)
+        self.has_oil = "OilTemp" in pos
+        self.pp = pos.get("PP", width)
+        self.qp = pos.get("QP", width)
+
+    def load(self, row: np.ndarray) -> np.ndarray:
+        """``row`` copied into the buffer; returns the buffer's row."""
+        np.copyto(self.head, row)
+        return self.row
+
+
 class Gate:
     def __init__(
         self,
@@ -95,35 +162,12 @@ class Gate:
         cfg = cfg or GatingConfig()
         self.cfg = cfg
         self.min_engine_rpm = float(min_engine_rpm)
-        self.tracker = OpStateTracker(min_engine_rpm, cfg.operating)
-        self.plausibility = Plausibility(cfg.plausibility, min_engine_rpm)
-        plaus = cfg.plausibility
-        self._settle_n = round(cfg.operating.silent_settle_s / SAMPLE_PERIOD_S)
-        self.silence = SilenceTracker(plaus.rest_max_bar, plaus.move_flow_lpm, self._settle_n)
-        op = cfg.operating
-        samples = lambda s: round(s / SAMPLE_PERIOD_S)  # noqa: E731
-        self._oil_args = (op.oil_rate_max_c_per_s, samples(op.oil_confirm_s))
-        self._confirm_args = (samples(op.engine_confirm_s), samples(op.oil_confirm_s))
-        self.oil_belief = OilBelief(*self._oil_args)
-        self.confirmer = StateConfirmer(*self._confirm_args)
+        self._n = _Samples.of(cfg.operating)
+        self._trackers = _Trackers(self.min_engine_rpm, cfg, self._n)
         self._engine_col = COLUMNS.index("EngineSpeed")
         self.validity = Validity(model_envelope(model), cfg.validity)
         self.gate_oor = cfg.validity.gate
-        # Live rows: [t, *columns] copied into a (1, width + 1) buffer whose last entry is
-        # NaN, so a signal the rows lack reads as missing without a branch per tick.
-        if columns is not None:
-            width = 1 + len(columns)
-            pos = {name: 1 + k for k, name in enumerate(columns)}
-            self._ext = np.full((1, width + 1), np.nan)
-            self._ext_row = self._ext[0]
-            self._ext_head = self._ext[0, :width]
-            self._plaus_idx = np.array([pos.get(n, width) for n in COLUMNS], dtype=np.int64)
-            self._val_idx = tuple(pos.get(n, width) for n in self.validity.signals)
-            self._engine = pos.get("EngineSpeed", width)
-            self._oil = pos.get("OilTemp", width)
-            self._has_oil = "OilTemp" in pos
-            self._pp = pos.get("PP", width)
-            self._qp = pos.get("QP", width)
+        self._layout = None if columns is None else _RowLayout(columns, self.validity.signals)
         self.op_state = OpState.NORMAL
         self.computed = OpState.NORMAL
         self.check = 0
@@ -134,9 +178,7 @@ class Gate:
         """A reload: keep what the rows so far have built up (operating state, plausibility
         history) when its settings are unchanged; those do not depend on the model."""
         if old.cfg == self.cfg and old.min_engine_rpm == self.min_engine_rpm:
-            self.tracker, self.plausibility = old.tracker, old.plausibility
-            self.silence = old.silence
-            self.oil_belief, self.confirmer = old.oil_belief, old.confirmer
+            self._trackers = old._trackers
             self.op_state, self.check, self.sensor = old.op_state, old.check, old.sensor
             self.computed = old.computed
 
@@ -151,16 +193,16 @@ class Gate:
         plaus = self.cfg.plausibility
         engine = col("EngineSpeed")
         silent = silent_source(
-            engine, col("PP"), col("QP"), plaus.rest_max_bar, plaus.move_flow_lpm, self._settle_n
+            engine, col("PP"), col("QP"), plaus.rest_max_bar, plaus.move_flow_lpm, self._n.settle_n
         )
         # A silent source is not an engine off: the pump shows the engine running.
         running = np.where(silent, self.min_engine_rpm, engine)
-        oil = believed_oil(col("OilTemp"), *self._oil_args)
+        oil = believed_oil(col("OilTemp"), *self._n.oil_args)
         computed = op_states(running, oil, self.min_engine_rpm, self.cfg.operating)
-        ops = confirmed_states(computed, np.isnan(engine), *self._confirm_args)
+        ops = confirmed_states(computed, np.isnan(engine), *self._n.confirm_args)
         # Downstream of the gate's own readings the believed OilTemp stands in for the raw.
         x = np.column_stack([oil if c == "OilTemp" else col(c) for c in COLUMNS])
-        check, sensor = self.plausibility.series(x)
+        check, sensor = self._trackers.plausibility.series(x)
         check[silent] = STALE
         sensor[silent] = self._engine_col
         oor = self.validity.series(self.validity_values(rec, oil))
@@ -193,21 +235,22 @@ class Gate:
 
     def step(self, row: np.ndarray) -> None:
         """One row ``[t, *columns]``: sets ``op_state``, ``check``/``sensor`` and ``oor``."""
-        ext = self._ext_row
-        np.copyto(self._ext_head, row)
-        engine = float(ext[self._engine])
-        silent = self.silence.step(engine, float(ext[self._pp]), float(ext[self._qp]))
-        oil = self.oil_belief.step(float(ext[self._oil]))
-        if self._has_oil:
-            ext[self._oil] = oil  # the believed OilTemp for every check below
-        self.computed = self.tracker.step(self.min_engine_rpm if silent else engine, oil)
-        op = OpState(self.confirmer.step(self.computed, engine != engine))
-        self.check = self.plausibility.step(self._ext, self._plaus_idx)
-        self.sensor = self.plausibility.signal
+        lay, tr = self._layout, self._trackers
+        assert lay is not None, "a Gate for live rows is made with their columns"
+        ext = lay.load(row)
+        engine = float(ext[lay.engine])
+        silent = tr.silence.step(engine, float(ext[lay.pp]), float(ext[lay.qp]))
+        oil = tr.oil_belief.step(float(ext[lay.oil]))
+        if lay.has_oil:
+            ext[lay.oil] = oil  # the believed OilTemp for every check below
+        self.computed = tr.op_state.step(self.min_engine_rpm if silent else engine, oil)
+        op = OpState(tr.confirmer.step(self.computed, engine != engine))
+        self.check = tr.plausibility.step(lay.ext, lay.plaus_idx)
+        self.sensor = tr.plausibility.signal
         if silent:
             self.check, self.sensor = STALE, self._engine_col
         normal = op is OpState.NORMAL and self.computed is OpState.NORMAL
-        self.oor = self.validity.check(ext, self._val_idx) if normal else -1
+        self.oor = self.validity.check(ext, lay.val_idx) if normal else -1
         self.op_state = op
 
     def gated_now(self, inputs_ok: bool) -> bool:

@@ -280,21 +280,40 @@ def _run(  # pragma: no cover - numba
                 break
 
 
+@dataclass(frozen=True)
+class _Limits:
+    """The kernel's fixed inputs from the config: sensor range, readings in range, params."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    rlo: np.ndarray
+    rhi: np.ndarray
+    params: np.ndarray
+
+    @classmethod
+    def of(cls, cfg: PlausibilityConfig) -> _Limits:
+        return cls(*cfg.limits(), *cfg.range_limits(), cfg.params())
+
+
+class _CheckState:
+    """The kernel's state arrays (see ``_run``), carried from one call to the next."""
+
+    def __init__(self, m: int) -> None:
+        self.counters = np.zeros((4, m), dtype=np.int64)
+        self.ref = np.full(m, np.nan)
+        self.last = np.full(m, np.nan)
+        self.active = np.zeros((len(CHECKS), m), dtype=np.bool_)
+        self.misc = np.zeros(1, dtype=np.int64)
+
+
 class Plausibility:
     """The checks with their state; ``series`` and ``step`` continue the same state."""
 
     def __init__(self, cfg: PlausibilityConfig, min_engine_rpm: float) -> None:
         self.cfg = cfg
         self.min_engine_rpm = float(min_engine_rpm)
-        self._lo, self._hi = cfg.limits()
-        self._rlo, self._rhi = cfg.range_limits()
-        self._p = cfg.params()
-        m = len(COLUMNS)
-        self._counters = np.zeros((4, m), dtype=np.int64)
-        self._ref = np.full(m, np.nan)
-        self._last = np.full(m, np.nan)
-        self._active = np.zeros((len(CHECKS), m), dtype=np.bool_)
-        self._misc = np.zeros(1, dtype=np.int64)
+        self._limits = _Limits.of(cfg)
+        self._state = _CheckState(len(COLUMNS))
         self._check1 = np.zeros(1, dtype=np.int8)
         self._sig1 = np.zeros(1, dtype=np.int8)
         self.check = 0  # last sample's finding: check code (0 none) and column index
@@ -318,19 +337,20 @@ class Plausibility:
         return self.check
 
     def _kernel(self, x: np.ndarray, cols: np.ndarray, check: np.ndarray, sig: np.ndarray) -> None:
+        lim, st = self._limits, self._state
         _run(
             x,
             cols,
-            self._lo,
-            self._hi,
-            self._rlo,
-            self._rhi,
-            self._p,
-            self._counters,
-            self._ref,
-            self._last,
-            self._active,
-            self._misc,
+            lim.lo,
+            lim.hi,
+            lim.rlo,
+            lim.rhi,
+            lim.params,
+            st.counters,
+            st.ref,
+            st.last,
+            st.active,
+            st.misc,
             self.min_engine_rpm,
             check,
             sig,

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from monitor.detection.alarm import AlarmConfig, State, regime_of
+from monitor.detection.alarm import AlarmConfig, AlarmMachine, State, regime_of
 from monitor.detection.decision import Decider, event_record
 from monitor.detection.gating import Gate, GatingConfig
 from monitor.detection.offline import make_isolator
@@ -50,6 +50,99 @@ class Tick:
     level: float = math.nan  # compared with 1: each statistic's value / threshold, the largest
 
 
+class _Inputs:
+    """Reads a row's model signals and z-scores them with the model's F0 statistics, into
+    buffers made once."""
+
+    def __init__(self, model: MonitorModel, columns: tuple[str, ...]) -> None:
+        spec = model.spec
+        # Row layout is [t, *columns]: +1 skips t.
+        self.var_idx = np.array([1 + columns.index(v) for v in spec.variables], dtype=np.int64)
+        self.names = tuple(spec.variables)
+        self.engine_col = 1 + columns.index("EngineSpeed")
+        self.spool_col = 1 + columns.index("SpoolCmd") if "SpoolCmd" in columns else -1
+        norm_cols = [model.normalizer.names_.index(v) for v in spec.variables]
+        self.mean = np.ascontiguousarray(model.normalizer.mean_[norm_cols])
+        self.std = np.ascontiguousarray(model.normalizer.std_[norm_cols])
+        self.raw = np.empty(len(spec.variables))
+        self.z = np.empty(len(spec.variables))
+
+    def read(self, row: np.ndarray) -> bool:
+        """``raw`` and ``z`` from ``row``; True when every model signal is present."""
+        raw, z = self.raw, self.z
+        np.take(row, self.var_idx, out=raw)
+        np.subtract(raw, self.mean, out=z)
+        np.divide(z, self.std, out=z)
+        # A sum is finite exactly when every term is (values are far from overflow).
+        return math.isfinite(float(np.add.reduce(raw)))
+
+    def stale_signal(self) -> str:
+        """The first model signal missing from the last row read (one not finite)."""
+        return self.names[int(np.argmax(np.isnan(self.raw)))]
+
+
+class _Residual:
+    """The DGRNN's prediction from the ring of past z-rows and e = y_hat - y (z units),
+    clipped to the model's residual bound."""
+
+    def __init__(self, model: MonitorModel, horizon: int | None, z: np.ndarray) -> None:
+        nout = len(model.spec.outputs)
+        self.predictor = TickPredictor(model.dgrnn, horizon)
+        self.rows_needed = self.predictor.rows_needed
+        self.ring = RowRing(self.rows_needed, len(model.spec.variables))
+        self.z_out = z[:nout]  # a view made once, not per tick
+        self.yz = np.empty(nout)
+        self.e = np.empty(nout)
+        clip = model.residual_clip
+        self.clip = None if clip is None else np.asarray(clip, dtype=np.float64)
+        # Compile (or load from numba's cache) the kernel now, not on the first live frame:
+        # a first-call compile of seconds would back the bus queue up.
+        self.predictor.predict(self.ring.last(self.rows_needed), out=self.yz)
+
+    def step(self, z: np.ndarray, gated: bool) -> np.ndarray:
+        """Push ``z`` (NaN when gated: it must not seed a prediction) and return e."""
+        if gated:
+            z[:] = np.nan
+        self.ring.push(z)
+        self.predictor.predict(self.ring.last(self.rows_needed), out=self.yz)
+        e = self.e
+        np.subtract(self.yz, self.z_out, out=e)
+        if self.clip is not None:
+            np.clip(e, -self.clip, self.clip, out=e)
+        if gated:
+            e[:] = np.nan
+        return e
+
+
+class _Family:
+    """The statistics of the family (J first: the level rests on it), each with its window
+    over the rows; the level is their largest ratio value / threshold."""
+
+    def __init__(self, model: MonitorModel, columns: tuple[str, ...]) -> None:
+        nout = len(model.spec.outputs)
+        self.stats = active(model)
+        self.steps = tuple(s.window(columns, nout).step for s in self.stats)
+        self.thresholds = tuple(s.threshold_ for s in self.stats)
+        self.index = {s.name: k for k, s in enumerate(self.stats)}
+        self.values = [math.nan] * len(self.stats)  # each statistic at the last tick
+
+    def step(self, e: np.ndarray, row: np.ndarray) -> tuple[float, float]:
+        """(J, level) of this row."""
+        values, steps, thresholds = self.values, self.steps, self.thresholds
+        j = steps[0](e, row)
+        values[0] = j
+        level = j / thresholds[0]
+        for k in range(1, len(steps)):
+            v = steps[k](e, row)
+            values[k] = v
+            level = raise_level(level, v, thresholds[k])
+        return j, level
+
+    def value(self, name: str) -> float:
+        k = self.index.get(name)
+        return math.nan if k is None else float(self.values[k])
+
+
 class Ticker:
     def __init__(
         self,
@@ -61,45 +154,20 @@ class Ticker:
     ) -> None:
         self.model = model
         self.alarm = alarm or AlarmConfig()
-        spec = model.spec
-        missing = [n for n in (*spec.variables, "EngineSpeed") if n not in columns]
+        missing = [n for n in (*model.spec.variables, "EngineSpeed") if n not in columns]
         if missing:
             raise ModelFileError(f"the model needs signal(s) the rows lack: {missing}")
-        self.predictor = TickPredictor(model.dgrnn, horizon)
-        self.rows_needed = self.predictor.rows_needed
-        # Row layout is [t, *columns]: +1 skips t.
-        self._var_idx = np.array([1 + columns.index(v) for v in spec.variables], dtype=np.int64)
-        self._names = tuple(spec.variables)
-        self._engine_col = 1 + columns.index("EngineSpeed")
-        self._spool_col = 1 + columns.index("SpoolCmd") if "SpoolCmd" in columns else -1
-        norm_cols = [model.normalizer.names_.index(v) for v in spec.variables]
-        self._mean = np.ascontiguousarray(model.normalizer.mean_[norm_cols])
-        self._std = np.ascontiguousarray(model.normalizer.std_[norm_cols])
-        nvar, nout = len(spec.variables), len(spec.outputs)
-        self._raw = np.empty(nvar)
-        self._z = np.empty(nvar)
-        self._z_out = self._z[:nout]  # a view made once, not per tick
-        self._yz = np.empty(nout)
-        self._e = np.empty(nout)
-        clip = model.residual_clip
-        self._clip = None if clip is None else np.asarray(clip, dtype=np.float64)
-        self.ring = RowRing(self.rows_needed, nvar)
-        # Compile (or load from numba's cache) the kernel now, not on the first live frame:
-        # a first-call compile of seconds would back the bus queue up.
-        self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
-        # The statistics of the family (J first: the level rests on it), each with its window
-        # over these rows; the alarm machine compares the level, their largest ratio
-        # value / threshold, with 1.
-        self.stats = active(model)
-        self._steps = tuple(s.window(columns, nout).step for s in self.stats)
-        self._thresholds = tuple(s.threshold_ for s in self.stats)
-        self._index = {s.name: k for k, s in enumerate(self.stats)}
-        self._values = [math.nan] * len(self.stats)  # each statistic at the last tick
+        self._inputs = _Inputs(model, columns)
+        self._residual = _Residual(model, horizon, self._inputs.z)
+        self._family = _Family(model, columns)
         self.decider = Decider(self.alarm, 1.0, make_isolator(model), model.window_n)
-        self.machine = self.decider.machine
         self.eps0 = float(model.eps0)
         self.gate = Gate(model, self.alarm.min_engine_rpm, gating, columns)
         self.ticks = 0
+
+    @property
+    def machine(self) -> AlarmMachine:
+        return self.decider.machine
 
     @property
     def state(self) -> State:
@@ -111,13 +179,12 @@ class Ticker:
 
     @property
     def residual(self) -> np.ndarray:
-        return self._e
+        return self._residual.e
 
     def value(self, name: str) -> float:
         """Statistic ``name`` (``J``, ``B``, ...) at the last tick (NaN: not judged, not yet,
         or the model has none)."""
-        k = self._index.get(name)
-        return math.nan if k is None else float(self._values[k])
+        return self._family.value(name)
 
     def carry_over(self, old: Ticker) -> None:
         """A reload: this ticker (a new model or new settings) goes on from ``old``'s alarm
@@ -130,35 +197,13 @@ class Ticker:
 
     def tick(self, row: np.ndarray) -> Tick:
         """Advance one sample: ``row`` is a sampler row ``[t, *columns]``."""
-        raw, z, e = self._raw, self._z, self._e
-        np.take(row, self._var_idx, out=raw)
-        engine = float(row[self._engine_col])
-        gate = self.gate
+        inp, gate = self._inputs, self.gate
+        inputs_ok = inp.read(row)
+        engine = float(row[inp.engine_col])
         gate.step(row)
-        # A sum is finite exactly when every term is (values are far from overflow).
-        inputs_ok = math.isfinite(float(np.add.reduce(raw)))
-        np.subtract(raw, self._mean, out=z)
-        np.divide(z, self._std, out=z)
-        gated = gate.gated_now(inputs_ok)
-        if gated:
-            z[:] = np.nan  # a gated row (engine off, sensor fault...) must not seed a prediction
-        self.ring.push(z)
-        self.predictor.predict(self.ring.last(self.rows_needed), out=self._yz)
-        np.subtract(self._yz, self._z_out, out=e)
-        if self._clip is not None:
-            np.clip(e, -self._clip, self._clip, out=e)
-        if gated:
-            e[:] = np.nan
-        values, steps, thresholds = self._values, self._steps, self._thresholds
-        j = steps[0](e, row)
-        values[0] = j
-        level = j / thresholds[0]
-        for k in range(1, len(steps)):
-            v = steps[k](e, row)
-            values[k] = v
-            level = raise_level(level, v, thresholds[k])
-        spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
-        stale = -1 if inputs_ok else int(np.argmax(np.isnan(raw)))
+        e = self._residual.step(inp.z, gate.gated_now(inputs_ok))
+        j, level = self._family.step(e, row)
+        spool = float(row[inp.spool_col]) if inp.spool_col >= 0 else 0.0
         d = self.decider.decide(
             level,
             inputs_ok,
@@ -182,7 +227,7 @@ class Ticker:
             gate.sensor,
             d.state_changed,
             d.raised,
-            self._names[stale] if stale >= 0 else None,
+            None if inputs_ok else inp.stale_signal(),
             d.episode_open,
             level,
         )
