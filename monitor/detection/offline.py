@@ -12,18 +12,17 @@ from typing import Any
 import numpy as np
 
 from monitor.detection.alarm import AlarmConfig, Isolator, State, regimes_of
-from monitor.detection.decision import Decider, event_record
+from monitor.detection.decision import Decider, Decision, event_record
+from monitor.detection.episodes import Alarms, EpisodeLog
 from monitor.detection.gating import Gate, GateSeries, GatingConfig
 from monitor.detection.opstate import OpState
-from monitor.detection.outofrange import describe, out_of_range_values
-from monitor.detection.plausibility import finding
-from monitor.detection.verdict import verdict
+from monitor.detection.summary import detection_summary
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
 from monitor.model.dgrnn import predict_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.spec import table
-from monitor.model.statistic import active, level_series, statistic_keys, statistics_entries
+from monitor.model.statistic import active, level_series
 
 
 @dataclass
@@ -42,7 +41,8 @@ class Detection:
     #: Each statistic of the model per sample, by name (``J``, ``B``, ...; see
     #: ``monitor.model.statistic``); a statistic the model lacks has none.
     series: dict[str, np.ndarray] = field(default_factory=dict)
-    # Each alarm episode, named once from the isolation votes over all of it (see _Run).
+    # Each alarm episode, named once from the isolation votes over all of it (see
+    # ``monitor.detection.episodes``).
     episodes: list[dict[str, Any]] = field(default_factory=list)
 
 
@@ -128,67 +128,26 @@ def detect(
     """Run the detector over a whole recording (``exact``: see ``residual_series``;
     ``gating``: operating state, plausibility and validity, see ``monitor.detection.gating``)."""
     alarm = alarm or AlarmConfig()
-    spec = model.spec
     check_recording(model, rec, horizon)
     gate = Gate(model, alarm.min_engine_rpm, gating)
     g = gate.series(rec)
-    missing = ~np.isfinite(table(rec, spec.variables))
-    inputs_ok = ~missing.any(axis=1)
-    gated = gate.gated(g, inputs_ok)
+    missing = ~np.isfinite(table(rec, model.spec.variables))
+    gated = gate.gated(g, ~missing.any(axis=1))
     y_hat, e = residual_series(model, rec, gated, horizon, exact)
     e[gated] = np.nan
     stats = active(model)  # J first: the level rests on it
     series = {s.name: s.series(e, rec) for s in stats}
-    j = series["J"]
     # The alarm machine compares the level with 1: each statistic against its threshold.
     level = level_series([(series[s.name], s.threshold_) for s in stats])
     decider = Decider(alarm, 1.0, make_isolator(model), model.window_n)
-    run = _decide_all(decider, model, rec, gate, g, e, j, level, missing)
-    states = run.states
-    summary = {
-        "alarm": run.first_alarm_t is not None,
-        "first_alarm_t": run.first_alarm_t,
-        "alarm_episodes": run.episodes,
-        "fault": run.first_fault,
-        "sensor_fault": bool(np.any(states == State.SENSOR_FAULT)),
-        # Each statistic's largest value and threshold (null for one the model lacks), and
-        # the largest alarm level, 1 being the alarm threshold.
-        **statistic_keys(model, series),
-        "max_level": float(np.nanmax(level)) if np.isfinite(level).any() else None,
-        "threshold_rule": model.threshold.rule,
-        "window_n": model.window_n,
-        "horizon": horizon or spec.horizon,
-        "samples": len(rec),
-        "inactive_fraction": float(np.mean(states == State.INACTIVE)),
-        "sensor_fault_fraction": float(np.mean(states == State.SENSOR_FAULT)),
-        **gating_summary(rec, gate, g),
-        "source": rec.source,
-    }
-    period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
-    summary["out_of_range_values"] = out_of_range_values(
-        gate.validity_values(rec), g.oor, gate.validity
-    )
-    summary["verdict"], summary["judged_s"], summary["not_judged_why"] = verdict(
-        summary,
-        states,
-        j,
-        g.op_state,
-        g.oor,
-        inputs_ok,
-        rec["EngineSpeed"],
-        model.window_n,
-        period,
-        describe(summary["out_of_range_values"]),
-    )
-    summary["rejected"] = rejected_counts(rec)
-    summary["statistics"] = statistics_entries(model)
-    summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, spec.variables)
+    run = _decide_all(decider, model, rec, gate, g, e, series["J"], level, missing)
+    summary = detection_summary(model, rec, gate, g, run, series, level, horizon, missing)
     return Detection(
         rec.t,
         y_hat,
         e,
-        j,
-        states,
+        series["J"],
+        run.states,
         run.events,
         summary,
         gates=g,
@@ -198,17 +157,18 @@ def detect(
     )
 
 
-@dataclass
-class _Run:
-    states: np.ndarray
-    events: list[dict[str, Any]]
-    first_alarm_t: float | None
-    first_fault: str | None  # the label held longest over the first alarm episode
-    episodes: int
-    # Every alarm episode: start_t and end_t (s from the first sample; end_t None while
-    # open at the end of the log), fault (named once, from the votes of the whole episode,
-    # as ``first_fault``) and votes (fault samples per isolation label).
-    named: list[dict[str, Any]] = field(default_factory=list)
+def _quiet(g: GateSeries, inputs_ok: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """Samples that change nothing in NORMAL but the isolation ring: normal operation,
+    inputs complete and plausible, level <= 1 (J finite means the sample was not gated,
+    nor out of range)."""
+    with np.errstate(invalid="ignore"):
+        return (
+            (g.op_state == OpState.NORMAL)
+            & inputs_ok
+            & (g.check == 0)
+            & (g.oor < 0)
+            & (level <= 1.0)
+        )
 
 
 def _decide_all(
@@ -221,35 +181,21 @@ def _decide_all(
     j: np.ndarray,
     level: np.ndarray,
     missing: np.ndarray,
-) -> _Run:
-    """The shared per-sample decision over every sample of the recording, in order."""
+) -> Alarms:
+    """The shared per-sample decision over every sample of the recording, in order; runs
+    of quiet samples go to ``skip_quiet`` at once, the rest are decided one by one."""
     n = len(rec)
     engine = rec["EngineSpeed"]
     inputs_ok = ~np.asarray(missing.any(axis=1))  # an array (numpy's stubs: or a scalar)
     stale = np.where(inputs_ok, -1, np.argmax(missing, axis=1))  # first missing model signal
     regimes = regimes_of(rec["SpoolCmd"] if rec.has("SpoolCmd") else np.zeros(n))
     states = np.empty(n, dtype=np.int8)
-    # Quiet samples (normal operation, inputs complete and plausible, level <= 1) change
-    # nothing in NORMAL but the isolation ring: runs of them go to skip_quiet at once, the
-    # rest are decided one by one.  J finite means the sample was not gated (nor out of range).
-    with np.errstate(invalid="ignore"):
-        quiet = (
-            (g.op_state == OpState.NORMAL)
-            & inputs_ok
-            & (g.check == 0)
-            & (g.oor < 0)
-            & (level <= 1.0)
-        )
+    quiet = _quiet(g, inputs_ok, level)
     stops = np.append(np.flatnonzero(~quiet), n)
     start = rec.meta.get("start_time_s")
     start_s = float(start) if isinstance(start, (int, float)) else None
     t_rel = rec.t - rec.t[0]
-    run = _Run(states, [], None, None, 0)
-    # Isolation votes over the first alarm episode: the label held longest names the fault
-    # (it firms up as evidence accumulates, and may waver on the way).
-    votes: dict[str, int] = {}
-    in_first = False
-    ep_votes: dict[str, int] = {}
+    episodes, events = EpisodeLog(), []
     i = 0
     while i < n:
         if quiet[i] and decider.quiet():
@@ -258,132 +204,45 @@ def _decide_all(
             states[i:r] = State.NORMAL
             i = r
             continue
-        oor, check, sensor = int(g.oor[i]), int(g.check[i]), int(g.sensor[i])
-        d = decider.decide(
-            level[i],
-            bool(inputs_ok[i]),
-            engine[i],
-            e[i],
-            int(regimes[i]),
-            int(g.op_state[i]),
-            oor,
-            check,
-            sensor,
-        )
+        status = int(g.op_state[i]), int(g.oor[i]), int(g.check[i]), int(g.sensor[i])
+        d = decider.decide(level[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]), *status)
         states[i] = d.state
-        run.episodes += d.raised
-        if d.raised and run.first_alarm_t is None:
-            run.first_alarm_t = float(t_rel[i])
-            in_first = True
-        if d.raised:
-            ep_votes = {}
-            run.named.append({"start_t": float(t_rel[i]), "end_t": None, "votes": ep_votes})
-        if d.state is State.FAULT and run.named:
-            ep_votes[decider.fault] = ep_votes.get(decider.fault, 0) + 1
-        if run.named and run.named[-1]["end_t"] is None and not d.episode_open:
-            run.named[-1]["end_t"] = float(t_rel[i])
-        if in_first:  # the first episode, short gaps included
-            if d.state is State.FAULT:
-                votes[decider.fault] = votes.get(decider.fault, 0) + 1
-            in_first = d.episode_open
+        episodes.add(d, float(t_rel[i]), decider.fault)
         if d.changed:
-            run.events.append(
-                event_record(
-                    float(t_rel[i]),
-                    d.state,
-                    float(j[i]),
-                    model.eps0,
-                    decider.fault,
-                    start_s,
-                    int(g.op_state[i]),
-                    gate.validity.signals[oor] if oor >= 0 else None,
-                    check,
-                    sensor,
-                    model.spec.variables[stale[i]] if stale[i] >= 0 else None,
-                )
+            t_s, stale_i = float(t_rel[i]), int(stale[i])
+            stale_name = model.spec.variables[stale_i] if stale_i >= 0 else None
+            event = _event(
+                t_s, d, float(j[i]), model.eps0, decider.fault, start_s, gate, g, i, stale_name
             )
+            events.append(event)
         i += 1
-    run.first_fault = vote_name(votes)
-    for ep in run.named:
-        ep["fault"] = vote_name(ep["votes"])
-    return run
+    return episodes.result(states, events)
 
 
-def vote_name(votes: dict[str, int]) -> str | None:
-    """The fault an episode's isolation votes name: the label held for the most samples,
-    a known fault before ``unknown`` (None: no votes)."""
-    known = {k: v for k, v in votes.items() if k != "unknown"}
-    pool = known or votes
-    return max(pool, key=pool.__getitem__) if pool else None
-
-
-def stale_checks(
-    rec: Recording,
-    states: np.ndarray,
-    check: np.ndarray,
-    missing: np.ndarray,
-    names: tuple[str, ...],
-) -> list[dict[str, Any]]:
-    """Sensor faults from missing data (frames stale, rejected or never sent), per signal."""
-    t = rec.t - rec.t[0]
-    out = []
-    mine = (states == State.SENSOR_FAULT) & (check == 0)
-    for k, name in enumerate(names):
-        rows = np.flatnonzero(mine & missing[:, k])
-        if rows.size:
-            out.append(
-                {
-                    "sensor": name,
-                    "check": "stale",
-                    "first_t": round(float(t[rows[0]]), 6),
-                    "samples": int(rows.size),
-                }
-            )
-    return out
-
-
-def rejected_counts(rec: Recording) -> dict[str, dict[str, int]]:
-    """Frames rejected per message and reason (dlc, crc, range, counter_jump) while reading
-    a candump log; empty for a CSV."""
-    counts = rec.meta.get("counts")
-    if not isinstance(counts, dict):
-        return {}
-    return {k: dict(v) for k, v in counts.get("rejected_by_message", {}).items()}
-
-
-def gating_summary(rec: Recording, gate: Gate, g: GateSeries) -> dict[str, Any]:
-    """Summary keys of the gating: time per operating state, out-of-range samples per
-    signal, sensor findings with their first time, and the envelope's coverage."""
-    t = rec.t - rec.t[0]
-    period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
-    op_s = {s.label: round(float(np.sum(g.op_state == s)) * period, 3) for s in OpState}
-    oor = {
-        name: int(np.sum(g.oor == k))
-        for k, name in enumerate(gate.validity.signals)
-        if np.any(g.oor == k)
-    }
-    idx = np.flatnonzero(g.check != 0)
-    codes = g.check[idx].astype(np.int64) * 256 + g.sensor[idx]
-    uniq, first, count = np.unique(codes, return_index=True, return_counts=True)
-    checks = []
-    for code, k, c in sorted(zip(uniq, first, count, strict=True), key=lambda u: u[1]):
-        sensor, name = finding(int(code) // 256, int(code) % 256)
-        checks.append(
-            {
-                "sensor": sensor,
-                "check": name,
-                "first_t": round(float(t[idx[k]]), 6),
-                "samples": int(c),
-            }
-        )
-    normal = g.op_state == OpState.NORMAL
-    env = gate.validity.envelope
-    return {
-        "op_state_s": op_s,
-        "out_of_range_samples": int(np.sum(g.oor >= 0)),
-        "out_of_range_s": round(float(np.sum(g.oor >= 0)) * period, 3),
-        "out_of_range_signals": oor,
-        "sensor_checks": checks,
-        "envelope": None if env is None else env.source,
-        "sparse_coverage": gate.validity.sparse_shares(gate.validity_values(rec), normal),
-    }
+def _event(
+    t_s: float,
+    d: Decision,
+    j: float,
+    eps0: float,
+    fault: str,
+    start_s: float | None,
+    gate: Gate,
+    g: GateSeries,
+    i: int,
+    stale_signal: str | None,
+) -> dict[str, Any]:
+    """The event line of sample ``i`` (its status changed), as the daemon writes it."""
+    oor = int(g.oor[i])
+    return event_record(
+        t_s,
+        d.state,
+        j,
+        eps0,
+        fault,
+        start_s,
+        int(g.op_state[i]),
+        gate.oor_name(oor),
+        int(g.check[i]),
+        int(g.sensor[i]),
+        stale_signal,
+    )

@@ -27,17 +27,37 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
     t = det.t - det.t[0]
     n_sig = len(outputs)
     fig, axes = plt.subplots(n_sig + 2, 1, figsize=(12, 2.0 * (n_sig + 2) + 1), sharex=True)
-    for ax, name, k in zip(axes[:n_sig], outputs, range(n_sig), strict=True):
+    _outputs(axes[:n_sig], t, rec, det, outputs)
+    _residuals(axes[n_sig], t, det, outputs)
+    _levels(axes[-1], t, det)
+    _states(axes, t, det)
+    _out_of_range(axes[-1], t, det)
+    fig.suptitle(_title(det.summary), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _outputs(
+    axes: Any, t: np.ndarray, rec: Recording, det: Detection, outputs: tuple[str, ...]
+) -> None:
+    """One panel per model output: measured and predicted."""
+    for ax, name, k in zip(axes, outputs, range(len(outputs)), strict=True):
         ax.plot(t, rec[name], lw=0.6, color="0.2", label=f"{name} measured")
         ax.plot(t, det.y_hat[:, k], lw=0.6, color="tab:blue", alpha=0.8, label="DGRNN")
         ax.set_ylabel(f"{name} [{UNITS[name]}]")
         ax.legend(loc="upper right", fontsize=7)
-    ax_e = axes[n_sig]
+
+
+def _residuals(ax: Any, t: np.ndarray, det: Detection, outputs: tuple[str, ...]) -> None:
     for k, name in enumerate(outputs):
-        ax_e.plot(t, det.residual[:, k], lw=0.5, label=name)
-    ax_e.set_ylabel("residual e [z]")
-    ax_e.legend(loc="upper right", fontsize=7, ncol=len(outputs))
-    _levels(axes[-1], t, det)
+        ax.plot(t, det.residual[:, k], lw=0.5, label=name)
+    ax.set_ylabel("residual e [z]")
+    ax.legend(loc="upper right", fontsize=7, ncol=len(outputs))
+
+
+def _states(axes: Any, t: np.ndarray, det: Detection) -> None:
+    """Fault, sensor fault and inactive shaded on every panel."""
     for state, colour in _STATE_COLOURS.items():
         mask = det.state == state
         if mask.any():
@@ -52,36 +72,35 @@ def plot_detection(rec: Recording, det: Detection, outputs: tuple[str, ...], pat
                     alpha=0.15,
                     lw=0,
                 )
-    ax_j = axes[-1]
-    if det.gates is not None and np.any(det.gates.oor >= 0):
-        # Outside the training envelope: not judged (hatched, so it reads over a state colour).
-        oor = det.gates.oor >= 0
-        ax_j.fill_between(
-            t,
-            0,
-            1,
-            where=oor,
-            transform=ax_j.get_xaxis_transform(),
-            facecolor="none",
-            edgecolor="tab:purple",
-            hatch="//",
-            lw=0,
-            label="out of range",
-        )
-        ax_j.legend(loc="upper left", fontsize=7)
-    s = det.summary
+
+
+def _out_of_range(ax: Any, t: np.ndarray, det: Detection) -> None:
+    """Outside the training envelope: not judged (hatched, so it reads over a state colour)."""
+    if det.gates is None or not np.any(det.gates.oor >= 0):
+        return
+    ax.fill_between(
+        t,
+        0,
+        1,
+        where=det.gates.oor >= 0,
+        transform=ax.get_xaxis_transform(),
+        facecolor="none",
+        edgecolor="tab:purple",
+        hatch="//",
+        lw=0,
+        label="out of range",
+    )
+    ax.legend(loc="upper left", fontsize=7)
+
+
+def _title(s: dict[str, Any]) -> str:
     verdict = (
         f"FAULT at {s['first_alarm_t']:.1f} s ({s['fault']})"
         if s["alarm"]
         else "no hydraulic fault"
     )
     top = "n/a" if s.get("max_level") is None else f"{s['max_level']:.3g}"
-    fig.suptitle(
-        f"{Path(str(s['source'])).name}: {verdict}; max level {top} (1 = alarm)", fontsize=10
-    )
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return f"{Path(str(s['source'])).name}: {verdict}; max level {top} (1 = alarm)"
 
 
 def _levels(ax: Any, t: np.ndarray, det: Detection) -> None:
