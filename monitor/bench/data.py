@@ -19,7 +19,7 @@ from monitor.codec.logwrite import write_candump
 from monitor.io.recording import Recording
 from monitor.model.dgrnn import DGRNN
 from monitor.model.grnn import GRNN
-from monitor.model.modelfile import MonitorModel, load_model, save_model
+from monitor.model.modelfile import Isolation, MonitorModel, load_model, save_model
 from monitor.model.residual import window_j
 from monitor.model.spec import DGRNNSpec, Normalizer, table
 from monitor.sim.cycles import make_cycle
@@ -135,7 +135,8 @@ def monitor_model(work: Path, n_patterns: int, train_s: float, say: Progress) ->
         e_val = [np.clip(e, -clip, clip) for e in e_val]
     j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
     model.j0, model.eps0 = cfg.threshold.eps0(j_val)
-    model.isolation_labels, model.isolation_centroids = simulated_signatures(model, cfg, say)
+    labels, centroids = simulated_signatures(model, cfg, say)
+    model.isolation = Isolation(labels, centroids, model.isolation.min_similarity)
     model.training = {
         **model.training,
         "max_patterns": n_patterns,

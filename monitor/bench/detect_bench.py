@@ -30,7 +30,7 @@ import numpy as np
 
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect
-from monitor.model.modelfile import MonitorModel, load_model
+from monitor.model.modelfile import Isolation, MonitorModel, load_model
 from monitor.sampling.read import read_recording
 
 Progress = Callable[[str], None]
@@ -161,7 +161,7 @@ def measure(
     parts = {k: float(np.median([r[1][k] for r in runs])) for k in runs[0][1]}
     say(f"  ours: {total:.2f} s median of {repeats} ({duration_s / total:.0f}x real time)")
     # What fault isolation costs: it runs per sample while in fault (numpy cosine similarity).
-    plain = dataclasses.replace(load_model(model_path), isolation_labels=())
+    plain = dataclasses.replace(load_model(model_path), isolation=Isolation())
     rec = read_recording(log)
     t0 = time.perf_counter()
     detect(plain, rec, load_config().alarm, horizon=1)

@@ -47,14 +47,10 @@ class Detection:
 
 
 def make_isolator(model: MonitorModel) -> Isolator | None:
-    if not model.isolation_labels:
+    iso = model.isolation
+    if not iso.labels:
         return None
-    return Isolator(
-        model.isolation_labels,
-        model.isolation_centroids,
-        len(model.spec.outputs),
-        model.isolation_min_similarity,
-    )
+    return Isolator(iso.labels, iso.centroids, len(model.spec.outputs), iso.min_similarity)
 
 
 def residual_series(

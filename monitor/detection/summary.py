@@ -62,7 +62,7 @@ def detection_summary(
         series["J"],
         g.op_state,
         g.oor,
-        ~missing.any(axis=1),
+        ~np.asarray(missing.any(axis=1)),
         rec["EngineSpeed"],
         model.window_n,
         period,

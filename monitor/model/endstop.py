@@ -32,6 +32,7 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
 from monitor.model.bias import HOLD_PCT
+from monitor.model.filecheck import MAX_WINDOW_N, check_number
 from monitor.signals import SAMPLE_PERIOD_S
 
 #: Pump flow below which a lever held out means the rod stands on a stop (L/min).
@@ -240,3 +241,25 @@ def fit_stroke(spool: list[np.ndarray], qp: list[np.ndarray]) -> StrokeModel:
             f"{inv_up:.4g} and {inv_down:.4g} strokes per litre): is QP the pump's outlet flow?"
         )
     return StrokeModel(1.0 / float(inv_up), 1.0 / float(inv_down))
+
+
+def check_stroke_section(stroke: Any, where: str) -> None:
+    """A model file's end-stop estimate (header section ``where``, as ``hold.stroke``):
+    volumes, margin and stall rule; ``ValueError`` naming the key."""
+    if not isinstance(stroke, dict):
+        raise ValueError(f"header {where} must be an object")
+    for key, low, strict in (
+        ("volume_up_l", 0.0, True),
+        ("volume_down_l", 0.0, True),
+        ("margin", 0.0, False),
+        ("q_stall_lpm", 0.0, True),
+    ):
+        try:
+            check_number(stroke, key, low, strict)
+        except ValueError as exc:
+            raise ValueError(str(exc).replace("header ", f"header {where}.", 1)) from None
+    if stroke["margin"] >= 0.5:
+        raise ValueError(f"header {where}.margin must be < 0.5, got {stroke['margin']:g}")
+    v = stroke.get("n_stall")
+    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
+        raise ValueError(f"header {where}.n_stall must be a whole number 1..{MAX_WINDOW_N}")

@@ -30,6 +30,7 @@ the patterns within a cut-off radius with a stated error bound (``build_index``)
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -39,6 +40,8 @@ from monitor.model.grnn_core import (
     _LOO_MAX_ENTRIES,
     SIGMA_RULES,
     THINNING_RULES,
+    Bandwidth,
+    PatternSet,
     _as_matrix,
     _check_counts,
     _check_sigma,
@@ -83,11 +86,11 @@ class GRNN:
         patterns (own input and target, count 1: eq. 4 over the kept rows, as pyGRNN would
         compute it); the default ``True`` is the clustered form.
 
-    Fitted attributes: ``patterns_``, ``targets_``, ``counts_`` (members per pattern),
-    ``sigma_``, ``sigma_rule_``, ``pattern_index_`` (time index of each pattern's seed row),
-    ``thinning_`` (dict: rule, stride, min_distance actually used, rows in, patterns kept,
-    weights), ``loo_error_`` (NaN when fixed),
-    ``exclude_neighbours_``, ``n_features_in_``, ``n_outputs_``.
+    Fitted attributes: ``pattern_set_`` (``PatternSet``: ``patterns_``, ``targets_``,
+    ``counts_`` members per pattern, ``pattern_index_`` time index of each pattern's seed
+    row), ``bandwidth_`` (``Bandwidth``: ``sigma_``, ``sigma_rule_``, ``loo_error_`` NaN when
+    fixed, ``exclude_neighbours_``), ``thinning_`` (dict: rule, stride, min_distance
+    actually used, rows in, patterns kept, weights), ``n_features_in_``, ``n_outputs_``.
     """
 
     def __init__(
@@ -180,19 +183,69 @@ class GRNN:
             sigma, loo = self._loo_sigma(Xa, Ya, tidx, assign)
             rule = "loo"
 
-        self.patterns_ = P
-        self.targets_ = np.ascontiguousarray(Py)
-        self.counts_ = counts
-        self.pattern_index_ = pidx
-        self.sigma_ = float(sigma)
-        self.sigma_rule_ = rule
-        self.loo_error_ = float(loo)
-        self.exclude_neighbours_ = int(self.exclude_neighbours)
+        self.pattern_set_ = PatternSet(P, np.ascontiguousarray(Py), counts, pidx)
+        self.bandwidth_ = Bandwidth(float(sigma), rule, float(loo), int(self.exclude_neighbours))
         self.thinning_ = thinning
-        self.n_features_in_ = Xa.shape[1]
-        self.n_outputs_ = Ya.shape[1]
         self._y1d = y1d
         return self
+
+    # -- fitted attributes (scikit-learn's names, each a field of the records above) ------
+
+    @property
+    def patterns_(self) -> np.ndarray:
+        return self.pattern_set_.patterns
+
+    @patterns_.setter
+    def patterns_(self, value: np.ndarray) -> None:
+        self.pattern_set_ = replace(self.pattern_set_, patterns=value)
+
+    @property
+    def targets_(self) -> np.ndarray:
+        return self.pattern_set_.targets
+
+    @targets_.setter
+    def targets_(self, value: np.ndarray) -> None:
+        self.pattern_set_ = replace(self.pattern_set_, targets=value)
+
+    @property
+    def counts_(self) -> np.ndarray:
+        return self.pattern_set_.counts
+
+    @counts_.setter
+    def counts_(self, value: np.ndarray) -> None:
+        self.pattern_set_ = replace(self.pattern_set_, counts=value)
+
+    @property
+    def pattern_index_(self) -> np.ndarray:
+        return self.pattern_set_.index
+
+    @pattern_index_.setter
+    def pattern_index_(self, value: np.ndarray) -> None:
+        self.pattern_set_ = replace(self.pattern_set_, index=value)
+
+    @property
+    def n_features_in_(self) -> int:
+        return int(self.pattern_set_.patterns.shape[1])
+
+    @property
+    def n_outputs_(self) -> int:
+        return int(self.pattern_set_.targets.shape[1])
+
+    @property
+    def sigma_(self) -> float:
+        return self.bandwidth_.sigma
+
+    @property
+    def sigma_rule_(self) -> str:
+        return self.bandwidth_.rule
+
+    @property
+    def loo_error_(self) -> float:
+        return self.bandwidth_.loo_error
+
+    @property
+    def exclude_neighbours_(self) -> int:
+        return self.bandwidth_.exclude_neighbours
 
     def _thin(self, X: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
         n = X.shape[0]
@@ -331,18 +384,17 @@ class GRNN:
         _require_finite(P, "patterns")
         _require_finite(Y, "targets")
         model = cls(sigma=_check_sigma(sigma))
-        model.patterns_, model.targets_ = P, Y
-        model.counts_ = _check_counts(fitted.pop("counts_", None), P.shape[0])
-        model.sigma_ = float(sigma)
-        model.sigma_rule_ = str(fitted.pop("sigma_rule_", "fixed"))
-        model.loo_error_ = float(fitted.pop("loo_error_", math.nan))
-        model.exclude_neighbours_ = int(fitted.pop("exclude_neighbours_", 0))
-        model.thinning_ = dict(fitted.pop("thinning_", {"rule": "none"}))
-        model.pattern_index_ = np.asarray(
-            fitted.pop("pattern_index_", np.arange(P.shape[0])), dtype=np.int64
+        counts = _check_counts(fitted.pop("counts_", None), P.shape[0])
+        index = np.asarray(fitted.pop("pattern_index_", np.arange(P.shape[0])), dtype=np.int64)
+        model.pattern_set_ = PatternSet(P, Y, counts, index)
+        model.bandwidth_ = Bandwidth(
+            float(sigma),
+            str(fitted.pop("sigma_rule_", "fixed")),
+            float(fitted.pop("loo_error_", math.nan)),
+            int(fitted.pop("exclude_neighbours_", 0)),
         )
+        model.thinning_ = dict(fitted.pop("thinning_", {"rule": "none"}))
         if fitted:
             raise ConfigError(f"unknown fitted attribute(s): {', '.join(sorted(fitted))}")
-        model.n_features_in_, model.n_outputs_ = P.shape[1], Y.shape[1]
         model._y1d = False
         return model

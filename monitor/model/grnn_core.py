@@ -7,6 +7,7 @@ functions (prediction, clustering, LOO errors, thinning).  The scikit-learn styl
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -14,6 +15,29 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import get_num_threads, jit, pjit, prange
 from monitor.model.grnn_index import exact_index, predict_cutoff
+
+
+@dataclass(frozen=True)
+class PatternSet:
+    """A fitted GRNN's patterns: inputs (z-scored), targets, members per pattern and the
+    time index of each pattern's seed row."""
+
+    patterns: np.ndarray
+    targets: np.ndarray
+    counts: np.ndarray
+    index: np.ndarray
+
+
+@dataclass(frozen=True)
+class Bandwidth:
+    """The fitted sigma and how it was chosen (``fixed`` or ``loo``, the leave-one-out
+    error at it, NaN when fixed, and the temporal neighbours left out)."""
+
+    sigma: float
+    rule: str
+    loo_error: float
+    exclude_neighbours: int
+
 
 SIGMA_RULES = ("loo", "fixed")
 THINNING_RULES = ("none", "stride", "min_distance")

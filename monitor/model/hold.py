@@ -45,8 +45,14 @@ from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.jit import jit
 from monitor.model.bias import HOLD_PCT
-from monitor.model.endstop import StopTracker, StrokeModel, fit_stroke, near_stop_series
-from monitor.model.filecheck import MAX_WINDOW_N, check_number, check_whole
+from monitor.model.endstop import (
+    StopTracker,
+    StrokeModel,
+    check_stroke_section,
+    fit_stroke,
+    near_stop_series,
+)
+from monitor.model.filecheck import MAX_WINDOW_N, check_whole
 from monitor.model.residual import largest_finite, resum_interval
 from monitor.model.statistic import HeldOut, Statistic, column, register, signal
 
@@ -290,24 +296,7 @@ class HoldWindow:
         """One sampler row's residuals, its SpoolCmd (0 without) and QP (NaN without)."""
         spool = float(row[self._spool_col]) if self._spool_col >= 0 else 0.0
         qp = float(row[self._qp_col]) if self._qp_col >= 0 else np.nan
-        h = self.hold  # ``push``'s body, one call less per tick
-        near = 0 if self._stops is None else self._stops.push(spool, qp)
-        flag = 1 if abs(spool) <= HOLD_PCT and not near else 0
-        return float(
-            _push(
-                self._ring_e,
-                self._ring_c,
-                self._sums,
-                self._state,
-                e,
-                flag,
-                self._outputs,
-                h.scale,
-                h.settle_n,
-                h.min_count,
-                self._resum,
-            )
-        )
+        return self.push(e, spool, qp)
 
 
 @register
@@ -406,25 +395,4 @@ class Hold(Statistic):
     def check_more(cls, section: dict[str, Any]) -> None:
         check_whole(section, "settle_n", 0, MAX_WINDOW_N, "hold.")
         if section.get("stroke") is not None:
-            _check_stroke(section["stroke"])
-
-
-def _check_stroke(stroke: Any) -> None:
-    """H's end-stop estimate (``monitor.model.endstop``): volumes, margin and stall rule."""
-    if not isinstance(stroke, dict):
-        raise ValueError("header hold.stroke must be an object")
-    for key, low, strict in (
-        ("volume_up_l", 0.0, True),
-        ("volume_down_l", 0.0, True),
-        ("margin", 0.0, False),
-        ("q_stall_lpm", 0.0, True),
-    ):
-        try:
-            check_number(stroke, key, low, strict)
-        except ValueError as exc:
-            raise ValueError(str(exc).replace("header ", "header hold.stroke.", 1)) from None
-    if stroke["margin"] >= 0.5:
-        raise ValueError(f"header hold.stroke.margin must be < 0.5, got {stroke['margin']:g}")
-    v = stroke.get("n_stall")
-    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
-        raise ValueError(f"header hold.stroke.n_stall must be a whole number 1..{MAX_WINDOW_N}")
+            check_stroke_section(section["stroke"], "hold.stroke")

@@ -49,6 +49,17 @@ MODEL_VERSION = 2
 _ARRAYS = ("patterns", "targets", "counts", "pattern_index", "isolation_centroids")
 
 
+@dataclass(frozen=True)
+class Isolation:
+    """The fault signatures the isolation compares an alarm's residuals with: a label and
+    a unit-length centroid (mean residual per spool regime and output) per fault and
+    severity, and the cosine similarity below which the fault is ``unknown``."""
+
+    labels: tuple[str, ...] = ()
+    centroids: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    min_similarity: float = 0.5
+
+
 @dataclass
 class MonitorModel:
     """A trained detector: DGRNN, normalisation, window N, threshold and fault isolation."""
@@ -59,9 +70,8 @@ class MonitorModel:
     threshold: ThresholdRule
     j0: float
     eps0: float
-    isolation_labels: tuple[str, ...] = ()
-    isolation_centroids: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    isolation_min_similarity: float = 0.5
+    #: Fault isolation: one signature per label (none: faults are not named).
+    isolation: Isolation = field(default_factory=lambda: Isolation())
     #: Per-output bound on |e| (z-units) before J; None keeps eq. 9 literal.  See training.
     residual_clip: tuple[float, ...] | None = None
     training: dict[str, Any] = field(default_factory=dict)
@@ -98,8 +108,8 @@ class MonitorModel:
             "residual_clip": None if self.residual_clip is None else list(self.residual_clip),
             "threshold": self.threshold.to_dict(),
             "isolation": {
-                "labels": list(self.isolation_labels),
-                "min_similarity": float(self.isolation_min_similarity),
+                "labels": list(self.isolation.labels),
+                "min_similarity": float(self.isolation.min_similarity),
             },
             "training": self.training,
         }
@@ -129,7 +139,7 @@ def save_model(path: str | Path, model: MonitorModel) -> None:
         "targets": np.asarray(g.targets_, dtype=np.float64),
         "counts": np.asarray(g.counts_, dtype=np.float64),
         "pattern_index": np.asarray(g.pattern_index_, dtype=np.int64),
-        "isolation_centroids": np.asarray(model.isolation_centroids, dtype=np.float64),
+        "isolation_centroids": np.asarray(model.isolation.centroids, dtype=np.float64),
     }
     header = json.dumps(model.header()).encode("utf-8")
     checksum = _checksum(header, arrays).encode("ascii")
@@ -237,9 +247,7 @@ def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> Monitor
         threshold=ThresholdRule(**header["threshold"]),
         j0=math.nan,
         eps0=math.nan,
-        isolation_labels=tuple(iso["labels"]),
-        isolation_centroids=centroids,
-        isolation_min_similarity=float(iso["min_similarity"]),
+        isolation=Isolation(tuple(iso["labels"]), centroids, float(iso["min_similarity"])),
         residual_clip=None if header["residual_clip"] is None else tuple(header["residual_clip"]),
         training=header["training"],
         envelope=Envelope.from_dict(header["validity"]) if "validity" in header else None,

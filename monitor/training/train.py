@@ -23,7 +23,7 @@ from monitor.io.recording import Recording
 from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
-from monitor.model.modelfile import MonitorModel
+from monitor.model.modelfile import Isolation, MonitorModel
 from monitor.model.residual import window_j
 from monitor.model.spec import Normalizer, table
 from monitor.model.statistic import HeldOut
@@ -191,7 +191,7 @@ def train(
     )
     if cfg.isolation == "sim":
         labels, centroids = simulated_signatures(model, cfg, say)
-        model.isolation_labels, model.isolation_centroids = labels, centroids
+    model.isolation = Isolation(labels, centroids, model.isolation.min_similarity)
     model.training = {
         "sources": [r.source for r in everything],
         "patterns_from": [r.source for r in fit_part],
