@@ -6,6 +6,8 @@ Slow and obvious on purpose: every test compares a kernel to one of these.
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -172,6 +174,8 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
     Returns (check code, column) per sample: the first latched finding in check order
     (signal_range, frozen, stuck, pump_below_port, rest_offset = 1..5), then column order.
     """
+    # The settings by their YAML keys (the config groups them in one record per check).
+    cfg = SimpleNamespace(**{k: v for rec in asdict(cfg).values() for k, v in rec.items()})
     names = ["SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp", "PP", "PA", "PB", "QP"]
     dbc = {
         "SpoolCmd": (-100.0, 100.0),

@@ -22,7 +22,7 @@ from monitor.codec.j1939.dtc import PGN_DM1
 from monitor.codec.logwrite import write_candump
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect
-from monitor.detection.plausibility import PlausibilityConfig
+from monitor.detection.plausibility_config import PlausibilityConfig, RangeCheck
 from monitor.errors import ConfigError
 from monitor.io.csvio import read_csv, write_csv
 from monitor.io.recording import Recording
@@ -147,7 +147,7 @@ def test_tolerance_is_configured_and_validated(tmp_path) -> None:
     assert all(hi[4:] < [400.0, 400.0, 400.0, 60.0])  # full scale itself is pinned
     assert lo[:4].tolist() == [-100.0, 0.0, 0.0, -40.0]  # commands, engine, oil: exact
     assert hi[:4].tolist() == [100.0, 100.0, 3000.0, 150.0]
-    assert PlausibilityConfig(range_tolerance_fs=0.0).range_limits()[0][5] == 0.0
+    assert PlausibilityConfig(RangeCheck(range_tolerance_fs=0.0)).range_limits()[0][5] == 0.0
     bad = tmp_path / "bad.yaml"
     bad.write_text("plausibility:\n  range_tolerance_fs: 1.0\n")
     with pytest.raises(ConfigError, match=re.escape("plausibility.range_tolerance_fs")):

@@ -20,6 +20,13 @@ from monitor.detection.plausibility import (
     PlausibilityConfig,
     finding,
 )
+from monitor.detection.plausibility_config import (
+    FrozenCheck,
+    RangeCheck,
+    RelationCheck,
+    RestCheck,
+    StuckCheck,
+)
 from monitor.detection.ticker import Ticker
 from monitor.io.recording import Recording
 from monitor.resources import resource_path
@@ -132,7 +139,7 @@ def test_stuck_sensor_with_live_noise_is_named(normal_run) -> None:
     k_fire = k + int(np.flatnonzero(np.cumsum(moving[k + 1 :]) >= 2000)[0]) + 1
     assert found[("PA", "stuck")] == pytest.approx(rec.t[k_fire], abs=0.02)
     # The same noise band on a moving sensor: no finding (20 s of motion in band is rare).
-    assert findings_of(normal_run, PlausibilityConfig(stuck_s=20.0))[0] == {}
+    assert findings_of(normal_run, PlausibilityConfig(stuck=StuckCheck(stuck_s=20.0)))[0] == {}
 
 
 def test_out_of_range_value_is_named_and_clears(normal_run) -> None:
@@ -146,11 +153,13 @@ def test_out_of_range_value_is_named_and_clears(normal_run) -> None:
     pp = normal_run["PP"].copy()
     pp[k : k + 20] = 260.0
     pp[k + 20 : k + 40] = 249.99  # just below the limit is in range
-    found, _, _ = findings_of(edited(normal_run, PP=pp), PlausibilityConfig(pressure_max_bar=250))
+    found, _, _ = findings_of(
+        edited(normal_run, PP=pp), PlausibilityConfig(RangeCheck(pressure_max_bar=250))
+    )
     assert found == {("PP", "signal_range"): 20.09}
     # At the limit a transducer is pinned at full scale: out of range.
     pp[k + 20 : k + 40] = 250.0
-    cfg = PlausibilityConfig(pressure_max_bar=250)
+    cfg = PlausibilityConfig(RangeCheck(pressure_max_bar=250))
     found, check, _ = findings_of(edited(normal_run, PP=pp), cfg)
     assert found == {("PP", "signal_range"): 20.09} and check[k + 39] != 0
 
@@ -207,7 +216,7 @@ def test_rest_offset_is_found_at_key_off_and_kept_when_the_engine_starts(model, 
     assert det.summary["alarm"] is False
     # A sensor reading tank at rest: no finding; the check off (rest_settle_s 0): none either.
     assert findings_of(rest_then_run(normal_run, 0.5))[0] == {}
-    assert findings_of(rec, PlausibilityConfig(rest_settle_s=0.0))[0] == {}
+    assert findings_of(rec, PlausibilityConfig(rest=RestCheck(rest_settle_s=0.0)))[0] == {}
 
 
 def test_a_boom_parked_in_the_air_is_not_a_sensor_fault(model, normal_run) -> None:
@@ -245,12 +254,11 @@ def test_detect_and_ticks_give_the_same_sensor_events(model, normal_run) -> None
     [
         PlausibilityConfig(),
         PlausibilityConfig(
-            frozen_s=0.3,
-            stuck_s=2.0,
-            relation_s=0.2,
-            rest_settle_s=1.0,
-            range_s=0.05,
-            rest_max_bar=2.0,
+            frozen=FrozenCheck(frozen_s=0.3),
+            stuck=StuckCheck(stuck_s=2.0),
+            relation=RelationCheck(relation_s=0.2),
+            rest=RestCheck(rest_settle_s=1.0, rest_max_bar=2.0),
+            signal_range=RangeCheck(range_s=0.05),
         ),
     ],
     ids=["defaults", "short-times"],

@@ -74,6 +74,8 @@ def _default(f: dataclasses.Field) -> str:
 
 
 def _config() -> str:
+    from monitor.schema.sections import keys, records
+
     try:
         from monitor.config.settings import MonitorConfig
     except ImportError:  # the layout before the packages
@@ -89,7 +91,11 @@ def _config() -> str:
             continue
         cls = type(cls)
         doc = inspect.getdoc(cls) or ""
+        # A section made of records (one per check) keeps its YAML keys flat.
+        groups = records(cls)
         comments = _field_comments(cls)
+        for rec in groups.values():
+            comments.update(_field_comments(rec))
         out += [
             f"## `{section.name}`",
             "",
@@ -98,7 +104,7 @@ def _config() -> str:
             "| key | type | default | meaning |",
             "|---|---|---|---|",
         ]
-        for f in dataclasses.fields(cls):
+        for _, f in keys(cls).values():
             meaning = f.metadata.get("doc") or comments.get(f.name, "")
             unit = f.metadata.get("unit")
             if unit:

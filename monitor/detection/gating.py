@@ -121,7 +121,9 @@ class _Trackers:
         plaus = cfg.plausibility
         self.op_state = OpStateTracker(min_engine_rpm, cfg.operating)
         self.plausibility = Plausibility(plaus, min_engine_rpm)
-        self.silence = SilenceTracker(plaus.rest_max_bar, plaus.move_flow_lpm, n.settle_n)
+        self.silence = SilenceTracker(
+            plaus.rest.rest_max_bar, plaus.motion.move_flow_lpm, n.settle_n
+        )
         self.oil_belief = OilBelief(*n.oil_args)
         self.confirmer = StateConfirmer(*n.confirm_args)
 
@@ -192,8 +194,9 @@ class Gate:
 
         plaus = self.cfg.plausibility
         engine = col("EngineSpeed")
+        rest_max_bar, move_flow_lpm = plaus.rest.rest_max_bar, plaus.motion.move_flow_lpm
         silent = silent_source(
-            engine, col("PP"), col("QP"), plaus.rest_max_bar, plaus.move_flow_lpm, self._n.settle_n
+            engine, col("PP"), col("QP"), rest_max_bar, move_flow_lpm, self._n.settle_n
         )
         # A silent source is not an engine off: the pump shows the engine running.
         running = np.where(silent, self.min_engine_rpm, engine)

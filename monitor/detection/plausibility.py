@@ -57,122 +57,34 @@ findings sample by sample, and a tick allocates nothing.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.errors import ConfigError
+from monitor.detection.plausibility_config import (
+    COLUMNS,
+    P_BAND_BAR,
+    P_BAND_LPM,
+    P_FROZEN_N,
+    P_MOVE_FLOW,
+    P_MOVE_SPOOL,
+    P_RANGE_N,
+    P_REL_MARGIN,
+    P_REL_N,
+    P_REL_SPOOL,
+    P_REST_MAX,
+    P_REST_N,
+    P_STUCK_N,
+    PlausibilityConfig,
+)
+from monitor.detection.plausibility_config import DBC_RANGES as DBC_RANGES
 from monitor.jit import jit
-from monitor.signals import SAMPLE_PERIOD_S, SIGNAL_NAMES
 
 #: Check names by code (code 0 = no finding); the order is the reporting priority.
 CHECKS: tuple[str, ...] = ("signal_range", "frozen", "stuck", "pump_below_port", "rest_offset")
-#: Kernel column order: the contract signals (SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp,
-#: PP, PA, PB, QP).
-COLUMNS: tuple[str, ...] = SIGNAL_NAMES
 _SPOOL, _ENGINE, _PP, _PA, _PB, _QP = (
     COLUMNS.index(n) for n in ("SpoolCmd", "EngineSpeed", "PP", "PA", "PB", "QP")
 )
-#: Sensor ranges of the shipped DBC (dbc/monitor.dbc; tests hold them equal).
-DBC_RANGES: dict[str, tuple[float, float]] = {
-    "SpoolCmd": (-100.0, 100.0),
-    "PumpDispCmd": (0.0, 100.0),
-    "EngineSpeed": (0.0, 3000.0),
-    "OilTemp": (-40.0, 150.0),
-    "PP": (0.0, 400.0),
-    "PA": (0.0, 400.0),
-    "PB": (0.0, 400.0),
-    "QP": (0.0, 60.0),
-}
-
-
-# Indices of the kernel's parameter vector (``PlausibilityConfig.params``): numba takes one
-# float array, and names keep its order from drifting between the two sides.
-(
-    P_RANGE_N,
-    P_FROZEN_N,
-    P_STUCK_N,
-    P_BAND_BAR,
-    P_BAND_LPM,
-    P_MOVE_SPOOL,
-    P_MOVE_FLOW,
-    P_REL_SPOOL,
-    P_REL_MARGIN,
-    P_REL_N,
-    P_REST_N,
-    P_REST_MAX,
-) = range(12)
-N_PARAMS = 12
-
-
-@dataclass(frozen=True)
-class PlausibilityConfig:
-    """``plausibility:`` section (units in the names; a time of 0 switches its check off)."""
-
-    pressure_min_bar: float = 0.0  # PP, PA, PB sensor range (default: the DBC's)
-    pressure_max_bar: float = 400.0
-    flow_max_lpm: float = 60.0  # QP sensor range upper end (lower end 0)
-    # 4-20 mA transducers sit +-0.5 % FS off zero and their noise crosses zero.
-    range_tolerance_fs: float = 0.01  # share of full scale PP/PA/PB/QP may read below range
-    range_s: float = 0.1
-    frozen_s: float = 1.0
-    stuck_s: float = 20.0
-    stuck_band_bar: float = 1.5
-    stuck_band_lpm: float = 0.5
-    move_spool_pct: float = 20.0
-    move_flow_lpm: float = 2.0
-    relation_spool_pct: float = 20.0
-    relation_margin_bar: float = 10.0
-    relation_s: float = 1.0
-    rest_settle_s: float = 30.0
-    rest_max_bar: float = 5.0
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            if f.name != "pressure_min_bar" and not getattr(self, f.name) >= 0:
-                raise ConfigError(f"plausibility.{f.name} must be >= 0")
-        if not self.pressure_max_bar > self.pressure_min_bar:
-            raise ConfigError("plausibility.pressure_max_bar must be above pressure_min_bar")
-        if self.flow_max_lpm <= 0:
-            raise ConfigError("plausibility.flow_max_lpm must be > 0")
-        if not self.range_tolerance_fs <= 0.1:
-            raise ConfigError(
-                f"plausibility.range_tolerance_fs is a share of full scale "
-                f"within 0..0.1 (0.01 = 1 %), got "
-                f"{self.range_tolerance_fs}"
-            )
-
-    def limits(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi) sensor range per column (COLUMNS order)."""
-        lo = np.array([DBC_RANGES[n][0] for n in COLUMNS])
-        hi = np.array([DBC_RANGES[n][1] for n in COLUMNS])
-        for c in (_PP, _PA, _PB):
-            lo[c], hi[c] = self.pressure_min_bar, self.pressure_max_bar
-        hi[_QP] = self.flow_max_lpm
-        return lo, hi
-
-    def range_limits(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lowest, highest) reading per column that is in range: the transducers (PP, PA,
-        PB, QP) down to ``range_tolerance_fs`` of full scale below their lower limit and
-        strictly below full scale (a reading at it is pinned); the others their limits."""
-        lo, hi = self.limits()
-        for c in (_PP, _PA, _PB, _QP):
-            lo[c] -= self.range_tolerance_fs * (hi[c] - lo[c])
-            hi[c] = np.nextafter(hi[c], -np.inf)
-        return lo, hi
-
-    def params(self) -> np.ndarray:
-        """Kernel parameters at the ``P_*`` indices; times as sample counts (0: check off)."""
-        n = lambda s: float(round(s / SAMPLE_PERIOD_S))  # noqa: E731
-        p = np.zeros(N_PARAMS)
-        p[P_RANGE_N], p[P_FROZEN_N] = n(self.range_s), n(self.frozen_s)
-        p[P_STUCK_N] = n(self.stuck_s)
-        p[P_BAND_BAR], p[P_BAND_LPM] = self.stuck_band_bar, self.stuck_band_lpm
-        p[P_MOVE_SPOOL], p[P_MOVE_FLOW] = self.move_spool_pct, self.move_flow_lpm
-        p[P_REL_SPOOL], p[P_REL_MARGIN] = self.relation_spool_pct, self.relation_margin_bar
-        p[P_REL_N], p[P_REST_N] = n(self.relation_s), n(self.rest_settle_s)
-        p[P_REST_MAX] = self.rest_max_bar
-        return p
 
 
 # State arrays (per column): counters[0] range run, [1] identical run, [2] stuck moving

@@ -1,6 +1,8 @@
 """Typed configuration sections, declared once: each setting is a dataclass field whose
 metadata says what a value must be (``setting(default, check=..., demand=..., unit=...)``);
-``typed`` validates a YAML mapping against the dataclass and builds it.
+``typed`` validates a YAML mapping against the dataclass and builds it.  A section may be
+made of records (one per check, say) while its YAML stays flat: ``keys`` says which record
+each key belongs to.
 
 The kind of a value follows the field's annotation: ``str``, ``int``, ``float``, ``bool``,
 ``Path`` (a file or folder name) or ``dict[...]`` (a mapping of names to scalars).  Numbers
@@ -11,9 +13,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import MISSING, field, fields
+from dataclasses import MISSING, Field, field, fields, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, get_type_hints
 
 from monitor.errors import ConfigError
 
@@ -115,6 +117,30 @@ def value(kind: str, raw: Any, where: str, source: Path | str) -> Any:
     return float(raw)
 
 
+def records(cls: type) -> dict[str, type]:
+    """The nested records of a section made of records (field name -> record class), as
+    ``plausibility`` is one per check; empty for a section of plain settings."""
+    try:
+        hints = get_type_hints(cls)
+    except (NameError, TypeError):
+        return {}
+    inits = [f for f in fields(cls) if f.init]
+    kinds = {f.name: hints.get(f.name) for f in inits}
+    if not inits or not all(isinstance(k, type) and is_dataclass(k) for k in kinds.values()):
+        return {}
+    return {n: k for n, k in kinds.items() if isinstance(k, type)}
+
+
+def keys(cls: type) -> dict[str, tuple[str | None, Field[Any]]]:
+    """A section's YAML keys in declaration order -> (record field, setting field).  A
+    section made of records keeps its YAML flat: every key is a setting of one record
+    (their names are unique), the record field None otherwise."""
+    groups = records(cls)
+    if not groups:
+        return {f.name: (None, f) for f in fields(cls) if f.init}
+    return {f.name: (g, f) for g, rec in groups.items() for f in fields(rec) if f.init}
+
+
 def typed(cls: type, sec: Any, name: str, source: Path | str) -> Any:
     """Section ``name`` of the YAML (a mapping, or None for all defaults) as ``cls``; unknown
     keys, wrong kinds and values failing their check are one ConfigError each."""
@@ -122,10 +148,10 @@ def typed(cls: type, sec: Any, name: str, source: Path | str) -> Any:
         sec = {}
     if not isinstance(sec, dict):
         raise ConfigError(f"{source}: section {name!r} must be a mapping")
-    known = {f.name: f for f in fields(cls) if f.init}
+    known = keys(cls)
     values: dict[str, Any] = {}
     for key, raw in sec.items():
-        f = known.get(key)
+        f = known.get(key, (None, None))[1]
         if f is None:
             raise ConfigError(
                 f"{source}: unknown key {name}.{key_text(key)}; known: {', '.join(known)}"
@@ -137,7 +163,14 @@ def typed(cls: type, sec: Any, name: str, source: Path | str) -> Any:
             raise ConfigError(f"{source}: {name}.{key} must be {demand}, got {shown(raw)}")
         values[key] = v
     try:
-        return cls(**values)
+        groups = records(cls)
+        if not groups:
+            return cls(**values)
+        parts = {
+            g: rec(**{k: v for k, v in values.items() if known[k][0] == g})
+            for g, rec in groups.items()
+        }
+        return cls(**parts)
     except ConfigError as exc:  # a check across keys in the class itself
         text = str(exc)
         raise ConfigError(text if text.startswith(f"{source}:") else f"{source}: {text}") from None
