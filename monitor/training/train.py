@@ -191,7 +191,7 @@ def train(
     )
     if cfg.isolation == "sim":
         labels, centroids = simulated_signatures(model, cfg, say)
-    model.isolation = Isolation(labels, centroids, model.isolation.min_similarity)
+        model.isolation = Isolation(labels, centroids, model.isolation.min_similarity)
     model.training = {
         "sources": [r.source for r in everything],
         "patterns_from": [r.source for r in fit_part],
