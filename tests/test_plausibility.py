@@ -291,5 +291,5 @@ def test_kernel_equals_the_plain_python_twin(normal_run, cfg) -> None:
     np.testing.assert_array_equal(check, ref_check)
     np.testing.assert_array_equal(np.where(check > 0, sig, -1), ref_sig)
     assert n == len(check)
-    if cfg.frozen_s < 1:  # the short times make every check fire: the comparison covers all
+    if cfg.frozen.frozen_s < 1:  # the short times make every check fire: the comparison covers all
         assert set(np.unique(ref_check).tolist()) == {0, 1, 2, 3, 4, 5}
