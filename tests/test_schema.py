@@ -85,3 +85,21 @@ def test_deeply_nested_yaml_is_one_clear_error_not_a_recursion_crash(tmp_path) -
     for loader in (load_config, load_machine):
         with pytest.raises(ConfigError, match=r"deep\.yaml: line 1: nested deeper than 32 levels"):
             loader(p)
+
+
+def test_a_section_made_of_records_keeps_its_yaml_keys_flat(tmp_path: Path) -> None:
+    """``plausibility`` holds one record per check; users still write its keys flat, each
+    lands in its record, the rest keep their defaults, and a wrong key names the flat keys."""
+    path = tmp_path / "monitor.yaml"
+    path.write_text("plausibility:\n  frozen_s: 0.5\n  rest_max_bar: 3\n  range_s: 0.2\n")
+    plaus = load_config(path).plausibility
+    assert plaus.frozen.frozen_s == 0.5
+    assert plaus.rest.rest_max_bar == 3.0 and plaus.rest.rest_settle_s == 30.0
+    assert plaus.signal_range.range_s == 0.2 and plaus.signal_range.pressure_max_bar == 400.0
+    assert plaus.stuck.stuck_s == 20.0  # not written: the shipped default
+    path.write_text("plausibility:\n  rest: {rest_max_bar: 3}\n")
+    with pytest.raises(ConfigError, match=r"unknown key plausibility\.rest; known: pressure_min"):
+        load_config(path)
+    path.write_text("plausibility:\n  rest_max_bar: -1\n")
+    with pytest.raises(ConfigError, match=r"monitor\.yaml: plausibility\.rest_max_bar must be"):
+        load_config(path)
