@@ -61,30 +61,52 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.detection.plausibility_config import (
-    COLUMNS,
-    P_BAND_BAR,
-    P_BAND_LPM,
-    P_FROZEN_N,
-    P_MOVE_FLOW,
-    P_MOVE_SPOOL,
-    P_RANGE_N,
-    P_REL_MARGIN,
-    P_REL_N,
-    P_REL_SPOOL,
-    P_REST_MAX,
-    P_REST_N,
-    P_STUCK_N,
-    PlausibilityConfig,
-)
+from monitor.detection.plausibility_config import COLUMNS, PlausibilityConfig
 from monitor.detection.plausibility_config import DBC_RANGES as DBC_RANGES
 from monitor.jit import jit
+from monitor.signals import SAMPLE_PERIOD_S
 
 #: Check names by code (code 0 = no finding); the order is the reporting priority.
 CHECKS: tuple[str, ...] = ("signal_range", "frozen", "stuck", "pump_below_port", "rest_offset")
 _SPOOL, _ENGINE, _PP, _PA, _PB, _QP = (
     COLUMNS.index(n) for n in ("SpoolCmd", "EngineSpeed", "PP", "PA", "PB", "QP")
 )
+
+
+# Indices of the kernel's parameter vector (``kernel_params``): numba takes one
+# float array, and names keep its order from drifting between the two sides.
+(
+    P_RANGE_N,
+    P_FROZEN_N,
+    P_STUCK_N,
+    P_BAND_BAR,
+    P_BAND_LPM,
+    P_MOVE_SPOOL,
+    P_MOVE_FLOW,
+    P_REL_SPOOL,
+    P_REL_MARGIN,
+    P_REL_N,
+    P_REST_N,
+    P_REST_MAX,
+) = range(12)
+N_PARAMS = 12
+
+
+def kernel_params(cfg: PlausibilityConfig) -> np.ndarray:
+    """Kernel parameters at the ``P_*`` indices; times as sample counts (0: check off)."""
+    n = lambda s: float(round(s / SAMPLE_PERIOD_S))  # noqa: E731
+    p = np.zeros(N_PARAMS)
+    p[P_RANGE_N], p[P_FROZEN_N] = n(cfg.signal_range.range_s), n(cfg.frozen.frozen_s)
+    p[P_STUCK_N] = n(cfg.stuck.stuck_s)
+    p[P_BAND_BAR], p[P_BAND_LPM] = cfg.stuck.stuck_band_bar, cfg.stuck.stuck_band_lpm
+    p[P_MOVE_SPOOL], p[P_MOVE_FLOW] = cfg.motion.move_spool_pct, cfg.motion.move_flow_lpm
+    p[P_REL_SPOOL], p[P_REL_MARGIN] = (
+        cfg.relation.relation_spool_pct,
+        cfg.relation.relation_margin_bar,
+    )
+    p[P_REL_N], p[P_REST_N] = n(cfg.relation.relation_s), n(cfg.rest.rest_settle_s)
+    p[P_REST_MAX] = cfg.rest.rest_max_bar
+    return p
 
 
 # State arrays (per column): counters[0] range run, [1] identical run, [2] stuck moving
@@ -204,7 +226,7 @@ class _Limits:
 
     @classmethod
     def of(cls, cfg: PlausibilityConfig) -> _Limits:
-        return cls(*cfg.limits(), *cfg.range_limits(), cfg.params())
+        return cls(*cfg.limits(), *cfg.range_limits(), kernel_params(cfg))
 
 
 class _CheckState:

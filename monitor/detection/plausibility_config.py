@@ -1,6 +1,6 @@
 """The ``plausibility:`` section: one record per check (``monitor.detection.plausibility``
-describes the checks), the sensor ranges they judge against and the kernel's parameter
-vector.  The YAML keeps its keys flat; each is a setting of one record."""
+describes the checks) and the sensor ranges they judge against.  The YAML keeps its keys
+flat; each is a setting of one record."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from monitor.errors import ConfigError
-from monitor.signals import SAMPLE_PERIOD_S, SIGNAL_NAMES
+from monitor.signals import SIGNAL_NAMES
 
 #: Kernel column order: the contract signals (SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp,
 #: PP, PA, PB, QP).
@@ -28,25 +28,6 @@ DBC_RANGES: dict[str, tuple[float, float]] = {
     "PB": (0.0, 400.0),
     "QP": (0.0, 60.0),
 }
-
-
-# Indices of the kernel's parameter vector (``PlausibilityConfig.params``): numba takes one
-# float array, and names keep its order from drifting between the two sides.
-(
-    P_RANGE_N,
-    P_FROZEN_N,
-    P_STUCK_N,
-    P_BAND_BAR,
-    P_BAND_LPM,
-    P_MOVE_SPOOL,
-    P_MOVE_FLOW,
-    P_REL_SPOOL,
-    P_REL_MARGIN,
-    P_REL_N,
-    P_REST_N,
-    P_REST_MAX,
-) = range(12)
-N_PARAMS = 12
 
 
 @dataclass(frozen=True)
@@ -158,19 +139,3 @@ class PlausibilityConfig:
             lo[c] -= self.signal_range.range_tolerance_fs * (hi[c] - lo[c])
             hi[c] = np.nextafter(hi[c], -np.inf)
         return lo, hi
-
-    def params(self) -> np.ndarray:
-        """Kernel parameters at the ``P_*`` indices; times as sample counts (0: check off)."""
-        n = lambda s: float(round(s / SAMPLE_PERIOD_S))  # noqa: E731
-        p = np.zeros(N_PARAMS)
-        p[P_RANGE_N], p[P_FROZEN_N] = n(self.signal_range.range_s), n(self.frozen.frozen_s)
-        p[P_STUCK_N] = n(self.stuck.stuck_s)
-        p[P_BAND_BAR], p[P_BAND_LPM] = self.stuck.stuck_band_bar, self.stuck.stuck_band_lpm
-        p[P_MOVE_SPOOL], p[P_MOVE_FLOW] = self.motion.move_spool_pct, self.motion.move_flow_lpm
-        p[P_REL_SPOOL], p[P_REL_MARGIN] = (
-            self.relation.relation_spool_pct,
-            self.relation.relation_margin_bar,
-        )
-        p[P_REL_N], p[P_REST_N] = n(self.relation.relation_s), n(self.rest.rest_settle_s)
-        p[P_REST_MAX] = self.rest.rest_max_bar
-        return p
