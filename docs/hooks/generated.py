@@ -81,15 +81,24 @@ def _config() -> str:
     except ImportError:  # the layout before the packages
         from monitor.config import MonitorConfig  # type: ignore[no-redef]
 
+    from monitor.config.settings import _TOP_KEYS
+
+    def sections(cls: type) -> list[tuple[str, type]]:
+        """(YAML section, its class); a record of sections (``gating``) gives each of its."""
+        out = []
+        for f in dataclasses.fields(cls):
+            default = f.default_factory if f.default_factory is not dataclasses.MISSING else None
+            value = default() if callable(default) else None
+            if not dataclasses.is_dataclass(value):
+                continue
+            if f.name not in _TOP_KEYS and records(type(value)):
+                out += sections(type(value))
+            else:
+                out.append((f.name, type(value)))
+        return out
+
     out = []
-    for section in dataclasses.fields(MonitorConfig):
-        default = (
-            section.default_factory if section.default_factory is not dataclasses.MISSING else None
-        )
-        cls = default() if callable(default) else None
-        if not dataclasses.is_dataclass(cls):
-            continue
-        cls = type(cls)
+    for name, cls in sections(MonitorConfig):
         doc = inspect.getdoc(cls) or ""
         # A section made of records (one per check) keeps its YAML keys flat.
         groups = records(cls)
@@ -97,7 +106,7 @@ def _config() -> str:
         for rec in groups.values():
             comments.update(_field_comments(rec))
         out += [
-            f"## `{section.name}`",
+            f"## `{name}`",
             "",
             doc.split("\n\n")[0],
             "",
