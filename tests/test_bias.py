@@ -187,12 +187,14 @@ def test_short_held_out_data_trains_without_b() -> None:
     from monitor.sim.cycles import make_cycle
     from monitor.sim.machine import load_machine
     from monitor.sim.simulate import simulate
-    from monitor.training.settings import TrainConfig
+    from monitor.training.settings import IsolationSettings, TrainConfig
     from monitor.training.train import train
 
     recs = [simulate(make_cycle("boom", 120.0, s), load_machine(), seed=s) for s in (1, 2, 3)]
     said: list[str] = []
-    m = train(recs[:2], TrainConfig(isolation="none"), said.append, held_out=recs[2:])
+    m = train(
+        recs[:2], TrainConfig(isolation=IsolationSettings("none")), said.append, held_out=recs[2:]
+    )
     assert m.bias is None
     assert m.training["bias"].startswith("off: ")
     assert any("bias statistic off" in line for line in said)

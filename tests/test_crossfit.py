@@ -19,7 +19,12 @@ from monitor.sim.cycles import make_cycle
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
 from monitor.training.crossfit import cross_fitted_residuals, fold_ids, n_blocks
-from monitor.training.settings import TrainConfig
+from monitor.training.settings import (
+    IsolationSettings,
+    StatisticSettings,
+    ThresholdSettings,
+    TrainConfig,
+)
 from monitor.training.train import floor_thresholds, normal_residuals, train
 
 
@@ -82,7 +87,15 @@ def test_each_block_is_predicted_from_the_other_folds_only() -> None:
 def commissioned() -> tuple[MonitorModel, list[str], list]:
     recs = _recordings(300.0, (11, 12))  # 10 blocks of 60 s: enough for 4 folds (8)
     said: list[str] = []
-    return train(recs, TrainConfig(isolation="none", folds=4), said.append), said, recs
+    return (
+        train(
+            recs,
+            TrainConfig(thresholds=ThresholdSettings(folds=4), isolation=IsolationSettings("none")),
+            said.append,
+        ),
+        said,
+        recs,
+    )
 
 
 def test_train_cross_fits_when_the_data_allows_and_says_so(commissioned) -> None:
@@ -96,7 +109,15 @@ def test_train_cross_fits_when_the_data_allows_and_says_so(commissioned) -> None
     assert m.bias is not None and math.isfinite(m.bias.b0)
 
     short: list[str] = []
-    m = train(recs[:1], TrainConfig(isolation="none", bias=False, folds=4), short.append)
+    m = train(
+        recs[:1],
+        TrainConfig(
+            thresholds=ThresholdSettings(folds=4),
+            statistics=StatisticSettings(bias=False),
+            isolation=IsolationSettings("none"),
+        ),
+        short.append,
+    )
     assert m.training["validation"] == "held out"  # 5 blocks of 60 s, fewer than 8
     assert any("too short to cross-fit 4 folds" in line for line in short)
 
@@ -106,7 +127,7 @@ def test_fold_counts_outside_the_range_are_refused(folds: int) -> None:
     from monitor.errors import ConfigError
 
     with pytest.raises(ConfigError, match="folds must be"):
-        TrainConfig(folds=folds)
+        ThresholdSettings(folds=folds)
 
 
 def test_a_reference_floors_both_thresholds_and_never_lowers_them(commissioned) -> None:

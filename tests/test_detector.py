@@ -19,7 +19,12 @@ from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
-from monitor.training.settings import TrainConfig
+from monitor.training.settings import (
+    DGRNNSettings,
+    IsolationSettings,
+    StatisticSettings,
+    TrainConfig,
+)
 from monitor.training.train import train
 
 MACHINE = load_machine()
@@ -28,7 +33,11 @@ MACHINE = load_machine()
 @pytest.fixture(scope="module")
 def small_model():
     recs = [simulate(make_cycle("boom", 120, s), MACHINE, seed=s) for s in (11, 12, 13)]
-    cfg = TrainConfig(max_patterns=400, window_n=300, isolation="none")
+    cfg = TrainConfig(
+        DGRNNSettings(max_patterns=400),
+        statistics=StatisticSettings(window_n=300),
+        isolation=IsolationSettings("none"),
+    )
     return train(recs, cfg)
 
 

@@ -31,7 +31,12 @@ from monitor.resources import resource_path
 from monitor.sim.cycles import make_cycle
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
-from monitor.training.settings import TrainConfig
+from monitor.training.settings import (
+    DGRNNSettings,
+    IsolationSettings,
+    StatisticSettings,
+    TrainConfig,
+)
 from monitor.training.train import train
 
 CFG = load_config()
@@ -139,7 +144,14 @@ def run_at(seed: int, oil_c: float, duration_s: float = 60.0) -> Recording:
 
 def test_trained_model_keeps_its_envelope_and_old_files_derive_one(tmp_path, caplog) -> None:
     recs = [run_at(s, oil) for s, oil in ((21, 40.0), (22, 60.0))]
-    m = train(recs, TrainConfig(max_patterns=300, window_n=300, isolation="none"))
+    m = train(
+        recs,
+        TrainConfig(
+            DGRNNSettings(max_patterns=300),
+            statistics=StatisticSettings(window_n=300),
+            isolation=IsolationSettings("none"),
+        ),
+    )
     env = m.envelope
     assert env is not None and env.source == "training"
     for name in ("SpoolCmd", "OilTemp", "PA", "QP"):

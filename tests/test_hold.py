@@ -390,11 +390,20 @@ def boom_runs():
 
 
 def _train(fit, held_out, hold: bool = True):
-    from monitor.training.settings import TrainConfig
+    from monitor.training.settings import (
+        DGRNNSettings,
+        IsolationSettings,
+        StatisticSettings,
+        TrainConfig,
+    )
     from monitor.training.train import train
 
     said: list[str] = []
-    cfg = TrainConfig(isolation="none", max_patterns=400, hold=hold)
+    cfg = TrainConfig(
+        DGRNNSettings(max_patterns=400),
+        statistics=StatisticSettings(hold=hold),
+        isolation=IsolationSettings("none"),
+    )
     return train(fit, cfg, said.append, held_out=held_out), said
 
 

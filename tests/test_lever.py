@@ -340,11 +340,11 @@ def boom_runs():
 
 
 def _train(fit, held_out):
-    from monitor.training.settings import TrainConfig
+    from monitor.training.settings import DGRNNSettings, IsolationSettings, TrainConfig
     from monitor.training.train import train
 
     said: list[str] = []
-    cfg = TrainConfig(isolation="none", max_patterns=400)
+    cfg = TrainConfig(DGRNNSettings(max_patterns=400), isolation=IsolationSettings("none"))
     return train(fit, cfg, said.append, held_out=held_out), said
 
 

@@ -202,12 +202,21 @@ def test_training_fits_a_registered_statistic(shift) -> None:
     from monitor.sim.cycles import make_cycle
     from monitor.sim.machine import load_machine
     from monitor.sim.simulate import simulate
-    from monitor.training.settings import TrainConfig
+    from monitor.training.settings import (
+        DGRNNSettings,
+        IsolationSettings,
+        StatisticSettings,
+        TrainConfig,
+    )
     from monitor.training.train import train
 
     runs = [simulate(make_cycle("boom", 60.0, s), load_machine(), seed=s) for s in (1, 2, 3)]
     said: list[str] = []
-    cfg = TrainConfig(isolation="none", max_patterns=300, bias=False)
+    cfg = TrainConfig(
+        DGRNNSettings(max_patterns=300),
+        statistics=StatisticSettings(bias=False),
+        isolation=IsolationSettings("none"),
+    )
     m = train(runs[:2], cfg, said.append, held_out=runs[2:])
     params = m.statistics["shift"]
     assert params.m0 == pytest.approx(2.0, rel=1e-12)

@@ -26,8 +26,8 @@ from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
+from monitor.training.settings import DGRNNSettings, IsolationSettings, TrainConfig
 from monitor.training.train import (
-    TrainConfig,
     normal_residuals,
     simulated_signatures,
     split_normal,
@@ -114,13 +114,16 @@ def monitor_model(work: Path, n_patterns: int, train_s: float, say: Progress) ->
         return path
     say(f"training a default-preset model with {n_patterns} patterns (cached in {path})")
     recs = training_runs(train_s)
-    cfg = TrainConfig(max_patterns=n_patterns, isolation="none", isolation_runs=1)
+    cfg = TrainConfig(
+        dgrnn=DGRNNSettings(max_patterns=n_patterns),
+        isolation=IsolationSettings(method="none", runs=1),
+    )
     model = train(recs, cfg, say)
-    fit_part, val_part = split_normal(recs, cfg.validation_fraction)
+    fit_part, val_part = split_normal(recs, cfg.thresholds.validation_fraction)
     spec = model.spec
     tables = [model.normalizer.transform(table(r, spec.variables)) for r in fit_part]
     grnn = GRNN(
-        exclude_neighbours=cfg.exclude_neighbours,
+        exclude_neighbours=cfg.dgrnn.exclude_neighbours,
         max_patterns=n_patterns,
         min_distance=1e-3,
         cluster_weights=False,
@@ -129,12 +132,13 @@ def monitor_model(work: Path, n_patterns: int, train_s: float, say: Progress) ->
     say(f"  refitted: {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g}")
     model.residual_clip = None
     e_val = [normal_residuals(model, r) for r in val_part]
-    if cfg.residual_clip_quantile is not None:  # as `monitor train` does
-        clip = np.nanquantile(np.abs(np.concatenate(e_val)), cfg.residual_clip_quantile, axis=0)
+    q = cfg.thresholds.residual_clip_quantile
+    if q is not None:  # as `monitor train` does
+        clip = np.nanquantile(np.abs(np.concatenate(e_val)), q, axis=0)
         model.residual_clip = tuple(float(c) for c in clip)
         e_val = [np.clip(e, -clip, clip) for e in e_val]
-    j_val = np.concatenate([window_j(e, cfg.window_n) for e in e_val])
-    model.j0, model.eps0 = cfg.threshold.eps0(j_val)
+    j_val = np.concatenate([window_j(e, cfg.statistics.window_n) for e in e_val])
+    model.j0, model.eps0 = cfg.thresholds.rule.eps0(j_val)
     labels, centroids = simulated_signatures(model, cfg, say)
     model.isolation = Isolation(labels, centroids, model.isolation.min_similarity)
     model.training = {

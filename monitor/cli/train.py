@@ -12,7 +12,13 @@ from monitor.cli._paths import output_file
 from monitor.errors import MonitorError
 from monitor.model.spec import PRESETS
 from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule
-from monitor.training.settings import TrainConfig
+from monitor.training.settings import (
+    DGRNNSettings,
+    IsolationSettings,
+    StatisticSettings,
+    ThresholdSettings,
+    TrainConfig,
+)
 
 if TYPE_CHECKING:
     from monitor.config.settings import MonitorConfig
@@ -56,18 +62,18 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--window",
         type=number(1, WINDOW_MAX, whole=True),
-        default=TrainConfig.window_n,
+        default=StatisticSettings.window_n,
         metavar="N",
-        help=f"J window N in samples (eq. 9; default {TrainConfig.window_n} = "
-        f"{TrainConfig.window_n / 100:g} s)",
+        help=f"J window N in samples (eq. 9; default {StatisticSettings.window_n} = "
+        f"{StatisticSettings.window_n / 100:g} s)",
     )
     p.add_argument(
         "--max-patterns",
         type=int,
-        default=TrainConfig.max_patterns,
+        default=DGRNNSettings.max_patterns,
         metavar="K",
         help="bound on GRNN patterns (clusters of min-distance thinning; default "
-        f"{TrainConfig.max_patterns})",
+        f"{DGRNNSettings.max_patterns})",
     )
     p.add_argument(
         "--threshold-rule",
@@ -120,10 +126,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--folds",
         type=number(0, 20, whole=True),
-        default=TrainConfig.folds,
+        default=ThresholdSettings.folds,
         metavar="K",
         help="thresholds from residuals cross-fitted over all of REC in K folds of "
-        f"{TrainConfig.fold_block_s:g} s blocks (needs 2K blocks, else the last "
+        f"{ThresholdSettings.fold_block_s:g} s blocks (needs 2K blocks, else the last "
         "--validation-fraction is held out); default 0: hold out the last "
         "--validation-fraction",
     )
@@ -176,10 +182,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--isolation-runs",
         type=number(1, 100, whole=True),
-        default=TrainConfig.isolation_runs,
+        default=IsolationSettings.runs,
         metavar="N",
         help="simulated faulty runs per fault and severity for the signatures (default "
-        f"{TrainConfig.isolation_runs}; the shipped model uses 8: fewer misname slight faults)",
+        f"{IsolationSettings.runs}; the shipped model uses 8: fewer misname slight faults)",
     )
     p.add_argument(
         "--fault-check",
@@ -281,18 +287,23 @@ def run(args: argparse.Namespace) -> int:
     from monitor.training.train import train
 
     cfg = TrainConfig(
-        preset=args.preset,
-        horizon=args.horizon,
-        window_n=args.window,
-        max_patterns=args.max_patterns,
-        threshold=ThresholdRule(args.threshold_rule, args.quantile, args.factor, args.rate),
-        validation_fraction=args.validation_fraction,
-        folds=args.folds,
-        isolation=args.isolation,
-        isolation_runs=args.isolation_runs,
-        lend=args.lend == "on",
-        bias=None if args.bias is None else args.bias == "on",
-        hold=args.hold == "on",
+        dgrnn=DGRNNSettings(
+            preset=args.preset,
+            horizon=args.horizon,
+            max_patterns=args.max_patterns,
+            lend=args.lend == "on",
+        ),
+        thresholds=ThresholdSettings(
+            rule=ThresholdRule(args.threshold_rule, args.quantile, args.factor, args.rate),
+            validation_fraction=args.validation_fraction,
+            folds=args.folds,
+        ),
+        statistics=StatisticSettings(
+            window_n=args.window,
+            bias=None if args.bias is None else args.bias == "on",
+            hold=args.hold == "on",
+        ),
+        isolation=IsolationSettings(method=args.isolation, runs=args.isolation_runs),
     )
     monitor_cfg = load_config(args.config)
     recordings = []
@@ -324,7 +335,7 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise MonitorError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     print(
-        f"wrote {args.out}: preset {cfg.preset}, sigma {model.dgrnn.grnn.sigma_:.4g}, "
+        f"wrote {args.out}: preset {cfg.dgrnn.preset}, sigma {model.dgrnn.grnn.sigma_:.4g}, "
         f"N {model.window_n}, J0 {model.j0:.4g}, eps0 {model.eps0:.4g}",
         file=sys.stderr,
     )

@@ -40,7 +40,7 @@ from monitor.sim.cycles import make_cycle
 from monitor.sim.faults import Fault
 from monitor.sim.machine import MachineParams, load_machine
 from monitor.sim.simulate import simulate
-from monitor.training.settings import TrainConfig
+from monitor.training.settings import DGRNNSettings, IsolationSettings, TrainConfig
 from monitor.training.train import train
 
 Progress = Callable[[str], None]
@@ -214,7 +214,7 @@ def train_presets(
 
         model = train(
             fit,
-            TrainConfig(preset=preset, isolation_runs=8),
+            TrainConfig(DGRNNSettings(preset=preset), isolation=IsolationSettings(runs=8)),
             progress=progress,
             held_out=held or None,
         )

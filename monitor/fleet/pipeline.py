@@ -66,7 +66,8 @@ def default_model_bytes(model_path: str | None, config_path: str | None) -> byte
 
 
 class _Commissioning(TypedDict):
-    """The :class:`~monitor.training.settings.TrainConfig` fields commissioning sets."""
+    """The :class:`~monitor.training.settings.TrainConfig` settings commissioning sets, by
+    their `monitor train` names (recorded in each model's trained-from.json)."""
 
     folds: int
     bias: bool
@@ -95,13 +96,24 @@ def train_model_bytes(
     with its other defaults (:data:`COMMISSIONING`): the model file's bytes
     (``reference``: the reference model's bytes)."""
     from monitor.offline.recordings import read_loop
-    from monitor.training.settings import TrainConfig
+    from monitor.training.settings import (
+        DGRNNSettings,
+        IsolationSettings,
+        StatisticSettings,
+        ThresholdSettings,
+        TrainConfig,
+    )
     from monitor.training.train import train
 
     cfg = _config(config_path)
     recordings = [read_loop(p, cfg, None) for p in paths]
     ref = None if reference is None else model_from_bytes(reference)
-    settings = TrainConfig(isolation=isolation, **COMMISSIONING)
+    settings = TrainConfig(
+        dgrnn=DGRNNSettings(lend=COMMISSIONING["lend"]),
+        thresholds=ThresholdSettings(folds=COMMISSIONING["folds"]),
+        statistics=StatisticSettings(bias=COMMISSIONING["bias"]),
+        isolation=IsolationSettings(method=isolation),
+    )
     return model_to_bytes(train(recordings, settings, reference=ref))
 
 

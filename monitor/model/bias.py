@@ -305,7 +305,8 @@ class Bias(Statistic):
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Bias | str:
         if not settings.with_bias:
             return "off (--bias off, or the paper preset)"
-        return cls(settings.bias_window_n, settings.bias_min_count)
+        stats = settings.statistics
+        return cls(stats.bias_window_n, stats.bias_min_count)
 
     def unscaled(self, held: HeldOut) -> BiasModel:
         if any(not r.has("SpoolCmd") for r in held.recordings):

@@ -325,14 +325,15 @@ class Hold(Statistic):
 
     @classmethod
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Hold | str:
-        if not settings.hold:
+        stats = settings.statistics
+        if not stats.hold:
             return "off (not asked for: --hold on)"
         if "B" not in on or not all(o in outputs for o in HOLD_OUTPUTS):
             return "off (with the bias statistic, on a model that predicts PA and PB)"
         return cls(
-            settings.bias_window_n,
-            settings.hold_min_count,
-            settings.hold_settle_n,
+            stats.bias_window_n,
+            stats.hold_min_count,
+            stats.hold_settle_n,
             tuple(outputs.index(o) for o in HOLD_OUTPUTS),
         )
 

@@ -284,7 +284,8 @@ class Lever(Statistic):
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Lever | str:
         if "B" not in on or LEVER_OUTPUT not in outputs:
             return "off (with the bias statistic, on a model that predicts PP)"
-        return cls(settings.bias_window_n, settings.lever_min_count, outputs.index(LEVER_OUTPUT))
+        stats = settings.statistics
+        return cls(stats.bias_window_n, stats.lever_min_count, outputs.index(LEVER_OUTPUT))
 
     def unscaled(self, held: HeldOut) -> LeverModel:
         directions = [lever_directions(r["SpoolCmd"]) for r in held.recordings]

@@ -232,7 +232,7 @@ class J(Statistic):
 
     @classmethod
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> J | str:
-        return cls(settings.window_n)
+        return cls(settings.statistics.window_n)
 
     def unscaled(self, held: HeldOut) -> JModel:
         return JModel(_check_window(self.window_n_setting), math.nan, math.nan)

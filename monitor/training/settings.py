@@ -1,6 +1,7 @@
-"""What `monitor train` is told: the preset, the J window, the pattern budget, the threshold
-rule and the isolation.  Light to import (no kernels), so the command line can show the
-defaults."""
+"""What `monitor train` is told, grouped as its options are: the DGRNN to fit, how the
+thresholds are set, which statistics watch beside J, and how faults are isolated.  Light to
+import (no kernels), so the command line can show the defaults.  Each group checks its own
+values when it is made."""
 
 from __future__ import annotations
 
@@ -12,13 +13,31 @@ from monitor.model.threshold import ThresholdRule
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class DGRNNSettings:
+    """The model fitted: ``--preset``, ``--horizon``, ``--max-patterns``, ``--lend``."""
+
     preset: str = "default"
     horizon: int | None = None  # None: the preset's own
-    window_n: int = 3000  # J window N (samples): 30 s spans several raise/hold/lower phases
     max_patterns: int = 6000  # smaller clusters: less bias where PP is steep in SpoolCmd
     exclude_neighbours: int = 50  # LOO leaves out +-0.5 s: 100 Hz rows are near copies
-    threshold: ThresholdRule = field(default_factory=ThresholdRule)
+    #: With a reference model: lend its patterns where this machine's own data has none
+    #: (``monitor.training.fill``), in the final model and in every cross-fitted fold.
+    lend: bool = True
+
+    def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            raise ConfigError(f"unknown preset {self.preset!r}; known: {', '.join(PRESETS)}")
+
+    def spec(self) -> DGRNNSpec:
+        return DGRNNSpec.preset(self.preset, self.horizon)
+
+
+@dataclass(frozen=True)
+class ThresholdSettings:
+    """How the thresholds are set on normal data the GRNN never saw: ``--threshold-rule``
+    (with ``--quantile``, ``--factor``, ``--rate``), ``--validation-fraction``, ``--folds``."""
+
+    rule: ThresholdRule = field(default_factory=ThresholdRule)
     validation_fraction: float = 0.25
     #: Thresholds from residuals cross-fitted over all the normal data in this many folds
     #: (``monitor.training.crossfit``); 0: hold out the last ``validation_fraction``.  Off by
@@ -30,11 +49,33 @@ class TrainConfig:
     #: literal).  0.999 leaves sustained fault residuals alone and caps the rare one-sample
     #: events (end-stop impacts) that would otherwise set J0 by themselves.
     residual_clip_quantile: float | None = 0.999
-    isolation: str = "sim"  # "sim": signatures from simulated faults; "none"
-    isolation_runs: int = 2  # simulated runs per fault and severity
-    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.05 <= self.validation_fraction <= 0.5:
+            raise ConfigError("validation fraction must be within 0.05..0.5")
+        if self.folds != 0 and not 2 <= self.folds <= 20:
+            raise ConfigError(f"folds must be 0 (hold out a share) or 2..20, got {self.folds}")
+        if not 1.0 <= self.fold_block_s <= 3600.0:
+            raise ConfigError(f"fold block must be within 1..3600 s, got {self.fold_block_s}")
+        q = self.residual_clip_quantile
+        if q is not None and not 0.9 <= q <= 1.0:
+            raise ConfigError(f"residual clip quantile must be within 0.9..1, got {q}")
+
+    @property
+    def block_n(self) -> int:
+        """A fold block in 100 Hz samples."""
+        return int(round(self.fold_block_s * 100))
+
+
+@dataclass(frozen=True)
+class StatisticSettings:
+    """The statistics that watch: J's window (``--window``), and beside J the bias
+    statistic B (``--bias``), the full-lever statistic L (with B) and the hold statistic H
+    (``--hold``, with B)."""
+
+    window_n: int = 3000  # J window N (samples): 30 s spans several raise/hold/lower phases
     #: The bias statistic beside J (``monitor.model.bias``); None: on for every preset but
-    #: ``paper``, which stays the paper's method.
+    #: ``paper``, which stays the paper's method (:attr:`TrainConfig.with_bias`).
     bias: bool | None = None
     bias_window_n: int = 6000  # 60 s: several raise/hold/lower phases of every regime
     bias_min_count: int = 300  # 3 s of a regime in the window before it counts
@@ -50,36 +91,45 @@ class TrainConfig:
     hold: bool = False
     hold_settle_n: int = 200
     hold_min_count: int = 300
-    #: With a reference model: lend its patterns where this machine's own data has none
-    #: (``monitor.training.fill``), in the final model and in every cross-fitted fold.
-    lend: bool = True
 
     def __post_init__(self) -> None:
-        if self.preset not in PRESETS:
-            raise ConfigError(f"unknown preset {self.preset!r}; known: {', '.join(PRESETS)}")
         if self.window_n < 1:
             raise ConfigError(f"window N must be at least 1 sample, got {self.window_n}")
-        if not 0.05 <= self.validation_fraction <= 0.5:
-            raise ConfigError("validation fraction must be within 0.05..0.5")
-        if self.folds != 0 and not 2 <= self.folds <= 20:
-            raise ConfigError(f"folds must be 0 (hold out a share) or 2..20, got {self.folds}")
-        if not 1.0 <= self.fold_block_s <= 3600.0:
-            raise ConfigError(f"fold block must be within 1..3600 s, got {self.fold_block_s}")
-        q = self.residual_clip_quantile
-        if q is not None and not 0.9 <= q <= 1.0:
-            raise ConfigError(f"residual clip quantile must be within 0.9..1, got {q}")
         if not 1 <= self.bias_min_count <= self.bias_window_n:
             raise ConfigError("bias min_count must be within 1..bias window")
         if not 1 <= self.lever_min_count <= self.bias_window_n:
             raise ConfigError("lever min_count must be within 1..bias window")
         if not 1 <= self.hold_min_count <= self.bias_window_n or self.hold_settle_n < 0:
             raise ConfigError("hold min_count must be within 1..bias window, settle >= 0")
-        if self.isolation not in ("sim", "none"):
-            raise ConfigError(f"isolation must be 'sim' or 'none', got {self.isolation!r}")
+
+
+@dataclass(frozen=True)
+class IsolationSettings:
+    """How faults are named: ``--isolation`` (``sim``: signatures from simulated faults;
+    ``none``) and ``--isolation-runs``; ``seed`` shifts the simulated runs' seeds."""
+
+    method: str = "sim"
+    runs: int = 2  # simulated runs per fault and severity
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.method not in ("sim", "none"):
+            raise ConfigError(f"isolation must be 'sim' or 'none', got {self.method!r}")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything `monitor train` is told, by group; every group has its defaults."""
+
+    dgrnn: DGRNNSettings = field(default_factory=DGRNNSettings)
+    thresholds: ThresholdSettings = field(default_factory=ThresholdSettings)
+    statistics: StatisticSettings = field(default_factory=StatisticSettings)
+    isolation: IsolationSettings = field(default_factory=IsolationSettings)
 
     @property
     def with_bias(self) -> bool:
-        return self.preset != "paper" if self.bias is None else self.bias
+        bias = self.statistics.bias
+        return self.dgrnn.preset != "paper" if bias is None else bias
 
     def spec(self) -> DGRNNSpec:
-        return DGRNNSpec.preset(self.preset, self.horizon)
+        return self.dgrnn.spec()

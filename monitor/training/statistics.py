@@ -28,7 +28,7 @@ def fit_statistics(
     failure is the training's), the others off with the reason when the held-out data
     cannot support them.  Returns the notes ("on" or "off...") by member key and what
     each fitted threshold rests on by member name."""
-    rule: ThresholdRule = settings.threshold
+    rule: ThresholdRule = settings.thresholds.rule
     notes: dict[str, str] = {}
     support: dict[str, Any] = {}
     on: set[str] = set()

@@ -14,6 +14,7 @@ import hashlib
 import math
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -25,12 +26,12 @@ from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
 from monitor.model.modelfile import Isolation, MonitorModel
 from monitor.model.residual import window_j
-from monitor.model.spec import Normalizer, table
+from monitor.model.spec import DGRNNSpec, Normalizer, table
 from monitor.model.statistic import HeldOut
 from monitor.model.threshold import one_event
 from monitor.signals import FAULT_NAMES
 from monitor.training.crossfit import cross_fitted_residuals, n_blocks
-from monitor.training.settings import TrainConfig
+from monitor.training.settings import ThresholdSettings, TrainConfig
 from monitor.training.statistics import check_reference, fit_statistics, floor_thresholds
 
 Progress = Callable[[str], None]
@@ -65,6 +66,21 @@ def normal_residuals(model: MonitorModel, rec: Recording) -> np.ndarray:
     return gated_residuals(model, rec, AlarmConfig().min_engine_rpm)[1]
 
 
+@dataclass(frozen=True)
+class _Parts:
+    """Which recordings give the patterns and which the thresholds, and how (the model
+    file's ``validation``)."""
+
+    fit: list[Recording]
+    val: list[Recording]
+    everything: list[Recording]
+    validation: str = "held out"
+
+    @property
+    def crossfit(self) -> bool:
+        return self.validation != "held out"
+
+
 def train(
     recordings: Sequence[Recording],
     cfg: TrainConfig,
@@ -74,114 +90,32 @@ def train(
 ) -> MonitorModel:
     """A model from normal ``recordings``; the thresholds come from ``held_out`` normal
     recordings when given, else from residuals cross-fitted over all of them
-    (``monitor.training.crossfit``), or from their last ``cfg.validation_fraction`` when
-    they are too short for ``cfg.folds`` folds (or ``cfg.folds`` is 0).  A ``reference``
+    (``monitor.training.crossfit``), or from their last ``validation_fraction`` when
+    they are too short for ``folds`` folds (or ``folds`` is 0).  A ``reference``
     model of the same machine type (trained on hours) floors both thresholds: see
     :func:`floor_thresholds`."""
     say = progress or (lambda _msg: None)
-    if not recordings:
-        raise InputFileError("no normal recordings to train on")
     spec = cfg.spec()
-    if reference is not None:  # before the long work
-        check_reference(reference, spec, cfg.window_n)
-    for rec in [*recordings, *(held_out or ())]:
-        missing = [n for n in spec.variables if not rec.has(n)]
-        if missing:
-            raise InputFileError(f"{rec.source}: missing signal(s) {', '.join(missing)}")
-    block_n = int(round(cfg.fold_block_s * 100))
-    crossfit = (
-        not held_out
-        and cfg.folds >= 2
-        and n_blocks([len(r) for r in recordings], block_n) >= 2 * cfg.folds
-    )
-    if held_out:
-        fit_part, val_part = list(recordings), list(held_out)
-    elif crossfit:
-        fit_part, val_part = list(recordings), list(recordings)
-    else:
-        fit_part, val_part = split_normal(recordings, cfg.validation_fraction)
-        if cfg.folds >= 2:
-            say(
-                f"  too short to cross-fit {cfg.folds} folds of {cfg.fold_block_s:g} s blocks "
-                f"(needs {2 * cfg.folds * cfg.fold_block_s / 60:g} min): the last "
-                f"{cfg.validation_fraction:.0%} held out for the thresholds"
-            )
-    tables = [table(r, spec.variables) for r in fit_part]
-    normalizer = Normalizer().fit(np.concatenate(tables), spec.variables)
-    started = time.perf_counter()
-    say(
-        f"fitting the {cfg.preset} DGRNN on {sum(len(t) for t in tables)} samples "
-        f"from {len(fit_part)} part(s)"
-    )
-    grnn = GRNN(exclude_neighbours=cfg.exclude_neighbours, max_patterns=cfg.max_patterns)
-    dgrnn = DGRNN(spec, grnn).fit([normalizer.transform(t) for t in tables])
-    say(
-        f"  {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g} (LOO, +-"
-        f"{cfg.exclude_neighbours} samples excluded) in {time.perf_counter() - started:.1f} s"
-    )
-    lend = None
-    if reference is not None and cfg.lend:
-        from monitor.training.fill import lend_patterns
-
-        def lend(d: DGRNN) -> int:
-            return lend_patterns(d, normalizer, reference)
-
-        say(
-            f"  {lend(dgrnn)} patterns lent by the reference model where this machine's own "
-            "data has none"
-        )
-    model = MonitorModel(dgrnn, normalizer, cfg.window_n, cfg.threshold, math.nan, math.nan)
-    # Held-out residuals once, unbounded; the bound (if any) is learnt from them and then
-    # applied exactly as the detector applies it.
-    if crossfit:
-        say(f"  thresholds cross-fitted: {cfg.folds} folds of {cfg.fold_block_s:g} s blocks")
-        e_val = cross_fitted_residuals(
-            model,
-            [normalizer.transform(t) for t in tables],
-            val_part,
-            cfg.folds,
-            block_n,
-            normal_residuals,
-            say,
-            lend,
-        )
-    else:
-        e_val = [normal_residuals(model, r) for r in val_part]
-    if cfg.residual_clip_quantile is not None:
-        clip = np.nanquantile(np.abs(np.concatenate(e_val)), cfg.residual_clip_quantile, axis=0)
-        model.residual_clip = tuple(float(c) for c in clip)
-        say(f"  residual bound |e| <= {', '.join(f'{c:.3g}' for c in clip)} (z, per output)")
-        e_val = [np.clip(e, -clip, clip) for e in e_val]
-    validation = (
-        f"cross-fitted, {cfg.folds} folds of {cfg.fold_block_s:g} s blocks"
-        if crossfit
-        else "held out"
-    )
-    everything = [*recordings, *(held_out or ())]
-    held = HeldOut(e_val, val_part, spec.outputs, everything, validation)
+    check_inputs(recordings, held_out, spec, cfg, reference)
+    parts = choose_parts(recordings, held_out, cfg.thresholds, say)
+    tables = [table(r, spec.variables) for r in parts.fit]
+    model, lend = fit_model(tables, spec, cfg, reference, say)
+    e_val = held_out_residuals(model, tables, parts, cfg.thresholds, lend, say)
+    held = HeldOut(e_val, parts.val, spec.outputs, parts.everything, parts.validation)
     notes, support = fit_statistics(model, held, cfg, say)
     own_eps0 = model.eps0
     floor_note = None
     if reference is not None:
         floor_note = floor_thresholds(model, reference)
         say(f"  thresholds floored by the reference model: {floor_note}")
+    window_n = cfg.statistics.window_n
+    j_parts = [window_j(e, window_n) for e in e_val]
     # Said only when the event sets the threshold (not when the reference's floor does).
-    j_parts = [window_j(e, cfg.window_n) for e in e_val]
-    found = one_event(j_parts, cfg.window_n) if model.eps0 == own_eps0 else None
-    event: dict[str, object] | None = None  # the model file's note: the event's source and time
-    if found is not None:
-        rec = val_part[int(found.pop("part"))]
-        t_s = float(rec.t[min(int(found.pop("start")), len(rec) - 1)])
-        event = {"source": rec.source, "t_s": t_s, **found}
-        say(
-            f"  note: J0 rests on one event, {rec.source} at {t_s / 60:.1f} min "
-            f"({found['ratio']:.1f} x any other window's J): the threshold is that much less "
-            "sensitive unless such events are this machine's normal work; check what it did "
-            "then"
-        )
+    own = model.eps0 == own_eps0
+    event = one_event_note(j_parts, parts.val, window_n, say) if own else None
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
-    model.envelope = envelope_from_recordings(everything, AlarmConfig().min_engine_rpm)
+    model.envelope = envelope_from_recordings(parts.everything, AlarmConfig().min_engine_rpm)
     env = model.envelope
     say(
         "  trained envelope: "
@@ -189,21 +123,11 @@ def train(
             f"{s} {a:.4g}..{b:.4g}" for s, a, b in zip(env.signals, env.lo, env.hi, strict=True)
         )
     )
-    if cfg.isolation == "sim":
+    if cfg.isolation.method == "sim":
         labels, centroids = simulated_signatures(model, cfg, say)
         model.isolation = Isolation(labels, centroids, model.isolation.min_similarity)
     model.training = {
-        "sources": [r.source for r in everything],
-        "patterns_from": [r.source for r in fit_part],
-        "validation_from": [r.source for r in val_part],
-        "validation": validation,
-        "samples": int(sum(len(r) for r in everything)),
-        "data_sha256": data_hash([table(r, spec.variables) for r in everything]),
-        "preset": cfg.preset,
-        "max_patterns": cfg.max_patterns,
-        "residual_clip_quantile": cfg.residual_clip_quantile,
-        "isolation": cfg.isolation,
-        "threshold": cfg.threshold.describe(),
+        **training_record(parts, spec, cfg),
         **notes,  # each statistic: "on", or "off..." and why
         "support": support,
         "threshold_floor": floor_note,
@@ -214,6 +138,163 @@ def train(
         "trained_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     return model
+
+
+def check_inputs(
+    recordings: Sequence[Recording],
+    held_out: Sequence[Recording] | None,
+    spec: DGRNNSpec,
+    cfg: TrainConfig,
+    reference: MonitorModel | None,
+) -> None:
+    """Before the long work: data to train on, a reference of this spec and window, and
+    every signal the preset reads in every recording."""
+    if not recordings:
+        raise InputFileError("no normal recordings to train on")
+    if reference is not None:
+        check_reference(reference, spec, cfg.statistics.window_n)
+    for rec in [*recordings, *(held_out or ())]:
+        missing = [n for n in spec.variables if not rec.has(n)]
+        if missing:
+            raise InputFileError(f"{rec.source}: missing signal(s) {', '.join(missing)}")
+
+
+def choose_parts(
+    recordings: Sequence[Recording],
+    held_out: Sequence[Recording] | None,
+    thresholds: ThresholdSettings,
+    say: Progress,
+) -> _Parts:
+    """The recordings given apart, else cross-fitted folds when the data is long enough for
+    them, else the last share of the data held out."""
+    folds, block_s = thresholds.folds, thresholds.fold_block_s
+    everything = [*recordings, *(held_out or ())]
+    if held_out:
+        return _Parts(list(recordings), list(held_out), everything)
+    if folds >= 2 and n_blocks([len(r) for r in recordings], thresholds.block_n) >= 2 * folds:
+        text = f"cross-fitted, {folds} folds of {block_s:g} s blocks"
+        return _Parts(list(recordings), list(recordings), everything, text)
+    fraction = thresholds.validation_fraction
+    if folds >= 2:
+        say(
+            f"  too short to cross-fit {folds} folds of {block_s:g} s blocks "
+            f"(needs {2 * folds * block_s / 60:g} min): the last "
+            f"{fraction:.0%} held out for the thresholds"
+        )
+    fit_part, val_part = split_normal(recordings, fraction)
+    return _Parts(fit_part, val_part, everything)
+
+
+def fit_model(
+    tables: list[np.ndarray],
+    spec: DGRNNSpec,
+    cfg: TrainConfig,
+    reference: MonitorModel | None,
+    say: Progress,
+) -> tuple[MonitorModel, Callable[[DGRNN], int] | None]:
+    """The normaliser and the DGRNN on the patterns part, with the reference's patterns lent
+    where asked; the model has no thresholds yet.  Also returns the lending step (None:
+    none), which every cross-fitted fold repeats."""
+    normalizer = Normalizer().fit(np.concatenate(tables), spec.variables)
+    started = time.perf_counter()
+    d = cfg.dgrnn
+    say(
+        f"fitting the {d.preset} DGRNN on {sum(len(t) for t in tables)} samples "
+        f"from {len(tables)} part(s)"
+    )
+    grnn = GRNN(exclude_neighbours=d.exclude_neighbours, max_patterns=d.max_patterns)
+    dgrnn = DGRNN(spec, grnn).fit([normalizer.transform(t) for t in tables])
+    say(
+        f"  {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g} (LOO, +-"
+        f"{d.exclude_neighbours} samples excluded) in {time.perf_counter() - started:.1f} s"
+    )
+    lend = None
+    if reference is not None and d.lend:
+        from monitor.training.fill import lend_patterns
+
+        def lend(d: DGRNN) -> int:
+            return lend_patterns(d, normalizer, reference)
+
+        say(
+            f"  {lend(dgrnn)} patterns lent by the reference model where this machine's own "
+            "data has none"
+        )
+    window_n = cfg.statistics.window_n
+    rule = cfg.thresholds.rule
+    return MonitorModel(dgrnn, normalizer, window_n, rule, math.nan, math.nan), lend
+
+
+def held_out_residuals(
+    model: MonitorModel,
+    tables: list[np.ndarray],
+    parts: _Parts,
+    thresholds: ThresholdSettings,
+    lend: Callable[[DGRNN], int] | None,
+    say: Progress,
+) -> list[np.ndarray]:
+    """Residuals of the data the thresholds rest on, each part predicted by a model that
+    never saw it; bounded per output when asked (the bound is then kept in ``model``)."""
+    # Held-out residuals once, unbounded; the bound (if any) is learnt from them and then
+    # applied exactly as the detector applies it.
+    if parts.crossfit:
+        folds, block_s = thresholds.folds, thresholds.fold_block_s
+        say(f"  thresholds cross-fitted: {folds} folds of {block_s:g} s blocks")
+        normalizer = model.normalizer
+        e_val = cross_fitted_residuals(
+            model,
+            [normalizer.transform(t) for t in tables],
+            parts.val,
+            folds,
+            thresholds.block_n,
+            normal_residuals,
+            say,
+            lend,
+        )
+    else:
+        e_val = [normal_residuals(model, r) for r in parts.val]
+    q = thresholds.residual_clip_quantile
+    if q is None:
+        return e_val
+    clip = np.nanquantile(np.abs(np.concatenate(e_val)), q, axis=0)
+    model.residual_clip = tuple(float(c) for c in clip)
+    say(f"  residual bound |e| <= {', '.join(f'{c:.3g}' for c in clip)} (z, per output)")
+    return [np.clip(e, -clip, clip) for e in e_val]
+
+
+def one_event_note(
+    j_parts: list[np.ndarray], val_part: list[Recording], window_n: int, say: Progress
+) -> dict[str, object] | None:
+    """The model file's note when J0 rests on one event (its source and time), else None."""
+    found = one_event(j_parts, window_n)
+    if found is None:
+        return None
+    rec = val_part[int(found.pop("part"))]
+    t_s = float(rec.t[min(int(found.pop("start")), len(rec) - 1)])
+    say(
+        f"  note: J0 rests on one event, {rec.source} at {t_s / 60:.1f} min "
+        f"({found['ratio']:.1f} x any other window's J): the threshold is that much less "
+        "sensitive unless such events are this machine's normal work; check what it did "
+        "then"
+    )
+    return {"source": rec.source, "t_s": t_s, **found}
+
+
+def training_record(parts: _Parts, spec: DGRNNSpec, cfg: TrainConfig) -> dict[str, object]:
+    """The model file's record of what the model was trained from and how."""
+    everything = parts.everything
+    return {
+        "sources": [r.source for r in everything],
+        "patterns_from": [r.source for r in parts.fit],
+        "validation_from": [r.source for r in parts.val],
+        "validation": parts.validation,
+        "samples": int(sum(len(r) for r in everything)),
+        "data_sha256": data_hash([table(r, spec.variables) for r in everything]),
+        "preset": cfg.dgrnn.preset,
+        "max_patterns": cfg.dgrnn.max_patterns,
+        "residual_clip_quantile": cfg.thresholds.residual_clip_quantile,
+        "isolation": cfg.isolation.method,
+        "threshold": cfg.thresholds.rule.describe(),
+    }
 
 
 #: Severities the fault signatures are learnt at: one signature per fault and severity, since
@@ -238,13 +319,13 @@ def simulated_signatures(
     labels, centroids = [], []
     say(
         f"  learning fault signatures from "
-        f"{len(FAULT_NAMES) * len(ISOLATION_SEVERITIES) * cfg.isolation_runs} simulated runs"
+        f"{len(FAULT_NAMES) * len(ISOLATION_SEVERITIES) * cfg.isolation.runs} simulated runs"
     )
     for k, fault in enumerate(FAULT_NAMES):
         for sev in ISOLATION_SEVERITIES:
             acc = Isolator((), np.zeros((0, N_REGIMES * n_out)), n_out)
-            for r in range(cfg.isolation_runs):
-                seed = 70_000 + 1000 * k + 100 * r + int(round(sev * 20)) + cfg.seed
+            for r in range(cfg.isolation.runs):
+                seed = 70_000 + 1000 * k + 100 * r + int(round(sev * 20)) + cfg.isolation.seed
                 rec = simulate(
                     make_cycle("boom", 90.0, seed),
                     machine,
