@@ -12,8 +12,9 @@ import pytest
 
 from monitor.cli import main
 from monitor.errors import InputFileError
-from monitor.evaluation.uci import DETECTION_KEYS, UCI_PRESETS, sensors_needed
+from monitor.evaluation.uci import sensors_needed
 from monitor.evaluation.uci_data import load_rig
+from monitor.evaluation.uci_presets import DETECTION_KEYS, UCI_PRESETS
 
 UCI_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "uci-hydraulic-1hz"
 SENSORS = sensors_needed(tuple(UCI_PRESETS))

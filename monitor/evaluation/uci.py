@@ -26,9 +26,9 @@ separate 1 Hz recording (loaded by :mod:`monitor.evaluation.uci_data`).  Method,
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -47,11 +47,11 @@ from monitor.evaluation.uci_data import (
 )
 from monitor.evaluation.uci_presets import (
     CYCLE_TIME,
-    DETECTION_KEYS,
     MIN_STD,
     UCI_PRESETS,
     WINDOWS,
 )
+from monitor.evaluation.uci_score import score, selection
 from monitor.model.dgrnn import DGRNN, predict_series
 from monitor.model.grnn import GRNN
 from monitor.model.residual import window_j
@@ -130,68 +130,6 @@ def first_alarm_s(j: np.ndarray, eps0: float) -> np.ndarray:
     return np.where(above.any(axis=1), np.argmax(above, axis=1).astype(float), np.nan)
 
 
-# --------------------------------------------------------------------------- scoring
-
-
-def _rate(mask: np.ndarray, alarms: np.ndarray) -> float | None:
-    return float(alarms[mask].mean()) if mask.any() else None
-
-
-def score(rc: RigCycles, alarms: np.ndarray) -> dict[str, Any]:
-    """The contract's rates plus breakdowns by cooler state and stable flag."""
-    healthy = rc.healthy
-    out: dict[str, Any] = {
-        "healthy_false_alarm_rate": _rate(healthy, alarms),
-        "detection": {f"{c}={v}": _rate(rc.profile[c] == v, alarms) for c, v in DETECTION_KEYS},
-        "any_fault_detection": _rate(~healthy, alarms),
-        "counts": {
-            "cycles": len(rc),
-            "healthy": int(healthy.sum()),
-            "alarmed": int(alarms.sum()),
-            **{f"{c}={v}": int((rc.profile[c] == v).sum()) for c, v in DETECTION_KEYS},
-        },
-    }
-    by: dict[str, Any] = {}
-    for cond, values in (("cooler", (100, 20, 3)), ("stable", (0, 1))):
-        for v in values:
-            m = rc.profile[cond] == v
-            by[f"{cond}={v}"] = {
-                "cycles": int(m.sum()),
-                "healthy_false_alarm_rate": _rate(m & healthy, alarms),
-                "any_fault_detection": _rate(m & ~healthy, alarms),
-            }
-    out["by_condition"] = by
-    return out
-
-
-def _selection(
-    jmax: np.ndarray,
-    means: np.ndarray | None,
-    rc: RigCycles,
-    j0_idx: np.ndarray,
-    rule: ThresholdRule,
-) -> dict[str, Any]:
-    """Held-out score on --train: detection on its faulty cycles (never used for patterns or
-    J0) and a two-fold false-alarm rate on the J0 cycles (thresholds from one half, alarms
-    counted on the other).  Youden's index = detection - false-alarm rate."""
-    faulty = ~rc.healthy
-    alarms = CycleRule.fit(jmax, means, j0_idx, rule).alarms(jmax, means)
-    det = float(alarms[faulty].mean()) if faulty.any() else math.nan
-    halves = (j0_idx[0::2], j0_idx[1::2])
-    fa = []
-    if len(halves[1]):
-        for a, b in (halves, halves[::-1]):
-            on_b = CycleRule.fit(jmax, means, a, rule).alarms(jmax, means)[b]
-            fa.append(float(on_b.mean()))
-    far = float(np.mean(fa)) if fa else math.nan
-    return {
-        "fault_cycles": int(faulty.sum()),
-        "detection": det,
-        "cv_false_alarm_rate": far,
-        "score": det - (far if fa else 0.0),
-    }
-
-
 # --------------------------------------------------------------------------- evaluation
 
 
@@ -208,6 +146,32 @@ def evaluate(
     t_start = time.perf_counter()
     say = progress or (lambda _msg: None)
     rule = rule or ThresholdRule("max", factor=2.0)
+    check_arguments(presets, windows, max_cycles)
+    data = load(train_dir, test_dir, presets, max_cycles)
+    say(
+        f"loaded {len(data.train)} train cycles ({len(data.pat_idx)} healthy for patterns, "
+        f"{len(data.j0_idx)} for J0) and {len(data.test)} test cycles in "
+        f"{time.perf_counter() - t_start:.1f} s"
+    )
+    fits = {name: fit_preset(name, data, windows, rule, say) for name in presets}
+    for fitted in fits.values():
+        # Each preset is also scored with its own best N, so both are reported side by side.
+        score_best(fitted, data, rule)
+    chosen = choose(fits)
+    return {
+        **chosen_summary(fits[chosen], rule),
+        "presets": {name: f.result for name, f in fits.items()},
+        "split": split_summary(data, train_dir, test_dir),
+        "healthy_definition": dict(HEALTHY) | {"cooler": "any", "stable": "any"},
+        "counts": fits[chosen].result["test"]["counts"],
+        "runtime_s": round(time.perf_counter() - t_start, 2),
+        "data_source": "ZeMA hydraulic test rig, Helwig, Pignanelli & Schuetze, I2MTC 2015, "
+        "UCI Machine Learning Repository, CC BY 4.0",
+    }
+
+
+def check_arguments(presets: Sequence[str], windows: Sequence[int], max_cycles: int | None) -> None:
+    """ConfigError naming the preset, window or cycle count that cannot be evaluated."""
     for p in presets:
         if p not in UCI_PRESETS:
             raise ConfigError(f"unknown preset {p!r}; choose from {', '.join(UCI_PRESETS)}")
@@ -218,6 +182,22 @@ def evaluate(
     if max_cycles is not None and max_cycles < 10:
         raise ConfigError(f"--max-cycles {max_cycles}: need at least 10")
 
+
+@dataclass(frozen=True)
+class RigData:
+    """The --train and --test cycles, and --train's healthy cycles for patterns and J0."""
+
+    train: RigCycles
+    test: RigCycles
+    split_info: dict[str, Any]
+    pat_idx: np.ndarray
+    j0_idx: np.ndarray
+
+
+def load(
+    train_dir: Path, test_dir: Path, presets: Sequence[str], max_cycles: int | None
+) -> RigData:
+    """Both folders (once when they are the same), split and given each cycle's time."""
     sensors = sensors_needed(presets)
     same = Path(train_dir).resolve() == Path(test_dir).resolve()
     train_all = load_rig(train_dir, sensors)
@@ -226,97 +206,115 @@ def evaluate(
     _with_cycle_time(train)
     _with_cycle_time(test)
     pat_idx, j0_idx = holdout(train)
+    return RigData(train, test, split_info, pat_idx, j0_idx)
+
+
+@dataclass
+class PresetFit:
+    """One preset fitted on --train: its result record, J per window on both sides and B's
+    phase means per phase length (None: J alone) on both sides."""
+
+    name: str
+    result: dict[str, Any]
+    jtests: dict[int, tuple[np.ndarray, np.ndarray]]
+    means: dict[int | None, tuple[Any, Any]]
+
+
+def fit_preset(
+    name: str, data: RigData, windows: Sequence[int], rule: ThresholdRule, say: Progress
+) -> PresetFit:
+    """Fit the preset on the pattern cycles and score every (N, phase) on --train alone."""
+    t0 = time.perf_counter()
+    spec = UCI_PRESETS[name]
+    model, norm = fit(spec, data.train, data.pat_idx)
+    e_train = cycle_residuals(model, norm, data.train)
+    e_test = cycle_residuals(model, norm, data.test)
+    # J alone first: on a tie the simpler rule stays.  The paper preset is the paper's
+    # J alone, as `monitor train --preset paper` has no B.
+    phases = (None,) if name == "paper" else (None, *PHASES_S)
+    means: dict[int | None, tuple[Any, Any]] = {
+        p: (None, None) if p is None else (phase_means(e_train, p), phase_means(e_test, p))
+        for p in phases
+    }
+    sel = {}
+    jtests = {}
+    for N in windows:
+        jm = max_j(cycle_j(e_train, N))
+        jtests[N] = (jm, cycle_j(e_test, N))
+        for phase in phases:
+            key = str(N) if phase is None else f"{N}+B{phase}s"
+            sel[key] = {
+                "window_N": N,
+                "bias_phase_s": phase,
+                **selection(jm, means[phase][0], data.train, data.j0_idx, rule),
+            }
+    g = model.grnn
+    result = {
+        "spec": spec.to_dict(),
+        "sigma": g.sigma_,
+        "sigma_rule": f"{g.sigma_rule_} (leave-one-cycle-out: exclude_neighbours="
+        f"{g.exclude_neighbours_})",
+        "loo_error": g.loo_error_,
+        "thinning": g.thinning_,
+        "normalizer": norm.to_dict(),
+        "selection_on_train": sel,
+        "fit_and_predict_s": round(time.perf_counter() - t0, 2),
+    }
     say(
-        f"loaded {len(train)} train cycles ({len(pat_idx)} healthy for patterns, "
-        f"{len(j0_idx)} for J0) and {len(test)} test cycles in "
-        f"{time.perf_counter() - t_start:.1f} s"
+        f"preset {name}: sigma {g.sigma_:.4g}, {g.thinning_['n_patterns']} patterns, "
+        f"best train score {max(s['score'] for s in sel.values()):.3f} "
+        f"({time.perf_counter() - t0:.1f} s)"
     )
+    return PresetFit(name, result, jtests, means)
 
-    results: dict[str, Any] = {}
-    best: tuple[float, str, int] | None = None
-    jtests: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    # Per preset and phase length: B's phase means on --train and --test (None: J alone).
-    means_by: dict[str, dict[int | None, tuple[Any, Any]]] = {}
-    for name in presets:
-        t0 = time.perf_counter()
-        spec = UCI_PRESETS[name]
-        model, norm = fit(spec, train, pat_idx)
-        e_train = cycle_residuals(model, norm, train)
-        e_test = cycle_residuals(model, norm, test)
-        # J alone first: on a tie the simpler rule stays.  The paper preset is the paper's
-        # J alone, as `monitor train --preset paper` has no B.
-        phases = (None,) if name == "paper" else (None, *PHASES_S)
-        means = means_by[name] = {
-            p: (None, None) if p is None else (phase_means(e_train, p), phase_means(e_test, p))
-            for p in phases
-        }
-        sel = {}
-        for N in windows:
-            jm = max_j(cycle_j(e_train, N))
-            jtests[f"{name}/{N}"] = (jm, cycle_j(e_test, N))
-            for phase in phases:
-                key = str(N) if phase is None else f"{N}+B{phase}s"
-                sel[key] = {
-                    "window_N": N,
-                    "bias_phase_s": phase,
-                    **_selection(jm, means[phase][0], train, j0_idx, rule),
-                }
-                if best is None or sel[key]["score"] > best[0] + 1e-12:
-                    best = (sel[key]["score"], name, N)
-        g = model.grnn
-        results[name] = {
-            "spec": spec.to_dict(),
-            "sigma": g.sigma_,
-            "sigma_rule": f"{g.sigma_rule_} (leave-one-cycle-out: exclude_neighbours="
-            f"{g.exclude_neighbours_})",
-            "loo_error": g.loo_error_,
-            "thinning": g.thinning_,
-            "normalizer": norm.to_dict(),
-            "selection_on_train": sel,
-            "fit_and_predict_s": round(time.perf_counter() - t0, 2),
-        }
-        say(
-            f"preset {name}: sigma {g.sigma_:.4g}, {g.thinning_['n_patterns']} patterns, "
-            f"best train score {max(s['score'] for s in sel.values()):.3f} "
-            f"({time.perf_counter() - t0:.1f} s)"
-        )
 
+def choose(fits: dict[str, PresetFit]) -> str:
+    """The preset with the best --train score; on a tie (within 1e-12) the first tried."""
+    best: tuple[float, str] | None = None
+    for name, fitted in fits.items():
+        for s in fitted.result["selection_on_train"].values():
+            if best is None or s["score"] > best[0] + 1e-12:
+                best = (s["score"], name)
     assert best is not None
-    for name in presets:
-        # Each preset is also scored with its own best N, so both are reported side by side.
-        sel = results[name]["selection_on_train"]
-        # The best score; on a tie the first tried (smaller N, J alone before B).
-        pick = sel[max(sel, key=lambda k: (sel[k]["score"], -list(sel).index(k)))]
-        N, phase = pick["window_N"], pick["bias_phase_s"]
-        jm_train, j_test = jtests[f"{name}/{N}"]
-        jm_test = max_j(j_test)
-        m_train, m_test = means_by[name][phase]
-        cr = CycleRule.fit(jm_train, m_train, j0_idx, rule)
-        j0, eps0 = rule.eps0(jm_train[j0_idx])
-        results[name]["window_N"] = N
-        results[name]["bias_phase_s"] = phase
-        results[name]["J0"], results[name]["eps0"] = j0, eps0
-        results[name]["b0"] = None if phase is None else cr.b0
-        t = results[name]["test"] = score(test, cr.alarms(jm_test, m_test))
-        # How close the healthy test cycles came to the threshold (1.0 = at eps0).
-        t["max_J_healthy_over_eps0"] = float(np.max(jm_test[test.healthy], initial=0) / eps0)
-        t["max_B_healthy_over_b0"] = (
-            None
-            if m_test is None or cr.scale is None
-            else float(np.max(cycle_b(m_test[test.healthy], cr.scale), initial=0) / cr.b0)
-        )
-        # Detection delay within the cycle: J needs N + 1 residuals, so >= max_lag + N s; B
-        # is judged at the end of a phase.
-        fa = first_alarm_s(j_test, eps0)
-        if m_test is not None:
-            fa = np.fmin(fa, cr.first_b_alarm_s(m_test, phase))
-        fa = fa[~test.healthy]
-        t["median_first_alarm_s_in_cycle"] = (
-            float(np.nanmedian(fa)) if np.isfinite(fa).any() else None
-        )
+    return best[1]
 
-    _, chosen, _ = best
-    ch = results[chosen]
+
+def score_best(fitted: PresetFit, data: RigData, rule: ThresholdRule) -> None:
+    """Score --test with the preset's best (N, phase) on --train, into its result."""
+    res, test = fitted.result, data.test
+    sel = res["selection_on_train"]
+    # The best score; on a tie the first tried (smaller N, J alone before B).
+    pick = sel[max(sel, key=lambda k: (sel[k]["score"], -list(sel).index(k)))]
+    N, phase = pick["window_N"], pick["bias_phase_s"]
+    jm_train, j_test = fitted.jtests[N]
+    jm_test = max_j(j_test)
+    m_train, m_test = fitted.means[phase]
+    cr = CycleRule.fit(jm_train, m_train, data.j0_idx, rule)
+    j0, eps0 = rule.eps0(jm_train[data.j0_idx])
+    res["window_N"] = N
+    res["bias_phase_s"] = phase
+    res["J0"], res["eps0"] = j0, eps0
+    res["b0"] = None if phase is None else cr.b0
+    t = res["test"] = score(test, cr.alarms(jm_test, m_test))
+    # How close the healthy test cycles came to the threshold (1.0 = at eps0).
+    t["max_J_healthy_over_eps0"] = float(np.max(jm_test[test.healthy], initial=0) / eps0)
+    t["max_B_healthy_over_b0"] = (
+        None
+        if m_test is None or cr.scale is None
+        else float(np.max(cycle_b(m_test[test.healthy], cr.scale), initial=0) / cr.b0)
+    )
+    # Detection delay within the cycle: J needs N + 1 residuals, so >= max_lag + N s; B
+    # is judged at the end of a phase.
+    fa = first_alarm_s(j_test, eps0)
+    if m_test is not None:
+        fa = np.fmin(fa, cr.first_b_alarm_s(m_test, phase))
+    fa = fa[~test.healthy]
+    t["median_first_alarm_s_in_cycle"] = float(np.nanmedian(fa)) if np.isfinite(fa).any() else None
+
+
+def chosen_summary(fitted: PresetFit, rule: ThresholdRule) -> dict[str, Any]:
+    """The contract's rates of the chosen preset on --test, and its model."""
+    ch, chosen = fitted.result, fitted.name
     return {
         "healthy_false_alarm_rate": ch["test"]["healthy_false_alarm_rate"],
         "detection": ch["test"]["detection"],
@@ -344,21 +342,20 @@ def evaluate(
             "(with bias_phase_s) when B, an output's mean residual over a load phase over "
             "its largest held-out healthy value, exceeds b0",
         },
-        "presets": results,
-        "split": {
-            **split_info,
-            "train_folder": str(train_dir),
-            "test_folder": str(test_dir),
-            "train_cycles": len(train),
-            "pattern_cycles": len(pat_idx),
-            "j0_cycles": len(j0_idx),
-            "train_fault_cycles_for_selection": int((~train.healthy).sum()),
-            "test_cycles": len(test),
-            "j0_rule": f"every {J0_EVERY}rd healthy --train cycle per cooler state",
-        },
-        "healthy_definition": dict(HEALTHY) | {"cooler": "any", "stable": "any"},
-        "counts": ch["test"]["counts"],
-        "runtime_s": round(time.perf_counter() - t_start, 2),
-        "data_source": "ZeMA hydraulic test rig, Helwig, Pignanelli & Schuetze, I2MTC 2015, "
-        "UCI Machine Learning Repository, CC BY 4.0",
+    }
+
+
+def split_summary(data: RigData, train_dir: Path, test_dir: Path) -> dict[str, Any]:
+    """Which cycles trained, set J0 and were scored."""
+    train = data.train
+    return {
+        **data.split_info,
+        "train_folder": str(train_dir),
+        "test_folder": str(test_dir),
+        "train_cycles": len(train),
+        "pattern_cycles": len(data.pat_idx),
+        "j0_cycles": len(data.j0_idx),
+        "train_fault_cycles_for_selection": int((~train.healthy).sum()),
+        "test_cycles": len(data.test),
+        "j0_rule": f"every {J0_EVERY}rd healthy --train cycle per cooler state",
     }
