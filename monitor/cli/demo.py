@@ -25,10 +25,12 @@ from monitor.resources import resource_path
 
 if TYPE_CHECKING:
     from monitor.bus.replay import ReplayCounts
+    from monitor.config.settings import MonitorConfig
     from monitor.live.daemon import Daemon
 
 DEMO_LOG = "spool_wear.log"
 DEMO_ONSET_S = 45.0  # replay/regenerate.sh: --fault spool_wear:0.6@45
+SPAN_S = 90.0  # the log's length
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -106,26 +108,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
-    import can
-
-    from monitor.bus.reader import BusConfig
-    from monitor.bus.replay import replay_log
-    from monitor.codec.frames import FrameCodec
-    from monitor.config.settings import load_config
     from monitor.live.daemon import Daemon
-    from monitor.live.outputs import ALARM, fault_codes
 
-    cfg = load_config()
     channel = f"monitor-demo-{os.getpid()}"
-    cfg = dataclasses.replace(
-        cfg,
-        # The queue holds the whole log: a slow first tick must not cost frames.
-        bus=BusConfig(interface="virtual", channel=channel, silent_s=2.0, queue_frames=100_000),
-        event_log=dataclasses.replace(cfg.event_log, path=out / "events.jsonl"),
-        black_box=dataclasses.replace(cfg.black_box, directory=out / "blackbox"),
-    )
+    cfg = _demo_config(out, channel)
     tty = sys.stdout.isatty()
-    progress = _Progress(tty)
     alarms: list[dict[str, Any]] = []
 
     def on_event(ev: dict[str, Any]) -> None:
@@ -144,70 +131,13 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
         f"{speed:g}x real time on virtual CAN bus {channel!r}"
     )
     daemon = Daemon(cfg, on_event=on_event)
-    listener = can.Bus(interface="virtual", channel=channel)
-    sender = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
-    # The listener is another bus node: its own codec, so the daemon's counters stay its own.
-    listen_codec = FrameCodec.from_dbc(cfg.dbc)
-    alarm_id = listen_codec.message(ALARM).frame_id
-    names = {code: name for name, code in fault_codes(daemon.codec).items()}
-    frames: list[tuple[float, int, str]] = []
-    stop = threading.Event()
-
-    def listen() -> None:
-        while not stop.is_set():
-            m = listener.recv(0.1)
-            if m is not None and m.arbitration_id == alarm_id:
-                d = listen_codec.decode_message(m)
-                if d.values is not None:
-                    frames.append(
-                        (
-                            m.timestamp,
-                            int(d.values["State"]),
-                            names.get(int(d.values["Fault"]), "?"),
-                        )
-                    )
-
-    listen_thread = threading.Thread(target=listen, name="demo-listener", daemon=True)
-    listen_thread.start()
-    span_s = 90.0
+    readback = _AlarmReadback(cfg, daemon)
     start = time.monotonic()
-    daemon.start()
-    try:
-        counts = replay_log(
-            log_path, sender, speed, on_frame=lambda m, c: progress.show(daemon, c, span_s)
-        )
-        time.sleep(0.3)  # let the detector drain the last frames
-    finally:
-        daemon.stop()
-        time.sleep(0.2)
-        stop.set()
-        listen_thread.join(2.0)
-        listener.shutdown()
-        sender.shutdown()
-    progress.show(daemon, counts, span_s, force=True)
-    if tty:
-        print()
-    t0 = counts.first_ts or 0.0
-    fault_frames = [f for f in frames if f[1] == 1]
+    counts = _replay(daemon, readback, log_path, speed, _Progress(tty))
     c = daemon.counts()
-    print(f"\nsummary ({time.monotonic() - start:.1f} s wall for {span_s:.0f} s of log):")
-    if alarms:
-        first = alarms[0]
-        print(
-            f"  hydraulic fault raised at {first['t']:.2f} s of the log, "
-            f"{first['t'] - DEMO_ONSET_S:.2f} s after the fault's onset at {DEMO_ONSET_S:.0f} s;"
-            f" isolated: {first['fault']}"
-        )
-    else:
-        print("  no hydraulic fault raised")
-    if fault_frames:
-        print(
-            f"  MON_Alarm frames read back off the bus: {len(frames)} "
-            f"({len(fault_frames)} in fault, first at {fault_frames[0][0] - t0:.2f} s, "
-            f"fault {fault_frames[0][2]})"
-        )
-    else:
-        print(f"  MON_Alarm frames read back off the bus: {len(frames)}")
+    print(f"\nsummary ({time.monotonic() - start:.1f} s wall for {SPAN_S:.0f} s of log):")
+    _say_alarm(alarms)
+    _say_frames(readback.frames, counts.first_ts or 0.0)
     print(
         f"  frames: {c['received']} received, {c['decoded']} decoded, "
         f"{sum(c['rejected'].values())} rejected, {c['dropped']} dropped; {c['ticks']} ticks"
@@ -220,3 +150,104 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
             "(keep them with --out DIR)"
         )
     return 0
+
+
+def _demo_config(out: Path, channel: str) -> MonitorConfig:
+    """The shipped config on a virtual bus of its own, the outputs written under ``out``."""
+    from monitor.bus.reader import BusConfig
+    from monitor.config.settings import load_config
+
+    cfg = load_config()
+    return dataclasses.replace(
+        cfg,
+        # The queue holds the whole log: a slow first tick must not cost frames.
+        bus=BusConfig(interface="virtual", channel=channel, silent_s=2.0, queue_frames=100_000),
+        event_log=dataclasses.replace(cfg.event_log, path=out / "events.jsonl"),
+        black_box=dataclasses.replace(cfg.black_box, directory=out / "blackbox"),
+    )
+
+
+class _AlarmReadback:
+    """Another node on the demo's bus, reading the daemon's MON_Alarm frames back:
+    (bus time, state, fault name) each.  Its own codec, so the daemon's counters stay its
+    own."""
+
+    def __init__(self, cfg: MonitorConfig, daemon: Daemon) -> None:
+        import can
+
+        from monitor.codec.frames import FrameCodec
+        from monitor.live.outputs import ALARM, fault_codes
+
+        self.bus = can.Bus(interface="virtual", channel=cfg.bus.channel)
+        self.codec = FrameCodec.from_dbc(cfg.dbc)
+        self.alarm_id = self.codec.message(ALARM).frame_id
+        self.names = {code: name for name, code in fault_codes(daemon.codec).items()}
+        self.frames: list[tuple[float, int, str]] = []
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._listen, name="demo-listener", daemon=True)
+
+    def _listen(self) -> None:
+        while not self.stop.is_set():
+            m = self.bus.recv(0.1)
+            if m is not None and m.arbitration_id == self.alarm_id:
+                d = self.codec.decode_message(m)
+                if d.values is not None:
+                    fault = self.names.get(int(d.values["Fault"]), "?")
+                    self.frames.append((m.timestamp, int(d.values["State"]), fault))
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(2.0)
+        self.bus.shutdown()
+
+
+def _replay(
+    daemon: Daemon, readback: _AlarmReadback, log_path: Path, speed: float, progress: _Progress
+) -> ReplayCounts:
+    """The log onto the bus at ``speed`` with the daemon and the read-back running; both
+    stopped after it, in order."""
+    import can
+
+    from monitor.bus.replay import replay_log
+
+    sender = can.Bus(interface="virtual", channel=daemon.cfg.bus.channel, preserve_timestamps=True)
+    readback.thread.start()
+    daemon.start()
+    try:
+        counts = replay_log(
+            log_path, sender, speed, on_frame=lambda m, c: progress.show(daemon, c, SPAN_S)
+        )
+        time.sleep(0.3)  # let the detector drain the last frames
+    finally:
+        daemon.stop()
+        time.sleep(0.2)
+        readback.close()
+        sender.shutdown()
+    progress.show(daemon, counts, SPAN_S, force=True)
+    if progress.tty:
+        print()
+    return counts
+
+
+def _say_alarm(alarms: list[dict[str, Any]]) -> None:
+    if not alarms:
+        print("  no hydraulic fault raised")
+        return
+    first = alarms[0]
+    print(
+        f"  hydraulic fault raised at {first['t']:.2f} s of the log, "
+        f"{first['t'] - DEMO_ONSET_S:.2f} s after the fault's onset at {DEMO_ONSET_S:.0f} s;"
+        f" isolated: {first['fault']}"
+    )
+
+
+def _say_frames(frames: list[tuple[float, int, str]], t0: float) -> None:
+    fault_frames = [f for f in frames if f[1] == 1]
+    if fault_frames:
+        print(
+            f"  MON_Alarm frames read back off the bus: {len(frames)} "
+            f"({len(fault_frames)} in fault, first at {fault_frames[0][0] - t0:.2f} s, "
+            f"fault {fault_frames[0][2]})"
+        )
+    else:
+        print(f"  MON_Alarm frames read back off the bus: {len(frames)}")
