@@ -18,7 +18,8 @@ from monitor.model.spec import PRESETS
 from monitor.signals import FAULT_NAMES
 
 if TYPE_CHECKING:
-    from monitor.evaluation.sim_eval import EvalConfig
+    from monitor.config.settings import MonitorConfig
+    from monitor.evaluation.sim_eval import EvalConfig, ModelUnderTest
 
 T = TypeVar("T")
 
@@ -293,22 +294,46 @@ def _rerun(
 
 def run(args: argparse.Namespace) -> int:
     from monitor.config.settings import load_config
-    from monitor.evaluation.report import aggregate, markdown
-    from monitor.evaluation.sim_eval import (
-        EvalConfig,
-        ModelUnderTest,
-        fault_plan,
-        normal_plan,
-        planned_seeds,
-        run_all,
-        train_presets,
-    )
-    from monitor.model.modelfile import load_model
+    from monitor.evaluation.parallel import score_all
+    from monitor.evaluation.report import Training, evaluation_record, markdown
 
     started = time.perf_counter()
     base = QUICK if args.quick else FULL
     conf = load_config(args.config)
-    cfg = EvalConfig(
+    cfg = _eval_config(args, base, conf)
+    presets, train_seeds = _training(args, base, cfg)
+    for path in (args.json, args.markdown):
+        if path is not None and not path.parent.is_dir():
+            raise ConfigError(f"{path}: folder {path.parent} does not exist")
+    models = _models(args, conf, presets, train_seeds)
+    timing = score_all(models, cfg, args.workers, _say)
+    total = time.perf_counter() - started
+    result = evaluation_record(
+        _rerun(args, cfg, presets, train_seeds),
+        cfg,
+        models,
+        Training(train_seeds, args.train_duration) if presets else None,
+        args.workers,
+        {**timing, "total": total},
+    )
+    try:
+        args.json.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        text = markdown(result)
+        if args.markdown:
+            args.markdown.write_text(text + "\n", encoding="utf-8")
+        else:
+            print(text)
+    except OSError as exc:
+        raise ConfigError(f"cannot write output: {exc.strerror or exc} ({exc.filename})") from None
+    _say(f"done in {total:.0f} s -> {args.json}")
+    return 0
+
+
+def _eval_config(args: argparse.Namespace, base: _Scale, conf: MonitorConfig) -> EvalConfig:
+    """What to simulate and how to judge it: the options given, else ``base``'s sizes."""
+    from monitor.evaluation.sim_eval import EvalConfig
+
+    return EvalConfig(
         severities=tuple(round(s, 6) for s in _given(args.severities, base.severities)),
         runs=_given(args.runs, base.runs),
         normal_hours=_given(args.normal_hours, base.normal_hours),
@@ -323,6 +348,14 @@ def run(args: argparse.Namespace) -> int:
         twins=args.twins,
         twin_residuals=args.twin_residuals,
     )
+
+
+def _training(
+    args: argparse.Namespace, base: _Scale, cfg: EvalConfig
+) -> tuple[tuple[str, ...], tuple[int, ...]]:
+    """The presets to train afresh and their seeds, checked against the test seeds."""
+    from monitor.evaluation.sim_eval import planned_seeds
+
     presets = args.presets
     if presets is None:
         presets = () if args.model else base.presets
@@ -332,9 +365,18 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--train-seeds overlap the test seeds: {overlap[:5]}")
     if not args.train_duration >= 60:
         raise ConfigError("--train-duration must be at least 60 s")
-    for path in (args.json, args.markdown):
-        if path is not None and not path.parent.is_dir():
-            raise ConfigError(f"{path}: folder {path.parent} does not exist")
+    return presets, train_seeds
+
+
+def _models(
+    args: argparse.Namespace,
+    conf: MonitorConfig,
+    presets: tuple[str, ...],
+    train_seeds: tuple[int, ...],
+) -> list[ModelUnderTest]:
+    """The model files given (--model), then the presets trained afresh."""
+    from monitor.evaluation.sim_eval import ModelUnderTest, train_presets
+    from monitor.model.modelfile import load_model
 
     models: list[ModelUnderTest] = []
     for name in args.model or ():
@@ -342,48 +384,4 @@ def run(args: argparse.Namespace) -> int:
         label = "shipped" if name == "shipped" else path.stem
         models.append(ModelUnderTest(label, load_model(path), f"model file {path}"))
     models += train_presets(presets, train_seeds, args.train_duration, _say)
-    n_fault, n_normal = len(fault_plan(cfg)), len(normal_plan(cfg))
-    _say(
-        f"scoring {n_fault} fault run(s) and {n_normal} normal run(s) with "
-        f"{len(models)} model(s): {', '.join(m.label for m in models)}"
-    )
-    if args.workers > 1:
-        from monitor.evaluation.parallel import run_parallel
-
-        timing = run_parallel(models, cfg, args.workers, _say)
-    else:
-        timing = run_all(models, cfg, _say)
-    total = time.perf_counter() - started
-    result = {
-        "rerun": _rerun(args, cfg, presets, train_seeds),
-        "config": cfg.to_dict(),
-        "plan": {
-            "fault_runs": n_fault,
-            "normal_runs": n_normal,
-            "normal_hours": cfg.normal_hours,
-            "train_seeds": list(train_seeds) if presets else None,
-            "train_duration_s": args.train_duration if presets else None,
-            "test_seeds": "normal: 100000+i; fault: 1000000 + 100000*fault + 50000*onset "
-            "+ 100*round(100*severity) + run; plus 10000000 x seed set",
-            "seed_set": cfg.seed_set,
-            "workers": args.workers,
-        },
-        "models": {m.label: aggregate(m, cfg) for m in models},
-        "runtime_s": {
-            "total": round(total, 1),
-            "simulate": round(timing["simulate_s"], 1),
-            "train": {m.label: round(m.train_s, 1) for m in models},
-            "detect": {m.label: round(m.detect_s, 1) for m in models},
-        },
-    }
-    try:
-        args.json.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
-        text = markdown(result)
-        if args.markdown:
-            args.markdown.write_text(text + "\n", encoding="utf-8")
-        else:
-            print(text)
-    except OSError as exc:
-        raise ConfigError(f"cannot write output: {exc.strerror or exc} ({exc.filename})") from None
-    _say(f"done in {total:.0f} s -> {args.json}")
-    return 0
+    return models

@@ -25,6 +25,7 @@ from monitor.evaluation.sim_eval import (
     collect,
     fault_plan,
     normal_plan,
+    run_all,
     score_spec,
 )
 
@@ -91,3 +92,21 @@ def run_parallel(
             sim_s += s
             collect(models, spec, rows, det_s)
     return {"simulate_s": sim_s, "runs_s": time.perf_counter() - eta.started}
+
+
+def score_all(
+    models: Sequence[ModelUnderTest],
+    cfg: EvalConfig,
+    workers: int,
+    progress: Progress | None = None,
+) -> dict[str, float]:
+    """Every planned run scored by every model, in this process (``workers`` 1) or on
+    ``workers`` Dask worker processes: the same rows either way; returns timings (s)."""
+    say = progress or (lambda _msg: None)
+    say(
+        f"scoring {len(fault_plan(cfg))} fault run(s) and {len(normal_plan(cfg))} normal run(s) "
+        f"with {len(models)} model(s): {', '.join(m.label for m in models)}"
+    )
+    if workers > 1:
+        return run_parallel(models, cfg, workers, say)
+    return run_all(models, cfg, say)

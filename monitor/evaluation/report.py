@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import statistics
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from monitor.evaluation.exercised import exercised_cell, exercised_markdown
 from monitor.evaluation.rates import poisson_rate_upper
-from monitor.evaluation.sim_eval import EvalConfig, ModelUnderTest
+from monitor.evaluation.sim_eval import EvalConfig, ModelUnderTest, fault_plan, normal_plan
 from monitor.signals import FAULT_NAMES
 
 #: Confusion-matrix columns: what an alarm named, or ``none`` for a missed run.
@@ -112,6 +113,48 @@ def aggregate(m: ModelUnderTest, cfg: EvalConfig) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------------- markdown
+
+
+@dataclass(frozen=True)
+class Training:
+    """The presets' training runs: their seeds and each one's length."""
+
+    seeds: tuple[int, ...]
+    duration_s: float
+
+
+def evaluation_record(
+    rerun: str,
+    cfg: EvalConfig,
+    models: Sequence[ModelUnderTest],
+    training: Training | None,
+    workers: int,
+    timing: dict[str, float],
+) -> dict[str, Any]:
+    """The JSON ``monitor eval-sim`` writes: the command that reruns it, the plan, every
+    model's scores and the time spent (``timing``: ``simulate_s`` and ``total``)."""
+    return {
+        "rerun": rerun,
+        "config": cfg.to_dict(),
+        "plan": {
+            "fault_runs": len(fault_plan(cfg)),
+            "normal_runs": len(normal_plan(cfg)),
+            "normal_hours": cfg.normal_hours,
+            "train_seeds": None if training is None else list(training.seeds),
+            "train_duration_s": None if training is None else training.duration_s,
+            "test_seeds": "normal: 100000+i; fault: 1000000 + 100000*fault + 50000*onset "
+            "+ 100*round(100*severity) + run; plus 10000000 x seed set",
+            "seed_set": cfg.seed_set,
+            "workers": workers,
+        },
+        "models": {m.label: aggregate(m, cfg) for m in models},
+        "runtime_s": {
+            "total": round(timing["total"], 1),
+            "simulate": round(timing["simulate_s"], 1),
+            "train": {m.label: round(m.train_s, 1) for m in models},
+            "detect": {m.label: round(m.detect_s, 1) for m in models},
+        },
+    }
 
 
 def _pct(v: float | None) -> str:
