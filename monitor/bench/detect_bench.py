@@ -60,13 +60,30 @@ def _ours(model_path: Path, log: Path, out: Path) -> tuple[float, dict[str, floa
 
 def reference_pipeline(model: MonitorModel, log: Path, dbc: Path) -> dict[str, Any]:
     """python-can + cantools + pyGRNN over ``log``; returns what it found, for a check."""
-    from pyGRNN import GRNN as PyGRNN
+    spec = model.spec
+    names = list(spec.variables)
+    Z = model.normalizer.transform(_reference_rows(log, dbc, names), names)
+    y = _reference_predict(model, Z)
+    nout = len(spec.outputs)
+    e = y - Z[:, :nout]
+    if model.residual_clip is not None:
+        e = np.clip(e, -np.asarray(model.residual_clip), np.asarray(model.residual_clip))
+    s = np.mean(e * e, axis=1)
+    win = model.window_n + 1
+    csum = np.concatenate([[0.0], np.cumsum(np.nan_to_num(s))])
+    j = np.full(len(s), np.nan)
+    j[win - 1 :] = (csum[win:] - csum[:-win]) / win
+    above = np.nan_to_num(j) > model.eps0
+    run = max((sum(1 for _ in grp) for v, grp in itertools.groupby(above) if v), default=0)
+    max_j = float(np.nanmax(j)) if np.isfinite(j).any() else None
+    return {"samples": len(Z), "y_hat_z": y, "alarm": run >= 50, "max_J": max_j}
 
+
+def _reference_rows(log: Path, dbc: Path, names: list[str]) -> np.ndarray:
+    """The latest decoded value of each signal on the 10 ms grid, (rows, names)."""
     db = cantools.database.load_file(str(dbc))
     if not isinstance(db, cantools.database.can.Database):
         raise TypeError(f"{dbc}: not a CAN database")
-    spec = model.spec
-    names = list(spec.variables)
     latest = dict.fromkeys(names, np.nan)
     rows, t0, k = [], None, 0
     with can.LogReader(str(log)) as reader:
@@ -90,8 +107,15 @@ def reference_pipeline(model: MonitorModel, log: Path, dbc: Path) -> dict[str, A
                 if n in values:
                     latest[n] = float(values[n])
     rows.append([latest[n] for n in names])
-    norm = model.normalizer
-    Z = norm.transform(np.array(rows), names)
+    return np.array(rows)
+
+
+def _reference_predict(model: MonitorModel, Z: np.ndarray) -> np.ndarray:
+    """pyGRNN's prediction of each output (z-units) from the lag embedding of ``Z``, with
+    the model's patterns and sigma; NaN where a lag is missing."""
+    from pyGRNN import GRNN as PyGRNN
+
+    spec = model.spec
     fvar, flag = spec.feature_columns()
     L = spec.max_lag
     X = np.column_stack([Z[L - lag : len(Z) - lag, v] for v, lag in zip(fvar, flag, strict=True)])
@@ -111,18 +135,7 @@ def reference_pipeline(model: MonitorModel, log: Path, dbc: Path) -> dict[str, A
             y[L:, o] = col
     delta = spec.delta_mask().astype(bool)
     y[1:, delta] += Z[:-1, :nout][:, delta]
-    e = y - Z[:, :nout]
-    if model.residual_clip is not None:
-        e = np.clip(e, -np.asarray(model.residual_clip), np.asarray(model.residual_clip))
-    s = np.mean(e * e, axis=1)
-    win = model.window_n + 1
-    csum = np.concatenate([[0.0], np.cumsum(np.nan_to_num(s))])
-    j = np.full(len(s), np.nan)
-    j[win - 1 :] = (csum[win:] - csum[:-win]) / win
-    above = np.nan_to_num(j) > model.eps0
-    run = max((sum(1 for _ in grp) for v, grp in itertools.groupby(above) if v), default=0)
-    max_j = float(np.nanmax(j)) if np.isfinite(j).any() else None
-    return {"samples": len(Z), "y_hat_z": y, "alarm": run >= 50, "max_J": max_j}
+    return y
 
 
 def _slice(log: Path, seconds: float, out: Path) -> int:
@@ -152,6 +165,43 @@ def measure(
     with log.open("rb") as fh:
         frames = sum(1 for _ in fh)
     say(f"detect: {frames} frames, {duration_s:.0f} s of log; warm-up run")
+    total, parts, summary = _ours_median(model_path, log, tmp, repeats)
+    say(f"  ours: {total:.2f} s median of {repeats} ({duration_s / total:.0f}x real time)")
+    no_isolation_s = _without_isolation_s(model_path, log)
+    cli_s = _cli_cold_s(model_path, log, tmp)
+    ref = _against_reference(model_path, log, reference_s, tmp, say)
+    per_frame_ours = total / frames
+    per_frame_ref = ref["reference_s"] / ref["reference_frames"]
+    say(f"  reference {per_frame_ref * 1e6:.1f} us/frame vs ours {per_frame_ours * 1e6:.2f}")
+    return {
+        "log_frames": frames,
+        "log_s": duration_s,
+        "detect_s": total,
+        "detect_parts_s": parts,
+        "detect_s_without_isolation": no_isolation_s,
+        "fault_s_in_log": duration_s - summary["first_alarm_t"] if summary["alarm"] else 0.0,
+        "detect_frames_per_s": frames / total,
+        "detect_realtime_factor": duration_s / total,
+        "detect_cli_cold_wall_s": cli_s,
+        "alarm": summary["alarm"],
+        "first_alarm_t": summary["first_alarm_t"],
+        "reference_slice_s": reference_s,
+        "reference_frames": ref["reference_frames"],
+        "reference_s": ref["reference_s"],
+        "reference_us_per_frame": per_frame_ref * 1e6,
+        "reference_realtime_factor": reference_s / ref["reference_s"],
+        "ours_on_slice_s": ref["ours_on_slice_s"],
+        "ours_us_per_frame": per_frame_ours * 1e6,
+        "detect_speedup_vs_reference_pipeline": per_frame_ref / per_frame_ours,
+        "reference_max_abs_diff_z": ref["reference_max_abs_diff_z"],
+    }
+
+
+def _ours_median(
+    model_path: Path, log: Path, tmp: Path, repeats: int
+) -> tuple[float, dict[str, float], dict]:
+    """Ours after a warm-up run: the median total and parts of ``repeats`` runs, and the
+    summary of the last."""
     _ours(model_path, log, tmp / "events.jsonl")
     runs = []
     for _ in range(repeats):
@@ -159,13 +209,21 @@ def measure(
         runs.append((total, parts))
     total = float(np.median([r[0] for r in runs]))
     parts = {k: float(np.median([r[1][k] for r in runs])) for k in runs[0][1]}
-    say(f"  ours: {total:.2f} s median of {repeats} ({duration_s / total:.0f}x real time)")
-    # What fault isolation costs: it runs per sample while in fault (numpy cosine similarity).
+    return total, parts, summary
+
+
+def _without_isolation_s(model_path: Path, log: Path) -> float:
+    """What fault isolation costs: it runs per sample while in fault (numpy cosine
+    similarity); the detect part's time without it."""
     plain = dataclasses.replace(load_model(model_path), isolation=Isolation())
     rec = read_recording(log)
     t0 = time.perf_counter()
     detect(plain, rec, load_config().alarm, horizon=1)
-    no_isolation_s = time.perf_counter() - t0
+    return time.perf_counter() - t0
+
+
+def _cli_cold_s(model_path: Path, log: Path, tmp: Path) -> float:
+    """Wall time of `monitor detect` in a new process, imports included."""
     cli_start = time.perf_counter()
     subprocess.run(
         [
@@ -186,8 +244,14 @@ def measure(
         check=True,
         capture_output=True,
     )
-    cli_s = time.perf_counter() - cli_start
+    return time.perf_counter() - cli_start
 
+
+def _against_reference(
+    model_path: Path, log: Path, reference_s: float, tmp: Path, say: Progress
+) -> dict[str, Any]:
+    """The reference pipeline and ours on the first ``reference_s`` of ``log``: times,
+    frames and how far apart the predictions are (z-units)."""
     piece = tmp / "slice.log"
     ref_frames = _slice(log, reference_s, piece)
     model = load_model(model_path)
@@ -201,28 +265,9 @@ def measure(
     outputs = list(model.spec.outputs)
     z_mine = model.normalizer.transform(mine.y_hat[:n], outputs)
     agree = np.nanmax(np.abs(z_mine - ref["y_hat_z"][:n]))
-    per_frame_ours = total / frames
-    per_frame_ref = ref_s / ref_frames
-    say(f"  reference {per_frame_ref * 1e6:.1f} us/frame vs ours {per_frame_ours * 1e6:.2f}")
     return {
-        "log_frames": frames,
-        "log_s": duration_s,
-        "detect_s": total,
-        "detect_parts_s": parts,
-        "detect_s_without_isolation": no_isolation_s,
-        "fault_s_in_log": duration_s - summary["first_alarm_t"] if summary["alarm"] else 0.0,
-        "detect_frames_per_s": frames / total,
-        "detect_realtime_factor": duration_s / total,
-        "detect_cli_cold_wall_s": cli_s,
-        "alarm": summary["alarm"],
-        "first_alarm_t": summary["first_alarm_t"],
-        "reference_slice_s": reference_s,
         "reference_frames": ref_frames,
         "reference_s": ref_s,
-        "reference_us_per_frame": per_frame_ref * 1e6,
-        "reference_realtime_factor": reference_s / ref_s,
         "ours_on_slice_s": ours_slice_s,
-        "ours_us_per_frame": per_frame_ours * 1e6,
-        "detect_speedup_vs_reference_pipeline": per_frame_ref / per_frame_ours,
         "reference_max_abs_diff_z": float(agree),
     }
