@@ -27,7 +27,8 @@ import numpy as np
 
 from monitor.bench.data import Sizes, paper_grnn, test_recording, training_runs
 from monitor.jit import jit
-from monitor.model.dgrnn import TickPredictor, build_training_pairs
+from monitor.model.dgrnn import DGRNN, TickPredictor, build_training_pairs
+from monitor.model.grnn import GRNN
 from monitor.model.grnn_index import cutoff_row
 from monitor.model.spec import table
 
@@ -106,45 +107,18 @@ def measure(sizes: Sizes, say: Progress, budget_s: float = 1.5) -> dict[str, Any
     for n in sizes.patterns:
         say(f"GRNN: fitting the paper preset with {n} patterns")
         model, norm = paper_grnn(recs, n)
-        g, spec = model.grnn, model.spec
+        spec = model.spec
         Z = np.ascontiguousarray(norm.transform(table(test, spec.variables), spec.variables))
         X, _, _ = build_training_pairs(spec, Z)
-        # Far-away queries too: the bound must hold where the data ends.
-        far = X[:: max(1, len(X) // 50)] * 4.0 + 3.0
-        Xq = np.ascontiguousarray(np.vstack([X, far]))
-        std = g.targets_.std(axis=0)
-        err = np.abs(g.predict(Xq, exact=False) - g.predict(Xq, exact=True)) / std
-        errors[n] = float(err.max())
-        fast_q = _per_query_s(g.cutoff_index(), X, g.sigma_, budget_s)
-        plain_q = _per_query_s(g.cutoff_index(exact=True), X, g.sigma_, budget_s)
-        py_q = _pygrnn_per_query_s(g.patterns_, g.targets_, g.sigma_, X, budget_s)
+        errors[n] = _max_rel_error(model.grnn, X)
+        queries = _per_query(model.grnn, X, budget_s)
         models[n] = {
-            "patterns": int(g.patterns_.shape[0]),
+            "patterns": int(model.grnn.patterns_.shape[0]),
             "inputs": int(X.shape[1]),
-            "sigma": float(g.sigma_),
-            "cutoff_c": float(g.cutoff_index().cut),
+            "sigma": float(model.grnn.sigma_),
+            "cutoff_c": float(model.grnn.cutoff_index().cut),
         }
-        for p in sizes.horizons:
-            fast_t = _per_tick_s(TickPredictor(model, p), Z, budget_s)
-            plain_t = _per_tick_s(TickPredictor(model, p, exact=True), Z, budget_s)
-            cells.append(
-                {
-                    "patterns": int(g.patterns_.shape[0]),
-                    "p": p,
-                    "cutoff_us_per_query": fast_q * 1e6,
-                    "plain_us_per_query": plain_q * 1e6,
-                    "pygrnn_us_per_query": None if py_q is None else py_q * 1e6,
-                    "cutoff_us_per_tick": fast_t * 1e6,
-                    "plain_us_per_tick": plain_t * 1e6,
-                    "pygrnn_us_per_tick_derived": None if py_q is None else p * py_q * 1e6,
-                }
-            )
-            py_text = "" if py_q is None else f", pyGRNN {py_q * 1e6:.0f} us"
-            say(
-                f"  {n} patterns, p={p}: cutoff {fast_t * 1e6:.1f} us/tick, plain "
-                f"{plain_t * 1e6:.1f} us/tick; per query {fast_q * 1e6:.2f} vs "
-                f"{plain_q * 1e6:.1f} us{py_text}"
-            )
+        cells += [_cell(model, Z, p, queries, budget_s, n, say) for p in sizes.horizons]
     head = sizes.headline_patterns
     row = next(c for c in cells if c["p"] == sizes.horizons[0] and _near(c["patterns"], head))
     py = row["pygrnn_us_per_query"]
@@ -157,6 +131,55 @@ def measure(sizes: Sizes, say: Progress, budget_s: float = 1.5) -> dict[str, Any
         "grnn_speedup_vs_pygrnn": None if py is None else py / row["cutoff_us_per_query"],
         "grnn_max_rel_error": max(errors.values()),
         "grnn_headline_patterns": row["patterns"],
+    }
+
+
+def _max_rel_error(g: GRNN, X: np.ndarray) -> float:
+    """The cut-off GRNN's largest error against the exact one, over the output's std, on
+    ``X`` and on far-away queries too: the bound must hold where the data ends."""
+    far = X[:: max(1, len(X) // 50)] * 4.0 + 3.0
+    Xq = np.ascontiguousarray(np.vstack([X, far]))
+    std = g.targets_.std(axis=0)
+    err = np.abs(g.predict(Xq, exact=False) - g.predict(Xq, exact=True)) / std
+    return float(err.max())
+
+
+def _per_query(g: GRNN, X: np.ndarray, budget_s: float) -> tuple[float, float, float | None]:
+    """Seconds per query: the cut-off GRNN, the plain loop and pyGRNN (None: not installed)."""
+    fast_q = _per_query_s(g.cutoff_index(), X, g.sigma_, budget_s)
+    plain_q = _per_query_s(g.cutoff_index(exact=True), X, g.sigma_, budget_s)
+    py_q = _pygrnn_per_query_s(g.patterns_, g.targets_, g.sigma_, X, budget_s)
+    return fast_q, plain_q, py_q
+
+
+def _cell(
+    model: DGRNN,
+    Z: np.ndarray,
+    p: int,
+    queries: tuple[float, float, float | None],
+    budget_s: float,
+    n_asked: int,
+    say: Progress,
+) -> dict[str, Any]:
+    """One (patterns, horizon) cell: per-query and per-tick times in microseconds."""
+    fast_q, plain_q, py_q = queries
+    fast_t = _per_tick_s(TickPredictor(model, p), Z, budget_s)
+    plain_t = _per_tick_s(TickPredictor(model, p, exact=True), Z, budget_s)
+    py_text = "" if py_q is None else f", pyGRNN {py_q * 1e6:.0f} us"
+    say(
+        f"  {n_asked} patterns, p={p}: cutoff {fast_t * 1e6:.1f} us/tick, plain "
+        f"{plain_t * 1e6:.1f} us/tick; per query {fast_q * 1e6:.2f} vs "
+        f"{plain_q * 1e6:.1f} us{py_text}"
+    )
+    return {
+        "patterns": int(model.grnn.patterns_.shape[0]),
+        "p": p,
+        "cutoff_us_per_query": fast_q * 1e6,
+        "plain_us_per_query": plain_q * 1e6,
+        "pygrnn_us_per_query": None if py_q is None else py_q * 1e6,
+        "cutoff_us_per_tick": fast_t * 1e6,
+        "plain_us_per_tick": plain_t * 1e6,
+        "pygrnn_us_per_tick_derived": None if py_q is None else p * py_q * 1e6,
     }
 
 
