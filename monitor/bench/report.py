@@ -43,8 +43,7 @@ def _f(v: float | None, digits: int = 1) -> str:
 
 
 def markdown(result: dict[str, Any]) -> str:
-    g, live, det, m = result["grnn"], result["live"], result["detect"], result["machine"]
-    goals = result["goals"]
+    m = result["machine"]
     lines = [
         f"Machine: {m['cpu']}, {m['cores']} cores ({m['numba_threads']} numba threads), "
         f"Python {m['python']}, numba {m['numba']}; load average {result['load_before']} "
@@ -52,6 +51,23 @@ def markdown(result: dict[str, Any]) -> str:
         + (" (quick run: reduced sizes)" if result["quick"] else "")
         + ".",
         "",
+        *_headline_table(result),
+        "",
+        *_grnn_table(result["grnn"]),
+        "",
+        _live(result["live"]),
+        "",
+        _four_loops(result["four_loop"]),
+        "",
+        _detect(result["detect"]),
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _headline_table(result: dict[str, Any]) -> list[str]:
+    """Each headline figure with its unit, its goal and whether it was met."""
+    goals = result["goals"]
+    lines = [
         "| measurement | value | goal | met |",
         "|---|---|---|---|",
     ]
@@ -84,8 +100,12 @@ def markdown(result: dict[str, Any]) -> str:
         value = result[key]
         shown = f"{value:.2e}" if key == "grnn_max_rel_error" else _f(value, digits)
         lines.append(f"| `{key}` | {shown} {unit} | {goal['text'] if goal else ''} | {met} |")
-    lines += [
-        "",
+    return lines
+
+
+def _grnn_table(g: dict[str, Any]) -> list[str]:
+    """Query and tick times by patterns and horizon: ours, the plain loop and pyGRNN."""
+    lines = [
         f"GRNN (paper preset, {g['models'][next(iter(g['models']))]['inputs']} inputs), "
         "median time; pyGRNN per tick = p x its per-query time:",
         "",
@@ -101,9 +121,12 @@ def markdown(result: dict[str, Any]) -> str:
             f"{_f(c['pygrnn_us_per_tick_derived'], 0)} | "
             f"{c['plain_us_per_tick'] / c['cutoff_us_per_tick']:.0f}x |"
         )
+    return lines
+
+
+def _live(live: dict[str, Any]) -> str:
     alarm_ms = live["alarm_frame_latency_ms"]
-    lines += [
-        "",
+    return (
         f"Live daemon ({live['model_summary']['patterns']:,} patterns, p = {live['horizon']}, "
         f"{live['seconds_of_data']:.0f} s of 100 Hz data at {live['speed']:g}x on a virtual "
         f"bus, {live['ticks']:,} ticks): latency p50 {live['tick_p50_ms']:.3f} ms, p99 "
@@ -115,10 +138,12 @@ def markdown(result: dict[str, Any]) -> str:
         f"state change to MON_Alarm sent: "
         + (", ".join(f"{v:.2f} ms" for v in alarm_ms) if alarm_ms else "none")
         + f"; peak RSS {live['peak_rss_mb']:.0f} MB ({live['rss_after_load_mb']:.0f} MB after "
-        f"loading); {live['dropped']} frames dropped.",
-        "",
-        _four_loops(result["four_loop"]),
-        "",
+        f"loading); {live['dropped']} frames dropped."
+    )
+
+
+def _detect(det: dict[str, Any]) -> str:
+    return (
         f"`monitor detect` ({det['model_summary']['patterns']:,} patterns, p = 1) on a "
         f"{det['log_s']:.0f} s log of {det['log_frames']:,} frames: {det['detect_s']:.2f} s "
         f"in-process ({det['detect_frames_per_s']:,.0f} frames/s, "
@@ -130,9 +155,8 @@ def markdown(result: dict[str, Any]) -> str:
         f"LogReader + cantools + pyGRNN) on the first {det['reference_slice_s']:.0f} s: "
         f"{det['reference_us_per_frame']:.0f} us/frame vs {det['ours_us_per_frame']:.2f} "
         f"us/frame: {det['detect_speedup_vs_reference_pipeline']:,.0f}x (their predictions "
-        f"agree to {det['reference_max_abs_diff_z']:.1e} z).",
-    ]
-    return "\n".join(lines) + "\n"
+        f"agree to {det['reference_max_abs_diff_z']:.1e} z)."
+    )
 
 
 def _four_loops(four: dict[str, Any]) -> str:
