@@ -325,15 +325,14 @@ class Hold(Statistic):
 
     @classmethod
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Hold | str:
-        stats = settings.statistics
-        if not stats.hold:
+        if not settings.statistics.hold:
             return "off (not asked for: --hold on)"
         if "B" not in on or not all(o in outputs for o in HOLD_OUTPUTS):
             return "off (with the bias statistic, on a model that predicts PA and PB)"
         return cls(
-            stats.bias_window_n,
-            stats.hold_min_count,
-            stats.hold_settle_n,
+            settings.statistics.bias_window_n,
+            settings.statistics.hold_min_count,
+            settings.statistics.hold_settle_n,
             tuple(outputs.index(o) for o in HOLD_OUTPUTS),
         )
 
