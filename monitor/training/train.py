@@ -74,11 +74,8 @@ class _Parts:
     fit: list[Recording]
     val: list[Recording]
     everything: list[Recording]
+    crossfit: bool = False
     validation: str = "held out"
-
-    @property
-    def crossfit(self) -> bool:
-        return self.validation != "held out"
 
 
 def train(
@@ -173,7 +170,7 @@ def choose_parts(
         return _Parts(list(recordings), list(held_out), everything)
     if folds >= 2 and n_blocks([len(r) for r in recordings], thresholds.block_n) >= 2 * folds:
         text = f"cross-fitted, {folds} folds of {block_s:g} s blocks"
-        return _Parts(list(recordings), list(recordings), everything, text)
+        return _Parts(list(recordings), list(recordings), everything, True, text)
     fraction = thresholds.validation_fraction
     if folds >= 2:
         say(
@@ -197,19 +194,19 @@ def fit_model(
     none), which every cross-fitted fold repeats."""
     normalizer = Normalizer().fit(np.concatenate(tables), spec.variables)
     started = time.perf_counter()
-    d = cfg.dgrnn
+    ds = cfg.dgrnn
     say(
-        f"fitting the {d.preset} DGRNN on {sum(len(t) for t in tables)} samples "
+        f"fitting the {ds.preset} DGRNN on {sum(len(t) for t in tables)} samples "
         f"from {len(tables)} part(s)"
     )
-    grnn = GRNN(exclude_neighbours=d.exclude_neighbours, max_patterns=d.max_patterns)
+    grnn = GRNN(exclude_neighbours=ds.exclude_neighbours, max_patterns=ds.max_patterns)
     dgrnn = DGRNN(spec, grnn).fit([normalizer.transform(t) for t in tables])
     say(
         f"  {grnn.patterns_.shape[0]} patterns, sigma {grnn.sigma_:.4g} (LOO, +-"
-        f"{d.exclude_neighbours} samples excluded) in {time.perf_counter() - started:.1f} s"
+        f"{ds.exclude_neighbours} samples excluded) in {time.perf_counter() - started:.1f} s"
     )
     lend = None
-    if reference is not None and d.lend:
+    if reference is not None and ds.lend:
         from monitor.training.fill import lend_patterns
 
         def lend(d: DGRNN) -> int:
