@@ -109,13 +109,18 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     _fleet_web.add_query(sub)
     b = sub.add_parser(
         "bench",
-        help="logs/s and frames/s: one process against Dask with 1 and 2 workers",
+        help="frames/s per worker: monitor detect, one process, Dask with 1 and 2 workers",
         description="Judge every log of FLEET (with the models of a finished run in RESULTS) "
-        "in one process, as a loop of `monitor detect` would, then on a Dask LocalCluster "
-        "of 1 and of 2 workers; print logs/s and frames/s of each, side by side.",
+        "with `monitor detect`'s code, as the fleet's task in one process, and on Dask "
+        "LocalClusters of 1 and of 2 workers, in turn within each of --repeats rounds; "
+        "print each one's median seconds, frames/s and frames/s per worker beside detect's "
+        "as a table on stderr and JSON on stdout, with the load average.",
     )
     b.add_argument("fleet", type=Path, metavar="FLEET")
     b.add_argument("--results", type=Path, required=True, metavar="RESULTS")
+    b.add_argument(
+        "--repeats", type=int, default=3, metavar="N", help="timings of each way (default 3)"
+    )
     b.set_defaults(func=bench)
 
 
@@ -174,11 +179,16 @@ def report(args: argparse.Namespace) -> int:
 
 def bench(args: argparse.Namespace) -> int:
     import json
-    import os
 
-    from monitor.fleet.bench import bench_fleet
+    require("distributed")  # the [fleet] extra, before any work
+    from monitor.errors import ConfigError
+    from monitor.fleet.bench import bench_fleet, table
 
-    out = bench_fleet(args.fleet.resolve(), args.results.resolve())
-    out["load_average"] = os.getloadavg()
+    if args.repeats < 1:
+        raise ConfigError(f"--repeats {args.repeats}: at least 1")
+    if not args.fleet.is_dir():
+        raise ConfigError(f"{args.fleet}: no such fleet folder")
+    out = bench_fleet(args.fleet.resolve(), args.results.resolve(), repeats=args.repeats)
+    print(table(out), file=sys.stderr)
     print(json.dumps(out, indent=2))
     return 0

@@ -1,18 +1,29 @@
-"""`monitor fleet bench`: logs/s and frames/s of judging a fleet's logs in one process (the
-`monitor detect` loop) and on a Dask LocalCluster of 1 and 2 workers, side by side.
+"""`monitor fleet bench`: frames/s of judging a fleet's logs with `monitor detect`'s code path,
+in one process as the fleet's task, and on Dask LocalClusters of 1 and 2 workers, side by side.
 
 Models come from a finished run's RESULTS/models, so only judging is timed; every timing
-starts after a warm-up (numba's cache filled, workers started)."""
+starts after a warm-up (numba's cache filled, workers started).  The ways are timed in turn
+within each repeat, so a change of the machine's load touches them all alike, and each
+reports the median of its repeats: on a shared machine the ratios to `monitor detect` per
+worker mean more than the rates."""
 
 from __future__ import annotations
 
+import contextlib
+import os
+import statistics
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from monitor.errors import ConfigError
 from monitor.fleet import pipeline
 from monitor.fleet.layout import scan_fleet
 from monitor.fleet.run import judge_task
+
+#: The baseline every way is compared with: `monitor detect` over each log in turn.
+DETECT = "detect"
 
 
 def _jobs(fleet_root: Path, results: Path) -> list[tuple[bytes, str]]:
@@ -25,26 +36,92 @@ def _jobs(fleet_root: Path, results: Path) -> list[tuple[bytes, str]]:
     return jobs
 
 
-def bench_fleet(fleet_root: Path, results: Path, workers: tuple[int, ...] = (1, 2)) -> dict:
+def _in_process(jobs: list[tuple[bytes, str]], judge: Callable[[bytes, str], Any]) -> Callable:
+    def once() -> None:
+        for m, p in jobs:
+            judge(m, p)
+
+    return once
+
+
+@contextlib.contextmanager
+def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[Callable[[], None]]:
+    """A LocalCluster of ``n`` single-threaded workers, warm, and a function judging every
+    log on it as `monitor fleet run` does (the model scattered once, one task a log)."""
     from distributed import Client, LocalCluster
 
-    jobs = _jobs(fleet_root, results)
-    pipeline.judge_log(*jobs[0])  # warm-up: numba's cache
-    start = time.perf_counter()
-    frames = sum(pipeline.judge_log(m, p).row["frames"] or 0 for m, p in jobs)
-    out: dict[str, Any] = {"logs": len(jobs), "frames": frames}
-    out["one_process_s"] = time.perf_counter() - start
-    for n in workers:
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, dashboard_address=None)
-        with cluster, Client(cluster) as client:
-            models = {m: client.scatter(m, broadcast=True) for m in {m for m, _ in jobs}}
-            client.run(pipeline.judge_log, *jobs[0])  # every worker warm
-            start = time.perf_counter()
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, dashboard_address=None)
+    with cluster, Client(cluster) as client:
+        models = {m: client.scatter(m, broadcast=True) for m in {m for m, _ in jobs}}
+        client.run(pipeline.judge_log, *jobs[0])  # every worker warm
+
+        def once() -> None:
             futs = [client.submit(judge_task, models[m], p, None, pure=False) for m, p in jobs]
             client.gather(futs)
-            out[f"workers_{n}_s"] = time.perf_counter() - start
-    for key in [k for k in out if k.endswith("_s")]:
-        name = key[:-2]
-        out[f"{name}_logs_per_s"] = len(jobs) / out[key]
-        out[f"{name}_frames_per_s"] = frames / out[key]
-    return out
+
+        yield once
+
+
+def _rates(seconds: list[float], frames: int, workers: int) -> dict[str, Any]:
+    median_s = statistics.median(seconds)
+    return {
+        "workers": workers,
+        "s": [round(s, 3) for s in seconds],
+        "median_s": median_s,
+        "frames_per_s": frames / median_s,
+        "frames_per_s_per_worker": frames / median_s / workers,
+    }
+
+
+def bench_fleet(
+    fleet_root: Path, results: Path, workers: tuple[int, ...] = (1, 2), repeats: int = 3
+) -> dict[str, Any]:
+    """Seconds, frames/s and frames/s per worker of judging every log of the fleet: with
+    `monitor detect`'s code (``detect``), as the fleet's task in one process
+    (``one_process``) and on Dask (``workers_N``); each one's per-worker rate over detect's
+    (``vs_detect_per_worker``), from the medians of ``repeats`` timings."""
+    jobs = _jobs(fleet_root, results)
+    if not jobs:
+        raise ConfigError(f"{results / 'models'}: no model for any machine of {fleet_root}")
+    frames = sum(pipeline.detect_frames(m, p) for m, p in jobs)  # and numba's cache warm
+    pipeline.judge_log(*jobs[0])
+    load_start = os.getloadavg()
+    ways: dict[str, tuple[int, Callable[[], None]]] = {
+        DETECT: (1, _in_process(jobs, pipeline.detect_frames)),
+        "one_process": (1, _in_process(jobs, pipeline.judge_log)),
+    }
+    seconds: dict[str, list[float]] = {name: [] for name in ways}
+    with contextlib.ExitStack() as stack:
+        for n in workers:
+            ways[f"workers_{n}"] = (n, stack.enter_context(_on_dask(jobs, n)))
+            seconds[f"workers_{n}"] = []
+        for _ in range(repeats):
+            for name, (_n, once) in ways.items():
+                start = time.perf_counter()
+                once()
+                seconds[name].append(time.perf_counter() - start)
+    runs = {name: _rates(seconds[name], frames, n) for name, (n, _once) in ways.items()}
+    base = runs[DETECT]["frames_per_s_per_worker"]
+    for r in runs.values():
+        r["vs_detect_per_worker"] = r["frames_per_s_per_worker"] / base
+    return {
+        "logs": len(jobs),
+        "frames": frames,
+        "repeats": repeats,
+        "load_average": {"start": load_start, "end": os.getloadavg()},
+        "runs": runs,
+    }
+
+
+def table(out: dict[str, Any]) -> str:
+    """The result as the Markdown table of docs/benchmarks.md."""
+    lines = [
+        "| how | workers | median s | frames/s | frames/s per worker | per worker vs detect |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, r in out["runs"].items():
+        lines.append(
+            f"| {name} | {r['workers']} | {r['median_s']:.2f} | {r['frames_per_s']:,.0f} "
+            f"| {r['frames_per_s_per_worker']:,.0f} | {r['vs_detect_per_worker']:.2f} |"
+        )
+    return "\n".join(lines)

@@ -205,6 +205,20 @@ def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
     return Judged(row, events)
 
 
+def detect_frames(model_bytes: bytes, path: str, config_path: str | None = None) -> int:
+    """`monitor detect PATH --model M` without its output: load the model, read the log,
+    run the detector; the log's frames (what `monitor fleet bench` times beside the fleet)."""
+    from monitor.detection.offline import detect
+    from monitor.offline.recordings import read_loop
+
+    cfg = _config(config_path)
+    model = model_from_bytes(model_bytes)
+    rec = read_loop(path, cfg, None)
+    detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+    counts = rec.meta.get("counts")
+    return int(counts.get("frames", 0)) if isinstance(counts, dict) else 0
+
+
 #: Signals the fleet page plots around an alarm (those a log has).
 TRACE_SIGNALS = ("PP", "PA", "PB", "QP", "SpoolCmd", "OilTemp", "EngineSpeed")
 
