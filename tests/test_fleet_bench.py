@@ -44,6 +44,8 @@ def test_each_way_judges_every_frame_and_is_set_beside_detect_per_worker(fleet):
         per_worker = frames / r["median_s"] / r["workers"]
         assert r["frames_per_s_per_worker"] == pytest.approx(per_worker)
         assert r["vs_detect_per_worker"] == pytest.approx(per_worker / detect_rate, rel=1e-3)
+        assert len(r["cpu_s"]) == 2 and min(r["cpu_s"]) > 0
+        assert r["frames_per_cpu_s"] == pytest.approx(frames / statistics.median(r["cpu_s"]), 1e-3)
     assert out["runs"]["detect"]["vs_detect_per_worker"] == 1.0
     assert len(out["load_average"]["start"]) == 3
 
@@ -54,4 +56,4 @@ def test_results_without_models_or_bad_repeats_are_one_line(fleet, tmp_path, cap
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no model for any machine" in err[0]
     assert main(["fleet", "bench", str(root), "--results", str(tmp_path), "--repeats", "0"]) == 2
-    assert "--repeats 0" in capsys.readouterr().err
+    assert "--repeats 0: at least 1" in capsys.readouterr().err

@@ -36,16 +36,27 @@ def _jobs(fleet_root: Path, results: Path) -> list[tuple[bytes, str]]:
     return jobs
 
 
-def _in_process(jobs: list[tuple[bytes, str]], judge: Callable[[bytes, str], Any]) -> Callable:
-    def once() -> None:
+#: A way of judging every log once: returns the CPU seconds it took (all its processes).
+Once = Callable[[], float]
+
+
+def _in_process(jobs: list[tuple[bytes, str]], judge: Callable[[bytes, str], Any]) -> Once:
+    def once() -> float:
+        cpu = time.process_time()
         for m, p in jobs:
             judge(m, p)
+        return time.process_time() - cpu
 
     return once
 
 
+def _cpu_s(client: Any) -> float:
+    """CPU seconds of every worker process so far (its heartbeats and task handling too)."""
+    return sum(client.run(time.process_time).values())
+
+
 @contextlib.contextmanager
-def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[Callable[[], None]]:
+def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[Once]:
     """A LocalCluster of ``n`` single-threaded workers, warm, and a function judging every
     log on it as `monitor fleet run` does (the model scattered once, one task a log)."""
     from distributed import Client, LocalCluster
@@ -55,21 +66,27 @@ def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[Callable[[], Non
         models = {m: client.scatter(m, broadcast=True) for m in {m for m, _ in jobs}}
         client.run(pipeline.judge_log, *jobs[0])  # every worker warm
 
-        def once() -> None:
+        def once() -> float:
+            cpu = _cpu_s(client)
             futs = [client.submit(judge_task, models[m], p, None, pure=False) for m, p in jobs]
             client.gather(futs)
+            return _cpu_s(client) - cpu
 
         yield once
 
 
-def _rates(seconds: list[float], frames: int, workers: int) -> dict[str, Any]:
+def _rates(seconds: list[float], cpu_s: list[float], frames: int, workers: int) -> dict:
     median_s = statistics.median(seconds)
+    median_cpu_s = statistics.median(cpu_s)
     return {
         "workers": workers,
         "s": [round(s, 3) for s in seconds],
         "median_s": median_s,
         "frames_per_s": frames / median_s,
         "frames_per_s_per_worker": frames / median_s / workers,
+        "cpu_s": [round(s, 3) for s in cpu_s],
+        "median_cpu_s": median_cpu_s,
+        "frames_per_cpu_s": frames / median_cpu_s,
     }
 
 
@@ -79,28 +96,32 @@ def bench_fleet(
     """Seconds, frames/s and frames/s per worker of judging every log of the fleet: with
     `monitor detect`'s code (``detect``), as the fleet's task in one process
     (``one_process``) and on Dask (``workers_N``); each one's per-worker rate over detect's
-    (``vs_detect_per_worker``), from the medians of ``repeats`` timings."""
+    (``vs_detect_per_worker``), from the medians of ``repeats`` timings; and frames per
+    CPU second of all its processes (``frames_per_cpu_s``: what a cluster's cores cost,
+    whatever else the machine runs)."""
     jobs = _jobs(fleet_root, results)
     if not jobs:
         raise ConfigError(f"{results / 'models'}: no model for any machine of {fleet_root}")
     frames = sum(pipeline.detect_frames(m, p) for m, p in jobs)  # and numba's cache warm
     pipeline.judge_log(*jobs[0])
     load_start = os.getloadavg()
-    ways: dict[str, tuple[int, Callable[[], None]]] = {
+    ways: dict[str, tuple[int, Once]] = {
         DETECT: (1, _in_process(jobs, pipeline.detect_frames)),
         "one_process": (1, _in_process(jobs, pipeline.judge_log)),
     }
     seconds: dict[str, list[float]] = {name: [] for name in ways}
+    cpu_s: dict[str, list[float]] = {name: [] for name in ways}
     with contextlib.ExitStack() as stack:
         for n in workers:
             ways[f"workers_{n}"] = (n, stack.enter_context(_on_dask(jobs, n)))
             seconds[f"workers_{n}"] = []
+            cpu_s[f"workers_{n}"] = []
         for _ in range(repeats):
             for name, (_n, once) in ways.items():
                 start = time.perf_counter()
-                once()
+                cpu_s[name].append(once())
                 seconds[name].append(time.perf_counter() - start)
-    runs = {name: _rates(seconds[name], frames, n) for name, (n, _once) in ways.items()}
+    runs = {name: _rates(seconds[name], cpu_s[name], frames, n) for name, (n, _) in ways.items()}
     base = runs[DETECT]["frames_per_s_per_worker"]
     for r in runs.values():
         r["vs_detect_per_worker"] = r["frames_per_s_per_worker"] / base
@@ -116,12 +137,14 @@ def bench_fleet(
 def table(out: dict[str, Any]) -> str:
     """The result as the Markdown table of docs/benchmarks.md."""
     lines = [
-        "| how | workers | median s | frames/s | frames/s per worker | per worker vs detect |",
-        "|---|---|---|---|---|---|",
+        "| how | workers | median s | frames/s | frames/s per worker | per worker vs detect "
+        "| frames per CPU-s |",
+        "|---|---|---|---|---|---|---|",
     ]
     for name, r in out["runs"].items():
         lines.append(
             f"| {name} | {r['workers']} | {r['median_s']:.2f} | {r['frames_per_s']:,.0f} "
-            f"| {r['frames_per_s_per_worker']:,.0f} | {r['vs_detect_per_worker']:.2f} |"
+            f"| {r['frames_per_s_per_worker']:,.0f} | {r['vs_detect_per_worker']:.2f} "
+            f"| {r['frames_per_cpu_s']:,.0f} |"
         )
     return "\n".join(lines)
