@@ -40,7 +40,7 @@ def test_each_way_judges_every_frame_and_is_set_beside_detect_per_worker(fleet):
     detect_rate = frames / statistics.median(out["runs"]["detect"]["s"])
     for r in out["runs"].values():
         assert len(r["s"]) == 2
-        assert r["median_s"] == pytest.approx(statistics.median(r["s"]), abs=1e-3)
+        assert r["median_s"] == pytest.approx(statistics.median(r["s"]), rel=1e-9)
         per_worker = frames / r["median_s"] / r["workers"]
         assert r["frames_per_s_per_worker"] == pytest.approx(per_worker)
         assert r["vs_detect_per_worker"] == pytest.approx(per_worker / detect_rate, rel=1e-3)

@@ -80,11 +80,11 @@ def _rates(seconds: list[float], cpu_s: list[float], frames: int, workers: int) 
     median_cpu_s = statistics.median(cpu_s)
     return {
         "workers": workers,
-        "s": [round(s, 3) for s in seconds],
+        "s": seconds,
         "median_s": median_s,
         "frames_per_s": frames / median_s,
         "frames_per_s_per_worker": frames / median_s / workers,
-        "cpu_s": [round(s, 3) for s in cpu_s],
+        "cpu_s": cpu_s,
         "median_cpu_s": median_cpu_s,
         "frames_per_cpu_s": frames / median_cpu_s,
     }
