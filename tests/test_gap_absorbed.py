@@ -10,10 +10,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from monitor.gap.candidates import Candidate
-from monitor.gap.diagnose import Absorbed, calibration_absorbed
-from monitor.gap.report import _absorbed, _absorbed_line
-from monitor.gap.score import SegmentSums
+from monitor.gap.diagnose.pipeline import Absorbed, calibration_absorbed
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.score import SegmentSums
+from monitor.gap.report.document import _absorbed, _absorbed_line
 from monitor.sim.effects import Effect
 
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.gap import basemis
-from monitor.gap.candidates import Candidate
-from monitor.gap.decide import Decision, decide
-from monitor.gap.score import SegmentSums, gap, reduction
-from monitor.gap.shrink import resamples
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.score import SegmentSums, gap, reduction
+from monitor.gap.judge import basemis
+from monitor.gap.judge.decide import Decision, decide
+from monitor.gap.judge.shrink import resamples
 from monitor.sim.effects import Effect
 
 FS = 100.0

@@ -17,7 +17,7 @@ from bench import diagnose_blind, score  # noqa: E402
 from generate import cases, generate  # noqa: E402
 from plant import nominal, run  # noqa: E402
 
-from monitor.gap.decide import EXPLAIN_MIN  # noqa: E402
+from monitor.gap.judge.decide import EXPLAIN_MIN  # noqa: E402
 from monitor.sim.cycles import make_cycle  # noqa: E402
 from monitor.sim.machine import load_machine  # noqa: E402
 from monitor.sim.simulate import simulate  # noqa: E402

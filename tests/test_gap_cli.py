@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from monitor.gap.calibrate import apply
-from monitor.gap.diagnose import diagnose
+from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.fit.calibrate import apply
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
@@ -121,8 +121,8 @@ def test_report_keeps_the_contract_keys(deadband_run):
 
 
 def test_a_tolerance_at_its_bound_is_said_in_the_json_and_the_first_lines(deadband_run):
-    from monitor.gap.calibrate import describe
-    from monitor.gap.report import summary_text
+    from monitor.gap.fit.calibrate import describe
+    from monitor.gap.report.document import summary_text
 
     # By hand: mass at +15 % of its +-15 % band and valve gain at -14.9 % of +-15 % (within
     # 2 % of the band's edge) ended at their bounds; viscous friction +10 % of +-30 % did not.

@@ -8,12 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.gap.candidates import Candidate
-from monitor.gap.consistency import WORSE_MATERIAL
-from monitor.gap.decide import decide, pair_plan
-from monitor.gap.report import summary_text
-from monitor.gap.score import SegmentSums, gap, reduction
-from monitor.gap.shrink import resamples
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.score import SegmentSums, gap, reduction
+from monitor.gap.judge.consistency import WORSE_MATERIAL
+from monitor.gap.judge.decide import decide, pair_plan
+from monitor.gap.judge.shrink import resamples
+from monitor.gap.report.document import summary_text
 from monitor.sim.effects import Effect
 
 N_SEG = 10

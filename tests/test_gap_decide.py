@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from monitor.gap.candidates import Candidate
-from monitor.gap.decide import decide, pair_plan
-from monitor.gap.score import SegmentSums, gap, reduction
-from monitor.gap.shrink import resamples
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.score import SegmentSums, gap, reduction
+from monitor.gap.judge.decide import decide, pair_plan
+from monitor.gap.judge.shrink import resamples
 from monitor.sim.effects import Effect
 
 N_SEG = 10

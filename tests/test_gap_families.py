@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.gap.calibrate import apply
-from monitor.gap.candidates import Candidate, n_params
-from monitor.gap.diagnose import diagnose
-from monitor.gap.families import MEMBERS, fit_family
-from monitor.gap.report import member_names
+from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.fit.calibrate import apply
+from monitor.gap.fit.candidates import Candidate, n_params
+from monitor.gap.fit.families import MEMBERS, fit_family
+from monitor.gap.report.document import member_names
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import Effect
 from monitor.sim.machine import load_machine

@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.gap import lagcheck
-from monitor.gap.calibrate import apply
-from monitor.gap.diagnose import diagnose
-from monitor.gap.prepare import Prepared
-from monitor.gap.report import summary_text
-from monitor.gap.segments import Segment
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.segments import Segment
+from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.fit.calibrate import apply
+from monitor.gap.judge import lagcheck
+from monitor.gap.report.document import summary_text
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import Effect
@@ -157,7 +157,7 @@ def test_a_sensor_lag_standing_in_for_a_slow_spool_is_withdrawn(lag_only):
 
 
 def test_the_report_says_why_the_sensor_lag_was_not_named(lag_only):
-    from monitor.gap.report import build_report, simulate_all
+    from monitor.gap.report.document import build_report, simulate_all
 
     rep = build_report(lag_only, M, simulate_all(lag_only, M))
     assert rep["verdict"] != "sensor_lag" and rep["lag_check"]["sensor_named"] is False

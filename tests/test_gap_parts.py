@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 
 from monitor.errors import InputFileError, NoHydraulicDataError
-from monitor.gap import calibrate as cal_mod
-from monitor.gap import where as W
-from monitor.gap.fit import Knob, fit
-from monitor.gap.predict import predict
-from monitor.gap.prepare import noise_variance, prepare
-from monitor.gap.rodflow import arrivals, holds_on_stop, rod_from_flow, stalls
-from monitor.gap.score import SegmentSums, gap, normalised, segment_sums
-from monitor.gap.segments import make_segments, split
-from monitor.gap.shrink import boot_reduction, resamples
+from monitor.gap.data.prepare import noise_variance, prepare
+from monitor.gap.data.rodflow import arrivals, holds_on_stop, rod_from_flow, stalls
+from monitor.gap.data.segments import make_segments, split
+from monitor.gap.fit import calibrate as cal_mod
+from monitor.gap.fit.predict import predict
+from monitor.gap.fit.score import SegmentSums, gap, normalised, segment_sums
+from monitor.gap.fit.solve import Knob, fit
+from monitor.gap.judge import where as W
+from monitor.gap.judge.shrink import boot_reduction, resamples
 from monitor.io.recording import Recording
 from monitor.signals import MEASURED_NAMES
 from monitor.sim.cycles import make_cycle
@@ -141,7 +141,7 @@ def test_fit_recovers_a_known_minimum_inside_bounds():
 
 def test_log_knobs_stay_inside_their_bounds_at_the_ends():
     # Every log-mapped knob of the catalogue, at both ends of the unit interval and between.
-    from monitor.gap.candidates import KNOBS
+    from monitor.gap.fit.candidates import KNOBS
 
     for knobs in KNOBS.values():
         for k in knobs:

@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from monitor.gap.candidates import criterion, fit_candidate
-from monitor.gap.fit import Knob, fit
-from monitor.gap.predict import predict
-from monitor.gap.prepare import ROD_VEL, ROD_VEL_NOISE_GAIN, prepare, rod_velocity, smooth_rod
-from monitor.gap.score import compared, noise_floor, segment_sums
-from monitor.gap.segments import make_segments
+from monitor.gap.data.prepare import ROD_VEL, ROD_VEL_NOISE_GAIN, prepare, rod_velocity, smooth_rod
+from monitor.gap.data.segments import make_segments
+from monitor.gap.fit.candidates import criterion, fit_candidate
+from monitor.gap.fit.predict import predict
+from monitor.gap.fit.score import compared, noise_floor, segment_sums
+from monitor.gap.fit.solve import Knob, fit
 from monitor.io.recording import Recording
 from monitor.signals import MEASURED_NAMES, SAMPLE_PERIOD_S
 from monitor.sim.cycles import make_cycle
@@ -133,9 +133,9 @@ def test_friction_is_fitted_with_the_valve_gain_a_calibration_bent_to_mimic_it()
     # benchmark saw +30 % and -7 % on a 1.2 kN friction).  Fitted from there with viscous
     # friction alone free, the friction stays far too small; with the valve gain free too,
     # the fit recovers it and the calibration's valve gain goes back to the machine's.
-    from monitor.gap.calibrate import knobs
-    from monitor.gap.candidates import CONFOUNDED
-    from monitor.gap.diagnose import _Evaluator
+    from monitor.gap.diagnose.pipeline import _Evaluator
+    from monitor.gap.fit.calibrate import knobs
+    from monitor.gap.fit.candidates import CONFOUNDED
 
     fx = [Effect.make("cylinder_friction", coulomb_n=1200.0, static_n=1500.0)]
     rec = simulate(make_cycle("boom", 60.0, 5), M, effects=fx, seed=3)

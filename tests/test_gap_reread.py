@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.gap.diagnose import diagnose
-from monitor.gap.prepare import prepare
-from monitor.gap.report import build_report, simulate_all
-from monitor.gap.reread import reread, rereads, true_flow_lpm, without_arrivals_of
-from monitor.gap.rodflow import rod_from_flow, stalls
+from monitor.gap.data.prepare import prepare
+from monitor.gap.data.reread import reread, rereads, true_flow_lpm, without_arrivals_of
+from monitor.gap.data.rodflow import rod_from_flow, stalls
+from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.report.document import build_report, simulate_all
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import Effect

@@ -10,11 +10,11 @@ import sys
 import numpy as np
 import pytest
 
-from monitor.gap.calibrate import apply
-from monitor.gap.diagnose import diagnose
-from monitor.gap.predict import _Start, _true_start
-from monitor.gap.prepare import prepare
-from monitor.gap.report import build_report, simulate_all, summary_text
+from monitor.gap.data.prepare import prepare
+from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.fit.calibrate import apply
+from monitor.gap.fit.predict import _Start, _true_start
+from monitor.gap.report.document import build_report, simulate_all, summary_text
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.gap import calibrate as cal_mod
-from monitor.gap.diagnose import FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR
-from monitor.gap.predict import SegmentPlant, _measured_start, _start_state, predict
-from monitor.gap.prepare import prepare
-from monitor.gap.score import compared, noise_floor
-from monitor.gap.segments import make_segments, split
+from monitor.gap.data.prepare import prepare
+from monitor.gap.data.segments import make_segments, split
+from monitor.gap.diagnose.pipeline import FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR
+from monitor.gap.fit import calibrate as cal_mod
+from monitor.gap.fit.predict import SegmentPlant, _measured_start, _start_state, predict
+from monitor.gap.fit.score import compared, noise_floor
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import Effect

@@ -9,15 +9,20 @@ import math
 import numpy as np
 import pytest
 
-from monitor.gap import score as S
-from monitor.gap import suggest as suggest_mod
-from monitor.gap.calibrate import apply
-from monitor.gap.diagnose import FIT_BUDGET_S, FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR, diagnose
-from monitor.gap.predict import SegmentPlant, sense
-from monitor.gap.prepare import prepare
-from monitor.gap.report import build_report, simulate_all, summary_text
-from monitor.gap.segments import Segment, make_segments, split, spread
-from monitor.gap.suggest import periodic_frequencies_hz, suggest
+from monitor.gap.data.prepare import prepare
+from monitor.gap.data.segments import Segment, make_segments, split, spread
+from monitor.gap.diagnose.pipeline import (
+    FIT_BUDGET_S,
+    FIT_STEP_FACTOR,
+    HELDOUT_STEP_FACTOR,
+    diagnose,
+)
+from monitor.gap.fit import score as S
+from monitor.gap.fit.calibrate import apply
+from monitor.gap.fit.predict import SegmentPlant, sense
+from monitor.gap.judge import suggest as suggest_mod
+from monitor.gap.judge.suggest import periodic_frequencies_hz, suggest
+from monitor.gap.report.document import build_report, simulate_all, summary_text
 from monitor.signals import MEASURED_NAMES
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import parse_effect

@@ -73,8 +73,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from monitor.gap.diagnose import diagnose
-    from monitor.gap.report import build_report, simulate_all, summary_text
+    from monitor.gap.diagnose.pipeline import diagnose
+    from monitor.gap.report.document import build_report, simulate_all, summary_text
 
     machine = load_machine(args.config)
     if args.report is not None and args.report.exists() and not args.report.is_dir():
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
         if args.report is not None:
-            from monitor.gap.plots import write_plots
+            from monitor.gap.report.plots import write_plots
 
             args.report.mkdir(parents=True, exist_ok=True)
             (args.report / "summary.txt").write_text(text, encoding="utf-8")

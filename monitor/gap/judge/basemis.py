@@ -33,10 +33,10 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from monitor.gap.prepare import Prepared
-from monitor.gap.score import SegmentSums, gap, segment_sums
-from monitor.gap.segments import Segment
-from monitor.gap.shrink import boot_mse
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.segments import Segment
+from monitor.gap.fit.score import SegmentSums, gap, segment_sums
+from monitor.gap.judge.shrink import boot_mse
 from monitor.signals import SAMPLE_RATE_HZ
 
 #: Width of the moving average that keeps the structured part (s): first null at 5 Hz.

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.prepare import Prepared
-from monitor.gap.segments import Segment
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.segments import Segment
 from monitor.signals import MEASURED_NAMES, UNITS
 
 #: Delays tried (s): 0 to 150 ms in 5 ms steps (a grid: the objective is not smooth in a

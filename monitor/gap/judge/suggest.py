@@ -25,15 +25,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from monitor.gap import calibrate as cal_mod
-from monitor.gap import score as S
-from monitor.gap.candidates import criterion
-from monitor.gap.decide import PAIR_GAIN, PAIR_MATERIAL
-from monitor.gap.predict import SegmentPlant, sense
-from monitor.gap.prepare import Prepared
-from monitor.gap.segments import Segment
-from monitor.gap.sensorterms import SensorTerm, fit_sensor_terms
-from monitor.gap.terms import PlantTerm, describe, library, periodic
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.segments import Segment
+from monitor.gap.fit import calibrate as cal_mod
+from monitor.gap.fit import score as S
+from monitor.gap.fit.candidates import criterion
+from monitor.gap.fit.predict import SegmentPlant, sense
+from monitor.gap.fit.sensorterms import SensorTerm, fit_sensor_terms
+from monitor.gap.fit.terms import PlantTerm, describe, library, periodic
+from monitor.gap.judge.decide import PAIR_GAIN, PAIR_MATERIAL
 from monitor.sim.machine import MachineParams
 
 #: Plant terms refined (a second Gauss-Newton step and a run of their own) after screening.

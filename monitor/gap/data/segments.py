@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.prepare import Prepared
-from monitor.gap.rodflow import CENTRE_PCT
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.rodflow import CENTRE_PCT
 from monitor.signals import SAMPLE_PERIOD_S
 
 #: The spool must have rested this long before a quiet start (s).

@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.score import SegmentSums
-from monitor.gap.shrink import boot_mse
+from monitor.gap.fit.score import SegmentSums
+from monitor.gap.judge.shrink import boot_mse
 
 #: A signal's excess over the noise must grow by this share of the whole held-out gap ...
 WORSE_MATERIAL = 0.05

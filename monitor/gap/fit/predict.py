@@ -14,9 +14,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from monitor.gap.prepare import ROD_VEL, Prepared, rod_velocity, smooth_rod
-from monitor.gap.score import compared
-from monitor.gap.segments import Segment
+from monitor.gap.data.prepare import ROD_VEL, Prepared, rod_velocity, smooth_rod
+from monitor.gap.data.segments import Segment
+from monitor.gap.fit.score import compared
 from monitor.io.recording import Recording
 from monitor.sim.effects import Effect
 from monitor.sim.machine import BAR, LPM, MachineParams

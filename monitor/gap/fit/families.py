@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from monitor.gap.candidates import (
+from monitor.gap.fit.candidates import (
     KNOBS,
     Candidate,
     Member,
@@ -22,7 +22,7 @@ from monitor.gap.candidates import (
     default_member,
     fit_candidate,
 )
-from monitor.gap.fit import Knob
+from monitor.gap.fit.solve import Knob
 from monitor.sim.effects import Effect
 
 _AIR = KNOBS["entrained_air"]

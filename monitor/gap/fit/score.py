@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.prepare import ROD_VEL, Prepared
-from monitor.gap.segments import Segment
+from monitor.gap.data.prepare import ROD_VEL, Prepared
+from monitor.gap.data.segments import Segment
 from monitor.signals import MEASURED_NAMES
 
 

@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.candidates import Candidate
-from monitor.gap.decide import gain_share
-from monitor.gap.score import SegmentSums
-from monitor.gap.suggest import Suggestions
-from monitor.gap.terms import PlantTerm
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.score import SegmentSums
+from monitor.gap.fit.terms import PlantTerm
+from monitor.gap.judge.decide import gain_share
+from monitor.gap.judge.suggest import Suggestions
 
 
 @dataclass

@@ -12,15 +12,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap import basemis, sensorcal
-from monitor.gap import calibrate as cal_mod
-from monitor.gap import where as W
-from monitor.gap.candidates import Candidate, default_member
-from monitor.gap.diagnose import Diagnosis
-from monitor.gap.predict import predict
-from monitor.gap.prepare import Prepared
-from monitor.gap.score import SegmentSums, compared, gap, normalised, reduction
-from monitor.gap.shrink import shrink_report
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.diagnose.pipeline import Diagnosis
+from monitor.gap.fit import calibrate as cal_mod
+from monitor.gap.fit import sensorcal
+from monitor.gap.fit.candidates import Candidate, default_member
+from monitor.gap.fit.predict import predict
+from monitor.gap.fit.score import SegmentSums, compared, gap, normalised, reduction
+from monitor.gap.judge import basemis
+from monitor.gap.judge import where as W
+from monitor.gap.judge.shrink import shrink_report
 from monitor.signals import MEASURED_NAMES, UNITS
 from monitor.sim.effects import CATALOGUE, Effect
 from monitor.sim.machine import MachineParams

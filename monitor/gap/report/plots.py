@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.gap.diagnose import Diagnosis
-from monitor.gap.report import Traces
-from monitor.gap.score import normalised
-from monitor.gap.where import spectra
+from monitor.gap.diagnose.pipeline import Diagnosis
+from monitor.gap.fit.score import normalised
+from monitor.gap.judge.where import spectra
+from monitor.gap.report.document import Traces
 from monitor.signals import MEASURED_NAMES, UNITS
 
 #: Seconds shown either side of the worst window.

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.prepare import Prepared
-from monitor.gap.segments import Segment
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.segments import Segment
 
 #: The catalogue effect this module checks.
 NAME = "sensor_lag"

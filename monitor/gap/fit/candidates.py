@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.gap.calibrate import AT_BOUND_SHARE, TOLERANCES
-from monitor.gap.fit import MAX_ITERATIONS, Knob, default_starts, fit
-from monitor.gap.prepare import Prepared
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.fit.calibrate import AT_BOUND_SHARE, TOLERANCES
+from monitor.gap.fit.solve import MAX_ITERATIONS, Knob, default_starts, fit
 from monitor.sim.effects import CATALOGUE, Effect
 
 #: Fitted parameters per effect; the others keep their catalogue defaults (weakly

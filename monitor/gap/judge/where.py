@@ -12,8 +12,8 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.signal import coherence, welch
 
-from monitor.gap.prepare import Prepared
-from monitor.gap.segments import Segment
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.segments import Segment
 from monitor.signals import MEASURED_NAMES, SAMPLE_RATE_HZ
 
 BANDS_HZ: tuple[tuple[float, float], ...] = (

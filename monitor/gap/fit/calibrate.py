@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.fit import Knob
+from monitor.gap.fit.solve import Knob
 from monitor.sim.machine import MachineParams
 
 

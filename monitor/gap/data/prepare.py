@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monitor.errors import InputFileError, NoHydraulicDataError
-from monitor.gap.rodflow import rod_from_flow
+from monitor.gap.data.rodflow import rod_from_flow
 from monitor.io.recording import Recording
 from monitor.signals import COMMAND_NAMES, MEASURED_NAMES, SAMPLE_PERIOD_S
 from monitor.sim.effects import SENSOR_CAL_SIGNALS

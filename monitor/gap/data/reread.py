@@ -31,8 +31,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from monitor.gap.prepare import Prepared
-from monitor.gap.rodflow import rod_from_flow
+from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.rodflow import rod_from_flow
 from monitor.sim.effects import Effect
 from monitor.sim.machine import MachineParams
 

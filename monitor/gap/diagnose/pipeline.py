@@ -16,10 +16,13 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from monitor.errors import NoHydraulicDataError
-from monitor.gap import basemis, lagcheck, sensorcal, sensorphysics
-from monitor.gap import calibrate as cal_mod
-from monitor.gap import score as S
-from monitor.gap.candidates import (
+from monitor.gap.data.prepare import Prepared, prepare
+from monitor.gap.data.reread import reread, without_arrivals_of
+from monitor.gap.data.segments import Segment, make_segments, split, spread
+from monitor.gap.fit import calibrate as cal_mod
+from monitor.gap.fit import score as S
+from monitor.gap.fit import sensorcal
+from monitor.gap.fit.candidates import (
     CONFOUNDED,
     KNOBS,
     Candidate,
@@ -29,7 +32,10 @@ from monitor.gap.candidates import (
     fit_candidate,
     n_params,
 )
-from monitor.gap.decide import (
+from monitor.gap.fit.families import fit_family
+from monitor.gap.fit.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sense
+from monitor.gap.judge import basemis, lagcheck, sensorphysics
+from monitor.gap.judge.decide import (
     Decision,
     boot_gain,
     decide,
@@ -37,13 +43,8 @@ from monitor.gap.decide import (
     pair_plan,
     within_noise,
 )
-from monitor.gap.families import fit_family
-from monitor.gap.predict import SENSOR_EFFECTS, SegmentPlant, moves_starts, sense
-from monitor.gap.prepare import Prepared, prepare
-from monitor.gap.reread import reread, without_arrivals_of
-from monitor.gap.segments import Segment, make_segments, split, spread
-from monitor.gap.shrink import resamples
-from monitor.gap.suggest import suggest
+from monitor.gap.judge.shrink import resamples
+from monitor.gap.judge.suggest import suggest
 from monitor.io.recording import Recording
 from monitor.sim.effects import Effect
 from monitor.sim.machine import MachineParams

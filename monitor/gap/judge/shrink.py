@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from monitor.gap.score import SegmentSums, gap
+from monitor.gap.fit.score import SegmentSums, gap
 from monitor.signals import MEASURED_NAMES
 
 N_BOOT = 400

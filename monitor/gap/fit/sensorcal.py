@@ -26,12 +26,12 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from monitor.gap import score as S
-from monitor.gap.candidates import Candidate
-from monitor.gap.fit import Knob, fit
-from monitor.gap.predict import moves_starts
-from monitor.gap.prepare import ROD_VEL, Prepared, rod_velocity
-from monitor.gap.segments import Segment
+from monitor.gap.data.prepare import ROD_VEL, Prepared, rod_velocity
+from monitor.gap.data.segments import Segment
+from monitor.gap.fit import score as S
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.predict import moves_starts
+from monitor.gap.fit.solve import Knob, fit
 from monitor.sim.effects import CATALOGUE, SENSOR_CAL_SIGNALS, Effect
 
 NAME = "sensor_calibration"

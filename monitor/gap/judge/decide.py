@@ -49,11 +49,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap import basemis
-from monitor.gap.candidates import Candidate
-from monitor.gap.consistency import Worse, worse_signal
-from monitor.gap.score import SegmentSums, gap, reduction
-from monitor.gap.shrink import boot_gap, boot_mse, boot_reduction
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.score import SegmentSums, gap, reduction
+from monitor.gap.judge import basemis
+from monitor.gap.judge.consistency import Worse, worse_signal
+from monitor.gap.judge.shrink import boot_gap, boot_mse, boot_reduction
 
 #: ``none``: held-out mean squared residual below this multiple of the noise floor on
 #: every signal (a perfect simulator sits at 1).
