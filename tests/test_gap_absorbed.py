@@ -6,14 +6,14 @@ is at its bound."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 
-from monitor.gap.diagnose.pipeline import Absorbed, calibration_absorbed
+from monitor.gap.diagnose.records import Absorbed
+from monitor.gap.diagnose.verdict import calibration_absorbed
 from monitor.gap.fit.candidates import Candidate
 from monitor.gap.fit.score import SegmentSums
-from monitor.gap.report.document import _absorbed, _absorbed_line
+from monitor.gap.report.document import _absorbed
+from monitor.gap.report.summary import _absorbed_line
 from monitor.sim.effects import Effect
 
 
@@ -85,13 +85,8 @@ def test_the_json_and_summary_say_which_bound_stood_in_and_what_the_effect_remov
     without = SegmentSums(np.full((1, 2), 21.0), np.full((1, 2), 100.0))
     friction = _c("cylinder_friction", viscous_friction=0.8)
     friction.heldout_gap = 0.1
-    diag = SimpleNamespace(
-        verdict="cylinder_friction",
-        chosen=friction,
-        floor=floor,
-        absorbed={friction.name: Absorbed({"viscous_friction": (1.3, 0.8)}, (without, without))},
-    )
-    block = _absorbed(diag)["absorbed"]
+    absorbed = {friction.name: Absorbed({"viscous_friction": (1.3, 0.8)}, (without, without))}
+    block = _absorbed(friction, absorbed, floor)["absorbed"]
     assert block == {
         "effect": "cylinder_friction",
         "tolerances": {"viscous_friction": {"calibration_pct": 30.0, "with_effect_pct": -20.0}},
@@ -100,5 +95,5 @@ def test_the_json_and_summary_say_which_bound_stood_in_and_what_the_effect_remov
     line = _absorbed_line(block)
     assert "viscous_friction +30 % (its bound), -20 % when fitted" in line and "75 %" in line
     # Nothing to say when the verdict is another effect, or nothing was absorbed.
-    assert _absorbed(SimpleNamespace(**{**vars(diag), "verdict": "none", "chosen": None})) == {}
-    assert _absorbed(SimpleNamespace(**{**vars(diag), "absorbed": {}})) == {}
+    assert _absorbed(None, absorbed, floor) == {}
+    assert _absorbed(friction, {}, floor) == {}

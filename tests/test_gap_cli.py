@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.diagnose import diagnose
 from monitor.gap.fit.calibrate import apply
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
@@ -122,7 +122,7 @@ def test_report_keeps_the_contract_keys(deadband_run):
 
 def test_a_tolerance_at_its_bound_is_said_in_the_json_and_the_first_lines(deadband_run):
     from monitor.gap.fit.calibrate import describe
-    from monitor.gap.report.document import summary_text
+    from monitor.gap.report.summary import summary_text
 
     # By hand: mass at +15 % of its +-15 % band and valve gain at -14.9 % of +-15 % (within
     # 2 % of the band's edge) ended at their bounds; viscous friction +10 % of +-30 % did not.
@@ -145,16 +145,16 @@ def test_sensor_lag_recording_is_named_and_its_delay_fitted():
     lagged = _recording([Effect.make("sensor_lag", delay_ms=40.0)], seed=22)
     # A reduced candidate list keeps the test short; the full list runs in the benchmark.
     d = diagnose(lagged, M, effects=("sensor_lag", "valve_deadband", "load_variation"))
-    assert d.verdict == "sensor_lag"
-    p = d.chosen.effects[0].params
+    assert d.finding.verdict == "sensor_lag"
+    p = d.finding.chosen.effects[0].params
     # Delay plus filter time constant: the lag the sensor adds at low frequency.
     assert p["delay_ms"] + p["time_constant_ms"] == pytest.approx(40.0, abs=6.0)
-    assert d.chosen.heldout_reduction > 0.7
+    assert d.finding.chosen.heldout_reduction > 0.7
 
 
 def test_nominal_recording_is_none():
     d = diagnose(_recording([], seed=23), M, effects=("sensor_lag", "valve_deadband"))
-    assert d.verdict == "none" and d.chosen is None and d.also is None
+    assert d.finding.verdict == "none" and d.finding.chosen is None and d.finding.also is None
 
 
 def test_a_machine_13_percent_off_in_valve_gain_and_gravity_is_calibrated_and_none():
@@ -164,9 +164,9 @@ def test_a_machine_13_percent_off_in_valve_gain_and_gravity_is_calibrated_and_no
     off = {**MACHINE_TOLERANCE, "valve_gain": 1.13, "gravity_load": 0.87}
     rec = simulate(make_cycle("boom", 60.0, 25), apply(M, off), seed=25)
     d = diagnose(rec, M, effects=("valve_deadband", "load_variation"))
-    assert d.factors["valve_gain"] == pytest.approx(1.13, abs=0.015)
-    assert d.factors["gravity_load"] == pytest.approx(0.87, abs=0.015)
-    assert d.verdict == "none" and d.chosen is None
+    assert d.tolerances.factors["valve_gain"] == pytest.approx(1.13, abs=0.015)
+    assert d.tolerances.factors["gravity_load"] == pytest.approx(0.87, abs=0.015)
+    assert d.finding.verdict == "none" and d.finding.chosen is None
 
 
 def test_unusable_recordings_exit_with_one_line(tmp_path):

@@ -13,7 +13,7 @@ from monitor.gap.fit.score import SegmentSums, gap, reduction
 from monitor.gap.judge.consistency import WORSE_MATERIAL
 from monitor.gap.judge.decide import decide, pair_plan
 from monitor.gap.judge.shrink import resamples
-from monitor.gap.report.document import summary_text
+from monitor.gap.report.summary import summary_text
 from monitor.sim.effects import Effect
 
 N_SEG = 10

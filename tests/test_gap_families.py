@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.diagnose import diagnose
 from monitor.gap.fit.calibrate import apply
 from monitor.gap.fit.candidates import Candidate, n_params
 from monitor.gap.fit.families import MEMBERS, fit_family
@@ -118,8 +118,8 @@ def test_oil_leaking_across_the_valve_clearances_is_named_with_that_member():
         4,
         ("oil_viscosity", "spool_dynamics", "load_variation"),
     )
-    assert d.verdict == "oil_viscosity"
-    best = d.singles[0]
+    assert d.finding.verdict == "oil_viscosity"
+    best = d.ranking.singles[0]
     assert member_names(best)["oil_viscosity"] in ("seal_and_valve", "all_paths")
     assert best.effects[0].params["valve_leak_lpm_per_100bar"] == pytest.approx(0.3, rel=0.3)
 
@@ -135,8 +135,8 @@ def test_entrained_air_on_a_machine_with_larger_volumes_is_found_with_one_local_
         6,
         ("entrained_air", "hose_compliance", "load_variation"),
     )
-    assert d.verdict == "entrained_air"
-    assert d.singles[0].effects[0].params["air_fraction"] == pytest.approx(0.02, rel=0.3)
+    assert d.finding.verdict == "entrained_air"
+    assert d.ranking.singles[0].effects[0].params["air_fraction"] == pytest.approx(0.02, rel=0.3)
 
 
 def test_hoses_on_the_cylinder_lines_are_named_with_the_cylinder_hoses_member():
@@ -155,8 +155,8 @@ def test_hoses_on_the_cylinder_lines_are_named_with_the_cylinder_hoses_member():
         8,
         ("entrained_air", "hose_compliance", "load_variation"),
     )
-    assert d.verdict == "hose_compliance"
-    best = d.singles[0]
+    assert d.finding.verdict == "hose_compliance"
+    best = d.ranking.singles[0]
     assert member_names(best)["hose_compliance"] == "cylinder_hoses"
     p = best.effects[0].params
     assert p["cylinder_capacitance_cm3_per_bar"] == pytest.approx(0.03, rel=0.3)
@@ -175,8 +175,8 @@ def test_a_ringing_pump_is_named_with_the_second_order_member_and_its_frequency(
         9,
         ("pump_control_dynamics", "spool_dynamics", "sensor_lag"),
     )
-    assert d.verdict == "pump_control_dynamics"
-    best = d.singles[0]
+    assert d.finding.verdict == "pump_control_dynamics"
+    best = d.ranking.singles[0]
     assert member_names(best)["pump_control_dynamics"] == "second_order"
     assert best.effects[0].params["natural_freq_hz"] == pytest.approx(7.0, rel=0.15)
     assert best.effects[0].params["damping_ratio"] == pytest.approx(0.4, rel=0.3)

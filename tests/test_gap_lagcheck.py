@@ -9,10 +9,10 @@ import pytest
 
 from monitor.gap.data.prepare import Prepared
 from monitor.gap.data.segments import Segment
-from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.diagnose import diagnose
 from monitor.gap.fit.calibrate import apply
 from monitor.gap.judge import lagcheck
-from monitor.gap.report.document import summary_text
+from monitor.gap.report.summary import summary_text
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import Effect
@@ -131,11 +131,11 @@ def slow_spool_recording():
 
 def test_a_slow_spool_without_rodpos_is_named(slow_spool_recording):
     d = diagnose(slow_spool_recording, M, effects=CANDIDATES)
-    assert not d.prep.has_rodpos
-    assert d.verdict == "spool_dynamics"
+    assert not d.parts.prep.has_rodpos
+    assert d.finding.verdict == "spool_dynamics"
     # Named outright (the simulator's own spool fits best) or after the check withdrew a
     # sensor lag that fitted as well.
-    assert d.lag_check is None or d.lag_check["sensor_named"] is False
+    assert d.finding.lag_check is None or d.finding.lag_check["sensor_named"] is False
 
 
 @pytest.fixture(scope="module")
@@ -147,19 +147,19 @@ def lag_only(slow_spool_recording):
 
 def test_a_sensor_lag_standing_in_for_a_slow_spool_is_withdrawn(lag_only):
     d = lag_only
-    assert d.singles[0].heldout_reduction >= 0.5  # it would have been named
-    assert d.verdict != "sensor_lag"
-    assert d.lag_check is not None and d.lag_check["sensor_named"] is False
-    assert d.lag_check["readings"] == "prompt"
-    assert d.lag_check["verdict_without_check"] == "sensor_lag"
-    qp = next(r for r in d.lag_check["signals"] if r["signal"] == "QP")
+    assert d.ranking.singles[0].heldout_reduction >= 0.5  # it would have been named
+    assert d.finding.verdict != "sensor_lag"
+    assert d.finding.lag_check is not None and d.finding.lag_check["sensor_named"] is False
+    assert d.finding.lag_check["readings"] == "prompt"
+    assert d.finding.lag_check["verdict_without_check"] == "sensor_lag"
+    qp = next(r for r in d.finding.lag_check["signals"] if r["signal"] == "QP")
     assert qp["position"] > 0.5
 
 
 def test_the_report_says_why_the_sensor_lag_was_not_named(lag_only):
-    from monitor.gap.report.document import build_report, simulate_all
+    from monitor.gap.report.document import build_report
 
-    rep = build_report(lag_only, M, simulate_all(lag_only, M))
+    rep = build_report(lag_only, M)
     assert rep["verdict"] != "sensor_lag" and rep["lag_check"]["sensor_named"] is False
     assert "Not a sensor lag: QP and PP follow the engine's speed ripple promptly" in (
         summary_text(rep)
@@ -169,6 +169,6 @@ def test_the_report_says_why_the_sensor_lag_was_not_named(lag_only):
 def test_a_lagged_sensor_without_rodpos_keeps_its_verdict():
     rec = _without_rodpos([Effect.make("sensor_lag", delay_ms=30.0)], 32, 10.0)
     d = diagnose(rec, M, effects=CANDIDATES)
-    assert d.verdict == "sensor_lag"
-    assert d.lag_check is not None and d.lag_check["sensor_named"] is True
-    assert d.lag_check["readings"] == "late"
+    assert d.finding.verdict == "sensor_lag"
+    assert d.finding.lag_check is not None and d.finding.lag_check["sensor_named"] is True
+    assert d.finding.lag_check["readings"] == "late"

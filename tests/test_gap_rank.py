@@ -133,7 +133,7 @@ def test_friction_is_fitted_with_the_valve_gain_a_calibration_bent_to_mimic_it()
     # benchmark saw +30 % and -7 % on a 1.2 kN friction).  Fitted from there with viscous
     # friction alone free, the friction stays far too small; with the valve gain free too,
     # the fit recovers it and the calibration's valve gain goes back to the machine's.
-    from monitor.gap.diagnose.pipeline import _Evaluator
+    from monitor.gap.diagnose.evaluate import Evaluator
     from monitor.gap.fit.calibrate import knobs
     from monitor.gap.fit.candidates import CONFOUNDED
 
@@ -141,7 +141,7 @@ def test_friction_is_fitted_with_the_valve_gain_a_calibration_bent_to_mimic_it()
     rec = simulate(make_cycle("boom", 60.0, 5), M, effects=fx, seed=3)
     prep = prepare(rec, M)
     segs = make_segments(prep)
-    ev = _Evaluator(prep, segs, M)
+    ev = Evaluator(prep, segs, M)
     bent = {"viscous_friction": 1.3, "valve_gain": 0.93}
     assert {"viscous_friction", "valve_gain"} <= set(CONFOUNDED["cylinder_friction"])
     fits = {}

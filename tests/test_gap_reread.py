@@ -8,8 +8,8 @@ import pytest
 from monitor.gap.data.prepare import prepare
 from monitor.gap.data.reread import reread, rereads, true_flow_lpm, without_arrivals_of
 from monitor.gap.data.rodflow import rod_from_flow, stalls
-from monitor.gap.diagnose.pipeline import diagnose
-from monitor.gap.report.document import build_report, simulate_all
+from monitor.gap.diagnose import diagnose
+from monitor.gap.report.document import build_report
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import Effect
@@ -108,7 +108,7 @@ def test_a_flow_offset_without_rodpos_is_named_and_the_pressures_follow():
     effect = Effect.make("sensor_calibration", signal="QP", gain=1.0, offset=OFFSET_LPM)
     rec = simulate(make_cycle("boom", 90.0, seed), M, effects=[effect], seed=seed)
     diag = diagnose(_without_rodpos(rec), M)
-    rep = build_report(diag, M, simulate_all(diag, M))
+    rep = build_report(diag, M)
     assert rep["verdict"] == "sensor_calibration"
     fitted = rep["params"]["sensor_calibration"]
     # Within 3 % of the injected offset (0.1 L/min, a tenth of the stall threshold: the

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 
 from monitor.gap.data.prepare import prepare
-from monitor.gap.diagnose.pipeline import diagnose
+from monitor.gap.diagnose import diagnose
 from monitor.gap.fit.calibrate import apply
 from monitor.gap.fit.predict import _Start, _true_start
-from monitor.gap.report.document import build_report, simulate_all, summary_text
+from monitor.gap.report.document import build_report
+from monitor.gap.report.summary import summary_text
 from monitor.io.csvio import write_csv
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
@@ -44,7 +45,7 @@ def _recording(effects: list[Effect], seed: int) -> Recording:
 
 def _report(rec: Recording) -> dict:
     diag = diagnose(rec, M)
-    return build_report(diag, M, simulate_all(diag, M))
+    return build_report(diag, M)
 
 
 def test_true_start_reads_the_start_pressure_through_the_inverse_calibration():

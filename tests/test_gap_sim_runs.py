@@ -8,7 +8,7 @@ import pytest
 
 from monitor.gap.data.prepare import prepare
 from monitor.gap.data.segments import make_segments, split
-from monitor.gap.diagnose.pipeline import FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR
+from monitor.gap.diagnose import FIT_STEP_FACTOR, HELDOUT_STEP_FACTOR
 from monitor.gap.fit import calibrate as cal_mod
 from monitor.gap.fit.predict import SegmentPlant, _measured_start, _start_state, predict
 from monitor.gap.fit.score import compared, noise_floor

@@ -11,7 +11,7 @@ import pytest
 
 from monitor.gap.data.prepare import prepare
 from monitor.gap.data.segments import Segment, make_segments, split, spread
-from monitor.gap.diagnose.pipeline import (
+from monitor.gap.diagnose import (
     FIT_BUDGET_S,
     FIT_STEP_FACTOR,
     HELDOUT_STEP_FACTOR,
@@ -22,7 +22,8 @@ from monitor.gap.fit.calibrate import apply
 from monitor.gap.fit.predict import SegmentPlant, sense
 from monitor.gap.judge import suggest as suggest_mod
 from monitor.gap.judge.suggest import periodic_frequencies_hz, suggest
-from monitor.gap.report.document import build_report, simulate_all, summary_text
+from monitor.gap.report.document import build_report
+from monitor.gap.report.summary import summary_text
 from monitor.signals import MEASURED_NAMES
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import parse_effect
@@ -54,7 +55,7 @@ def _report(corrections: dict[str, float], seed: int) -> dict:
         corrections=corrections,
     )
     diag = diagnose(rec, M)
-    return build_report(diag, M, simulate_all(diag, M))
+    return build_report(diag, M)
 
 
 def test_a_periodic_load_is_suggested_with_its_amplitude_and_frequency():
@@ -108,7 +109,7 @@ def test_a_catalogue_effect_gets_no_suggestion():
         effects=[parse_effect("valve_deadband:overlap_pct=12")],
     )
     diag = diagnose(rec, M)
-    rep = build_report(diag, M, simulate_all(diag, M))
+    rep = build_report(diag, M)
     assert rep["verdict"] == "valve_deadband"
     assert "suggestion" not in rep and "What to model next" not in summary_text(rep)
 

@@ -73,8 +73,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from monitor.gap.diagnose.pipeline import diagnose
-    from monitor.gap.report.document import build_report, simulate_all, summary_text
+    from monitor.gap.diagnose import diagnose
+    from monitor.gap.report.document import build_report
+    from monitor.gap.report.summary import summary_text
 
     machine = load_machine(args.config)
     if args.report is not None and args.report.exists() and not args.report.is_dir():
@@ -86,8 +87,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"gap: {msg}", file=sys.stderr, flush=True)
 
     diag = diagnose(rec, machine, progress)
-    traces = simulate_all(diag, machine)
-    report = build_report(diag, machine, traces)
+    report = build_report(diag, machine)
     text = summary_text(report)
     try:
         args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
 
             args.report.mkdir(parents=True, exist_ok=True)
             (args.report / "summary.txt").write_text(text, encoding="utf-8")
-            write_plots(diag, traces, report, args.report)
+            write_plots(diag, report, args.report)
     except OSError as exc:
         raise MonitorError(f"cannot write the report: {exc}") from None
     print(text.splitlines()[0])

@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.gap.diagnose.pipeline import Diagnosis
+from monitor.gap.diagnose.records import Diagnosis
 from monitor.gap.fit.score import normalised
 from monitor.gap.judge.where import spectra
-from monitor.gap.report.document import Traces
 from monitor.signals import MEASURED_NAMES, UNITS
 
 #: Seconds shown either side of the worst window.
@@ -26,9 +25,9 @@ def _plt():
     return plt
 
 
-def plot_traces(diag: Diagnosis, traces: Traces, report: dict, path: Path) -> None:
+def plot_traces(diag: Diagnosis, report: dict, path: Path) -> None:
     plt = _plt()
-    prep = diag.prep
+    prep, traces = diag.parts.prep, diag.traces
     t = prep.t - prep.t[0]
     win = report["where"]["windows"][0] if report["where"]["windows"] else None
     lo, hi = (win["t_start"] - MARGIN_S, win["t_end"] + MARGIN_S) if win else (0.0, 10.0)
@@ -45,7 +44,7 @@ def plot_traces(diag: Diagnosis, traces: Traces, report: dict, path: Path) -> No
     axes[-1].plot(t[sel], prep.cmd["SpoolCmd"][sel], color="k", lw=0.8)
     axes[-1].set_ylabel("SpoolCmd [%]")
     axes[-1].set_xlabel("time from start [s]")
-    for seg in diag.segments:
+    for seg in diag.parts.segments:
         if lo <= t[seg.start] <= hi:
             for ax in axes:
                 ax.axvline(t[seg.start], color="0.7", lw=0.5, ls=":")
@@ -74,17 +73,20 @@ def plot_regimes(report: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def plot_spectra(diag: Diagnosis, traces: Traces, path: Path) -> None:
+def plot_spectra(diag: Diagnosis, path: Path) -> None:
     plt = _plt()
-    f, p0 = spectra(normalised(diag.prep, traces.nominal))
-    p1 = spectra(normalised(diag.prep, traces.corrected))[1] if traces.corrected else None
+    prep, traces = diag.parts.prep, diag.traces
+    f, p0 = spectra(normalised(prep, traces.nominal))
+    p1 = spectra(normalised(prep, traces.corrected))[1] if traces.corrected else None
     fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
     for ax, (j, name) in zip(axes.flat, enumerate(MEASURED_NAMES), strict=True):
         ax.loglog(f[1:], p0[name][1:], color="tab:blue", label="nominal")
         if p1 is not None:
             ax.loglog(f[1:], p1[name][1:], color="tab:red", label="corrected")
         # White sensor noise: flat at 2 var / fs in the one-sided density.
-        ax.axhline(2 * diag.floor[j] / 100.0, color="0.5", ls="--", lw=0.8, label="sensor noise")
+        ax.axhline(
+            2 * diag.tolerances.floor[j] / 100.0, color="0.5", ls="--", lw=0.8, label="sensor noise"
+        )
         ax.set_title(f"{name} residual (normalised)")
         ax.set_ylabel("PSD [1/Hz]")
         ax.legend(fontsize=7)
@@ -110,11 +112,11 @@ def plot_ranking(report: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def write_plots(diag: Diagnosis, traces: Traces, report: dict, directory: Path) -> list[Path]:
+def write_plots(diag: Diagnosis, report: dict, directory: Path) -> list[Path]:
     paths = {
-        "traces_worst_window.png": lambda p: plot_traces(diag, traces, report, p),
+        "traces_worst_window.png": lambda p: plot_traces(diag, report, p),
         "residual_by_regime.png": lambda p: plot_regimes(report, p),
-        "residual_spectra.png": lambda p: plot_spectra(diag, traces, p),
+        "residual_spectra.png": lambda p: plot_spectra(diag, p),
         "candidates.png": lambda p: plot_ranking(report, p),
     }
     out = []

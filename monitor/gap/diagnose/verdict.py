@@ -1,0 +1,203 @@
+"""The diagnosis's judging stages: the verdict (with the calibration's absorbed effects and
+the sensor-lag check), then what to model next and the sensor-or-physics check.
+
+Verdict rules: see ``judge/decide.py``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from monitor.gap.diagnose.evaluate import Readings
+from monitor.gap.diagnose.records import Absorbed, Calibrated, Finding, Paired, Parts, Scores
+from monitor.gap.fit import calibrate as cal_mod
+from monitor.gap.fit import score as S
+from monitor.gap.fit import sensorcal
+from monitor.gap.fit.candidates import CONFOUNDED, Candidate
+from monitor.gap.judge import lagcheck, sensorphysics
+from monitor.gap.judge.decide import Decision, boot_gain, decide, explains, within_noise
+from monitor.gap.judge.suggest import suggest
+
+Progress = Callable[[str], None]
+
+#: An effect's fit moved a tolerance off the bound the calibration left it at when it moved
+#: it by this share of the band (a friction's fit took viscous friction from +30 % to +19 %
+#: or below; a hose's left volumes at +14.3-14.6 % of +15 %, where nothing stood in).
+MOVED_OFF = 0.25
+
+
+@dataclass(frozen=True)
+class Judged:
+    """The decision before the suggestion stage, and what it was checked against."""
+
+    decision: Decision
+    #: The JSON's ``lag_check`` (None: not checked).
+    lag_check: dict | None
+    absorbed: dict[str, Absorbed]
+    noise_only: bool
+
+
+def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
+    """Stage 6: the verdict from the held-out scores (``decide``), then checked against
+    the engine's speed ripple where a sensor lag is in question (``lagcheck``)."""
+    base, floor = scores.baseline, cal.floor
+    noise_only = within_noise(base.nominal, floor)
+    absorbed = (
+        {} if noise_only else calibration_absorbed(scores.singles, base.factors, cal.readings)
+    )
+    against = {name: a.sums for name, a in absorbed.items()}
+    structured = (paired.smooth, base.smooth_nominal)
+    d = decide(
+        noise_only,
+        scores.singles,
+        paired.pairs,
+        paired.sums,
+        base.nominal,
+        paired.boot_idx,
+        floor,
+        structured,
+        against,
+    )
+    chk = None if noise_only else _lag_check(d, cal, scores, paired)
+    lag_checked = None
+    if chk is not None:
+        before = d.verdict
+        d = _after_lag_check(d, chk, scores, paired, cal, against)
+        lag_checked = {
+            **chk.as_dict(),
+            "verdict_without_check": before,
+            "sensor_named": d.verdict == lagcheck.NAME,
+        }
+        say(
+            f"sensor lag against the engine's speed ripple: readings {lag_checked['readings']}"
+            f"; verdict {before} -> {d.verdict}"
+        )
+    return Judged(decision=d, lag_check=lag_checked, absorbed=absorbed, noise_only=noise_only)
+
+
+def _lag_candidate(singles: Sequence[Candidate]) -> Candidate | None:
+    return next((c for c in singles if c.effects[0].name == lagcheck.NAME), None)
+
+
+def _lag_check(
+    d: Decision, cal: Calibrated, scores: Scores, paired: Paired
+) -> lagcheck.LagCheck | None:
+    """How the readings follow the engine's speed ripple: checked when ``sensor_lag`` is
+    the verdict or explains the gap alone without being it (None: not checked)."""
+    lag_c = _lag_candidate(scores.singles)
+    if lag_c is None:
+        return None
+    base = scores.baseline
+    gain = boot_gain(base.nominal, paired.sums[lag_c.name], paired.boot_idx, cal.floor)
+    if d.verdict != lagcheck.NAME and not explains(lag_c, gain):
+        return None
+    lagged = cal.readings.held(lag_c.prep).predict(lag_c.factors, lag_c.effects)
+    held = cal.readings.held(None).segments
+    return lagcheck.check(cal.readings.prep, held, base.pred0, lagged)
+
+
+def _after_lag_check(
+    d: Decision,
+    chk: lagcheck.LagCheck,
+    scores: Scores,
+    paired: Paired,
+    cal: Calibrated,
+    against: dict,
+) -> Decision:
+    """A lagged sensor reports the engine's speed ripple late, a slow spool (or any plant
+    effect) leaves it prompt: a ``sensor_lag`` verdict with prompt readings is decided
+    again without it; late readings name it, if it explains the gap alone."""
+    lag_c = _lag_candidate(scores.singles)
+    base, idx, floor, sums = scores.baseline, paired.boot_idx, cal.floor, paired.sums
+    structured = (paired.smooth, base.smooth_nominal)
+    if d.verdict == lagcheck.NAME and chk.prompt:
+        rest = [c for c in scores.singles if c is not lag_c]
+        plain = [p for p in paired.pairs if all(e.name != lagcheck.NAME for e in p.effects)]
+        return decide(False, rest, plain, sums, base.nominal, idx, floor, structured, against)
+    if d.verdict != lagcheck.NAME and chk.late and lag_c is not None:
+        alone = decide(False, [lag_c], [], sums, base.nominal, idx, floor, structured, against)
+        if alone.verdict == lagcheck.NAME:
+            return alone
+    return d
+
+
+def suggest_next(
+    parts: Parts, cal: Calibrated, scores: Scores, paired: Paired, judged: Judged, say: Progress
+) -> Finding:
+    """Stage 7: for ``unexplained`` (or a sensor calibration, to check it against the plant
+    terms): what to model next (``suggest``); a sensor error moves one signal only, so a
+    plant term that explains more of the held-out gap makes it ``unexplained``."""
+    d, base, floor = judged.decision, scores.baseline, cal.floor
+    lead = checked = None
+    if d.verdict in ("unexplained", sensorcal.NAME):
+        readings = cal.readings
+        lead = suggest(
+            cal.prep,
+            (parts.fitted, readings.fit(None).plant, cal.fit_machine),
+            (parts.heldout, readings.held(None).plant, cal.held_machine),
+            base.factors,
+            floor,
+            base.gap0,
+            base.n_eff,
+            held_base=base.pred0,
+            # A sensor check compares single terms; the partner of the best is tried only
+            # if the verdict ends ``unexplained`` (below).
+            pair=d.verdict == "unexplained",
+        )
+    if d.verdict == sensorcal.NAME and d.chosen is not None and lead is not None:
+        sums = paired.sums[d.chosen.name]
+        checked = sensorphysics.compare(d.chosen, sums, lead, paired.boot_idx, floor)
+        if checked is not None and not checked.sensor_named:
+            say(f"not a sensor error: {checked.term} explains more across the signals")
+            d = Decision("unexplained", None, None, checked.plant_share)
+    if d.verdict == "unexplained" and lead is not None:
+        lead.with_pair()
+        say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
+    return Finding(
+        verdict=d.verdict,
+        also=d.also,
+        chosen=d.chosen,
+        confidence=d.confidence,
+        suggestion=lead.ranked if lead and d.verdict == "unexplained" else [],
+        suggestion_tried=lead.tried if lead else [],
+        sensor_check=checked.as_dict() if checked is not None else None,
+        traded=_traded(d, scores.singles, S.compared(cal.prep)),
+        lag_check=judged.lag_check,
+    )
+
+
+def calibration_absorbed(
+    singles: Sequence[Candidate], factors: dict[str, float], readings: Readings
+) -> dict[str, Absorbed]:
+    """Per physical single effect whose fit moved a confounded tolerance off the bound the
+    calibration (``factors``) left it at (by ``MOVED_OFF`` of the band): what its own
+    tolerances do without it (one held-out simulation each; none on a machine whose
+    calibration is inside its bands)."""
+    out = {}
+    for c in singles:
+        name = c.effects[0].name
+        moved = {
+            t: (f0, f1)
+            for t in CONFOUNDED.get(name, ())
+            if cal_mod.bound_side(t, f0 := factors.get(t, 1.0)) != 0
+            and abs((f1 := c.factors.get(t, 1.0)) - f0) >= MOVED_OFF * cal_mod.BY_NAME[t].band
+        }
+        if moved and len(c.effects) == 1:
+            out[c.name] = Absorbed(moved, readings.held(c.prep).both_sums(c.factors, ()))
+    return out
+
+
+def _traded(d: Decision, singles: Sequence[Candidate], names: Sequence[str]) -> dict | None:
+    """The JSON ``trade_off``: which effect was not named, the signal it made worse."""
+    if d.traded is None:
+        return None
+    name, worse = d.traded
+    best = next(c for c in singles if c.effects[0].name == name)
+    return {
+        "effect": name,
+        "member": best.members[0].name if best.members else "default",
+        "heldout_reduction": round(float(best.heldout_reduction), 4),
+        "signal": names[worse.signal],
+        "growth_share": round(worse.growth, 4),
+        "bootstrap_share": round(worse.share, 3),
+    }
