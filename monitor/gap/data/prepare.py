@@ -163,39 +163,9 @@ ROD_VEL_NOISE_GAIN = float(np.sum(np.convolve(_SMOOTH, _DIFF) ** 2))
 def prepare(rec: Recording, machine: MachineParams) -> Prepared:
     """Validate ``rec`` for the gap tool and resample it; raises a ``MonitorError``."""
     src = rec.source
-    missing_cmd = [n for n in COMMAND_NAMES if not rec.has(n)]
-    if missing_cmd:
-        raise InputFileError(
-            f"{src}: command signal(s) {', '.join(missing_cmd)} missing: the simulator is "
-            "driven by the recording's own commands"
-        )
-    present = [n for n in MEASURED_NAMES if rec.has(n)]
-    if len(present) < len(MEASURED_NAMES):
-        others = ", ".join(n for n in rec.columns if n not in COMMAND_NAMES) or "none"
-        raise NoHydraulicDataError(
-            f"{src}: no usable hydraulic data: needs {', '.join(MEASURED_NAMES)}, has {others}"
-        )
-    if len(rec) < 2 or rec.t[-1] - rec.t[0] < MIN_DURATION_S:
-        dur = 0.0 if len(rec) < 2 else rec.t[-1] - rec.t[0]
-        raise NoHydraulicDataError(
-            f"{src}: {dur:.1f} s is too short to diagnose: needs at least {MIN_DURATION_S:g} s "
-            "(a calibration and a held-out part of several duty cycles)"
-        )
+    _check_signals(rec)
     t, cols, valid = _resample(rec)
-    for name in COMMAND_NAMES:
-        ok = np.isfinite(cols[name])
-        if ok.mean() < MIN_VALID_SHARE:
-            raise InputFileError(
-                f"{src}: command {name} is missing in {100 * (1 - ok.mean()):.0f} % of the "
-                "samples; the simulator needs the commands"
-            )
-        valid &= ok
-    for name in MEASURED_NAMES:
-        share = float(np.isfinite(cols[name]).mean())
-        if share < MIN_VALID_SHARE:
-            raise NoHydraulicDataError(
-                f"{src}: {name} is missing in {100 * (1 - share):.0f} % of the samples"
-            )
+    valid = _check_samples(src, cols, valid)
     spool = np.nan_to_num(cols["SpoolCmd"])
     if not (np.abs(spool) > 5.0).any():
         raise NoHydraulicDataError(
@@ -235,6 +205,49 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         unscored=unscored,
         below_zero=reads_below_zero({n: meas[n] for n in MEASURED_NAMES}),
     )
+
+
+def _check_signals(rec: Recording) -> None:
+    """The commands and the hydraulic signals present, and the recording long enough."""
+    src = rec.source
+    missing_cmd = [n for n in COMMAND_NAMES if not rec.has(n)]
+    if missing_cmd:
+        raise InputFileError(
+            f"{src}: command signal(s) {', '.join(missing_cmd)} missing: the simulator is "
+            "driven by the recording's own commands"
+        )
+    present = [n for n in MEASURED_NAMES if rec.has(n)]
+    if len(present) < len(MEASURED_NAMES):
+        others = ", ".join(n for n in rec.columns if n not in COMMAND_NAMES) or "none"
+        raise NoHydraulicDataError(
+            f"{src}: no usable hydraulic data: needs {', '.join(MEASURED_NAMES)}, has {others}"
+        )
+    if len(rec) < 2 or rec.t[-1] - rec.t[0] < MIN_DURATION_S:
+        dur = 0.0 if len(rec) < 2 else rec.t[-1] - rec.t[0]
+        raise NoHydraulicDataError(
+            f"{src}: {dur:.1f} s is too short to diagnose: needs at least {MIN_DURATION_S:g} s "
+            "(a calibration and a held-out part of several duty cycles)"
+        )
+
+
+def _check_samples(src: str, cols: dict[str, np.ndarray], valid: np.ndarray) -> np.ndarray:
+    """Every command and measured signal present in enough of the resampled samples; the
+    samples valid where every command is."""
+    for name in COMMAND_NAMES:
+        ok = np.isfinite(cols[name])
+        if ok.mean() < MIN_VALID_SHARE:
+            raise InputFileError(
+                f"{src}: command {name} is missing in {100 * (1 - ok.mean()):.0f} % of the "
+                "samples; the simulator needs the commands"
+            )
+        valid &= ok
+    for name in MEASURED_NAMES:
+        share = float(np.isfinite(cols[name]).mean())
+        if share < MIN_VALID_SHARE:
+            raise NoHydraulicDataError(
+                f"{src}: {name} is missing in {100 * (1 - share):.0f} % of the samples"
+            )
+    return valid
 
 
 def _check_plausible(src: str, cols: dict[str, np.ndarray], machine: MachineParams) -> None:

@@ -143,8 +143,12 @@ _EDGES = (("P->A", "pa"), ("P->B", "pb"), ("A->tank", "at"), ("B->tank", "bt"))
 
 def library() -> list[PlantTerm]:
     """Every plant term but the periodic force (its frequency comes from the data)."""
-    terms = _leakage_terms()
-    terms += [
+    return [*_leakage_terms(), *_force_terms(), *_valve_terms(), *_pump_terms()]
+
+
+def _force_terms() -> list[PlantTerm]:
+    """Forces on the rod: viscous, Coulomb, and a spring about the mid stroke."""
+    return [
         PlantTerm(
             "force_velocity",
             "rod",
@@ -176,7 +180,11 @@ def library() -> list[PlantTerm]:
             _corr("force_position", 1e3),
         ),
     ]
-    terms += [
+
+
+def _valve_terms() -> list[PlantTerm]:
+    """A gain change of each metering edge of the valve."""
+    return [
         PlantTerm(
             "valve_setting",
             edge,
@@ -189,7 +197,11 @@ def library() -> list[PlantTerm]:
         )
         for edge, code in _EDGES
     ]
-    terms += [
+
+
+def _pump_terms() -> list[PlantTerm]:
+    """The pump's compensator, displacement and relief settings."""
+    return [
         PlantTerm(
             "pump_setting",
             "compensator",
@@ -221,7 +233,6 @@ def library() -> list[PlantTerm]:
             _shift(("relief_crack_pa", "relief_full_pa"), BAR),
         ),
     ]
-    return terms
 
 
 def describe(term: PlantTerm, c: np.ndarray) -> tuple[float, str]:

@@ -190,6 +190,30 @@ def decide(
         judged = None if structured is None else (structured[0], before_s)
     red_b = boot_reduction(before, sums[best.name], idx, floor)
     gain_b = boot_gain(before, sums[best.name], idx, floor)
+    named, worse, settled = _best_named(best, before, judged, sums, idx, floor, gain_b)
+    if settled is not None:
+        return settled
+    traded = (best.effects[0].name, worse) if worse is not None else None
+    if not named or worse is not None:
+        if against:
+            absorbed = _absorbed_runner(singles[1:], sums, nominal, idx, floor, structured, against)
+            if absorbed is not None:
+                return absorbed
+        return _not_named(nominal, idx, floor, structured, red_b, worse, traded)
+    return _named(best, singles, pairs, sums, nominal, idx, floor, (red_b, gain_b))
+
+
+def _best_named(
+    best: Candidate,
+    before: SegmentSums,
+    judged: tuple[dict[str, SegmentSums], SegmentSums] | None,
+    sums: dict[str, SegmentSums],
+    idx: np.ndarray,
+    floor: np.ndarray,
+    gain_b: np.ndarray,
+) -> tuple[bool, Worse | None, Decision | None]:
+    """Whether the best explains the gap (against ``before``), the signal it makes clearly
+    worse if it would be named, and the decision when its structured part settles it."""
     # Either way, an effect whose own structured part is below the practical level is not
     # named: a modest share of a healthy machine's base mismatch looks like that.
     large = _practical(best, judged, floor)
@@ -208,30 +232,51 @@ def decide(
                 best, before_s, smooth[best.name], idx, floor_s
             )
             if worse is None:
-                return Decision(best.effects[0].name, None, best, s_conf)
-    traded = (best.effects[0].name, worse) if worse is not None else None
-    named = named and worse is None
-    if not named and against:
-        absorbed = _absorbed_runner(singles[1:], sums, nominal, idx, floor, structured, against)
-        if absorbed is not None:
-            return absorbed
-    if not named:
-        if structured is not None:
-            # What is left is base mismatch and a structured part too small to matter, or
-            # not clearly larger: ``unexplained`` needs the structured part above the
-            # practical level on some signal in ``SIGNIFICANT`` of the resamples, as an
-            # effect needs its gain.
-            floor_s = basemis.smoothed_floor(floor)
-            small = basemis.small_share(structured[1], idx, floor_s)
-            if basemis.practically_small(structured[1], floor_s) or small > 1 - SIGNIFICANT:
-                return Decision("none", None, None, small, traded)
-        if within_noise(nominal, floor, MARGINAL_RATIO):
-            conf = np.all(boot_mse(nominal, idx) < MARGINAL_RATIO * floor, axis=1)
-            return Decision("none", None, None, float(np.mean(conf)), traded)
-        # Unexplained: the best does not explain the gap in the resample, or (when it traded
-        # signals) the signal it makes worse grows in the resample.
-        conf = worse.share if worse is not None else float(np.mean(red_b < EXPLAIN_MIN))
-        return Decision("unexplained", None, None, conf, traded)
+                return named, worse, Decision(best.effects[0].name, None, best, s_conf)
+    return named, worse, None
+
+
+def _not_named(
+    nominal: SegmentSums,
+    idx: np.ndarray,
+    floor: np.ndarray,
+    structured: tuple[dict[str, SegmentSums], SegmentSums] | None,
+    red_b: np.ndarray,
+    worse: Worse | None,
+    traded: tuple[str, Worse] | None,
+) -> Decision:
+    """``none`` or ``unexplained`` when the best effect is not named."""
+    if structured is not None:
+        # What is left is base mismatch and a structured part too small to matter, or
+        # not clearly larger: ``unexplained`` needs the structured part above the
+        # practical level on some signal in ``SIGNIFICANT`` of the resamples, as an
+        # effect needs its gain.
+        floor_s = basemis.smoothed_floor(floor)
+        small = basemis.small_share(structured[1], idx, floor_s)
+        if basemis.practically_small(structured[1], floor_s) or small > 1 - SIGNIFICANT:
+            return Decision("none", None, None, small, traded)
+    if within_noise(nominal, floor, MARGINAL_RATIO):
+        conf = np.all(boot_mse(nominal, idx) < MARGINAL_RATIO * floor, axis=1)
+        return Decision("none", None, None, float(np.mean(conf)), traded)
+    # Unexplained: the best does not explain the gap in the resample, or (when it traded
+    # signals) the signal it makes worse grows in the resample.
+    conf = worse.share if worse is not None else float(np.mean(red_b < EXPLAIN_MIN))
+    return Decision("unexplained", None, None, conf, traded)
+
+
+def _named(
+    best: Candidate,
+    singles: list[Candidate],
+    pairs: list[Candidate],
+    sums: dict[str, SegmentSums],
+    nominal: SegmentSums,
+    idx: np.ndarray,
+    floor: np.ndarray,
+    boot: tuple[np.ndarray, np.ndarray],
+) -> Decision:
+    """The best effect named, or a pair of it and another that clearly does better; with
+    ``boot`` the best's bootstrap reduction and gain."""
+    red_b, gain_b = boot
     gap0 = whole_gap(best)
     good = [
         p

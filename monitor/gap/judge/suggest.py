@@ -21,9 +21,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
 from monitor.gap.data.prepare import Prepared
 from monitor.gap.data.segments import Segment
@@ -34,6 +34,7 @@ from monitor.gap.fit.predict import SegmentPlant, sense
 from monitor.gap.fit.sensorterms import SensorTerm, fit_sensor_terms
 from monitor.gap.fit.terms import PlantTerm, describe, library, periodic
 from monitor.gap.judge.decide import PAIR_GAIN, PAIR_MATERIAL
+from monitor.gap.judge.periodic import periodic_frequencies_hz
 from monitor.sim.machine import MachineParams
 
 #: Plant terms refined (a second Gauss-Newton step and a run of their own) after screening.
@@ -42,12 +43,6 @@ REFINE = 3
 SCORED = 3
 #: Runners-up tried as the best term's partner.
 PAIR_POOL = 2
-#: The periodic load's frequency is searched in this band (Hz).
-PERIODIC_BAND_HZ = (0.1, 20.0)
-#: A line's prominence is its power over the spectrum's local (log) mean within this (Hz):
-#: without RodPos the residual's power is largest below 0.5 Hz (the rod integrated from
-#: the flow drifts), and the strongest bin there is no line.
-PROMINENCE_WINDOW_HZ = 0.2
 #: A term is suggested only when it removes at least this share of the held-out gap (one
 #: that makes the held-out part worse is no lead).
 SUGGEST_MIN = 0.2
@@ -239,54 +234,6 @@ def _pairs(f: Fitted) -> list[tuple[PlantTerm | SensorTerm, np.ndarray]]:
     return list(zip(f.terms, f.coefs, strict=True))
 
 
-#: Candidate lines tried for the periodic load: the strongest and the most prominent.
-N_LINES = 1
-#: Lines closer than this (Hz) are one line.
-LINE_SEPARATION_HZ = 0.05
-
-
-def periodic_frequencies_hz(prep: Prepared, segments: Sequence[Segment], pred: Pred) -> list[float]:
-    """Candidate lines of the residual's spectrum in ``PERIODIC_BAND_HZ`` (power summed over
-    the compared signals; the residual outside the segments set to zero, zero-padded
-    eightfold and each peak interpolated: a line's frequency to a small share of
-    1/duration): the ``N_LINES`` strongest and the ``N_LINES`` most prominent (power over
-    the local mean of the log spectrum), whichever the plant fit then prefers."""
-    r = S.normalised(prep, pred)
-    dt = float(prep.t[1] - prep.t[0])
-    n = 8 * len(prep)
-    power = np.zeros(n // 2 + 1)
-    for v in r.values():
-        x = np.zeros(len(prep))
-        for seg in segments:
-            # Each segment's quadratic trend removed: a residual drifting over seconds (a rod
-            # integrated from the flow, a slow load) would otherwise leak through the
-            # segments' on-off pattern into lines at multiples of its repetition rate.
-            y = np.nan_to_num(v[seg.scored])
-            rows = np.arange(y.size)
-            if y.size > 2:
-                y = y - np.polyval(np.polyfit(rows, y, 2), rows)
-            x[seg.scored] = y
-        power += np.abs(np.fft.rfft(x, n)) ** 2
-    df = 1.0 / (n * dt)
-    log_p = np.log(power + 1e-300)
-    width = max(int(PROMINENCE_WINDOW_HZ / df), 3)
-    prominence = log_p - uniform_filter1d(log_p, width, mode="nearest")
-    lo, hi = (int(round(f / df)) for f in PERIODIC_BAND_HZ)
-    out: list[float] = []
-    for score in (log_p, prominence):
-        s = score[lo:hi].copy()
-        for _ in range(N_LINES):
-            i = lo + int(np.argmax(s))
-            a, b, c = log_p[i - 1 : i + 2]
-            shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) < 0 else 0.0
-            f = (i + shift) * df
-            if all(abs(f - g) > LINE_SEPARATION_HZ for g in out):
-                out.append(float(f))
-            k = int(LINE_SEPARATION_HZ / df)
-            s[max(i - lo - k, 0) : i - lo + k + 1] = -np.inf
-    return out
-
-
 def suggest(
     prep: Prepared,
     fit: tuple[Sequence[Segment], SegmentPlant, MachineParams],
@@ -319,24 +266,14 @@ def suggest(
         key=lambda f: f.fit_cost,
     )
 
-    def scored(f: Fitted) -> Fitted:
-        sums = S.segment_sums(prep, held_runs.segments, held_runs.pred(_pairs(f), f.factors))
-        f.heldout_gap = S.gap(sums.mse(), floor)
-        f.heldout_reduction = S.reduction(gap0, f.heldout_gap)
-        f.criterion = criterion(f.heldout_gap, floor, n_eff, f.n_coefs)
-        f.sums = sums
-        return f
-
+    scored = _Scorer(prep, held_runs, floor, gap0, n_eff)
     # The periodic term is always scored: its frequency is the data's own line, and a load
     # the calibration half absorbed can rank it low on the calibration part.
-    def periodic_in(fs: Sequence[Fitted]) -> list[Fitted]:
-        return [f for f in fs if f.terms[0].kind == "force_periodic"]
-
     per: list[Fitted] = []
-    if not periodic_in(refined[:SCORED]):
-        per = periodic_in(refined[SCORED:])[:1]
-        if not per and periodic_in(screened[REFINE:]):
-            per = [_fit_plant(fit_runs, _plant(periodic_in(screened[REFINE:])[0]), r0, 2)]
+    if not _periodic_in(refined[:SCORED]):
+        per = _periodic_in(refined[SCORED:])[:1]
+        if not per and _periodic_in(screened[REFINE:]):
+            per = [_fit_plant(fit_runs, _plant(_periodic_in(screened[REFINE:])[0]), r0, 2)]
     singles = [scored(f) for f in [*refined[:SCORED], *per[:1], *sensors[:1]]]
     singles.sort(key=lambda f: f.criterion)
     if isinstance(singles[0].terms[0], PlantTerm):
@@ -347,28 +284,60 @@ def suggest(
     tried = [_entry(f, f.terms[0], f.coefs[0], f.heldout_reduction) for f in singles]
     if best.heldout_reduction < SUGGEST_MIN:
         return Suggestions([], tried, singles)
-    alone = [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
-
-    def paired() -> list[dict]:
-        two = _best_pair(fit_runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
-        if (
-            two is not None
-            and two.heldout_gap <= (1 - PAIR_GAIN) * best.heldout_gap
-            and best.heldout_gap - two.heldout_gap >= PAIR_MATERIAL * gap0
-        ):
-            return [
-                _entry(best, two.terms[0], two.coefs[0], best.heldout_reduction),
-                _entry(two, two.terms[1], two.coefs[1], two.heldout_reduction),
-            ]
-        return alone
-
+    paired = partial(_with_partner, fit_runs, singles, r0, scored)
     if not pair:
-        return Suggestions(alone, tried, singles, paired)
+        return Suggestions(_alone(best), tried, singles, paired)
     return Suggestions(paired(), tried, singles)
 
 
+@dataclass(frozen=True)
+class _Scorer:
+    """Scores a fitted term (or pair) on the held-out part, like the effects."""
+
+    prep: Prepared
+    held_runs: _Runs
+    floor: np.ndarray
+    gap0: float
+    n_eff: float
+
+    def __call__(self, f: Fitted) -> Fitted:
+        runs = self.held_runs
+        sums = S.segment_sums(self.prep, runs.segments, runs.pred(_pairs(f), f.factors))
+        f.heldout_gap = S.gap(sums.mse(), self.floor)
+        f.heldout_reduction = S.reduction(self.gap0, f.heldout_gap)
+        f.criterion = criterion(f.heldout_gap, self.floor, self.n_eff, f.n_coefs)
+        f.sums = sums
+        return f
+
+
+def _periodic_in(fs: Sequence[Fitted]) -> list[Fitted]:
+    return [f for f in fs if f.terms[0].kind == "force_periodic"]
+
+
+def _alone(best: Fitted) -> list[dict]:
+    return [_entry(best, best.terms[0], best.coefs[0], best.heldout_reduction)]
+
+
+def _with_partner(
+    runs: _Runs, singles: Sequence[Fitted], r0: np.ndarray, scored: _Scorer
+) -> list[dict]:
+    """The ranking: the best term, and its partner when the pair removes clearly more."""
+    best = singles[0]
+    two = _best_pair(runs, best, singles[1 : 1 + PAIR_POOL], r0, scored)
+    if (
+        two is not None
+        and two.heldout_gap <= (1 - PAIR_GAIN) * best.heldout_gap
+        and best.heldout_gap - two.heldout_gap >= PAIR_MATERIAL * scored.gap0
+    ):
+        return [
+            _entry(best, two.terms[0], two.coefs[0], best.heldout_reduction),
+            _entry(two, two.terms[1], two.coefs[1], two.heldout_reduction),
+        ]
+    return _alone(best)
+
+
 def _best_pair(
-    runs: _Runs, best: Fitted, others: Sequence[Fitted], r0: np.ndarray, scored
+    runs: _Runs, best: Fitted, others: Sequence[Fitted], r0: np.ndarray, scored: _Scorer
 ) -> Fitted | None:
     """The best term with each runner-up: the runner-up's coefficients refitted (one
     Gauss-Newton step) with the best term in place; the pair with the best criterion."""
