@@ -588,7 +588,7 @@ def test_a_fault_on_before_an_outage_is_the_same_episode_after_it(tmp_path) -> N
     assert states[1][2] == states[3][2] == "spool_wear"
     # EngineSpeed is missing over the gap (engine off at once); its return is reported once
     # it has held for engine_confirm_s (one frame is not evidence), then fault at once.
-    confirm_s = cfg.operating.engine_confirm_s
+    confirm_s = cfg.gating.operating.engine_confirm_s
     assert cut_s + gap_s + confirm_s <= states[3][1] < cut_s + gap_s + confirm_s + 0.05
     assert det.summary["alarm_episodes"] == 1
 

@@ -92,7 +92,7 @@ def test_a_section_made_of_records_keeps_its_yaml_keys_flat(tmp_path: Path) -> N
     lands in its record, the rest keep their defaults, and a wrong key names the flat keys."""
     path = tmp_path / "monitor.yaml"
     path.write_text("plausibility:\n  frozen_s: 0.5\n  rest_max_bar: 3\n  range_s: 0.2\n")
-    plaus = load_config(path).plausibility
+    plaus = load_config(path).gating.plausibility
     assert plaus.frozen.frozen_s == 0.5
     assert plaus.rest.rest_max_bar == 3.0 and plaus.rest.rest_settle_s == 30.0
     assert plaus.signal_range.range_s == 0.2 and plaus.signal_range.pressure_max_bar == 400.0
