@@ -12,15 +12,13 @@ attack harness) apply the same rule and give the same events.
 
 from __future__ import annotations
 
-import json
 import random
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 from attack_support import AttackRig, multicast_error
+from detect_support import detect_cli
 from naive_frames import counter_believed, read_candump_lines
 from naive_frames import recording_from_candump as recording_from_frames
 
@@ -52,27 +50,10 @@ def flood(src: Path, out: Path, n: int, seed: int) -> Path:
 def detect_events(log: Path, tmp_path: Path) -> tuple[list[tuple], dict]:
     """``monitor detect LOG``'s state changes (time and the keys that make a decision) and
     its summary."""
-    summary, events = tmp_path / f"{log.stem}.json", tmp_path / f"{log.stem}.jsonl"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "monitor",
-            "detect",
-            str(log),
-            "--summary",
-            str(summary),
-            "--events",
-            str(events),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    assert proc.returncode == 0, proc.stderr
-    lines = [json.loads(x) for x in events.read_text().splitlines()]
+    rc, summary, err, lines = detect_cli(log, tmp_path, stem=log.stem)
+    assert rc == 0, err
     changes = [(e["t"], *(e.get(k) for k in KEYS)) for e in lines if e["event"] == "state"]
-    return changes, json.loads(summary.read_text())
+    return changes, summary
 
 
 @pytest.fixture(scope="module")

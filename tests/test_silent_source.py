@@ -5,14 +5,12 @@ really stopped (every message silent, or the pump at rest) stays ``inactive``.""
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from detect_support import detect_cli as run_detect
 from j1939_support import TP_CM_ID, TP_DT_ID, decode_dm, reassemble
 from live_support import (
     assert_same_events,
@@ -62,26 +60,9 @@ def cut_log(
 
 
 def detect_cli(log: Path, tmp_path: Path) -> tuple[int, dict[str, Any], list[dict[str, Any]]]:
-    summary, events = tmp_path / "s.json", tmp_path / "e.jsonl"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "monitor",
-            "detect",
-            str(log),
-            "--summary",
-            str(summary),
-            "--events",
-            str(events),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    lines = [json.loads(x) for x in events.read_text().splitlines()]
+    rc, summary, _, lines = run_detect(log, tmp_path)
     changes = [e for e in lines if e["event"] == "state"]  # not the J once a second
-    return proc.returncode, json.loads(summary.read_text()), changes
+    return rc, summary, changes
 
 
 def _states(events: list[dict[str, Any]]) -> list[tuple[float, str, str | None, str | None]]:

@@ -3,13 +3,11 @@
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from detect_support import detect_cli
 from naive_frames import recording_from_candump
 
 from monitor.codec.logwrite import write_candump
@@ -18,29 +16,6 @@ from monitor.resources import resource_path
 from monitor.sampling.read import read_recording
 
 WINDOW_S = 30.0  # the shipped model's J window: N = 3000 samples at 100 Hz
-
-
-def detect_cli(rec: Path, tmp_path: Path, *extra: str) -> tuple[int, dict, str, list[dict]]:
-    summary, events = tmp_path / "s.json", tmp_path / "e.jsonl"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "monitor",
-            "detect",
-            str(rec),
-            "--summary",
-            str(summary),
-            "--events",
-            str(events),
-            *extra,
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    lines = [json.loads(x) for x in events.read_text().splitlines()] if events.exists() else []
-    return proc.returncode, json.loads(summary.read_text()), proc.stderr, lines
 
 
 def edited_log(tmp_path: Path, name: str, keep_s: float | None = None, **nan_cols: bool) -> Path:
