@@ -189,8 +189,8 @@ class Sampler:
             cycle_times_s, columns, period_s, stale_cycles, max_gap_s, resync_frames, optional
         )
         self._warming = True  # no row emitted yet: the first ones may be warming
-        self._values = [_NAN] * len(self.columns)
-        self._last_t = [-math.inf] * len(self.columns)  # sampler time of each latest value
+        self._values = np.full(len(self.columns), _NAN)
+        self._last_t = np.full(len(self.columns), -math.inf)  # sampler time of each value
         self.seen: set[str] = set()
         self.first_time_s: float | None = None  # log time of the first frame (sampler time 0)
         self.start_time_s: float | None = None  # log time of row t = 0 (once warming ends)
@@ -286,14 +286,6 @@ class Sampler:
 
     # -- rows -----------------------------------------------------------------------------
 
-    def _row(self, k: int) -> list[float]:
-        spec = self.spec
-        last = np.array(self._last_t)
-        ok = fresh(
-            k * spec.period_s, last, last.max(), self._resumed, spec.stale_s, spec.on_schedule_s
-        )
-        return [(k - self.origin_k) * spec.period_s, *np.where(ok, self._values, _NAN).tolist()]
-
     def _emit_before(self, st: float) -> None:
         """Queue the rows of instants strictly before sampler time ``st``."""
         end = math.ceil((st - _EPS_S) / self.spec.period_s)  # first instant >= st - eps
@@ -310,23 +302,20 @@ class Sampler:
             if not self._warming:
                 self.origin_k = k0
                 self.start_time_s = self.first_time_s + k0 * self.period_s  # type: ignore[operator]
-        if end - k0 <= 64:
-            self._pending.extend(self._row(k) for k in range(k0, end))
-        else:  # a long gap: same state throughout, vectorised
-            inst = np.arange(k0, end) * self.period_s
-            vals = np.array(self._values)
-            last = np.array(self._last_t)
-            ok = fresh(
-                inst[:, None],
-                last[None, :],
-                last.max(),
-                self._resumed,
-                self.spec.stale_s,
-                self.spec.on_schedule_s,
-            )
-            t = np.arange(k0 - self.origin_k, end - self.origin_k) * self.period_s
-            block = np.column_stack([t, np.where(ok, vals[None, :], np.nan)])
-            self._pending.extend(block.tolist())
+        # The state is the same for every row of [k0, end): no frame lies between them.
+        inst = np.arange(k0, end) * self.period_s
+        last = self._last_t
+        ok = fresh(
+            inst[:, None],
+            last[None, :],
+            last.max(),
+            self._resumed,
+            self.spec.stale_s,
+            self.spec.on_schedule_s,
+        )
+        t = np.arange(k0 - self.origin_k, end - self.origin_k) * self.period_s
+        block = np.column_stack([t, np.where(ok, self._values[None, :], np.nan)])
+        self._pending.extend(block.tolist())
         self._k = end
 
     def take(self) -> np.ndarray:
