@@ -113,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
     from monitor.config.layout import check_loop_model
     from monitor.config.settings import load_config
     from monitor.detection.offline import detect
+    from monitor.model.machinecard import reference_reason
     from monitor.model.modelfile import load_model
     from monitor.offline.recordings import read_loop
 
@@ -127,7 +128,10 @@ def run(args: argparse.Namespace) -> int:
     rec = read_loop(args.recording, cfg, args.loop)
     tag = {} if args.loop is None else {"loop": args.loop}
     horizon = args.horizon or cfg.horizon
-    det = detect(model, rec, cfg.alarm, horizon, gating=cfg.gating)
+    # A model not commissioned on the config's machine_id withholds its hydraulic alarms
+    # (the daemon applies the same rule).
+    reference = reference_reason(model.card, cfg.machine_id)
+    det = detect(model, rec, cfg.alarm, horizon, gating=cfg.gating, reference=reference)
     det.summary.update(tag)
     lines = _lines(det, args.j_every, tag)
     try:
@@ -149,9 +153,16 @@ def run(args: argparse.Namespace) -> int:
     # The alarm compares the level (each statistic over its threshold, the largest) with 1:
     # its largest value says how close.
     level = "" if s["max_level"] is None else f", max level {s['max_level']:.3g} (1 = alarm)"
+    # Said even when nothing was withheld: the verdict rests on another machine's model.
+    ref = (
+        ""
+        if reference is None or s["withheld"]
+        else f"; {reference}: a fault would be withheld, not raised (commission this machine "
+        "with monitor train to judge it)"
+    )
     print(
         f"{args.recording}: {_result_line(s)} (max J {max_j}, eps0 {s['threshold']:.4g}"
-        f"{level}, judged {s['judged_s']:.1f} s)",
+        f"{level}, judged {s['judged_s']:.1f} s){ref}",
         file=sys.stderr,
     )
     return 3 if s["verdict"] == "not_judged" else 0

@@ -219,7 +219,7 @@ def _card(monitor_cfg: MonitorConfig, loop_name: str | None, recordings: list) -
             }
             check_seen(seen, machine, f"{rec.source}: shows", where)
     source = None if loop.machine_source is None else str(loop.machine_source)
-    return card_for(loop.name, loop.machine, source)
+    return card_for(loop.name, loop.machine, source, monitor_cfg.machine_id)
 
 
 def _check_input(

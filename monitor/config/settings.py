@@ -9,7 +9,10 @@ starts in, so a config shipped inside the installed package never writes into it
 ``operating``, ``plausibility`` and ``validity`` say which samples
 the detector judges; ``loops`` (optional, ``monitor.config.loops``) lists several loops;
 ``machine`` (optional) names the simulator YAML of the machine of a config without loops,
-against which a model's recorded machine is checked (``monitor.model.machinecard``).
+against which a model's recorded machine is checked (``monitor.model.machinecard``);
+``machine_id`` (optional) names the machine monitored (its serial), which ``monitor train``
+records in the model and which a model must have been commissioned on to raise hydraulic
+alarms (``machinecard.reference_reason``).
 
 Every problem (unknown key, wrong type, missing input file, impossible value) is one
 ``ConfigError`` naming the file and the key; the CLI turns it into exit 2.
@@ -215,6 +218,17 @@ class DetectorSection:
 
 
 @dataclass(frozen=True)
+class MachineSection:
+    """The machine monitored: ``machine_id`` (its id, None: not declared) and ``machine``
+    (the simulator YAML of the machine of the one loop of a config without ``loops``, and
+    its parameters)."""
+
+    machine_id: str | None = None
+    source: Path | None = None
+    params: MachineParams | None = None
+
+
+@dataclass(frozen=True)
 class MonitorConfig:
     source: Path
     dbc: Path
@@ -230,16 +244,18 @@ class MonitorConfig:
     #: The ``operating``, ``plausibility`` and ``validity`` sections: which samples are judged.
     gating: GatingConfig = field(default_factory=GatingConfig)
     loops: tuple[LoopConfig, ...] = ()  # as written in the file; empty: no ``loops`` section
-    #: The simulator YAML of the machine of the one loop of a config without ``loops``, and
-    #: its parameters.
-    machine: Path | None = None
-    machine_params: MachineParams | None = None
+    machine: MachineSection = field(default_factory=MachineSection)
+
+    @property
+    def machine_id(self) -> str | None:
+        """The machine monitored, as the config declares it (None: not declared)."""
+        return self.machine.machine_id
 
     @property
     def monitored_loops(self) -> tuple[LoopConfig, ...]:
         """The loops the daemon monitors: ``loops``, or the one ``boom`` loop of ``model``."""
         return self.loops or default_loops(
-            self.model, self.j1939.source_address, self.machine_params, self.machine
+            self.model, self.j1939.source_address, self.machine.params, self.machine.source
         )
 
 
@@ -259,6 +275,7 @@ _TOP_KEYS = {
     "validity",
     "loops",
     "machine",
+    "machine_id",
 }
 
 
@@ -315,8 +332,22 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             section(ValidityConfig, "validity"),
         ),
         loops=loops,
-        machine=machine,
-        machine_params=None if machine is None else load_machine(machine),
+        machine=MachineSection(
+            _machine_id(data.get("machine_id"), source),
+            machine,
+            None if machine is None else load_machine(machine),
+        ),
+    )
+
+
+def _machine_id(value: Any, source: Path) -> str | None:
+    """``machine_id``: a non-empty text (a serial written as a number would lose its
+    leading zeros, so it must be quoted)."""
+    if value is None or (isinstance(value, str) and value.strip()):
+        return None if value is None else value.strip()
+    raise ConfigError(
+        f"{source}: machine_id must be a text naming the machine (quote a number: "
+        f"machine_id: '0042'), got {shown(value)}"
     )
 
 

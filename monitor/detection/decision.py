@@ -19,6 +19,7 @@ from monitor.detection.alarm import AlarmConfig, AlarmMachine, Isolator, State
 from monitor.detection.gating import status_keys
 from monitor.detection.opstate import OpState
 from monitor.detection.plausibility import STALE
+from monitor.model.machinecard import COMMISSION
 
 
 class Status(NamedTuple):
@@ -41,6 +42,7 @@ class Decision(NamedTuple):
     state_changed: bool  # the alarm state itself changed
     raised: bool = False  # a new alarm episode starts here (black box, DM1 occurrence)
     episode_open: bool = False  # an alarm episode is open (in fault, or in a short gap)
+    withheld: bool = False  # an alarm episode would start here, but alarms are withheld
 
 
 class Decider:
@@ -51,6 +53,12 @@ class Decider:
     inside it does not end it (the fault comes back with the same isolation, no new black
     box, no new DM1 occurrence); only the clear rule or a longer gap does.  One fault, one
     episode, live and offline alike.
+
+    ``withhold`` (a reason, ``monitor.model.machinecard.reference_reason``): the model is
+    another machine's, so its hydraulic alarms are withheld: the alarm machine runs as
+    usual, but a fault is reported as normal (no MON_Alarm fault, no DM1, no black box) and
+    ``withheld`` counts the episodes it would have raised.  Sensor faults, which do not rest
+    on the model, stay.
     """
 
     def __init__(
@@ -59,13 +67,18 @@ class Decider:
         eps0: float,
         isolator: Isolator | None = None,
         window_n: int = 0,
+        withhold: str | None = None,
     ) -> None:
         self.machine = AlarmMachine(alarm, eps0, isolator, window_n)
         self.status: Status | None = None  # of the last sample decided
+        self.withhold = withhold
+        self.withheld = 0  # alarm episodes withheld
 
     @property
     def state(self) -> State:
-        return self.machine.state
+        """The state reported (a withheld fault is reported as normal)."""
+        state = self.machine.state
+        return State.NORMAL if self.withhold is not None and state is State.FAULT else state
 
     @property
     def fault(self) -> str:
@@ -94,22 +107,49 @@ class Decider:
         state = self.machine.step(
             j, sensor_ok, engine_rpm if on else math.nan, e, regime, op_state != OpState.WARM_UP, on
         )
+        m = self.machine
+        raised, episode_open, withheld = m.raised, m.episode_open, False
+        if self.withhold is not None:
+            withheld, raised, episode_open = raised, False, False
+            self.withheld += withheld
+            state = State.NORMAL if state is State.FAULT else state
         status = Status(state, int(op_state), int(oor), int(check), int(sensor))
         prev = self.status
         self.status = status
-        m = self.machine
-        return Decision(
-            state, status != prev, prev is None or state is not prev.state, m.raised, m.episode_open
-        )
+        changed = prev is None or state is not prev.state
+        return Decision(state, status != prev, changed, raised, episode_open, withheld)
 
     def quiet(self) -> bool:
-        """The last sample was quiet: a run of quiet samples may go to ``skip_quiet``."""
-        return self.status == QUIET
+        """The last sample was quiet: a run of quiet samples may go to ``skip_quiet`` (not
+        while a withheld fault holds the alarm machine)."""
+        return self.status == QUIET and self.machine.state is State.NORMAL
 
     def skip_quiet(self, e: np.ndarray, regimes: np.ndarray) -> None:
         """``decide`` over a run of quiet samples (J finite and <= eps0, status ``QUIET``)
         at once; the status stays ``QUIET``."""
         self.machine.skip_quiet(e, regimes)
+
+
+def _wall(t_s: float, start_time_s: float | None) -> str | None:
+    """The wall clock of ``t_s`` s from the first sample (None without a start time)."""
+    if start_time_s is None:
+        return None
+    return dt.datetime.fromtimestamp(start_time_s + t_s, tz=dt.timezone.utc).isoformat()
+
+
+def withheld_record(
+    t_s: float, level: float, reason: str, start_time_s: float | None
+) -> dict[str, Any]:
+    """The event line of an alarm withheld (``kind: "withheld"``): ``t`` s from the first
+    sample, ``time`` the wall clock (null without a start time), the ``level`` that would
+    have raised it (1 = alarm) and the ``reason``."""
+    return {
+        "kind": "withheld",
+        "t": round(float(t_s), 6),
+        "time": _wall(t_s, start_time_s),
+        "level": float(level),
+        "reason": f"{reason}; {COMMISSION}",
+    }
 
 
 def event_record(
@@ -129,12 +169,9 @@ def event_record(
     wall clock (null without a start time), ``state``, ``J`` (null while the window warms up
     or pauses), ``threshold``, ``fault`` (only in fault) and the gating's keys.  A sensor
     fault from missing data names its signal: ``sensor`` it, ``sensor_check`` ``stale``."""
-    wall = None
-    if start_time_s is not None:
-        wall = dt.datetime.fromtimestamp(start_time_s + t_s, tz=dt.timezone.utc).isoformat()
     return {
         "t": round(float(t_s), 6),
-        "time": wall,
+        "time": _wall(t_s, start_time_s),
         "state": state.label,
         "J": float(j) if math.isfinite(j) else None,
         "threshold": float(eps0),

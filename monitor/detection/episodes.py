@@ -31,6 +31,9 @@ class Alarms:
     # open at the end of the log), fault (named once, from the votes of the whole episode,
     # as ``first_fault``) and votes (fault samples per isolation label).
     named: list[dict[str, Any]] = field(default_factory=list)
+    #: When each alarm episode a reference model would have raised was withheld instead
+    #: (s from the first sample; ``Decision.withheld``).
+    withheld_t: list[float] = field(default_factory=list)
 
 
 class EpisodeLog:
@@ -43,10 +46,13 @@ class EpisodeLog:
         self._first_votes: dict[str, int] = {}  # over the first episode, short gaps included
         self._in_first = False
         self._votes: dict[str, int] = {}  # over the current episode
+        self.withheld_t: list[float] = []
 
     def add(self, d: Decision, t_s: float, fault: str) -> None:
         """One decision at ``t_s`` (s from the first sample); ``fault`` the isolation then."""
         self.count += d.raised
+        if d.withheld:
+            self.withheld_t.append(t_s)
         if d.raised and self.first_alarm_t is None:
             self.first_alarm_t = t_s
             self._in_first = True
@@ -67,7 +73,9 @@ class EpisodeLog:
         for ep in self.named:
             ep["fault"] = vote_name(ep["votes"])
         first = vote_name(self._first_votes)
-        return Alarms(states, events, self.first_alarm_t, first, self.count, self.named)
+        return Alarms(
+            states, events, self.first_alarm_t, first, self.count, self.named, self.withheld_t
+        )
 
 
 def vote_name(votes: dict[str, int]) -> str | None:

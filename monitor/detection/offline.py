@@ -120,9 +120,12 @@ def detect(
     horizon: int | None = None,
     exact: bool = False,
     gating: GatingConfig | None = None,
+    reference: str | None = None,
 ) -> Detection:
     """Run the detector over a whole recording (``exact``: see ``residual_series``;
-    ``gating``: operating state, plausibility and validity, see ``monitor.detection.gating``)."""
+    ``gating``: operating state, plausibility and validity, see ``monitor.detection.gating``;
+    ``reference``: why ``model`` is another machine's, ``machinecard.reference_reason``: its
+    hydraulic alarms are withheld and the summary's ``withheld`` says when and why)."""
     alarm = alarm or AlarmConfig()
     check_recording(model, rec, horizon)
     gate = Gate(model, alarm.min_engine_rpm, gating)
@@ -135,9 +138,11 @@ def detect(
     series = {s.name: s.series(e, rec) for s in stats}
     # The alarm machine compares the level with 1: each statistic against its threshold.
     level = level_series([(series[s.name], s.threshold_) for s in stats])
-    decider = Decider(alarm, 1.0, make_isolator(model), model.window_n)
+    decider = Decider(alarm, 1.0, make_isolator(model), model.window_n, reference)
     run = _decide_all(decider, model, rec, gate, g, e, series["J"], level, missing)
-    summary = detection_summary(model, rec, gate, g, run, series, level, horizon, missing)
+    summary = detection_summary(
+        model, rec, gate, g, run, series, level, horizon, missing, reference
+    )
     return Detection(
         rec.t,
         y_hat,

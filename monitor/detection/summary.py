@@ -16,6 +16,7 @@ from monitor.detection.outofrange import describe, out_of_range_values
 from monitor.detection.plausibility import finding
 from monitor.detection.verdict import verdict
 from monitor.io.recording import Recording
+from monitor.model.machinecard import COMMISSION
 from monitor.model.modelfile import MonitorModel
 from monitor.model.statistic import statistic_keys, statistics_entries
 
@@ -30,8 +31,10 @@ def detection_summary(
     level: np.ndarray,
     horizon: int | None,
     missing: np.ndarray,
+    reference: str | None = None,
 ) -> dict[str, Any]:
-    """The summary's keys, in the order the file shows them."""
+    """The summary's keys, in the order the file shows them (``reference``: why the model
+    is another machine's, ``machinecard.reference_reason``)."""
     states = alarms.states
     summary = {
         "alarm": alarms.first_alarm_t is not None,
@@ -51,6 +54,8 @@ def detection_summary(
         "sensor_fault_fraction": float(np.mean(states == State.SENSOR_FAULT)),
         **gating_summary(rec, gate, g),
         "source": rec.source,
+        "reference_model": reference is not None,
+        "withheld": _withheld(reference, alarms, level),
     }
     period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
     summary["out_of_range_values"] = out_of_range_values(
@@ -72,6 +77,24 @@ def detection_summary(
     summary["statistics"] = statistics_entries(model)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, model.spec.variables)
     return summary
+
+
+def _withheld(reference: str | None, alarms: Alarms, level: np.ndarray) -> dict[str, Any] | None:
+    """The summary's ``withheld``: null unless a reference model's alarm was withheld, then
+    when the first would have been raised, how many, the largest level, and why."""
+    if reference is None or not alarms.withheld_t:
+        return None
+    top = float(np.nanmax(level))
+    why = (
+        f"{reference}: a level of {top:.3g} (1 = alarm) does not tell a fault from this "
+        f"machine's difference from the model's machine; {COMMISSION}"
+    )
+    return {
+        "first_t": alarms.withheld_t[0],
+        "episodes": len(alarms.withheld_t),
+        "max_level": top,
+        "reason": why,
+    }
 
 
 def stale_checks(

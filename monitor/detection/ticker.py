@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from monitor.detection.alarm import AlarmConfig, AlarmMachine, State, regime_of
-from monitor.detection.decision import Decider, event_record
+from monitor.detection.decision import Decider, event_record, withheld_record
 from monitor.detection.gating import Gate, GatingConfig
 from monitor.detection.offline import make_isolator
 from monitor.detection.opstate import OpState
@@ -48,6 +48,7 @@ class Tick:
     stale_signal: str | None = None  # the first model signal missing, when inputs are not ok
     episode_open: bool = False  # an alarm episode is open (fault, or a short gap within one)
     level: float = math.nan  # compared with 1: each statistic's value / threshold, the largest
+    withheld: bool = False  # a reference model's alarm would have been raised here: withheld
 
 
 class _Inputs:
@@ -151,8 +152,12 @@ class Ticker:
         horizon: int | None = None,
         columns: tuple[str, ...] = ROW_COLUMNS,
         gating: GatingConfig | None = None,
+        reference: str | None = None,
     ) -> None:
         self.model = model
+        #: Why ``model`` is another machine's (``machinecard.reference_reason``): its
+        #: hydraulic alarms are withheld (``Decider``); None: this machine's own model.
+        self.reference = reference
         self.alarm = alarm or AlarmConfig()
         missing = [n for n in (*model.spec.variables, "EngineSpeed") if n not in columns]
         if missing:
@@ -160,7 +165,7 @@ class Ticker:
         self._inputs = _Inputs(model, columns)
         self._residual = _Residual(model, horizon, self._inputs.z)
         self._family = _Family(model, columns)
-        self.decider = Decider(self.alarm, 1.0, make_isolator(model), model.window_n)
+        self.decider = Decider(self.alarm, 1.0, make_isolator(model), model.window_n, reference)
         self.eps0 = float(model.eps0)
         self.gate = Gate(model, self.alarm.min_engine_rpm, gating, columns)
         self.ticks = 0
@@ -171,7 +176,7 @@ class Ticker:
 
     @property
     def state(self) -> State:
-        return self.machine.state
+        return self.decider.state  # as reported: a withheld fault is normal
 
     @property
     def fault(self) -> str:
@@ -230,6 +235,7 @@ class Ticker:
             None if inputs_ok else inp.stale_signal(),
             d.episode_open,
             level,
+            d.withheld,
         )
 
 
@@ -248,3 +254,9 @@ def event(tick: Tick, fault: str, eps0: float, start_time_s: float | None) -> di
         tick.sensor,
         tick.stale_signal,
     )
+
+
+def withheld_event(tick: Tick, reason: str, start_time_s: float | None) -> dict[str, Any]:
+    """The JSON-lines event of an alarm withheld at ``tick`` (``Tick.withheld``), as
+    ``monitor detect``'s summary ``withheld`` tells it."""
+    return withheld_record(tick.t_s, tick.level, reason, start_time_s)

@@ -9,7 +9,10 @@ monitor was running (state normal or fault, J finite).  The verdict:
   of N samples of running, in-range, complete data);
 * ``not_judged``: no J was ever judged, so the data cannot support "healthy": no commands
   (engine speed never received), a recording shorter than the window, or the engine off,
-  warm-up, outside the model's trained range or missing model signals throughout.
+  warm-up, outside the model's trained range or missing model signals throughout; or the
+  model is another machine's (``reference_model``) and would have alarmed: its alarm was
+  withheld (``withheld``), since it cannot tell a fault from this machine's difference from
+  the model's machine, so neither ``fault`` nor ``healthy`` is supported.
 
 A recording without any EngineSpeed is ``not_judged`` (no commands) even where its samples
 are sensor faults because the pump shows a working machine (``opstate.silent_source``): a
@@ -58,6 +61,9 @@ def verdict(
     no_commands = len(states) > 0 and not np.isfinite(engine_rpm).any()
     if summary["sensor_fault"] and not no_commands:
         return "sensor_fault", judged_s, None
+    withheld = summary.get("withheld")
+    if withheld:
+        return "not_judged", judged_s, withheld["reason"]
     if judged.any():
         return "healthy", judged_s, None
     return (

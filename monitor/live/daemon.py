@@ -229,6 +229,14 @@ class Daemon:
             )
 
     def _state_change(self, tick: Tick, lp: Loop) -> None:
+        if tick.withheld:  # a reference model's alarm: a line and the journal, nothing raised
+            line = lp.withheld_event(tick, self.pipeline.start_time_s)
+            self.disk.log_event(line)
+            log.warning("t=%.2f s: %salarm withheld: %s", line["t"], _prefix(lp), line["reason"])
+            if self.on_event is not None:
+                self.on_event(line)
+        if not tick.changed:
+            return
         ev = lp.event(tick, self.pipeline.start_time_s)
         self.disk.log_event(ev)
         _log_change(tick, lp, ev)
@@ -264,6 +272,10 @@ def _reader(
         opener=opener if bus is None else None,
         backoff=Backoff(cfg.bus.reopen_initial_s, cfg.bus.reopen_max_s),
     )
+
+
+def _prefix(lp: Loop) -> str:
+    return f"{lp.name}: " if lp.tag else ""
 
 
 def _log_change(tick: Tick, lp: Loop, ev: dict[str, Any]) -> None:

@@ -4,6 +4,7 @@ diagnostics) on its view of the one sampler row (``monitor.config.layout``).
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
@@ -17,11 +18,14 @@ from monitor.config.loops import LoopConfig
 from monitor.config.settings import MonitorConfig
 from monitor.detection.alarm import State
 from monitor.detection.plausibility import finding
-from monitor.detection.ticker import Tick, Ticker, event
+from monitor.detection.ticker import Tick, Ticker, event, withheld_event
 from monitor.io.digest import sha256_file
 from monitor.live.dm1 import Diagnostics
 from monitor.live.outputs import AlarmFrames
+from monitor.model.machinecard import COMMISSION, reference_reason
 from monitor.model.modelfile import MonitorModel, load_model
+
+log = logging.getLogger("monitor")
 
 # MON_Status shows the most pressing loop: a fault before a sensor fault before normal.
 _SEVERITY = {State.FAULT: 3, State.SENSOR_FAULT: 2, State.NORMAL: 1, State.INACTIVE: 0}
@@ -57,10 +61,18 @@ class Loop:
         lc: LoopConfig, cfg: MonitorConfig, view: tuple[str, ...]
     ) -> tuple[MonitorModel, Ticker]:
         """The loop's model and a fresh ticker (raises on a bad model file, or one of
-        another loop or machine)."""
+        another loop or machine).  A model not commissioned on the config's ``machine_id``
+        withholds its hydraulic alarms (``machinecard.reference_reason``, as ``monitor
+        detect``): MON_Alarm stays normal, no DM1, no black box, a ``withheld`` line."""
         model = load_model(lc.model)
         check_loop_model(model, lc, cfg)
-        return model, Ticker(model, cfg.alarm, cfg.horizon, columns=view, gating=cfg.gating)
+        reference = reference_reason(model.card, cfg.machine_id)
+        if reference is not None:
+            log.warning("loop %s: %s; %s", lc.name, reference, COMMISSION)
+        ticker = Ticker(
+            model, cfg.alarm, cfg.horizon, columns=view, gating=cfg.gating, reference=reference
+        )
+        return model, ticker
 
     def swap(
         self,
@@ -89,6 +101,11 @@ class Loop:
 
     def event(self, tick: Tick, start_time_s: float | None) -> dict[str, Any]:
         return event(tick, self.ticker.fault, self.ticker.eps0, start_time_s) | self.tag
+
+    def withheld_event(self, tick: Tick, start_time_s: float | None) -> dict[str, Any]:
+        """The line of an alarm withheld at ``tick`` (a model of another machine)."""
+        reason = self.ticker.reference or ""
+        return withheld_event(tick, reason, start_time_s) | self.tag
 
     def alarm_label(self) -> str:
         """The black-box file's label of this loop's alarm."""

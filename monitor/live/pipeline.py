@@ -3,7 +3,8 @@
 One ``feed`` per received frame: J1939 requests go to the loops' diagnostics, the rest is
 decoded (alive counter, CRC, ranges), sampled onto the 100 Hz clock and every finished row
 ticked by each loop; a loop's state changes and its MON_Alarm / DM1 frames leave through the
-two callbacks the daemon gives (``send``, ``on_change``).  ``flush`` ticks the last rows.
+two callbacks the daemon gives (``send``, ``on_change``, which also hears an alarm a
+reference model withheld).  ``flush`` ticks the last rows.
 The sample clock is the frames' own timestamps, so a log replayed onto a bus gives the
 events ``monitor detect`` gives for the file.
 
@@ -132,7 +133,7 @@ class FramePipeline:
 
     def _tick_loop(self, lp: Loop, row: np.ndarray, bus_time: float) -> None:
         tick = lp.tick(row)
-        if tick.changed:
+        if tick.changed or tick.withheld:  # a withheld alarm is said, never raised
             self.on_change(tick, lp)
         ticker, frames = lp.ticker, lp.frames
         if frames.due(tick.t_s, tick.state, tick.state_changed):

@@ -10,6 +10,12 @@ model: another loop's name, another machine (a parameter more than ``MACHINE_TOL
 off) or training data the configured machine cannot produce (more than
 ``CAPABILITY_MARGIN`` times its pump's flow or its relief pressure) is a ``ModelFileError``
 naming both.
+
+The card also records the machine a model was commissioned on (``id``: the config's
+``machine_id`` when it was trained; ``REFERENCE_MACHINE`` for the shipped model), and
+``reference_reason`` is the one rule, offline, in the daemon and in the fleet, for whether a
+model judges its own machine or another one (a reference model, whose hydraulic alarms are
+then withheld: ``monitor.detection.decision``).
 """
 
 from __future__ import annotations
@@ -49,9 +55,13 @@ class ModelCard:
     loop: str | None
     machine: dict[str, float] | None = None
     machine_source: str | None = None
+    #: The machine commissioned on (the config's ``machine_id``), None: not declared.
+    machine_id: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"loop": self.loop, "parameters": self.machine, "source": self.machine_source}
+        d = {"loop": self.loop, "parameters": self.machine, "source": self.machine_source}
+        # Only when declared: a card without it is written as before.
+        return d if self.machine_id is None else d | {"id": self.machine_id}
 
     @classmethod
     def from_dict(cls, d: Any) -> ModelCard:
@@ -60,6 +70,9 @@ class ModelCard:
         loop, params, source = d.get("loop"), d.get("parameters"), d.get("source")
         if loop is not None and not isinstance(loop, str):
             raise ValueError("header machine.loop must be a loop name or null")
+        machine_id = d.get("id")
+        if machine_id is not None and not (isinstance(machine_id, str) and machine_id):
+            raise ValueError("header machine.id must be a machine id or null")
         if params is not None:
             if (
                 not isinstance(params, dict)
@@ -70,7 +83,7 @@ class ModelCard:
             ):
                 raise ValueError(f"header machine.parameters must hold {', '.join(MACHINE_KEYS)}")
             params = {k: float(params[k]) for k in MACHINE_KEYS}
-        return cls(loop, params, None if source is None else str(source)[:200])
+        return cls(loop, params, None if source is None else str(source)[:200], machine_id)
 
 
 def machine_values(params: MachineParams) -> dict[str, float]:
@@ -78,11 +91,53 @@ def machine_values(params: MachineParams) -> dict[str, float]:
     return {k: round(params.value(f) * factor, 6) for k, (f, factor, _, _) in MACHINE_KEYS.items()}
 
 
-def card_for(loop: str | None, params: MachineParams | None, source: str | None) -> ModelCard:
-    """The card ``monitor train`` writes."""
+def card_for(
+    loop: str | None,
+    params: MachineParams | None,
+    source: str | None,
+    machine_id: str | None = None,
+) -> ModelCard:
+    """The card ``monitor train`` writes (``machine_id``: the machine commissioned on)."""
     if params is None:
-        return ModelCard(loop)
-    return ModelCard(loop, machine_values(params), source)
+        return ModelCard(loop, machine_id=machine_id)
+    return ModelCard(loop, machine_values(params), source, machine_id)
+
+
+#: The machine the shipped model was commissioned on: the simulated reference machine of
+#: config/simulator.yaml, whose recordings the replay logs are.  The shipped config declares
+#: it (``machine_id: reference``); a real machine declares its own id.
+REFERENCE_MACHINE = "reference"
+
+#: What makes a verdict possible on a machine judged with another machine's model.
+COMMISSION = (
+    "its hydraulic alarms are withheld, since a healthy machine 5-15 % from the model's machine "
+    "looks as faulty to it as a worn one; commission this machine (monitor train on its own "
+    "normal operation, with machine_id declared) to judge it"
+)
+
+
+def reference_reason(card: ModelCard | None, machine_id: str | None) -> str | None:
+    """Why a model with ``card`` judges another machine than ``machine_id`` (the machine
+    the run declares: the config's ``machine_id``, a fleet's machine folder), or None when
+    it judges the machine it was commissioned on.
+
+    A model that records no machine (a file from before ``id``, or trained without a
+    ``machine_id``) is taken as the judged machine's own, as before.  A run that declares
+    no machine is not the model's machine: only a declared id can claim a model's data."""
+    commissioned = None if card is None else card.machine_id
+    if commissioned is None or commissioned == machine_id:
+        return None
+    model = (
+        "the shipped reference model, commissioned on the reference machine"
+        if commissioned == REFERENCE_MACHINE
+        else f"a model commissioned on machine {commissioned!r}"
+    )
+    run = (
+        "this machine (the config declares no machine_id)"
+        if machine_id is None
+        else f"machine {machine_id!r}"
+    )
+    return f"judged with {model}, not a model of {run}"
 
 
 def describe(values: dict[str, float]) -> str:
