@@ -32,9 +32,11 @@ REPO = Path(__file__).resolve().parents[1]
 
 def write_config(tmp_path: Path, extra: str, base: bool = True, model: Path | None = None) -> Path:
     """``tmp_path/monitor.yaml``: the shipped DBC and ``model`` (default: the shipped
-    model) unless ``base`` is False, then ``extra`` YAML."""
+    model) on the reference machine (the shipped logs' and models trained on them) unless
+    ``base`` is False, then ``extra`` YAML."""
     model = model or resource_path("config", "boom_default.model.npz")
-    text = f"dbc: {resource_path('dbc', 'monitor.dbc')}\nmodel: {model}\n" if base else ""
+    dbc = resource_path("dbc", "monitor.dbc")
+    text = f"dbc: {dbc}\nmodel: {model}\nmachine_id: reference\n" if base else ""
     p = tmp_path / "monitor.yaml"
     p.write_text(text + extra)
     return p

@@ -19,7 +19,9 @@ def test_detect_uses_the_config_dbc_without_loop(tmp_path, capsys) -> None:
     log = resource_path("replay", "spool_wear.log").read_text()
     (tmp_path / "moved.log").write_text(log.replace(f" {OLD}#", f" {NEW}#"))
     model = resource_path("config", "boom_default.model.npz")
-    (tmp_path / "monitor.yaml").write_text(f"dbc: moved.dbc\nmodel: {model}\n")
+    (tmp_path / "monitor.yaml").write_text(
+        f"dbc: moved.dbc\nmodel: {model}\nmachine_id: reference\n"
+    )
 
     def verdict(args: list[str]) -> tuple[int, str]:
         out = tmp_path / "s.json"

@@ -382,7 +382,8 @@ def test_a_judged_log_names_its_episode_from_every_fault_sample_of_it():
         resource_path("config", "boom_default.model.npz"),
         resource_path("replay", "piston_wear.log"),
     )
-    judged = judge_log(model_path.read_bytes(), str(log))
+    # The shipped log of the reference machine, judged as that machine.
+    judged = judge_log(model_path.read_bytes(), str(log), None, "reference")
     (ep,) = json.loads(judged.row["episodes"])
     raised = [e for e in judged.events if e["state"] == "fault"]
     assert ep["start_t"] == raised[0]["t"] and ep["open"] is True

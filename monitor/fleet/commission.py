@@ -16,8 +16,10 @@ from monitor.fleet.store import ResultStore
 from monitor.io.digest import sha256_file
 
 
-def train_task(paths: list[str], config: str | None, isolation: str, reference: bytes) -> bytes:
-    return pipeline.train_model_bytes(paths, config, isolation, reference)
+def train_task(
+    paths: list[str], config: str | None, isolation: str, reference: bytes, machine_id: str
+) -> bytes:
+    return pipeline.train_model_bytes(paths, config, isolation, reference, machine_id)
 
 
 def _settings(default: bytes, opts: RunOptions) -> dict[str, Any]:
@@ -121,6 +123,7 @@ def _submit(
             opts.config,
             opts.isolation,
             default,
+            m.machine_id,
             key=f"train-{m.machine_id}",
             pure=False,
         )

@@ -91,10 +91,13 @@ def train_model_bytes(
     config_path: str | None = None,
     isolation: str = "sim",
     reference: bytes | None = None,
+    machine_id: str | None = None,
 ) -> bytes:
     """`monitor train REC... --out M --folds 4 --bias off [--isolation I] [--reference R]`
     with its other defaults (:data:`COMMISSIONING`): the model file's bytes
-    (``reference``: the reference model's bytes)."""
+    (``reference``: the reference model's bytes; ``machine_id``: the machine commissioned,
+    recorded in the model as ``machine_id:`` in a config makes `monitor train` do)."""
+    from monitor.model.machinecard import card_for
     from monitor.offline.recordings import read_loop
     from monitor.training.settings import (
         DGRNNSettings,
@@ -114,7 +117,9 @@ def train_model_bytes(
         statistics=StatisticSettings(bias=COMMISSIONING["bias"]),
         isolation=IsolationSettings(method=isolation),
     )
-    return model_to_bytes(train(recordings, settings, reference=ref))
+    model = train(recordings, settings, reference=ref)
+    model.card = card_for(None, None, None, machine_id)
+    return model_to_bytes(model)
 
 
 def _drift(j: np.ndarray, j_median: float | None) -> float | None:
@@ -166,15 +171,22 @@ def statistic_ratios(summary: dict[str, Any]) -> dict[str, float | None]:
     return {ratio_column(stat.name): stat.peak_ratio(summary) for stat in registry()}
 
 
-def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> Judged:
-    """`monitor detect PATH --model M --j-every 0`: its summary as row keys, its events."""
+def judge_log(
+    model_bytes: bytes, path: str, config_path: str | None = None, machine_id: str | None = None
+) -> Judged:
+    """`monitor detect PATH --model M --j-every 0` with the config's ``machine_id`` the
+    fleet's machine ``machine_id``: its summary as row keys, its events.  A model not
+    commissioned on that machine (the default model of a machine without commissioning)
+    withholds its hydraulic alarms, the row says ``reference_model``."""
     from monitor.detection.offline import detect
+    from monitor.model.machinecard import reference_reason
     from monitor.offline.recordings import read_loop
 
     cfg = _config(config_path)
     model = model_from_bytes(model_bytes)
     rec = read_loop(path, cfg, None)
-    det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+    reference = reference_reason(model.card, machine_id)
+    det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating, reference=reference)
     s = json.loads(json.dumps(det.summary))  # exactly what --summary writes
     eps0 = float(s["threshold"])
     j = det.j[np.isfinite(det.j)]
@@ -198,6 +210,7 @@ def judge_log(model_bytes: bytes, path: str, config_path: str | None = None) -> 
         "max_level": s.get("max_level"),
         "p50_j_ratio": float(np.median(j)) / eps0 if j.size else None,
         "p50_j_drift": _drift(j, model.training.get("j_median")),
+        "reference_model": bool(s["reference_model"]),
     }
     events = [json.loads(json.dumps(dict(e, event="state"))) for e in det.events]
     end_s = float(rec.t[-1] - rec.t[0]) if len(rec) else 0.0

@@ -27,10 +27,13 @@ from monitor.io.digest import sha256_file
 __all__ = ["FleetInterrupted", "ResultsWriteError", "RunOptions", "judge_task", "run_fleet"]
 
 
-def judge_task(model_bytes: bytes, path: str, config: str | None) -> dict[str, Any]:
-    """A worker's task: the row keys and events of one log, or why it could not be judged."""
+def judge_task(
+    model_bytes: bytes, path: str, config: str | None, machine_id: str | None = None
+) -> dict[str, Any]:
+    """A worker's task: the row keys and events of one log of machine ``machine_id``, or
+    why it could not be judged."""
     try:
-        judged = pipeline.judge_log(model_bytes, path, config)
+        judged = pipeline.judge_log(model_bytes, path, config, machine_id)
         return {"row": judged.row, "events": judged.events, "error": None}
     except (MonitorError, OSError, ValueError, KeyError) as exc:
         return {"row": {}, "events": [], "error": f"{type(exc).__name__}: {exc}"}
@@ -115,6 +118,7 @@ def _judge(
             machine_models[m.machine_id][0],
             str(p),
             opts.config,
+            m.machine_id,
             key=f"judge-{sha[:16]}-{i}",
             pure=False,
         )

@@ -50,6 +50,9 @@ LOG_SCHEMA = pa.schema(
         # JSON text: the log's alarm episodes (monitor.fleet.episodes), each with kind, start_t,
         # end_t, duration_s, name, check, votes, spn, fmi (null in older results).
         ("episodes", pa.string()),
+        # judged with a model not commissioned on this machine (the default model of a
+        # machine without commissioning): its hydraulic alarms withheld (null in older results)
+        ("reference_model", pa.bool_()),
     ]
 )
 
