@@ -57,8 +57,8 @@ class Decider:
     ``withhold`` (a reason, ``monitor.model.machinecard.reference_reason``): the model is
     another machine's, so its hydraulic alarms are withheld: the alarm machine runs as
     usual, but a fault is reported as normal (no MON_Alarm fault, no DM1, no black box) and
-    ``withheld`` counts the episodes it would have raised.  Sensor faults, which do not rest
-    on the model, stay.
+    ``Decision.withheld`` marks where it would have raised an episode.  Sensor faults, which
+    do not rest on the model, stay.
     """
 
     def __init__(
@@ -72,7 +72,6 @@ class Decider:
         self.machine = AlarmMachine(alarm, eps0, isolator, window_n)
         self.status: Status | None = None  # of the last sample decided
         self.withhold = withhold
-        self.withheld = 0  # alarm episodes withheld
 
     @property
     def state(self) -> State:
@@ -111,7 +110,6 @@ class Decider:
         raised, episode_open, withheld = m.raised, m.episode_open, False
         if self.withhold is not None:
             withheld, raised, episode_open = raised, False, False
-            self.withheld += withheld
             state = State.NORMAL if state is State.FAULT else state
         status = Status(state, int(op_state), int(oor), int(check), int(sensor))
         prev = self.status
