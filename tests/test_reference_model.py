@@ -142,3 +142,25 @@ def test_fleet_rows_follow_the_same_rule() -> None:
     assert not row["alarm"] and row["fault"] is None
     row = judge_log(data, str(LOG), None, REFERENCE_MACHINE).row
     assert row["reference_model"] is False and row["verdict"] == "fault"
+
+
+def test_a_reload_that_declares_another_machine_withholds_from_then_on(tmp_path: Path) -> None:
+    """SIGHUP after `machine_id` changed: the same model file, but a new ticker that
+    withholds (and back again when the machine is the model's)."""
+    from monitor.codec.frames import FrameCodec
+    from monitor.config.layout import row_layout
+    from monitor.live.loops import Loop
+    from monitor.live.reload import prepare
+
+    p = tmp_path / "m.yaml"
+    p.write_text("machine_id: reference\n")
+    cfg = load_config(p)
+    codec = FrameCodec.from_dbc(cfg.dbc)
+    _, views = row_layout(cfg, codec)
+    lp = Loop(cfg.monitored_loops[0], cfg, codec, views[0])
+    assert lp.ticker.reference is None
+    p.write_text("machine_id: EX-0042\n")
+    result = prepare(cfg, [lp], None)  # type: ignore[arg-type]  # no event log change
+    assert not isinstance(result, Exception) and result.loaded[0] is not None
+    _, ticker, _ = result.loaded[0]
+    assert ticker.reference is not None and "'EX-0042'" in ticker.reference

@@ -68,8 +68,9 @@ def prepare(current: MonitorConfig, loops: Sequence[Loop], quota: Quota) -> Relo
 
 
 def ticker_rules(cfg: MonitorConfig) -> tuple[Any, ...]:
-    """The settings a ticker is built with besides its model."""
-    return (cfg.alarm, cfg.horizon, cfg.gating)
+    """The settings a ticker is built with besides its model (the machine declared decides
+    whether its model is a reference, ``machinecard.reference_reason``)."""
+    return (cfg.alarm, cfg.horizon, cfg.gating, cfg.machine_id)
 
 
 def loop_layout(cfg: MonitorConfig) -> list[tuple[Any, ...]]:
