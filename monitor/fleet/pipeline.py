@@ -96,7 +96,7 @@ def train_model_bytes(
     """`monitor train REC... --out M --folds 4 --bias off [--isolation I] [--reference R]`
     with its other defaults (:data:`COMMISSIONING`): the model file's bytes
     (``reference``: the reference model's bytes; ``machine_id``: the machine commissioned,
-    recorded in the model as ``machine_id:`` in a config makes `monitor train` do)."""
+    recorded in the model as `monitor train` records the config's ``machine_id``)."""
     from monitor.model.machinecard import card_for
     from monitor.offline.recordings import read_loop
     from monitor.training.settings import (
