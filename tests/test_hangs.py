@@ -65,7 +65,7 @@ def test_a_huge_integer_in_the_config_is_one_line(tmp_path, capsys, digits: int)
     if digits == 4000:  # a Python int, beyond any float
         assert "frames_max_per_s must be a finite number" in err
     else:  # more digits than Python converts to an int
-        assert "line 4: an integer of 5000 characters" in err
+        assert "line 5: an integer of 5000 characters" in err  # after dbc, model, machine_id
 
 
 def _model_claiming(tmp_path: Path, shape: tuple[int, ...]) -> Path:
