@@ -146,6 +146,9 @@ def test_no_commissioning_uses_the_default_model_and_says_so(run1):
     assert all(r["reference_model"] and r["verdict"] != "fault" and not r["alarm"] for r in m04)
     others = [r for r in rows(out) if r["machine"] != "M04" and r["error"] is None]
     assert others and all(r["reference_model"] is False for r in others)
+    # A commissioned model records its machine (the machine's folder), as `monitor train`
+    # records the config's machine_id.
+    assert load_model(out / "models" / "M01.model.npz").card.machine_id == "M01"
 
 
 def test_each_row_and_its_events_equal_monitor_detect_with_the_machines_model(run1, tmp_path):
