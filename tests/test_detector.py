@@ -191,6 +191,9 @@ def test_train_isolation_runs_sets_the_simulated_runs(tmp_path, capsys):
     assert main([*argv, "--isolation-runs", "1"]) == 0
     said = capsys.readouterr().err
     assert "learning fault signatures from 12 simulated runs" in said
+    # The shipped config declares the reference machine: the model records it.
+    assert "commissioned on machine 'reference'" in said
+    assert load_model(model).card.machine_id == "reference"
     assert load_model(model).isolation.labels == tuple(
         f for f in ("piston_wear", "spool_stroke", "spool_wear") for _ in range(4)
     )

@@ -336,7 +336,8 @@ def run(args: argparse.Namespace) -> int:
         raise MonitorError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     print(
         f"wrote {args.out}: preset {cfg.dgrnn.preset}, sigma {model.dgrnn.grnn.sigma_:.4g}, "
-        f"N {model.window_n}, J0 {model.j0:.4g}, eps0 {model.eps0:.4g}",
+        f"N {model.window_n}, J0 {model.j0:.4g}, eps0 {model.eps0:.4g}, commissioned on "
+        + (f"machine {card.machine_id!r}" if card.machine_id else "no machine (no machine_id)"),
         file=sys.stderr,
     )
     return 0
