@@ -30,6 +30,7 @@ import numpy as np
 
 from monitor.io.recording import Recording
 from monitor.model.filecheck import MAX_WINDOW_N, check_number, check_whole
+from monitor.model.support import implied_rate, spool_shares, window_maxima
 from monitor.model.threshold import ThresholdRule
 
 #: The members shipped with the monitor, imported (and so registered) before any is used.
@@ -200,30 +201,35 @@ class Statistic(ABC):
 
     def support(self, held: HeldOut, parts: Sequence[np.ndarray]) -> dict[str, Any]:
         """What the threshold rests on: hours of judged held-out data, how many of the
-        statistic's own windows judged it, oil temperatures covered, and the member's own
-        coverage (:meth:`coverage`)."""
+        statistic's own windows judged it and how many of them count as independent, the
+        false-alarm rate the threshold implies on them with its 95 % bound
+        (``monitor.model.support``), the oil temperatures and spool regimes covered, and the
+        member's own coverage (:meth:`coverage`)."""
         hours = 0.0
-        windows = 0
         temps: list[np.ndarray] = []
         for rec, s in zip(held.recordings, parts, strict=True):
             judged = np.isfinite(s)
             period = float(np.median(np.diff(rec.t))) if len(rec) > 1 else 0.01
             hours += float(judged.sum()) * period / 3600.0
-            n = len(s) // self.window_n
-            blocks = judged[: n * self.window_n].reshape(n, self.window_n)
-            windows += int(np.sum(blocks.sum(axis=1) * 2 >= self.window_n))
             if rec.has("OilTemp"):
                 temps.append(rec["OilTemp"][judged & np.isfinite(rec["OilTemp"])])
+        maxima = [window_maxima(s, self.window_n) for s in parts]
         oil = np.concatenate(temps) if temps else np.zeros(0)
         out: dict[str, Any] = {
             "validation": held.validation,
             "parts": len(parts),
             "judged_h": round(hours, 4),
-            "windows": windows,
+            "windows": int(sum(np.isfinite(m).sum() for m in maxima)),
             "window_s": round(self.window_n * 0.01, 3),
         }
+        out |= implied_rate(maxima, self.threshold_, self.window_n * 0.01)
         if oil.size:
             out["oil_temp_c"] = [round(float(oil.min()), 2), round(float(oil.max()), 2)]
+        if all(r.has("SpoolCmd") for r in held.recordings):
+            shares = spool_shares(
+                [r["SpoolCmd"] for r in held.recordings], [np.isfinite(s) for s in parts]
+            )
+            out["spool_share"] = shares
         return out | self.coverage(held)
 
     def coverage(self, held: HeldOut) -> dict[str, Any]:

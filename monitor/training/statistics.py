@@ -17,6 +17,7 @@ from monitor.model.modelfile import MonitorModel
 from monitor.model.spec import DGRNNSpec
 from monitor.model.statistic import HeldOut, Statistic, registry
 from monitor.model.threshold import ThresholdRule
+from monitor.training.support import earned, support_line
 
 Progress = Callable[[str], None]
 
@@ -26,8 +27,9 @@ def fit_statistics(
 ) -> tuple[dict[str, str], dict[str, Any]]:
     """Every member as ``settings`` (a ``TrainConfig``) ask, into ``model``: J always (its
     failure is the training's), the others off with the reason when the held-out data
-    cannot support them.  Returns the notes ("on" or "off...") by member key and what
-    each fitted threshold rests on by member name."""
+    cannot support them (too short, too few independent windows, or a threshold that does
+    not hold from one half of the held-out data to the other: :func:`earned`).  Returns the
+    notes ("on" or "off...") by member key and what each threshold rests on by member name."""
     rule: ThresholdRule = settings.thresholds.rule
     notes: dict[str, str] = {}
     support: dict[str, Any] = {}
@@ -47,11 +49,20 @@ def fit_statistics(
             cls.put(model, None)
             notes[cls.key] = f"off: {exc}"
             continue
+        why = earned(stat, held, rule)
+        support[cls.name] = stat.support_
+        if why is not None and cls.optional:
+            say(f"  {cls.title} off: {why}")
+            cls.put(model, None)
+            notes[cls.key] = f"off: {why}"
+            continue
         cls.put(model, stat.params_)
         on.add(cls.name)
         notes[cls.key] = "on"
-        support[cls.name] = stat.support_
         say(said(stat, held, rule))
+        say(support_line(stat))
+        if why is not None:  # J stays on (the level rests on it), with the warning
+            say(f"  warning: {cls.title}'s threshold is thinly supported: {why}")
     return notes, support
 
 
