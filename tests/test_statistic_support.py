@@ -123,7 +123,8 @@ def test_a_statistic_that_holds_across_the_halves_stays_on() -> None:
     (2 x the largest) holds from one half to the other."""
     held = _held(5.0, 0.0)
     stat = Mean().fit(held, ThresholdRule())
-    # 118 windows of 5 s (a part's first is not full); neighbours share the moving mean's start: fewer count as independent
+    # 118 windows of 5 s (a part's first is not full); neighbours share the moving mean's
+    # start, so fewer count as independent
     assert 40 <= stat.support_["independent_windows"] < 118 == stat.support_["windows"]
     assert stat.support_["windows_above"] == 0
     assert stat.support_["spool_share"] == {"hold": 1.0, "raise": 0.0, "lower": 0.0}
