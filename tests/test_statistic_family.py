@@ -210,18 +210,29 @@ def test_training_fits_a_registered_statistic(shift) -> None:
     )
     from monitor.training.train import train
 
-    runs = [simulate(make_cycle("boom", 60.0, s), load_machine(), seed=s) for s in (1, 2, 3)]
+    runs = [simulate(make_cycle("boom", 60.0, s), load_machine(), seed=s) for s in range(1, 10)]
     said: list[str] = []
     cfg = TrainConfig(
         DGRNNSettings(max_patterns=300),
         statistics=StatisticSettings(bias=False),
         isolation=IsolationSettings("none"),
     )
-    m = train(runs[:2], cfg, said.append, held_out=runs[2:])
+    # Eight minutes held out: 88 windows of 5 s (36 independent), and a threshold set on the
+    # cooler half holds on the warmer (0.71 x) and back.
+    m = train(runs[:1], cfg, said.append, held_out=runs[1:])
     params = m.statistics["shift"]
     assert params.m0 == pytest.approx(2.0, rel=1e-12)
-    assert m.training["shift"] == "on" and m.training["support"]["M"]["parts"] == 1
+    assert m.training["shift"] == "on" and m.training["support"]["M"]["parts"] == 8
+    assert m.training["support"]["M"]["independent_windows"] >= 8
+    assert m.training["support"]["M"]["transfer"]["ratio"] < 1
     assert any("mean-shift statistic M over 5 s, m0 2: " in line for line in said)
+    # 45 s held out (8 windows, fewer independent) is too little: off, saying why and what
+    # switch it on.
+    brief = simulate(make_cycle("boom", 45.0, 4), load_machine(), seed=4)
+    short = train(runs[:3], cfg, said.append, held_out=[brief])
+    assert "shift" not in short.statistics
+    assert short.training["shift"].startswith("off: its threshold rests on ")
+    assert "more held-out normal data" in short.training["shift"]
 
 
 def test_summary_says_which_statistics_were_on_and_why(model) -> None:

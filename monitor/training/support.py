@@ -121,7 +121,7 @@ def earned(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str | None:
         more_min = (MIN_BLOCKS - n_eff) * per * window_s / 60.0
         return (
             f"its threshold rests on {n_eff:.1f} independent {window_s:g} s windows of "
-            f"held-out data, it needs {MIN_BLOCKS}: about {more_min:.0f} min more held-out "
+            f"held-out data, it needs {MIN_BLOCKS}: about {more_min:.2g} min more held-out "
             "normal data (--held-out, or a longer run with --folds) would switch it on"
         )
     moved = transfer(stat, held, rule)
