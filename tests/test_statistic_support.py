@@ -150,3 +150,18 @@ def test_too_few_independent_windows_is_off() -> None:
     stat = Mean().fit(held, ThresholdRule())
     why = earned(stat, held, ThresholdRule())
     assert why is not None and "independent 5 s windows" in why and "more held-out" in why
+
+
+def test_one_recording_cannot_show_a_threshold_holds_between_sessions() -> None:
+    """Ten minutes of one recording: enough windows, halves that agree, but one session."""
+    two = _held(5.0, 0.0)
+    e = np.concatenate(two.residuals)
+    rec = Recording(
+        np.arange(len(e)) * 0.01,
+        {k: np.concatenate([r[k] for r in two.recordings]) for k in ("OilTemp", "SpoolCmd")},
+    )
+    held = HeldOut([e], [rec], ("PP",))
+    stat = Mean().fit(held, ThresholdRule())
+    why = earned(stat, held, ThresholdRule())
+    assert why is not None and why.startswith("its threshold rests on one recording")
+    assert "at least 2 sessions (--held-out)" in why
