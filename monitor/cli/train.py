@@ -130,8 +130,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="K",
         help="thresholds from residuals cross-fitted over all of REC in K folds of "
         f"{ThresholdSettings.fold_block_s:g} s blocks (needs 2K blocks, else the last "
-        "--validation-fraction is held out); 0: hold out the last --validation-fraction "
-        "(default %(default)s)",
+        "--validation-fraction is held out); default 0: hold out the last "
+        "--validation-fraction",
     )
     p.add_argument(
         "--lend",

@@ -9,10 +9,9 @@ of ``block_n`` samples dealt round-robin to ``folds`` folds (so every fold spans
 run and its temperatures); for each fold a DGRNN with the full model's bandwidth is fitted
 on the other folds' blocks and predicts the fold's own.  The thresholds then rest on out-of-
 sample residuals over the whole run, and each fold model saw less data than the final one.
-It is the default (``monitor train --folds K``, 0: the last quarter held out): on simulated
-20-minute commissioning runs the bias statistic it enables raised false alarms, which the
-support rule now catches (``monitor.training.support``: a threshold that does not hold
-from one half of the data to the other is off).
+It is an option (``monitor train --folds K``), not the default: on simulated 20-minute
+commissioning runs the bias statistic it enables raised false alarms, and J alone was no
+better than with the last quarter held out (docs/benchmarks.md, 2026-11-25).
 """
 
 from __future__ import annotations

@@ -40,13 +40,10 @@ class ThresholdSettings:
     rule: ThresholdRule = field(default_factory=ThresholdRule)
     validation_fraction: float = 0.25
     #: Thresholds from residuals cross-fitted over all the normal data in this many folds
-    #: (``monitor.training.crossfit``); 0: hold out the last ``validation_fraction``.  Data
-    #: too short for the folds (8 blocks) falls back to the held-out share.  The thresholds
-    #: then rest on the whole run and its oil temperatures, not its hottest last quarter;
-    #: the bias statistic it enables on 20 minutes stays on only where its threshold holds
-    #: from one half of the data to the other (``monitor.training.support``), which on the
-    #: outsider's plant it did not (benchmarks/detect_blind/results, 2026-11-28).
-    folds: int = 4
+    #: (``monitor.training.crossfit``); 0: hold out the last ``validation_fraction``.  Off by
+    #: default: on simulated 20-minute commissioning runs it found slight wear earlier but
+    #: its bias statistic raised false alarms (docs/benchmarks.md, 2026-11-25).
+    folds: int = 0
     fold_block_s: float = 60.0  # blocks dealt round-robin to the folds
     #: Bound |e| per output at this quantile of held-out normal |e| before J (None: eq. 9
     #: literal).  0.999 leaves sustained fault residuals alone and caps the rare one-sample
