@@ -10,8 +10,11 @@ run and its temperatures); for each fold a DGRNN with the full model's bandwidth
 on the other folds' blocks and predicts the fold's own.  The thresholds then rest on out-of-
 sample residuals over the whole run, and each fold model saw less data than the final one.
 It is an option (``monitor train --folds K``), not the default: on simulated 20-minute
-commissioning runs the bias statistic it enables raised false alarms, and J alone was no
-better than with the last quarter held out (docs/benchmarks.md, 2026-11-25).
+commissioning runs the bias statistic it enables raised false alarms (the support rule,
+``monitor.training.support``, now keeps it off on one recording), and J alone was no better
+than with the last quarter held out (docs/benchmarks.md, 2026-11-25); on the outsider's
+plant its J thresholds, set on the cold start too, were up to twice as high and missed
+most faults (benchmarks/detect_blind/results, 2026-11-28).
 """
 
 from __future__ import annotations
