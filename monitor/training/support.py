@@ -124,6 +124,7 @@ def earned(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str | None:
     """None when the held-out data supports the fitted statistic's threshold, else why not
     and what data would (one line).  Records the transfer check in ``stat.support_``."""
     sup = stat.support_
+    then = "switch it on" if stat.optional else "support it"  # J is on regardless
     n_eff = float(sup.get("independent_windows", 0.0))
     window_s = float(sup.get("window_s", stat.window_n * 0.01))
     if n_eff < MIN_BLOCKS:
@@ -132,14 +133,13 @@ def earned(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str | None:
         return (
             f"its threshold rests on {n_eff:.1f} independent {window_s:g} s windows of "
             f"held-out data, it needs {MIN_BLOCKS}: about {more_min:.2g} min more held-out "
-            "normal data (--held-out, or a longer run with --folds) would switch it on"
+            f"normal data (--held-out, or a longer run with --folds) would {then}"
         )
     if len(held.recordings) < MIN_SESSIONS:
         return (
             "its threshold rests on one recording (one session: one load, one operator, one "
             "warm-up), whose halves cannot show how it moves between sessions; held-out "
-            f"normal recordings of at least {MIN_SESSIONS} sessions (--held-out) would switch "
-            "it on"
+            f"normal recordings of at least {MIN_SESSIONS} sessions (--held-out) would {then}"
         )
     moved = transfer(stat, held, rule)
     sup["transfer"] = moved
@@ -149,7 +149,7 @@ def earned(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str | None:
             f"{moved['ratio']:.3g} x its threshold at {moved['judged_on']}, so its threshold "
             "does not hold beyond the conditions it was set on; held-out normal data that "
             "spans the oil temperatures, loads and operator styles it will judge "
-            "(--held-out) would switch it on"
+            f"(--held-out) would {then}"
         )
     return None
 
