@@ -58,7 +58,7 @@ def fit_statistics(
             continue
         cls.put(model, stat.params_)
         on.add(cls.name)
-        notes[cls.key] = "on"
+        notes[cls.key] = "on" if why is None else f"on, thinly supported: {why}"
         say(said(stat, held, rule))
         say(support_line(stat))
         if why is not None:  # J stays on (the level rests on it), with the warning
