@@ -111,11 +111,17 @@ def _held(minutes: float, warm_offset: float, seed: int = 5) -> HeldOut:
     return HeldOut(es, recs, ("PP",))
 
 
-def test_halves_are_cooler_and_warmer() -> None:
-    cool, warm = halves(_held(1.0, 0.0))
-    assert max(r["OilTemp"].max() for r in cool.recordings) == pytest.approx(35.0)
-    assert min(r["OilTemp"].min() for r in warm.recordings) == pytest.approx(35.0)
-    assert [len(e) for e in cool.residuals] == [3000, 3000]
+def test_halves_deal_sessions_alternately_and_cut_one_recording() -> None:
+    """Two sessions: one each (by oil temperature); one recording: its cooler and warmer
+    half."""
+    two = _held(1.0, 0.0)
+    cool, warm = halves(two)
+    assert [r["OilTemp"][0] for r in cool.recordings] == [25.0]
+    assert [r["OilTemp"][0] for r in warm.recordings] == [35.0]
+    one = HeldOut([two.residuals[0]], [two.recordings[0]], ("PP",))
+    first, second = halves(one)
+    assert first.recordings[0]["OilTemp"].max() < second.recordings[0]["OilTemp"].min()
+    assert len(first.residuals[0]) == len(second.residuals[0]) == 3000
 
 
 def test_a_statistic_that_holds_across_the_halves_stays_on() -> None:

@@ -124,6 +124,15 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "data has none (--lend)",
     )
     p.add_argument(
+        "--support-check",
+        choices=("on", "off"),
+        default="on",
+        help="switch off B, L or H when its held-out data does not support its threshold "
+        "(fewer than 8 independent windows, one recording, or a threshold set on one half "
+        "of the data that the other half exceeds); off keeps every statistic that could be "
+        "fitted (default %(default)s)",
+    )
+    p.add_argument(
         "--folds",
         type=number(0, 20, whole=True),
         default=ThresholdSettings.folds,
@@ -302,6 +311,7 @@ def run(args: argparse.Namespace) -> int:
             window_n=args.window,
             bias=None if args.bias is None else args.bias == "on",
             hold=args.hold == "on",
+            support_check=args.support_check == "on",
         ),
         isolation=IsolationSettings(method=args.isolation, runs=args.isolation_runs),
     )

@@ -91,6 +91,10 @@ class StatisticSettings:
     hold: bool = False
     hold_settle_n: int = 200
     hold_min_count: int = 300
+    #: Switch off an optional statistic its held-out data does not support
+    #: (``monitor.training.support``); False keeps every one that could be fitted
+    #: (``--support-check off``: experiments, tests of a statistic's own mechanics).
+    support_check: bool = True
 
     def __post_init__(self) -> None:
         if self.window_n < 1:

@@ -51,7 +51,7 @@ def fit_statistics(
             continue
         why = earned(stat, held, rule)
         support[cls.name] = stat.support_
-        if why is not None and cls.optional:
+        if why is not None and cls.optional and settings.statistics.support_check:
             say(f"  {cls.title} off: {why}")
             cls.put(model, None)
             notes[cls.key] = f"off: {why}"

@@ -9,9 +9,9 @@ Three checks, on the held-out (or cross-fitted) normal data the threshold was se
   for many.
 - **sessions**: held-out data from at least ``MIN_SESSIONS`` recordings, since one
   recording's halves cannot show how the statistic moves between sessions;
-- **transfer within the held-out data**: the held-out data is cut in two halves, the cooler
-  and the warmer oil (a commissioning run warms up as it goes); the statistic is fitted
-  (scales and threshold) on each half and judged on the other.  A threshold that the other
+- **transfer within the held-out data**: the held-out sessions are dealt alternately to two
+  halves (one recording: its cooler and warmer half); the statistic is fitted (scales and
+  threshold) on each half and judged on the other.  A threshold that the other
   half already exceeds does not hold under conditions its data did not show, and a machine
   in the field meets more of them (other oil temperatures, loads, operators) than its
   commissioning run: on the outsider's plant (benchmarks/detect_blind, development seeds)
@@ -49,38 +49,34 @@ def _piece(rec: Recording, a: int, b: int) -> Recording:
 
 
 def halves(held: HeldOut) -> tuple[HeldOut, HeldOut] | None:
-    """The held-out data as two halves of equal judged length, cooler and warmer oil: every
-    part is cut at its middle, the pieces ordered by their median oil temperature (their
-    order in time without OilTemp) and dealt to the cooler half until it holds half of the
-    judged samples.  None when there are not two pieces."""
+    """The held-out data in two halves.  Several recordings (sessions): ordered by their
+    median oil temperature and dealt alternately, so both halves span the temperatures and
+    the check asks whether the threshold holds from one set of sessions to another.  One
+    recording: cut at its middle, the cooler and the warmer half (a commissioning run warms
+    up as it goes).  None when there are not two pieces."""
+    whole = len(held.recordings) >= 2
     pieces = []
     for e, rec in zip(held.residuals, held.recordings, strict=True):
-        mid = len(rec) // 2
-        for a, b in ((0, mid), (mid, len(rec))):
+        cuts = ((0, len(rec)),) if whole else ((0, len(rec) // 2), (len(rec) // 2, len(rec)))
+        for a, b in cuts:
             if b - a < 2:
                 continue
             oil = rec["OilTemp"][a:b] if rec.has("OilTemp") else np.zeros(0)
             oil = oil[np.isfinite(oil)]
             key = float(np.median(oil)) if oil.size else math.nan
-            judged = int(np.isfinite(e[a:b]).all(axis=1).sum())
-            pieces.append((key, len(pieces), e[a:b], _piece(rec, a, b), judged))
+            pieces.append((key, len(pieces), e[a:b], _piece(rec, a, b)))
     if len(pieces) < 2:
         return None
     if all(math.isfinite(p[0]) for p in pieces):
         pieces.sort(key=lambda p: (p[0], p[1]))
-    total, acc, cut = sum(p[4] for p in pieces), 0, 1
-    for i, p in enumerate(pieces[:-1]):
-        acc += p[4]
-        cut = i + 1
-        if acc * 2 >= total:
-            break
+    first, second = pieces[0::2], pieces[1::2]
 
     def part(ps: list) -> HeldOut:
         return HeldOut(
             [p[2] for p in ps], [p[3] for p in ps], held.outputs, held.every, held.validation
         )
 
-    return part(pieces[:cut]), part(pieces[cut:])
+    return part(first), part(second)
 
 
 def _oil(held: HeldOut) -> str:
