@@ -427,7 +427,7 @@ def test_training_puts_h0_at_twice_the_held_out_max(boom_runs) -> None:
     assert (m.hold.window_n, m.hold.min_count, m.hold.settle_n) == (6000, 300, 200)
     assert m.hold.h0 == pytest.approx(2.0, rel=1e-12)
     assert np.all(m.hold.scale > 0) and m.hold.scale.shape == (2,)
-    assert m.training["hold"] == "on"
+    assert m.training["hold"].startswith("on")  # ", thinly supported": --support-check off
     assert any("hold statistic H" in line for line in said)
 
 
