@@ -289,13 +289,9 @@ def _check_input(
         )
 
 
-def run(args: argparse.Namespace) -> int:
-    from monitor.config.settings import load_config
-    from monitor.model.modelfile import load_model, save_model
-    from monitor.offline.recordings import read_loop
-    from monitor.training.train import train
-
-    cfg = TrainConfig(
+def _config(args: argparse.Namespace) -> TrainConfig:
+    """The training settings the options ask for."""
+    return TrainConfig(
         dgrnn=DGRNNSettings(
             preset=args.preset,
             horizon=args.horizon,
@@ -315,6 +311,15 @@ def run(args: argparse.Namespace) -> int:
         ),
         isolation=IsolationSettings(method=args.isolation, runs=args.isolation_runs),
     )
+
+
+def run(args: argparse.Namespace) -> int:
+    from monitor.config.settings import load_config
+    from monitor.model.modelfile import load_model, save_model
+    from monitor.offline.recordings import read_loop
+    from monitor.training.train import train
+
+    cfg = _config(args)
     monitor_cfg = load_config(args.config)
     recordings = []
     for path in args.recordings:
