@@ -27,8 +27,9 @@ def fit_statistics(
 ) -> tuple[dict[str, str], dict[str, Any]]:
     """Every member as ``settings`` (a ``TrainConfig``) ask, into ``model``: J always (its
     failure is the training's), the others off with the reason when the held-out data
-    cannot support them (too short, too few independent windows, or a threshold that does
-    not hold from one half of the held-out data to the other: :func:`earned`).  Returns the
+    cannot support them (too short, too few independent windows, one session, or a
+    threshold that does not hold from one half of the held-out data to the other:
+    :func:`earned`; ``--support-check off`` keeps them).  Returns the
     notes ("on" or "off...") by member key and what each threshold rests on by member name."""
     rule: ThresholdRule = settings.thresholds.rule
     notes: dict[str, str] = {}
