@@ -205,12 +205,17 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
         moving = running and (
             abs(v["SpoolCmd"]) >= cfg.move_spool_pct or v["QP"] >= cfg.move_flow_lpm
         )
-        # The valve passes oil: open, the pump well above the port the command feeds.
-        fed = v["PA"] if v["SpoolCmd"] > 0 else v["PB"]
+        # The valve passes oil: open, the pump well above the port the command feeds; a
+        # load-sensing pump stands its margin above a stalled section, so there the drop
+        # must exceed the margin too.
+        load_sensing = cfg.pump_system == "load_sensing"
+        fed_name = "PA" if v["SpoolCmd"] > 0 else "PB"
+        fed = v[fed_name]
         passing = (
             running
             and abs(v["SpoolCmd"]) >= cfg.relation_spool_pct
-            and v["PP"] - fed > cfg.relation_margin_bar
+            and v["PP"] - fed
+            > cfg.relation_margin_bar + (cfg.ls_margin_bar if load_sensing else 0.0)
         )
         for s in names:
             val = v[s]
@@ -265,7 +270,8 @@ def plausibility_findings(x, cfg, min_engine_rpm, period_s=0.01):
             and n_rel > 0
             and not math.isnan(v["PP"])
         ):
-            for s in ("PA", "PB"):
+            # Load sensing: only the port the pump feeds is below it.
+            for s in (fed_name,) if load_sensing else ("PA", "PB"):
                 if v[s] > v["PP"] + cfg.relation_margin_bar:
                     above_pump_run[s] += 1
                     if above_pump_run[s] >= n_rel:

@@ -22,6 +22,7 @@ from monitor.detection.plausibility import (
 )
 from monitor.detection.plausibility_config import (
     FrozenCheck,
+    PumpSystem,
     RangeCheck,
     RelationCheck,
     RestCheck,
@@ -260,8 +261,9 @@ def test_detect_and_ticks_give_the_same_sensor_events(model, normal_run) -> None
             rest=RestCheck(rest_settle_s=1.0, rest_max_bar=2.0),
             signal_range=RangeCheck(range_s=0.05),
         ),
+        PlausibilityConfig(pump=PumpSystem("load_sensing", 20.0)),
     ],
-    ids=["defaults", "short-times"],
+    ids=["defaults", "short-times", "load-sensing"],
 )
 def test_kernel_equals_the_plain_python_twin(normal_run, cfg) -> None:
     """The numba kernel against tests/naive.py's sample-by-sample reading of the rules, on

@@ -88,8 +88,9 @@ _SPOOL, _ENGINE, _PP, _PA, _PB, _QP = (
     P_REL_N,
     P_REST_N,
     P_REST_MAX,
-) = range(12)
-N_PARAMS = 12
+    P_LS_MARGIN,
+) = range(13)
+N_PARAMS = 13
 
 
 def kernel_params(cfg: PlausibilityConfig) -> np.ndarray:
@@ -106,6 +107,8 @@ def kernel_params(cfg: PlausibilityConfig) -> np.ndarray:
     )
     p[P_REL_N], p[P_REST_N] = n(cfg.relation.relation_s), n(cfg.rest.rest_settle_s)
     p[P_REST_MAX] = cfg.rest.rest_max_bar
+    # 0: a pressure-compensated pump of its own; > 0: a load-sensing pump's margin.
+    p[P_LS_MARGIN] = cfg.pump.ls_margin_bar if cfg.pump.load_sensing else 0.0
     return p
 
 
@@ -125,6 +128,8 @@ def _run(  # pragma: no cover - numba
     move_spool, move_flow = p[P_MOVE_SPOOL], p[P_MOVE_FLOW]
     rel_spool, rel_margin, rel_n = p[P_REL_SPOOL], p[P_REL_MARGIN], p[P_REL_N]
     rest_n, rest_max = p[P_REST_N], p[P_REST_MAX]
+    ls_margin = p[P_LS_MARGIN]
+    load_sensing = ls_margin > 0.0
     for i in range(n):
         spool = x[i, cols[_SPOOL]]
         engine = x[i, cols[_ENGINE]]
@@ -132,9 +137,15 @@ def _run(  # pragma: no cover - numba
         qp = x[i, cols[_QP]]
         moving = running and (abs(spool) >= move_spool or qp >= move_flow)
         # The valve passes oil: open, with the pump well above the port it feeds (False
-        # when a pressure is NaN).
-        fed = x[i, cols[_PA]] if spool > 0 else x[i, cols[_PB]]
-        passing = running and abs(spool) >= rel_spool and x[i, cols[_PP]] - fed > rel_margin
+        # when a pressure is NaN).  A load-sensing pump holds its margin over a stalled
+        # section too, so there only a drop beyond the margin proves flow.
+        fed_c = _PA if spool > 0 else _PB
+        fed = x[i, cols[fed_c]]
+        passing = (
+            running
+            and abs(spool) >= rel_spool
+            and x[i, cols[_PP]] - fed > rel_margin + ls_margin
+        )
         for c in range(m):
             v = x[i, cols[c]]
             if np.isnan(v):
@@ -180,6 +191,10 @@ def _run(  # pragma: no cover - numba
         pp = x[i, cols[_PP]]
         if running and abs(spool) >= rel_spool and rel_n > 0 and not np.isnan(pp):
             for c in (_PA, _PB):
+                if load_sensing and c != fed_c:
+                    # The port draining to tank: on a load-sensing machine the pump serves
+                    # the lightest work, and the held load's side may be far above it.
+                    continue
                 v = x[i, cols[c]]
                 if v > pp + rel_margin:
                     counters[3, c] += 1

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from monitor.errors import ConfigError
+from monitor.schema.sections import setting
 from monitor.signals import SIGNAL_NAMES
 
 #: Kernel column order: the contract signals (SpoolCmd, PumpDispCmd, EngineSpeed, OilTemp,
@@ -83,6 +84,47 @@ class RestCheck:
     rest_max_bar: float = 5.0
 
 
+#: The pump systems the relation checks know (``PumpSystem``).
+PUMP_SYSTEMS: tuple[str, ...] = ("pressure_compensated", "load_sensing")
+
+
+@dataclass(frozen=True)
+class PumpSystem:
+    """What feeds the loop, which decides what the pressures prove (``pump_below_port`` and
+    the frozen check of QP at zero).  ``pressure_compensated``: one loop on its own pump
+    held at its compensator setting, far above any port it feeds (the reference machine).
+    ``load_sensing``: a pump shared by several sections, held ``ls_margin_bar`` above the
+    highest load pressure of the open sections, at standby when all are closed."""
+
+    pump_system: str = setting(
+        "pressure_compensated",
+        check=lambda v: v in PUMP_SYSTEMS,
+        demand=" or ".join(PUMP_SYSTEMS),
+        doc="the pump that feeds the loop: its own compensated pump, or a load-sensing "
+        "pump shared with other sections",
+    )
+    ls_margin_bar: float = setting(
+        20.0,
+        check=lambda v: 0 < v <= 100,
+        demand="within 0..100 (above 0)",
+        unit="bar",
+        doc="load_sensing: the pump's margin over the highest load pressure",
+    )
+
+    def __post_init__(self) -> None:
+        if self.pump_system not in PUMP_SYSTEMS:
+            raise ConfigError(
+                f"plausibility.pump_system must be {' or '.join(PUMP_SYSTEMS)}, "
+                f"got {self.pump_system!r}"
+            )
+        if not 0 < self.ls_margin_bar <= 100:
+            raise ConfigError("plausibility.ls_margin_bar must be within 0..100 (above 0)")
+
+    @property
+    def load_sensing(self) -> bool:
+        return self.pump_system == "load_sensing"
+
+
 @dataclass(frozen=True)
 class PlausibilityConfig:
     """``plausibility:`` section (units in the names; a time of 0 switches its check off).
@@ -96,6 +138,7 @@ class PlausibilityConfig:
     motion: Motion = field(default_factory=Motion)
     relation: RelationCheck = field(default_factory=RelationCheck)
     rest: RestCheck = field(default_factory=RestCheck)
+    pump: PumpSystem = field(default_factory=PumpSystem)
 
     def __post_init__(self) -> None:
         for group in (
