@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 from monitor.cli._numbers import WINDOW_MAX, number
 from monitor.cli._paths import output_file
-from monitor.errors import MonitorError
+from monitor.errors import ConfigError, MonitorError
 from monitor.model.spec import PRESETS
 from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule
 from monitor.training.settings import (
@@ -48,9 +48,12 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--preset",
         choices=sorted(PRESETS),
-        default="default",
+        default=None,
         help="paper: eq. 11 exactly (QP from QP, PP, PA, PB at t-1, t-2); default: "
-        "PP, PA, PB, QP from their lags plus the commands and OilTemp",
+        "PP, PA, PB, QP from their lags plus the commands and OilTemp; section: a section "
+        "of a load-sensing machine, PA, PB, QP from their lags, PP and the commands, with "
+        "--loop the other loops' spool commands too (default: section for --loop on a "
+        "config whose plausibility.pump_system is load_sensing, else default)",
     )
     p.add_argument(
         "--horizon",
@@ -173,8 +176,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--loop",
         default=None,
         metavar="NAME",
-        help="train on this loop of candump logs with several loops' frames (needs "
-        "--config with `loops:`); the fault signatures still come from the boom simulator",
+        help="train on this loop of whole-machine recordings (candump logs, or CSVs whose "
+        "columns are the DBC's signal names; needs --config with `loops:`, whose mapping "
+        "the daemon and `monitor detect --loop` read too); the fault signatures still "
+        "come from the boom simulator (--isolation none leaves them out)",
     )
     p.add_argument(
         "--config",
@@ -185,8 +190,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--isolation",
         choices=("sim", "none"),
-        default="sim",
-        help="learn fault signatures from the simulator (default) or skip",
+        default=None,
+        help="learn fault signatures from the boom simulator (default) or skip (the "
+        "default for a section model, whose neighbours the boom simulator has not)",
     )
     p.add_argument(
         "--isolation-runs",
@@ -289,14 +295,29 @@ def _check_input(
         )
 
 
-def _config(args: argparse.Namespace) -> TrainConfig:
-    """The training settings the options ask for."""
+def _preset(args: argparse.Namespace, monitor_cfg: MonitorConfig) -> tuple[str, tuple[str, ...]]:
+    """(preset, the neighbours' demand columns it reads): ``section`` for a loop of a
+    load-sensing machine unless ``--preset`` says otherwise; with ``--loop`` a section
+    reads every other loop's spool command (``monitor.config.layout.neighbour``)."""
+    from monitor.config.layout import neighbour
+
+    ls = monitor_cfg.gating.plausibility.pump.load_sensing
+    preset = args.preset or ("section" if ls and args.loop else "default")
+    if preset != "section" or args.loop is None:
+        return preset, ()
+    others = [lc.name for lc in monitor_cfg.monitored_loops if lc.name != args.loop]
+    return preset, tuple(neighbour("SpoolCmd", name) for name in others)
+
+
+def _config(args: argparse.Namespace, preset: str, neighbours: tuple[str, ...]) -> TrainConfig:
+    """The training settings the options ask for (``_preset``: the model's preset)."""
     return TrainConfig(
         dgrnn=DGRNNSettings(
-            preset=args.preset,
+            preset=preset,
             horizon=args.horizon,
             max_patterns=args.max_patterns,
             lend=args.lend == "on",
+            neighbours=neighbours,
         ),
         thresholds=ThresholdSettings(
             rule=ThresholdRule(args.threshold_rule, args.quantile, args.factor, args.rate),
@@ -309,7 +330,9 @@ def _config(args: argparse.Namespace) -> TrainConfig:
             hold=args.hold == "on",
             support_check=args.support_check == "on",
         ),
-        isolation=IsolationSettings(method=args.isolation, runs=args.isolation_runs),
+        isolation=IsolationSettings(
+            method=args.isolation or ("none" if neighbours else "sim"), runs=args.isolation_runs
+        ),
     )
 
 
@@ -319,8 +342,14 @@ def run(args: argparse.Namespace) -> int:
     from monitor.offline.recordings import read_loop
     from monitor.training.train import train
 
-    cfg = _config(args)
     monitor_cfg = load_config(args.config)
+    preset, neighbours = _preset(args, monitor_cfg)
+    cfg = _config(args, preset, neighbours)
+    if neighbours and cfg.isolation.method == "sim":
+        raise ConfigError(
+            f"--isolation sim: the boom simulator has no neighbours ({', '.join(neighbours)}) "
+            "to learn a section model's fault signatures from; use --isolation none"
+        )
     recordings = []
     for path in args.recordings:
         rec = read_loop(path, monitor_cfg, args.loop)

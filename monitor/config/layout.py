@@ -6,7 +6,10 @@ any loop reads (``PP`` for the boom, ``Stick_PP`` for the stick, ``EngineSpeed``
 A loop sees that same row through its *view*: the row's column names with the loop's own
 signals under their contract names and every other column under a name no model uses
 (``OTHER`` first), so the ticker, the gating and the diagnostics work unchanged on it, and a
-row is decoded and sampled once whatever the number of loops.  With one loop and the
+row is decoded and sampled once whatever the number of loops.  The other loops' spool
+commands are the exception: they are named ``SpoolCmd@LOOP`` (``neighbour``), so that a
+loop on a pump it shares can take its neighbours' demand as inputs of its model, the same
+columns in training, ``monitor detect --loop`` and the daemon.  With one loop and the
 contract names the row is exactly ``monitor.sampling.sampler.ROW_COLUMNS``.  The daemon
 (``monitor.live``) and the offline readers (``monitor.offline``) both lay rows out here.
 """
@@ -26,6 +29,17 @@ from monitor.sampling.sampler import ROW_COLUMNS
 from monitor.signals import ROD_POS
 
 OTHER = "~"  # prefix of a column that belongs to another loop (no model signal starts so)
+#: The contract signals of another loop its neighbours see (``neighbour``): its demand.
+SHARED_WITH_NEIGHBOURS = ("SpoolCmd",)
+
+
+def neighbour(contract: str, loop: str) -> str:
+    """The view's name of another loop's signal, e.g. ``SpoolCmd@stick``."""
+    return f"{contract}@{loop}"
+
+
+def is_neighbour(name: str) -> bool:
+    return "@" in name
 _ALARM_SIGNALS = ("State", "Fault", "J", "Threshold", "AlarmCount")
 
 
@@ -52,7 +66,7 @@ def row_layout(
             if name not in columns:
                 columns.append(name)
         _check_alarm_message(lp.alarm_message, codec, where, cfg)
-    views = [_view(lp, columns) for lp in loops]
+    views = [_view(lp, loops, columns) for lp in loops]
     return tuple(columns), views
 
 
@@ -68,9 +82,15 @@ def _check_alarm_message(name: str, codec: FrameCodec, where: str, cfg: MonitorC
         )
 
 
-def _view(lp: LoopConfig, columns: list[str]) -> tuple[str, ...]:
+def _view(lp: LoopConfig, loops: Iterable[LoopConfig], columns: list[str]) -> tuple[str, ...]:
+    theirs = {
+        other.dbc_signal(c): neighbour(c, other.name)
+        for other in loops
+        if other.name != lp.name
+        for c in SHARED_WITH_NEIGHBOURS
+    }
     own = {lp.dbc_signal(c): c for c in ROW_COLUMNS}
-    return tuple(own.get(name, OTHER + name) for name in columns)
+    return tuple(own.get(name, theirs.get(name, OTHER + name)) for name in columns)
 
 
 def rod_columns(loops: Iterable[LoopConfig]) -> set[str]:

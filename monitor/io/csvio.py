@@ -97,8 +97,8 @@ def _to_float(path: Path, name: str, values: list[str], lines: list[int]) -> np.
 BLOCK_ROWS = 16_384
 
 
-def _header(reader: Any, p: Path) -> list[str]:
-    """The header row of ``reader`` (a ``csv.reader``), checked (duplicates, required
+def _header(reader: Any, p: Path, required: Sequence[str] = CSV_COLUMNS) -> list[str]:
+    """The header row of ``reader`` (a ``csv.reader``), checked (duplicates, ``required``
     columns) before any data row is read."""
     try:
         header = [h.strip() for h in next(reader)]
@@ -110,7 +110,7 @@ def _header(reader: Any, p: Path) -> list[str]:
     dupes = sorted({h for h in header if header.count(h) > 1})
     if dupes:
         raise InputFileError(f"{p}:{line}: duplicate column(s) {_shown(', '.join(dupes))}")
-    missing = [c for c in CSV_COLUMNS if c not in header]
+    missing = [c for c in required if c not in header]
     if missing:
         raise InputFileError(
             f"{p}:{line}: missing required column(s) {', '.join(missing)}"
@@ -120,7 +120,7 @@ def _header(reader: Any, p: Path) -> list[str]:
 
 
 def _rows(
-    reader: Any, p: Path, header: list[str]
+    reader: Any, p: Path, header: list[str], required: Sequence[str] = CSV_COLUMNS
 ) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
     """(float64 column per kept column, file line of each row, text columns dropped), the
     rows converted ``BLOCK_ROWS`` at a time; blank lines skipped."""
@@ -141,13 +141,13 @@ def _rows(
             rows.append(row)
             lines.append(reader.line_num)
             if len(rows) == BLOCK_ROWS:
-                _convert(p, header, rows, lines, parts, dropped)
+                _convert(p, header, rows, lines, parts, dropped, required)
                 line_parts.append(np.array(lines, dtype=np.int64))
                 rows, lines = [], []
     except csv.Error as exc:
         raise InputFileError(f"{p}:{reader.line_num}: {exc}") from None
     if rows:
-        _convert(p, header, rows, lines, parts, dropped)
+        _convert(p, header, rows, lines, parts, dropped, required)
         line_parts.append(np.array(lines, dtype=np.int64))
     if not line_parts:
         raise InputFileError(f"{p}: no data rows after the header")
@@ -162,10 +162,11 @@ def _convert(
     lines: list[int],
     parts: dict[str, list[np.ndarray]],
     dropped: set[str],
+    required: Sequence[str] = CSV_COLUMNS,
 ) -> None:
     """One block of rows onto ``parts``; a column holding text is dropped (``dropped``)
     unless it is required (``InputFileError`` naming its line)."""
-    required = set(CSV_COLUMNS)
+    required = set(required)
     for name, values in zip(header, zip(*rows, strict=True), strict=True):
         if name in dropped:
             continue
@@ -178,10 +179,12 @@ def _convert(
             parts[name].clear()
 
 
-def read_csv(path: str | Path) -> Recording:
+def read_csv(path: str | Path, required: Sequence[str] = CSV_COLUMNS) -> Recording:
     """Read a contract CSV into a ``Recording`` (``t`` in s, signals in contract units).
 
-    Required columns are ``monitor.signals.CSV_COLUMNS`` in any order; other numeric
+    Required columns are ``required`` (default ``monitor.signals.CSV_COLUMNS``; a
+    whole-machine CSV read for one loop requires that loop's DBC signal names) in any
+    order, ``t`` always; other numeric
     columns (such as ``RodPos``) are kept; extra columns holding text (labels, notes)
     are left out and listed in ``meta["dropped_columns"]``.  Blank lines are skipped.
     Raises ``InputFileError`` naming file, line and column for missing required columns,
@@ -193,8 +196,9 @@ def read_csv(path: str | Path) -> Recording:
     try:
         with p.open(newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(_lines(fh, p))
-            header = _header(reader, p)
-            columns, lines, dropped = _rows(reader, p, header)
+            required = ("t", *(c for c in required if c != "t"))
+            header = _header(reader, p, required)
+            columns, lines, dropped = _rows(reader, p, header, required)
     except UnicodeDecodeError as exc:
         raise InputFileError(f"{p}: not a UTF-8 text file ({exc.reason})") from None
     except OSError as exc:

@@ -139,16 +139,48 @@ class DGRNNSpec:
             raise ConfigError(f"bad DGRNN spec {shown}: {exc}") from None
 
     @classmethod
-    def preset(cls, name: str, horizon: int | None = None) -> DGRNNSpec:
+    def preset(
+        cls, name: str, horizon: int | None = None, neighbours: Sequence[str] = ()
+    ) -> DGRNNSpec:
+        """Preset ``name``; ``neighbours``: the other loops' demand columns a ``section``
+        model takes as inputs (``SpoolCmd@LOOP``, ``monitor.config.layout.neighbour``)."""
         try:
             spec = PRESETS[name]
         except KeyError:
             raise ConfigError(
                 f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}"
             ) from None
+        if name == "section":
+            spec = section_spec(neighbours)
         if horizon is None:
             return spec
         return cls(spec.outputs, spec.exogenous, spec.lags, horizon, spec.delta)
+
+
+def section_spec(neighbours: Sequence[str] = ()) -> DGRNNSpec:
+    """A section of a load-sensing valve on a pump it shares with ``neighbours`` (their
+    spool commands): PA, PB and the section's flow QP predicted; PP an input.  The pump
+    sets PP at the highest load pressure of every open section plus its margin, so PP is
+    the neighbours' doing as much as this section's, and predicting it from this section's
+    signals would read a neighbour's load as a fault here.  Given PP (at t and t-1), a
+    post-compensated section's flow is its opening times the common drop, the same whatever
+    its load, until the pump saturates: then every section's flow shrinks by the pump's
+    flow over the total demand, which the neighbours' commands at t say."""
+    return DGRNNSpec(
+        outputs=("PA", "PB", "QP"),
+        exogenous=("PP", "SpoolCmd", "EngineSpeed", "OilTemp", *neighbours),
+        lags=(
+            ("PA", (1, 2)),
+            ("PB", (1, 2)),
+            ("QP", (1, 2)),
+            ("PP", (0, 1)),
+            ("SpoolCmd", (0, 1)),
+            ("EngineSpeed", (0,)),
+            ("OilTemp", (0,)),
+            *((n, (0,)) for n in neighbours),
+        ),
+        delta=("PA", "PB"),
+    )
 
 
 PRESETS: dict[str, DGRNNSpec] = {
@@ -186,6 +218,9 @@ PRESETS: dict[str, DGRNNSpec] = {
         ),
         delta=("PA", "PB"),
     ),
+    # One section of a load-sensing machine (``section_spec``): PP an input; `monitor train
+    # --loop` adds the other loops' spool commands.
+    "section": section_spec(),
 }
 
 
@@ -228,7 +263,8 @@ class Normalizer:
                 raise InputFileError(f"signal {name!r} has fewer than 2 valid samples to scale")
         mean = np.nanmean(A, axis=0)
         std = np.nanstd(A, axis=0, ddof=1)
-        floor = np.array([self.min_std.get(n, 0.0) for n in names])
+        # Another loop's signal (``SpoolCmd@stick``) has its signal's floor.
+        floor = np.array([self.min_std.get(n.split("@")[0], 0.0) for n in names])
         std = np.maximum(std, floor)
         for name, s in zip(names, std, strict=True):
             if not s > 0:

@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from monitor.codec.frames import FrameCodec
-from monitor.config.layout import OTHER, rod_columns, row_layout
+from monitor.config.layout import OTHER, is_neighbour, rod_columns, row_layout
 from monitor.config.settings import MonitorConfig
 from monitor.errors import ConfigError, InputFileError, NoHydraulicDataError
+from monitor.io.csvio import read_csv
 from monitor.io.recording import Recording
 from monitor.sampling.bulk import recording_from_candump_bulk
 from monitor.sampling.read import read_recording
@@ -21,19 +22,23 @@ from monitor.signals import ROD_POS
 
 
 def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording:
-    """Loop ``name``'s signals of a candump log with several loops' frames, under the
-    contract names, on the daemon's sample clock (which starts at the first frame of any
-    loop, so the rows are the ones the daemon ticks)."""
+    """Loop ``name``'s signals of a log with several loops' frames, under the contract
+    names, on the daemon's sample clock (which starts at the first frame of any loop, so the
+    rows are the ones the daemon ticks), with the other loops' spool commands as
+    ``SpoolCmd@LOOP`` (``monitor.config.layout.neighbour``).  A ``.csv`` is a whole-machine
+    CSV whose columns are the DBC's signal names (``t`` and the loop's own required)."""
     names = [lc.name for lc in cfg.monitored_loops]
     if name not in names:
         raise ConfigError(f"{cfg.source}: no loop {name!r}; loops: {', '.join(names)}")
-    if Path(path).suffix.lower() == ".csv":
-        raise InputFileError(f"{path}: a contract CSV holds one loop; --loop reads a candump log")
     codec = FrameCodec.from_dbc(cfg.dbc)
     columns, views = row_layout(cfg, codec)
     optional = rod_columns(cfg.monitored_loops)
-    wide = recording_from_candump_bulk(path, codec, columns, optional=optional)
     view = views[names.index(name)]
+    if Path(path).suffix.lower() == ".csv":
+        mine = [c for c, v in zip(columns, view, strict=True) if v in ROW_COLUMNS]
+        wide = read_csv(path, required=[c for c in mine if c not in optional])
+    else:
+        wide = recording_from_candump_bulk(path, codec, columns, optional=optional)
     picked = {
         contract: wide[col]
         for col, contract in zip(columns, view, strict=True)
@@ -41,7 +46,9 @@ def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording
     }
     # The signals the loop renames are its own; a log without any of them is not its log.
     own = [
-        col for col, c in zip(columns, view, strict=True) if not c.startswith(OTHER) and col != c
+        col
+        for col, c in zip(columns, view, strict=True)
+        if not c.startswith(OTHER) and not is_neighbour(c) and col != c
     ]
     if own and not any(wide.has(c) and np.isfinite(wide[c]).any() for c in own):
         raise NoHydraulicDataError(

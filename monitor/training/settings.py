@@ -23,13 +23,15 @@ class DGRNNSettings:
     #: With a reference model: lend its patterns where this machine's own data has none
     #: (``monitor.training.fill``), in the final model and in every cross-fitted fold.
     lend: bool = True
+    #: The other loops' demand columns a ``section`` model reads (``--loop``).
+    neighbours: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
             raise ConfigError(f"unknown preset {self.preset!r}; known: {', '.join(PRESETS)}")
 
     def spec(self) -> DGRNNSpec:
-        return DGRNNSpec.preset(self.preset, self.horizon)
+        return DGRNNSpec.preset(self.preset, self.horizon, self.neighbours)
 
 
 @dataclass(frozen=True)
