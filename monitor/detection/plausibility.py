@@ -44,6 +44,17 @@ Checks (``plausibility:`` in config/monitor.yaml; times in seconds of 100 Hz sam
   trapped in the cap side, which is normal; PA reading tank at rest still clears an earlier
   finding on it.  (``rest_settle_s: 0`` switches the check off.)
 
+On a load-sensing machine (``pump_system: load_sensing``) the pump is shared: it stands
+``ls_margin_bar`` above the highest load pressure of the open sections, at standby when all
+are closed.  Two rules change there, both because of what a shared pump makes normal:
+``pump_below_port`` judges only the port the pump feeds (A for a positive command, B for a
+negative): the other port meters a held load out to tank, and a lowered boom's cap side may
+stand far above a pump that serves a lighter function.  And QP at 0 L/min counts as frozen
+only across a drop above ``relation_margin_bar`` plus the margin: a stalled section (on its
+stop, or against a load the pump cannot lift) has the pump its margin above its port and no
+flow.  The single loop on its own compensated pump (``pressure_compensated``, the default)
+keeps the rules above.
+
 A finding latches until its own check shows the sensor healthy again (range: back in range;
 frozen/stuck: the value moves; the relation and rest offsets: a later rest reads the
 sensor near tank), so an offset found at key-off is still named when the engine starts.
