@@ -14,7 +14,7 @@ from monitor.cli._extras import require
 from monitor.cli._paths import output_file
 from monitor.detection.alarm import State
 from monitor.detection.opstate import OpState
-from monitor.errors import MonitorError
+from monitor.errors import ConfigError, MonitorError
 
 if TYPE_CHECKING:
     from monitor.detection.offline import Detection
@@ -125,6 +125,12 @@ def run(args: argparse.Namespace) -> int:
     model_path = args.model or (loop.model if args.loop else cfg.model)
     model = load_model(model_path)
     check_loop_model(model, loop, cfg, model_path)  # before the recording is read
+    if args.loop is None and any("@" in v for v in model.spec.variables):
+        names = ", ".join(lc.name for lc in cfg.monitored_loops)
+        raise ConfigError(
+            f"{model_path}: a model of one loop of several (it reads the other loops' "
+            f"commands): give --loop NAME ({names})"
+        )
     rec = read_loop(args.recording, cfg, args.loop)
     tag = {} if args.loop is None else {"loop": args.loop}
     horizon = args.horizon or cfg.horizon

@@ -40,6 +40,8 @@ def neighbour(contract: str, loop: str) -> str:
 
 def is_neighbour(name: str) -> bool:
     return "@" in name
+
+
 _ALARM_SIGNALS = ("State", "Fault", "J", "Threshold", "AlarmCount")
 
 

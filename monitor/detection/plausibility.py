@@ -153,9 +153,7 @@ def _run(  # pragma: no cover - numba
         fed_c = _PA if spool > 0 else _PB
         fed = x[i, cols[fed_c]]
         passing = (
-            running
-            and abs(spool) >= rel_spool
-            and x[i, cols[_PP]] - fed > rel_margin + ls_margin
+            running and abs(spool) >= rel_spool and x[i, cols[_PP]] - fed > rel_margin + ls_margin
         )
         for c in range(m):
             v = x[i, cols[c]]
