@@ -20,7 +20,7 @@ from pathlib import Path
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect
 from monitor.model.modelfile import load_model
-from monitor.offline.recordings import read_loop
+from monitor.offline.recordings import loop_recordings
 from monitor.resources import resource_path
 
 DURATION_S = 600
@@ -53,13 +53,12 @@ def _simulate(out: Path, seed: int, fault: str | None, severity: float) -> Path:
 
 
 def _judge(path: Path, cfg, models) -> dict[str, dict]:
-    out = {}
-    for lc in cfg.monitored_loops:
-        rec = read_loop(path, cfg, lc.name)
-        out[lc.name] = detect(
-            models[lc.name], rec, cfg.alarm, cfg.horizon, gating=cfg.gating
-        ).summary
-    return out
+    """Every loop's ``monitor detect --loop`` summary of one run (the file read once)."""
+    recs = loop_recordings(path, cfg, list(models))
+    return {
+        name: detect(models[name], rec, cfg.alarm, cfg.horizon, gating=cfg.gating).summary
+        for name, rec in recs.items()
+    }
 
 
 def main() -> int:

@@ -4,19 +4,23 @@ each loop its own signals, model, MON_Alarm frame and J1939 address.
 The four-loop log puts the shipped demo logs on the four loops (boom normal, stick piston
 wear, bucket spool wear, swing spool stroke; faults from 45 s, replay/regenerate.sh), with
 the boom's EngineSpeed and OilTemp shared.  What each loop must say is known from the log
-that went into it; the daemon's events per loop must equal ``monitor detect --loop``'s."""
+that went into it; the daemon's events per loop must equal ``monitor detect --loop``'s.
+Those logs are the single boom loop's on its own pump, so the config here is the shipped
+one with the boom's model on every loop and the single loop's pump system."""
 
 from __future__ import annotations
 
 import collections
 import dataclasses
 import json
+import tempfile
 from pathlib import Path
 from typing import Any
 
 import can
 import numpy as np
 import pytest
+import yaml
 from live_support import assert_same_events, live_config, replay_settled, run_daemon
 
 from monitor.cli import main
@@ -35,7 +39,23 @@ from monitor.resources import resource_path
 from monitor.sampling.bulk import recording_from_candump_bulk
 from monitor.sampling.sampler import ROW_COLUMNS
 
-CONFIG = resource_path("config", "excavator4.yaml")
+
+def _boom_model_config(folder: Path) -> Path:
+    """config/excavator4.yaml with the boom's model on every loop, on the boom loop's own
+    compensated pump (the plausibility defaults): what the demo logs come from."""
+    doc = yaml.safe_load(resource_path("config", "excavator4.yaml").read_text())
+    boom = str(resource_path("config", "boom_default.model.npz"))
+    doc["dbc"] = str(resource_path("dbc", "excavator4.dbc"))
+    doc["model"] = boom
+    for loop in doc["loops"]:
+        loop["model"] = boom
+    doc.pop("plausibility", None)
+    path = folder / "excavator4_boom_models.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+CONFIG = _boom_model_config(Path(tempfile.mkdtemp(prefix="test-loops-")))
 ONSET_S = 45.0
 TRUTH = {"boom": "normal", "stick": "piston_wear", "bucket": "spool_wear", "swing": "spool_stroke"}
 ALARM_SA = {"boom": 0xA0, "stick": 0xA1, "bucket": 0xA2, "swing": 0xA3}

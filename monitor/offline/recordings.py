@@ -5,6 +5,7 @@ the daemon's row layout (``monitor.config.layout``) and sample clock, without th
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -27,18 +28,42 @@ def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording
     rows are the ones the daemon ticks), with the other loops' spool commands as
     ``SpoolCmd@LOOP`` (``monitor.config.layout.neighbour``).  A ``.csv`` is a whole-machine
     CSV whose columns are the DBC's signal names (``t`` and the loop's own required)."""
-    names = [lc.name for lc in cfg.monitored_loops]
-    if name not in names:
-        raise ConfigError(f"{cfg.source}: no loop {name!r}; loops: {', '.join(names)}")
+    return loop_recordings(path, cfg, (name,))[name]
+
+
+def loop_recordings(
+    path: str | Path, cfg: MonitorConfig, names: Sequence[str]
+) -> dict[str, Recording]:
+    """``loop_recording`` of each loop of ``names``, the file read once."""
+    known = [lc.name for lc in cfg.monitored_loops]
+    for name in names:
+        if name not in known:
+            raise ConfigError(f"{cfg.source}: no loop {name!r}; loops: {', '.join(known)}")
     codec = FrameCodec.from_dbc(cfg.dbc)
     columns, views = row_layout(cfg, codec)
     optional = rod_columns(cfg.monitored_loops)
-    view = views[names.index(name)]
     if Path(path).suffix.lower() == ".csv":
-        mine = [c for c, v in zip(columns, view, strict=True) if v in ROW_COLUMNS]
-        wide = read_csv(path, required=[c for c in mine if c not in optional])
+        mine = {
+            c
+            for name in names
+            for c, v in zip(columns, views[known.index(name)], strict=True)
+            if v in ROW_COLUMNS and c not in optional
+        }
+        wide = read_csv(path, required=[c for c in columns if c in mine])
     else:
         wide = recording_from_candump_bulk(path, codec, columns, optional=optional)
+    return {name: _pick(wide, columns, views[known.index(name)], name, path, cfg) for name in names}
+
+
+def _pick(
+    wide: Recording,
+    columns: Sequence[str],
+    view: Sequence[str],
+    name: str,
+    path: str | Path,
+    cfg: MonitorConfig,
+) -> Recording:
+    """Loop ``name``'s columns of the row ``wide`` under their ``view`` names."""
     picked = {
         contract: wide[col]
         for col, contract in zip(columns, view, strict=True)
