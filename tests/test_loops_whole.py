@@ -16,6 +16,7 @@ from monitor.codec.frames import FrameCodec
 from monitor.config.layout import row_layout
 from monitor.config.settings import load_config
 from monitor.detection.offline import detect
+from monitor.detection.plausibility import COLUMNS, Plausibility, PlausibilityConfig, finding
 from monitor.io.csvio import read_csv
 from monitor.model.modelfile import load_model
 from monitor.model.spec import DGRNNSpec
@@ -159,3 +160,21 @@ def test_a_stick_fault_raises_the_stick_alarm_and_not_the_booms(stick_fault) -> 
     assert said["stick"]["alarm"] and said["stick"]["first_alarm_t"] > 120.0
     assert not said["boom"]["alarm"]
     assert all(s["sensor_checks"] == [] for s in said.values())
+
+
+def _findings(rec, cfg: PlausibilityConfig) -> set[tuple]:
+    x = np.column_stack([rec[c] for c in COLUMNS])
+    check, sig = Plausibility(cfg, load_config(CONFIG).alarm.min_engine_rpm).series(x)
+    return {finding(int(c), int(s)) for c, s in zip(check, sig, strict=True) if c}
+
+
+def test_healthy_whole_machine_work_is_a_sensor_fault_only_under_single_loop_rules(stick_fault):
+    # The boom lowers (the pump feeds B at a few bar plus the margin) with its load on A:
+    # the single loop's rule reads A above the pump as an offset; the load-sensing rule
+    # of config/excavator4.yaml judges the fed port only, and finds nothing on any loop.
+    cfg = load_config(CONFIG)
+    boom = read_loop(stick_fault, cfg, "boom")
+    assert ("PA", "pump_below_port") in _findings(boom, PlausibilityConfig())
+    for lc in cfg.monitored_loops:
+        rec = read_loop(stick_fault, cfg, lc.name)
+        assert _findings(rec, cfg.gating.plausibility) == set(), lc.name
