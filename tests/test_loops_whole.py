@@ -178,3 +178,10 @@ def test_healthy_whole_machine_work_is_a_sensor_fault_only_under_single_loop_rul
     for lc in cfg.monitored_loops:
         rec = read_loop(stick_fault, cfg, lc.name)
         assert _findings(rec, cfg.gating.plausibility) == set(), lc.name
+
+
+def test_detect_without_loop_asks_for_one_on_a_section_model(whole, capsys) -> None:
+    capsys.readouterr()
+    assert main(["detect", str(whole["csv"]), "--config", str(CONFIG)]) == 2
+    err = capsys.readouterr().err
+    assert "give --loop NAME (boom, stick, bucket, swing)" in err and "Traceback" not in err

@@ -17,7 +17,9 @@ from monitor.detection.opstate import OpState
 from monitor.errors import ConfigError, MonitorError
 
 if TYPE_CHECKING:
+    from monitor.config.settings import MonitorConfig
     from monitor.detection.offline import Detection
+    from monitor.model.modelfile import MonitorModel
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -125,12 +127,7 @@ def run(args: argparse.Namespace) -> int:
     model_path = args.model or (loop.model if args.loop else cfg.model)
     model = load_model(model_path)
     check_loop_model(model, loop, cfg, model_path)  # before the recording is read
-    if args.loop is None and any("@" in v for v in model.spec.variables):
-        names = ", ".join(lc.name for lc in cfg.monitored_loops)
-        raise ConfigError(
-            f"{model_path}: a model of one loop of several (it reads the other loops' "
-            f"commands): give --loop NAME ({names})"
-        )
+    _check_whole_recording(args.loop, model, cfg, model_path)
     rec = read_loop(args.recording, cfg, args.loop)
     tag = {} if args.loop is None else {"loop": args.loop}
     horizon = args.horizon or cfg.horizon
@@ -172,6 +169,19 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return 3 if s["verdict"] == "not_judged" else 0
+
+
+def _check_whole_recording(
+    loop: str | None, model: MonitorModel, cfg: MonitorConfig, model_path: Path
+) -> None:
+    """Without --loop the recording is read as one loop's: a model that reads the other
+    loops' commands (``SpoolCmd@LOOP``) needs --loop."""
+    if loop is None and any("@" in v for v in model.spec.variables):
+        names = ", ".join(lc.name for lc in cfg.monitored_loops)
+        raise ConfigError(
+            f"{model_path}: a model of one loop of several (it reads the other loops' "
+            f"commands): give --loop NAME ({names})"
+        )
 
 
 def _result_line(s: dict[str, Any]) -> str:
