@@ -185,3 +185,22 @@ def test_detect_without_loop_asks_for_one_on_a_section_model(whole, capsys) -> N
     assert main(["detect", str(whole["csv"]), "--config", str(CONFIG)]) == 2
     err = capsys.readouterr().err
     assert "give --loop NAME (boom, stick, bucket, swing)" in err and "Traceback" not in err
+
+
+def test_the_daemon_reads_each_loop_as_detect_loop_does(tmp_path) -> None:
+    # One mapping for the daemon and `detect --loop`: a whole-machine log through the
+    # shipped four-loop config on a virtual bus gives, per loop, detect's events.
+    from live_support import assert_same_events, live_config, replay_settled, run_daemon
+
+    log = tmp_path / "whole.log"
+    argv = ["simulate", "--machine", "excavator4", "--duration", "90", "--seed", "78"]
+    assert main([*argv, "--out", str(log)]) == 0
+    cfg = live_config(tmp_path, CONFIG)
+    _, events, _, _ = run_daemon(cfg, replay_settled(log))
+    for lc in cfg.loops:
+        live = [e for e in events if e.get("loop") == lc.name]
+        rec = read_loop(log, cfg, lc.name)
+        offline = detect(load_model(lc.model), rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+        assert live and offline.events
+        assert_same_events(live, offline)
+        assert all(e["state"] != "sensor_fault" for e in live), lc.name
