@@ -19,6 +19,7 @@ from typing import Any
 
 from monitor.errors import ConfigError
 from monitor.fleet import pipeline
+from monitor.fleet.cluster import local_cluster
 from monitor.fleet.layout import scan_fleet
 from monitor.fleet.run import judge_task
 
@@ -57,12 +58,12 @@ def _cpu_s(client: Any) -> float:
 
 @contextlib.contextmanager
 def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[Once]:
-    """A LocalCluster of ``n`` single-threaded workers, warm, and a function judging every
-    log on it as `monitor fleet run` does (the model scattered once, one task a log)."""
-    from distributed import Client, LocalCluster
+    """`monitor fleet run`'s LocalCluster of ``n`` single-threaded workers, warm, and a
+    function judging every log on it as the run does (the model scattered once, one task a
+    log)."""
+    from distributed import Client
 
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, dashboard_address=None)
-    with cluster, Client(cluster) as client:
+    with local_cluster(n, dashboard_address=None) as cluster, Client(cluster) as client:
         models = {m: client.scatter(m, broadcast=True) for m in {m for m, _ in jobs}}
         client.run(pipeline.judge_log, *jobs[0])  # every worker warm
 
