@@ -46,7 +46,13 @@ def test_each_way_judges_every_frame_and_is_set_beside_detect_per_worker(fleet):
         assert r["vs_detect_per_worker"] == pytest.approx(per_worker / detect_rate, rel=1e-3)
         assert len(r["cpu_s"]) == 2 and min(r["cpu_s"]) > 0
         assert r["frames_per_cpu_s"] == pytest.approx(frames / statistics.median(r["cpu_s"]), 1e-3)
+        detect_cpu = out["runs"]["detect"]["frames_per_cpu_s"]
+        assert r["cpu_vs_detect"] == pytest.approx(r["frames_per_cpu_s"] / detect_cpu)
     assert out["runs"]["detect"]["vs_detect_per_worker"] == 1.0
+    # Peak memory is a worker's own (a process judging logs: numpy and numba loaded, > 50 MB)
+    assert out["runs"]["detect"]["worker_peak_rss_mb"] is None
+    assert out["runs"]["workers_1"]["worker_peak_rss_mb"] > 50
+    assert out["process_peak_rss_mb"] > 50
     assert len(out["load_average"]["start"]) == 3
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import resource
 import statistics
 import time
 from collections.abc import Callable, Iterator
@@ -56,11 +57,16 @@ def _cpu_s(client: Any) -> float:
     return sum(client.run(time.process_time).values())
 
 
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory so far, MB (Linux reports KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 @contextlib.contextmanager
-def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[Once]:
+def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[tuple[Once, Callable[[], float]]]:
     """`monitor fleet run`'s LocalCluster of ``n`` single-threaded workers, warm, and a
     function judging every log on it as the run does (the model scattered once, one task a
-    log)."""
+    log), and one giving the largest peak RSS of its workers (MB)."""
     from distributed import Client
 
     with local_cluster(n, dashboard_address=None) as cluster, Client(cluster) as client:
@@ -73,7 +79,7 @@ def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[Once]:
             client.gather(futs)
             return _cpu_s(client) - cpu
 
-        yield once
+        yield once, lambda: max(client.run(_peak_rss_mb).values())
 
 
 def _rates(seconds: list[float], cpu_s: list[float], frames: int, workers: int) -> dict:
@@ -110,11 +116,13 @@ def bench_fleet(
         DETECT: (1, _in_process(jobs, pipeline.detect_frames)),
         "one_process": (1, _in_process(jobs, pipeline.judge_log)),
     }
+    peaks: dict[str, Callable[[], float]] = {}
     seconds: dict[str, list[float]] = {name: [] for name in ways}
     cpu_s: dict[str, list[float]] = {name: [] for name in ways}
     with contextlib.ExitStack() as stack:
         for n in workers:
-            ways[f"workers_{n}"] = (n, stack.enter_context(_on_dask(jobs, n)))
+            once, peaks[f"workers_{n}"] = stack.enter_context(_on_dask(jobs, n))
+            ways[f"workers_{n}"] = (n, once)
             seconds[f"workers_{n}"] = []
             cpu_s[f"workers_{n}"] = []
         for _ in range(repeats):
@@ -122,15 +130,20 @@ def bench_fleet(
                 start = time.perf_counter()
                 cpu_s[name].append(once())
                 seconds[name].append(time.perf_counter() - start)
+        worker_peak = {name: peak() for name, peak in peaks.items()}
     runs = {name: _rates(seconds[name], cpu_s[name], frames, n) for name, (n, _) in ways.items()}
-    base = runs[DETECT]["frames_per_s_per_worker"]
-    for r in runs.values():
+    base, base_cpu = runs[DETECT]["frames_per_s_per_worker"], runs[DETECT]["frames_per_cpu_s"]
+    for name, r in runs.items():
         r["vs_detect_per_worker"] = r["frames_per_s_per_worker"] / base
+        r["cpu_vs_detect"] = r["frames_per_cpu_s"] / base_cpu
+        r["worker_peak_rss_mb"] = worker_peak.get(name)
     return {
         "logs": len(jobs),
         "frames": frames,
         "repeats": repeats,
         "load_average": {"start": load_start, "end": os.getloadavg()},
+        # detect's and the one-process task's judging, and the bench's own imports
+        "process_peak_rss_mb": _peak_rss_mb(),
         "runs": runs,
     }
 
@@ -139,13 +152,17 @@ def table(out: dict[str, Any]) -> str:
     """The result as the Markdown table of docs/benchmarks.md."""
     lines = [
         "| how | workers | median s | frames/s | frames/s per worker | per worker vs detect "
-        "| frames per CPU-s |",
-        "|---|---|---|---|---|---|---|",
+        "| median CPU s | frames per CPU-s | vs detect | worker peak RSS MB |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, r in out["runs"].items():
+        peak = r["worker_peak_rss_mb"]
         lines.append(
             f"| {name} | {r['workers']} | {r['median_s']:.2f} | {r['frames_per_s']:,.0f} "
             f"| {r['frames_per_s_per_worker']:,.0f} | {r['vs_detect_per_worker']:.2f} "
-            f"| {r['frames_per_cpu_s']:,.0f} |"
+            f"| {r['median_cpu_s']:.2f} | {r['frames_per_cpu_s']:,.0f} "
+            f"| {r['cpu_vs_detect']:.2f} | {'-' if peak is None else f'{peak:,.0f}'} |"
         )
+    peak = out["process_peak_rss_mb"]
+    lines.append(f"\nbench process peak RSS (detect, one process): {peak:,.0f} MB")
     return "\n".join(lines)
