@@ -31,12 +31,12 @@ def fleet(tmp_path_factory):
 
 def test_each_way_judges_every_frame_and_is_set_beside_detect_per_worker(fleet):
     root, results = fleet
-    out = bench_fleet(root, results, workers=(1,), repeats=2)
+    out = bench_fleet(root, results, workers=(1,), repeats=2, dask_default=True)
     logs = sorted((root / "M01" / "logs").glob("*.log"))
     frames = sum(sum(1 for line in p.open() if FRAME.match(line.strip())) for p in logs)
     assert out["logs"] == len(logs) == 2
     assert out["frames"] == frames
-    assert list(out["runs"]) == ["detect", "one_process", "workers_1"]
+    assert list(out["runs"]) == ["detect", "one_process", "workers_1", "workers_1_dask_default"]
     detect_rate = frames / statistics.median(out["runs"]["detect"]["s"])
     for r in out["runs"].values():
         assert len(r["s"]) == 2

@@ -121,6 +121,12 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--repeats", type=int, default=3, metavar="N", help="timings of each way (default 3)"
     )
+    b.add_argument(
+        "--dask-default",
+        action="store_true",
+        help="also time clusters whose workers have Dask's default environment, as "
+        "`dask worker` starts them (what the fleet's own workers save)",
+    )
     b.set_defaults(func=bench)
 
 
@@ -188,7 +194,12 @@ def bench(args: argparse.Namespace) -> int:
         raise ConfigError(f"--repeats {args.repeats}: at least 1")
     if not args.fleet.is_dir():
         raise ConfigError(f"{args.fleet}: no such fleet folder")
-    out = bench_fleet(args.fleet.resolve(), args.results.resolve(), repeats=args.repeats)
+    out = bench_fleet(
+        args.fleet.resolve(),
+        args.results.resolve(),
+        repeats=args.repeats,
+        dask_default=args.dask_default,
+    )
     print(table(out), file=sys.stderr)
     print(json.dumps(out, indent=2))
     return 0

@@ -63,13 +63,17 @@ def _peak_rss_mb() -> float:
 
 
 @contextlib.contextmanager
-def _on_dask(jobs: list[tuple[bytes, str]], n: int) -> Iterator[tuple[Once, Callable[[], float]]]:
-    """`monitor fleet run`'s LocalCluster of ``n`` single-threaded workers, warm, and a
-    function judging every log on it as the run does (the model scattered once, one task a
-    log), and one giving the largest peak RSS of its workers (MB)."""
+def _on_dask(
+    jobs: list[tuple[bytes, str]], n: int, dask_default: bool
+) -> Iterator[tuple[Once, Callable[[], float]]]:
+    """`monitor fleet run`'s LocalCluster of ``n`` single-threaded workers (with Dask's
+    default worker environment if ``dask_default``), warm, and a function judging every log
+    on it as the run does (the model scattered once, one task a log), and one giving the
+    largest peak RSS of its workers (MB)."""
     from distributed import Client
 
-    with local_cluster(n, dashboard_address=None) as cluster, Client(cluster) as client:
+    local = local_cluster(n, dashboard_address=None, dask_default=dask_default)
+    with local as cluster, Client(cluster) as client:
         models = {m: client.scatter(m, broadcast=True) for m in {m for m, _ in jobs}}
         client.run(pipeline.judge_log, *jobs[0])  # every worker warm
 
@@ -98,14 +102,19 @@ def _rates(seconds: list[float], cpu_s: list[float], frames: int, workers: int) 
 
 
 def bench_fleet(
-    fleet_root: Path, results: Path, workers: tuple[int, ...] = (1, 2), repeats: int = 3
+    fleet_root: Path,
+    results: Path,
+    workers: tuple[int, ...] = (1, 2),
+    repeats: int = 3,
+    dask_default: bool = False,
 ) -> dict[str, Any]:
     """Seconds, frames/s and frames/s per worker of judging every log of the fleet: with
     `monitor detect`'s code (``detect``), as the fleet's task in one process
-    (``one_process``) and on Dask (``workers_N``); each one's per-worker rate over detect's
-    (``vs_detect_per_worker``), from the medians of ``repeats`` timings; and frames per
-    CPU second of all its processes (``frames_per_cpu_s``: what a cluster's cores cost,
-    whatever else the machine runs)."""
+    (``one_process``) and on Dask (``workers_N``; with ``dask_default`` also
+    ``workers_N_dask_default``, workers in Dask's own default environment); each one's
+    per-worker rate over detect's (``vs_detect_per_worker``), from the medians of
+    ``repeats`` timings; and frames per CPU second of all its processes
+    (``frames_per_cpu_s``: what a cluster's cores cost, whatever else the machine runs)."""
     jobs = _jobs(fleet_root, results)
     if not jobs:
         raise ConfigError(f"{results / 'models'}: no model for any machine of {fleet_root}")
@@ -120,11 +129,12 @@ def bench_fleet(
     seconds: dict[str, list[float]] = {name: [] for name in ways}
     cpu_s: dict[str, list[float]] = {name: [] for name in ways}
     with contextlib.ExitStack() as stack:
-        for n in workers:
-            once, peaks[f"workers_{n}"] = stack.enter_context(_on_dask(jobs, n))
-            ways[f"workers_{n}"] = (n, once)
-            seconds[f"workers_{n}"] = []
-            cpu_s[f"workers_{n}"] = []
+        for n, default in [(n, d) for n in workers for d in (False, True)[: 1 + dask_default]]:
+            name = f"workers_{n}" + ("_dask_default" if default else "")
+            once, peaks[name] = stack.enter_context(_on_dask(jobs, n, default))
+            ways[name] = (n, once)
+            seconds[name] = []
+            cpu_s[name] = []
         for _ in range(repeats):
             for name, (_n, once) in ways.items():
                 start = time.perf_counter()

@@ -99,15 +99,18 @@ def worker_environ(workers: int, cores: int | None = None) -> dict[str, str | No
 
 
 @contextmanager
-def local_cluster(workers: int, dashboard_address: str | None = "127.0.0.1:0") -> Iterator[Any]:
+def local_cluster(
+    workers: int, dashboard_address: str | None = "127.0.0.1:0", dask_default: bool = False
+) -> Iterator[Any]:
     """A LocalCluster of ``workers`` single-threaded worker processes with
-    :func:`worker_environ` (closed afterwards).  The nanny writes its variables into this
-    process's environment too; they are put back, so a second cluster gets its own."""
+    :func:`worker_environ` (or Dask's default environment, as `dask worker` starts them;
+    closed afterwards).  The nanny writes its variables into this process's environment
+    too; they are put back, so a second cluster gets its own."""
     import dask
     from distributed import LocalCluster
 
     key = "distributed.nanny.pre-spawn-environ"
-    env = {f"{key}.{k}": v for k, v in worker_environ(workers).items()}
+    env = {} if dask_default else {f"{key}.{k}": v for k, v in worker_environ(workers).items()}
     saved = dict(os.environ)
     try:
         with _quiet_workers(), dask.config.set(env):
