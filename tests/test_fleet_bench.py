@@ -52,6 +52,8 @@ def test_each_way_judges_every_frame_and_is_set_beside_detect_per_worker(fleet):
     # Peak memory is a worker's own (a process judging logs: numpy and numba loaded, > 50 MB)
     assert out["runs"]["detect"]["worker_peak_rss_mb"] is None
     assert out["runs"]["workers_1"]["worker_peak_rss_mb"] > 50
+    after = out["runs"]["workers_1"]["worker_rss_after_mb"]
+    assert 50 < after <= out["runs"]["workers_1"]["worker_peak_rss_mb"]
     assert out["process_peak_rss_mb"] > 50
     assert len(out["load_average"]["start"]) == 3
 

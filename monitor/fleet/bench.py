@@ -62,10 +62,16 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def _rss_mb() -> float:
+    """This process's resident memory now, MB (what a worker keeps between logs)."""
+    resident_pages = int(Path("/proc/self/statm").read_text().split()[1])  # Linux
+    return resident_pages * resource.getpagesize() / 2**20
+
+
 @contextlib.contextmanager
 def _on_dask(
     jobs: list[tuple[bytes, str]], n: int, dask_default: bool
-) -> Iterator[tuple[Once, Callable[[], float]]]:
+) -> Iterator[tuple[Once, Callable[[], Iterator[float]]]]:
     """`monitor fleet run`'s LocalCluster of ``n`` single-threaded workers (with Dask's
     default worker environment if ``dask_default``), warm, and a function judging every log
     on it as the run does (the model scattered once, one task a log), and one giving the
@@ -83,7 +89,7 @@ def _on_dask(
             client.gather(futs)
             return _cpu_s(client) - cpu
 
-        yield once, lambda: max(client.run(_peak_rss_mb).values())
+        yield once, lambda: (max(client.run(f).values()) for f in (_peak_rss_mb, _rss_mb))
 
 
 def _rates(seconds: list[float], cpu_s: list[float], frames: int, workers: int) -> dict:
@@ -125,7 +131,7 @@ def bench_fleet(
         DETECT: (1, _in_process(jobs, pipeline.detect_frames)),
         "one_process": (1, _in_process(jobs, pipeline.judge_log)),
     }
-    peaks: dict[str, Callable[[], float]] = {}
+    peaks: dict[str, Callable[[], Iterator[float]]] = {}
     seconds: dict[str, list[float]] = {name: [] for name in ways}
     cpu_s: dict[str, list[float]] = {name: [] for name in ways}
     with contextlib.ExitStack() as stack:
@@ -140,13 +146,13 @@ def bench_fleet(
                 start = time.perf_counter()
                 cpu_s[name].append(once())
                 seconds[name].append(time.perf_counter() - start)
-        worker_peak = {name: peak() for name, peak in peaks.items()}
+        worker_rss = {name: tuple(peak()) for name, peak in peaks.items()}
     runs = {name: _rates(seconds[name], cpu_s[name], frames, n) for name, (n, _) in ways.items()}
     base, base_cpu = runs[DETECT]["frames_per_s_per_worker"], runs[DETECT]["frames_per_cpu_s"]
     for name, r in runs.items():
         r["vs_detect_per_worker"] = r["frames_per_s_per_worker"] / base
         r["cpu_vs_detect"] = r["frames_per_cpu_s"] / base_cpu
-        r["worker_peak_rss_mb"] = worker_peak.get(name)
+        r["worker_peak_rss_mb"], r["worker_rss_after_mb"] = worker_rss.get(name, (None, None))
     return {
         "logs": len(jobs),
         "frames": frames,
@@ -162,16 +168,17 @@ def table(out: dict[str, Any]) -> str:
     """The result as the Markdown table of docs/benchmarks.md."""
     lines = [
         "| how | workers | median s | frames/s | frames/s per worker | per worker vs detect "
-        "| median CPU s | frames per CPU-s | vs detect | worker peak RSS MB |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| median CPU s | frames per CPU-s | vs detect | worker peak RSS MB | RSS after MB |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, r in out["runs"].items():
-        peak = r["worker_peak_rss_mb"]
+        peak, after = r["worker_peak_rss_mb"], r["worker_rss_after_mb"]
         lines.append(
             f"| {name} | {r['workers']} | {r['median_s']:.2f} | {r['frames_per_s']:,.0f} "
             f"| {r['frames_per_s_per_worker']:,.0f} | {r['vs_detect_per_worker']:.2f} "
             f"| {r['median_cpu_s']:.2f} | {r['frames_per_cpu_s']:,.0f} "
-            f"| {r['cpu_vs_detect']:.2f} | {'-' if peak is None else f'{peak:,.0f}'} |"
+            f"| {r['cpu_vs_detect']:.2f} | {'-' if peak is None else f'{peak:,.0f}'} "
+            f"| {'-' if after is None else f'{after:,.0f}'} |"
         )
     peak = out["process_peak_rss_mb"]
     lines.append(f"\nbench process peak RSS (detect, one process): {peak:,.0f} MB")
