@@ -460,3 +460,30 @@ def test_a_machine_in_fault_is_named_by_its_fault_though_a_sensor_episode_came_l
         ],
     )
     assert (v.state, v.finding, v.since) == ("sensor_fault", "QP frozen", "day01")
+
+
+def test_a_fault_code_means_what_its_episodes_were_sent_as_not_the_machine_name():
+    # M06 is named piston_wear (40 of 50 votes) but its second episode was sent as spool
+    # wear: the spool code's meaning stays "worn valve spool suspected", with M06 beside it.
+    from monitor.fleet.fleetview import code_groups, machine_view
+
+    rows = [
+        _row(
+            "M06",
+            1,
+            "fault",
+            2.0,
+            [
+                _ep("fault", 5.0, 30.0, "piston_wear", {"piston_wear": 40}),
+                _ep("fault", 40.0, 50.0, "spool_wear", {"spool_wear": 10}, spn_fmi=SPOOL),
+            ],
+        )
+    ]
+    v = machine_view("M06", rows)
+    assert v.alarms[1].what.endswith("the machine: piston seal suspected")
+    groups, periods = code_groups([v])
+    assert [(g.spn, g.fmi, g.what, g.machines) for g in groups] == [
+        (*PISTON, "piston seal suspected", ["M06"]),
+        (*SPOOL, "worn valve spool suspected", ["M06"]),
+    ]
+    assert periods == ["day 01"]

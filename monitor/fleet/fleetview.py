@@ -223,6 +223,14 @@ class CodeGroup:
     per_period: dict[str, int]  # episodes per period
 
 
+def _code_meaning(a: Alarm) -> str:
+    """What a DM1 code says: the episode's own name (the one it was sent with), never the
+    machine's name an episode row adds when they differ."""
+    if a.kind == "fault":
+        return fault_action(a.name)[0]
+    return sensor_label(a.name, a.check)
+
+
 def code_groups(views: list[MachineView]) -> tuple[list[CodeGroup], list[str]]:
     """Episodes counted per DM1 code (SPN, FMI) and period; the periods in order."""
     groups: dict[tuple[int, int], CodeGroup] = {}
@@ -231,7 +239,7 @@ def code_groups(views: list[MachineView]) -> tuple[list[CodeGroup], list[str]]:
         for a in v.alarms:
             c = a.code
             g = groups.setdefault(
-                (c.spn, c.fmi), CodeGroup(c.spn, c.fmi, a.what, [], defaultdict(int))
+                (c.spn, c.fmi), CodeGroup(c.spn, c.fmi, _code_meaning(a), [], defaultdict(int))
             )
             if a.machine not in g.machines:
                 g.machines.append(a.machine)
