@@ -110,6 +110,10 @@ last {{ v.last_seen }}){% endif %}{% if v.evidence %}; {{ v.evidence }}{% endif 
 {% for div in signal_plots %}{{ div|safe }}{% else %}<p class="note">{{ signals_note }}</p>{%
 endfor %}
 <h2>Every log</h2>
+<p class="note">Health index: the log's largest alarm level (J / eps0 or a statistic beside
+it over its threshold; 1.0 = alarm). Median J / eps0: the log's typical residual over the
+alarm threshold. Drift: the log's median J over the commissioning run's (2 x and above:
+wearing?). Judged: the seconds of the log the detector gave a verdict on.</p>
 <table id="logs"><tr><th>#</th><th>log</th><th>verdict</th><th>health index</th>
 <th>median J / eps0</th><th>drift</th><th>judged [s]</th><th>episodes</th><th>error</th></tr>
 {% for r in v.rows %}<tr><td class="num">{{ loop.index }}</td><td>{{ r.log }}</td>
