@@ -75,7 +75,7 @@ def _on_dask(
     """`monitor fleet run`'s LocalCluster of ``n`` single-threaded workers (with Dask's
     default worker environment if ``dask_default``), warm, and a function judging every log
     on it as the run does (the model scattered once, one task a log), and one giving the
-    largest peak RSS of its workers (MB)."""
+    largest peak RSS and the largest RSS now of its workers (MB)."""
     from distributed import Client
 
     local = local_cluster(n, dashboard_address=None, dask_default=dask_default)

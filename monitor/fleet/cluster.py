@@ -89,8 +89,8 @@ def worker_environ(workers: int, cores: int | None = None) -> dict[str, str | No
     """What Dask's nanny sets in a local worker's environment before it starts, changed for
     judging (``None`` unsets).  Dask's ``MALLOC_TRIM_THRESHOLD_=65536`` (to hand freed memory
     back to the system) also turns off glibc's adaptive mmap threshold, so every array over
-    128 kB of a log's judging is mapped and unmapped afresh: on a 1-hour log 8x the page
-    faults and 0.3-0.5 CPU-s of system time on top of 1.5 s (docs/explanation/fleet-scaling.md);
+    128 kB of a log's judging is mapped and unmapped afresh: on a 1-hour log 8-12 x the page
+    faults and 0.3-0.7 CPU-s of system time on top of 1.5 s (docs/explanation/fleet-scaling.md);
     without it a worker judges as `monitor detect` does.  And numba's parallel loops get the
     worker's share of the cores, not every core each, so N workers do not run N x cores
     threads (a variable the user set keeps their value)."""
