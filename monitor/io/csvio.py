@@ -166,14 +166,14 @@ def _convert(
 ) -> None:
     """One block of rows onto ``parts``; a column holding text is dropped (``dropped``)
     unless it is required (``InputFileError`` naming its line)."""
-    required = set(required)
+    must = set(required)
     for name, values in zip(header, zip(*rows, strict=True), strict=True):
         if name in dropped:
             continue
         try:
             parts[name].append(_to_float(p, name, list(values), lines))
         except InputFileError:
-            if name in required:
+            if name in must:
                 raise
             dropped.add(name)  # an extra text column: tools ignore what they do not need
             parts[name].clear()

@@ -55,7 +55,7 @@ def halves(held: HeldOut) -> tuple[HeldOut, HeldOut] | None:
     recording: cut at its middle, the cooler and the warmer half (a commissioning run warms
     up as it goes).  None when there are not two pieces."""
     whole = len(held.recordings) >= 2
-    pieces = []
+    pieces: list[tuple[float, int, np.ndarray, Recording]] = []
     for e, rec in zip(held.residuals, held.recordings, strict=True):
         cuts = ((0, len(rec)),) if whole else ((0, len(rec) // 2), (len(rec) // 2, len(rec)))
         for a, b in cuts:
