@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from threadpoolctl import threadpool_limits
 
 from monitor.gap.diagnose import fitting as F
+from monitor.gap.diagnose import identify
 from monitor.gap.diagnose import verdict as V
 from monitor.gap.diagnose.records import (
     Diagnosis,
@@ -77,9 +78,12 @@ def _diagnose(
     paired = F.fit_pairs(parts, cal, refined, say)
     laps.lap("pairs")
     judged = V.judge(cal, refined, paired, say)
+    judged = V.check_cause(parts, cal, refined, paired, judged, say)
     finding = V.suggest_next(parts, cal, refined, paired, judged, say)
     if judged.decision.verdict in ("unexplained", V.sensorcal.NAME):
         laps.lap("suggest")
+    pairs_apart = identify.measure(cal, refined)
+    laps.lap("identify")
     laps.timings["total"] = time.perf_counter() - laps.start
     base = refined.baseline
     tolerances = Tolerances(
@@ -105,6 +109,7 @@ def _diagnose(
         finding=finding,
         traces=traces,
         timings_s=laps.timings,
+        identifiability=pairs_apart,
     )
 
 

@@ -141,6 +141,9 @@ class Finding:
     #: A ``sensor_lag`` verdict checked against the engine's ripple (``lagcheck.py``): the
     #: JSON's ``lag_check``.
     lag_check: dict | None = None
+    #: An ``oil_viscosity`` leak checked against the oil temperature (``cause.py``): the
+    #: JSON's ``cause_check``.
+    cause_check: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -153,3 +156,5 @@ class Diagnosis:
     finding: Finding
     traces: Traces
     timings_s: dict[str, float]
+    #: How well the recording separates the look-alike pairs (``identify.py``).
+    identifiability: list[dict] = field(default_factory=list)

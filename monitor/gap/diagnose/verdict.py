@@ -6,8 +6,9 @@ Verdict rules: see ``judge/decide.py``."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+from monitor.gap.diagnose import cause as cause_mod
 from monitor.gap.diagnose.evaluate import Readings
 from monitor.gap.diagnose.records import Absorbed, Calibrated, Finding, Paired, Parts, Scores
 from monitor.gap.fit import calibrate as cal_mod
@@ -35,6 +36,8 @@ class Judged:
     lag_check: dict | None
     absorbed: dict[str, Absorbed]
     noise_only: bool
+    #: An ``oil_viscosity`` verdict's leak checked against the oil temperature (``cause``).
+    cause: cause_mod.LeakCause | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -73,6 +76,15 @@ def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Jud
             f"; verdict {before} -> {d.verdict}"
         )
     return Judged(decision=d, lag_check=lag_checked, absorbed=absorbed, noise_only=noise_only)
+
+
+def check_cause(
+    parts: Parts, cal: Calibrated, scores: Scores, paired: Paired, judged: Judged, say: Progress
+) -> Judged:
+    """Stage 6b: cause second (``cause.py``): a leak named ``oil_viscosity`` that does not
+    follow the oil temperature is wear, not viscosity."""
+    d, chk = cause_mod.judge_cause(judged.decision, parts, cal, scores, paired.boot_idx, say)
+    return replace(judged, decision=d, cause=chk)
 
 
 def _lag_candidate(singles: Sequence[Candidate]) -> Candidate | None:
@@ -153,16 +165,22 @@ def suggest_next(
     if d.verdict == "unexplained" and lead is not None:
         lead.with_pair()
         say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
+    chk = judged.cause
+    ranked = lead.ranked if lead and d.verdict == "unexplained" else []
+    if chk is not None and chk.cause == "wear":
+        # The worn leak was fitted and scored like the terms: it leads the suggestion.
+        ranked = [cause_mod.suggestion_entry(chk), *ranked]
     return Finding(
         verdict=d.verdict,
         also=d.also,
         chosen=d.chosen,
         confidence=d.confidence,
-        suggestion=lead.ranked if lead and d.verdict == "unexplained" else [],
+        suggestion=ranked,
         suggestion_tried=lead.tried if lead else [],
         sensor_check=checked.as_dict() if checked is not None else None,
         traded=_traded(d, scores.singles, S.compared(cal.prep)),
         lag_check=judged.lag_check,
+        cause_check=None if chk is None else chk.as_dict(),
     )
 
 

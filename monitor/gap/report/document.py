@@ -17,7 +17,7 @@ from monitor.gap.fit import calibrate as cal_mod
 from monitor.gap.fit import sensorcal
 from monitor.gap.fit.candidates import Candidate, default_member
 from monitor.gap.fit.score import SegmentSums, compared, gap, normalised, reduction
-from monitor.gap.judge import basemis
+from monitor.gap.judge import basemis, mechanism
 from monitor.gap.judge import where as W
 from monitor.gap.judge.shrink import shrink_report
 from monitor.signals import MEASURED_NAMES
@@ -162,6 +162,7 @@ def _checks(diag: Diagnosis) -> dict:
         **({"sensor_check": f.sensor_check} if f.sensor_check is not None else {}),
         **({"trade_off": f.traded} if f.traded is not None else {}),
         **({"lag_check": f.lag_check} if f.lag_check is not None else {}),
+        **({"cause_check": f.cause_check} if f.cause_check is not None else {}),
         **_absorbed(f.chosen, diag.ranking.absorbed, tol.floor),
     }
 
@@ -175,7 +176,7 @@ def build_report(diag: Diagnosis, machine: MachineParams) -> dict:
     regimes = _regime_shrink(diag, held_mask)
     shrink = shrink_report(tol.nominal, after, rank.boot_idx, tol.floor, regimes, compared(prep))
     named = _named_params(f)
-    return {
+    report = {
         "verdict": f.verdict,
         "also": f.also,
         "params": named["params"],
@@ -193,8 +194,12 @@ def build_report(diag: Diagnosis, machine: MachineParams) -> dict:
         "base_mismatch": _base_mismatch(diag, compared(prep), after, chosen),
         "recording": _recording(diag),
         "timings_s": {k: round(v, 2) for k, v in diag.timings_s.items()},
+        "identifiability": diag.identifiability,
         **_checks(diag),
     }
+    # Mechanism first, cause second: read from the keys above (``judge/mechanism.py``).
+    report["mechanism"] = mechanism.describe(report)
+    return report
 
 
 def _absorbed(chosen: Candidate | None, absorbed: dict[str, Absorbed], floor: np.ndarray) -> dict:

@@ -1,0 +1,190 @@
+"""Cause second: a leak the fits put down to oil viscosity is checked against the oil
+temperature.  A leak that follows the temperature (thin oil leaks more) is viscosity; one
+that does not is wear (a worn pump, a scored seal), which the catalogue does not hold.
+
+The check refits the named leak with an oil whose viscosity does not change with
+temperature (the same paths and knobs, ``FLAT_OIL``) and compares the two on the held-out
+part under the block bootstrap, like an effect against the simulator it must beat.  It
+needs the oil temperature to move: over a warm-up from 20 to 55 degC an ISO VG 46 oil
+thins by a factor of five, so the two laws part by far more than the noise; on a warm
+machine whose oil stays within a few degrees they are one law, and the verdict says which
+recording would tell them apart.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from monitor.gap.diagnose.evaluate import score
+from monitor.gap.diagnose.records import Calibrated, Parts, Scores
+from monitor.gap.fit.candidates import Candidate, Member, default_member, fit_candidate
+from monitor.gap.judge.decide import SIGNIFICANT, Decision, gain_share
+from monitor.gap.judge.where import scored_mask
+
+Progress = Callable[[str], None]
+
+NAME = "oil_viscosity"
+#: An oil whose viscosity does not follow the temperature (Walther through 20 and 19.99 cSt:
+#: within 0.03 % of its 40 degC value from 10 to 70 degC): the same leak, constant.
+FLAT_OIL: tuple[tuple[str, float], ...] = (("nu40_cst", 20.0), ("nu100_cst", 19.99))
+#: Oil temperature span (5th to 95th percentile of the compared samples, degC) below which
+#: the recording cannot tell the causes apart: 10 degC thins an ISO VG 46 oil by about a
+#: third near 40 degC, a leak change of the order of the fits' own spread.
+MIN_SPAN_C = 10.0
+#: The leak paths of the family's knobs, as the suggestion's ``signal`` names them.
+PATHS = {
+    "pump_leak_lpm_per_100bar": ("pump leakage", "P->tank"),
+    "piston_leak_lpm_per_100bar": ("leakage across the piston seal", "A<->B"),
+    "valve_leak_lpm_per_100bar": ("leakage across the valve clearances", "A->tank"),
+}
+
+
+@dataclass(frozen=True)
+class LeakCause:
+    """The oil-temperature check of a leak named ``oil_viscosity``."""
+
+    #: The leak path that carries most of the fitted leak (a ``PATHS`` key).
+    path: str
+    span_c: float
+    #: The leak as named, following the viscosity.
+    viscous: Candidate
+    #: The temperature-flat leak refitted and scored (None: the span was too small).
+    flat: Candidate | None = None
+    #: Share of bootstrap resamples in which the flat leak has the smaller held-out gap.
+    flat_share: float | None = None
+
+    @property
+    def cause(self) -> str | None:
+        """``oil_viscosity`` or ``wear``; None: the recording cannot tell."""
+        if self.flat_share is None:
+            return None
+        if self.flat_share >= SIGNIFICANT:
+            return "wear"
+        if self.flat_share <= 1.0 - SIGNIFICANT:
+            return NAME
+        return None
+
+    def as_dict(self) -> dict:
+        """The JSON's ``cause_check``."""
+        mechanism, signal = PATHS[self.path]
+        out: dict = {
+            "mechanism": mechanism,
+            "signal": signal,
+            "oil_temp_span_c": round(self.span_c, 1),
+            "cause": self.cause,
+            "viscous_heldout_reduction": round(float(self.viscous.heldout_reduction), 4),
+        }
+        if self.flat is not None and self.flat_share is not None:
+            out["flat_heldout_reduction"] = round(float(self.flat.heldout_reduction), 4)
+            out["flat_better_share"] = round(self.flat_share, 3)
+            out["flat_leak_lpm_per_100bar"] = round(self.flat.effects[0].params[self.path], 4)
+        out["evidence"] = self.evidence()
+        return out
+
+    def evidence(self) -> str:
+        """One line: what decided, or which recording would."""
+        if self.flat_share is None:
+            return (
+                f"the oil temperature spans {self.span_c:.0f} degC: a leak that follows it "
+                "(viscosity) and one that does not (wear) look alike; a warm-up run (oil "
+                "from about 20 to 50 degC) would tell them apart"
+            )
+        pct = 100 * self.flat_share
+        if self.cause == "wear":
+            return (
+                f"over {self.span_c:.0f} degC of oil temperature the leak does not follow "
+                f"the viscosity: a constant leak fits the held-out part better in {pct:.0f} % "
+                "of resamples (wear, not viscosity)"
+            )
+        if self.cause == NAME:
+            return (
+                f"over {self.span_c:.0f} degC of oil temperature the leak follows the "
+                f"viscosity: a constant leak fits the held-out part better in only "
+                f"{pct:.0f} % of resamples"
+            )
+        return (
+            f"over {self.span_c:.0f} degC of oil temperature a leak that follows the viscosity "
+            f"and a constant one fit alike (the constant one better in {pct:.0f} % of "
+            "resamples): a longer warm-up would tell them apart"
+        )
+
+
+def oil_span_c(parts: Parts) -> float:
+    """The oil temperature's 5th-95th percentile span over the scored samples (degC)."""
+    prep = parts.prep
+    temp = prep.cmd["OilTemp"][scored_mask(len(prep), parts.segments)]
+    temp = temp[np.isfinite(temp)]
+    return float(np.percentile(temp, 95) - np.percentile(temp, 5)) if temp.size else 0.0
+
+
+def main_path(c: Candidate) -> str:
+    """The leak path with the largest fitted leak."""
+    p = c.effects[0].params
+    return max(PATHS, key=lambda k: float(p.get(k, 0.0)))
+
+
+def flat_member(m: Member) -> Member:
+    """``m`` with a temperature-flat oil (same knobs, same paths)."""
+    fixed = tuple(kv for kv in m.fixed if kv[0] not in dict(FLAT_OIL)) + FLAT_OIL
+    return replace(m, name=f"{m.name}_constant", fixed=fixed, starts=())
+
+
+def check_leak(
+    parts: Parts, cal: Calibrated, scores: Scores, boot_idx: np.ndarray, chosen: Candidate
+) -> LeakCause:
+    """The named ``oil_viscosity`` single ``chosen`` against the same leak with a flat oil,
+    both with ``chosen``'s tolerances (one local fit and one held-out run)."""
+    span, path = oil_span_c(parts), main_path(chosen)
+    if span < MIN_SPAN_C:
+        return LeakCause(path, span, chosen)
+    member = chosen.members[0] if chosen.members else default_member(NAME)
+    flat_m = flat_member(member)
+    residual = cal.readings.fit(chosen.prep).residual
+    starts = [(chosen.factors, chosen.effects)]
+    flat = fit_candidate([NAME], residual, chosen.factors, (), starts, members=[flat_m])
+    flat = replace(flat, prep=chosen.prep)
+    base = scores.baseline
+    sums = cal.readings.held(chosen.prep).sums(flat.factors, flat.effects)
+    score(flat, sums, cal.floor, base.gap0, base.n_eff)
+    viscous_sums = cal.readings.held(chosen.prep).sums(chosen.factors, chosen.effects)
+    share = gain_share(viscous_sums, sums, boot_idx, cal.floor)
+    return LeakCause(path, span, chosen, flat, share)
+
+
+def judge_cause(
+    d: Decision, parts: Parts, cal: Calibrated, scores: Scores, boot_idx: np.ndarray, say: Progress
+) -> tuple[Decision, LeakCause | None]:
+    """A single ``oil_viscosity`` verdict checked against the oil temperature: a leak that
+    does not follow it is wear, out of the catalogue (``unexplained``, the leak first in
+    the suggestion); otherwise the verdict stands, with the check."""
+    c = d.chosen
+    if d.verdict != NAME or c is None or len(c.effects) != 1:
+        return d, None
+    chk = check_leak(parts, cal, scores, boot_idx, c)
+    say(f"oil_viscosity against the oil temperature: {chk.evidence()}")
+    if chk.cause == "wear":
+        return Decision("unexplained", None, None, float(chk.flat_share or 0.0)), chk
+    return d, chk
+
+
+def suggestion_entry(chk: LeakCause) -> dict:
+    """The worn leak as the suggestion's first term (the contract's object)."""
+    assert chk.flat is not None
+    mechanism, signal = PATHS[chk.path]
+    leak = float(chk.flat.effects[0].params[chk.path])
+    return {
+        "term": "leakage",
+        "signal": signal,
+        "shape": "dp",
+        "description": (
+            f"{mechanism} that does not follow the oil temperature (wear): "
+            f"{leak:.3g} L/min per 100 bar"
+        ),
+        "coefficient": round(leak, 6),
+        "unit": "L/min per 100 bar",
+        "heldout_reduction": round(float(chk.flat.heldout_reduction), 4),
+        "cause": "wear",
+    }

@@ -1,0 +1,245 @@
+"""Mechanism first, cause second: where the physics departs from the simulator (pump
+leakage, rod friction, a sensor's dynamics, ...), then the causes that would make it, with
+the evidence that separated them or the recording that would.
+
+Built from the verdict's own keys (``verdict``, ``member``, ``ranking``, ``suggestion``,
+``calibrated``, and the checks ``cause_check``, ``lag_check``, ``sensor_check``,
+``absorbed``, ``identifiability``): the JSON's ``mechanism``, an addition that changes none
+of them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from monitor.gap.fit.candidates import CONFOUNDED
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """Where the physics departs, and what can make it depart that way."""
+
+    name: str
+    where: str
+    #: The catalogue effects (and tolerances) that act through this mechanism.
+    causes: tuple[str, ...]
+    #: A recording that separates the causes when this one cannot.
+    separating_recording: str
+
+
+_COMPLIANCE = Mechanism(
+    "compliance",
+    "oil volumes and lines: pressures build and fall slower than the modelled oil allows",
+    ("entrained_air", "hose_compliance", "volumes"),
+    "pressure steps at several pressure levels (air stiffens with pressure, hoses and "
+    "volumes much less)",
+)
+_SENSOR = Mechanism(
+    "sensor dynamics",
+    "the pressure and flow readings, not the machine: they read late",
+    ("sensor_lag", "spool_dynamics", "pump_control_dynamics", "hose_compliance"),
+    "a recording with the engine speed varying (a sensor reads its ripple late, the "
+    "machine does not) and RodPos measured (the rod moves on time under a sensor lag)",
+)
+_FRICTION = Mechanism(
+    "rod friction",
+    "the cylinder: a force against the rod's motion at reversals and breakaway",
+    ("cylinder_friction", "oil_viscosity", "viscous_friction"),
+    "slow moves with reversals (Coulomb friction acts at any speed, viscous with speed)",
+)
+#: Per catalogue effect.
+BY_EFFECT: dict[str, Mechanism] = {
+    "entrained_air": _COMPLIANCE,
+    "hose_compliance": _COMPLIANCE,
+    "sensor_lag": _SENSOR,
+    "cylinder_friction": _FRICTION,
+    "oil_viscosity": Mechanism(
+        "leakage",
+        "internal leakage that follows the oil's viscosity (pump, piston seal, valve)",
+        ("oil_viscosity", "wear"),
+        "a warm-up run (oil from about 20 to 50 degC): a viscous leak follows the "
+        "temperature, a worn part's does not",
+    ),
+    "spool_dynamics": Mechanism(
+        "valve spool response",
+        "the valve: the spool follows its command late",
+        ("spool_dynamics", "sensor_lag"),
+        "spool steps with RodPos measured (a slow spool moves the rod late too)",
+    ),
+    "valve_deadband": Mechanism(
+        "valve metering near centre",
+        "the valve: no flow until the spool opens past an overlap",
+        ("valve_deadband", "valve_gain"),
+        "slow spool ramps through centre",
+    ),
+    "pump_control_dynamics": Mechanism(
+        "pump flow response",
+        "the pump: its flow follows the displacement command late",
+        ("pump_control_dynamics", "sensor_lag"),
+        "pump displacement steps at a steady engine speed",
+    ),
+    "load_variation": Mechanism(
+        "load force",
+        "the load on the rod changes with its position",
+        ("load_variation", "gravity_load"),
+        "holds at several rod positions",
+    ),
+    "sensor_calibration": Mechanism(
+        "sensor reading",
+        "one sensor's gain or offset, not the machine",
+        ("sensor_calibration",),
+        "a reference gauge on the signal",
+    ),
+}
+#: For ``unexplained``: the suggestion's first term kind.
+BY_TERM: dict[str, str] = {
+    "leakage": "leakage",
+    "force_velocity": "rod force with speed",
+    "force_sign": "rod friction",
+    "force_position": "load force",
+    "force_periodic": "periodic force on the rod",
+    "valve_setting": "valve flow gain",
+    "pump_setting": "pump setting",
+}
+
+
+def describe(report: dict) -> dict | None:
+    """The JSON's ``mechanism`` for a finished ``report`` (None for ``none``)."""
+    verdict = report["verdict"]
+    if verdict == "none":
+        return None
+    bounds = _bounds(report.get("calibrated") or {})
+    if verdict == "unexplained":
+        return _unexplained(report, bounds)
+    m = BY_EFFECT[verdict]
+    name, where = m.name, m.where
+    if verdict == "oil_viscosity" and report.get("cause_check"):
+        name = report["cause_check"]["mechanism"]
+    if verdict == "sensor_calibration":
+        sig = _sensor_signal(report)
+        name = f"sensor reading on {sig}" if sig else name
+    decided, separated = _decided_by(report, verdict)
+    return {
+        "name": name,
+        "where": where,
+        "cause": verdict,
+        "causes": _causes(report, m),
+        "decided_by": decided,
+        "separating_recording": None if separated else m.separating_recording,
+        "bounds": bounds,
+    }
+
+
+def _unexplained(report: dict, bounds: list[str]) -> dict | None:
+    sugg = report.get("suggestion") or []
+    if not sugg:
+        return {
+            "name": None,
+            "where": "no catalogue effect and no correction term explains the gap",
+            "cause": None,
+            "causes": [],
+            "decided_by": "no term removes enough of the held-out gap",
+            "separating_recording": None,
+            "bounds": bounds,
+        }
+    first = sugg[0]
+    name = BY_TERM.get(first["term"], first["term"])
+    if first["term"] not in BY_TERM:  # a sensor term: gain, offset or delay of one signal
+        name = f"sensor {first['term']} on {first['signal']}"
+    elif first["term"] == "leakage":
+        name = f"leakage {first['signal']}"
+    cause = first.get("cause")
+    chk = report.get("cause_check")
+    decided = chk["evidence"] if chk and cause == "wear" else (
+        f"the correction term that removes the most of the held-out gap "
+        f"({100 * first['heldout_reduction']:.0f} %): {first['description']}"
+    )
+    return {
+        "name": name,
+        "where": first["description"],
+        "cause": cause or "outside the catalogue",
+        "causes": [],
+        "decided_by": decided,
+        "separating_recording": None,
+        "bounds": bounds,
+    }
+
+
+def _sensor_signal(report: dict) -> str | None:
+    keys = (report.get("params") or {}).get("sensor_calibration") or {}
+    return next((k.split("_")[0] for k in keys), None)
+
+
+def _causes(report: dict, m: Mechanism) -> list[dict]:
+    """The mechanism's catalogue causes with their held-out scores (best first): how far
+    the named one stood apart from the others on this recording."""
+    rows = {r["effect"]: r for r in report.get("ranking") or []}
+    out = [
+        {
+            "cause": c,
+            "heldout_reduction": rows[c]["heldout_reduction"],
+            "criterion": rows[c]["criterion"],
+        }
+        for c in m.causes
+        if c in rows
+    ]
+    return sorted(out, key=lambda r: r["criterion"])
+
+
+def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
+    """What separated the named cause from its look-alikes, and whether it was a check
+    of its own (False: the held-out criterion alone, which a look-alike may come close to)."""
+    chk = report.get("cause_check")
+    if verdict == "oil_viscosity" and chk:
+        return chk["evidence"], chk["cause"] is not None
+    lag = report.get("lag_check")
+    if verdict == "sensor_lag" and lag:
+        return f"the readings follow the engine's speed ripple late ({lag.get('readings')})", True
+    sc = report.get("sensor_check")
+    if verdict == "sensor_calibration" and sc:
+        return "a sensor error moves one signal only: no plant term explains more", True
+    ab = report.get("absorbed")
+    if ab:
+        tols = ", ".join(
+            f"{t} {v['calibration_pct']:+.0f} % -> {v['with_effect_pct']:+.0f} %"
+            for t, v in ab["tolerances"].items()
+        )
+        return (
+            f"the calibration had taken a tolerance to its bound in the effect's place "
+            f"({tols}); judged against its own tolerances it removes "
+            f"{100 * ab['heldout_reduction']:.0f} % of the held-out gap",
+            False,
+        )
+    return _margin(report, verdict), False
+
+
+def _margin(report: dict, verdict: str) -> str:
+    rows = report.get("ranking") or []
+    best = next((r for r in rows if r["effect"] == verdict), None)
+    others = [r for r in rows if r["effect"] != verdict and "+" not in r["effect"]]
+    if best is None or not others:
+        return "the held-out criterion"
+    runner = min(others, key=lambda r: r["criterion"])
+    return (
+        f"the held-out criterion: {verdict} removes {100 * best['heldout_reduction']:.0f} % "
+        f"of the held-out gap, the next ({runner['effect']}) "
+        f"{100 * runner['heldout_reduction']:.0f} % (criterion "
+        f"{runner['criterion'] - best['criterion']:+.1f} behind)"
+    )
+
+
+def _bounds(calibrated: dict) -> list[str]:
+    """A tolerance at its bound is evidence, not a result: the effects it can stand in for."""
+    by_tol: dict[str, list[str]] = {}
+    for effect, tols in CONFOUNDED.items():
+        for t in tols:
+            by_tol.setdefault(t, []).append(effect)
+    out = []
+    for t, row in calibrated.items():
+        if row.get("at_bound"):
+            who = ", ".join(by_tol.get(t, [])) or "no catalogue effect"
+            out.append(
+                f"{t} at its {row['change_pct']:+.0f} % bound: the machine is outside its "
+                f"tolerance, or the band stands in for an effect ({who})"
+            )
+    return out

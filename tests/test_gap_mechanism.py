@@ -1,0 +1,114 @@
+"""Mechanism first, cause second (``judge/mechanism.py``, ``diagnose/cause.py``): what the
+JSON's ``mechanism`` says for each kind of verdict, and when a leak is put down to wear."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from monitor.gap.diagnose.cause import FLAT_OIL, LeakCause, flat_member
+from monitor.gap.fit.candidates import Candidate, default_member, make_effect
+from monitor.gap.judge import mechanism
+from monitor.sim.pack import viscosity_cst
+
+
+def _leak(pump: float = 3.0) -> Candidate:
+    e = make_effect("oil_viscosity", {"pump_leak_lpm_per_100bar": pump, "friction_share": 0.2})
+    c = Candidate((e,), {}, 1.0)
+    c.heldout_reduction = 0.8
+    return c
+
+
+def _flat(reduction: float) -> Candidate:
+    c = _leak(2.4)
+    c.heldout_reduction = reduction
+    return c
+
+
+def test_the_flat_oil_does_not_follow_the_temperature_and_keeps_the_paths():
+    nu40, nu100 = dict(FLAT_OIL)["nu40_cst"], dict(FLAT_OIL)["nu100_cst"]
+    # Over a warm-up from 15 to 60 degC: the flat oil within 0.1 %, ISO VG 46 by 4x.
+    t = np.array([15.0, 60.0])
+    assert np.all(np.abs(viscosity_cst(t, nu40, nu100) / nu40 - 1) < 1e-3)
+    ratio = viscosity_cst(t, 46.0, 6.8) / 46.0
+    assert ratio[0] / ratio[1] > 4
+    m = flat_member(default_member("oil_viscosity"))
+    assert m.knobs == default_member("oil_viscosity").knobs
+    e = make_effect("oil_viscosity", {"pump_leak_lpm_per_100bar": 2.0, "friction_share": 0}, m)
+    assert (e.params["nu40_cst"], e.params["nu100_cst"]) == (nu40, nu100)
+
+
+@pytest.mark.parametrize(
+    ("share", "cause"), [(0.99, "wear"), (0.01, "oil_viscosity"), (0.5, None)]
+)
+def test_the_cause_is_what_the_bootstrap_settles_and_undecided_otherwise(share, cause):
+    chk = LeakCause("pump_leak_lpm_per_100bar", 32.0, _leak(), _flat(0.9), share)
+    assert chk.cause == cause
+    d = chk.as_dict()
+    assert d["mechanism"] == "pump leakage" and d["signal"] == "P->tank"
+    assert d["cause"] == cause and d["oil_temp_span_c"] == 32.0
+    if cause is None:
+        assert "longer warm-up" in d["evidence"]
+
+
+def test_a_warm_machine_cannot_tell_viscosity_from_wear_and_says_which_run_would():
+    chk = LeakCause("pump_leak_lpm_per_100bar", 3.0, _leak())
+    assert chk.cause is None
+    assert "warm-up run" in chk.as_dict()["evidence"]
+    report = {
+        "verdict": "oil_viscosity",
+        "member": "pump_leak",
+        "ranking": [],
+        "calibrated": {},
+        "cause_check": chk.as_dict(),
+    }
+    m = mechanism.describe(report)
+    assert m["name"] == "pump leakage" and m["cause"] == "oil_viscosity"
+    assert "warm-up" in m["separating_recording"]
+
+
+def test_a_worn_leak_leads_with_the_mechanism_and_names_wear_as_its_cause():
+    chk = LeakCause("pump_leak_lpm_per_100bar", 34.0, _leak(), _flat(0.85), 0.995)
+    report = {
+        "verdict": "unexplained",
+        "suggestion": [
+            {
+                "term": "leakage",
+                "signal": "P->tank",
+                "description": "pump leakage that does not follow the oil temperature (wear)",
+                "heldout_reduction": 0.85,
+                "cause": "wear",
+            }
+        ],
+        "cause_check": chk.as_dict(),
+        "calibrated": {},
+    }
+    m = mechanism.describe(report)
+    assert m["name"] == "leakage P->tank" and m["cause"] == "wear"
+    assert "does not follow the viscosity" in m["decided_by"]
+
+
+def test_a_tolerance_at_its_bound_is_reported_as_evidence_for_the_effects_it_can_hide():
+    report = {
+        "verdict": "cylinder_friction",
+        "ranking": [
+            {"effect": "cylinder_friction", "heldout_reduction": 0.6, "criterion": -500.0},
+            {"effect": "oil_viscosity", "heldout_reduction": 0.2, "criterion": -420.0},
+        ],
+        "calibrated": {
+            "viscous_friction": {"change_pct": 30.0, "at_bound": True},
+            "mass": {"change_pct": 2.0, "at_bound": False},
+        },
+    }
+    m = mechanism.describe(report)
+    assert m["name"] == "rod friction"
+    assert [c["cause"] for c in m["causes"]] == ["cylinder_friction", "oil_viscosity"]
+    (line,) = m["bounds"]
+    assert line.startswith("viscous_friction at its +30 % bound")
+    assert "cylinder_friction" in line and "oil_viscosity" in line
+    # Decided on the criterion alone: the recording that would separate is named.
+    assert "80.0 behind" in m["decided_by"] and "reversals" in m["separating_recording"]
+
+
+def test_none_has_no_mechanism():
+    assert mechanism.describe({"verdict": "none", "calibrated": {}}) is None
