@@ -25,7 +25,12 @@ EFFECTS = ("oil_viscosity", "valve_deadband", "load_variation")
 def _report(tmp_path: Path, effect: str, seed: int) -> tuple[dict, dict]:
     """(Scenario seeds 3000-3999 are development seed 3's draws.)"""
     sc = Scenario(
-        name=effect, seed=seed, effect=effect, tolerance=0.03, rodpos=True, warmup=True,
+        name=effect,
+        seed=seed,
+        effect=effect,
+        tolerance=0.03,
+        rodpos=True,
+        warmup=True,
         duration_s=200.0,
     )
     path = tmp_path / f"{effect}.csv"

@@ -38,9 +38,7 @@ def test_the_flat_oil_does_not_follow_the_temperature_and_keeps_the_paths():
     assert (e.params["nu40_cst"], e.params["nu100_cst"]) == (nu40, nu100)
 
 
-@pytest.mark.parametrize(
-    ("share", "cause"), [(0.99, "wear"), (0.01, "oil_viscosity"), (0.5, None)]
-)
+@pytest.mark.parametrize(("share", "cause"), [(0.99, "wear"), (0.01, "oil_viscosity"), (0.5, None)])
 def test_the_cause_is_what_the_bootstrap_settles_and_undecided_otherwise(share, cause):
     chk = LeakCause("pump_leak_lpm_per_100bar", 32.0, _leak(), _flat(0.9), share)
     assert chk.cause == cause

@@ -38,9 +38,7 @@ PAIRS: tuple[tuple[str, str], ...] = (
 TOLERANCE_STEP = 0.25
 
 
-def _signature(
-    name: str, cal: Calibrated, scores: Scores, base: np.ndarray
-) -> np.ndarray | None:
+def _signature(name: str, cal: Calibrated, scores: Scores, base: np.ndarray) -> np.ndarray | None:
     factors = scores.baseline.factors
     fit_ev = cal.readings.fit(None)
     if name in cal_mod.BY_NAME:

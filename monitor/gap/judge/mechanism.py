@@ -150,9 +150,13 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
         name = f"leakage {first['signal']}"
     cause = first.get("cause")
     chk = report.get("cause_check")
-    decided = chk["evidence"] if chk and cause == "wear" else (
-        f"the correction term that removes the most of the held-out gap "
-        f"({100 * first['heldout_reduction']:.0f} %): {first['description']}"
+    decided = (
+        chk["evidence"]
+        if chk and cause == "wear"
+        else (
+            f"the correction term that removes the most of the held-out gap "
+            f"({100 * first['heldout_reduction']:.0f} %): {first['description']}"
+        )
     )
     return {
         "name": name,
