@@ -3,12 +3,16 @@ JSON's ``mechanism`` says for each kind of verdict, and when a leak is put down 
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
+from monitor.gap.data.segments import Segment
 from monitor.gap.diagnose.cause import FLAT_OIL, LeakCause, flat_member
 from monitor.gap.fit.candidates import Candidate, default_member, make_effect
 from monitor.gap.judge import mechanism
+from monitor.gap.judge.delays import delays_ms
 from monitor.sim.pack import viscosity_cst
 
 
@@ -110,3 +114,27 @@ def test_a_tolerance_at_its_bound_is_reported_as_evidence_for_the_effects_it_can
 
 def test_none_has_no_mechanism():
     assert mechanism.describe({"verdict": "none", "calibrated": {}}) is None
+
+
+def _traces(delay_samples: dict[str, int], n: int = 3000):
+    """A smooth random drive per signal (the 'simulator') and its reading delayed."""
+    rng = np.random.default_rng(4)
+    sim, meas = {}, {}
+    for name, d in delay_samples.items():
+        x = np.convolve(rng.standard_normal(n + 200), np.hanning(15), mode="same")[100:-100]
+        sim[name] = x
+        meas[name] = np.concatenate([np.full(d, x[0]), x[: n - d]])
+    return SimpleNamespace(meas=meas), sim
+
+
+@pytest.mark.parametrize(
+    ("rod", "says"), [(0, "a lag of the readings (sensor)"), (3, "the machine itself is late")]
+)
+def test_a_lag_the_rod_does_not_share_is_the_sensors(rod, says):
+    lag = {"PP": 3, "PA": 3, "PB": 3, "QP": 3, "RodVel": rod}
+    prep, sim = _traces(lag)
+    segs = [Segment(i, i + 500, True) for i in range(0, 2500, 500)]
+    d = delays_ms(prep, segs, sim)
+    # 3 samples of 10 ms; the parabola puts the peak within a millisecond of it.
+    assert d == {k: pytest.approx(10.0 * v, abs=1.0) for k, v in lag.items()}
+    assert says in mechanism.timing(d)

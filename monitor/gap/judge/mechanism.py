@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from monitor.gap.fit.candidates import CONFOUNDED
+from monitor.gap.judge.delays import shared
 
 
 @dataclass(frozen=True)
@@ -119,7 +120,7 @@ def describe(report: dict) -> dict | None:
         sig = _sensor_signal(report)
         name = f"sensor reading on {sig}" if sig else name
     decided, separated = _decided_by(report, verdict)
-    return {
+    out = {
         "name": name,
         "where": where,
         "cause": verdict,
@@ -128,6 +129,40 @@ def describe(report: dict) -> dict | None:
         "separating_recording": None if separated else m.separating_recording,
         "bounds": bounds,
     }
+    if verdict in TIMED:
+        out["timing"] = timing(report.get("delays_ms") or {})
+    return out
+
+
+#: Verdicts whose look-alikes differ in which readings are late.
+TIMED = ("sensor_lag", "spool_dynamics", "pump_control_dynamics", "hose_compliance")
+#: A delay the rod does not share by this much is the readings' (ms: one sample).
+APART_MS = 10.0
+PRESSURES = ("PP", "PA", "PB")
+
+
+def timing(delays: dict) -> str:
+    """One line: which readings are late against the simulator, and what that says (a lag
+    the rod does not share is a sensor's; one it shares is the machine's)."""
+    if not delays:
+        return "no timing measured"
+    p, q, rod = shared(delays, PRESSURES), delays.get("QP"), delays.get("RodVel")
+    parts = [f"{k} {v:+.0f} ms" for k, v in delays.items() if v is not None]
+    line = "readings against the calibrated simulator: " + ", ".join(parts)
+    if p is None:
+        return line
+    if rod is None:
+        return line + " (no rod reading: a sensor's lag and the machine's look alike)"
+    if p - rod >= APART_MS:
+        return line + (
+            f"; the pressures read {p - rod:.0f} ms later than the rod moves: a lag of the "
+            "readings (sensor), not of the machine"
+        )
+    if p >= APART_MS and abs(p - rod) < APART_MS:
+        return line + "; the rod is as late as the pressures: the machine itself is late"
+    if q is not None and p - q >= APART_MS:
+        return line + "; the pressures read later than the flow"
+    return line
 
 
 def _unexplained(report: dict, bounds: list[str]) -> dict | None:

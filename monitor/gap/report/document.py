@@ -17,7 +17,7 @@ from monitor.gap.fit import calibrate as cal_mod
 from monitor.gap.fit import sensorcal
 from monitor.gap.fit.candidates import Candidate, default_member
 from monitor.gap.fit.score import SegmentSums, compared, gap, normalised, reduction
-from monitor.gap.judge import basemis, mechanism
+from monitor.gap.judge import basemis, delays, mechanism
 from monitor.gap.judge import where as W
 from monitor.gap.judge.shrink import shrink_report
 from monitor.signals import MEASURED_NAMES
@@ -195,6 +195,8 @@ def build_report(diag: Diagnosis, machine: MachineParams) -> dict:
         "recording": _recording(diag),
         "timings_s": {k: round(v, 2) for k, v in diag.timings_s.items()},
         "identifiability": diag.identifiability,
+        # Per signal: how late the reading is against the calibrated simulator (held out).
+        "delays_ms": delays.delays_ms(prep, diag.parts.heldout, diag.traces.nominal),
         **_checks(diag),
     }
     # Mechanism first, cause second: read from the keys above (``judge/mechanism.py``).
