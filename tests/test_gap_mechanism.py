@@ -13,6 +13,7 @@ from monitor.gap.diagnose.cause import FLAT_OIL, LeakCause, flat_member
 from monitor.gap.fit.candidates import Candidate, default_member, make_effect
 from monitor.gap.judge import mechanism
 from monitor.gap.judge.delays import delays_ms
+from monitor.gap.report.summary import _mechanism_lines
 from monitor.sim.pack import viscosity_cst
 
 
@@ -138,3 +139,17 @@ def test_a_lag_the_rod_does_not_share_is_the_sensors(rod, says):
     # 3 samples of 10 ms; the parabola puts the peak within a millisecond of it.
     assert d == {k: pytest.approx(10.0 * v, abs=1.0) for k, v in lag.items()}
     assert says in mechanism.timing(d)
+
+
+def test_the_summary_says_the_mechanism_then_the_cause_and_the_recording_that_would_decide():
+    m = {
+        "name": "pump leakage",
+        "cause": "oil_viscosity",
+        "decided_by": "the oil temperature spans 3 degC",
+        "separating_recording": "a warm-up run",
+    }
+    assert _mechanism_lines(m) == [
+        "Mechanism: pump leakage; cause: oil_viscosity (the oil temperature spans 3 degC)",
+        "To tell the causes apart, record: a warm-up run",
+    ]
+    assert _mechanism_lines(None) == []

@@ -19,6 +19,7 @@ def summary_text(report: dict) -> str:
         lines += _verdict_unexplained(report)
     else:
         lines += _verdict_named(report)
+    lines += _mechanism_lines(report.get("mechanism"))
     lines.append(f"Confidence: {report['confidence']:.2f}")
     lines += _bounded(report["calibrated"])
     lines += _tables(report)
@@ -30,6 +31,18 @@ def summary_text(report: dict) -> str:
         f"RodPos {rec['rodpos']}; diagnosis took {report['timings_s']['total']:.0f} s.",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _mechanism_lines(m: dict | None) -> list[str]:
+    """Mechanism first, cause second (``judge/mechanism.py``), when there is one."""
+    if not m or not m.get("name"):
+        return []
+    lines = [f"Mechanism: {m['name']}; cause: {m['cause']} ({m['decided_by']})"]
+    if m.get("timing"):
+        lines.append(f"Timing: {m['timing']}")
+    if m.get("separating_recording"):
+        lines.append(f"To tell the causes apart, record: {m['separating_recording']}")
+    return lines
 
 
 def _where_line(w: dict) -> str:
