@@ -157,11 +157,16 @@ def check_leak(
 def judge_cause(
     d: Decision, parts: Parts, cal: Calibrated, scores: Scores, boot_idx: np.ndarray, say: Progress
 ) -> tuple[Decision, LeakCause | None]:
-    """A single ``oil_viscosity`` verdict checked against the oil temperature: a leak that
-    does not follow it is wear, out of the catalogue (``unexplained``, the leak first in
-    the suggestion); otherwise the verdict stands, with the check."""
-    c = d.chosen
-    if d.verdict != NAME or c is None or len(c.effects) != 1:
+    """An ``oil_viscosity`` verdict (alone or with a second effect) checked against the oil
+    temperature, on the single effect's leak: a leak that does not follow it is wear, out
+    of the catalogue (``unexplained``, the leak first in the suggestion); otherwise the
+    verdict stands, with the check."""
+    if d.verdict != NAME:
+        return d, None
+    # A pair's leak (oil_viscosity also sensor_lag: a worn pump on the third plant) is
+    # checked as the single effect: the law of the leak is what is in question.
+    c = next((s for s in scores.singles if s.name == NAME), None)
+    if c is None:
         return d, None
     chk = check_leak(parts, cal, scores, boot_idx, c)
     say(f"oil_viscosity against the oil temperature: {chk.evidence()}")
