@@ -79,6 +79,8 @@ def _diagnose(
     laps.lap("pairs")
     judged = V.judge(cal, refined, paired, say)
     judged = V.check_cause(parts, cal, refined, paired, judged, say)
+    if judged.cause is not None:
+        laps.lap("cause")
     finding = V.suggest_next(parts, cal, refined, paired, judged, say)
     if judged.decision.verdict in ("unexplained", V.sensorcal.NAME):
         laps.lap("suggest")
