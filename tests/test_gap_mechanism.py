@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from monitor.gap.data.segments import Segment
+from monitor.gap.diagnose import identify
 from monitor.gap.diagnose.cause import FLAT_OIL, LeakCause, flat_member
 from monitor.gap.fit.candidates import Candidate, default_member, make_effect
 from monitor.gap.judge import mechanism
@@ -153,3 +154,38 @@ def test_the_summary_says_the_mechanism_then_the_cause_and_the_recording_that_wo
         "To tell the causes apart, record: a warm-up run",
     ]
     assert _mechanism_lines(None) == []
+
+
+class _FitEv:
+    """A residual linear in viscous friction and in a friction's Coulomb force, with the
+    two directions at a known angle (the look-alikes of ``identify.PAIRS``' first pair)."""
+
+    def __init__(self, u: np.ndarray, v: np.ndarray):
+        self.u, self.v = u, v
+
+    def residual(self, factors, effects):
+        r = 1.0 + 0 * self.u + (factors.get("viscous_friction", 1.0) - 1.0) * self.u
+        for e in effects:
+            r = r + e.params["coulomb_n"] / 100.0 * self.v
+        return r
+
+
+def test_identifiability_is_the_angle_between_what_each_look_alike_changes():
+    rng = np.random.default_rng(2)
+    u = rng.standard_normal(400)
+    w = rng.standard_normal(400)
+    w -= (w @ u) / (u @ u) * u
+    v = 0.8 * u / np.linalg.norm(u) + 0.6 * w / np.linalg.norm(w)  # cosine 0.8 with u
+    fit_ev = _FitEv(u, v)
+    cal = SimpleNamespace(readings=SimpleNamespace(fit=lambda prep: fit_ev))
+    friction = Candidate(
+        (make_effect("cylinder_friction", {"coulomb_n": 500.0, "static_excess_n": 0.0}),), {}, 0.0
+    )
+    scores = SimpleNamespace(
+        baseline=SimpleNamespace(factors={"viscous_friction": 1.3}), singles=[friction]
+    )
+    (row,) = identify.measure(cal, scores)
+    assert row["pair"] == ["cylinder_friction", "viscous_friction"]
+    # viscous friction at its upper bound: its signature is a step down (-u), so -0.8.
+    assert row["cosine"] == pytest.approx(-0.8, abs=1e-3)
+    assert row["unique_share"] == pytest.approx(0.36, abs=1e-3)
