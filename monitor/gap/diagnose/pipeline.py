@@ -78,6 +78,7 @@ def _diagnose(
     paired = F.fit_pairs(parts, cal, refined, say)
     laps.lap("pairs")
     judged = V.judge(cal, refined, paired, say)
+    judged = V.check_timing(cal, refined, paired, judged, say)
     judged = V.check_cause(parts, cal, refined, paired, judged, say)
     if judged.cause is not None:
         laps.lap("cause")

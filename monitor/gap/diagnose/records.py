@@ -144,6 +144,9 @@ class Finding:
     #: An ``oil_viscosity`` leak checked against the oil temperature (``cause.py``): the
     #: JSON's ``cause_check``.
     cause_check: dict | None = None
+    #: A ``sensor_lag`` verdict checked against the rod's timing (``verdict.check_timing``):
+    #: the JSON's ``timing_check``.
+    timing_check: dict | None = None
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
+from monitor.gap.data.prepare import ROD_VEL
 from monitor.gap.diagnose import cause as cause_mod
 from monitor.gap.diagnose.evaluate import Readings
 from monitor.gap.diagnose.records import Absorbed, Calibrated, Finding, Paired, Parts, Scores
@@ -15,7 +16,7 @@ from monitor.gap.fit import calibrate as cal_mod
 from monitor.gap.fit import score as S
 from monitor.gap.fit import sensorcal
 from monitor.gap.fit.candidates import CONFOUNDED, Candidate
-from monitor.gap.judge import lagcheck, sensorphysics
+from monitor.gap.judge import delays, lagcheck, mechanism, sensorphysics
 from monitor.gap.judge.decide import Decision, boot_gain, decide, explains, within_noise
 from monitor.gap.judge.suggest import suggest
 
@@ -38,6 +39,9 @@ class Judged:
     noise_only: bool
     #: An ``oil_viscosity`` verdict's leak checked against the oil temperature (``cause``).
     cause: cause_mod.LeakCause | None = None
+    #: A ``sensor_lag`` verdict checked against the rod's timing: the JSON's
+    #: ``timing_check`` (None: not checked).
+    timing: dict | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -85,6 +89,39 @@ def check_cause(
     follow the oil temperature is wear, not viscosity."""
     d, chk = cause_mod.judge_cause(judged.decision, parts, cal, scores, paired.boot_idx, say)
     return replace(judged, decision=d, cause=chk)
+
+
+def check_timing(
+    cal: Calibrated, scores: Scores, paired: Paired, judged: Judged, say: Progress
+) -> Judged:
+    """Stage 6c: a sensor lag delays the readings, not the machine.  A ``sensor_lag``
+    verdict where the measured rod moves as late as the pressures read (against the
+    calibrated simulator, ``delays.py``) is the machine being late (a slow spool or pump):
+    it is decided again without the sensor lag.  Needs RodPos."""
+    d = judged.decision
+    prep = cal.readings.prep
+    if d.verdict != lagcheck.NAME or ROD_VEL not in prep.meas:
+        return judged
+    base = scores.baseline
+    lags = delays.delays_ms(prep, cal.readings.held(None).segments, base.pred0)
+    p, rod = delays.shared(lags, mechanism.PRESSURES), lags.get(ROD_VEL)
+    if p is None or rod is None:
+        return judged
+    machine_late = p >= mechanism.APART_MS and p - rod < mechanism.APART_MS
+    timing = {"delays_ms": lags, "rod_shares_lag": machine_late, "verdict_without_check": d.verdict}
+    if machine_late:
+        lag_c = _lag_candidate(scores.singles)
+        rest = [c for c in scores.singles if c is not lag_c]
+        plain = [q for q in paired.pairs if all(e.name != lagcheck.NAME for e in q.effects)]
+        against = {name: a.sums for name, a in judged.absorbed.items()}
+        structured = (paired.smooth, base.smooth_nominal)
+        args = (paired.sums, base.nominal, paired.boot_idx, cal.floor, structured, against)
+        d = decide(False, rest, plain, *args)
+    say(
+        f"sensor lag against the rod's timing: pressures {p:+.0f} ms, rod {rod:+.0f} ms; "
+        f"verdict {timing['verdict_without_check']} -> {d.verdict}"
+    )
+    return replace(judged, decision=d, timing=timing)
 
 
 def _lag_candidate(singles: Sequence[Candidate]) -> Candidate | None:
@@ -181,6 +218,7 @@ def suggest_next(
         traded=_traded(d, scores.singles, S.compared(cal.prep)),
         lag_check=judged.lag_check,
         cause_check=None if chk is None else chk.as_dict(),
+        timing_check=judged.timing,
     )
 
 

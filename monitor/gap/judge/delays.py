@@ -67,7 +67,7 @@ def delays_ms(
             y0, y1, y2 = r[j - 1], r[j], r[j + 1]
             curv = y0 - 2 * y1 + y2
             frac = 0.5 * (y0 - y2) / curv if curv < 0 else 0.0
-        out[name] = round(1e3 * (j - k + frac) * SAMPLE_PERIOD_S, 1)
+        out[name] = round(float(1e3 * (j - k + frac) * SAMPLE_PERIOD_S), 1)
     return out
 
 
