@@ -17,13 +17,15 @@ from monitor.gap.report.document import build_report
 from monitor.sampling.read import read_recording
 from monitor.sim.machine import load_machine
 
-#: The look-alikes of a leak, enough to name or rule out the viscosity (the full catalogue
-#: decides the same way on the 300 s benchmark recordings; this keeps the test short).
-EFFECTS = ("oil_viscosity", "valve_deadband", "load_variation")
+#: The leak alone: the check compares two laws of the same leak, and the tolerance
+#: calibration does not depend on the candidates (with the full catalogue these two
+#: recordings were named ``oil_viscosity`` also ``sensor_lag``, and decided the same way).
+EFFECTS = ("oil_viscosity",)
 
 
 def _report(tmp_path: Path, effect: str, seed: int) -> tuple[dict, dict]:
-    """(Scenario seeds 3000-3999 are development seed 3's draws.)"""
+    """The benchmark's recording of development seed 1 (``generate --seed 1 --set small``:
+    scenario seeds 1000-1013)."""
     sc = Scenario(
         name=effect,
         seed=seed,
@@ -31,7 +33,7 @@ def _report(tmp_path: Path, effect: str, seed: int) -> tuple[dict, dict]:
         tolerance=0.03,
         rodpos=True,
         warmup=True,
-        duration_s=200.0,
+        duration_s=300.0,
     )
     path = tmp_path / f"{effect}.csv"
     key = record(sc, path)
@@ -40,7 +42,7 @@ def _report(tmp_path: Path, effect: str, seed: int) -> tuple[dict, dict]:
 
 
 def test_a_worn_pump_over_a_warm_up_is_pump_leakage_from_wear(tmp_path):
-    rep, key = _report(tmp_path, "worn_pump", 3012)
+    rep, key = _report(tmp_path, "worn_pump", 1012)
     chk = rep["cause_check"]
     assert chk["oil_temp_span_c"] >= 20 and chk["cause"] == "wear"
     assert chk["mechanism"] == "pump leakage" and chk["flat_better_share"] >= 0.95
@@ -55,7 +57,7 @@ def test_a_worn_pump_over_a_warm_up_is_pump_leakage_from_wear(tmp_path):
 
 
 def test_a_thin_oil_over_a_warm_up_stays_oil_viscosity(tmp_path):
-    rep, _ = _report(tmp_path, "oil_viscosity", 3001)
+    rep, _ = _report(tmp_path, "oil_viscosity", 1001)
     assert rep["verdict"] == "oil_viscosity"
     assert rep["cause_check"]["cause"] == "oil_viscosity"
     assert rep["mechanism"]["cause"] == "oil_viscosity"

@@ -13,7 +13,7 @@ from monitor.gap.diagnose import identify
 from monitor.gap.diagnose.cause import FLAT_OIL, LeakCause, flat_member
 from monitor.gap.fit.candidates import Candidate, default_member, make_effect
 from monitor.gap.judge import mechanism
-from monitor.gap.judge.delays import delays_ms
+from monitor.gap.judge.delays import delays_ms, machine_late
 from monitor.gap.report.summary import _mechanism_lines
 from monitor.sim.pack import viscosity_cst
 
@@ -140,6 +140,8 @@ def test_a_lag_the_rod_does_not_share_is_the_sensors(rod, says):
     # 3 samples of 10 ms; the parabola puts the peak within a millisecond of it.
     assert d == {k: pytest.approx(10.0 * v, abs=1.0) for k, v in lag.items()}
     assert says in mechanism.timing(d)
+    assert machine_late(d) is (rod == 3)
+    assert machine_late({k: v for k, v in d.items() if k != "RodVel"}) is None
 
 
 def test_the_summary_says_the_mechanism_then_the_cause_and_the_recording_that_would_decide():

@@ -16,7 +16,7 @@ from monitor.gap.fit import calibrate as cal_mod
 from monitor.gap.fit import score as S
 from monitor.gap.fit import sensorcal
 from monitor.gap.fit.candidates import CONFOUNDED, Candidate
-from monitor.gap.judge import delays, lagcheck, mechanism, sensorphysics
+from monitor.gap.judge import delays, lagcheck, sensorphysics
 from monitor.gap.judge.decide import Decision, boot_gain, decide, explains, within_noise
 from monitor.gap.judge.suggest import suggest
 
@@ -104,10 +104,9 @@ def check_timing(
         return judged
     base = scores.baseline
     lags = delays.delays_ms(prep, cal.readings.held(None).segments, base.pred0)
-    p, rod = delays.shared(lags, mechanism.PRESSURES), lags.get(ROD_VEL)
-    if p is None or rod is None:
+    machine_late = delays.machine_late(lags)
+    if machine_late is None:
         return judged
-    machine_late = p >= mechanism.APART_MS and p - rod < mechanism.APART_MS
     timing = {"delays_ms": lags, "rod_shares_lag": machine_late, "verdict_without_check": d.verdict}
     if machine_late:
         lag_c = _lag_candidate(scores.singles)
@@ -118,7 +117,7 @@ def check_timing(
         args = (paired.sums, base.nominal, paired.boot_idx, cal.floor, structured, against)
         d = decide(False, rest, plain, *args)
     say(
-        f"sensor lag against the rod's timing: pressures {p:+.0f} ms, rod {rod:+.0f} ms; "
+        f"sensor lag against the rod's timing: {lags}; "
         f"verdict {timing['verdict_without_check']} -> {d.verdict}"
     )
     return replace(judged, decision=d, timing=timing)

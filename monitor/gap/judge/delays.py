@@ -26,6 +26,9 @@ from monitor.signals import SAMPLE_PERIOD_S
 MAX_LAG_S = 0.12
 #: A signal's peak correlation below this says nothing about its timing.
 MIN_CORRELATION = 0.3
+#: A delay the rod does not share by this much is the readings' (ms: one sample).
+APART_MS = 10.0
+PRESSURES = ("PP", "PA", "PB")
 
 
 def _xcorr(meas: np.ndarray, sim: np.ndarray, segments: Sequence[Segment], k: int) -> np.ndarray:
@@ -75,3 +78,13 @@ def shared(delays: dict[str, float | None], signals: Sequence[str]) -> float | N
     """The median delay of ``signals`` (those with a timing), None without any."""
     vals = [delays[s] for s in signals if delays.get(s) is not None]
     return float(np.median(vals)) if vals else None
+
+
+def machine_late(delays: dict[str, float | None]) -> bool | None:
+    """Whether the rod moves as late as the pressures read, and they read late (the machine
+    itself is late: a slow spool or pump, not a sensor); None without a rod or pressure
+    timing."""
+    p, rod = shared(delays, PRESSURES), delays.get("RodVel")
+    if p is None or rod is None:
+        return None
+    return p >= APART_MS and p - rod < APART_MS

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from monitor.gap.fit.candidates import CONFOUNDED
-from monitor.gap.judge.delays import shared
+from monitor.gap.judge.delays import APART_MS, PRESSURES, machine_late, shared
 
 
 @dataclass(frozen=True)
@@ -136,9 +136,6 @@ def describe(report: dict) -> dict | None:
 
 #: Verdicts whose look-alikes differ in which readings are late.
 TIMED = ("sensor_lag", "spool_dynamics", "pump_control_dynamics", "hose_compliance")
-#: A delay the rod does not share by this much is the readings' (ms: one sample).
-APART_MS = 10.0
-PRESSURES = ("PP", "PA", "PB")
 
 
 def timing(delays: dict) -> str:
@@ -158,7 +155,7 @@ def timing(delays: dict) -> str:
             f"; the pressures read {p - rod:.0f} ms later than the rod moves: a lag of the "
             "readings (sensor), not of the machine"
         )
-    if p >= APART_MS and abs(p - rod) < APART_MS:
+    if machine_late(delays):
         return line + "; the rod is as late as the pressures: the machine itself is late"
     if q is not None and p - q >= APART_MS:
         return line + "; the pressures read later than the flow"
