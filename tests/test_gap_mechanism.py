@@ -191,3 +191,14 @@ def test_identifiability_is_the_angle_between_what_each_look_alike_changes():
     # viscous friction at its upper bound: its signature is a step down (-u), so -0.8.
     assert row["cosine"] == pytest.approx(-0.8, abs=1e-3)
     assert row["unique_share"] == pytest.approx(0.36, abs=1e-3)
+
+
+def test_an_unexplained_gap_led_by_a_sensor_term_names_the_sensor_and_signal():
+    first = {
+        "term": "sensor_delay",
+        "signal": "QP",
+        "description": "QP read 20 ms late",
+        "heldout_reduction": 0.4,
+    }
+    m = mechanism.describe({"verdict": "unexplained", "suggestion": [first], "calibrated": {}})
+    assert (m["name"], m["cause"]) == ("sensor delay on QP", "outside the catalogue")

@@ -177,7 +177,8 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
     first = sugg[0]
     name = BY_TERM.get(first["term"], first["term"])
     if first["term"] not in BY_TERM:  # a sensor term: gain, offset or delay of one signal
-        name = f"sensor {first['term']} on {first['signal']}"
+        kind = first["term"].removeprefix("sensor_").replace("_", " ")
+        name = f"sensor {kind} on {first['signal']}"
     elif first["term"] == "leakage":
         name = f"leakage {first['signal']}"
     cause = first.get("cause")
