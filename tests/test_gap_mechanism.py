@@ -202,3 +202,17 @@ def test_an_unexplained_gap_led_by_a_sensor_term_names_the_sensor_and_signal():
     }
     m = mechanism.describe({"verdict": "unexplained", "suggestion": [first], "calibrated": {}})
     assert (m["name"], m["cause"]) == ("sensor delay on QP", "outside the catalogue")
+
+
+def test_a_verdict_the_rods_timing_decided_says_so_and_asks_for_no_other_recording():
+    lags = {"PP": 33.1, "PA": 49.4, "PB": 35.6, "QP": 37.4, "RodVel": 44.7}
+    report = {
+        "verdict": "spool_dynamics",
+        "ranking": [],
+        "calibrated": {},
+        "delays_ms": lags,
+        "timing_check": {"delays_ms": lags, "rod_shares_lag": True},
+    }
+    m = mechanism.describe(report)
+    assert "the machine itself is late" in m["decided_by"]
+    assert m["separating_recording"] is None and m["timing"] == m["decided_by"]

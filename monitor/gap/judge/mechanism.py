@@ -229,6 +229,10 @@ def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
     chk = report.get("cause_check")
     if verdict == "oil_viscosity" and chk:
         return chk["evidence"], chk["cause"] is not None
+    tc = report.get("timing_check")
+    if tc is not None:
+        # The rod's timing decided between a sensor's lag and the machine's.
+        return timing(tc["delays_ms"]), True
     lag = report.get("lag_check")
     if verdict == "sensor_lag" and lag:
         return f"the readings follow the engine's speed ripple late ({lag.get('readings')})", True
