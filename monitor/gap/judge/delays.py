@@ -76,7 +76,7 @@ def delays_ms(
 
 def shared(delays: dict[str, float | None], signals: Sequence[str]) -> float | None:
     """The median delay of ``signals`` (those with a timing), None without any."""
-    vals = [delays[s] for s in signals if delays.get(s) is not None]
+    vals = [d for s in signals if (d := delays.get(s)) is not None]
     return float(np.median(vals)) if vals else None
 
 
