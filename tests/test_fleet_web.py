@@ -209,6 +209,7 @@ def test_the_html_page_names_state_fault_since_and_action_and_loads_nothing_remo
     m03 = _table_row(index, "M03")
     assert "SENSOR FAULT" in m03 and "QP frozen" in m03 and "<td>day02</td>" in m03
     assert "check the sensor and its wiring" in m03
+    assert "QP: pump outlet flow (L/min)" in m03  # what the signal is, for a newcomer
     assert "healthy" in _table_row(index, "M02") and "nothing to do" in _table_row(index, "M02")
     # Episodes per code and day (days 02, 03, 04): each episode under the code of its own
     # name, as DM1 sent it: piston_wear once on day 4, spool_wear on days 3 and 4, QP every
@@ -426,6 +427,16 @@ def test_a_sensor_finding_reads_as_signal_and_what_is_wrong():
     assert sensor_label("PA", "stale") == "PA silent (no frames)"
     assert sensor_label("unknown", None) == "a sensor (not named) faulty"
     assert sensor_label("PB", "a_check_added_later") == "PB faulty"
+
+
+def test_a_sensor_finding_says_what_its_signal_measures():
+    # The contract's words for the signals (docs/reference/contracts.md): QP is the pump
+    # outlet flow in L/min, PA the cap-side port pressure in bar.
+    from monitor.fleet.actions import signal_meaning
+
+    assert signal_meaning("QP") == "QP: pump outlet flow (L/min)"
+    assert signal_meaning("Stick_PA") == "Stick_PA: valve port A (cap side) pressure, gauge (bar)"
+    assert signal_meaning("unknown") == ""
 
 
 def test_a_machine_in_fault_is_named_by_its_fault_though_a_sensor_episode_came_later():

@@ -7,6 +7,8 @@ the plausibility checks (``monitor.detection.plausibility``) and ``stale`` (fram
 
 from __future__ import annotations
 
+from monitor.signals import ROD_POS, SIGNALS
+
 #: fault name -> (what is suspected, what to do)
 FAULT_ACTIONS: dict[str, tuple[str, str]] = {
     "piston_wear": (
@@ -81,6 +83,16 @@ def sensor_label(signal: str, check: str | None) -> str:
     """What the page says of a sensor finding: ``QP frozen``, ``PA silent (no frames)``."""
     who = "a sensor (not named)" if signal == "unknown" else signal
     return f"{who} {sensor_action(check)[0]}"
+
+
+def signal_meaning(signal: str) -> str:
+    """What a sensor finding's signal measures, for a reader who does not know the names:
+    ``QP: pump outlet flow (L/min)``; a loop's signal (``Stick_QP``) by its base name; ""
+    for a name the contract does not hold."""
+    base = signal.rsplit("_", 1)[-1]
+    known = {s.name: s for s in (*SIGNALS, ROD_POS)}
+    s = known.get(signal) or known.get(base)
+    return f"{signal}: {s.description} ({s.unit})" if s else ""
 
 
 def markdown_table() -> str:

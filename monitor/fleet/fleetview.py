@@ -13,7 +13,13 @@ from dataclasses import dataclass, field
 from pathlib import PurePosixPath
 from typing import Any
 
-from monitor.fleet.actions import STATE_ACTIONS, fault_action, sensor_action, sensor_label
+from monitor.fleet.actions import (
+    STATE_ACTIONS,
+    fault_action,
+    sensor_action,
+    sensor_label,
+    signal_meaning,
+)
 from monitor.fleet.episodes import MachineFault, machine_fault, row_episodes
 from monitor.fleet.health import (
     DRIFT_FLAG,
@@ -153,7 +159,7 @@ def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFaul
     check = checks[-1].check if checks else None
     return (
         sensor_label(newest.name, check),
-        "",
+        signal_meaning(newest.name),
         same[0].log,
         same[-1].log,
         sensor_action(check)[1],
