@@ -170,7 +170,11 @@ def test_cli_shipped_model_small_set(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert "| spool_wear | 1 |" in md and "Isolation confusion" in md
 
 
-def test_cli_trains_paper_preset(tmp_path: Path) -> None:
+def test_cli_trains_paper_preset(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A preset trained afresh, its fault signatures from one simulated run per fault and
+    severity (--isolation-runs 1; the default 8 took most of this test's time)."""
+    from monitor.training.train import ISOLATION_SEVERITIES
+
     out, md = tmp_path / "eval.json", tmp_path / "eval.md"
     code = main(
         [
@@ -181,6 +185,8 @@ def test_cli_trains_paper_preset(tmp_path: Path) -> None:
             "1-3",
             "--train-duration",
             "90",
+            "--isolation-runs",
+            "1",
             "--severities",
             "0.6",
             "--runs",
@@ -199,6 +205,10 @@ def test_cli_trains_paper_preset(tmp_path: Path) -> None:
     result = json.loads(out.read_text())
     assert result["models"]["paper"]["outputs"] == ["QP"]
     assert result["plan"]["train_seeds"] == [1, 2, 3]
+    assert result["plan"]["train_isolation_runs"] == 1
+    assert "--isolation-runs 1 " in result["rerun"]
+    runs = len(FAULT_NAMES) * len(ISOLATION_SEVERITIES)  # one run per fault and severity
+    assert f"learning fault signatures from {runs} simulated runs" in capsys.readouterr().err
     _check_invariants(result)
     text = md.read_text()
     assert "### paper" in text and "Table 1, all models" in text
@@ -211,6 +221,7 @@ def test_cli_trains_paper_preset(tmp_path: Path) -> None:
         ["--severities", "0,1"],
         ["--severities", "x"],
         ["--runs", "0"],
+        ["--isolation-runs", "0"],
         ["--onsets", "sudden"],
         ["--presets", "nope"],
         ["--onset", "5"],

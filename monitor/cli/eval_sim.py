@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from monitor.cli._numbers import number
 from monitor.cli._paths import output_file
 from monitor.errors import ConfigError
-from monitor.evaluation.plan import DEFAULT_SEVERITIES, MAX_SEED_SET, ONSETS
+from monitor.evaluation.plan import DEFAULT_SEVERITIES, ISOLATION_RUNS, MAX_SEED_SET, ONSETS
 from monitor.model.spec import PRESETS
 from monitor.signals import FAULT_NAMES
 
@@ -155,6 +155,15 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="length of each training run (default 300 s)",
     )
     p.add_argument(
+        "--isolation-runs",
+        type=number(1, 100, whole=True),
+        default=ISOLATION_RUNS,
+        metavar="N",
+        help="simulated faulty runs per fault and severity from which each trained preset "
+        f"learns its fault signatures (default {ISOLATION_RUNS}, as the shipped model; fewer "
+        "train faster and misname slight faults more often)",
+    )
+    p.add_argument(
         "--runs",
         metavar="K",
         type=int,
@@ -271,6 +280,8 @@ def _rerun(
     if presets:
         parts += [f"--presets {','.join(presets)}", f"--train-seeds {','.join(map(str, seeds))}"]
         parts.append(f"--train-duration {args.train_duration:g}")
+        if args.isolation_runs != ISOLATION_RUNS:
+            parts.append(f"--isolation-runs {args.isolation_runs}")
     parts += [
         f"--runs {cfg.runs}",
         f"--severities {','.join(f'{s:g}' for s in cfg.severities)}",
@@ -312,7 +323,7 @@ def run(args: argparse.Namespace) -> int:
         _rerun(args, cfg, presets, train_seeds),
         cfg,
         models,
-        Training(train_seeds, args.train_duration) if presets else None,
+        Training(train_seeds, args.train_duration, args.isolation_runs) if presets else None,
         args.workers,
         {**timing, "total": total},
     )
@@ -383,5 +394,5 @@ def _models(
         path = conf.model if name == "shipped" else Path(name)
         label = "shipped" if name == "shipped" else path.stem
         models.append(ModelUnderTest(label, load_model(path), f"model file {path}"))
-    models += train_presets(presets, train_seeds, args.train_duration, _say)
+    models += train_presets(presets, train_seeds, args.train_duration, _say, args.isolation_runs)
     return models

@@ -11,3 +11,6 @@ SEED_SET_STRIDE = 10_000_000
 #: The largest set whose seeds all stay below 2**32 (a plan's seeds reach 1.3e6 within a set):
 #: the range every numpy generator, legacy ones included, takes as a seed.
 MAX_SEED_SET = 429
+#: Simulated faulty runs per fault and severity from which a preset trained afresh learns its
+#: fault signatures (as the shipped model).
+ISOLATION_RUNS = 8

@@ -117,10 +117,12 @@ def aggregate(m: ModelUnderTest, cfg: EvalConfig) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class Training:
-    """The presets' training runs: their seeds and each one's length."""
+    """The presets' training runs: their seeds, each one's length, and the simulated faulty
+    runs per fault and severity behind their fault signatures."""
 
     seeds: tuple[int, ...]
     duration_s: float
+    isolation_runs: int
 
 
 def evaluation_record(
@@ -142,6 +144,7 @@ def evaluation_record(
             "normal_hours": cfg.normal_hours,
             "train_seeds": None if training is None else list(training.seeds),
             "train_duration_s": None if training is None else training.duration_s,
+            "train_isolation_runs": None if training is None else training.isolation_runs,
             "test_seeds": "normal: 100000+i; fault: 1000000 + 100000*fault + 50000*onset "
             "+ 100*round(100*severity) + run; plus 10000000 x seed set",
             "seed_set": cfg.seed_set,

@@ -30,7 +30,13 @@ import numpy as np
 from monitor.detection.alarm import AlarmConfig, State
 from monitor.detection.offline import Detection, detect
 from monitor.errors import ConfigError
-from monitor.evaluation.plan import DEFAULT_SEVERITIES, MAX_SEED_SET, ONSETS, SEED_SET_STRIDE
+from monitor.evaluation.plan import (
+    DEFAULT_SEVERITIES,
+    ISOLATION_RUNS,
+    MAX_SEED_SET,
+    ONSETS,
+    SEED_SET_STRIDE,
+)
 from monitor.evaluation.twins import fault_view, predictor_view, simulate_twins
 from monitor.io.recording import Recording
 from monitor.model.modelfile import MonitorModel
@@ -193,10 +199,12 @@ def train_presets(
     seeds: Sequence[int],
     duration_s: float,
     progress: Progress | None = None,
+    isolation_runs: int = ISOLATION_RUNS,
 ) -> list[ModelUnderTest]:
     """Fresh models on normal operation of ``seeds``, as config/train_default_model.sh:
     patterns from boom-cover cycles of the first half, thresholds from boom cycles of the
-    second half held out (with fewer than four seeds, no held-out part)."""
+    second half held out (with fewer than four seeds, no held-out part); fault signatures
+    from ``isolation_runs`` simulated runs per fault and severity."""
     say = progress or (lambda _msg: None)
     if not presets:
         return []
@@ -214,7 +222,9 @@ def train_presets(
 
         model = train(
             fit,
-            TrainConfig(DGRNNSettings(preset=preset), isolation=IsolationSettings(runs=8)),
+            TrainConfig(
+                DGRNNSettings(preset=preset), isolation=IsolationSettings(runs=isolation_runs)
+            ),
             progress=progress,
             held_out=held or None,
         )
