@@ -58,7 +58,8 @@ class AttackRig:
             f'bus: {{interface: udp_multicast, channel: "{self.group}", time_scale: '
             f"{time_scale}}}\nevent_log: {{path: events.jsonl{', ' if event_log else ''}"
             f"{event_log}}}\n"
-            f"black_box: {{directory: blackbox}}\n{extra}"
+            # The shipped logs are the reference machine's, as is the shipped model.
+            f"black_box: {{directory: blackbox}}\nmachine_id: reference\n{extra}"
         )
         self.events_path = root / "events.jsonl"
         self.daemon: subprocess.Popen | None = None

@@ -136,7 +136,8 @@ def test_the_static_page_opens_from_disk_with_its_plots_and_names(judged, browse
     assert ref[1] == "FAULT" and ref[2].startswith("piston_wear: piston seal suspected")
     assert ref[3] == "day02" and ref[5].startswith("inspect the boom cylinder")
     # M03's flow sensor froze on day 2: named, since then, and what to do.
-    assert m03[1] == "SENSOR FAULT" and m03[2] == "QP frozen" and m03[3] == "day02"
+    assert m03[1] == "SENSOR FAULT" and m03[3] == "day02"
+    assert m03[2] == "QP frozen\nQP: pump outlet flow (L/min)"  # the name, then what it is
     assert m03[5].startswith("check the sensor and its wiring")
     for cells in (m01, m02):  # every state is a word of the table, and says what to do
         assert cells[1] in ("FAULT", "healthy", "WEARING?") and cells[5]
