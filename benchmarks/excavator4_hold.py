@@ -50,7 +50,8 @@ def _seeds(text: str) -> list[int]:
 
 
 def _simulate(out: Path, kind: str, seed: int, severity: float) -> Path:
-    path = out / f"{kind}_{seed}.csv"
+    name = f"{kind}_{severity:g}_{seed}" if kind == "piston_wear" else f"{kind}_{seed}"
+    path = out / f"{name}.csv"
     if not path.exists():
         cmd = [sys.executable, "-m", "monitor", "simulate", "--machine", "excavator4"]
         cmd += ["--duration", str(DURATION_S), "--seed", str(seed), "--out", str(path)]
