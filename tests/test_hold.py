@@ -444,7 +444,11 @@ def test_held_out_data_without_long_holds_trains_without_h(boom_runs) -> None:
 
 def test_short_held_out_data_trains_without_h(boom_runs) -> None:
     """Too little held-out data for the bias statistic (one run of 120 s): H is off too."""
-    m, _ = _train(boom_runs[:2], boom_runs[2:3])
+    m, said = _train(boom_runs[:2], boom_runs[2:3])
     assert m.bias is None
     assert m.hold is None
     assert m.training["hold"].startswith("off")
+    # --hold on asked for it: the progress says it is off and that it needs B, not only
+    # the model file's note (a stick section trained with --hold on said nothing of H).
+    off = [line for line in said if "hold statistic H off" in line]
+    assert len(off) == 1 and "bias statistic" in off[0]

@@ -336,6 +336,10 @@ class Hold(Statistic):
             tuple(outputs.index(o) for o in HOLD_OUTPUTS),
         )
 
+    @classmethod
+    def asked(cls, settings: Any) -> bool:
+        return bool(settings.statistics.hold)
+
     def unscaled(self, held: HeldOut) -> HoldModel:
         # The boom cylinder's swept volumes from every normal recording given: geometry,
         # not a threshold, so the training part counts too.  Holds on an end stop are left

@@ -182,6 +182,12 @@ class Statistic(ABC):
         the names of the members fitted so far).  Default: on, with its own defaults."""
         return cls()
 
+    @classmethod
+    def asked(cls, settings: Any) -> bool:
+        """Whether ``monitor train``'s settings ask for the member by name (``--hold on``):
+        then, off, it says why, beside the note in the model file.  Default: no."""
+        return False
+
     def fit(self, held: HeldOut, rule: ThresholdRule) -> Statistic:
         """Scales from ``held`` (the member's), then the threshold from the statistic's
         held-out series by ``rule``, one window per block; sets ``params_`` and ``support_``."""

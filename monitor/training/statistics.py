@@ -38,6 +38,8 @@ def fit_statistics(
     for cls in registry():
         stat = cls.configure(settings, held.outputs, on)
         if isinstance(stat, str):
+            if cls.asked(settings):  # asked for by name and off: said, not only noted
+                say(f"  {cls.title} {stat}")
             cls.put(model, None)
             notes[cls.key] = stat
             continue
