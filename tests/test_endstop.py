@@ -158,6 +158,11 @@ def test_too_few_strokes_is_a_clear_error() -> None:
     spool, qp = _rod_runs(1.0, 1.0, 3, n_moves=3)
     with pytest.raises(InputFileError, match=r"end stop to end stop \d+ times up and \d+ times"):
         fit_stroke([spool], [qp])
+    # The estimate serves any cylinder loop (`monitor train --loop stick --hold on` said
+    # "runs the boom"): the message names the rod, not the boom.
+    with pytest.raises(InputFileError, match=r"runs the rod from end stop") as err:
+        fit_stroke([spool], [qp])
+    assert "boom" not in str(err.value)
 
 
 def test_stroke_model_checks_its_values() -> None:

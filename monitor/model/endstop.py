@@ -229,7 +229,7 @@ def fit_stroke(spool: list[np.ndarray], qp: list[np.ndarray]) -> StrokeModel:
     ups, downs = int(np.sum(rhs > 0)), int(np.sum(rhs < 0))
     if min(ups, downs) < MIN_STROKES:
         raise InputFileError(
-            f"the normal data runs the boom from end stop to end stop {ups} times up "
+            f"the normal data runs the rod from end stop to end stop {ups} times up "
             f"and {downs} times down; the end-stop estimate needs {MIN_STROKES} each way "
             "(a stall: the lever out and QP below "
             f"{Q_STALL_LPM:g} L/min for {N_STALL * SAMPLE_PERIOD_S:g} s)"
