@@ -310,6 +310,7 @@ class Hold(Statistic):
     colour = "tab:brown"
     counts = ("window_n", "min_count")
     order = 3
+    asked_by = "hold"
 
     def __init__(
         self,
@@ -335,10 +336,6 @@ class Hold(Statistic):
             settings.statistics.hold_settle_n,
             tuple(outputs.index(o) for o in HOLD_OUTPUTS),
         )
-
-    @classmethod
-    def asked(cls, settings: Any) -> bool:
-        return bool(settings.statistics.hold)
 
     def unscaled(self, held: HeldOut) -> HoldModel:
         # The boom cylinder's swept volumes from every normal recording given: geometry,

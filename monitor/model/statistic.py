@@ -151,6 +151,8 @@ class Statistic(ABC):
     carries_over: ClassVar[bool] = False
     #: Training may leave it out when the held-out data cannot support it (J: never).
     optional: ClassVar[bool] = True
+    #: The training switch that asks for it by name ("hold": --hold on): off, it is said.
+    asked_by: ClassVar[str] = ""
     #: Whole numbers of samples in its header section, checked 1..MAX_WINDOW_N.
     counts: ClassVar[tuple[str, ...]] = ("window_n",)
     params_: Any
@@ -181,12 +183,6 @@ class Statistic(ABC):
         """The member as ``monitor train``'s settings ask for it, or why it is off (``on``:
         the names of the members fitted so far).  Default: on, with its own defaults."""
         return cls()
-
-    @classmethod
-    def asked(cls, settings: Any) -> bool:
-        """Whether ``monitor train``'s settings ask for the member by name (``--hold on``):
-        then, off, it says why, beside the note in the model file.  Default: no."""
-        return False
 
     def fit(self, held: HeldOut, rule: ThresholdRule) -> Statistic:
         """Scales from ``held`` (the member's), then the threshold from the statistic's

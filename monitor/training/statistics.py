@@ -38,7 +38,7 @@ def fit_statistics(
     for cls in registry():
         stat = cls.configure(settings, held.outputs, on)
         if isinstance(stat, str):
-            if cls.asked(settings):  # asked for by name and off: said, not only noted
+            if cls.asked_by and getattr(settings.statistics, cls.asked_by):
                 say(f"  {cls.title} {stat}")
             cls.put(model, None)
             notes[cls.key] = stat
