@@ -85,13 +85,15 @@ def sensor_label(signal: str, check: str | None) -> str:
     return f"{who} {sensor_action(check)[0]}"
 
 
+#: The contract's signals by name, for ``signal_meaning``.
+_KNOWN = {s.name: s for s in (*SIGNALS, ROD_POS)}
+
+
 def signal_meaning(signal: str) -> str:
     """What a sensor finding's signal measures, for a reader who does not know the names:
     ``QP: pump outlet flow (L/min)``; a loop's signal (``Stick_QP``) by its base name; ""
     for a name the contract does not hold."""
-    base = signal.rsplit("_", 1)[-1]
-    known = {s.name: s for s in (*SIGNALS, ROD_POS)}
-    s = known.get(signal) or known.get(base)
+    s = _KNOWN.get(signal) or _KNOWN.get(signal.rsplit("_", 1)[-1])
     return f"{signal}: {s.description} ({s.unit})" if s else ""
 
 
