@@ -53,3 +53,19 @@ EFFECT_NAMES: tuple[str, ...] = (
     "load_variation",
     "sensor_calibration",
 )
+
+
+def neighbour(contract: str, loop: str) -> str:
+    """The name of another loop's signal as a loop's model reads it: ``SpoolCmd@stick``
+    (the stick's spool command, an input of a section on the pump the stick shares)."""
+    return f"{contract}@{loop}"
+
+
+def is_neighbour(name: str) -> bool:
+    """Whether ``name`` is another loop's signal (``neighbour``)."""
+    return "@" in name
+
+
+def contract_name(name: str) -> str:
+    """The contract signal behind a model variable: ``SpoolCmd@stick`` -> ``SpoolCmd``."""
+    return name.split("@", 1)[0]

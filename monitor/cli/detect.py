@@ -176,7 +176,9 @@ def _check_whole_recording(
 ) -> None:
     """Without --loop the recording is read as one loop's: a model that reads the other
     loops' commands (``SpoolCmd@LOOP``) needs --loop."""
-    if loop is None and any("@" in v for v in model.spec.variables):
+    from monitor.signals import is_neighbour
+
+    if loop is None and any(is_neighbour(v) for v in model.spec.variables):
         names = ", ".join(lc.name for lc in cfg.monitored_loops)
         raise ConfigError(
             f"{model_path}: a model of one loop of several (it reads the other loops' "

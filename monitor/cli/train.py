@@ -298,8 +298,8 @@ def _check_input(
 def _preset(args: argparse.Namespace, monitor_cfg: MonitorConfig) -> tuple[str, tuple[str, ...]]:
     """(preset, the neighbours' demand columns it reads): ``section`` for a loop of a
     load-sensing machine unless ``--preset`` says otherwise; with ``--loop`` a section
-    reads every other loop's spool command (``monitor.config.layout.neighbour``)."""
-    from monitor.config.layout import neighbour
+    reads every other loop's spool command (``monitor.signals.neighbour``)."""
+    from monitor.signals import neighbour
 
     ls = monitor_cfg.gating.plausibility.pump.load_sensing
     preset = args.preset or ("section" if ls and args.loop else "default")

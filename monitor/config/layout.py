@@ -26,20 +26,11 @@ from monitor.errors import ConfigError
 from monitor.model.machinecard import check_model_for_loop
 from monitor.model.modelfile import MonitorModel
 from monitor.sampling.sampler import ROW_COLUMNS
-from monitor.signals import ROD_POS
+from monitor.signals import ROD_POS, neighbour
 
 OTHER = "~"  # prefix of a column that belongs to another loop (no model signal starts so)
 #: The contract signals of another loop its neighbours see (``neighbour``): its demand.
 SHARED_WITH_NEIGHBOURS = ("SpoolCmd",)
-
-
-def neighbour(contract: str, loop: str) -> str:
-    """The view's name of another loop's signal, e.g. ``SpoolCmd@stick``."""
-    return f"{contract}@{loop}"
-
-
-def is_neighbour(name: str) -> bool:
-    return "@" in name
 
 
 _ALARM_SIGNALS = ("State", "Fault", "J", "Threshold", "AlarmCount")

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
+from monitor.signals import contract_name
 
 
 @dataclass(frozen=True)
@@ -143,7 +144,7 @@ class DGRNNSpec:
         cls, name: str, horizon: int | None = None, neighbours: Sequence[str] = ()
     ) -> DGRNNSpec:
         """Preset ``name``; ``neighbours``: the other loops' demand columns a ``section``
-        model takes as inputs (``SpoolCmd@LOOP``, ``monitor.config.layout.neighbour``)."""
+        model takes as inputs (``SpoolCmd@LOOP``, ``monitor.signals.neighbour``)."""
         try:
             spec = PRESETS[name]
         except KeyError:
@@ -264,7 +265,7 @@ class Normalizer:
         mean = np.nanmean(A, axis=0)
         std = np.nanstd(A, axis=0, ddof=1)
         # Another loop's signal (``SpoolCmd@stick``) has its signal's floor.
-        floor = np.array([self.min_std.get(n.split("@")[0], 0.0) for n in names])
+        floor = np.array([self.min_std.get(contract_name(n), 0.0) for n in names])
         std = np.maximum(std, floor)
         for name, s in zip(names, std, strict=True):
             if not s > 0:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from monitor.codec.frames import FrameCodec
-from monitor.config.layout import OTHER, is_neighbour, rod_columns, row_layout
+from monitor.config.layout import OTHER, rod_columns, row_layout
 from monitor.config.settings import MonitorConfig
 from monitor.errors import ConfigError, InputFileError, NoHydraulicDataError
 from monitor.io.csvio import read_csv
@@ -19,14 +19,14 @@ from monitor.io.recording import Recording
 from monitor.sampling.bulk import recording_from_candump_bulk
 from monitor.sampling.read import read_recording
 from monitor.sampling.sampler import ROW_COLUMNS
-from monitor.signals import ROD_POS
+from monitor.signals import ROD_POS, is_neighbour
 
 
 def loop_recording(path: str | Path, cfg: MonitorConfig, name: str) -> Recording:
     """Loop ``name``'s signals of a log with several loops' frames, under the contract
     names, on the daemon's sample clock (which starts at the first frame of any loop, so the
     rows are the ones the daemon ticks), with the other loops' spool commands as
-    ``SpoolCmd@LOOP`` (``monitor.config.layout.neighbour``).  A ``.csv`` is a whole-machine
+    ``SpoolCmd@LOOP`` (``monitor.signals.neighbour``).  A ``.csv`` is a whole-machine
     CSV whose columns are the DBC's signal names (``t`` and the loop's own required)."""
     return loop_recordings(path, cfg, (name,))[name]
 
