@@ -146,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
             "commissioning/); give the fleet folder above it"
         )
 
+    _refuse_whole_machines(args.fleet, args.config)
     opts = RunOptions(
         workers=args.workers,
         scheduler=args.scheduler,
@@ -157,6 +158,17 @@ def run(args: argparse.Namespace) -> int:
     outcome = run_fleet(args.fleet.resolve(), args.out, opts, progress)
     print(f"{outcome.line()}; rows in {args.out / 'logs.parquet'}", file=sys.stderr)
     return outcome.exit_code
+
+
+def _refuse_whole_machines(fleet: Path, config: Path | None) -> None:
+    """Whole machines' logs, or a config of several loops: one line, before any work
+    (``monitor.fleet.wholemachine``)."""
+    from monitor.config.settings import load_config
+    from monitor.fleet.layout import scan_fleet
+    from monitor.fleet.wholemachine import refuse_whole_machines
+
+    loops = [lc.name for lc in load_config(config).monitored_loops]
+    refuse_whole_machines(scan_fleet(fleet.resolve()), loops)
 
 
 def report(args: argparse.Namespace) -> int:

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from monitor.cli._paths import output_dir
+from monitor.cli.simulate import MACHINES
 from monitor.errors import ConfigError
 
 
@@ -17,7 +18,11 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "its commissioning log and one candump log a day or --logs-per-day (one oil "
         "temperature per day). M01 wears its piston seal and M02 its spool slowly (severity 0 "
         "in the first log rising to --wear-max in the last), M03's flow sensor freezes from "
-        "the middle day on; the rest are healthy. OUT/answer_key.json says which is which.",
+        "the middle day on; the rest are healthy. OUT/answer_key.json says which is which. "
+        "--machine excavator4: whole machines instead (every loop's signals of "
+        "dbc/excavator4.dbc in each log, one duty cycle per log drawn from mixed, "
+        "truck-loading and lifting); M01 wears its stick's piston seal, M02 its bucket's "
+        "spool, M03 its swing motor and M04 its pump, the rest are healthy.",
     )
     p.add_argument("out", type=output_dir, metavar="OUT", help="fleet folder to write (created)")
     p.add_argument(
@@ -37,6 +42,13 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "dayDD-2.log, ..., as a machine that uploads after every few hours)",
     )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="default 0")
+    p.add_argument(
+        "--machine",
+        choices=MACHINES,
+        default=None,
+        help="a fleet of whole machines (excavator4: boom, stick, bucket and swing on one "
+        "load-sensing pump, config/excavator4_sim.yaml) instead of single boom loops",
+    )
     p.add_argument(
         "--log-s",
         type=float,
@@ -64,8 +76,6 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from monitor.fleet.simulate import FleetPlan, simulate_fleet
-
     if args.machines < 1 or args.days < 1:
         raise ConfigError("--machines and --days must be at least 1")
     if not 1 <= args.logs_per_day <= 24:
@@ -81,18 +91,39 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--wear-max must be a severity in [0, 1], got {args.wear_max:g}")
     if args.out.exists() and any(args.out.iterdir()):
         raise ConfigError(f"{args.out}: exists and is not empty")
-    plan = FleetPlan(
-        args.machines,
-        args.days,
-        args.seed,
-        args.log_s,
-        args.commissioning_s,
-        wear_max=args.wear_max,
-        logs_per_day=args.logs_per_day,
-    )
-    simulate_fleet(args.out, plan, say=lambda m: print(m, file=sys.stderr))
+
+    def say(message: str) -> None:
+        print(message, file=sys.stderr)
+
+    if args.machine is None:
+        from monitor.fleet.simulate import FleetPlan, simulate_fleet
+
+        plan = FleetPlan(
+            args.machines,
+            args.days,
+            args.seed,
+            args.log_s,
+            args.commissioning_s,
+            wear_max=args.wear_max,
+            logs_per_day=args.logs_per_day,
+        )
+        simulate_fleet(args.out, plan, say=say)
+    else:
+        from monitor.fleet.simulate_whole import WholeFleetPlan, simulate_whole_fleet
+
+        whole = WholeFleetPlan(
+            args.machines,
+            args.days,
+            args.seed,
+            args.log_s,
+            args.commissioning_s,
+            wear_max=args.wear_max,
+            logs_per_day=args.logs_per_day,
+        )
+        simulate_whole_fleet(args.out, whole, say=say)
+    what = "machines" if args.machine is None else f"{args.machine} machines"
     print(
-        f"wrote {args.machines} machines x {args.days} days x {args.logs_per_day} log(s) "
+        f"wrote {args.machines} {what} x {args.days} days x {args.logs_per_day} log(s) "
         f"to {args.out}",
         file=sys.stderr,
     )

@@ -99,7 +99,7 @@ def _one(
     _write(path, rec)
 
 
-def _log_name(day: int, part: int, logs_per_day: int) -> str:
+def day_log_name(day: int, part: int, logs_per_day: int) -> str:
     """``day01.log`` with one log a day, else ``day01-1.log``, ``day01-2.log``, ..."""
     if logs_per_day == 1:
         return f"day{day + 1:02d}.log"
@@ -137,7 +137,7 @@ def simulate_fleet(out: Path, plan: FleetPlan, say: Any = print) -> dict[str, An
             sev = plan.wear_max * j / max(n_logs - 1, 1) if role.endswith("_wear") else 0.0
             faults = [Fault(role, sev)] if sev > 0 else []
             freeze = plan.log_s / 2 if role == "frozen_QP" and d >= plan.days // 2 else None
-            name = _log_name(d, part, plan.logs_per_day)
+            name = day_log_name(d, part, plan.logs_per_day)
             # Seeds base + 1 + j: with one log a day, the same logs as before logs_per_day.
             _one(
                 out / mid / "logs" / name,
