@@ -143,6 +143,7 @@ def _days(
                 "log": f"{mid}/logs/{name}",
                 "day": d + 1,
                 "cycle": cycle,
+                "seed": base + 1 + j,
                 "fault": f"{loop}.{fault}" if sev > 0 else None,
                 "severity": round(sev, 4),
                 "oil_temp_c": oil[d],
@@ -185,7 +186,12 @@ def simulate_whole_fleet(
         n_logs = plan.days * plan.logs_per_day
         cycles = [WHOLE_CYCLES[int(c)] for c in rng.integers(0, len(WHOLE_CYCLES), n_logs)]
         days = _days(out, i, machine_i, plan, cycles, oil)
-        key["machines"][mid] = {"role": role(i), "factors": draw, "days": days}
+        key["machines"][mid] = {
+            "role": role(i),
+            "factors": draw,
+            "commissioning": {"cycle": COMMISSIONING_CYCLE, "seed": base},
+            "days": days,
+        }
         say(f"simulate-fleet: {mid} ({role(i)}) written")
     (out / "answer_key.json").write_text(json.dumps(key, indent=2) + "\n", encoding="utf-8")
     return key
