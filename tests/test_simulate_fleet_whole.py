@@ -10,12 +10,8 @@ import pytest
 
 from monitor.cli import main
 from monitor.config.settings import load_config
-from monitor.fleet.simulate_whole import (
-    TOLERANCED,
-    WholeFleetPlan,
-    simulate_whole_fleet,
-    toleranced,
-)
+from monitor.fleet.simulate import FleetPlan
+from monitor.fleet.simulate_whole import TOLERANCED, simulate_whole_fleet, toleranced
 from monitor.fleet.wholemachine import loops_in
 from monitor.io.csvio import write_csv
 from monitor.offline.recordings import loop_recordings
@@ -28,7 +24,7 @@ from monitor.sim.whole.faults import MachineFault
 from monitor.sim.whole.params import load_whole_machine
 from monitor.sim.whole.simulate import simulate_whole
 
-PLAN = WholeFleetPlan(machines=5, days=1, logs_per_day=2, log_s=10.0, commissioning_s=10.0)
+PLAN = FleetPlan(machines=5, days=1, logs_per_day=2, log_s=10.0, commissioning_s=10.0)
 
 
 @pytest.fixture(scope="module")

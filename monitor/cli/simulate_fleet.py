@@ -91,36 +91,28 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--wear-max must be a severity in [0, 1], got {args.wear_max:g}")
     if args.out.exists() and any(args.out.iterdir()):
         raise ConfigError(f"{args.out}: exists and is not empty")
+    from monitor.fleet.simulate import FleetPlan
 
     def say(message: str) -> None:
         print(message, file=sys.stderr)
 
+    plan = FleetPlan(
+        args.machines,
+        args.days,
+        args.seed,
+        args.log_s,
+        args.commissioning_s,
+        wear_max=args.wear_max,
+        logs_per_day=args.logs_per_day,
+    )
     if args.machine is None:
-        from monitor.fleet.simulate import FleetPlan, simulate_fleet
+        from monitor.fleet.simulate import simulate_fleet
 
-        plan = FleetPlan(
-            args.machines,
-            args.days,
-            args.seed,
-            args.log_s,
-            args.commissioning_s,
-            wear_max=args.wear_max,
-            logs_per_day=args.logs_per_day,
-        )
         simulate_fleet(args.out, plan, say=say)
     else:
-        from monitor.fleet.simulate_whole import WholeFleetPlan, simulate_whole_fleet
+        from monitor.fleet.simulate_whole import simulate_whole_fleet
 
-        whole = WholeFleetPlan(
-            args.machines,
-            args.days,
-            args.seed,
-            args.log_s,
-            args.commissioning_s,
-            wear_max=args.wear_max,
-            logs_per_day=args.logs_per_day,
-        )
-        simulate_whole_fleet(args.out, whole, say=say)
+        simulate_whole_fleet(args.out, plan, say=say)
     what = "machines" if args.machine is None else f"{args.machine} machines"
     print(
         f"wrote {args.machines} {what} x {args.days} days x {args.logs_per_day} log(s) "

@@ -17,13 +17,13 @@ linearly from 0 in the first log to ``wear_max`` in the last; the others are hea
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from monitor.fleet.simulate import day_log_name
+from monitor.fleet.simulate import FleetPlan, day_log_name
 from monitor.resources import resource_path
 from monitor.sim.whole.cycles import WHOLE_CYCLES, make_whole_cycle
 from monitor.sim.whole.faults import MachineFault
@@ -58,21 +58,6 @@ ROLES: tuple[tuple[str, str], ...] = (
 )
 COMMISSIONING_CYCLE = "mixed"
 _COMMISSIONING_OIL_C = (30.0, 60.0)  # degC at the start and end of the commissioning log
-
-
-@dataclass(frozen=True)
-class WholeFleetPlan:
-    """What to simulate: ``machines`` x ``days`` x ``logs_per_day`` logs of ``log_s``
-    seconds each, and a commissioning log of ``commissioning_s`` per machine."""
-
-    machines: int
-    days: int
-    seed: int = 0
-    log_s: float = 300.0
-    commissioning_s: float = 1200.0
-    tolerance: float = 0.05
-    wear_max: float = 0.6  # severity on the last log
-    logs_per_day: int = 1
 
 
 def role(i: int) -> str:
@@ -120,7 +105,7 @@ def _days(
     out: Path,
     i: int,
     machine: WholeMachine,
-    plan: WholeFleetPlan,
+    plan: FleetPlan,
     cycles: list[str],
     oil: list[float],
 ) -> list[dict[str, Any]]:
@@ -153,10 +138,12 @@ def _days(
 
 
 def simulate_whole_fleet(
-    out: Path, plan: WholeFleetPlan, say: Any = print, machine: WholeMachine | None = None
+    out: Path, plan: FleetPlan, say: Any = print, machine: WholeMachine | None = None
 ) -> dict[str, Any]:
     """Write FLEET folders of whole machines under ``out`` and ``out/answer_key.json``;
-    returns the key (``machine``: the nominal whole machine, default the shipped one)."""
+    returns the key (``machine``: the nominal whole machine, default the shipped one).
+    ``plan`` is the single-boom fleet's: machines x days x logs_per_day logs of log_s
+    seconds, a commissioning log of commissioning_s, +-tolerance, wear_max."""
     rng = np.random.default_rng(plan.seed)
     nominal = machine or load_whole_machine()
     oil = [round(float(rng.uniform(35.0, 55.0)), 1) for _ in range(plan.days)]
