@@ -105,6 +105,20 @@ def test_the_loops_own_simulator_yaml_is_the_one_it_is_diagnosed_against(two_pum
     assert gap_loop(cfg, "boom").machine is None  # the shipped reference loop then
 
 
+def test_gap_diagnoses_the_loop_against_its_machine_unless_config_names_another(two_pumps):
+    from argparse import Namespace
+
+    from monitor.cli.gap import _read_loop
+
+    cfg_path, _, d, _, stick = two_pumps
+    args = Namespace(loops_config=cfg_path, loop="stick", config=None, real=d / "whole.csv")
+    machine, rec = _read_loop(args)
+    assert machine.cylinder.stroke_m == pytest.approx(0.45)  # the loop's machine: key
+    np.testing.assert_allclose(rec["PA"], stick["PA"], rtol=1e-9, atol=1e-9)
+    args.config = resource_path("config", "simulator.yaml")
+    assert _read_loop(args)[0].cylinder.stroke_m == pytest.approx(0.5)  # --config wins
+
+
 def _gap(tmp_path, *args):
     real, out = str(tmp_path / "absent.csv"), str(tmp_path / "g.json")
     return main(["gap", "--real", real, "--json", out, *args])
