@@ -154,3 +154,15 @@ def test_a_bad_loop_name_is_one_line_naming_the_loops_and_exit_2(tmp_path, capsy
 def test_loops_config_without_loop_is_a_user_error(tmp_path, capsys):
     assert _gap(tmp_path, "--loops-config", str(resource_path("config", "excavator4.yaml"))) == 2
     assert "give --loop NAME" in capsys.readouterr().err
+
+
+def test_a_whole_machine_recording_without_loop_is_one_line_asking_for_it(two_pumps, capsys):
+    _, _, d, *_ = two_pumps
+    for name in ("whole.csv", "whole.log"):
+        args = ["gap", "--real", str(d / name), "--json", str(d / "g.json")]
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1
+        assert "a whole-machine recording (it carries the stick loops' signals" in err[0]
+        assert err[0].endswith("give --loop NAME")
+    assert not (d / "g.json").exists()

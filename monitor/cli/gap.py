@@ -91,6 +91,18 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _refuse_whole_machine(path: Path) -> None:
+    """A recording of several loops read as one would be its boom alone: ask for --loop."""
+    from monitor.offline.loopsniff import loops_in
+
+    found = loops_in(path)
+    if found:
+        raise ConfigError(
+            f"{path}: a whole-machine recording (it carries the {', '.join(found)} loops' "
+            "signals of dbc/excavator4.dbc): the gap tool diagnoses one loop; give --loop NAME"
+        )
+
+
 def _read_loop(args: argparse.Namespace) -> tuple[MachineParams, Recording]:
     """--loop: the simulator and the loop's signals of the whole-machine recording, the loop
     checked (``monitor.gap.data.loop``) before the recording is read."""
@@ -115,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
     if args.loop is None:
         if args.loops_config is not None:
             raise ConfigError("--loops-config names a whole machine's loops: give --loop NAME")
+        _refuse_whole_machine(args.real)
         machine = load_machine(args.config)
         rec = read_recording(args.real)
     else:

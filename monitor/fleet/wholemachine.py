@@ -11,68 +11,14 @@ line: a config of several loops (``loops:``), or a log that carries another loop
 
 from __future__ import annotations
 
-from functools import lru_cache
-from pathlib import Path
-
 from monitor.errors import ConfigError
 from monitor.fleet.layout import Fleet
-from monitor.resources import resource_path
+from monitor.offline.loopsniff import loops_in
 
-#: Bytes read from the start of each log: a whole machine sends every loop's frames every
-#: 10 ms, so a few hundred candump lines hold each of them.
-SNIFF_BYTES = 32768
 _DETECT_HINT = (
     "judge a loop of a log with `monitor detect LOG --config config/excavator4.yaml "
     "--loop NAME` (commissioned with `monitor train ... --loop NAME`)"
 )
-
-
-@lru_cache(maxsize=1)
-def other_loops() -> tuple[dict[str, str], dict[int, str]]:
-    """The shipped whole machine's (config/excavator4.yaml) loops after the first: each
-    loop's DBC signal name -> loop, and each frame id carrying one of them -> loop."""
-    import cantools
-
-    from monitor.config.settings import load_config
-
-    cfg = load_config(resource_path("config", "excavator4.yaml"))
-    names: dict[str, str] = {}
-    for lc in cfg.monitored_loops[1:]:
-        for signal in lc.signals.values():
-            if signal is not None:
-                names[signal] = lc.name
-    db = cantools.database.load_file(str(cfg.dbc))
-    ids = {
-        int(msg.frame_id): names[s.name]
-        for msg in db.messages
-        for s in msg.signals
-        if s.name in names
-    }
-    return names, ids
-
-
-def loops_in(path: Path) -> list[str]:
-    """The other loops (stick, bucket, swing) whose signals the start of log ``path``
-    carries; [] for a one-loop log (or one that cannot be read: its row will say why)."""
-    names, ids = other_loops()
-    try:
-        with path.open("rb") as fh:
-            head = fh.read(SNIFF_BYTES).decode("ascii", errors="replace")
-    except OSError:
-        return []
-    found: set[str] = set()
-    if path.suffix.lower() == ".csv":
-        header = head.splitlines()[0] if head else ""
-        found = {names[c.strip()] for c in header.split(",") if c.strip() in names}
-    else:
-        for line in head.splitlines():
-            parts = line.split()
-            if len(parts) >= 3 and "#" in parts[2]:
-                try:
-                    found.add(ids[int(parts[2].split("#", 1)[0], 16)])
-                except (KeyError, ValueError):
-                    continue
-    return sorted(found, key=list(dict.fromkeys(names.values())).index)
 
 
 def refuse_whole_machines(fleet: Fleet, loops_in_config: list[str]) -> None:
