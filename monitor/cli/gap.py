@@ -33,12 +33,15 @@ RodPos_offset_mm, ...  lag_check: how QP and PP follow the engine's speed ripple
 (prompt: not a sensor lag; late: a sensor lag), when sensor_lag was in question.
 
 exit status: 0 diagnosed (whatever the verdict), 2 bad argument/config/file or commands
-missing, 3 a recording the tool cannot use (too short, no hydraulic signals, no motion,
-another machine's signals).
+missing (a whole-machine recording without --loop, a loop the config does not have), 3 a
+recording the tool cannot use (too short, no hydraulic signals, no motion, another
+machine's signals) or a loop the single-loop simulator cannot stand for (--loop swing, a
+loop sharing a load-sensing pump: every loop of config/excavator4.yaml).
 
 example:
   monitor simulate --duration 300 --seed 1 --effect valve_deadband:overlap_pct=12 --out r.csv
   monitor gap --real r.csv --json gap.json --report gap/
+  monitor gap --real whole.log --loop stick --loops-config my-machine.yaml --json stick.json
 """
 
 
