@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from monitor.cli._numbers import number
 from monitor.cli._paths import output_file
+from monitor.cli._eval_sim_args import boom_defaults, fault_names, floats, names, seeds
+from monitor.cli._eval_sim_machine import add_machine_option, run_machine
 from monitor.errors import ConfigError
 from monitor.evaluation.plan import DEFAULT_SEVERITIES, ISOLATION_RUNS, MAX_SEED_SET, ONSETS
 from monitor.model.spec import PRESETS
@@ -82,40 +84,6 @@ FULL = _Scale(
 )
 
 
-def _floats(text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected numbers separated by commas: {text!r}"
-        ) from None
-
-
-def _seeds(text: str) -> tuple[int, ...]:
-    """'1-8' or '1,2,5' or a mix."""
-    out: list[int] = []
-    try:
-        for part in (p.strip() for p in text.split(",") if p.strip()):
-            lo, _, hi = part.partition("-")
-            out += range(int(lo), int(hi) + 1) if hi else [int(lo)]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seeds like 1-8 or 1,2,3: {text!r}") from None
-    if not out:
-        raise argparse.ArgumentTypeError("no seeds given")
-    return tuple(dict.fromkeys(out))
-
-
-def _names(known: tuple[str, ...]) -> Any:
-    def parse(text: str) -> tuple[str, ...]:
-        names = tuple(n.strip() for n in text.split(",") if n.strip())
-        bad = [n for n in names if n not in known]
-        if bad or not names:
-            raise argparse.ArgumentTypeError(f"choose from {', '.join(known)}: {text!r}")
-        return names
-
-    return parse
-
-
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "eval-sim",
@@ -136,14 +104,14 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--presets",
         metavar="LIST",
-        type=_names(tuple(PRESETS)),
+        type=names(tuple(PRESETS)),
         default=None,
         help="presets to train afresh (default default,paper; --quick default; none with --model)",
     )
     p.add_argument(
         "--train-seeds",
         metavar="SEEDS",
-        type=_seeds,
+        type=seeds,
         default=None,
         help="seeds of the normal training runs (default 1-48; --quick 1-8)",
     )
@@ -151,13 +119,13 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--train-duration",
         metavar="S",
         type=float,
-        default=300.0,
+        default=None,
         help="length of each training run (default 300 s)",
     )
     p.add_argument(
         "--isolation-runs",
         type=number(1, 100, whole=True),
-        default=ISOLATION_RUNS,
+        default=None,
         metavar="N",
         help="simulated faulty runs per fault and severity from which each trained preset "
         f"learns its fault signatures (default {ISOLATION_RUNS}, as the shipped model; fewer "
@@ -173,23 +141,24 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--severities",
         metavar="LIST",
-        type=_floats,
+        type=floats,
         default=None,
         help="fault severities (default 0.1,0.2,...,1.0; --quick 0.5,1.0)",
     )
     p.add_argument(
         "--faults",
         metavar="LIST",
-        type=_names(FAULT_NAMES),
-        default=FAULT_NAMES,
-        help=f"faults to simulate (default all: {','.join(FAULT_NAMES)})",
+        type=fault_names,
+        default=None,
+        help=f"faults to simulate (default all: {','.join(FAULT_NAMES)}; with --machine "
+        "LOOP.FAULT names)",
     )
     p.add_argument(
         "--onsets",
         metavar="LIST",
-        type=_names(ONSETS),
-        default=ONSETS,
-        help="abrupt,gradual (default both)",
+        type=names(ONSETS),
+        default=None,
+        help="abrupt,gradual (default both; with --machine abrupt)",
     )
     p.add_argument(
         "--normal-hours",
@@ -202,18 +171,22 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--duration",
         metavar="S",
         type=float,
-        default=120.0,
-        help="abrupt fault run length (default 120 s; gradual: + ramp)",
+        default=None,
+        help="abrupt fault run length (default 120 s, with --machine 600 s; gradual: + ramp)",
     )
     p.add_argument(
-        "--onset", metavar="S", type=float, default=30.0, help="fault onset (default 30 s)"
+        "--onset",
+        metavar="S",
+        type=float,
+        default=None,
+        help="fault onset (default 30 s, with --machine 120 s)",
     )
     p.add_argument(
         "--ramp",
         metavar="S",
         type=float,
-        default=30.0,
-        help="ramp of a gradual fault (default 30 s)",
+        default=None,
+        help="ramp of a gradual fault (default 30 s, with --machine 60 s)",
     )
     p.add_argument(
         "--horizon",
@@ -249,6 +222,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "--no-twins",
         dest="twins",
         action="store_false",
+        default=None,
         help="skip the noise-free twins of each fault run (with and without the "
         "fault) that give fault_j_ratio and the 'exercised' columns",
     )
@@ -264,6 +238,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="the reduced set CI runs (~1 min); explicit options win",
     )
+    add_machine_option(p)
     p.set_defaults(func=run)
 
 
@@ -308,6 +283,9 @@ def run(args: argparse.Namespace) -> int:
     from monitor.evaluation.parallel import score_all
     from monitor.evaluation.report import Training, evaluation_record, markdown
 
+    if args.machine is not None:
+        return run_machine(args, _say)
+    boom_defaults(args)
     started = time.perf_counter()
     base = QUICK if args.quick else FULL
     conf = load_config(args.config)
@@ -348,15 +326,15 @@ def _eval_config(args: argparse.Namespace, base: _Scale, conf: MonitorConfig) ->
         severities=tuple(round(s, 6) for s in _given(args.severities, base.severities)),
         runs=_given(args.runs, base.runs),
         normal_hours=_given(args.normal_hours, base.normal_hours),
-        duration_s=args.duration,
-        onset_s=args.onset,
-        ramp_s=args.ramp,
-        onsets=args.onsets,
-        faults=args.faults,
+        duration_s=_given(args.duration, 120.0),
+        onset_s=_given(args.onset, 30.0),
+        ramp_s=_given(args.ramp, 30.0),
+        onsets=_given(args.onsets, ONSETS),
+        faults=_given(args.faults, FAULT_NAMES),
         horizon=args.horizon or conf.horizon,
         alarm=conf.alarm,
         seed_set=args.seed_set,
-        twins=args.twins,
+        twins=args.twins is not False,
         twin_residuals=args.twin_residuals,
     )
 

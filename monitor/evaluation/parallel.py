@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,7 @@ def _load(path: str) -> ModelUnderTest:
     return ModelUnderTest(Path(path).stem, load_model(path), path)
 
 
-def score_batch(paths: tuple[str, ...], specs: list[RunSpec], cfg: EvalConfig) -> list[Any]:
+def score_batch(specs: list[RunSpec], paths: tuple[str, ...], cfg: EvalConfig) -> list[Any]:
     """A worker's task: every run of ``specs`` scored by the models at ``paths``."""
     models = [_load(p) for p in paths]
     return [score_spec(models, spec, cfg) for spec in specs]
@@ -53,15 +53,10 @@ def run_parallel(
     progress: Progress | None = None,
 ) -> dict[str, float]:
     """``sim_eval.run_all`` on ``workers`` Dask worker processes; the same rows, in plan order."""
-    from distributed import Client, LocalCluster, as_completed
-
     from monitor.model.modelfile import save_model
 
     say = progress or (lambda _msg: None)
     plan = normal_plan(cfg) + fault_plan(cfg)
-    batches = [plan[i : i + BATCH_RUNS] for i in range(0, len(plan), BATCH_RUNS)]
-    results: list[Any] = [None] * len(batches)
-    sim_s = 0.0
     eta = Eta(plan, say)
     with tempfile.TemporaryDirectory(prefix="eval-sim-") as tmp:
         paths = []
@@ -69,29 +64,47 @@ def run_parallel(
             path = Path(tmp) / f"model{k}.npz"
             save_model(path, m.model)
             paths.append(str(path))
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0"
-        )
-        with cluster, Client(cluster) as client:
-            say(f"Dask LocalCluster, {workers} workers, dashboard {client.dashboard_link}")
-            first = client.submit(score_batch, tuple(paths), batches[0], cfg, pure=False)
-            results[0] = first.result()
-            for spec in batches[0]:
-                eta.step(spec)
-            futures = {
-                client.submit(score_batch, tuple(paths), b, cfg, pure=False): k
-                for k, b in enumerate(batches[1:], 1)
-            }
-            for fut in as_completed(futures):
-                k = futures[fut]
-                results[k] = fut.result()
-                for spec in batches[k]:
-                    eta.step(spec)
-    for batch, scored in zip(batches, results, strict=True):
-        for spec, (rows, s, det_s) in zip(batch, scored, strict=True):
-            sim_s += s
-            collect(models, spec, rows, det_s)
+        scored = map_batches(plan, score_batch, (tuple(paths), cfg), workers, eta)
+    sim_s = 0.0
+    for spec, (rows, s, det_s) in zip(plan, scored, strict=True):
+        sim_s += s
+        collect(models, spec, rows, det_s)
     return {"simulate_s": sim_s, "runs_s": time.perf_counter() - eta.started}
+
+
+def map_batches(
+    plan: Sequence[RunSpec],
+    task: Callable[..., list[Any]],
+    task_args: tuple[Any, ...],
+    workers: int,
+    eta: Eta,
+) -> list[Any]:
+    """``task(batch, *task_args)`` (one result per run of the batch) over ``plan`` in
+    batches of ``BATCH_RUNS`` on a Dask ``LocalCluster`` of ``workers`` processes: the
+    results in plan order, ``eta`` told of every run done."""
+    from distributed import Client, LocalCluster, as_completed
+
+    batches = [list(plan[i : i + BATCH_RUNS]) for i in range(0, len(plan), BATCH_RUNS)]
+    results: list[Any] = [None] * len(batches)
+    cluster = LocalCluster(
+        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0"
+    )
+    with cluster, Client(cluster) as client:
+        eta.say(f"Dask LocalCluster, {workers} workers, dashboard {client.dashboard_link}")
+        first = client.submit(task, batches[0], *task_args, pure=False)
+        results[0] = first.result()
+        for spec in batches[0]:
+            eta.step(spec)
+        futures = {
+            client.submit(task, b, *task_args, pure=False): k
+            for k, b in enumerate(batches[1:], 1)
+        }
+        for fut in as_completed(futures):
+            k = futures[fut]
+            results[k] = fut.result()
+            for spec in batches[k]:
+                eta.step(spec)
+    return [r for scored in results for r in scored]
 
 
 def score_all(

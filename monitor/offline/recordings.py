@@ -35,10 +35,7 @@ def loop_recordings(
     path: str | Path, cfg: MonitorConfig, names: Sequence[str]
 ) -> dict[str, Recording]:
     """``loop_recording`` of each loop of ``names``, the file read once."""
-    known = [lc.name for lc in cfg.monitored_loops]
-    for name in names:
-        if name not in known:
-            raise ConfigError(f"{cfg.source}: no loop {name!r}; loops: {', '.join(known)}")
+    known = _check_names(cfg, names)
     codec = FrameCodec.from_dbc(cfg.dbc)
     columns, views = row_layout(cfg, codec)
     optional = rod_columns(cfg.monitored_loops)
@@ -53,6 +50,27 @@ def loop_recordings(
     else:
         wide = recording_from_candump_bulk(path, codec, columns, optional=optional)
     return {name: _pick(wide, columns, views[known.index(name)], name, path, cfg) for name in names}
+
+
+def split_loops(
+    wide: Recording, cfg: MonitorConfig, names: Sequence[str], source: str
+) -> dict[str, Recording]:
+    """``loop_recordings`` of a recording already in memory under the DBC's signal names
+    (a whole-machine simulation, as its CSV would be read back): each loop of ``names``."""
+    known = _check_names(cfg, names)
+    columns, views = row_layout(cfg, FrameCodec.from_dbc(cfg.dbc))
+    return {
+        name: _pick(wide, columns, views[known.index(name)], name, source, cfg) for name in names
+    }
+
+
+def _check_names(cfg: MonitorConfig, names: Sequence[str]) -> list[str]:
+    """The config's loop names; a name of ``names`` not among them is a ``ConfigError``."""
+    known = [lc.name for lc in cfg.monitored_loops]
+    for name in names:
+        if name not in known:
+            raise ConfigError(f"{cfg.source}: no loop {name!r}; loops: {', '.join(known)}")
+    return known
 
 
 def _pick(
