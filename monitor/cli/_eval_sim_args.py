@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+
 def floats(text: str) -> tuple[float, ...]:
     try:
         return tuple(float(v) for v in text.split(",") if v.strip())

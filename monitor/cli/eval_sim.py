@@ -8,12 +8,12 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
-from monitor.cli._numbers import number
-from monitor.cli._paths import output_file
 from monitor.cli._eval_sim_args import boom_defaults, fault_names, floats, names, seeds
 from monitor.cli._eval_sim_machine import add_machine_option, run_machine
+from monitor.cli._numbers import number
+from monitor.cli._paths import output_file
 from monitor.errors import ConfigError
 from monitor.evaluation.plan import DEFAULT_SEVERITIES, ISOLATION_RUNS, MAX_SEED_SET, ONSETS
 from monitor.model.spec import PRESETS

@@ -85,8 +85,9 @@ def judge_loops(monitor: MachineUnderTest, rec: Recording, spec: RunSpec) -> dic
     rows = {}
     for name, model in monitor.models.items():
         reference = reference_reason(model.card, cfg.machine_id)
-        det = detect(model, views[name], cfg.alarm, cfg.horizon, gating=cfg.gating,
-                     reference=reference)
+        det = detect(
+            model, views[name], cfg.alarm, cfg.horizon, gating=cfg.gating, reference=reference
+        )
         row = score_run(det, spec)
         row["verdict"] = det.summary["verdict"]
         rows[name] = row
@@ -139,9 +140,7 @@ def judge_batch(specs: list[RunSpec], config_path: str, sim_config: str | None) 
     return [judge_spec(spec, config_path, sim_config) for spec in specs]
 
 
-def file_rows(
-    monitor: MachineUnderTest, plan: Sequence[RunSpec], scored: Sequence[Any]
-) -> float:
+def file_rows(monitor: MachineUnderTest, plan: Sequence[RunSpec], scored: Sequence[Any]) -> float:
     """File every run's row with the monitor (plan order); returns the simulation seconds."""
     sim_s = 0.0
     monitor.normal = {name: [] for name in monitor.loops}

@@ -88,8 +88,9 @@ def by_faulty_loop(m: MachineUnderTest) -> dict[str, dict[str, Any]]:
             f"severity>={TABLE1_MIN_SEVERITY}": fault_cell(
                 [r for r in mine if r["severity"] >= TABLE1_MIN_SEVERITY - 1e-9], m.loops
             ),
-            "severity=0.3": fault_cell([r for r in mine if abs(r["severity"] - 0.3) < 1e-9],
-                                       m.loops),
+            "severity=0.3": fault_cell(
+                [r for r in mine if abs(r["severity"] - 0.3) < 1e-9], m.loops
+            ),
         }
     return out
 

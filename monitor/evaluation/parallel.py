@@ -96,8 +96,7 @@ def map_batches(
         for spec in batches[0]:
             eta.step(spec)
         futures = {
-            client.submit(task, b, *task_args, pure=False): k
-            for k, b in enumerate(batches[1:], 1)
+            client.submit(task, b, *task_args, pure=False): k for k, b in enumerate(batches[1:], 1)
         }
         for fut in as_completed(futures):
             k = futures[fut]
