@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from monitor.cli._demo_machine import MACHINES, Scenario, machine_scenario, say_loops
 from monitor.cli._paths import output_dir
 from monitor.resources import resource_path
 
@@ -55,6 +56,14 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="keep the event log and black box here (default: a temp dir)",
     )
+    p.add_argument(
+        "--machine",
+        choices=MACHINES,
+        default=None,
+        help="the whole machine instead (excavator4: boom, stick, bucket and swing on one "
+        "bus, the daemon with config/excavator4.yaml's four loops, the stick's spool worn "
+        "from 45 s; the log is simulated first)",
+    )
     p.set_defaults(func=run)
 
 
@@ -83,8 +92,14 @@ class _Progress:
 
 
 def _levels(daemon: Daemon) -> str:
-    """The alarm level and J's share of it: the alarm is raised above 1, by J or by B."""
-    lp = daemon.loops[0]  # the demo's config has one loop
+    """The alarm level and J's share of it: the alarm is raised above 1, by J or by B;
+    with several loops, each loop's level."""
+    if len(daemon.loops) > 1:
+        return "levels " + " ".join(
+            f"{lp.name} {'n/a' if lp.last_level != lp.last_level else f'{lp.last_level:.2f}'}"
+            for lp in daemon.loops
+        )
+    lp = daemon.loops[0]
     j, level = lp.last_j, lp.last_level
     if level != level:
         return "level n/a, J warming"
@@ -95,23 +110,27 @@ def run(args: argparse.Namespace) -> int:
     if not args.speed > 0:
         print("monitor demo: error: --speed must be > 0", file=sys.stderr)
         return 2
-    log_path = resource_path("replay", DEMO_LOG)
     logger = logging.getLogger("monitor")
     level = logger.level
     # The demo prints its own lines; the daemon's journal lines would interleave with them.
     logger.setLevel(logging.ERROR)
     try:
         with tempfile.TemporaryDirectory(prefix="monitor-demo-") as tmp:
-            return _demo(log_path, args.out or Path(tmp), args.speed, kept=args.out is not None)
+            if args.machine:
+                scenario = machine_scenario(Path(tmp))
+            else:
+                log_path = resource_path("replay", DEMO_LOG)
+                scenario = Scenario(log_path, None, DEMO_ONSET_S, SPAN_S, "spool wear")
+            return _demo(scenario, args.out or Path(tmp), args.speed, kept=args.out is not None)
     finally:
         logger.setLevel(level)
 
 
-def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
+def _demo(scenario: Scenario, out: Path, speed: float, kept: bool) -> int:
     from monitor.live.daemon import Daemon
 
     channel = f"monitor-demo-{os.getpid()}"
-    cfg = _demo_config(out, channel)
+    cfg = _demo_config(out, channel, scenario)
     tty = sys.stdout.isatty()
     alarms: list[dict[str, Any]] = []
 
@@ -119,25 +138,32 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
         if tty:
             print("\r" + " " * 100 + "\r", end="")
         fault = f", isolated: {ev['fault']}" if ev["fault"] else ""
+        loop = f"{ev['loop']}: " if "loop" in ev else ""
         print(
-            f"[log t={ev['t']:6.2f} s] state -> {ev['state'].upper()} ({_levels(daemon)}{fault})",
+            f"[log t={ev['t']:6.2f} s] {loop}state -> {ev['state'].upper()} "
+            f"({_levels(daemon)}{fault})",
             flush=True,
         )
         if ev["state"] == "fault":
             alarms.append(ev)
 
     print(
-        f"monitor demo: replaying {log_path.name} (spool wear from {DEMO_ONSET_S:.0f} s) at "
-        f"{speed:g}x real time on virtual CAN bus {channel!r}"
+        f"monitor demo: replaying {scenario.log.name} ({scenario.what} from "
+        f"{scenario.onset_s:.0f} s) at {speed:g}x real time on virtual CAN bus {channel!r}"
     )
     daemon = Daemon(cfg, on_event=on_event)
     readback = _AlarmReadback(cfg, daemon)
     start = time.monotonic()
-    counts = _replay(daemon, readback, log_path, speed, _Progress(tty))
+    counts = _replay(daemon, readback, scenario, speed, _Progress(tty))
     c = daemon.counts()
-    print(f"\nsummary ({time.monotonic() - start:.1f} s wall for {SPAN_S:.0f} s of log):")
-    _say_alarm(alarms)
-    _say_frames(readback.frames, counts.first_ts or 0.0)
+    span = scenario.span_s
+    print(f"\nsummary ({time.monotonic() - start:.1f} s wall for {span:.0f} s of log):")
+    t0 = counts.first_ts or 0.0
+    if len(daemon.loops) > 1:
+        say_loops([lp.name for lp in daemon.loops], alarms, readback.frames, t0, scenario)
+    else:
+        _say_alarm(alarms)
+        _say_frames(readback.frames, t0)
     print(
         f"  frames: {c['received']} received, {c['decoded']} decoded, "
         f"{sum(c['rejected'].values())} rejected, {c['dropped']} dropped; {c['ticks']} ticks"
@@ -152,25 +178,27 @@ def _demo(log_path: Path, out: Path, speed: float, kept: bool) -> int:
     return 0
 
 
-def _demo_config(out: Path, channel: str) -> MonitorConfig:
-    """The shipped config on a virtual bus of its own, the outputs written under ``out``."""
+def _demo_config(out: Path, channel: str, scenario: Scenario) -> MonitorConfig:
+    """The scenario's config on a virtual bus of its own, the outputs written under
+    ``out``."""
     from monitor.bus.reader import BusConfig
     from monitor.config.settings import load_config
 
-    cfg = load_config()
+    cfg = load_config(scenario.config)
+    # The queue holds the whole log: a slow first tick must not cost frames.
+    queue = max(100_000, scenario.frames + 1000)
     return dataclasses.replace(
         cfg,
-        # The queue holds the whole log: a slow first tick must not cost frames.
-        bus=BusConfig(interface="virtual", channel=channel, silent_s=2.0, queue_frames=100_000),
+        bus=BusConfig(interface="virtual", channel=channel, silent_s=2.0, queue_frames=queue),
         event_log=dataclasses.replace(cfg.event_log, path=out / "events.jsonl"),
         black_box=dataclasses.replace(cfg.black_box, directory=out / "blackbox"),
     )
 
 
 class _AlarmReadback:
-    """Another node on the demo's bus, reading the daemon's MON_Alarm frames back:
-    (bus time, state, fault name) each.  Its own codec, so the daemon's counters stay its
-    own."""
+    """Another node on the demo's bus, reading the daemon's MON_Alarm frames back (every
+    loop's alarm message): (bus time, state, fault name, loop) each.  Its own codec, so the
+    daemon's counters stay its own."""
 
     def __init__(self, cfg: MonitorConfig, daemon: Daemon) -> None:
         import can
@@ -180,20 +208,29 @@ class _AlarmReadback:
 
         self.bus = can.Bus(interface="virtual", channel=cfg.bus.channel)
         self.codec = FrameCodec.from_dbc(cfg.dbc)
-        self.alarm_id = self.codec.message(ALARM).frame_id
-        self.names = {code: name for name, code in fault_codes(daemon.codec).items()}
-        self.frames: list[tuple[float, int, str]] = []
+        names = [lc.alarm_message for lc in cfg.monitored_loops] if cfg.loops else [ALARM]
+        loops = [lc.name for lc in cfg.monitored_loops]
+        # Frame id -> (loop, fault code -> name of that loop's message's value table).
+        self.alarm_ids = {
+            self.codec.message(n).frame_id: (
+                loop,
+                {code: f for f, code in fault_codes(daemon.codec, n).items()},
+            )
+            for n, loop in zip(names, loops, strict=True)
+        }
+        self.frames: list[tuple[float, int, str, str]] = []
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._listen, name="demo-listener", daemon=True)
 
     def _listen(self) -> None:
         while not self.stop.is_set():
             m = self.bus.recv(0.1)
-            if m is not None and m.arbitration_id == self.alarm_id:
+            if m is not None and m.arbitration_id in self.alarm_ids:
                 d = self.codec.decode_message(m)
                 if d.values is not None:
-                    fault = self.names.get(int(d.values["Fault"]), "?")
-                    self.frames.append((m.timestamp, int(d.values["State"]), fault))
+                    loop, codes = self.alarm_ids[m.arbitration_id]
+                    fault = codes.get(int(d.values["Fault"]), "?")
+                    self.frames.append((m.timestamp, int(d.values["State"]), fault, loop))
 
     def close(self) -> None:
         self.stop.set()
@@ -202,7 +239,7 @@ class _AlarmReadback:
 
 
 def _replay(
-    daemon: Daemon, readback: _AlarmReadback, log_path: Path, speed: float, progress: _Progress
+    daemon: Daemon, readback: _AlarmReadback, scenario: Scenario, speed: float, progress: _Progress
 ) -> ReplayCounts:
     """The log onto the bus at ``speed`` with the daemon and the read-back running; both
     stopped after it, in order."""
@@ -215,7 +252,10 @@ def _replay(
     daemon.start()
     try:
         counts = replay_log(
-            log_path, sender, speed, on_frame=lambda m, c: progress.show(daemon, c, SPAN_S)
+            scenario.log,
+            sender,
+            speed,
+            on_frame=lambda m, c: progress.show(daemon, c, scenario.span_s),
         )
         time.sleep(0.3)  # let the detector drain the last frames
     finally:
@@ -223,7 +263,7 @@ def _replay(
         time.sleep(0.2)
         readback.close()
         sender.shutdown()
-    progress.show(daemon, counts, SPAN_S, force=True)
+    progress.show(daemon, counts, scenario.span_s, force=True)
     if progress.tty:
         print()
     return counts
@@ -241,7 +281,7 @@ def _say_alarm(alarms: list[dict[str, Any]]) -> None:
     )
 
 
-def _say_frames(frames: list[tuple[float, int, str]], t0: float) -> None:
+def _say_frames(frames: list[tuple[float, int, str, str]], t0: float) -> None:
     fault_frames = [f for f in frames if f[1] == 1]
     if fault_frames:
         print(
