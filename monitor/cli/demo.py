@@ -4,7 +4,8 @@ The log (90 s of simulated boom cycles, spool wear of severity 0.6 from 45 s) is
 faster than real time onto a python-can ``virtual`` bus; the daemon's own code path (reader
 thread, decoder, sampler, ticker, outputs) receives it, and a second bus node reads the
 MON_Alarm frames back.  The sample clock is the log's, so the speed changes nothing but the
-wall time.
+wall time.  ``--machine excavator4``: the whole machine's four loops on one bus instead
+(``monitor.cli._demo_machine``).
 """
 
 from __future__ import annotations
