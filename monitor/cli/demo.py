@@ -258,7 +258,7 @@ def _replay(
             speed,
             on_frame=lambda m, c: progress.show(daemon, c, scenario.span_s),
         )
-        time.sleep(0.3)  # let the detector drain the last frames
+        _drain(daemon)
     finally:
         daemon.stop()
         time.sleep(0.2)
@@ -268,6 +268,18 @@ def _replay(
     if progress.tty:
         print()
     return counts
+
+
+def _drain(daemon: Daemon, timeout_s: float = 600.0) -> None:
+    """Wait until the detector has decoded every frame the reader took off the bus (on a
+    busy machine it runs far behind a fast replay; stopping it early would lose the end)."""
+    deadline = time.monotonic() + timeout_s
+    settled = 0
+    while time.monotonic() < deadline and daemon.healthy and settled < 3:
+        r = daemon.reader.counts
+        done = daemon.reader.queue.empty() and daemon.codec.counts.frames >= r.received - r.dropped
+        settled = settled + 1 if done else 0
+        time.sleep(0.1)
 
 
 def _say_alarm(alarms: list[dict[str, Any]]) -> None:
