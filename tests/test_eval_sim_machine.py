@@ -211,6 +211,7 @@ def test_short_run_rows_match_an_independent_count(tmp_path: Path) -> None:
         ["--model", "shipped"],
         ["--presets", "default"],
         ["--no-twins"],
+        ["--twin-residuals"],
         ["--faults", "stick.sand_in_oil"],
         ["--onset", "10"],
     ],

@@ -76,6 +76,13 @@ def machine_plan(args: argparse.Namespace, alarm: Any) -> MachinePlan:
     )
 
 
+def _given_option(args: argparse.Namespace, key: str) -> bool:
+    """Whether the option was given: not None (``--no-twins`` given is False), except
+    ``--twin-residuals``, a switch that is False when not given."""
+    value = getattr(args, key, None)
+    return bool(value) if key == "twin_residuals" else value is not None
+
+
 def rerun_command(args: argparse.Namespace, plan: MachinePlan) -> str:
     """The explicit command that reproduces this evaluation (no --quick shorthand)."""
     from monitor.evaluation.machine_plan import MACHINE_FAULTS
@@ -104,7 +111,7 @@ def run_machine(args: argparse.Namespace, say: Callable[[str], None]) -> int:
     from monitor.resources import resource_path
 
     started = time.perf_counter()
-    given = [flag for key, flag in _BOOM_ONLY if getattr(args, key, None) not in (None, False)]
+    given = [flag for key, flag in _BOOM_ONLY if _given_option(args, key)]
     if given:
         raise ConfigError(
             f"{', '.join(given)}: not with --machine (the whole machine is judged by the "
