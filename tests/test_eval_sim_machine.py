@@ -227,3 +227,22 @@ def test_boom_evaluation_refuses_a_loop_fault(
 ) -> None:
     assert main(["eval-sim", "--faults", "stick.spool_wear", "--json", str(tmp_path / "x")]) == 2
     assert "need --machine excavator4" in capsys.readouterr().err
+
+
+def test_dask_workers_give_the_one_process_rows() -> None:
+    """--workers 2 (a Dask LocalCluster) judges the same runs to the same rows."""
+    from monitor.evaluation.machine_eval import judge_all
+
+    plan = MachinePlan(
+        faults=("bucket.spool_wear",),
+        severities=(1.0,),
+        runs=1,
+        normal_hours=1 / 60,
+        duration_s=105.0,
+        onset_s=45.0,
+    )
+    config = resource_path("config", "excavator4.yaml")
+    one, _ = judge_all(config, plan, workers=1)
+    two, _ = judge_all(config, plan, workers=2)
+    assert (one.normal, one.faults) == (two.normal, two.faults)
+    assert len(one.faults) == 1 and all(len(rows) == 1 for rows in one.normal.values())
