@@ -1,8 +1,10 @@
-"""The option parsers of ``monitor eval-sim`` (lists of numbers, seeds and names)."""
+"""The option parsers of ``monitor eval-sim`` (lists of numbers, seeds and names), and its
+outputs."""
 
 from __future__ import annotations
 
 import argparse
+import json
 from typing import Any
 
 
@@ -65,3 +67,17 @@ def boom_defaults(args: argparse.Namespace) -> None:
         args.train_duration = 300.0
     if args.isolation_runs is None:
         args.isolation_runs = ISOLATION_RUNS
+
+
+def write_result(args: argparse.Namespace, result: dict[str, Any], text: str) -> None:
+    """The JSON to ``--json``; the report to ``--markdown``, else stdout."""
+    from monitor.errors import ConfigError
+
+    try:
+        args.json.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        if args.markdown:
+            args.markdown.write_text(text + "\n", encoding="utf-8")
+        else:
+            print(text)
+    except OSError as exc:
+        raise ConfigError(f"cannot write output: {exc.strerror or exc} ({exc.filename})") from None

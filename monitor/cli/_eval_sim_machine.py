@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from monitor.cli._eval_sim_args import write_result
 from monitor.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -134,17 +134,6 @@ def run_machine(args: argparse.Namespace, say: Callable[[str], None]) -> int:
         args.workers,
         {**timing, "total": time.perf_counter() - started},
     )
-    _write(args, result, machine_markdown(result))
+    write_result(args, result, machine_markdown(result))
     say(f"done in {time.perf_counter() - started:.0f} s -> {args.json}")
     return 0
-
-
-def _write(args: argparse.Namespace, result: dict[str, Any], text: str) -> None:
-    try:
-        args.json.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
-        if args.markdown:
-            args.markdown.write_text(text, encoding="utf-8")
-        else:
-            print(text, end="")
-    except OSError as exc:
-        raise ConfigError(f"cannot write output: {exc.strerror or exc} ({exc.filename})") from None

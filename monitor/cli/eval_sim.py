@@ -3,14 +3,20 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
-from monitor.cli._eval_sim_args import boom_defaults, fault_names, floats, names, seeds
+from monitor.cli._eval_sim_args import (
+    boom_defaults,
+    fault_names,
+    floats,
+    names,
+    seeds,
+    write_result,
+)
 from monitor.cli._eval_sim_machine import add_machine_option, run_machine
 from monitor.cli._numbers import number
 from monitor.cli._paths import output_file
@@ -315,15 +321,7 @@ def run(args: argparse.Namespace) -> int:
         args.workers,
         {**timing, "total": total},
     )
-    try:
-        args.json.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
-        text = markdown(result)
-        if args.markdown:
-            args.markdown.write_text(text + "\n", encoding="utf-8")
-        else:
-            print(text)
-    except OSError as exc:
-        raise ConfigError(f"cannot write output: {exc.strerror or exc} ({exc.filename})") from None
+    write_result(args, result, markdown(result))
     _say(f"done in {total:.0f} s -> {args.json}")
     return 0
 

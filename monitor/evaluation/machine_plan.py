@@ -17,7 +17,7 @@ from typing import Any
 from monitor.detection.alarm import AlarmConfig
 from monitor.errors import ConfigError
 from monitor.evaluation.plan import MAX_SEED_SET, ONSETS, SEED_SET_STRIDE
-from monitor.evaluation.sim_eval import MAX_RUNS, RunSpec
+from monitor.evaluation.sim_eval import RunSpec, check_sizes
 
 #: The loops of the whole machine and the faults each can have (the simulator's
 #: ``monitor.sim.whole.faults.LOOP_FAULTS``; the swing's spool faults are left out of the
@@ -56,22 +56,8 @@ class MachinePlan:
     alarm: AlarmConfig = field(default_factory=AlarmConfig)
 
     def __post_init__(self) -> None:
-        if not self.severities or any(not 0.0 < s <= 1.0 for s in self.severities):
-            raise ConfigError("severities must be in (0, 1]")
-        if not 1 <= self.runs <= MAX_RUNS:
-            raise ConfigError(f"runs must be within 1..{MAX_RUNS}, got {self.runs}")
-        if not self.normal_hours >= 0:
-            raise ConfigError(f"normal hours must be >= 0, got {self.normal_hours}")
-        if self.onset_s < 45.0:
-            # The section models' window is 30 s (N = 3000): J needs it filled first.
-            raise ConfigError(f"onset must be at least 45 s, got {self.onset_s:g}")
-        if not self.duration_s >= self.onset_s + 60.0:
-            raise ConfigError("duration must leave at least 60 s after the onset")
-        if not self.ramp_s > 0:
-            raise ConfigError(f"ramp must be positive, got {self.ramp_s:g}")
-        bad = [o for o in self.onsets if o not in ONSETS]
-        if bad or not self.onsets:
-            raise ConfigError(f"onset kinds must be among {', '.join(ONSETS)}")
+        # The section models' window is 30 s (N = 3000): J needs it filled first.
+        check_sizes(self, min_onset_s=45.0, min_after_s=60.0)
         bad = [f for f in self.faults if f not in KNOWN_MACHINE_FAULTS]
         if bad or not self.faults:
             raise ConfigError(

@@ -203,4 +203,4 @@ def machine_markdown(result: dict[str, Any]) -> str:
             f"{_pct(c['detection_rate'])} | {_sec(c['median_delay_s'])} | {_named(c)} | "
             f"{first} | {_neighbours(c)} |"
         )
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines)

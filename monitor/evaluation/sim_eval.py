@@ -84,22 +84,8 @@ class EvalConfig:
     twin_residuals: bool = False
 
     def __post_init__(self) -> None:
-        if not self.severities or any(not 0.0 < s <= 1.0 for s in self.severities):
-            raise ConfigError("severities must be in (0, 1]")
-        if not 1 <= self.runs <= MAX_RUNS:
-            raise ConfigError(f"runs must be within 1..{MAX_RUNS}, got {self.runs}")
-        if not self.normal_hours >= 0:
-            raise ConfigError(f"normal hours must be >= 0, got {self.normal_hours}")
-        if self.onset_s < 15.0:
-            # J needs its window (10 s by default) filled before an alarm can be judged.
-            raise ConfigError(f"onset must be at least 15 s, got {self.onset_s:g}")
-        if not self.duration_s >= self.onset_s + 30.0:
-            raise ConfigError("duration must leave at least 30 s after the onset")
-        if not self.ramp_s > 0:
-            raise ConfigError(f"ramp must be positive, got {self.ramp_s:g}")
-        bad = [o for o in self.onsets if o not in ONSETS]
-        if bad or not self.onsets:
-            raise ConfigError(f"onset kinds must be among {', '.join(ONSETS)}")
+        # J needs its window (10 s by default) filled before an alarm can be judged.
+        check_sizes(self, min_onset_s=15.0, min_after_s=30.0)
         bad = [f for f in self.faults if f not in FAULT_NAMES]
         if bad or not self.faults:
             raise ConfigError(f"faults must be among {', '.join(FAULT_NAMES)}")
@@ -112,6 +98,26 @@ class EvalConfig:
         d = asdict(self)
         d["severities"] = list(self.severities)
         return d
+
+
+def check_sizes(plan: Any, min_onset_s: float, min_after_s: float) -> None:
+    """An evaluation plan's severities, runs, normal hours, onset, duration, ramp and onset
+    kinds (``EvalConfig``, ``machine_plan.MachinePlan``); a bad one is a ``ConfigError``."""
+    if not plan.severities or any(not 0.0 < s <= 1.0 for s in plan.severities):
+        raise ConfigError("severities must be in (0, 1]")
+    if not 1 <= plan.runs <= MAX_RUNS:
+        raise ConfigError(f"runs must be within 1..{MAX_RUNS}, got {plan.runs}")
+    if not plan.normal_hours >= 0:
+        raise ConfigError(f"normal hours must be >= 0, got {plan.normal_hours}")
+    if plan.onset_s < min_onset_s:
+        raise ConfigError(f"onset must be at least {min_onset_s:g} s, got {plan.onset_s:g}")
+    if not plan.duration_s >= plan.onset_s + min_after_s:
+        raise ConfigError(f"duration must leave at least {min_after_s:g} s after the onset")
+    if not plan.ramp_s > 0:
+        raise ConfigError(f"ramp must be positive, got {plan.ramp_s:g}")
+    bad = [o for o in plan.onsets if o not in ONSETS]
+    if bad or not plan.onsets:
+        raise ConfigError(f"onset kinds must be among {', '.join(ONSETS)}")
 
 
 @dataclass(frozen=True)
