@@ -91,8 +91,6 @@ class EvalConfig:
             raise ConfigError(f"faults must be among {', '.join(FAULT_NAMES)}")
         if self.twin_residuals and not self.twins:
             raise ConfigError("the twins' residuals need the twins (drop --no-twins)")
-        if not 0 <= self.seed_set <= MAX_SEED_SET:
-            raise ConfigError(f"seed set must be within 0..{MAX_SEED_SET}, got {self.seed_set}")
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -101,8 +99,9 @@ class EvalConfig:
 
 
 def check_sizes(plan: Any, min_onset_s: float, min_after_s: float) -> None:
-    """An evaluation plan's severities, runs, normal hours, onset, duration, ramp and onset
-    kinds (``EvalConfig``, ``machine_plan.MachinePlan``); a bad one is a ``ConfigError``."""
+    """An evaluation plan's severities, runs, normal hours, onset, duration, ramp, onset
+    kinds and seed set (``EvalConfig``, ``machine_plan.MachinePlan``); a bad one is a
+    ``ConfigError``."""
     if not plan.severities or any(not 0.0 < s <= 1.0 for s in plan.severities):
         raise ConfigError("severities must be in (0, 1]")
     if not 1 <= plan.runs <= MAX_RUNS:
@@ -118,6 +117,8 @@ def check_sizes(plan: Any, min_onset_s: float, min_after_s: float) -> None:
     bad = [o for o in plan.onsets if o not in ONSETS]
     if bad or not plan.onsets:
         raise ConfigError(f"onset kinds must be among {', '.join(ONSETS)}")
+    if not 0 <= plan.seed_set <= MAX_SEED_SET:
+        raise ConfigError(f"seed set must be within 0..{MAX_SEED_SET}, got {plan.seed_set}")
 
 
 @dataclass(frozen=True)
