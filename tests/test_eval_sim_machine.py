@@ -214,6 +214,7 @@ def test_short_run_rows_match_an_independent_count(tmp_path: Path) -> None:
         ["--twin-residuals"],
         ["--faults", "stick.sand_in_oil"],
         ["--onset", "10"],
+        ["--config", str(resource_path("config", "monitor.yaml"))],  # one loop, the boom
     ],
 )
 def test_machine_bad_arguments_exit_2(tmp_path: Path, argv: list[str]) -> None:

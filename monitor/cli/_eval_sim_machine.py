@@ -122,6 +122,13 @@ def run_machine(args: argparse.Namespace, say: Callable[[str], None]) -> int:
     if len(conf.monitored_loops) < 2:
         raise ConfigError(f"{config_path}: --machine needs a config with the machine's loops")
     plan = machine_plan(args, conf.alarm)
+    loops = [lc.name for lc in conf.monitored_loops]
+    missing = sorted({f.partition(".")[0] for f in plan.faults} - {*loops, "pump"})
+    if missing:
+        raise ConfigError(
+            f"{config_path}: no loop {', '.join(missing)} to judge its faults; loops: "
+            f"{', '.join(loops)}"
+        )
     for path in (args.json, args.markdown):
         if path is not None and not path.parent.is_dir():
             raise ConfigError(f"{path}: folder {path.parent} does not exist")
