@@ -127,6 +127,14 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "data has none (--lend)",
     )
     p.add_argument(
+        "--stops-in-j",
+        choices=("leave-out", "judge"),
+        default="leave-out",
+        help="leave-out: J does not judge the samples settling on an end stop (from a stall, "
+        "lever out and QP below 1 L/min for 0.2 s, until the lever moves the rod again; the "
+        "summary's on_stop_not_judged_s); judge: every sample, as before (default %(default)s)",
+    )
+    p.add_argument(
         "--support-check",
         choices=("on", "off"),
         default="on",
@@ -329,6 +337,7 @@ def _config(args: argparse.Namespace, preset: str, neighbours: tuple[str, ...]) 
             bias=None if args.bias is None else args.bias == "on",
             hold=args.hold == "on",
             support_check=args.support_check == "on",
+            j_leaves_out_stops=args.stops_in_j == "leave-out",
         ),
         isolation=IsolationSettings(
             method=args.isolation or ("none" if neighbours else "sim"), runs=args.isolation_runs

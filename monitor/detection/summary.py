@@ -18,6 +18,7 @@ from monitor.detection.verdict import verdict
 from monitor.io.recording import Recording
 from monitor.model.machinecard import COMMISSION
 from monitor.model.modelfile import MonitorModel
+from monitor.model.residual import J, on_stops
 from monitor.model.statistic import statistic_keys, statistics_entries
 
 
@@ -73,10 +74,22 @@ def detection_summary(
         period,
         describe(summary["out_of_range_values"]),
     )
+    summary["on_stop_not_judged_s"] = on_stop_seconds(model, rec, states, period)
     summary["rejected"] = rejected_counts(rec)
     summary["statistics"] = statistics_entries(model)
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, model.spec.variables)
     return summary
+
+
+def on_stop_seconds(
+    model: MonitorModel, rec: Recording, states: np.ndarray, period_s: float
+) -> float | None:
+    """Seconds the monitor ran while the rod settled on an end stop, which J left out (not
+    judged, never healthy); None when the model's J judges every sample."""
+    if not J.get(model).stops:
+        return None
+    running = (states == State.NORMAL) | (states == State.FAULT)
+    return round(float(np.sum(running & on_stops(rec))) * period_s, 3)
 
 
 def _withheld(reference: str | None, alarms: Alarms, level: np.ndarray) -> dict[str, Any] | None:

@@ -263,3 +263,48 @@ def check_stroke_section(stroke: Any, where: str) -> None:
     v = stroke.get("n_stall")
     if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WINDOW_N:
         raise ValueError(f"header {where}.n_stall must be a whole number 1..{MAX_WINDOW_N}")
+
+
+def settling_on_stop(spool_pct: np.ndarray, qp_lpm: np.ndarray) -> np.ndarray:
+    """Per sample: True from a stall (the rod on an end stop, see the module docstring) until
+    the lever next moves the rod (out beyond ``HOLD_PCT`` with QP at or above
+    ``Q_STALL_LPM``): the stop carries the load and the chamber pressures settle across the
+    lands from where the stall left them, by a path that depends on the payload and the pose,
+    which one session of commissioning cannot show.  No stroke volumes needed.  The same rule
+    as :class:`SettleTracker`, over a whole series at once."""
+    s = np.asarray(spool_pct, dtype=np.float64)
+    q = np.asarray(qp_lpm, dtype=np.float64)
+    if s.shape != q.shape or s.ndim != 1:
+        raise InputFileError(f"SpoolCmd {s.shape} and QP {q.shape} must be one series each")
+    idx = np.arange(s.size)
+    with np.errstate(invalid="ignore"):
+        out = np.isfinite(s) & np.isfinite(q) & (np.abs(s) > HOLD_PCT)
+        stalled = out & (q < Q_STALL_LPM)
+        moving = out & (q >= Q_STALL_LPM)
+    # Length of the run of stalled samples ending at each sample (a NaN or a hold breaks it).
+    since = idx - np.maximum.accumulate(np.where(stalled, -1, idx))
+    event = np.where(stalled & (since >= N_STALL), 1, np.where(moving, -1, 0))
+    last = np.maximum.accumulate(np.where(event != 0, idx, -1))
+    return (last >= 0) & (event[np.maximum(last, 0)] == 1)
+
+
+class SettleTracker:
+    """:func:`settling_on_stop` one sample at a time (the live ticker's), in plain Python:
+    a few comparisons per tick, no kernel to compile."""
+
+    def __init__(self) -> None:
+        self._run = 0
+        self.on = False
+
+    def push(self, spool_pct: float, qp_lpm: float) -> bool:
+        """One sample; True while the rod settles on an end stop."""
+        if abs(spool_pct) > HOLD_PCT and qp_lpm == qp_lpm:  # NaN compares False
+            if qp_lpm < Q_STALL_LPM:
+                self._run += 1
+                self.on = self.on or self._run >= N_STALL
+            else:
+                self._run = 0
+                self.on = False
+        else:
+            self._run = 0
+        return self.on

@@ -32,8 +32,9 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.jit import jit
+from monitor.model.endstop import SettleTracker, settling_on_stop
 from monitor.model.filecheck import MAX_WINDOW_N, check_number
-from monitor.model.statistic import HeldOut, Statistic, register
+from monitor.model.statistic import HeldOut, Statistic, column, register, signal
 
 
 def residuals(y_hat: Any, y: Any) -> np.ndarray:
@@ -189,26 +190,55 @@ class WindowJ:
 
 @dataclass(frozen=True)
 class JModel:
-    """What J keeps in the model file: its window N, J0 and the threshold eps0 (eq. 10)."""
+    """What J keeps in the model file: its window N, J0 and the threshold eps0 (eq. 10), and
+    whether J leaves out the samples settling on an end stop (``stops``; a file from before
+    it has none: False, J over every sample as before)."""
 
     window_n: int
     j0: float
     eps0: float
+    stops: bool = False
+
+
+def on_stops(rec: Recording) -> np.ndarray:
+    """The samples of ``rec`` settling on an end stop (``endstop.settling_on_stop``); none
+    for a recording without SpoolCmd or QP."""
+    return settling_on_stop(signal(rec, "SpoolCmd", 0.0), signal(rec, "QP", math.nan))
+
+
+def leave_out_stops(e: np.ndarray, rec: Recording) -> np.ndarray:
+    """``e`` with the rows settling on an end stop set to NaN: J's window pauses there and
+    those samples are not judged (never healthy)."""
+    out = np.array(e, dtype=np.float64, copy=True)
+    out[on_stops(rec)] = np.nan
+    return out
 
 
 class _JWindow:
     """J over sampler rows: e^2 averaged over outputs as ``squared_residual`` does (one row
-    reduced by numpy, so live and batch round alike), then eq. 9's running window."""
+    reduced by numpy, so live and batch round alike), then eq. 9's running window; with
+    ``stops`` (the rows' SpoolCmd and QP columns), a row settling on an end stop pauses it."""
 
-    def __init__(self, window_n: int, n_out: int) -> None:
+    def __init__(self, window_n: int, n_out: int, stops: tuple[int, int] | None = None) -> None:
         self._sq = np.empty((1, n_out))
         self._v = np.empty(1)
         self._window = WindowJ(window_n)
+        self._stops = stops
+        self._settle = SettleTracker()
 
     def step(self, e: np.ndarray, row: np.ndarray) -> float:
+        if self._stops is not None:
+            spool, qp = self._stops
+            if self._settle.push(float(row[spool]), float(row[qp])):
+                return math.nan
         np.multiply(e, e, out=self._sq[0])
         np.mean(self._sq, axis=1, out=self._v)
         return self._window.push_squared(float(self._v[0]))
+
+
+#: The model file's header key (and ``MonitorModel.statistics`` key) saying that J leaves out
+#: the samples settling on an end stop.
+STOPS_KEY = "j_leaves_out_stops"
 
 
 @register
@@ -227,25 +257,29 @@ class J(Statistic):
     carries_over = True
     optional = False
 
-    def __init__(self, window_n: int = 3000) -> None:
+    def __init__(self, window_n: int = 3000, stops: bool = False) -> None:
         self.window_n_setting = window_n
+        self.stops_setting = stops
 
     @classmethod
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> J | str:
-        return cls(settings.statistics.window_n)
+        return cls(settings.statistics.window_n, settings.statistics.j_leaves_out_stops)
 
     def unscaled(self, held: HeldOut) -> JModel:
-        return JModel(_check_window(self.window_n_setting), math.nan, math.nan)
+        window = _check_window(self.window_n_setting)
+        return JModel(window, math.nan, math.nan, bool(self.stops_setting))
 
     def with_threshold(self, threshold: float, reference: float | None = None) -> JModel:
         j0 = self.params_.j0 if reference is None else reference  # J0 (eq. 10)
-        return JModel(self.params_.window_n, j0, threshold)
+        return JModel(self.params_.window_n, j0, threshold, self.params_.stops)
 
     def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
-        return window_j(e, self.window_n)
+        return window_j(leave_out_stops(e, rec) if self.params_.stops else e, self.window_n)
 
     def window(self, columns: Sequence[str], n_out: int) -> _JWindow:
-        return _JWindow(self.window_n, n_out)
+        spool, qp = column(columns, "SpoolCmd"), column(columns, "QP")
+        use = self.params_.stops and spool >= 0 and qp >= 0
+        return _JWindow(self.window_n, n_out, (spool, qp) if use else None)
 
     @classmethod
     def summary_keys(cls) -> tuple[str, str]:
@@ -267,19 +301,27 @@ class J(Statistic):
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> JModel:
-        return JModel(int(d["window_n"]), float(d["j0"]), float(d["eps0"]))
+        stops = bool(d.get(STOPS_KEY, False))  # absent: a file from before, J over every sample
+        return JModel(int(d["window_n"]), float(d["j0"]), float(d["eps0"]), stops)
 
     @classmethod
     def get(cls, model: Any) -> JModel:
-        return JModel(int(model.window_n), float(model.j0), float(model.eps0))
+        stops = bool(model.statistics.get(STOPS_KEY, False))
+        return JModel(int(model.window_n), float(model.j0), float(model.eps0), stops)
 
     @classmethod
     def put(cls, model: Any, params: JModel) -> None:
         model.window_n, model.j0, model.eps0 = params.window_n, params.j0, params.eps0
+        if params.stops:
+            model.statistics[STOPS_KEY] = True
+        else:
+            model.statistics.pop(STOPS_KEY, None)
 
     @classmethod
     def write(cls, header: dict[str, Any], params: JModel) -> None:
         header.update(window_n=int(params.window_n), j0=float(params.j0), eps0=float(params.eps0))
+        if params.stops:  # written only when set: a file without it reads as before
+            header[STOPS_KEY] = True
 
     @classmethod
     def read(cls, header: dict[str, Any], n_out: int) -> JModel:
@@ -298,3 +340,5 @@ class J(Statistic):
             )
         check_number(header, "j0", 0.0, strict=False)
         check_number(header, "eps0", 0.0, strict=True)
+        if not isinstance(header.get(STOPS_KEY, False), bool):
+            raise ValueError(f"header {STOPS_KEY} must be true or false")
