@@ -32,7 +32,6 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.jit import jit
-from monitor.model.endstop import SettleTracker, settling_on_stop
 from monitor.model.filecheck import MAX_WINDOW_N, check_number
 from monitor.model.statistic import HeldOut, Statistic, column, register, signal
 
@@ -203,6 +202,8 @@ class JModel:
 def on_stops(rec: Recording) -> np.ndarray:
     """The samples of ``rec`` settling on an end stop (``endstop.settling_on_stop``); none
     for a recording without SpoolCmd or QP."""
+    from monitor.model.endstop import settling_on_stop  # endstop -> bias -> this module
+
     return settling_on_stop(signal(rec, "SpoolCmd", 0.0), signal(rec, "QP", math.nan))
 
 
@@ -223,6 +224,8 @@ class _JWindow:
         self._sq = np.empty((1, n_out))
         self._v = np.empty(1)
         self._window = WindowJ(window_n)
+        from monitor.model.endstop import SettleTracker  # endstop -> bias -> this module
+
         self._stops = stops
         self._settle = SettleTracker()
 
