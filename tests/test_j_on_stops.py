@@ -170,3 +170,23 @@ def test_train_leaves_stops_out_by_default(tmp_path) -> None:
     assert StatisticSettings().j_leaves_out_stops is True
     assert stat().stops_setting is True
     assert stat("--stops-in-j", "judge").stops_setting is False
+
+
+def test_threshold_not_set_by_a_stop() -> None:
+    """Trained on held-out data whose only large residuals settle on a stop, J0 is the
+    largest J off it (0.1^2), eps0 twice that (the max rule), and `monitor train` says how
+    much it left out (41 samples, 0.41 s); judging every sample, the stop sets J0 = 3^2."""
+    from monitor.model.statistic import HeldOut
+    from monitor.model.threshold import ThresholdRule
+    from monitor.training.statistics import said
+
+    rec = _recording()
+    e = np.where(np.array(SETTLING), 3.0, 0.1)[:, None] * np.ones((1, 4))
+    held = HeldOut([e], [rec], ("PP", "PA", "PB", "QP"))
+    stat = J(4, stops=True).fit(held, ThresholdRule())
+    assert stat.params_.j0 == pytest.approx(0.01, rel=1e-12)
+    assert stat.threshold_ == pytest.approx(0.02, rel=1e-12)
+    assert "0.4 s settling on an end stop left out" in said(stat, held, ThresholdRule())
+    every = J(4).fit(held, ThresholdRule())
+    assert every.params_.j0 == pytest.approx(9.0, rel=1e-12)
+    assert "settling" not in said(every, held, ThresholdRule())

@@ -14,6 +14,7 @@ from typing import Any
 
 from monitor.errors import ConfigError, InputFileError
 from monitor.model.modelfile import MonitorModel
+from monitor.model.residual import on_stops
 from monitor.model.spec import DGRNNSpec
 from monitor.model.statistic import HeldOut, Statistic, registry
 from monitor.model.threshold import ThresholdRule
@@ -75,12 +76,20 @@ def said(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str:
         kind = "cross-fitted" if held.validation.startswith("cross") else "held-out"
         return (
             f"  J0 {stat.params_.j0:.4g} ({rule.rule} of J on {len(held.recordings)} "
-            f"{kind} part(s)), eps0 {stat.threshold_:.4g}: {rule.describe()}"
+            f"{kind} part(s)), eps0 {stat.threshold_:.4g}: {rule.describe()}{_stops(stat, held)}"
         )
     return (
         f"  {stat.title} over {stat.window_n / 100:g} s, {stat.threshold_key} "
         f"{stat.threshold_:.4g}: {rule.describe()}"
     )
+
+
+def _stops(stat: Statistic, held: HeldOut) -> str:
+    """What J left out of its held-out data: the samples settling on an end stop."""
+    if not getattr(stat.params_, "stops", False):
+        return ""
+    left = sum(int(on_stops(r).sum()) for r in held.recordings) * 0.01
+    return f"; {left:.1f} s settling on an end stop left out (not judged; --stops-in-j judge)"
 
 
 def check_reference(reference: MonitorModel, spec: DGRNNSpec, window_n: int) -> None:
