@@ -25,7 +25,7 @@ from monitor.model.dgrnn import DGRNN
 from monitor.model.envelope import envelope_from_recordings
 from monitor.model.grnn import GRNN
 from monitor.model.modelfile import Isolation, MonitorModel
-from monitor.model.residual import window_j
+from monitor.model.residual import J
 from monitor.model.spec import DGRNNSpec, Normalizer, table
 from monitor.model.statistic import HeldOut
 from monitor.model.threshold import one_event
@@ -106,7 +106,8 @@ def train(
         floor_note = floor_thresholds(model, reference)
         say(f"  thresholds floored by the reference model: {floor_note}")
     window_n = cfg.statistics.window_n
-    j_parts = [window_j(e, window_n) for e in e_val]
+    judge = J().use(J.get(model))  # J as the model judges (samples on a stop left out)
+    j_parts = [judge.series(e, r) for e, r in zip(e_val, parts.val, strict=True)]
     # Said only when the event sets the threshold (not when the reference's floor does).
     own = model.eps0 == own_eps0
     event = one_event_note(j_parts, parts.val, window_n, say) if own else None
