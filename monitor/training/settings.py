@@ -78,9 +78,9 @@ class StatisticSettings:
     window_n: int = 3000  # J window N (samples): 30 s spans several raise/hold/lower phases
     #: J leaves out the samples settling on an end stop (``--stops-in-j leave-out``): the
     #: stop carries the load and the chamber pressures settle by a path that depends on the
-    #: payload and the pose; a model commissioned at one payload predicted it so badly that
-    #: every false alarm on the outsider's plant but the ±15 % machines' (PP while raising)
-    #: came from it (docs/benchmarks.md, 2026-11-28, "J on end stops").
+    #: payload and the pose; a model commissioned at one payload predicted it badly enough
+    #: for 7 of 17 false alarms on the outsider's plant (docs/benchmarks.md, 2026-11-28,
+    #: "J leaves out the rod settling on an end stop").
     j_leaves_out_stops: bool = True
     #: The bias statistic beside J (``monitor.model.bias``); None: on for every preset but
     #: ``paper``, which stays the paper's method (:attr:`TrainConfig.with_bias`).
