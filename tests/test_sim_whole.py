@@ -46,21 +46,23 @@ def _commands(duration_s: float, dt: float = 0.01, payload: float = 0.0, **spool
 
 def test_flow_sharing_under_saturation_scales_every_section_alike(machine):
     # Boom 100 %, stick 80 %, bucket 60 % extend: demand 24 + 17.6 + 10.8 = 52.4 L/min, above
-    # the pump's 39.6 L/min.  Post-compensated (flow sharing): every section gets its demand
-    # x 39.6 / 52.4 = 0.7557 of it: boom 18.14, stick 13.30, bucket 8.16 L/min; the pump at
-    # full displacement.  At every instant the split is exact (one drop PP - PLS across every
-    # spool: shares 24/52.4 = 0.4580, 0.3359, 0.2061), while the total rings about the
-    # pump's flow with the boom's oscillation (the line's compliance), so over 0.4-1.0 s.
+    # the pump's 39.6 L/min less its healthy leakage (10 cc/min/bar x PP).  Post-compensated
+    # (flow sharing): every section gets its demand x pump flow / 52.4 of it (about 0.746:
+    # boom 17.9, stick 13.1, bucket 8.1 L/min); the pump at full displacement.  At every
+    # instant the split is exact (one drop PP - PLS across every spool: shares 24/52.4 =
+    # 0.4580, 0.3359, 0.2061), while the total rings about the pump's flow with the boom's
+    # oscillation (the line's compliance), so over 0.4-1.0 s.
     trace = run_whole(_commands(1.0, boom=100, stick=80, bucket=60), machine)
     rows = slice(40, 101)  # 0.4-1.0 s: past the start's transient, before any end stop
     demand = {"boom": 24.0, "stick": 0.8 * 22.0, "bucket": 0.6 * 18.0}
     total = sum(trace.loop(loop, 2)[rows] for loop in demand)
-    factor = 39.6 / sum(demand.values())
+    pump_lpm = 39.6 - 0.010 * trace.rec[rows, K.R_PP] / BAR
+    factor = pump_lpm.mean() / sum(demand.values())
     for loop, want in demand.items():
         got = trace.loop(loop, 2)[rows]
         assert np.allclose(got / total, want / sum(demand.values()), rtol=1e-3), loop
         assert got.mean() / LPM == pytest.approx(want * factor, rel=0.015), loop
-    assert np.allclose(trace.rec[rows, K.R_QP] / LPM, 39.6, rtol=1e-3)
+    assert np.allclose(trace.rec[rows, K.R_QP] / LPM, pump_lpm, rtol=1e-3)
     assert trace.loop("swing", 2)[rows].max() == 0.0
 
 
@@ -73,6 +75,45 @@ def test_a_held_load_stays(machine):
         x = trace.loop(loop, 3)
         assert np.ptp(x) < 1e-6, (loop, np.ptp(x))  # less than a micrometre (a microradian)
     assert np.allclose(trace.rec[:, K.R_PP] / BAR, 20.0, atol=0.1)  # standby
+
+
+def test_closed_spools_drain_the_ls_line_and_the_pump_falls_to_standby(machine):
+    # Every spool closed with the LS line at 118 bar and PP at 138 bar (a lift just ended).
+    # By hand (config/excavator4_sim.yaml): the LS line drains through its bleed, laminar
+    # 5 cc/min/bar = 8.333e-13 m^3/s/Pa, into 0.1 L of oil at 1.5 GPa: tau = 1e-4 / (1.5e9 x
+    # 8.333e-13) = 0.080 s, PLS = 118 exp(-t / 0.08) bar.  The pump is destroked while PP >
+    # PLS + 20 bar and leaks 10 cc/min/bar = 1.667e-12 m^3/s/Pa from its 1 L line: tau = 1e-3
+    # / (1.5e9 x 1.667e-12) = 0.400 s, PP = 138 exp(-t / 0.4) bar (83.70 at 0.2 s, 50.77 at
+    # 0.4 s, both above PLS + 20).  Then the regulator holds PP at standby: displacement
+    # (20 bar - PP) / 5 bar x 6.6e-4 m^3/s = 1.667e-12 x PP, PP = 20 / (1 + 1.667e-12 x 5e5
+    # / 6.6e-4) = 19.975 bar.
+    prm = pack_params(machine)
+    cmd = _commands(3.0)
+    u = pack_inputs(cmd)
+    y0 = rest_state(machine, prm, u[0])
+    y0[K.S_PP] = 138 * BAR
+    y0[K.S_LS] = 118 * BAR
+    rec = K.integrate(y0, u, 50, 0.01, prm, 50)
+    pls, pp = rec[:, K.R_LS] / BAR, rec[:, K.R_PP] / BAR
+    for i in (4, 8, 16):
+        assert pls[i] == pytest.approx(118 * math.exp(-i * 0.01 / 0.08), rel=1e-3), i
+    for i in (20, 40):
+        assert pp[i] == pytest.approx(138 * math.exp(-i * 0.01 / 0.4), rel=1e-3), i
+    assert pp[-1] == pytest.approx(19.975, abs=0.002)
+
+
+def test_a_lift_ended_leaves_the_pump_at_standby_not_at_the_load_pressure(machine):
+    # The boom lifts 150 kg for 1 s, then every spool is closed: 1.5 s later PP is back at
+    # standby (19.975 bar, as above; before the bleed it stayed at the lift's load pressure
+    # plus the margin), while the boom holds its load (PA stays far above PP).
+    cmd = _commands(2.5, payload=150.0, boom=100)
+    cmd[SPOOL_SIGNALS["boom"]][cmd.t > 1.0] = 0.0
+    trace = run_whole(cmd, machine)
+    pp = trace.rec[:, K.R_PP] / BAR
+    pa = trace.loop("boom", 0) / BAR
+    assert pp[100] > 60.0  # lifting: the load pressure plus 20 bar
+    assert pp[-1] == pytest.approx(19.975, abs=0.01)
+    assert pa[-1] > 40.0
 
 
 def test_swing_acceleration_is_torque_over_inertia(machine):
@@ -120,19 +161,26 @@ def test_faults_name_their_loop_and_pump_wear_slows_a_saturated_machine(machine)
     ):
         with pytest.raises(Exception, match=fragment):
             parse_machine_fault(text)
-    # Pump wear at 1 leaks 8.3e-12 m^3/(s Pa) x PP.  Saturated (three levers full: 64 L/min
-    # asked of 39.6) the regulator has no displacement left to make up for it: the pump
-    # delivers 39.6 L/min less the leak (about 2 L/min at 40 bar), and the sections share less.
+    # Pump wear at 1 leaks 8.3e-12 m^3/(s Pa) x PP on top of the healthy 10 cc/min/bar
+    # (1.667e-12).  Saturated (three levers full: 64 L/min asked of 39.6) the regulator has
+    # no displacement left to make up for it: the pump delivers 39.6 L/min less the leaks
+    # (the wear's about 2 L/min at 40 bar), and the sections share less.
+    healthy_leak = 10e-6 / 60 / BAR
     cmd = _commands(1.0, boom=100, stick=100, bucket=100)
     healthy = run_whole(cmd, machine)
     worn = run_whole(cmd, machine, [parse_machine_fault("pump.pump_wear:1")])
     rows = slice(20, None)
     pp = worn.rec[rows, K.R_PP]
-    assert np.allclose(healthy.rec[rows, K.R_QP] / LPM, 39.6, rtol=1e-6)
-    assert np.allclose(worn.rec[rows, K.R_QP], 39.6 * LPM - 8.3e-12 * pp, rtol=1e-6)
+    pp_h = healthy.rec[rows, K.R_PP]
+    assert np.allclose(healthy.rec[rows, K.R_QP], 39.6 * LPM - healthy_leak * pp_h, rtol=1e-6)
+    assert np.allclose(
+        worn.rec[rows, K.R_QP], 39.6 * LPM - (healthy_leak + 8.3e-12) * pp, rtol=1e-6
+    )
     q_h = sum(healthy.loop(loop, 2) for loop in ("boom", "stick", "bucket"))[rows].mean()
     q_w = sum(worn.loop(loop, 2) for loop in ("boom", "stick", "bucket"))[rows].mean()
-    assert q_w == pytest.approx(q_h - 8.3e-12 * pp.mean(), rel=0.01)
+    assert q_w == pytest.approx(
+        q_h - 8.3e-12 * pp.mean() - healthy_leak * (pp - pp_h).mean(), rel=0.01
+    )
 
 
 @pytest.mark.parametrize(

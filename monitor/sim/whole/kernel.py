@@ -19,8 +19,18 @@ load-sensing mini excavators (and this simulator) use post-compensation ("flow s
 LUDV).  A pre-compensated valve would starve the highest load under saturation; negative
 flow control on an open-centre valve (``NEGATIVE_FLOW_CONTROL``) is named for later.
 
+The LS line: while a spool is open the shuttle chain holds it at the highest open section's
+feeding port (the passage is far larger than the bleed, taken as ideal); the line's state
+follows that port with the passage's time constant ``LS_TRACK_S``.  With every spool closed
+the spools cut it from the ports and it drains to tank through the bleed orifice (laminar):
+dPLS/dt = -(beta / V_ls) G_bleed (PLS - p_tank), a time constant V_ls / (beta G_bleed).
+
 The pump is a proportional LS regulator: displacement = (PLS + margin - PP) / band, limited
-to 0..1 and cut off between cutoff_start and cutoff_full, less a leakage (``pump_wear``).
+to 0..1 and cut off between cutoff_start and cutoff_full, less its internal leakage to the
+case (healthy, and more of it when worn: ``pump_wear``).  That leakage is what brings PP
+down once the LS signal has drained and the pump has destroked: PP falls with the time
+constant V_line / (beta G_pump) until the regulator holds it at the standby pressure
+(the margin above the drained LS line, less the leakage's share of the band).
 Anti-cavitation: ideal make-up checks from tank (no port falls below tank pressure; the
 projection after each step is that check).  Main relief on the pump line, crossover reliefs
 A<->B on the swing motor.
@@ -48,7 +58,9 @@ RELIEF_CRACK, RELIEF_GAIN, DP_LAM, PTANK, GRAV = 7, 8, 9, 10, 11
 XR_CRACK, XR_GAIN, MOTOR_LEAK, V_EPS_DIG = 12, 13, 14, 15
 # the chain: link lengths, masses, moment arms, angle offsets (boom absolute, others relative)
 L1, L2, L3, M1, M2, M3, R1, R2, R3, A1, A2, A3 = range(16, 28)
-LOOP0, NL = 28, 8  # per loop block: LOOP0 + NL * loop + one of:
+# the LS line: volume, bleed conductance (m^3/s/Pa); the pump's healthy leakage (m^3/s/Pa)
+V_LS, LS_BLEED, PUMP_LEAK = 28, 29, 30
+LOOP0, NL = 31, 8  # per loop block: LOOP0 + NL * loop + one of:
 P_KV, P_AA, P_AB, P_STROKE, P_V0A, P_V0B, P_MASS, P_CVISC = range(8)
 N_PARAMS = LOOP0 + NL * N_LOOPS
 
@@ -58,16 +70,21 @@ IN0, NI = 4, 4  # per loop block: IN0 + NI * loop + one of:
 I_SPOOL, I_STROKE_LIM, I_UNDERLAP, I_LEAK = range(4)
 N_INPUTS = IN0 + NI * N_LOOPS
 
-# --- states: PP, then per loop PA, PB, X (rod m / house rad), V (m/s / rad/s) ---------------
+# --- states: PP, then per loop PA, PB, X (rod m / house rad), V (m/s / rad/s), then PLS ----
 S_PP = 0
 S0, NS = 1, 4
 X_PA, X_PB, X_X, X_V = range(4)
-N_STATES = S0 + NS * N_LOOPS
+S_LS = S0 + NS * N_LOOPS
+N_STATES = S_LS + 1
+#: Time constant (s) of the LS line following the highest open port through the shuttles:
+#: short against the 10 ms samples, long against the 200 us RK4 step (stable).
+LS_TRACK_S = 0.002
 
-# --- recorded (100 Hz): PP, pump flow, per loop PA, PB, section flow, X, V -----------------
+# --- recorded (100 Hz): PP, pump flow, per loop PA, PB, section flow, X, V; PLS ------------
 R_PP, R_QP = 0, 1
 R0, NR = 2, 5
-N_RECORD = R0 + NR * N_LOOPS
+R_LS = R0 + NR * N_LOOPS  # and the LS line's pressure last
+N_RECORD = R_LS + 1
 
 # --- auxiliary outputs of the right-hand side ---------------------------------------------
 AUX_QP, AUX_PLS = 0, 1
@@ -128,14 +145,23 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
     pp = max(y[S_PP], 0.0)
     ptank = prm[PTANK]
     dpl = prm[DP_LAM]
-    # Load-sense pressure: the feeding port of every spool that is commanded open.
+    # Load-sense pressure: the feeding port of every spool that is commanded open; with
+    # every spool closed, the LS line's own pressure, draining through the bleed.
     pls = 0.0
+    opened = False
     for j in range(N_LOOPS):
         s = _clip(u[IN0 + NI * j + I_SPOOL], -1.0, 1.0)
         if s > 0.0:
             pls = max(pls, y[S0 + NS * j + X_PA])
+            opened = True
         elif s < 0.0:
             pls = max(pls, y[S0 + NS * j + X_PB])
+            opened = True
+    if opened:
+        dy[S_LS] = (pls - y[S_LS]) / LS_TRACK_S
+    else:
+        pls = max(y[S_LS], ptank)
+        dy[S_LS] = -prm[LS_BLEED] * (pls - ptank) * prm[BETA] / prm[V_LS]
     fg = chain_forces(y, u, prm)
     q_supply = 0.0
     for j in range(N_LOOPS):
@@ -188,7 +214,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
     # The LS pump: proportional regulator, pressure cut-off, leakage of a worn pump.
     disp = _clip((pls + prm[LS_MARGIN] - pp) / prm[LS_BAND], 0.0, 1.0)
     disp *= _clip((prm[CUT_FULL] - pp) / (prm[CUT_FULL] - prm[CUT_START]), 0.0, 1.0)
-    qp = disp * prm[DISP_MAX] * u[IN_SPEED_RPS] - u[IN_PUMP_LEAK] * pp
+    qp = disp * prm[DISP_MAX] * u[IN_SPEED_RPS] - (prm[PUMP_LEAK] + u[IN_PUMP_LEAK]) * pp
     q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
     dy[S_PP] = (qp - q_relief - q_supply) * prm[BETA] / prm[V_LINE]
     aux[AUX_QP] = qp
@@ -230,6 +256,7 @@ def _record(
     rhs(y, u, prm, dy, aux)
     rec[r, R_PP] = y[S_PP]
     rec[r, R_QP] = aux[AUX_QP]
+    rec[r, R_LS] = aux[AUX_PLS]
     for j in range(N_LOOPS):
         b = S0 + NS * j
         c = R0 + NR * j

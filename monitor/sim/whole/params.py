@@ -40,12 +40,15 @@ _KEYS: dict[str, dict[str, tuple[float, float]]] = {
         "cutoff_start_bar": (10, 500),
         "cutoff_full_bar": (10, 500),
         "line_volume_l": (0.01, 50),
+        "leakage_cc_min_per_bar": (0.01, 1000),
         "relief_crack_bar": (10, 500),
         "relief_full_bar": (10, 600),
     },
     "valve": {
         "laminar_dp_bar": (0.01, 5),
         "tank_bar": (0, 20),
+        "ls_line_volume_l": (0.001, 5),
+        "ls_bleed_cc_min_per_bar": (0.01, 1000),
         **{f"{loop}_rated_flow_lpm": (0.1, 1000) for loop in K.LOOPS},
     },
     **{name: _CYL_KEYS for name in CYLINDERS},
@@ -64,6 +67,8 @@ _KEYS: dict[str, dict[str, tuple[float, float]]] = {
     "solver": {"step_us": (5, 1000)},
 }
 GRAVITY_M_S2 = 9.81
+#: A laminar conductance given in cc/min per bar, in m^3/s per Pa.
+CC_MIN_PER_BAR = 1e-6 / 60.0 / BAR
 #: Smoothing speed of the digging force's sign (m/s): slow enough for the RK4 step.
 DIG_SMOOTHING_M_S = 0.01
 
@@ -208,6 +213,9 @@ def pack_params(m: WholeMachine) -> np.ndarray:
     prm[K.DISP_MAX] = p["displacement_cc_rev"] * 1e-6
     prm[K.LS_MARGIN] = p["ls_margin_bar"] * BAR
     prm[K.LS_BAND] = p["ls_band_bar"] * BAR
+    prm[K.PUMP_LEAK] = p["leakage_cc_min_per_bar"] * CC_MIN_PER_BAR
+    prm[K.V_LS] = v["ls_line_volume_l"] * 1e-3
+    prm[K.LS_BLEED] = v["ls_bleed_cc_min_per_bar"] * CC_MIN_PER_BAR
     prm[K.CUT_START] = p["cutoff_start_bar"] * BAR
     prm[K.CUT_FULL] = p["cutoff_full_bar"] * BAR
     prm[K.RELIEF_CRACK] = p["relief_crack_bar"] * BAR
@@ -221,7 +229,7 @@ def pack_params(m: WholeMachine) -> np.ndarray:
     prm[K.XR_GAIN] = m.rated_flow_m3_s("swing") / (
         (s["crossover_relief_full_bar"] - s["crossover_relief_crack_bar"]) * BAR
     )
-    prm[K.MOTOR_LEAK] = s["motor_leakage_cc_min_per_bar"] * 1e-6 / 60.0 / BAR
+    prm[K.MOTOR_LEAK] = s["motor_leakage_cc_min_per_bar"] * CC_MIN_PER_BAR
     prm[K.V_EPS_DIG] = DIG_SMOOTHING_M_S
     for i, loop in enumerate(CYLINDERS):
         c = m[loop]
