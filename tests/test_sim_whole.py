@@ -116,6 +116,24 @@ def test_a_lift_ended_leaves_the_pump_at_standby_not_at_the_load_pressure(machin
     assert pa[-1] > 40.0
 
 
+def test_a_neighbours_leak_leaves_the_shared_pp_alone_once_the_spools_close(machine):
+    # Isolation at its source: the stick curls in for 1 s, then every spool closes.  With a
+    # worn stick piston (severity 1) the stick's held chambers equalise through the seal, so
+    # in the second after the stop its PA is far from the healthy run's (the healthy one
+    # rings); PP, the signal every section model reads, is the standby pressure in both
+    # (19.975 bar, as above), not the stick's last load pressure plus the margin, so the
+    # boom's model is not handed the stick's fault.
+    cmd = _commands(4.0, payload=150.0, stick=60)
+    cmd[SPOOL_SIGNALS["stick"]][cmd.t > 1.0] = 0.0
+    healthy = run_whole(cmd, machine)
+    worn = run_whole(cmd, machine, [parse_machine_fault("stick.piston_wear:1")])
+    gap = np.abs(worn.loop("stick", 0) - healthy.loop("stick", 0))[101:201] / BAR
+    assert gap.max() > 5.0  # the fault is in the stick's own ports
+    last = slice(-100, None)  # the last second
+    for trace in (healthy, worn):
+        assert np.allclose(trace.rec[last, K.R_PP] / BAR, 19.975, atol=0.01)
+
+
 def test_swing_acceleration_is_torque_over_inertia(machine):
     # 100 bar across the motor, spools closed, house at rest: torque = 1560e-6 m^3/rev x 1e7 Pa
     # / (2 pi) = 2482.8 N m; alpha = 2482.8 / 802.5 = 3.094 rad/s^2; after 1 ms omega =

@@ -60,8 +60,9 @@ def rest_state(
     u0: np.ndarray,
     fractions: dict[str, float] | None = None,
 ) -> np.ndarray:
-    """At rest: PP at standby (the LS margin), the LS line drained, every cylinder holding its gravity load at
-    ``fractions`` of its stroke with 2 bar on the side that does not hold it."""
+    """At rest: PP at standby (the LS margin), the LS line drained, every cylinder holding
+    its gravity load at ``fractions`` of its stroke with 2 bar on the side that does not
+    hold it."""
     y = np.zeros(K.N_STATES)
     y[K.S_PP] = prm[K.LS_MARGIN]
     y[K.S_LS] = prm[K.PTANK]
