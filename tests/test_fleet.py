@@ -264,8 +264,40 @@ def test_a_model_trained_with_other_settings_is_commissioned_again(run1, tmp_pat
     assert proc.returncode == 3, proc.stderr  # run1's failed logs are still there
     assert "reused" not in proc.stderr
     again = json.loads(meta_path.read_text())
-    assert again["train"] == {"folds": 4, "bias": False, "lend": True}
+    assert again["train"] == {"folds": 4, "lend": True, "support_check": True}
     assert again["commissioning"] == meta["commissioning"]
+
+
+def test_b_too_thin_in_commissioning_is_off_with_the_rules_reason_in_the_fleets_record(
+    run1, tmp_path
+):
+    # Each machine's commissioning run is 180 s: too short to cross-fit 4 folds of 60 s
+    # blocks (8 blocks, 8 min), so its last quarter, 45 s (0.75 min), is held out, and the
+    # bias statistic needs 8 windows of 60 s (8 min) of it: off, with those numbers.
+    _f, out, _err = run1
+    for mid in ("M01", "M02", "M03"):
+        stats = json.loads((out / "models" / f"{mid}.trained-from.json").read_text())[
+            "statistics"
+        ]
+        assert stats["J"] == "on"
+        b = stats["B"]
+        assert b.startswith("off: ") and "the bias statistic needs 8 min (8 windows)" in b, b
+        held_min = float(b.removeprefix("off: ").split(" min")[0])
+        assert 0.5 <= held_min <= 0.75, b  # at most the last quarter of 3 min
+        assert stats["L"].startswith("off"), stats  # L watches only with B
+        assert stats["H"].startswith("off"), stats  # not asked for, as monitor train
+        assert load_model(out / "models" / f"{mid}.model.npz").bias is None
+    # The table of the fleet page says it beside the machine's model, the web page on the
+    # machine's own page with the reason.
+    web = tmp_path / "web"
+    page = main(["fleet", "report", str(out), "--out", str(tmp_path / "page"), "--html", str(web)])
+    assert page == 0
+    table = (tmp_path / "page" / "fleet.md").read_text()
+    m01 = next(line for line in table.splitlines() if line.startswith("| M01 |"))
+    assert "statistics: J on; B off: " in m01 and "needs 8 min (8 windows)" in m01, m01
+    assert "statistics on: J; off: B, L, H" in (web / "index.html").read_text()
+    machine = (web / "machine-M01.html").read_text()
+    assert "<li><b>B</b> off: " in machine and "needs 8 min (8 windows)" in machine
 
 
 def _started_with_a_finished_log(fleet, tmp_path) -> tuple[Path, Path, subprocess.Popen]:

@@ -25,8 +25,10 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "run",
         help="train each machine's model, judge every new log, write Parquet results",
         description="Per machine, train its model from its commissioning data (as `monitor "
-        "train --folds 4 --bias off --reference DEFAULT`: J's threshold cross-fitted over "
-        "the whole run, never below the default model's; without "
+        "train --folds 4 --reference DEFAULT`: J's threshold cross-fitted over "
+        "the whole run, never below the default model's; the bias statistic on only where "
+        "its held-out data earns its threshold, as monitor train decides, the reason in "
+        "models/<machine>.trained-from.json; without "
         "commissioning data the default model, and it says so), then judge every log not yet "
         "in RESULTS (by SHA-256) as `monitor detect` does. Writes RESULTS/logs.parquet, "
         "events.parquet and models/<machine>.model.npz. Runs on a Dask LocalCluster of "

@@ -153,6 +153,8 @@ def _collect(
             )
             out[mid] = (default, f"default (commissioning failed: {exc})")
             continue
-        store.save_model(mid, data, manifests[mid])
+        # Whether each statistic earned its threshold, and why not (the support rule's
+        # line), beside what the model was trained from.
+        store.save_model(mid, data, manifests[mid], pipeline.statistic_notes(data))
         out[mid] = (fut, "commissioned")
         progress.commissioned()

@@ -27,6 +27,7 @@ from monitor.fleet.health import (
     prognosis,
 )
 from monitor.fleet.pipeline import statistics, threshold_note
+from monitor.fleet.store import statistics_text, trained_statistics
 
 _COLOURS = {
     "fault": "tab:red",
@@ -242,12 +243,15 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     warns = {mid: first_warning(mid, rows, k) for mid, rows in per.items()}
     # A threshold resting on one commissioning event makes a machine less sensitive to
     # slow wear than its neighbours: the page says so beside its model.
+    # Which statistics a commissioned machine's model judges with, and why one is off.
     notes = {}
     for mid in per:
         path = results / "models" / f"{mid}.model.npz"
-        note = threshold_note(path) if path.is_file() else None
-        if note:
-            notes[mid] = note
+        stats = trained_statistics(results, mid)
+        said = [threshold_note(path) if path.is_file() else None]
+        said.append(None if stats is None else statistics_text(stats))
+        if any(said):
+            notes[mid] = "; ".join(n for n in said if n)
     out.mkdir(parents=True, exist_ok=True)
     _health_png(per, progs, warns, out / "health.png", k)
     _timeline_png(per, out / "timeline.png")

@@ -95,6 +95,31 @@ def _write_atomic(path: Path, data: bytes) -> None:
     os.replace(tmp, path)
 
 
+#: The key of trained-from.json that says whether each statistic is on and why.
+STATISTICS_KEY = "statistics"
+
+
+def trained_statistics(results: Path, machine: str) -> dict[str, str] | None:
+    """Whether each statistic of ``machine``'s commissioned model is on and why, from
+    RESULTS/models/<machine>.trained-from.json; None for a machine without it (the default
+    model, or results from before the record was kept)."""
+    try:
+        path = results / "models" / f"{machine}.trained-from.json"
+        known = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    stats = known.get(STATISTICS_KEY) if isinstance(known, dict) else None
+    return stats if isinstance(stats, dict) else None
+
+
+def statistics_text(stats: dict[str, str]) -> str:
+    """One line for a page: ``statistics: J on; B off: its threshold rests on ...``."""
+    return "statistics: " + "; ".join(
+        f"{name} {why}" if why.startswith(("on", "off")) else f"{name}: {why}"
+        for name, why in stats.items()
+    )
+
+
 class ResultStore:
     """The results folder of one fleet run."""
 
@@ -110,19 +135,28 @@ class ResultStore:
         (its commissioning files' hashes, reference model and settings), else None."""
         npz, meta = self._model_paths(machine)
         try:
-            same = json.loads(meta.read_text(encoding="utf-8")) == manifest
-            return npz.read_bytes() if same else None
-        except (OSError, ValueError):
+            known = json.loads(meta.read_text(encoding="utf-8"))
+            known.pop(STATISTICS_KEY, None)  # what training decided, not what it was given
+            return npz.read_bytes() if known == manifest else None
+        except (OSError, ValueError, AttributeError):
             return None
 
-    def save_model(self, machine: str, data: bytes, manifest: dict[str, Any] | None) -> None:
+    def save_model(
+        self,
+        machine: str,
+        data: bytes,
+        manifest: dict[str, Any] | None,
+        statistics: dict[str, str] | None = None,
+    ) -> None:
         """The model file, then (last, so a killed run never vouches for a model it did not
-        finish) what it was trained from; None: not a commissioned model, nothing to reuse."""
+        finish) what it was trained from; None: not a commissioned model, nothing to reuse.
+        ``statistics``: whether each statistic is on and why (kept beside the manifest)."""
         npz, meta = self._model_paths(machine)
         meta.unlink(missing_ok=True)
         _write_atomic(npz, data)
         if manifest is not None:
-            _write_atomic(meta, json.dumps(manifest, sort_keys=True).encode())
+            record = manifest if statistics is None else {**manifest, STATISTICS_KEY: statistics}
+            _write_atomic(meta, json.dumps(record, sort_keys=True).encode())
 
     def _model_paths(self, machine: str) -> tuple[Path, Path]:
         return self.models / f"{machine}.model.npz", self.models / f"{machine}.trained-from.json"

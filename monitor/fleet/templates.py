@@ -53,7 +53,9 @@ its alarms.</p>
 <th>logs</th><th>alarm episodes</th></tr>
 {% for v in views %}<tr id="row-{{ v.machine }}">
 <td><a href="{{ v.page }}">{{ v.machine }}</a>{% if v.rows[-1].model.startswith('default') %}
-<br><span class="note">default model: no commissioning data</span>{% endif %}</td>
+<br><span class="note">default model: no commissioning data</span>{% endif %}{% if
+stats.get(v.machine) %}<br><span class="note">{{ on_off(stats[v.machine]) }}</span>{% endif
+%}</td>
 <td>{{ state(v.state) }}</td>
 <td>{{ v.finding or '-' }}{% if v.evidence %}<br>
 <span class="note">{{ v.evidence }}</span>{% endif %}</td>
@@ -91,6 +93,10 @@ last {{ v.last_seen }}){% endif %}{% if v.evidence %}; {{ v.evidence }}{% endif 
 <b>What to do:</b> {{ v.what_to_do }}<br><b>First warning:</b> {{ v.warning.text }}<br>
 <b>Drift from commissioning:</b> {{ '-' if v.drift is none else '%.1f x'|format(v.drift) }}
 (median J of the last 3 logs over the commissioning run's; 2 x and above: wearing?)</p>
+{% if stats %}<p><b>Commissioning, the statistics its model judges with</b> (each on only
+when its held-out data earns its threshold):</p>
+<ul id="statistics">{% for name, why in stats.items() %}<li><b>{{ name }}</b> {{ why }}</li>
+{% endfor %}</ul>{% endif %}
 {{ health_plot|safe }}
 <h2>Alarm episodes</h2>
 {% if v.alarms %}<table id="episodes"><tr><th>log</th><th>start [s into the log]</th>

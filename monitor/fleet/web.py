@@ -18,6 +18,7 @@ from monitor.fleet.acks import SHELVE_DAYS, ack_path, read_acks
 from monitor.fleet.episodes import row_episodes
 from monitor.fleet.fleetview import Alarm, MachineView, code_groups, fleet_views, log_name
 from monitor.fleet.health import health_index
+from monitor.fleet.store import trained_statistics
 
 #: Alarm episodes per machine whose signals are plotted: the first and the newest of each
 #: fault or sensor, at most this many (each needs its log judged again).
@@ -26,6 +27,13 @@ MAX_SIGNAL_PLOTS = 4
 
 def _fmt(x: float | None) -> str:
     return "-" if x is None else f"{x:.2f}"
+
+
+def _on_off(stats: dict[str, str]) -> str:
+    """``statistics on: J; off: B, L, H`` for the fleet table (the reasons on its page)."""
+    on = [n for n, why in stats.items() if why.startswith("on")]
+    off = [n for n, why in stats.items() if not why.startswith("on")]
+    return f"statistics on: {', '.join(on) or '-'}" + (f"; off: {', '.join(off)}" if off else "")
 
 
 def _env():  # noqa: ANN202 - jinja2.Environment, imported lazily
@@ -40,7 +48,9 @@ def _env():  # noqa: ANN202 - jinja2.Environment, imported lazily
         }
     )
     env = jinja2.Environment(loader=loader, autoescape=True, undefined=jinja2.StrictUndefined)
-    env.globals.update(fmt=_fmt, index=health_index, n_episodes=lambda r: len(row_episodes(r)))
+    env.globals.update(
+        fmt=_fmt, index=health_index, n_episodes=lambda r: len(row_episodes(r)), on_off=_on_off
+    )
     return env
 
 
@@ -70,6 +80,10 @@ class Site:
 
     def __post_init__(self) -> None:
         self.views = fleet_views(self.per, self.k)
+        # Commissioned machines: whether each statistic is on and why (trained-from.json).
+        self.stats = {
+            v.machine: s for v in self.views if (s := trained_statistics(self.results, v.machine))
+        }
         self._env = _env()
         self._plots: dict[str, tuple[list[str], str]] = {}  # per machine, made once
 
@@ -109,6 +123,7 @@ class Site:
             unacked=unacked,
             errors=errors,
             older=older,
+            stats=self.stats,
             fleet_plot=fleet_plot(self.views),
         )
 
@@ -142,6 +157,7 @@ class Site:
             title=f"{v.machine}",
             plots=True,
             v=v,
+            stats=self.stats.get(v.machine),
             acks=read_acks(self.results),
             signal_plots=plots,
             signals_note=note,
