@@ -279,7 +279,7 @@ def test_b_too_thin_in_commissioning_is_off_with_the_rules_reason_in_the_fleets_
         stats = json.loads((out / "models" / f"{mid}.trained-from.json").read_text())[
             "statistics"
         ]
-        assert stats["J"] == "on"
+        assert stats["J"].startswith("on"), stats  # J stays on (thinly supported: said)
         b = stats["B"]
         assert b.startswith("off: ") and "the bias statistic needs 8 min (8 windows)" in b, b
         held_min = float(b.removeprefix("off: ").split(" min")[0])
@@ -294,7 +294,8 @@ def test_b_too_thin_in_commissioning_is_off_with_the_rules_reason_in_the_fleets_
     assert page == 0
     table = (tmp_path / "page" / "fleet.md").read_text()
     m01 = next(line for line in table.splitlines() if line.startswith("| M01 |"))
-    assert "statistics: J on; B off: " in m01 and "needs 8 min (8 windows)" in m01, m01
+    assert "statistics: J on" in m01 and "; B off: " in m01, m01
+    assert "needs 8 min (8 windows)" in m01, m01
     assert "statistics on: J; off: B, L, H" in (web / "index.html").read_text()
     machine = (web / "machine-M01.html").read_text()
     assert "<li><b>B</b> off: " in machine and "needs 8 min (8 windows)" in machine
