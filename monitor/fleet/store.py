@@ -109,7 +109,13 @@ def trained_statistics(results: Path, machine: str) -> dict[str, str] | None:
     except (OSError, ValueError):
         return None
     stats = known.get(STATISTICS_KEY) if isinstance(known, dict) else None
-    return stats if isinstance(stats, dict) else None
+    if not isinstance(stats, dict):
+        return None
+    # The family's order (J, B, L, H), not the file's sorted keys.
+    from monitor.fleet.pipeline import statistics
+
+    order = [name for name, _, _ in statistics()]
+    return dict(sorted(stats.items(), key=lambda kv: order.index(kv[0]) if kv[0] in order else 99))
 
 
 def statistics_text(stats: dict[str, str]) -> str:
