@@ -294,8 +294,9 @@ def test_b_too_thin_in_commissioning_is_off_with_the_rules_reason_in_the_fleets_
     assert page == 0
     table = (tmp_path / "page" / "fleet.md").read_text()
     m01 = next(line for line in table.splitlines() if line.startswith("| M01 |"))
-    assert "statistics: J on" in m01 and "; B off: " in m01, m01
-    assert "needs 8 min (8 windows)" in m01, m01
+    assert "statistics on: J; off: B, L, H" in m01, m01
+    (why,) = [line for line in table.splitlines() if line.startswith("- M01: B off: ")]
+    assert "the bias statistic needs 8 min (8 windows)" in why, why
     assert "statistics on: J; off: B, L, H" in (web / "index.html").read_text()
     machine = (web / "machine-M01.html").read_text()
     assert "<li><b>B</b> off: " in machine and "needs 8 min (8 windows)" in machine

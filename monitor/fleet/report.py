@@ -27,7 +27,7 @@ from monitor.fleet.health import (
     prognosis,
 )
 from monitor.fleet.pipeline import statistics, threshold_note
-from monitor.fleet.store import statistics_text, trained_statistics
+from monitor.fleet.store import on_off_text, trained_statistics
 
 _COLOURS = {
     "fault": "tab:red",
@@ -235,6 +235,21 @@ def _timeline_png(per: dict[str, list[dict[str, Any]]], path: Path) -> None:
     plt.close(fig)
 
 
+def _statistics_section(stats: dict[str, dict[str, str] | None]) -> list[str]:
+    """Per commissioned machine, every statistic that is off or thinly supported, and why
+    (the support rule's line, as `monitor train` said it)."""
+    lines = [
+        f"- {mid}: {name} {why}"
+        for mid, known in stats.items()
+        for name, why in (known or {}).items()
+        if why != "on"
+    ]
+    if not lines:
+        return []
+    head = "## Commissioning: statistics off or thinly supported, and why"
+    return [head, "", *lines, ""]
+
+
 def write_report(results: Path, out: Path, k: int = 6) -> Path:
     """Write ``out/fleet.md``, ``out/health.png``, ``out/timeline.png`` and, when the
     results have drifts, ``out/drift.png``; the page's path."""
@@ -243,13 +258,13 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     warns = {mid: first_warning(mid, rows, k) for mid, rows in per.items()}
     # A threshold resting on one commissioning event makes a machine less sensitive to
     # slow wear than its neighbours: the page says so beside its model.
-    # Which statistics a commissioned machine's model judges with, and why one is off.
-    notes = {}
+    # Which statistics a commissioned machine's model judges with (the reasons below).
+    notes, stats = {}, {}
     for mid in per:
         path = results / "models" / f"{mid}.model.npz"
-        stats = trained_statistics(results, mid)
+        stats[mid] = trained_statistics(results, mid)
         said = [threshold_note(path) if path.is_file() else None]
-        said.append(None if stats is None else statistics_text(stats))
+        said.append(None if stats[mid] is None else on_off_text(stats[mid]))
         if any(said):
             notes[mid] = "; ".join(n for n in said if n)
     out.mkdir(parents=True, exist_ok=True)
@@ -282,6 +297,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
         *drift_pic,
         "![verdict timeline](timeline.png)",
         "",
+        *_statistics_section(stats),
     ]
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
     if errors:

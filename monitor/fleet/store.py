@@ -118,12 +118,11 @@ def trained_statistics(results: Path, machine: str) -> dict[str, str] | None:
     return dict(sorted(stats.items(), key=lambda kv: order.index(kv[0]) if kv[0] in order else 99))
 
 
-def statistics_text(stats: dict[str, str]) -> str:
-    """One line for a page: ``statistics: J on; B off: its threshold rests on ...``."""
-    return "statistics: " + "; ".join(
-        f"{name} {why}" if why.startswith(("on", "off")) else f"{name}: {why}"
-        for name, why in stats.items()
-    )
+def on_off_text(stats: dict[str, str]) -> str:
+    """``statistics on: J; off: B, L, H`` for a fleet table (the reasons go below it)."""
+    on = [n for n, why in stats.items() if why.startswith("on")]
+    off = [n for n, why in stats.items() if not why.startswith("on")]
+    return f"statistics on: {', '.join(on) or '-'}" + (f"; off: {', '.join(off)}" if off else "")
 
 
 class ResultStore:

@@ -18,7 +18,7 @@ from monitor.fleet.acks import SHELVE_DAYS, ack_path, read_acks
 from monitor.fleet.episodes import row_episodes
 from monitor.fleet.fleetview import Alarm, MachineView, code_groups, fleet_views, log_name
 from monitor.fleet.health import health_index
-from monitor.fleet.store import trained_statistics
+from monitor.fleet.store import on_off_text, trained_statistics
 
 #: Alarm episodes per machine whose signals are plotted: the first and the newest of each
 #: fault or sensor, at most this many (each needs its log judged again).
@@ -27,13 +27,6 @@ MAX_SIGNAL_PLOTS = 4
 
 def _fmt(x: float | None) -> str:
     return "-" if x is None else f"{x:.2f}"
-
-
-def _on_off(stats: dict[str, str]) -> str:
-    """``statistics on: J; off: B, L, H`` for the fleet table (the reasons on its page)."""
-    on = [n for n, why in stats.items() if why.startswith("on")]
-    off = [n for n, why in stats.items() if not why.startswith("on")]
-    return f"statistics on: {', '.join(on) or '-'}" + (f"; off: {', '.join(off)}" if off else "")
 
 
 def _env():  # noqa: ANN202 - jinja2.Environment, imported lazily
@@ -49,7 +42,7 @@ def _env():  # noqa: ANN202 - jinja2.Environment, imported lazily
     )
     env = jinja2.Environment(loader=loader, autoescape=True, undefined=jinja2.StrictUndefined)
     env.globals.update(
-        fmt=_fmt, index=health_index, n_episodes=lambda r: len(row_episodes(r)), on_off=_on_off
+        fmt=_fmt, index=health_index, n_episodes=lambda r: len(row_episodes(r)), on_off=on_off_text
     )
     return env
 
