@@ -1,0 +1,197 @@
+"""Rod friction read from the recording's own force balance: Coulomb against viscous.
+
+While the rod moves, the hydraulic force PA A_A - PB A_B balances the load, the inertia
+and the friction: F = G + k (x - x_ref) + c v + F_c sign(v) + m a.  Coulomb friction is
+odd in speed and constant in size, viscous friction odd and proportional to speed, the
+gravity load even: regressed on moving samples, each has a column of its own, whatever
+tolerance the simulator's calibration gave them.  The calibration cannot tell the two
+frictions apart where the rod moves at much the same speed in each direction (on the
+outsider's duty cycle sign(v) and v have a cosine of 0.97): a 300-800 N Coulomb friction
+then passes for viscous friction at +30 % and more.  So the viscous coefficient is held
+within the band the tolerance calibration allows (``calibrate.TOLERANCES``, +-30 % of
+the configured value): what the band cannot carry is Coulomb friction, and a viscous
+coefficient that ends on the band's edge is reported as evidence.
+
+No simulation: the recording alone.  The blocks of the bootstrap are the diagnosis's
+segments (each a move or two started from rest), so a few segments with a force the
+balance does not describe cannot carry the estimate.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.gap.data.prepare import Prepared, rod_velocity, smooth_rod
+from monitor.gap.data.segments import Segment
+from monitor.gap.fit.calibrate import BY_NAME
+from monitor.gap.judge.decide import SIGNIFICANT
+from monitor.gap.judge.shrink import resamples
+from monitor.signals import SAMPLE_PERIOD_S
+from monitor.sim.machine import BAR, MachineParams
+
+#: Coulomb friction (N) the balance must find before a friction is read from it: a quarter
+#: of the least the benchmarks' plants draw (300 N); healthy machines of the development
+#: seeds read -5 to 25 N, friction of 300-900 N 275-564 N (with viscous friction held in
+#: its band).
+LEVEL_N = 100.0
+#: Rod speed (mm/s) below which the sign of the velocity is not read (a 0.5 mm RodPos noise
+#: gives 3 mm/s on the smoothed difference).
+MIN_SPEED_MM_S = 5.0
+#: Acceleration (mm/s^2) above which a sample is left out: starts and stops, where the
+#: pressures ring and the inertia term would carry the fit.
+MAX_ACCEL_MM_S2 = 300.0
+#: Rows this close (mm) to either end of the stroke are left out (an end stop's force).
+STOP_MARGIN_MM = 15.0
+#: The balance is read only when its residual rms (N) is below this (5 % of the reference
+#: machine's gravity load): 120-210 N on the development recordings, 490-3800 N where a
+#: pressure gain, a periodic force or a rod path integrated from a slow pump's flow broke
+#: it (there the Coulomb column took up to 5 kN).
+MAX_RMS_N = 300.0
+#: Least moving samples (1 s of motion at 100 Hz ... ten of them).
+MIN_SAMPLES = 1000
+#: Columns of the regression.
+_COLUMNS = ("gravity_n", "slope_n_per_mm", "viscous_n_s_m", "coulomb_n", "mass_kg")
+_VISCOUS, _COULOMB = 2, 3
+
+
+@dataclass(frozen=True)
+class FrictionSignature:
+    """What the force balance of the moving rod says about its friction."""
+
+    coulomb_n: float
+    viscous_n_s_m: float
+    #: The viscous coefficient's band (N s/m) and which edge it ended on (-1, 0, +1).
+    viscous_band: tuple[float, float]
+    viscous_at_bound: int
+    #: Share of bootstrap resamples of the segments with Coulomb friction at ``LEVEL_N`` or
+    #: more.
+    above_share: float
+    rms_n: float
+    samples: int
+    #: The balance describes the recording (enough samples, residual below ``MAX_RMS_N``).
+    readable: bool
+
+    @property
+    def present(self) -> bool:
+        return self.readable and self.above_share >= SIGNIFICANT
+
+    @property
+    def absent(self) -> bool:
+        return self.readable and self.above_share <= 1.0 - SIGNIFICANT
+
+    def evidence(self) -> str:
+        if not self.readable:
+            return (
+                f"the rod's force balance does not describe this recording ({self.samples} "
+                f"moving samples, residual {self.rms_n:.0f} N rms): friction not read from it"
+            )
+        bound = {1: " (at its band's top)", -1: " (at its band's bottom)"}.get(
+            self.viscous_at_bound, ""
+        )
+        return (
+            f"the rod's force balance: Coulomb friction {self.coulomb_n:.0f} N beside viscous "
+            f"friction {self.viscous_n_s_m:.0f} N s/m{bound}; at {LEVEL_N:.0f} N or more in "
+            f"{100 * self.above_share:.0f} % of the resamples"
+        )
+
+    def as_dict(self) -> dict:
+        return {
+            "coulomb_n": round(self.coulomb_n, 1),
+            "viscous_n_s_m": round(self.viscous_n_s_m, 1),
+            "viscous_band_n_s_m": [round(v, 1) for v in self.viscous_band],
+            "viscous_at_bound": self.viscous_at_bound != 0,
+            "level_n": LEVEL_N,
+            "above_share": round(self.above_share, 3),
+            "rms_n": round(self.rms_n, 1),
+            "samples": self.samples,
+            "readable": self.readable,
+            "evidence": self.evidence(),
+        }
+
+
+def signature(
+    prep: Prepared, segments: Sequence[Segment], machine: MachineParams
+) -> FrictionSignature:
+    """The friction the moving rod's measured force balance shows (``segments``: the
+    bootstrap's blocks)."""
+    cyl = machine.cylinder
+    force = (prep.meas["PA"] * cyl.area_a_m2 - prep.meas["PB"] * cyl.area_b_m2) * BAR
+    v = rod_velocity(smooth_rod(prep.rod_mm))
+    a = np.gradient(v, SAMPLE_PERIOD_S)
+    x = prep.rod_mm
+    ok = (
+        prep.valid
+        & np.isfinite(force)
+        & (np.abs(v) >= MIN_SPEED_MM_S)
+        & (np.abs(a) <= MAX_ACCEL_MM_S2)
+        & (x > STOP_MARGIN_MM)
+        & (x < prep.stroke_mm - STOP_MARGIN_MM)
+    )
+    if prep.unscored is not None:
+        ok &= ~prep.unscored
+    cols = np.column_stack(
+        [np.ones_like(v), x - x[ok].mean() if ok.any() else x, v * 1e-3, np.sign(v), a * 1e-3]
+    )
+    nominal = machine.load.viscous_friction_n_s_m
+    band = BY_NAME["viscous_friction"].band
+    bounds = (nominal * (1.0 - band), nominal * (1.0 + band))
+    xtx, xty, yty, n = _segment_sums(cols, force, ok, segments)
+    total = (xtx.sum(axis=0), xty.sum(axis=0), float(yty.sum()), int(n.sum()))
+    if total[3] < MIN_SAMPLES:
+        return FrictionSignature(0.0, nominal, bounds, 0, 0.0, np.inf, total[3], False)
+    beta, side = _bounded(total[0], total[1], bounds)
+    sq = total[2] - 2 * beta @ total[1] + beta @ total[0] @ beta
+    rms = float(np.sqrt(max(sq, 0.0) / total[3]))
+    idx = resamples(len(segments), seed=1)
+    boot = np.array(
+        [_bounded(xtx[i].sum(axis=0), xty[i].sum(axis=0), bounds)[0][_COULOMB] for i in idx]
+    )
+    return FrictionSignature(
+        coulomb_n=float(beta[_COULOMB]),
+        viscous_n_s_m=float(beta[_VISCOUS]),
+        viscous_band=bounds,
+        viscous_at_bound=side,
+        above_share=float(np.mean(boot >= LEVEL_N)),
+        rms_n=rms,
+        samples=total[3],
+        readable=rms <= MAX_RMS_N,
+    )
+
+
+def _segment_sums(
+    cols: np.ndarray, y: np.ndarray, ok: np.ndarray, segments: Sequence[Segment]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per segment, the normal equations' sums over its usable rows."""
+    k = cols.shape[1]
+    xtx, xty = np.zeros((len(segments), k, k)), np.zeros((len(segments), k))
+    yty, n = np.zeros(len(segments)), np.zeros(len(segments), dtype=np.int64)
+    for j, seg in enumerate(segments):
+        rows = np.arange(seg.score_from, seg.stop)
+        rows = rows[ok[rows]]
+        xs, ys = cols[rows], y[rows]
+        xtx[j], xty[j], yty[j], n[j] = xs.T @ xs, xs.T @ ys, ys @ ys, len(rows)
+    return xtx, xty, yty, n
+
+
+def _bounded(
+    xtx: np.ndarray, xty: np.ndarray, bounds: tuple[float, float]
+) -> tuple[np.ndarray, int]:
+    """Least squares with the viscous coefficient held within ``bounds``: the unbounded
+    solution, or (a convex quadratic's minimum over an interval lies on its edge when not
+    inside) the others solved with the viscous one at the nearer edge."""
+    beta = np.linalg.lstsq(xtx, xty, rcond=None)[0]
+    c = beta[_VISCOUS]
+    if bounds[0] <= c <= bounds[1]:
+        return beta, 0
+    side = 1 if c > bounds[1] else -1
+    c = bounds[1] if side > 0 else bounds[0]
+    keep = [j for j in range(len(beta)) if j != _VISCOUS]
+    sub = np.linalg.lstsq(xtx[np.ix_(keep, keep)], xty[keep] - xtx[keep, _VISCOUS] * c, rcond=None)[
+        0
+    ]
+    out = np.empty_like(beta)
+    out[keep], out[_VISCOUS] = sub, c
+    return out, side
