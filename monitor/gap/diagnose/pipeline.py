@@ -79,6 +79,7 @@ def _diagnose(
     laps.lap("pairs")
     judged = V.judge(cal, refined, paired, say)
     judged = V.check_timing(cal, refined, paired, judged, say)
+    judged = V.check_friction(parts, cal, refined, paired, judged, say)
     judged = V.check_cause(parts, cal, refined, paired, judged, say)
     if judged.cause is not None:
         laps.lap("cause")

@@ -147,6 +147,9 @@ class Finding:
     #: A ``sensor_lag`` verdict checked against the rod's timing (``verdict.check_timing``):
     #: the JSON's ``timing_check``.
     timing_check: dict | None = None
+    #: The rod's friction read from its force balance (``verdict.check_friction``): the
+    #: JSON's ``friction_check``.
+    friction_check: dict | None = None
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from monitor.gap.fit import calibrate as cal_mod
 from monitor.gap.fit import score as S
 from monitor.gap.fit import sensorcal
 from monitor.gap.fit.candidates import CONFOUNDED, Candidate
-from monitor.gap.judge import delays, lagcheck, sensorphysics
+from monitor.gap.judge import delays, friction, lagcheck, sensorphysics
 from monitor.gap.judge.decide import Decision, boot_gain, decide, explains, within_noise
 from monitor.gap.judge.suggest import suggest
 
@@ -42,6 +42,9 @@ class Judged:
     #: A ``sensor_lag`` verdict checked against the rod's timing: the JSON's
     #: ``timing_check`` (None: not checked).
     timing: dict | None = None
+    #: The rod's friction read from its force balance (``judge/friction.py``): the JSON's
+    #: ``friction_check`` (None: not read, the simulator within the noise).
+    friction: dict | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -121,6 +124,41 @@ def check_timing(
         f"verdict {timing['verdict_without_check']} -> {d.verdict}"
     )
     return replace(judged, decision=d, timing=timing)
+
+
+def check_friction(
+    parts: Parts, cal: Calibrated, scores: Scores, paired: Paired, judged: Judged, say: Progress
+) -> Judged:
+    """Stage 6d: friction acts at any speed, viscous friction with speed, and the rod's
+    measured force balance tells them apart where the calibration cannot
+    (``judge/friction.py``).  A Coulomb friction the viscous band cannot carry names
+    ``cylinder_friction`` when the verdict was ``none`` or ``unexplained`` and the fitted
+    friction gains significantly on the held-out part; a ``cylinder_friction`` verdict on
+    a rod whose balance shows none is decided again without it (more viscous friction, a
+    mass, a valve gain stood in)."""
+    if judged.noise_only:
+        return judged
+    sig = friction.signature(cal.readings.prep, parts.segments, cal.fit_machine)
+    d = judged.decision
+    fric = next((c for c in scores.singles if c.name == friction.NAME), None)
+    base, idx, floor, sums = scores.baseline, paired.boot_idx, cal.floor, paired.sums
+    against = {name: a.sums for name, a in judged.absorbed.items()}
+    if d.verdict in ("none", "unexplained") and fric is not None:
+        before = against[fric.name][0] if fric.name in against else base.nominal
+        named = friction.named_by_signature(sig, fric, before, sums[fric.name], idx, floor)
+        d = named or d
+    elif friction.NAME in (d.verdict, d.also) and sig.absent:
+        rest = [c for c in scores.singles if c is not fric]
+        plain = [q for q in paired.pairs if all(e.name != friction.NAME for e in q.effects)]
+        structured = (paired.smooth, base.smooth_nominal)
+        d = decide(False, rest, plain, sums, base.nominal, idx, floor, structured, against)
+    checked = {
+        **sig.as_dict(),
+        "verdict_without_check": judged.decision.verdict,
+        "friction_named": friction.NAME in (d.verdict, d.also),
+    }
+    say(f"friction: {sig.evidence()}; verdict {judged.decision.verdict} -> {d.verdict}")
+    return replace(judged, decision=d, friction=checked)
 
 
 def _lag_candidate(singles: Sequence[Candidate]) -> Candidate | None:
@@ -218,6 +256,7 @@ def suggest_next(
         lag_check=judged.lag_check,
         cause_check=None if chk is None else chk.as_dict(),
         timing_check=judged.timing,
+        friction_check=judged.friction,
     )
 
 

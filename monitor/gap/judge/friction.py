@@ -27,7 +27,9 @@ import numpy as np
 from monitor.gap.data.prepare import Prepared, rod_velocity, smooth_rod
 from monitor.gap.data.segments import Segment
 from monitor.gap.fit.calibrate import BY_NAME
-from monitor.gap.judge.decide import SIGNIFICANT
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.score import SegmentSums
+from monitor.gap.judge.decide import SIGNIFICANT, Decision, boot_gain, trades_signals
 from monitor.gap.judge.shrink import resamples
 from monitor.signals import SAMPLE_PERIOD_S
 from monitor.sim.machine import BAR, MachineParams
@@ -52,6 +54,8 @@ STOP_MARGIN_MM = 15.0
 MAX_RMS_N = 300.0
 #: Least moving samples (1 s of motion at 100 Hz ... ten of them).
 MIN_SAMPLES = 1000
+#: The catalogue effect this reads.
+NAME = "cylinder_friction"
 #: Columns of the regression.
 _COLUMNS = ("gravity_n", "slope_n_per_mm", "viscous_n_s_m", "coulomb_n", "mass_kg")
 _VISCOUS, _COULOMB = 2, 3
@@ -195,3 +199,33 @@ def _bounded(
     out = np.empty_like(beta)
     out[keep], out[_VISCOUS] = sub, c
     return out, side
+
+
+def named_by_signature(
+    sig: FrictionSignature,
+    friction: Candidate,
+    before: SegmentSums,
+    after: SegmentSums,
+    idx: np.ndarray,
+    floor: np.ndarray,
+) -> Decision | None:
+    """``cylinder_friction`` named on the force balance's evidence (None: not named).
+
+    The balance shows a Coulomb friction the viscous band cannot carry (``present``), and
+    the friction's fit, added to the simulator it is judged against (``before``: the
+    calibrated one, or its own tolerances where the calibration absorbed it), gains on the
+    held-out part in ``SIGNIFICANT`` of the block-bootstrap resamples without making a
+    signal clearly worse.  The held-out share it must otherwise remove (half the gap, or
+    the practical level of the structured gap) guards against an effect fitted to a
+    healthy machine's base mismatch; here the recording's own force balance, which a base
+    mismatch of the valve, pump or lines does not enter, says that the rod has friction,
+    and the held-out test says that the fitted friction is the recording's.  A friction
+    that removes 10-40 % of a gap dominated by another plant's base dynamics is named."""
+    if not sig.present:
+        return None
+    gain = boot_gain(before, after, idx, floor)
+    if np.mean(gain > 0) < SIGNIFICANT:
+        return None
+    if trades_signals(friction, before, after, idx, floor) is not None:
+        return None
+    return Decision(NAME, None, friction, float(np.mean(gain > 0)))

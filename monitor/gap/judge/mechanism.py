@@ -229,6 +229,10 @@ def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
     chk = report.get("cause_check")
     if verdict == "oil_viscosity" and chk:
         return chk["evidence"], chk["cause"] is not None
+    fc = report.get("friction_check")
+    if verdict == "cylinder_friction" and fc and fc.get("friction_named"):
+        # The rod's force balance: Coulomb friction beside viscous friction held in its band.
+        return fc["evidence"], fc["verdict_without_check"] != verdict
     tc = report.get("timing_check")
     if tc is not None:
         # The rod's timing decided between a sensor's lag and the machine's.

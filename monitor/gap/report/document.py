@@ -164,6 +164,7 @@ def _checks(diag: Diagnosis) -> dict:
         **({"lag_check": f.lag_check} if f.lag_check is not None else {}),
         **({"cause_check": f.cause_check} if f.cause_check is not None else {}),
         **({"timing_check": f.timing_check} if f.timing_check is not None else {}),
+        **({"friction_check": f.friction_check} if f.friction_check is not None else {}),
         **_absorbed(f.chosen, diag.ranking.absorbed, tol.floor),
     }
 

@@ -20,6 +20,7 @@ def summary_text(report: dict) -> str:
     else:
         lines += _verdict_named(report)
     lines += _mechanism_lines(report.get("mechanism"))
+    lines += _friction_line(report.get("friction_check"))
     lines.append(f"Confidence: {report['confidence']:.2f}")
     lines += _bounded(report["calibrated"])
     lines += _tables(report)
@@ -43,6 +44,13 @@ def _mechanism_lines(m: dict | None) -> list[str]:
     if m.get("separating_recording"):
         lines.append(f"To tell the causes apart, record: {m['separating_recording']}")
     return lines
+
+
+def _friction_line(fc: dict | None) -> list[str]:
+    """The rod's force balance, when it named or withdrew a friction (``judge/friction.py``)."""
+    if not fc or fc["friction_named"] == (fc["verdict_without_check"] == "cylinder_friction"):
+        return []
+    return [f"Friction: {fc['evidence']} (verdict without it: {fc['verdict_without_check']})"]
 
 
 def _where_line(w: dict) -> str:
