@@ -77,10 +77,22 @@ class FrictionSignature:
     samples: int
     #: The balance describes the recording (enough samples, residual below ``MAX_RMS_N``).
     readable: bool
+    #: The same with viscous friction free (any value): Coulomb friction, and its share of
+    #: resamples at ``LEVEL_N`` or more.  Where the rod moves at much the same speed each
+    #: way, a free viscous coefficient takes the Coulomb friction too (the outsider's
+    #: 300-800 N friction: 20 N beside 4500 N s/m), and so would a band that held a scored
+    #: rod's viscous friction take it for Coulomb friction.
+    free_coulomb_n: float = 0.0
+    free_share: float = 0.0
 
     @property
     def present(self) -> bool:
         return self.readable and self.above_share >= SIGNIFICANT
+
+    @property
+    def separated(self) -> bool:
+        """Coulomb friction whatever the viscous friction: no tolerance can carry it."""
+        return self.present and self.free_share >= SIGNIFICANT
 
     @property
     def absent(self) -> bool:
@@ -95,10 +107,14 @@ class FrictionSignature:
         bound = {1: " (at its band's top)", -1: " (at its band's bottom)"}.get(
             self.viscous_at_bound, ""
         )
+        free = (
+            f"with viscous friction free {self.free_coulomb_n:.0f} N "
+            f"({100 * self.free_share:.0f} %)"
+        )
         return (
             f"the rod's force balance: Coulomb friction {self.coulomb_n:.0f} N beside viscous "
-            f"friction {self.viscous_n_s_m:.0f} N s/m{bound}; at {LEVEL_N:.0f} N or more in "
-            f"{100 * self.above_share:.0f} % of the resamples"
+            f"friction {self.viscous_n_s_m:.0f} N s/m{bound}, at {LEVEL_N:.0f} N or more in "
+            f"{100 * self.above_share:.0f} % of the resamples; {free}"
         )
 
     def as_dict(self) -> dict:
@@ -109,6 +125,9 @@ class FrictionSignature:
             "viscous_at_bound": self.viscous_at_bound != 0,
             "level_n": LEVEL_N,
             "above_share": round(self.above_share, 3),
+            "free_coulomb_n": round(self.free_coulomb_n, 1),
+            "free_above_share": round(self.free_share, 3),
+            "separated": self.separated,
             "rms_n": round(self.rms_n, 1),
             "samples": self.samples,
             "readable": self.readable,
@@ -150,18 +169,28 @@ def signature(
     sq = total[2] - 2 * beta @ total[1] + beta @ total[0] @ beta
     rms = float(np.sqrt(max(sq, 0.0) / total[3]))
     idx = resamples(len(segments), seed=1)
+    free = (-np.inf, np.inf)
     boot = np.array(
-        [_bounded(xtx[i].sum(axis=0), xty[i].sum(axis=0), bounds)[0][_COULOMB] for i in idx]
+        [
+            [
+                _bounded(xtx[i].sum(axis=0), xty[i].sum(axis=0), b)[0][_COULOMB]
+                for b in (bounds, free)
+            ]
+            for i in idx
+        ]
     )
+    above = np.mean(boot >= LEVEL_N, axis=0)
     return FrictionSignature(
         coulomb_n=float(beta[_COULOMB]),
         viscous_n_s_m=float(beta[_VISCOUS]),
         viscous_band=bounds,
         viscous_at_bound=side,
-        above_share=float(np.mean(boot >= LEVEL_N)),
+        above_share=float(above[0]),
         rms_n=rms,
         samples=total[3],
         readable=rms <= MAX_RMS_N,
+        free_coulomb_n=float(_bounded(total[0], total[1], free)[0][_COULOMB]),
+        free_share=float(above[1]),
     )
 
 
@@ -221,6 +250,8 @@ def named_by_signature(
     mismatch of the valve, pump or lines does not enter, says that the rod has friction,
     and the held-out test says that the fitted friction is the recording's.  A friction
     that removes 10-40 % of a gap dominated by another plant's base dynamics is named."""
+    if sig.separated:
+        return Decision(NAME, None, friction, min(sig.above_share, sig.free_share))
     if not sig.present:
         return None
     gain = boot_gain(before, after, idx, floor)
