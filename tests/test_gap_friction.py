@@ -162,17 +162,21 @@ def test_the_third_plants_lugre_friction_is_named_by_the_force_balance(tmp_path)
 
 
 def test_viscous_friction_beyond_its_band_is_not_named_friction(tmp_path):
-    # Our simulator with viscous friction 40 % above the configured value and no Coulomb
-    # friction: the calibration ends at the band's top, and friction could stand in for
-    # the rest; the balance shows no Coulomb friction, so it is not named.
+    # Our simulator with viscous friction 50 % above the configured value and no Coulomb
+    # friction: the calibration ends at the band's top (+30 %), and a friction could stand
+    # in for the rest, which at one speed each way looks the same.  The balance holds
+    # viscous friction at 2600 N s/m and leaves some 400 N s/m x 0.13 m/s = 52 N to the
+    # Coulomb column, below the 100 N level in nearly every resample: not friction.
     cfg = yaml.safe_load(CONFIG.read_text())
-    cfg["load"]["viscous_friction_n_s_per_m"] = 2800
+    cfg["load"]["viscous_friction_n_s_per_m"] = 3000
     config = tmp_path / "viscous.yaml"
     config.write_text(yaml.safe_dump(cfg))
     rep = _diagnosed(_simulate(tmp_path, "viscous", "--config", str(config)), EFFECTS)
     assert rep["verdict"] != "cylinder_friction"
-    assert rep["friction_check"]["above_share"] <= 0.05
     assert rep["calibrated"]["viscous_friction"]["at_bound"]
+    # Read unless the calibrated simulator is within the noise (then nothing is named).
+    chk = rep.get("friction_check")
+    assert chk is None or (chk["above_share"] <= 0.05 and not chk["friction_named"])
 
 
 #: Friction and its look-alike cause (``mechanism``: oil viscosity's friction share).

@@ -232,7 +232,8 @@ def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
     fc = report.get("friction_check")
     if verdict == "cylinder_friction" and fc and fc.get("friction_named"):
         # The rod's force balance: Coulomb friction beside viscous friction held in its band.
-        return fc["evidence"], fc["verdict_without_check"] != verdict
+        # Separated (viscous friction held in its band or free): no other recording needed.
+        return fc["evidence"], bool(fc.get("separated"))
     tc = report.get("timing_check")
     if tc is not None:
         # The rod's timing decided between a sensor's lag and the machine's.
