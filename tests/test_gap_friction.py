@@ -181,3 +181,18 @@ def test_viscous_friction_beyond_its_band_is_not_named_friction(tmp_path):
 
 #: Friction and its look-alike cause (``mechanism``: oil viscosity's friction share).
 EFFECTS = ("cylinder_friction", "oil_viscosity")
+
+
+def test_the_summary_says_the_balance_only_when_it_named_or_withdrew_a_friction():
+    from monitor.gap.report.summary import _friction_line
+
+    chk = {**_sig(1.0, 1.0).as_dict(), "verdict_without_check": "unexplained"}
+    named = _friction_line({**chk, "friction_named": True})
+    assert len(named) == 1 and named[0].startswith("Friction: the rod's force balance")
+    assert "(verdict without it: unexplained)" in named[0]
+    withdrawn = {**chk, "verdict_without_check": "cylinder_friction", "friction_named": False}
+    assert _friction_line(withdrawn)
+    # The verdict it left alone, either way: no line.
+    assert _friction_line({**chk, "friction_named": False}) == []
+    kept = {**chk, "verdict_without_check": "cylinder_friction", "friction_named": True}
+    assert _friction_line(kept) == [] and _friction_line(None) == []
