@@ -196,3 +196,25 @@ def test_the_summary_says_the_balance_only_when_it_named_or_withdrew_a_friction(
     assert _friction_line({**chk, "friction_named": False}) == []
     kept = {**chk, "verdict_without_check": "cylinder_friction", "friction_named": True}
     assert _friction_line(kept) == [] and _friction_line(None) == []
+
+
+def test_a_friction_the_balance_did_not_decide_keeps_its_own_evidence():
+    from monitor.gap.judge import mechanism
+
+    chk = {**_sig(1.0, 0.0).as_dict(), "friction_named": True}
+    absorbed = {
+        "effect": "cylinder_friction",
+        "tolerances": {"viscous_friction": {"calibration_pct": 30.0, "with_effect_pct": -30.0}},
+        "heldout_reduction": 0.31,
+    }
+    base = {"verdict": "cylinder_friction", "ranking": [], "calibrated": {}, "absorbed": absorbed}
+    # Named before the balance was read (the calibration-absorbed rule), balance not
+    # separated: the absorbed rule decided, and slow moves with reversals would separate.
+    kept = mechanism.describe(
+        {**base, "friction_check": {**chk, "verdict_without_check": "cylinder_friction"}}
+    )
+    assert "calibration had taken a tolerance" in kept["decided_by"]
+    assert kept["separating_recording"] is not None
+    # Named by the balance: its evidence decided.
+    named = mechanism.describe({**base, "friction_check": {**chk, "verdict_without_check": "none"}})
+    assert named["decided_by"].startswith("the rod's force balance")

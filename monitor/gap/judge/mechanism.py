@@ -230,7 +230,12 @@ def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
     if verdict == "oil_viscosity" and chk:
         return chk["evidence"], chk["cause"] is not None
     fc = report.get("friction_check")
-    if verdict == "cylinder_friction" and fc and fc.get("friction_named"):
+    if (
+        verdict == "cylinder_friction"
+        and fc
+        and fc.get("friction_named")
+        and (fc.get("separated") or fc["verdict_without_check"] != verdict)
+    ):
         # The rod's force balance: Coulomb friction beside viscous friction held in its band.
         # Separated (viscous friction held in its band or free): no other recording needed.
         return fc["evidence"], bool(fc.get("separated"))
