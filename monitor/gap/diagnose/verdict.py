@@ -131,11 +131,12 @@ def check_friction(
 ) -> Judged:
     """Stage 6d: friction acts at any speed, viscous friction with speed, and the rod's
     measured force balance tells them apart where the calibration cannot
-    (``judge/friction.py``).  A Coulomb friction the viscous band cannot carry names
-    ``cylinder_friction`` when the verdict was ``none`` or ``unexplained`` and the fitted
-    friction gains significantly on the held-out part; a ``cylinder_friction`` verdict on
-    a rod whose balance shows none is decided again without it (more viscous friction, a
-    mass, a valve gain stood in)."""
+    (``judge/friction.py``).  Where the verdict was ``none`` or ``unexplained``, a Coulomb
+    friction no viscous friction carries (held in its band or free) names
+    ``cylinder_friction``; one only the band refuses names it when the fitted friction
+    gains significantly on the held-out part.  A ``cylinder_friction`` verdict on a rod
+    whose balance shows none is decided again without it (more viscous friction, a mass,
+    a valve gain stood in)."""
     if judged.noise_only:
         return judged
     sig = friction.signature(cal.readings.prep, parts.segments, cal.fit_machine)

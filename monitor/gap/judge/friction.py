@@ -36,8 +36,8 @@ from monitor.sim.machine import BAR, MachineParams
 
 #: Coulomb friction (N) the balance must find before a friction is read from it: a quarter
 #: of the least the benchmarks' plants draw (300 N); healthy machines of the development
-#: seeds read -5 to 25 N, friction of 300-900 N 275-564 N (with viscous friction held in
-#: its band).
+#: seeds and every other effect -38 to 25 N, frictions of 300-900 N 275-562 N (with
+#: viscous friction held in its band).
 LEVEL_N = 100.0
 #: Rod speed (mm/s) below which the sign of the velocity is not read (a 0.5 mm RodPos noise
 #: gives 3 mm/s on the smoothed difference).
@@ -52,12 +52,12 @@ STOP_MARGIN_MM = 15.0
 #: pressure gain, a periodic force or a rod path integrated from a slow pump's flow broke
 #: it (there the Coulomb column took up to 5 kN).
 MAX_RMS_N = 300.0
-#: Least moving samples (1 s of motion at 100 Hz ... ten of them).
+#: Least moving samples (10 s of motion at 100 Hz).
 MIN_SAMPLES = 1000
 #: The catalogue effect this reads.
 NAME = "cylinder_friction"
-#: Columns of the regression.
-_COLUMNS = ("gravity_n", "slope_n_per_mm", "viscous_n_s_m", "coulomb_n", "mass_kg")
+#: Columns of the regression: gravity (N), its slope (N/mm), viscous friction (N s/m),
+#: Coulomb friction (N), mass (kg).
 _VISCOUS, _COULOMB = 2, 3
 
 
