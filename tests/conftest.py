@@ -52,6 +52,30 @@ def model(shipped_config):
     return load_model(shipped_config.model)
 
 
+@pytest.fixture(scope="session")
+def warm_numba_cache(tmp_path_factory) -> tuple[list[str], Path]:
+    """``monitor warm-up`` twice into a numba cache of its own, empty before: (stderr of each
+    run, the cache folder).  Shared by test_startup (the cache's own checks) and test_bench
+    (its warm figures), which run on one worker (SHARED_GROUPS): one cold compile of every
+    kernel and one build of the ahead-of-time module for both, not two."""
+    import subprocess
+    import sys
+
+    cache = tmp_path_factory.mktemp("warm") / "cache"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    runs = [
+        subprocess.run(
+            [sys.executable, "-m", "monitor", "warm-up"],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+        ).stderr
+        for _ in range(2)
+    ]
+    return runs, cache
+
+
 # Under pytest-xdist (CI: ``-n auto --dist loadgroup``) a test file is one unit of work, run on
 # one worker, as with ``--dist loadfile``; but the files below, the heaviest, are split: each
 # test of theirs is a unit of its own, unless it uses a fixture of module (or class) scope,
@@ -97,6 +121,9 @@ HEAVY_WHOLE: dict[str, float] = {
 #: cache alone, where otherwise, in a clean clone, every worker compiled the simulator's
 #: kernels at once (about 35 CPU-seconds each) for its first gap test.
 STARTS_FIRST = ("test_bench.py", "test_startup.py")
+#: Files whose tests share a session fixture: one unit of work together, so that the
+#: fixture is built once, on one worker.
+SHARED_GROUPS = {"test_bench.py": "warm_numba_cache", "test_startup.py": "warm_numba_cache"}
 
 
 def _shares_a_fixture(item: pytest.Item) -> bool:
@@ -137,7 +164,7 @@ def pytest_collection_modifyitems(config, items) -> None:
     for item in items:
         name = item.path.name
         if name not in HEAVY_FILES or _shares_a_fixture(item):
-            item.add_marker(pytest.mark.xdist_group(name))
+            item.add_marker(pytest.mark.xdist_group(SHARED_GROUPS.get(name, name)))
     # Stable: the order within a file is kept, so tests sharing a fixture stay together.
     items.sort(
         key=lambda item: (

@@ -30,10 +30,12 @@ KEYS = (
 
 
 @pytest.fixture(scope="module")
-def quick(tmp_path_factory):
+def quick(tmp_path_factory, warm_numba_cache):
     pytest.importorskip("pyGRNN")
     out = tmp_path_factory.mktemp("bench")
     # The shortest RSS sampling: the test checks the numbers are measured, not their size.
+    # The warm figures with the cache test_startup checks (`monitor warm-up` twice, there):
+    # one cold compile of every kernel for both files.
     code = main(
         [
             "bench",
@@ -44,6 +46,8 @@ def quick(tmp_path_factory):
             str(out / "b.json"),
             "--work-dir",
             str(out),
+            "--numba-cache",
+            str(warm_numba_cache[1]),
         ]
     )
     assert code == 0
@@ -98,3 +102,13 @@ def test_unwritable_output_is_a_clear_error(tmp_path, capsys):
     code = main(["bench", "--quick", "--json", str(tmp_path / "no" / "b.json")])
     assert code == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_a_numba_cache_that_no_warm_up_filled_is_refused_before_the_work(tmp_path, capsys):
+    # Measured with an empty cache, the "warm" start would be a cold one under a warm name.
+    assert main(["bench", "--quick", "--numba-cache", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "argument --numba-cache" in err
+    assert f"{tmp_path} holds no numba cache" in err and "monitor warm-up" in err
+    assert main(["bench", "--quick", "--numba-cache", str(tmp_path / "none")]) == 2
+    assert "is not a folder" in capsys.readouterr().err

@@ -52,21 +52,9 @@ def test_help_and_argument_errors_load_no_numba_or_scipy(argv: list[str]) -> Non
 
 
 @pytest.fixture(scope="module")
-def warm(tmp_path_factory) -> tuple[list[str], Path]:
+def warm(warm_numba_cache) -> tuple[list[str], Path]:
     """``monitor warm-up`` twice into a cache of its own: (stderr of each run, cache dir)."""
-    cache = tmp_path_factory.mktemp("warm") / "cache"
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
-    runs = [
-        subprocess.run(
-            [sys.executable, "-m", "monitor", "warm-up"],
-            capture_output=True,
-            text=True,
-            env=env,
-            check=True,
-        ).stderr
-        for _ in range(2)
-    ]
-    return runs, cache
+    return warm_numba_cache
 
 
 def _line(stderr: str, text: str) -> str:

@@ -61,11 +61,17 @@ def cli_help(runs: int = 5) -> dict[str, float]:
     return {"cli_help_s": statistics.median(walls), "cli_help_rss_mb": max(rss)}
 
 
-def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.11") -> dict:
+def daemon(
+    seconds: float,
+    say: Callable[[str], None],
+    group: str = "239.74.163.11",
+    warm_cache: Path | None = None,
+) -> dict:
     """The daemon alone in its process: start to first tick (empty numba cache, then after
-    ``monitor warm-up``), then steady and peak RSS over ``seconds`` of the shipped normal
-    log replayed in a loop, each with the tick kernels compiled ahead of time and, side by
-    side, with numba's JIT (``MONITOR_AOT=0``)."""
+    ``monitor warm-up``, or with ``warm_cache``, a cache it filled before), then steady and
+    peak RSS over ``seconds`` of the shipped normal log replayed in a loop, each with the
+    tick kernels compiled ahead of time and, side by side, with numba's JIT
+    (``MONITOR_AOT=0``)."""
     work = Path(tempfile.mkdtemp(prefix="monitor-footprint-"))
     config = work / "monitor.yaml"
     config.write_text(
@@ -76,16 +82,20 @@ def daemon(seconds: float, say: Callable[[str], None], group: str = "239.74.163.
     out: dict[str, Any] = {}
     say("footprint: daemon start, empty numba cache")
     out["first_run_s"] = _start(config, work, group, 20.0, {"NUMBA_CACHE_DIR": str(work / "c")})
-    warm = {"NUMBA_CACHE_DIR": str(work / "w")}
-    say("footprint: monitor warm-up (numba cache and the kernels ahead of time)")
-    t0 = time.perf_counter()
-    subprocess.run(
-        [sys.executable, "-m", "monitor", "warm-up"],
-        env=_env(warm),
-        check=True,
-        capture_output=True,
-    )
-    out["warm_up_s"] = time.perf_counter() - t0
+    warm = {"NUMBA_CACHE_DIR": str(warm_cache or work / "w")}
+    out["warm_up_s"] = None
+    if warm_cache is None:
+        say("footprint: monitor warm-up (numba cache and the kernels ahead of time)")
+        t0 = time.perf_counter()
+        subprocess.run(
+            [sys.executable, "-m", "monitor", "warm-up"],
+            env=_env(warm),
+            check=True,
+            capture_output=True,
+        )
+        out["warm_up_s"] = time.perf_counter() - t0
+    else:
+        say(f"footprint: the numba cache {warm_cache}, warmed before (warm_up_s not measured)")
     for tag, extra in (("", warm), ("_jit", {**warm, "MONITOR_AOT": "0"})):
         kind = "JIT" if tag else "ahead of time"
         say(f"footprint: monitor detect of the shipped spool-wear log ({kind})")

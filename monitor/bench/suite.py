@@ -34,10 +34,16 @@ GOALS = {
 
 
 def measure_all(
-    sizes: data.Sizes, work: Path, footprint_s: float, live_speed: float, say: Progress
+    sizes: data.Sizes,
+    work: Path,
+    footprint_s: float,
+    live_speed: float,
+    say: Progress,
+    numba_cache: Path | None = None,
 ) -> dict[str, Any]:
     """Every measurement at ``sizes`` (the long log and the models cached in ``work``),
-    the headline figures on top and each goal met or not."""
+    the headline figures on top and each goal met or not; the warm figures with
+    ``numba_cache`` when given (a cache `monitor warm-up` filled), else a new warm one."""
     from monitor.model.modelfile import load_model
 
     tmp = Path(tempfile.mkdtemp(prefix="monitor-bench-"))
@@ -49,7 +55,7 @@ def measure_all(
     }
     say("footprint: monitor --help, 5 processes")
     foot = footprint.cli_help()
-    foot.update(footprint.daemon(footprint_s, say))
+    foot.update(footprint.daemon(footprint_s, say, warm_cache=numba_cache))
     grnn = grnn_bench.measure(sizes, say)
     model_path = data.monitor_model(work, sizes.headline_patterns, sizes.train_s, say)
     summary = data.model_summary(load_model(model_path))

@@ -83,6 +83,15 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="cache for the long log and the models (default: a folder in the system's temp dir)",
     )
     p.add_argument(
+        "--numba-cache",
+        type=_warm_cache,
+        default=None,
+        metavar="DIR",
+        help="measure the warm start, `monitor detect` and the memory with this numba cache, "
+        "already filled by `monitor warm-up` (e.g. the unit's /var/cache/hydraulic-monitor), "
+        "instead of warming up a new one (warm_up_s is then not measured)",
+    )
+    p.add_argument(
         "--live-speed",
         type=float,
         default=None,
@@ -91,6 +100,18 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "faster replays queue more ticks behind a stall)",
     )
     p.set_defaults(func=run)
+
+
+def _warm_cache(text: str) -> Path:
+    """A numba cache folder that `monitor warm-up` filled (its index files are there)."""
+    p = Path(text)
+    if not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{p} is not a folder")
+    if not any(p.rglob("*.nbi")):
+        raise argparse.ArgumentTypeError(
+            f"{p} holds no numba cache: fill it first with NUMBA_CACHE_DIR={p} monitor warm-up"
+        )
+    return p
 
 
 def _say(msg: str) -> None:
@@ -112,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
         if not path.parent.is_dir():
             raise MonitorError(f"cannot write {path}: folder {path.parent} does not exist")
     footprint_s = args.footprint_s or (20.0 if args.quick else 90.0)
-    result = suite.measure_all(sizes, work, footprint_s, args.live_speed or sizes.live_speed, _say)
+    result = suite.measure_all(
+        sizes, work, footprint_s, args.live_speed or sizes.live_speed, _say, args.numba_cache
+    )
     table = report.markdown(result)
     try:
         args.json.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
