@@ -149,9 +149,18 @@ def pytest_xdist_auto_num_workers(config) -> int | None:
     return (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1) + 1
 
 
+def pytest_addoption(parser) -> None:
+    import cpu_time
+
+    cpu_time.addoption(parser)
+
+
 def pytest_configure(config) -> None:
     """Under ``--dist loadgroup`` the units go out in the order of the collection (below),
-    not sorted by their number of tests (xdist's default)."""
+    not sorted by their number of tests (xdist's default); ``--cpu-durations`` (cpu_time.py)."""
+    import cpu_time
+
+    cpu_time.configure(config)
     if config.getoption("dist", "no") == "loadgroup":
         config.option.loadscopereorder = False
 
