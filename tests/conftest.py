@@ -116,11 +116,13 @@ HEAVY_WHOLE: dict[str, float] = {
 }
 
 
-#: Started before all others: their cold numba compiles go into caches of their own (a
-#: temporary NUMBA_CACHE_DIR, by design), so meanwhile another worker fills the checkout's
-#: cache alone, where otherwise, in a clean clone, every worker compiled the simulator's
-#: kernels at once (about 35 CPU-seconds each) for its first gap test.
-STARTS_FIRST = ("test_bench.py", "test_startup.py")
+#: Started before all others, so that in a clean clone one worker alone compiles the
+#: simulator's kernels into the checkout's cache (about 30 CPU-seconds, for its first gap
+#: test), where otherwise every worker compiled them at once: test_bench and test_startup
+#: (one unit, SHARED_GROUPS) compile into a cache of their own (a temporary NUMBA_CACHE_DIR,
+#: by design), and test_live_field's first test needs no simulator (its daemon mostly waits
+#: on a replay at the log's speed, beside the compiles).
+STARTS_FIRST = ("test_bench.py", "test_startup.py", "test_live_field.py")
 #: Files whose tests share a session fixture: one unit of work together, so that the
 #: fixture is built once, on one worker.
 SHARED_GROUPS = {"test_bench.py": "warm_numba_cache", "test_startup.py": "warm_numba_cache"}
