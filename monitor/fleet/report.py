@@ -262,9 +262,9 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     notes, stats = {}, {}
     for mid in per:
         path = results / "models" / f"{mid}.model.npz"
-        stats[mid] = trained_statistics(results, mid)
+        stats[mid] = got = trained_statistics(results, mid)
         said = [threshold_note(path) if path.is_file() else None]
-        said.append(None if stats[mid] is None else on_off_text(stats[mid]))
+        said.append(None if got is None else on_off_text(got))
         if any(said):
             notes[mid] = "; ".join(n for n in said if n)
     out.mkdir(parents=True, exist_ok=True)

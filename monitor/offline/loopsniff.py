@@ -20,8 +20,7 @@ SNIFF_BYTES = 32768
 def other_loops() -> tuple[dict[str, str], dict[int, str]]:
     """The shipped whole machine's (config/excavator4.yaml) loops after the first: each
     loop's DBC signal name -> loop, and each frame id carrying one of them -> loop."""
-    import cantools
-
+    from monitor.codec.dbc import load_dbc
     from monitor.config.settings import load_config
 
     cfg = load_config(resource_path("config", "excavator4.yaml"))
@@ -30,7 +29,7 @@ def other_loops() -> tuple[dict[str, str], dict[int, str]]:
         for signal in lc.signals.values():
             if signal is not None:
                 names[signal] = lc.name
-    db = cantools.database.load_file(str(cfg.dbc))
+    db = load_dbc(cfg.dbc)
     ids = {
         int(msg.frame_id): names[s.name]
         for msg in db.messages
