@@ -246,6 +246,9 @@ def _force_terms(prm: np.ndarray) -> tuple:
 @jit(inline="always")
 def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
     """Write dy/dt into ``dy``; return the pump outlet flow QP in m^3/s."""
+    # The inputs read at once, before any branch (see the helpers' note above).
+    spool_cmd, lim, ul, k_il = u[IN_SPOOL], u[IN_STROKE_LIM], u[IN_UNDERLAP], u[IN_LEAK]
+    vr_in, disp_cmd, speed_rps, t_s = u[IN_VISC_RATIO], u[IN_DISP], u[IN_SPEED_RPS], u[IN_TIME]
     pp = max(y[S_PP], 0.0)
     pa = max(y[S_PA], 0.0)
     pb = max(y[S_PB], 0.0)
@@ -258,17 +261,15 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         xs = y[S_XS]
         wn = prm[WN]
         dy[S_XS] = y[S_VS]
-        dy[S_VS] = wn * wn * (u[IN_SPOOL] - xs) - 2.0 * prm[ZETA] * wn * y[S_VS]
+        dy[S_VS] = wn * wn * (spool_cmd - xs) - 2.0 * prm[ZETA] * wn * y[S_VS]
     else:
-        xs = u[IN_SPOOL]
+        xs = spool_cmd
         dy[S_XS] = 0.0
         dy[S_VS] = 0.0
-    lim = u[IN_STROKE_LIM]
     xs = _clip(xs, -lim, lim)
     ov = prm[OVERLAP]
     mag = max(abs(xs) - ov, 0.0) / (1.0 - ov)
     s = mag if xs >= 0.0 else -mag
-    ul = u[IN_UNDERLAP]
     o_pos = _clip(s + ul, 0.0, 1.0)  # P->A and B->T
     o_neg = _clip(-s + ul, 0.0, 1.0)  # P->B and A->T
     kv = prm[KV]
@@ -277,10 +278,10 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
     q_bt = _orifice(kv * o_pos, pb - ptank, dpl)
     q_pb = _orifice(kv * o_neg, pp - pb, dpl)
     q_at = _orifice(kv * o_neg, pa - ptank, dpl)
-    q_il = u[IN_LEAK] * (pa - pb)
+    q_il = k_il * (pa - pb)
     if prm[VISC_ON] > 0.0 and (prm[PISTON_LEAK] > 0.0 or prm[VALVE_LEAK] > 0.0):
         # Thin oil leaks across the piston seal and the spool's clearances too (laminar).
-        vr = u[IN_VISC_RATIO]
+        vr = vr_in
         q_il += prm[PISTON_LEAK] * (pa - pb) / vr
         kc = prm[VALVE_LEAK] / vr
         q_pa += kc * (pp - pa)
@@ -297,7 +298,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         q_bt += _leak(prm[LEAK_BT_LIN], prm[LEAK_BT_SQRT], pb - ptank, dpl)
 
     # Pump: displacement command times the compensator's destroke, optionally lagged.
-    target = _disp_target(pp, u[IN_DISP], _compensator(prm))
+    target = _disp_target(pp, disp_cmd, _compensator(prm))
     dy[S_DISP_RATE] = 0.0
     if prm[PUMPDYN_ON] > 0.0 and prm[PUMP_WN] > 0.0:
         wp, rate = prm[PUMP_WN], y[S_DISP_RATE]
@@ -307,8 +308,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         dy[S_DISP] = (target - y[S_DISP]) / prm[TAU_PUMP]
     else:
         dy[S_DISP] = 0.0
-    qp = _pump_flow(y[S_PP], y[S_DISP], u[IN_SPEED_RPS], u[IN_VISC_RATIO], target, _pump(prm))
-    visc_ratio = u[IN_VISC_RATIO] if prm[VISC_ON] > 0.0 else 1.0
+    qp = _pump_flow(y[S_PP], y[S_DISP], speed_rps, vr_in, target, _pump(prm))
+    visc_ratio = vr_in if prm[VISC_ON] > 0.0 else 1.0
     q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
     if prm[CORR_ON] > 0.0:
         q_relief += _leak(prm[LEAK_PT_LIN], prm[LEAK_PT_SQRT], pp - ptank, dpl)
@@ -330,7 +331,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         decay = math.exp(-r * r) if e == 2.0 else math.exp(-(abs(r) ** e))
         f_fric += (prm[FC] + (prm[FS] - prm[FC]) * decay) * math.tanh(v / prm[V_EPS])
     if prm[CORR_ON] > 0.0:
-        f_grav, f_fric = _force_corrections(f_grav, f_fric, x, v, u[IN_TIME], _force_terms(prm))
+        f_grav, f_fric = _force_corrections(f_grav, f_fric, x, v, t_s, _force_terms(prm))
     drive = f_hyd - f_grav
     stroke = prm[STROKE]
     # End stops: the rod rests on a stop while the net drive presses it there.
