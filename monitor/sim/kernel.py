@@ -62,10 +62,12 @@ N_RECORD = 7
 P_ATM = 101325.0
 LOG_P_ATM = math.log(P_ATM)
 
-# The helpers below, inlined into ``rhs`` by numba, take scalars and tuples of parameters,
-# never the parameter or state arrays: numba's inliner wraps every array argument in an
-# atomic reference count increment and decrement, and with the arrays passed down, those
-# took half of a step's time (2026-11-28: 520 -> 230 ns per RK4 step).
+# The helpers below take scalars and tuples of parameters, never the parameter or state
+# arrays: numba's inliner wraps every array argument in an atomic reference count increment
+# and decrement, and with the arrays passed down, those took half of a step's time
+# (2026-11-28: 520 -> 190 ns per RK4 step).  The larger ones are plain functions that LLVM
+# inlines (the same code, bit for bit): numba's own inlining copies their IR into each of
+# the four right-hand sides of a step, which made the kernel's first compile 37 CPU-s (11).
 
 
 @jit(inline="always")
@@ -103,7 +105,7 @@ def _oil(prm: np.ndarray) -> tuple:
     )
 
 
-@jit(inline="always")
+@jit
 def _capacitance(p: float, vol: float, hose_vol: float, hose_c: float, oil: tuple) -> float:
     """``_compliance`` with the parameters as ``_oil`` reads them."""
     beta, air_on, air_n, air_alpha, air_law, air_pcrit, hose_on, e_wall = oil
@@ -128,7 +130,7 @@ def _capacitance(p: float, vol: float, hose_vol: float, hose_c: float, oil: tupl
     return c
 
 
-@jit(inline="always")
+@jit
 def _dissolving_air(beta: float, pabs: float, a: float, r: float, n: float, pcrit: float) -> float:
     """Softness 1/modulus (1/Pa) when the free air (fraction a at atmosphere, compressed
     polytropically: r = (p0/p)^(1/n)) also dissolves, linearly in pressure from atmospheric
@@ -142,7 +144,7 @@ def _dissolving_air(beta: float, pabs: float, a: float, r: float, n: float, pcri
     return (1.0 / beta + soft) / (1.0 + a * theta * r)
 
 
-@jit(inline="always")
+@jit
 def _disp_target(pp: float, disp_cmd: float, comp: tuple) -> float:
     """Displacement fraction the pump is commanded to: command times compensator destroke
     (``comp``: ``_compensator``)."""
@@ -165,7 +167,7 @@ def _pump(prm: np.ndarray) -> tuple:
     return prm[PUMPDYN_ON], prm[DISP_MAX], prm[VISC_ON], prm[LEAK_K]
 
 
-@jit(inline="always")
+@jit
 def _pump_flow(
     pp: float, disp_state: float, speed_rps: float, visc_ratio: float, target: float, pump: tuple
 ) -> float:
@@ -182,7 +184,7 @@ def _pump_flow(
     return qp
 
 
-@jit(inline="always")
+@jit
 def _leak(k_lin: float, k_sqrt: float, dp: float, dp_lam: float) -> float:
     """A correction leakage (m^3/s): laminar k_lin*dp plus orifice-like k_sqrt*sqrt(dp)."""
     q = 0.0
@@ -193,7 +195,7 @@ def _leak(k_lin: float, k_sqrt: float, dp: float, dp_lam: float) -> float:
     return q
 
 
-@jit(inline="always")
+@jit
 def _edge_corrections(q_pa: float, q_bt: float, q_pb: float, q_at: float, rel: tuple):
     """Metering edge flows scaled by (1 + relative gain change) per edge (``rel``: the
     changes of P->A, B->T, P->B, A->T)."""
@@ -209,7 +211,7 @@ def _edge_corrections(q_pa: float, q_bt: float, q_pb: float, q_at: float, rel: t
     return q_pa, q_bt, q_pb, q_at
 
 
-@jit(inline="always")
+@jit
 def _force_corrections(
     f_load: float, f_fric: float, x: float, v: float, t: float, terms: tuple
 ) -> tuple[float, float]:
