@@ -67,7 +67,7 @@ LOG_P_ATM = math.log(P_ATM)
 # and decrement, and with the arrays passed down, those took half of a step's time
 # (2026-11-28: 520 -> 190 ns per RK4 step).  The larger ones are plain functions that LLVM
 # inlines (the same code, bit for bit): numba's own inlining copies their IR into each of
-# the four right-hand sides of a step, which made the kernel's first compile 37 CPU-s (11).
+# the four right-hand sides of a step, which made the kernel's first compile 37 CPU-s (now 10).
 
 
 @jit(inline="always")
