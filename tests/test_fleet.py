@@ -276,9 +276,7 @@ def test_b_too_thin_in_commissioning_is_off_with_the_rules_reason_in_the_fleets_
     # bias statistic needs 8 windows of 60 s (8 min) of it: off, with those numbers.
     _f, out, _err = run1
     for mid in ("M01", "M02", "M03"):
-        stats = json.loads((out / "models" / f"{mid}.trained-from.json").read_text())[
-            "statistics"
-        ]
+        stats = json.loads((out / "models" / f"{mid}.trained-from.json").read_text())["statistics"]
         assert stats["J"].startswith("on"), stats  # J stays on (thinly supported: said)
         b = stats["B"]
         assert b.startswith("off: ") and "the bias statistic needs 8 min (8 windows)" in b, b

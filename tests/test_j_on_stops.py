@@ -43,9 +43,7 @@ def test_a_short_stall_or_a_gap_in_it_is_no_stop() -> None:
     assert not settling_on_stop(np.array(spool), np.zeros(24)).any()
     spool = [50.0] * 19 + [np.nan] + [50.0] * 19 + [0.0] * 5
     assert not settling_on_stop(np.array(spool), np.zeros(44)).any()
-    assert settling_on_stop(np.array([50.0] * 20), np.zeros(20)).tolist() == [False] * 19 + [
-        True
-    ]
+    assert settling_on_stop(np.array([50.0] * 20), np.zeros(20)).tolist() == [False] * 19 + [True]
 
 
 def test_tracker_is_the_series_one_sample_at_a_time() -> None:

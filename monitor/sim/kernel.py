@@ -15,6 +15,16 @@ import numpy as np
 
 from monitor.jit import jit
 from monitor.sim import rk4
+from monitor.sim.laws import (
+    capacitance,
+    clip,
+    disp_target,
+    edge_corrections,
+    force_corrections,
+    leak,
+    orifice,
+    pump_flow,
+)
 
 # --- parameter vector layout -------------------------------------------------------------
 BETA, V_LINE, V0A, V0B, AA, AB, STROKE = 0, 1, 2, 3, 4, 5, 6
@@ -59,40 +69,26 @@ N_STATES = 9
 R_PP, R_PA, R_PB, R_QP, R_X, R_V, R_XS = range(7)
 N_RECORD = 7
 
-P_ATM = 101325.0
-LOG_P_ATM = math.log(P_ATM)
 
-# The helpers below take scalars and tuples of parameters, never the parameter or state
-# arrays: numba's inliner wraps every array argument in an atomic reference count increment
-# and decrement, and with the arrays passed down, those took half of a step's time
-# (2026-11-28: 520 -> 190 ns per RK4 step).  The larger ones are plain functions that LLVM
-# inlines (the same code, bit for bit): numba's own inlining copies their IR into each of
-# the four right-hand sides of a step, which made the kernel's first compile 37 CPU-s (now 10).
-
-
-@jit(inline="always")
-def _orifice(kv_open: float, dp: float, dp_lam: float) -> float:
-    """Turbulent orifice flow kv*sqrt(dp), turning smoothly laminar below ~dp_lam."""
-    if kv_open == 0.0:  # a closed edge (half of them at any time): skip two roots
-        return 0.0
-    return kv_open * dp / math.sqrt(math.sqrt(dp * dp + dp_lam * dp_lam))
-
-
-@jit(inline="always")
-def _clip(v: float, lo: float, hi: float) -> float:
-    return lo if v < lo else (hi if v > hi else v)
+# The laws (``monitor.sim.laws``) and the readers below take scalars and tuples of
+# parameters, never the parameter or state arrays: numba's inliner wraps every array
+# argument in an atomic reference count increment and decrement, and with the arrays passed
+# down, those took half of a step's time (2026-11-28: 520 -> 190 ns per RK4 step).  The
+# larger laws are plain functions that LLVM inlines (the same code, bit for bit): numba's
+# own inlining copies their IR into each of the four right-hand sides of a step, which made
+# the kernel's first compile 37 CPU-s (now 10).
 
 
 @jit(inline="always")
 def _compliance(p: float, vol: float, hose_vol: float, hose_c: float, prm: np.ndarray) -> float:
     """Hydraulic capacitance dV/dp of a node (m^3/Pa) at gauge pressure p; with hoses, the
     walls' share of ``hose_vol`` and the hose's own capacitance ``hose_c``."""
-    return _capacitance(p, vol, hose_vol, hose_c, _oil(prm))
+    return capacitance(p, vol, hose_vol, hose_c, _oil(prm))
 
 
 @jit(inline="always")
 def _oil(prm: np.ndarray) -> tuple:
-    """The oil's and the hoses' parameters ``_capacitance`` reads."""
+    """The oil's and the hoses' parameters ``capacitance`` reads."""
     return (
         prm[BETA],
         prm[AIR_ON],
@@ -103,56 +99,6 @@ def _oil(prm: np.ndarray) -> tuple:
         prm[HOSE_ON],
         prm[E_WALL],
     )
-
-
-@jit
-def _capacitance(p: float, vol: float, hose_vol: float, hose_c: float, oil: tuple) -> float:
-    """``_compliance`` with the parameters as ``_oil`` reads them."""
-    beta, air_on, air_n, air_alpha, air_law, air_pcrit, hose_on, e_wall = oil
-    if air_on > 0.0:
-        # Simscape's entrained-air modulus; p absolute, never below 1 kPa.  The air's
-        # softness is kept as 1/modulus (fewer divisions one after the other: air doubled
-        # the cost of a step) and its compression as exp(log): log(pabs) needs no division
-        # first.
-        pabs = max(p + P_ATM, 1e3)
-        n = air_n
-        r = math.exp((LOG_P_ATM - math.log(pabs)) / n)
-        a = air_alpha
-        if air_law > 0.0:
-            c = vol * _dissolving_air(beta, pabs, a, r, n, air_pcrit)
-        else:
-            ar = a * r
-            c = vol * (1.0 + ar * beta / (n * pabs)) / (beta * (1.0 + ar))
-    else:
-        c = vol / beta
-    if hose_on > 0.0:
-        c += hose_vol / e_wall + hose_c
-    return c
-
-
-@jit
-def _dissolving_air(beta: float, pabs: float, a: float, r: float, n: float, pcrit: float) -> float:
-    """Softness 1/modulus (1/Pa) when the free air (fraction a at atmosphere, compressed
-    polytropically: r = (p0/p)^(1/n)) also dissolves, linearly in pressure from atmospheric
-    (all free) to ``pcrit`` (none free).  Gas volume a*theta*r per liquid volume, so
-    d(gas)/dp = a*(theta*r/(n p) + r/(pcrit - p0)) below pcrit; pure liquid above it."""
-    if pabs >= pcrit:
-        return 1.0 / beta
-    span = pcrit - P_ATM
-    theta = _clip((pcrit - pabs) / span, 0.0, 1.0)
-    soft = a * (theta * r / (n * pabs) + r / span)
-    return (1.0 / beta + soft) / (1.0 + a * theta * r)
-
-
-@jit
-def _disp_target(pp: float, disp_cmd: float, comp: tuple) -> float:
-    """Displacement fraction the pump is commanded to: command times compensator destroke
-    (``comp``: ``_compensator``)."""
-    comp_on, comp_start, comp_full = comp
-    destroke = 1.0
-    if comp_on > 0.0:
-        destroke = _clip((comp_full - pp) / (comp_full - comp_start), 0.0, 1.0)
-    return disp_cmd * destroke
 
 
 @jit(inline="always")
@@ -167,72 +113,9 @@ def _pump(prm: np.ndarray) -> tuple:
     return prm[PUMPDYN_ON], prm[DISP_MAX], prm[VISC_ON], prm[LEAK_K]
 
 
-@jit
-def _pump_flow(
-    pp: float, disp_state: float, speed_rps: float, visc_ratio: float, target: float, pump: tuple
-) -> float:
-    """Pump outlet flow QP (m^3/s) at displacement ``target`` (the lagged state
-    ``disp_state`` instead with pump dynamics), less the viscosity-dependent internal
-    leakage (``pump``: ``_pump``)."""
-    pumpdyn_on, disp_max, visc_on, leak_k = pump
-    pp = max(pp, 0.0)
-    # A ringing swashplate overshoots its target but not its stops.
-    disp = _clip(disp_state, 0.0, 1.0) if pumpdyn_on > 0.0 else target
-    qp = disp * disp_max * speed_rps
-    if visc_on > 0.0:
-        qp -= leak_k * pp / visc_ratio  # nu(OilTemp) / nu40, precomputed per sample
-    return qp
-
-
-@jit
-def _leak(k_lin: float, k_sqrt: float, dp: float, dp_lam: float) -> float:
-    """A correction leakage (m^3/s): laminar k_lin*dp plus orifice-like k_sqrt*sqrt(dp)."""
-    q = 0.0
-    if k_lin != 0.0:
-        q += k_lin * dp
-    if k_sqrt != 0.0:
-        q += _orifice(k_sqrt, dp, dp_lam)
-    return q
-
-
-@jit
-def _edge_corrections(q_pa: float, q_bt: float, q_pb: float, q_at: float, rel: tuple):
-    """Metering edge flows scaled by (1 + relative gain change) per edge (``rel``: the
-    changes of P->A, B->T, P->B, A->T)."""
-    pa_rel, bt_rel, pb_rel, at_rel = rel
-    if pa_rel != 0.0:
-        q_pa *= 1.0 + pa_rel
-    if bt_rel != 0.0:
-        q_bt *= 1.0 + bt_rel
-    if pb_rel != 0.0:
-        q_pb *= 1.0 + pb_rel
-    if at_rel != 0.0:
-        q_at *= 1.0 + at_rel
-    return q_pa, q_bt, q_pb, q_at
-
-
-@jit
-def _force_corrections(
-    f_load: float, f_fric: float, x: float, v: float, t: float, terms: tuple
-) -> tuple[float, float]:
-    """Correction forces on the rod (N): position and periodic terms act as load, velocity
-    and sign(velocity) terms as friction (``terms``: ``_force_terms``)."""
-    f_pos, xref, f_cos, f_sin, f_w, f_vel, f_sign, v_eps = terms
-    if f_pos != 0.0:
-        f_load += f_pos * (x - xref)
-    if f_cos != 0.0 or f_sin != 0.0:
-        w = f_w * t
-        f_load += f_cos * math.cos(w) + f_sin * math.sin(w)
-    if f_vel != 0.0:
-        f_fric += f_vel * v
-    if f_sign != 0.0:
-        f_fric += f_sign * math.tanh(v / v_eps)
-    return f_load, f_fric
-
-
 @jit(inline="always")
 def _force_terms(prm: np.ndarray) -> tuple:
-    """The correction forces' coefficients ``_force_corrections`` reads."""
+    """The correction forces' coefficients ``force_corrections`` reads."""
     return (
         prm[F_POS],
         prm[XREF],
@@ -268,18 +151,18 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         xs = spool_cmd
         dy[S_XS] = 0.0
         dy[S_VS] = 0.0
-    xs = _clip(xs, -lim, lim)
+    xs = clip(xs, -lim, lim)
     ov = prm[OVERLAP]
     mag = max(abs(xs) - ov, 0.0) / (1.0 - ov)
     s = mag if xs >= 0.0 else -mag
-    o_pos = _clip(s + ul, 0.0, 1.0)  # P->A and B->T
-    o_neg = _clip(-s + ul, 0.0, 1.0)  # P->B and A->T
+    o_pos = clip(s + ul, 0.0, 1.0)  # P->A and B->T
+    o_neg = clip(-s + ul, 0.0, 1.0)  # P->B and A->T
     kv = prm[KV]
     dpl = prm[DP_LAM]
-    q_pa = _orifice(kv * o_pos, pp - pa, dpl)
-    q_bt = _orifice(kv * o_pos, pb - ptank, dpl)
-    q_pb = _orifice(kv * o_neg, pp - pb, dpl)
-    q_at = _orifice(kv * o_neg, pa - ptank, dpl)
+    q_pa = orifice(kv * o_pos, pp - pa, dpl)
+    q_bt = orifice(kv * o_pos, pb - ptank, dpl)
+    q_pb = orifice(kv * o_neg, pp - pb, dpl)
+    q_at = orifice(kv * o_neg, pa - ptank, dpl)
     q_il = k_il * (pa - pb)
     if prm[VISC_ON] > 0.0 and (prm[PISTON_LEAK] > 0.0 or prm[VALVE_LEAK] > 0.0):
         # Thin oil leaks across the piston seal and the spool's clearances too (laminar).
@@ -292,15 +175,15 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         q_bt += kc * (pb - ptank)
     if prm[CORR_ON] > 0.0:
         rel = (prm[KV_PA_REL], prm[KV_BT_REL], prm[KV_PB_REL], prm[KV_AT_REL])
-        q_pa, q_bt, q_pb, q_at = _edge_corrections(q_pa, q_bt, q_pb, q_at, rel)
-        q_il += _leak(prm[LEAK_AB_LIN], prm[LEAK_AB_SQRT], pa - pb, dpl)
-        q_at += _leak(prm[LEAK_AT_LIN], prm[LEAK_AT_SQRT], pa - ptank, dpl)
+        q_pa, q_bt, q_pb, q_at = edge_corrections(q_pa, q_bt, q_pb, q_at, rel)
+        q_il += leak(prm[LEAK_AB_LIN], prm[LEAK_AB_SQRT], pa - pb, dpl)
+        q_at += leak(prm[LEAK_AT_LIN], prm[LEAK_AT_SQRT], pa - ptank, dpl)
         if prm[LEAK_AT_SQ] != 0.0:
             q_at += prm[LEAK_AT_SQ] * (pa - ptank) * abs(pa - ptank)
-        q_bt += _leak(prm[LEAK_BT_LIN], prm[LEAK_BT_SQRT], pb - ptank, dpl)
+        q_bt += leak(prm[LEAK_BT_LIN], prm[LEAK_BT_SQRT], pb - ptank, dpl)
 
     # Pump: displacement command times the compensator's destroke, optionally lagged.
-    target = _disp_target(pp, disp_cmd, _compensator(prm))
+    target = disp_target(pp, disp_cmd, _compensator(prm))
     dy[S_DISP_RATE] = 0.0
     if prm[PUMPDYN_ON] > 0.0 and prm[PUMP_WN] > 0.0:
         wp, rate = prm[PUMP_WN], y[S_DISP_RATE]
@@ -310,13 +193,13 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         dy[S_DISP] = (target - y[S_DISP]) / prm[TAU_PUMP]
     else:
         dy[S_DISP] = 0.0
-    qp = _pump_flow(y[S_PP], y[S_DISP], speed_rps, vr_in, target, _pump(prm))
+    qp = pump_flow(y[S_PP], y[S_DISP], speed_rps, vr_in, target, _pump(prm))
     visc_ratio = vr_in if prm[VISC_ON] > 0.0 else 1.0
     q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
     if prm[CORR_ON] > 0.0:
-        q_relief += _leak(prm[LEAK_PT_LIN], prm[LEAK_PT_SQRT], pp - ptank, dpl)
+        q_relief += leak(prm[LEAK_PT_LIN], prm[LEAK_PT_SQRT], pp - ptank, dpl)
     oil = _oil(prm)
-    c_line = _capacitance(pp, prm[V_LINE], prm[V_LINE], prm[HOSE_C_LINE], oil)
+    c_line = capacitance(pp, prm[V_LINE], prm[V_LINE], prm[HOSE_C_LINE], oil)
     dy[S_PP] = (qp - q_relief - q_pa - q_pb) / c_line
 
     # Rod: pressure force against gravity (optionally position dependent) and friction.
@@ -333,7 +216,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         decay = math.exp(-r * r) if e == 2.0 else math.exp(-(abs(r) ** e))
         f_fric += (prm[FC] + (prm[FS] - prm[FC]) * decay) * math.tanh(v / prm[V_EPS])
     if prm[CORR_ON] > 0.0:
-        f_grav, f_fric = _force_corrections(f_grav, f_fric, x, v, t_s, _force_terms(prm))
+        f_grav, f_fric = force_corrections(f_grav, f_fric, x, v, t_s, _force_terms(prm))
     drive = f_hyd - f_grav
     stroke = prm[STROKE]
     # End stops: the rod rests on a stop while the net drive presses it there.
@@ -346,8 +229,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
 
     vol_a = prm[V0A] + prm[AA] * x
     vol_b = prm[V0B] + prm[AB] * (stroke - x)
-    c_a = _capacitance(pa, vol_a, prm[V0A], prm[HOSE_C_CYL], oil)
-    c_b = _capacitance(pb, vol_b, prm[V0B], prm[HOSE_C_CYL], oil)
+    c_a = capacitance(pa, vol_a, prm[V0A], prm[HOSE_C_CYL], oil)
+    c_b = capacitance(pb, vol_b, prm[V0B], prm[HOSE_C_CYL], oil)
     dy[S_PA] = (q_pa - q_at - q_il - prm[AA] * v) / c_a
     dy[S_PB] = (q_pb - q_bt + q_il + prm[AB] * v) / c_b
     return qp
@@ -406,8 +289,8 @@ def _record(
     aux: np.ndarray,
 ) -> None:
     # QP alone, not a whole right-hand side (a record every few steps made that 5-12 %).
-    target = _disp_target(max(y[S_PP], 0.0), u[IN_DISP], _compensator(prm))
-    qp = _pump_flow(y[S_PP], y[S_DISP], u[IN_SPEED_RPS], u[IN_VISC_RATIO], target, _pump(prm))
+    target = disp_target(max(y[S_PP], 0.0), u[IN_DISP], _compensator(prm))
+    qp = pump_flow(y[S_PP], y[S_DISP], u[IN_SPEED_RPS], u[IN_VISC_RATIO], target, _pump(prm))
     rec[r, R_PP] = y[S_PP]
     rec[r, R_PA] = y[S_PA]
     rec[r, R_PB] = y[S_PB]
@@ -415,4 +298,4 @@ def _record(
     rec[r, R_X] = y[S_X]
     rec[r, R_V] = y[S_V]
     xs = y[S_XS] if prm[SPOOL_ON] > 0.0 else u[IN_SPOOL]
-    rec[r, R_XS] = _clip(xs, -u[IN_STROKE_LIM], u[IN_STROKE_LIM])
+    rec[r, R_XS] = clip(xs, -u[IN_STROKE_LIM], u[IN_STROKE_LIM])

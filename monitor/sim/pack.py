@@ -11,6 +11,7 @@ from monitor.sim import kernel as K
 from monitor.sim.corrections import pack_corrections
 from monitor.sim.effects import Effect
 from monitor.sim.faults import Fault, fault_inputs
+from monitor.sim.laws import P_ATM
 from monitor.sim.machine import BAR, LPM, MachineParams
 
 #: Smoothing velocity of the friction sign (m/s) unless the effect sets one: well below any
@@ -87,7 +88,7 @@ def _pack_effect(prm: np.ndarray, effect: Effect) -> None:
         prm[K.AIR_N] = p["polytropic_index"]
         if effect.labels.get("law", "free_air") == "dissolving":
             prm[K.AIR_LAW] = 1.0
-            prm[K.AIR_PCRIT] = p["dissolved_at_bar"] * BAR + K.P_ATM
+            prm[K.AIR_PCRIT] = p["dissolved_at_bar"] * BAR + P_ATM
     elif name == "oil_viscosity":
         prm[K.VISC_ON] = 1.0
         prm[K.LEAK_K] = p["pump_leak_lpm_per_100bar"] * LPM / (100 * BAR)

@@ -3,7 +3,7 @@
 
 SI inside (Pa, m^3/s, m, rad, kg, N, s).  Parameters travel as one float64 vector and the
 per-sample inputs as rows (indices below; ``params.py`` and ``simulate.py`` fill them).
-The orifice rule is the reference loop's (``monitor.sim.kernel._orifice``); the rest of a
+The orifice rule is the reference loop's (``monitor.sim.kernel.orifice``); the rest of a
 section (spool openings with the stroke limit and the worn edges' underlap, piston leakage,
 end stops, chamber compressibility) follows the boom loop's formulation in
 ``monitor.sim.kernel.rhs`` with a compensated meter-in edge.
@@ -44,7 +44,7 @@ import numpy as np
 
 from monitor.jit import jit
 from monitor.sim import rk4
-from monitor.sim.kernel import _clip, _orifice
+from monitor.sim.laws import clip, orifice
 
 #: Named for later: an open-centre valve with negative flow control (issue 39).
 NEGATIVE_FLOW_CONTROL = "negative_flow_control"
@@ -134,9 +134,9 @@ def _opening(u: np.ndarray, j: int) -> tuple[float, float, float]:
     """Signed spool s and the P->A/B->T and P->B/A->T openings (boom loop's rule)."""
     b = IN0 + NI * j
     lim = u[b + I_STROKE_LIM]
-    s = _clip(u[b + I_SPOOL], -lim, lim)
+    s = clip(u[b + I_SPOOL], -lim, lim)
     ul = u[b + I_UNDERLAP]
-    return s, _clip(s + ul, 0.0, 1.0), _clip(-s + ul, 0.0, 1.0)
+    return s, clip(s + ul, 0.0, 1.0), clip(-s + ul, 0.0, 1.0)
 
 
 @jit
@@ -150,7 +150,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
     pls = 0.0
     opened = False
     for j in range(N_LOOPS):
-        s = _clip(u[IN0 + NI * j + I_SPOOL], -1.0, 1.0)
+        s = clip(u[IN0 + NI * j + I_SPOOL], -1.0, 1.0)
         if s > 0.0:
             pls = max(pls, y[S0 + NS * j + X_PA])
             opened = True
@@ -177,10 +177,10 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
         # closes the edge when the port is above the compensator's outlet.
         dpa = pp - max(pls, pa)
         dpb = pp - max(pls, pb)
-        q_pa = _orifice(kv * o_pos, dpa, dpl) if dpa > 0.0 else 0.0
-        q_pb = _orifice(kv * o_neg, dpb, dpl) if dpb > 0.0 else 0.0
-        q_bt = _orifice(kv * o_pos, pb - ptank, dpl)
-        q_at = _orifice(kv * o_neg, pa - ptank, dpl)
+        q_pa = orifice(kv * o_pos, dpa, dpl) if dpa > 0.0 else 0.0
+        q_pb = orifice(kv * o_neg, dpb, dpl) if dpb > 0.0 else 0.0
+        q_bt = orifice(kv * o_pos, pb - ptank, dpl)
+        q_at = orifice(kv * o_neg, pa - ptank, dpl)
         q_il = u[IN0 + NI * j + I_LEAK] * (pa - pb)
         aa = prm[p + P_AA]
         ab = prm[p + P_AB]
@@ -212,8 +212,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
         aux[AUX_Q0 + j] = q_pa + q_pb
         q_supply += q_pa + q_pb
     # The LS pump: proportional regulator, pressure cut-off, leakage of a worn pump.
-    disp = _clip((pls + prm[LS_MARGIN] - pp) / prm[LS_BAND], 0.0, 1.0)
-    disp *= _clip((prm[CUT_FULL] - pp) / (prm[CUT_FULL] - prm[CUT_START]), 0.0, 1.0)
+    disp = clip((pls + prm[LS_MARGIN] - pp) / prm[LS_BAND], 0.0, 1.0)
+    disp *= clip((prm[CUT_FULL] - pp) / (prm[CUT_FULL] - prm[CUT_START]), 0.0, 1.0)
     qp = disp * prm[DISP_MAX] * u[IN_SPEED_RPS] - (prm[PUMP_LEAK] + u[IN_PUMP_LEAK]) * pp
     q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
     dy[S_PP] = (qp - q_relief - q_supply) * prm[BETA] / prm[V_LINE]
