@@ -9,7 +9,6 @@ loop) and the runs in which a neighbour's alarm was raised too, by loop.
 
 from __future__ import annotations
 
-import statistics
 from collections.abc import Sequence
 from typing import Any
 
@@ -21,20 +20,22 @@ from monitor.evaluation.machine_plan import (
     fault_runs,
     normal_runs,
 )
-from monitor.evaluation.report import TABLE1_MIN_SEVERITY, _fa, _false_alarms, _pct, _sec
+from monitor.evaluation.report import (
+    TABLE1_MIN_SEVERITY,
+    _fa,
+    _false_alarms,
+    _pct,
+    _sec,
+    detection_cell,
+)
 
 
 def fault_cell(runs: Sequence[dict[str, Any]], loops: Sequence[str]) -> dict[str, Any]:
     """Detection, delay, the loop named and neighbours' alarms over ``runs``."""
     detected = [r for r in runs if r["detected"]]
-    delays = [r["delay_s"] for r in detected]
     right = sum(r["right_loop"] for r in detected)
     return {
-        "runs": len(runs),
-        "detected": len(detected),
-        "detection_rate": len(detected) / len(runs) if runs else None,
-        "median_delay_s": statistics.median(delays) if delays else None,
-        "max_delay_s": max(delays) if delays else None,
+        **detection_cell(runs),
         "named_right": right,
         "right_loop_rate": right / len(detected) if detected else None,
         "named": {n: sum(r["named"] == n for r in runs) for n in (*loops, "none")},
