@@ -81,3 +81,17 @@ def write_result(args: argparse.Namespace, result: dict[str, Any], text: str) ->
             print(text)
     except OSError as exc:
         raise ConfigError(f"cannot write output: {exc.strerror or exc} ({exc.filename})") from None
+
+
+def plan_flags(plan: Any, all_faults: tuple[str, ...]) -> list[str]:
+    """A rerun command's options for the run plan (``EvalConfig``,
+    ``machine_plan.MachinePlan``): runs, severities, onsets, the faults when not
+    ``all_faults``, normal hours and the run's timing."""
+    return [
+        f"--runs {plan.runs}",
+        f"--severities {','.join(f'{s:g}' for s in plan.severities)}",
+        f"--onsets {','.join(plan.onsets)}",
+        *([f"--faults {','.join(plan.faults)}"] if plan.faults != all_faults else []),
+        f"--normal-hours {plan.normal_hours:g}",
+        f"--duration {plan.duration_s:g} --onset {plan.onset_s:g} --ramp {plan.ramp_s:g}",
+    ]

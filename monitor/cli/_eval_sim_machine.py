@@ -8,7 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from monitor.cli._eval_sim_args import write_result
+from monitor.cli._eval_sim_args import plan_flags, write_result
 from monitor.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -87,15 +87,7 @@ def rerun_command(args: argparse.Namespace, plan: MachinePlan) -> str:
     """The explicit command that reproduces this evaluation (no --quick shorthand)."""
     from monitor.evaluation.machine_plan import MACHINE_FAULTS
 
-    parts = [
-        f"monitor eval-sim --machine {args.machine}",
-        f"--runs {plan.runs}",
-        f"--severities {','.join(f'{s:g}' for s in plan.severities)}",
-        f"--onsets {','.join(plan.onsets)}",
-        *([f"--faults {','.join(plan.faults)}"] if plan.faults != MACHINE_FAULTS else []),
-        f"--normal-hours {plan.normal_hours:g}",
-        f"--duration {plan.duration_s:g} --onset {plan.onset_s:g} --ramp {plan.ramp_s:g}",
-    ]
+    parts = [f"monitor eval-sim --machine {args.machine}", *plan_flags(plan, MACHINE_FAULTS)]
     if args.config:
         parts.append(f"--config {args.config}")
     if plan.seed_set:

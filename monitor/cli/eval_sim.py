@@ -14,6 +14,7 @@ from monitor.cli._eval_sim_args import (
     fault_names,
     floats,
     names,
+    plan_flags,
     seeds,
     write_result,
 )
@@ -273,14 +274,7 @@ def _rerun(
         parts.append(f"--train-duration {args.train_duration:g}")
         if args.isolation_runs != ISOLATION_RUNS:
             parts.append(f"--isolation-runs {args.isolation_runs}")
-    parts += [
-        f"--runs {cfg.runs}",
-        f"--severities {','.join(f'{s:g}' for s in cfg.severities)}",
-        f"--onsets {','.join(cfg.onsets)}",
-        *([f"--faults {','.join(cfg.faults)}"] if cfg.faults != FAULT_NAMES else []),
-        f"--normal-hours {cfg.normal_hours:g}",
-        f"--duration {cfg.duration_s:g} --onset {cfg.onset_s:g} --ramp {cfg.ramp_s:g}",
-    ]
+    parts += plan_flags(cfg, FAULT_NAMES)
     if args.horizon:
         parts.append(f"--horizon {args.horizon}")
     if args.config:
