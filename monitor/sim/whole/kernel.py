@@ -92,56 +92,89 @@ AUX_Q0 = 2  # + loop: the section's supply flow (P->A plus P->B)
 N_AUX = AUX_Q0 + N_LOOPS
 
 
+# The helpers below take scalars and tuples of parameters, never the state, input or
+# parameter arrays: numba's inliner wraps every array argument in an atomic reference count
+# increment and decrement (the boom loop's kernel, monitor/sim/kernel.py, says more).
+
+
 @jit(inline="always")
-def chain_forces(y: np.ndarray, u: np.ndarray, prm: np.ndarray) -> tuple[float, float, float]:
+def _chain(prm: np.ndarray) -> tuple:
+    """The chain's parameters as ``chain_forces`` takes them."""
+    return (
+        prm[A1], prm[A2], prm[A3], prm[R1], prm[R2], prm[R3], prm[L1], prm[L2], prm[L3],
+        prm[M1], prm[M2], prm[M3], prm[GRAV], prm[V_EPS_DIG],
+    )  # fmt: skip
+
+
+@jit
+def chain_forces(
+    x1: float, x2: float, x3: float, v2: float, v3: float, payload: float, dig: float, ch: tuple
+) -> tuple[float, float, float]:
     """Gravity and digging forces on the boom, stick and bucket cylinders (N, positive
-    against extension) from the pose: potential energy V(x), force dV/dx = (dtheta/dx)
-    dV/dtheta with a constant moment arm per cylinder (dtheta/dx = +-1/R)."""
-    a1 = prm[A1] + y[S0 + X_X] / prm[R1]
-    a2 = a1 + prm[A2] - y[S0 + NS + X_X] / prm[R2]  # extending the stick curls it in
-    a3 = a2 + prm[A3] - y[S0 + 2 * NS + X_X] / prm[R3]  # extending the bucket curls it
+    against extension) from the rods' positions ``x1..x3`` (m) and the stick's and bucket's
+    speeds (m/s): potential energy V(x), force dV/dx = (dtheta/dx) dV/dtheta with a
+    constant moment arm per cylinder (dtheta/dx = +-1/R).  ``ch``: ``_chain``."""
+    pa1, pa2, pa3, r1, r2, r3, l1, l2, l3, m1, m2, m3, g, ve = ch
+    a1 = pa1 + x1 / r1
+    a2 = a1 + pa2 - x2 / r2  # extending the stick curls it in
+    a3 = a2 + pa3 - x3 / r3  # extending the bucket curls it
     c1, c2, c3 = math.cos(a1), math.cos(a2), math.cos(a3)
-    p1x = prm[L1] * c1
-    p1y = prm[L1] * math.sin(a1)
-    p2x = p1x + prm[L2] * c2
-    p2y = p1y + prm[L2] * math.sin(a2)
-    g1 = 0.5 * prm[L1] * c1
-    g2 = p1x + 0.5 * prm[L2] * c2
-    g3 = p2x + 0.5 * prm[L3] * c3
-    m3 = prm[M3] + u[IN_PAYLOAD_KG]
-    g = prm[GRAV]
-    t1 = g * (prm[M1] * g1 + prm[M2] * g2 + m3 * g3)
-    t2 = g * (prm[M2] * (g2 - p1x) + m3 * (g3 - p1x))
+    p1x = l1 * c1
+    p1y = l1 * math.sin(a1)
+    p2x = p1x + l2 * c2
+    p2y = p1y + l2 * math.sin(a2)
+    g1 = 0.5 * l1 * c1
+    g2 = p1x + 0.5 * l2 * c2
+    g3 = p2x + 0.5 * l3 * c3
+    m3 = m3 + payload
+    t1 = g * (m1 * g1 + m2 * g2 + m3 * g3)
+    t2 = g * (m2 * (g2 - p1x) + m3 * (g3 - p1x))
     t3 = g * m3 * (g3 - p2x)
-    f0 = t1 / prm[R1]
-    f1 = -t2 / prm[R2]
-    f2 = -t3 / prm[R3]
+    f0 = t1 / r1
+    f1 = -t2 / r2
+    f2 = -t3 / r3
     # Digging: a tip force against the curl, resisting stick and bucket while they move
     # (like friction: soil does not push a standing bucket back).
-    dig = u[IN_DIG_N]
     if dig != 0.0:
-        tipx = p2x + prm[L3] * c3
-        tipy = p2y + prm[L3] * math.sin(a3)
-        r2 = math.sqrt((tipx - p1x) ** 2 + (tipy - p1y) ** 2)
-        ve = prm[V_EPS_DIG]
-        f1 += dig * r2 / prm[R2] * math.tanh(y[S0 + NS + X_V] / ve)
-        f2 += dig * prm[L3] / prm[R3] * math.tanh(y[S0 + 2 * NS + X_V] / ve)
+        tipx = p2x + l3 * c3
+        tipy = p2y + l3 * math.sin(a3)
+        rr = math.sqrt((tipx - p1x) ** 2 + (tipy - p1y) ** 2)
+        f1 += dig * rr / r2 * math.tanh(v2 / ve)
+        f2 += dig * l3 / r3 * math.tanh(v3 / ve)
     return f0, f1, f2
 
 
+@jit
+def pose_forces(y: np.ndarray, u: np.ndarray, prm: np.ndarray) -> tuple[float, float, float]:
+    """``chain_forces`` at state ``y`` and input row ``u`` (for the rest state, not the step)."""
+    return chain_forces(
+        y[S0 + X_X], y[S0 + NS + X_X], y[S0 + 2 * NS + X_X], y[S0 + NS + X_V],
+        y[S0 + 2 * NS + X_V], u[IN_PAYLOAD_KG], u[IN_DIG_N], _chain(prm),
+    )  # fmt: skip
+
+
 @jit(inline="always")
-def _opening(u: np.ndarray, j: int) -> tuple[float, float, float]:
+def _opening(spool: float, lim: float, ul: float) -> tuple[float, float, float]:
     """Signed spool s and the P->A/B->T and P->B/A->T openings (boom loop's rule)."""
-    b = IN0 + NI * j
-    lim = u[b + I_STROKE_LIM]
-    s = clip(u[b + I_SPOOL], -lim, lim)
-    ul = u[b + I_UNDERLAP]
+    s = clip(spool, -lim, lim)
     return s, clip(s + ul, 0.0, 1.0), clip(-s + ul, 0.0, 1.0)
+
+
+@jit(inline="always")
+def _loop_inputs(u: np.ndarray, k: int) -> tuple[float, float, float, float]:
+    """Input ``k`` (``I_SPOOL`` ...) of the four loops."""
+    return u[IN0 + k], u[IN0 + NI + k], u[IN0 + 2 * NI + k], u[IN0 + 3 * NI + k]
 
 
 @jit
 def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.ndarray) -> None:
     """Write dy/dt into ``dy`` and the pump flow, PLS and section flows into ``aux``."""
+    # The inputs read at once, before any branch (see the helpers' note above).
+    spools, lims = _loop_inputs(u, I_SPOOL), _loop_inputs(u, I_STROKE_LIM)
+    underlaps, leaks = _loop_inputs(u, I_UNDERLAP), _loop_inputs(u, I_LEAK)
+    speed_rps, dig, payload, pump_leak = (
+        u[IN_SPEED_RPS], u[IN_DIG_N], u[IN_PAYLOAD_KG], u[IN_PUMP_LEAK]
+    )
     pp = max(y[S_PP], 0.0)
     ptank = prm[PTANK]
     dpl = prm[DP_LAM]
@@ -150,7 +183,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
     pls = 0.0
     opened = False
     for j in range(N_LOOPS):
-        s = clip(u[IN0 + NI * j + I_SPOOL], -1.0, 1.0)
+        s = clip(spools[j], -1.0, 1.0)
         if s > 0.0:
             pls = max(pls, y[S0 + NS * j + X_PA])
             opened = True
@@ -162,7 +195,10 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
     else:
         pls = max(y[S_LS], ptank)
         dy[S_LS] = -prm[LS_BLEED] * (pls - ptank) * prm[BETA] / prm[V_LS]
-    fg = chain_forces(y, u, prm)
+    fg = chain_forces(
+        y[S0 + X_X], y[S0 + NS + X_X], y[S0 + 2 * NS + X_X], y[S0 + NS + X_V],
+        y[S0 + 2 * NS + X_V], payload, dig, _chain(prm),
+    )  # fmt: skip
     q_supply = 0.0
     for j in range(N_LOOPS):
         b = S0 + NS * j
@@ -171,7 +207,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
         pb = max(y[b + X_PB], 0.0)
         x = y[b + X_X]
         v = y[b + X_V]
-        s, o_pos, o_neg = _opening(u, j)
+        s, o_pos, o_neg = _opening(spools[j], lims[j], underlaps[j])
         kv = prm[p + P_KV]
         # Compensated meter-in: the drop is PP - max(PLS, port); the load-holding check
         # closes the edge when the port is above the compensator's outlet.
@@ -181,7 +217,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
         q_pb = orifice(kv * o_neg, dpb, dpl) if dpb > 0.0 else 0.0
         q_bt = orifice(kv * o_pos, pb - ptank, dpl)
         q_at = orifice(kv * o_neg, pa - ptank, dpl)
-        q_il = u[IN0 + NI * j + I_LEAK] * (pa - pb)
+        q_il = leaks[j] * (pa - pb)
         aa = prm[p + P_AA]
         ab = prm[p + P_AB]
         if j == SWING:
@@ -214,7 +250,7 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
     # The LS pump: proportional regulator, pressure cut-off, leakage of a worn pump.
     disp = clip((pls + prm[LS_MARGIN] - pp) / prm[LS_BAND], 0.0, 1.0)
     disp *= clip((prm[CUT_FULL] - pp) / (prm[CUT_FULL] - prm[CUT_START]), 0.0, 1.0)
-    qp = disp * prm[DISP_MAX] * u[IN_SPEED_RPS] - (prm[PUMP_LEAK] + u[IN_PUMP_LEAK]) * pp
+    qp = disp * prm[DISP_MAX] * speed_rps - (prm[PUMP_LEAK] + pump_leak) * pp
     q_relief = prm[RELIEF_GAIN] * max(pp - prm[RELIEF_CRACK], 0.0)
     dy[S_PP] = (qp - q_relief - q_supply) * prm[BETA] / prm[V_LINE]
     aux[AUX_QP] = qp

@@ -69,7 +69,7 @@ def rest_state(
     for j, loop in enumerate(CYLINDERS):
         frac = (fractions or {}).get(loop, START_FRACTION)
         y[K.S0 + K.NS * j + K.X_X] = frac * machine.stroke_m(loop)
-    forces = K.chain_forces(y, u0, prm)
+    forces = K.pose_forces(y, u0, prm)
     low = 2 * BAR
     for j, loop in enumerate(CYLINDERS):
         b = K.S0 + K.NS * j
