@@ -172,9 +172,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray, aux: np.n
     # The inputs read at once, before any branch (see the helpers' note above).
     spools, lims = _loop_inputs(u, I_SPOOL), _loop_inputs(u, I_STROKE_LIM)
     underlaps, leaks = _loop_inputs(u, I_UNDERLAP), _loop_inputs(u, I_LEAK)
-    speed_rps, dig, payload, pump_leak = (
-        u[IN_SPEED_RPS], u[IN_DIG_N], u[IN_PAYLOAD_KG], u[IN_PUMP_LEAK]
-    )
+    speed_rps, dig = u[IN_SPEED_RPS], u[IN_DIG_N]
+    payload, pump_leak = u[IN_PAYLOAD_KG], u[IN_PUMP_LEAK]
     pp = max(y[S_PP], 0.0)
     ptank = prm[PTANK]
     dpl = prm[DP_LAM]
