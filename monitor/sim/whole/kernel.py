@@ -3,7 +3,7 @@
 
 SI inside (Pa, m^3/s, m, rad, kg, N, s).  Parameters travel as one float64 vector and the
 per-sample inputs as rows (indices below; ``params.py`` and ``simulate.py`` fill them).
-The orifice rule is the reference loop's (``monitor.sim.kernel.orifice``); the rest of a
+The orifice rule is the reference loop's (``monitor.sim.laws.orifice``); the rest of a
 section (spool openings with the stroke limit and the worn edges' underlap, piston leakage,
 end stops, chamber compressibility) follows the boom loop's formulation in
 ``monitor.sim.kernel.rhs`` with a compensated meter-in edge.
