@@ -127,13 +127,16 @@ class Session:
         self.procs.append(proc)
         return proc
 
-    def caught_up(self, cap: Capture) -> bool:
-        return _caught_up(cap)
+    def caught_up(self, cap: Capture, since: float) -> bool:
+        return _caught_up(cap, since)
 
 
-def _caught_up(cap: Capture) -> bool:
-    """Two heartbeats with the same counters: the daemon's queue is drained."""
-    last = [s for _, s in decode(cap.snapshot(), "MON_Status")][-2:]
+def _caught_up(cap: Capture, since: float) -> bool:
+    """Two heartbeats sent after ``since`` (wall clock, the end of the traffic waited for)
+    with the same counters: the daemon's queue is drained.  Heartbeats from before would
+    pass at once: traffic shorter than the 1 s heartbeat left the last two unchanged."""
+    beats = decode(cap.snapshot(), "MON_Status")
+    last = [s for t, s in beats if t >= since][-2:]
     return len(last) == 2 and all(last[0][k] == last[1][k] for k in ("RxFrames", "RejectedFrames"))
 
 
@@ -176,7 +179,8 @@ def _hostile(s: Session, cap: Capture) -> None:
     )
     s.wall["flood_rate"] = N_FLOOD / (time.monotonic() - t)
     s.phases(f"cangen flood of {N_FLOOD} frames ({s.wall['flood_rate']:.0f} frames/s)")
-    wait_until(lambda: s.caught_up(cap), 600.0)
+    sent = time.time()
+    wait_until(lambda: s.caught_up(cap, sent), 600.0)
     s.phases("daemon 2 caught up with the flood")
 
 
@@ -251,7 +255,8 @@ def session(tmp_path_factory, model) -> Session:
         s.wall["restart"] = time.time()
         s.phases("daemon 2 start")
         player.wait(_replay_wall_s(span))
-        wait_until(lambda: s.caught_up(cap), 600.0)
+        replayed = time.time()
+        wait_until(lambda: s.caught_up(cap, replayed), 600.0)
         s.wall["hostile"] = time.time()
         s.status_before_hostile = decode(cap.snapshot(), "MON_Status")[-1][1]
         s.phases("rest of the fault segment")
@@ -467,7 +472,8 @@ def recovery(tmp_path_factory, model) -> dict[str, Any]:
         player = subprocess.Popen(["canplayer", "-I", str(tmp / "before.log")])
         procs.append(player)
         assert player.wait(_replay_wall_s(split - first)) == 0
-        wait_until(lambda: _caught_up(cap), 600.0)
+        replayed = time.time()
+        wait_until(lambda: _caught_up(cap, replayed), 600.0)
         cap.kill()
         phases("fault log until the split")
         r["wall"]["down"] = time.time()
