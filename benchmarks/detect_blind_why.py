@@ -1,0 +1,142 @@
+"""Where J rose on the outsider's plant: for every normal log of a scored detect_blind seed
+that alarmed, the J window at its peak split by output and spool regime.
+
+    python -m benchmarks.detect_blind_why --work W/s3 [--type pm15] [--md why.md]
+
+Reads what `python -m benchmarks.detect_blind.score` left in ``--work`` (``data/key.json``,
+the models and the summaries) and runs the logs again through the monitor's own detector,
+so the split is of the J that alarmed.  J(k) is the mean of e^2 over the last N + 1 judged
+samples (eq. 9, averaged over outputs); a sample's e^2 of one output is put to that output
+and to the sample's regime (``hold`` within +-5 % of lever, ``raise`` above, ``lower``
+below), and each share is its sum over the window / the window's sum.  With each log its
+payload, operator style and oil temperatures from the key: what the commissioning run did
+not show.  Lives apart from benchmarks/detect_blind (written without our code), because it
+reads the monitor's internals.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REGIMES = ("hold", "raise", "lower")
+
+
+def regime_of(spool_pct: np.ndarray, hold_pct: float) -> np.ndarray:
+    """0 hold, 1 raise, 2 lower per sample (the order of ``REGIMES``)."""
+    s = np.asarray(spool_pct, dtype=np.float64)
+    return np.where(s > hold_pct, 1, np.where(s < -hold_pct, 2, 0))
+
+
+def window_shares(
+    e: np.ndarray, spool_pct: np.ndarray, end: int, window_n: int, hold_pct: float = 5.0
+) -> np.ndarray:
+    """(regimes, outputs) shares of J's window ending at sample ``end``: the N + 1 last
+    judged samples (rows of ``e`` without NaN) up to it, as eq. 9 sums them.  The shares add
+    up to 1 (all 0 when the window holds no residual)."""
+    e = np.asarray(e, dtype=np.float64)
+    judged = np.flatnonzero(np.isfinite(e[: end + 1]).all(axis=1))[-(window_n + 1) :]
+    sq = e[judged] ** 2
+    reg = regime_of(np.asarray(spool_pct)[judged], hold_pct)
+    out = np.zeros((len(REGIMES), e.shape[1]))
+    for r in range(len(REGIMES)):
+        out[r] = sq[reg == r].sum(axis=0)
+    total = out.sum()
+    return out / total if total > 0 else out
+
+
+def _peak(work: Path, entry: dict) -> dict | None:
+    """The log's peak J / threshold, its time and the window's shares; None when it never
+    judged a full window."""
+    from monitor.config.settings import load_config
+    from monitor.detection.offline import detect
+    from monitor.io.csvio import read_csv
+    from monitor.model.bias import HOLD_PCT
+    from monitor.model.modelfile import load_model
+    from monitor.model.residual import J, leave_out_stops
+
+    machine_dir = "/".join(entry["path"].split("/")[:3])
+    model = load_model(work / "models" / (machine_dir.replace("/", "_") + ".npz"))
+    rec = read_csv(work / "data" / entry["path"])
+    cfg = load_config()
+    det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+    if det.level is None or not np.isfinite(det.level).any():
+        return None
+    k = int(np.nanargmax(det.level))
+    j = J.get(model)
+    e = leave_out_stops(det.residual, rec) if j.stops else det.residual
+    shares = window_shares(e, rec["SpoolCmd"], k, j.window_n, HOLD_PCT)
+    return {
+        "level": float(det.level[k]),
+        "t_s": float(rec.t[k] - rec.t[0]),
+        "shares": shares,
+        "outputs": model.spec.outputs,
+    }
+
+
+def rows(work: Path, tname: str | None) -> list[dict]:
+    key = json.loads((work / "data" / "key.json").read_text())
+    out = []
+    for entry in key["files"]:
+        if entry["kind"] != "normal" or (tname and f"/{tname}/" not in f"/{entry['path']}"):
+            continue
+        summary = (work / "detect" / entry["path"]).with_suffix(".summary.json")
+        if not summary.exists() or not json.loads(summary.read_text()).get("alarm"):
+            continue
+        peak = _peak(work, entry)
+        if peak is not None:
+            out.append({**entry, **peak})
+    return out
+
+
+def table(found: list[dict]) -> str:
+    lines = [
+        "| log | payload | style | oil degC | peak J / eps0 at s | largest shares "
+        "| hold / raise / lower |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in found:
+        sh, names = r["shares"], r["outputs"]
+        cells = sorted(
+            (
+                (sh[g, o], f"{names[o]} {REGIMES[g]}")
+                for g in range(sh.shape[0])
+                for o in range(sh.shape[1])
+            ),
+            reverse=True,
+        )[:3]
+        by_regime = " / ".join(f"{v:.0%}" for v in sh.sum(axis=1))
+        lines.append(
+            f"| {r['path']} | {r['payload']:.2f} | {r['style']} | "
+            f"{r['temp_start_c']:.0f}-{r['temp_end_c']:.0f} | {r['level']:.2f} at {r['t_s']:.0f} | "
+            + ", ".join(f"{name} {v:.0%}" for v, name in cells)
+            + f" | {by_regime} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.detect_blind_why", description=__doc__.split("\n\n")[0]
+    )
+    ap.add_argument("--work", type=Path, required=True, help="a scored seed's --work folder")
+    ap.add_argument("--type", dest="tname", help="pm05 or pm15 (default: both)")
+    ap.add_argument("--md", type=Path, help="write the table here (default: stdout)")
+    args = ap.parse_args(argv)
+    if not (args.work / "data" / "key.json").exists():
+        print(f"error: {args.work}: no data/key.json (score this seed first)", file=sys.stderr)
+        return 2
+    text = table(rows(args.work, args.tname))
+    if args.md:
+        args.md.write_text(text)
+    else:
+        print(text, end="")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
