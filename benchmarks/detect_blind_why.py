@@ -130,7 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.work / "data" / "key.json").exists():
         print(f"error: {args.work}: no data/key.json (score this seed first)", file=sys.stderr)
         return 2
-    text = table(rows(args.work, args.tname))
+    found = rows(args.work, args.tname)
+    what = f" of type {args.tname}" if args.tname else ""
+    text = table(found) if found else f"no normal log{what} in {args.work} alarmed\n"
     if args.md:
         args.md.write_text(text)
     else:

@@ -38,3 +38,17 @@ def test_unscored_folder_is_one_line(tmp_path, capsys) -> None:
     assert main(["--work", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "data/key.json" in err
+
+
+def test_no_alarm_is_said(tmp_path, capsys) -> None:
+    """A scored seed whose normal logs were all quiet: one line saying so, exit 0."""
+    import json
+
+    entry = {"path": "types/pm05/pm05_m0/normal/n000.csv", "kind": "normal"}
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "key.json").write_text(json.dumps({"files": [entry]}))
+    summary = tmp_path / "detect" / "types/pm05/pm05_m0/normal/n000.summary.json"
+    summary.parent.mkdir(parents=True)
+    summary.write_text(json.dumps({"alarm": False}))
+    assert main(["--work", str(tmp_path)]) == 0
+    assert capsys.readouterr().out == f"no normal log in {tmp_path} alarmed\n"
