@@ -16,6 +16,7 @@ from threadpoolctl import threadpool_limits
 
 from monitor.gap.diagnose import fitting as F
 from monitor.gap.diagnose import identify
+from monitor.gap.diagnose import timing as T
 from monitor.gap.diagnose import verdict as V
 from monitor.gap.diagnose.records import (
     Diagnosis,
@@ -79,11 +80,13 @@ def _diagnose(
     laps.lap("pairs")
     judged = V.judge(cal, refined, paired, say)
     judged = V.check_timing(cal, refined, paired, judged, say)
+    judged = T.check_split(cal, refined, paired, judged, say)
     judged = V.check_friction(parts, cal, refined, paired, judged, say)
     judged = V.check_cause(parts, cal, refined, paired, judged, say)
     if judged.cause is not None:
         laps.lap("cause")
     finding = V.suggest_next(parts, cal, refined, paired, judged, say)
+    finding = T.check_shared(finding, say)
     if judged.decision.verdict in ("unexplained", V.sensorcal.NAME):
         laps.lap("suggest")
     pairs_apart = identify.measure(cal, refined)

@@ -150,6 +150,9 @@ class Finding:
     #: The rod's friction read from its force balance (``verdict.check_friction``): the
     #: JSON's ``friction_check``.
     friction_check: dict | None = None
+    #: Which readings are late, the delay the others share, and what that decided
+    #: (``diagnose/timing.py``): the JSON's ``timing``.
+    timing: dict | None = None
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,9 @@ class Judged:
     #: The rod's friction read from its force balance (``judge/friction.py``): the JSON's
     #: ``friction_check`` (None: not read, the simulator within the noise).
     friction: dict | None = None
+    #: Which readings are late and what the others share (``diagnose/timing.py``): the
+    #: JSON's ``timing`` (None: not measured).
+    split: dict | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -258,6 +261,7 @@ def suggest_next(
         cause_check=None if chk is None else chk.as_dict(),
         timing_check=judged.timing,
         friction_check=judged.friction,
+        timing=judged.split,
     )
 
 

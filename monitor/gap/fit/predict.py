@@ -204,10 +204,15 @@ def sense(
     """Noise-free sensor readings on the recording's grid (NaN outside the segments)."""
     delay_s = tau_s = 0.0
     gain, offset, cal_signal = 1.0, 0.0, None
+    lagged = ("PP", "PA", "PB", "QP")
     for e in effects:
         if e.name == "sensor_lag":
             delay_s = e.params["delay_ms"] * 1e-3
             tau_s = e.params["time_constant_ms"] * 1e-3
+            # The catalogue's lag reads all four late; a lag the timing check found on some
+            # readings only names them (``judge/delays.split``): "PA" or "PA,QP".
+            if e.labels.get("signal"):
+                lagged = tuple(e.labels["signal"].split(","))
         elif e.name == "sensor_calibration":
             gain, offset, cal_signal = e.params["gain"], e.params["offset"], e.labels["signal"]
     out = {n: np.full(len(prep), np.nan) for n in compared(prep)}
@@ -224,7 +229,8 @@ def sense(
             ("PB", tr.pb_pa, BAR),
             ("QP", tr.qp_m3_s, LPM),
         ):
-            out[name][rows] = lag(rel, values, delay_s, tau_s)[idx] / unit
+            late = name in lagged
+            out[name][rows] = lag(rel, values, delay_s * late, tau_s * late)[idx] / unit
             if name == cal_signal:
                 # The contract's pressure and flow sensors clip at zero (a negative offset
                 # reads 0 at rest, not the offset), unless the recording shows it reading below.

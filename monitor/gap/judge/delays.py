@@ -14,6 +14,7 @@ timing.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -29,6 +30,19 @@ MIN_CORRELATION = 0.3
 #: A delay the rod does not share by this much is the readings' (ms: one sample).
 APART_MS = 10.0
 PRESSURES = ("PP", "PA", "PB")
+#: The readings a sensor's dynamics can delay (RodPos is read by its own sensor and is not
+#: lagged: ``predict.sense``).
+READINGS = ("PP", "PA", "PB", "QP")
+#: A delay every reading shares, the rod included, up to this is the recording's
+#: acquisition (its clock against the commands, transducer electronics, the bus), not a
+#: fault of the machine: the third plant's healthy machines read 8-20 ms behind the
+#: calibrated simulator on every signal; its slow spools (3-8 Hz) 36-50 ms.
+SHARED_MAX_MS = 25.0
+#: Below this a shared delay is within one sample's jitter: nothing to note.
+SHARED_MIN_MS = 5.0
+#: Readings late together that a compliance of the cylinder lines (air, hoses) makes late
+#: too: their delay alone does not tell a sensor from the oil.
+CHAMBERS = frozenset({"PA", "PB"})
 
 
 def _xcorr(meas: np.ndarray, sim: np.ndarray, segments: Sequence[Segment], k: int) -> np.ndarray:
@@ -88,3 +102,55 @@ def machine_late(delays: dict[str, float | None]) -> bool | None:
     if p is None or rod is None:
         return None
     return p >= APART_MS and p - rod < APART_MS
+
+
+@dataclass(frozen=True)
+class Split:
+    """Which readings are later than the rest (a sensor's lag), and the delay the rest share.
+
+    The reference is the rod (RodPos, not lagged by a pressure or flow sensor) when it has a
+    timing, else the median of the readings: a reading later than it by ``APART_MS`` is
+    ``late``; what the others (the rod included) share is ``shared_ms``."""
+
+    reference: str  # "rod" or "readings"
+    reference_ms: float
+    late: tuple[str, ...]
+    shared_ms: float | None
+
+    @property
+    def some_late(self) -> bool:
+        """Some readings are late and some are not: a sensor's lag the others do not share
+        (unless the late ones are the cylinder chambers, which a compliance delays too)."""
+        return bool(self.late) and len(self.late) < len(READINGS) and set(self.late) != CHAMBERS
+
+    @property
+    def shared(self) -> bool:
+        """Every reading shares one delay (none stands out) of ``SHARED_MIN_MS`` to
+        ``SHARED_MAX_MS``: the recording's timing, not the machine's physics."""
+        return (
+            not self.late
+            and self.shared_ms is not None
+            and SHARED_MIN_MS <= self.shared_ms <= SHARED_MAX_MS
+        )
+
+    def as_dict(self) -> dict:
+        return {
+            "reference": self.reference,
+            "reference_ms": round(self.reference_ms, 1),
+            "late_signals": list(self.late),
+            "shared_ms": None if self.shared_ms is None else round(self.shared_ms, 1),
+        }
+
+
+def split(delays: dict[str, float | None]) -> Split | None:
+    """The readings later than the rod (or than the readings' median, without a rod), and
+    the delay the others share; None when fewer than two readings have a timing."""
+    timed = {s: d for s in READINGS if (d := delays.get(s)) is not None}
+    if len(timed) < 2:
+        return None
+    rod = delays.get("RodVel")
+    median = float(np.median(list(timed.values())))
+    ref, by = (rod, "rod") if rod is not None else (median, "readings")
+    late = tuple(s for s, d in timed.items() if d - ref >= APART_MS)
+    rest = [d for s, d in timed.items() if s not in late] + ([rod] if rod is not None else [])
+    return Split(by, float(ref), late, float(np.median(rest)) if rest else None)

@@ -116,7 +116,7 @@ def describe(report: dict) -> dict | None:
     name, where = m.name, m.where
     if verdict == "oil_viscosity" and report.get("cause_check"):
         name = report["cause_check"]["mechanism"]
-    if verdict == "sensor_calibration":
+    if verdict in ("sensor_calibration", "sensor_lag"):
         sig = _sensor_signal(report)
         name = f"sensor reading on {sig}" if sig else name
     decided, separated = _decided_by(report, verdict)
@@ -203,7 +203,11 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
 
 
 def _sensor_signal(report: dict) -> str | None:
-    keys = (report.get("params") or {}).get("sensor_calibration") or {}
+    params = report.get("params") or {}
+    lagged = (params.get("sensor_lag") or {}).get("signals")
+    if lagged:
+        return ", ".join(lagged)
+    keys = params.get("sensor_calibration") or {}
     return next((k.split("_")[0] for k in keys), None)
 
 
@@ -239,6 +243,10 @@ def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
         # The rod's force balance: Coulomb friction beside viscous friction held in its band.
         # Separated (viscous friction held in its band or free): no other recording needed.
         return fc["evidence"], bool(fc.get("separated"))
+    tm = report.get("timing") or {}
+    if (tm.get("sensor_lag_on_late") or {}).get("named"):
+        # Some readings late, the rod and the others on time: a sensor's dynamics.
+        return tm["decided_by"], True
     tc = report.get("timing_check")
     if tc is not None:
         # The rod's timing decided between a sensor's lag and the machine's.

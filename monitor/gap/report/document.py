@@ -8,6 +8,7 @@ JSON keys (issue 6, other tools read them): ``verdict``, ``also``, ``params``,
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -48,6 +49,12 @@ def effect_params(effect: Effect, fitted: set[str] | None = None) -> dict[str, d
         }
         out[effect.name] = {k: round(float(v), 6) for k, (v, _) in keys.items()}
         return out
+    if effect.name == "sensor_lag" and effect.labels.get("signal"):
+        # A lag on some readings only (``diagnose/timing.py``): which, beside the values.
+        lagged = {k: round(float(v), 6) for k, v in effect.params.items()}
+        late = {"signals": effect.labels["signal"].split(","), **lagged}
+        # The delay is the late readings' measured one; the time constant is not fitted.
+        return {**effect_params(replace(effect, labels={}), {"delay_ms"}), "sensor_lag": late}
     if fitted is None:
         fitted = {k.name for k in default_member(effect.name).knobs}
     if effect.name == "cylinder_friction":
@@ -165,6 +172,7 @@ def _checks(diag: Diagnosis) -> dict:
         **({"cause_check": f.cause_check} if f.cause_check is not None else {}),
         **({"timing_check": f.timing_check} if f.timing_check is not None else {}),
         **({"friction_check": f.friction_check} if f.friction_check is not None else {}),
+        **({"timing": f.timing} if f.timing is not None else {}),
         **_absorbed(f.chosen, diag.ranking.absorbed, tol.floor),
     }
 

@@ -19,6 +19,7 @@ def summary_text(report: dict) -> str:
         lines += _verdict_unexplained(report)
     else:
         lines += _verdict_named(report)
+    lines += _timing_line(report.get("timing"))
     lines += _mechanism_lines(report.get("mechanism"))
     lines += _friction_line(report.get("friction_check"))
     lines.append(f"Confidence: {report['confidence']:.2f}")
@@ -44,6 +45,15 @@ def _mechanism_lines(m: dict | None) -> list[str]:
     if m.get("separating_recording"):
         lines.append(f"To tell the causes apart, record: {m['separating_recording']}")
     return lines
+
+
+def _timing_line(t: dict | None) -> list[str]:
+    """Which readings are late and what the others share (``diagnose/timing.py``), when it
+    says more than that every reading is on time."""
+    if not t or (not t["late_signals"] and (t["shared_ms"] is None or abs(t["shared_ms"]) < 5)):
+        return []
+    before = t["verdict_without_check"]
+    return [f"Readings' timing: {t['decided_by']} (verdict without it: {before})"]
 
 
 def _friction_line(fc: dict | None) -> list[str]:

@@ -1,0 +1,207 @@
+"""Stage 6c': which readings are late, and what the lateness is (``judge/delays.py``).
+
+Sensor dynamics delay the reading, not the machine.  Per signal, the delay against the
+calibrated simulator on the held-out part (``delays.delays_ms``) is split into the readings
+later than the rod (RodPos, read by its own sensor; without it, than the readings' median)
+and the delay the others share (``delays.split``):
+
+- **Some readings late, the rod and the other readings on time**: a lag those sensors have
+  and the machine does not.  The catalogue's ``sensor_lag`` reads all four late; the lag
+  on the late readings alone (their measured delay) is scored on the held-out part like
+  any candidate (one sensor-only evaluation: the plant runs are the baseline's) and named
+  ``sensor_lag`` on those signals when ``decide`` would name it alone and, where another
+  effect was named, it beats that effect in ``SIGNIFICANT`` of the bootstrap resamples.
+  Both cylinder chambers late together is what a compliance of the lines does too: not
+  read as a sensor.
+- **Every reading late by the same 5-25 ms, the rod included** (or, without a rod, with
+  the readings not following the engine's ripple late: ``lag_check``): the recording's
+  timing (its clock against the commands, the transducers' electronics), not a fault.  The
+  calibrated simulator re-timed by that delay is judged as ``decide`` judges a simulator
+  without an effect; when that is ``none``, an ``unexplained`` or ``sensor_lag`` verdict is
+  ``none`` with the delay reported as a timing note.
+
+The JSON's ``timing`` holds the delays, the split, what was tried and what decided.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from monitor.gap.diagnose.evaluate import Sums, score
+from monitor.gap.diagnose.records import Calibrated, Finding, Paired, Scores
+from monitor.gap.diagnose.verdict import Judged
+from monitor.gap.fit import score as S
+from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.sensorterms import SensorTerm
+from monitor.gap.judge import basemis, delays
+from monitor.gap.judge.decide import SIGNIFICANT, Decision, _not_named, decide, gain_share
+from monitor.sim.effects import Effect
+
+Progress = Callable[[str], None]
+
+#: The catalogue effect the split names.
+NAME = "sensor_lag"
+#: Verdicts of a machine (or all its readings) running late, which a delay every reading
+#: shares, the rod included, can stand behind.
+MACHINE_DELAY = ("spool_dynamics", "pump_control_dynamics", NAME)
+
+
+def check_split(cal: Calibrated, scores: Scores, paired: Paired, judged: Judged, say: Progress):
+    """Stage 6c': some readings late (a sensor on them), or a machine-delay verdict that a
+    delay every reading shares does as well as (the recording's timing): see the module."""
+    if judged.noise_only:
+        return judged
+    prep, base = cal.readings.prep, scores.baseline
+    lags = delays.delays_ms(prep, cal.readings.held(None).segments, base.pred0)
+    sp = delays.split(lags)
+    if sp is None:
+        return judged
+    d = judged.decision
+    out: dict = {"delays_ms": lags, **sp.as_dict(), "verdict_without_check": d.verdict}
+    if sp.some_late:
+        d, out["sensor_lag_on_late"] = _sensor_on(sp, lags, cal, scores, paired, d)
+    elif sp.shared and not _ripple_late(judged):
+        whole, smooth = _retimed(lags, sp, cal, scores)
+        out["retimed"] = _retimed_row(whole, smooth, cal, scores, paired)
+        if d.verdict in MACHINE_DELAY and d.chosen is not None:
+            d = _delay_or_machine(d, whole, smooth, cal, paired, out["retimed"])
+    out["decided_by"] = evidence(out, d.verdict)
+    say(f"timing: {out['decided_by']}; verdict {out['verdict_without_check']} -> {d.verdict}")
+    return replace(judged, decision=d, split=out)
+
+
+def check_shared(finding: Finding, say: Progress) -> Finding:
+    """Stage 7b: an ``unexplained`` gap whose every suggested term is a reading's delay, on
+    a recording whose readings share a 5-25 ms delay (the rod included) that, re-timed,
+    gains significantly: the recording's timing and the base mismatch, not a fault."""
+    t = finding.timing
+    if finding.verdict != "unexplained" or not t or not t.get("retimed"):
+        return finding
+    delay_only = bool(finding.suggestion) and all(
+        s.get("term") == "sensor_delay" for s in finding.suggestion
+    )
+    r = t["retimed"]
+    if not (delay_only and r["gain_share"] >= SIGNIFICANT):
+        return finding
+    t = {**t, "verdict_without_check": finding.verdict}
+    t["decided_by"] = evidence(t, "none")
+    say(f"timing: {t['decided_by']}; verdict unexplained -> none")
+    return replace(
+        finding, verdict="none", chosen=None, confidence=r["gain_share"], suggestion=[], timing=t
+    )
+
+
+def _ripple_late(judged: Judged) -> bool:
+    """The readings follow the engine's ripple as late as a sensor lag (``lagcheck``)."""
+    return bool(judged.lag_check and judged.lag_check.get("readings") == "late")
+
+
+def _sensor_on(
+    sp: delays.Split, lags: dict, cal: Calibrated, scores: Scores, paired: Paired, d: Decision
+) -> tuple[Decision, dict]:
+    """A lag on the late readings alone, scored and judged like a candidate."""
+    base, floor, idx = scores.baseline, cal.floor, paired.boot_idx
+    delay = float(np.median([lags[s] for s in sp.late]))
+    eff = Effect(NAME, {"delay_ms": delay, "time_constant_ms": 0.0}, {"signal": ",".join(sp.late)})
+    c = Candidate((eff,), dict(base.factors), float("nan"))
+    whole, smooth = cal.readings.held(None).both_sums(c.factors, (eff,))
+    score(c, whole, floor, base.gap0, base.n_eff)
+    sums, smooths = {**paired.sums, c.name: whole}, {**paired.smooth, c.name: smooth}
+    alone = decide(False, [c], [], sums, base.nominal, idx, floor, (smooths, base.smooth_nominal))
+    beats = 1.0
+    if d.chosen is not None:
+        beats = gain_share(paired.sums[d.chosen.name], whole, idx, floor)
+    named = alone.verdict == NAME and beats >= SIGNIFICANT
+    tried = {
+        "signals": list(sp.late),
+        "delay_ms": round(delay, 1),
+        "heldout_reduction": round(float(c.heldout_reduction), 4),
+        "beats_verdict_share": round(beats, 3),
+        "named": named,
+    }
+    return (alone if named else d), tried
+
+
+def _retimed(lags: dict, sp: delays.Split, cal: Calibrated, scores: Scores) -> Sums:
+    """The calibrated simulator's held-out readings, each delayed by its own measured delay
+    (the shared one where it has none), whole and smoothed sums."""
+    prep, held = cal.readings.prep, cal.readings.held(None).segments
+    pred = scores.baseline.pred0
+    assert sp.shared_ms is not None
+    for name in S.compared(prep):
+        ms = lags.get(name)
+        ms = sp.shared_ms if ms is None else ms
+        if ms > 0.0:
+            pred = SensorTerm("sensor_delay", name, ms).apply(prep, held, pred)
+    return S.segment_sums(prep, held, pred), basemis.smoothed_sums(prep, held, pred)
+
+
+def _retimed_row(
+    whole: S.SegmentSums, smooth: S.SegmentSums, cal: Calibrated, scores: Scores, paired: Paired
+) -> dict:
+    """What re-timing removes, its bootstrap gain share and what ``decide`` says of it."""
+    base, floor, idx = scores.baseline, cal.floor, paired.boot_idx
+    # ``decide``'s own rule for a gap no effect explains, on the re-timed simulator.
+    alone = _not_named(whole, idx, floor, ({}, smooth), np.zeros(len(idx)), None, None)
+    return {
+        "heldout_reduction": round(S.reduction(base.gap0, S.gap(whole.mse(), floor)), 4),
+        "gain_share": round(gain_share(base.nominal, whole, idx, floor), 3),
+        "verdict": alone.verdict,
+    }
+
+
+def _delay_or_machine(
+    d: Decision,
+    whole: S.SegmentSums,
+    smooth: S.SegmentSums,
+    cal: Calibrated,
+    paired: Paired,
+    row: dict,
+) -> Decision:
+    """A slow spool or pump (or an all-readings lag) that does no better than re-timing the
+    readings by their shared delay is that delay: judged again as the re-timed simulator."""
+    assert d.chosen is not None
+    beats = gain_share(whole, paired.sums[d.chosen.name], paired.boot_idx, cal.floor)
+    row["effect_beats_share"] = round(beats, 3)
+    if beats >= SIGNIFICANT:
+        return d
+    alone = _not_named(whole, paired.boot_idx, cal.floor, ({}, smooth), np.zeros(1), None, None)
+    return Decision(alone.verdict, None, None, 1.0 - beats)
+
+
+def evidence(t: dict, verdict: str) -> str:
+    """One line: what the readings' timing showed and what it decided."""
+    ref = "the rod" if t["reference"] == "rod" else "the readings' median"
+    if "sensor_lag_on_late" in t:
+        s = t["sensor_lag_on_late"]
+        on = ", ".join(s["signals"])
+        head = f"{on} read {s['delay_ms']:.0f} ms late, later than {ref} by 10 ms or more"
+        if s["named"]:
+            return (
+                f"{head}: a lag of {on} alone removes {s['heldout_reduction']:.0%} of the "
+                f"held-out gap (a sensor's dynamics, not the machine's)"
+            )
+        return f"{head}; a lag of {on} alone does not explain the gap"
+    if "retimed" in t:
+        r = t["retimed"]
+        head = f"every reading {t['shared_ms']:.0f} ms late against the simulator"
+        head += ", the rod included" if t["reference"] == "rod" else ""
+        head += f"; re-timed by it, {r['heldout_reduction']:.0%} of the held-out gap goes"
+        before = t["verdict_without_check"]
+        if verdict == "none" and before == "unexplained":
+            return (
+                f"{head} and no term but a reading's delay explains the rest: the recording's "
+                "timing and the base mismatch, not a fault"
+            )
+        if verdict != before:
+            return (
+                f"{head}, as much as {before} removes: a delay the whole recording shares "
+                "(its timing), not the machine's dynamics"
+            )
+        return f"{head} (a timing note: the recording's delay, not a fault)"
+    if t["late_signals"]:
+        return f"{', '.join(t['late_signals'])} read later than {ref}"
+    return f"the readings share a {t['shared_ms']} ms delay against the simulator"
