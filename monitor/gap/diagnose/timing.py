@@ -13,12 +13,18 @@ and the delay the others share (``delays.split``):
   effect was named, it beats that effect in ``SIGNIFICANT`` of the bootstrap resamples.
   Both cylinder chambers late together is what a compliance of the lines does too: not
   read as a sensor.
-- **Every reading late by the same 5-25 ms, the rod included** (or, without a rod, with
-  the readings not following the engine's ripple late: ``lag_check``): the recording's
-  timing (its clock against the commands, the transducers' electronics), not a fault.  The
-  calibrated simulator re-timed by that delay is judged as ``decide`` judges a simulator
-  without an effect; when that is ``none``, an ``unexplained`` or ``sensor_lag`` verdict is
-  ``none`` with the delay reported as a timing note.
+- **Every reading late by the same 5-25 ms, the rod included** (without a rod: unless the
+  readings follow the engine's ripple late, ``lag_check``, as lagged sensors would): the
+  recording's timing (its clock against the commands, the transducers' electronics), not
+  a fault.  The calibrated simulator's readings are re-timed, each by its measured delay,
+  on the held-out part (no simulation).  A slow spool or pump, or the all-readings lag,
+  named where that re-timing does as well (the effect not better in ``SIGNIFICANT`` of
+  the bootstrap resamples) is the delay: the verdict is what ``decide`` says of the
+  re-timed simulator without an effect.  An ``unexplained`` gap whose every suggested term
+  is a reading's delay, where the re-timing gains in ``SIGNIFICANT`` of the resamples, is
+  ``none``: what is left is the base mismatch of a healthy machine of another make (the
+  third plant's healthy machines: 8-20 ms late on every signal, a QP delay the only
+  suggestion).  Otherwise the shared delay stays a timing note beside the verdict.
 
 The JSON's ``timing`` holds the delays, the split, what was tried and what decided.
 """
@@ -63,7 +69,10 @@ def check_split(cal: Calibrated, scores: Scores, paired: Paired, judged: Judged,
     out: dict = {"delays_ms": lags, **sp.as_dict(), "verdict_without_check": d.verdict}
     if sp.some_late:
         d, out["sensor_lag_on_late"] = _sensor_on(sp, lags, cal, scores, paired, d)
-    elif sp.shared and not _ripple_late(judged):
+    elif sp.shared and (sp.reference == "rod" or not _ripple_late(judged)):
+        # With the rod sharing the delay the sensors are not what is late (a rod read as
+        # late as the pressures is the acquisition); without it, readings that follow the
+        # engine's ripple late may be lagged sensors, and the lag stands.
         whole, smooth = _retimed(lags, sp, cal, scores)
         out["retimed"] = _retimed_row(whole, smooth, cal, scores, paired)
         if d.verdict in MACHINE_DELAY and d.chosen is not None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from monitor.gap.fit.candidates import CONFOUNDED
-from monitor.gap.judge.delays import APART_MS, PRESSURES, machine_late, shared
+from monitor.gap.judge.delays import APART_MS, PRESSURES, machine_late, shared, split
 
 
 @dataclass(frozen=True)
@@ -148,6 +148,13 @@ def timing(delays: dict) -> str:
     line = "readings against the calibrated simulator: " + ", ".join(parts)
     if p is None:
         return line
+    sp = split(delays)
+    if sp is not None and sp.some_late:
+        ref = "the rod moves" if sp.reference == "rod" else "the other readings"
+        return line + (
+            f"; {', '.join(sp.late)} read {APART_MS:.0f} ms or more later than {ref}: a lag "
+            "of those readings (sensor), not of the machine"
+        )
     if rod is None:
         return line + " (no rod reading: a sensor's lag and the machine's look alike)"
     if p - rod >= APART_MS:
