@@ -47,6 +47,8 @@ def test_the_chambers_late_together_and_all_readings_late_are_not_read_as_some_s
     # Air or a soft hose delays PA and PB: the oil, not necessarily their transducers.
     chambers = delays.split({"PP": 11.0, "PA": 34.0, "PB": 32.0, "QP": 13.0, "RodVel": 13.0})
     assert chambers is not None and chambers.late == ("PA", "PB") and not chambers.some_late
+    hose = delays.split({"PP": 22.0, "PA": 31.0, "PB": 30.0, "QP": 27.0, "RodVel": 14.0})
+    assert hose is not None and hose.late == ("PA", "PB", "QP") and not hose.some_late
     # All four later than the rod: the catalogue's all-readings lag (``check_timing``).
     four = delays.split({"PP": 50.0, "PA": 50.0, "PB": 52.0, "QP": 48.0, "RodVel": 12.0})
     assert four is not None and len(four.late) == 4 and not four.some_late and not four.shared

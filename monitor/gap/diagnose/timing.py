@@ -68,13 +68,15 @@ def check_split(cal: Calibrated, scores: Scores, paired: Paired, judged: Judged,
     d = judged.decision
     out: dict = {"delays_ms": lags, **sp.as_dict(), "verdict_without_check": d.verdict}
     if sp.some_late:
-        d, out["sensor_lag_on_late"] = _sensor_on(sp, lags, cal, scores, paired, d)
+        fitted = _fitted(sp.late, cal, scores)
+        d, out["sensor_lag_on_late"] = _sensor_on(sp, fitted, cal, scores, paired, d)
     elif sp.shared and (sp.reference == "rod" or not _ripple_late(judged)):
         # With the rod sharing the delay the sensors are not what is late (a rod read as
         # late as the pressures is the acquisition); without it, readings that follow the
         # engine's ripple late may be lagged sensors, and the lag stands.
-        whole, smooth = _retimed(lags, sp, cal, scores)
-        out["retimed"] = _retimed_row(whole, smooth, cal, scores, paired)
+        fitted = _fitted(S.compared(prep), cal, scores)
+        whole, smooth = _retimed(fitted, cal, scores)
+        out["retimed"] = {"delays_ms": fitted, **_retimed_row(whole, smooth, cal, scores, paired)}
         if d.verdict in MACHINE_DELAY and d.chosen is not None:
             d = _delay_or_machine(d, whole, smooth, cal, paired, out["retimed"])
     out["decided_by"] = evidence(out, d.verdict)
@@ -108,12 +110,20 @@ def _ripple_late(judged: Judged) -> bool:
     return bool(judged.lag_check and judged.lag_check.get("readings") == "late")
 
 
+def _fitted(signals, cal: Calibrated, scores: Scores) -> dict[str, float]:
+    """Each signal's delay fitted on the calibration part (``delays.fitted_ms``): the held-out
+    part only judges (one plant run of the calibration part at most, usually cached)."""
+    fit_ev = cal.readings.fit(None)
+    pred = fit_ev.predict(scores.baseline.factors, ())
+    return delays.fitted_ms(cal.readings.prep, fit_ev.segments, pred, signals)
+
+
 def _sensor_on(
-    sp: delays.Split, lags: dict, cal: Calibrated, scores: Scores, paired: Paired, d: Decision
+    sp: delays.Split, fitted: dict, cal: Calibrated, scores: Scores, paired: Paired, d: Decision
 ) -> tuple[Decision, dict]:
     """A lag on the late readings alone, scored and judged like a candidate."""
     base, floor, idx = scores.baseline, cal.floor, paired.boot_idx
-    delay = float(np.median([lags[s] for s in sp.late]))
+    delay = float(np.median([fitted[s] for s in sp.late]))
     eff = Effect(NAME, {"delay_ms": delay, "time_constant_ms": 0.0}, {"signal": ",".join(sp.late)})
     c = Candidate((eff,), dict(base.factors), float("nan"))
     whole, smooth = cal.readings.held(None).both_sums(c.factors, (eff,))
@@ -134,15 +144,12 @@ def _sensor_on(
     return (alone if named else d), tried
 
 
-def _retimed(lags: dict, sp: delays.Split, cal: Calibrated, scores: Scores) -> Sums:
-    """The calibrated simulator's held-out readings, each delayed by its own measured delay
-    (the shared one where it has none), whole and smoothed sums."""
+def _retimed(fitted: dict[str, float], cal: Calibrated, scores: Scores) -> Sums:
+    """The calibrated simulator's held-out readings, each delayed by its delay fitted on the
+    calibration part, whole and smoothed sums."""
     prep, held = cal.readings.prep, cal.readings.held(None).segments
     pred = scores.baseline.pred0
-    assert sp.shared_ms is not None
-    for name in S.compared(prep):
-        ms = lags.get(name)
-        ms = sp.shared_ms if ms is None else ms
+    for name, ms in fitted.items():
         if ms > 0.0:
             pred = SensorTerm("sensor_delay", name, ms).apply(prep, held, pred)
     return S.segment_sums(prep, held, pred), basemis.smoothed_sums(prep, held, pred)

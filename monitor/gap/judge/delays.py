@@ -21,10 +21,13 @@ import numpy as np
 from monitor.gap.data.prepare import Prepared
 from monitor.gap.data.segments import Segment
 from monitor.gap.fit.score import compared
+from monitor.gap.fit.sensorterms import SensorTerm
 from monitor.signals import SAMPLE_PERIOD_S
 
 #: Lags searched either way (s): longer than the catalogue's sensor lags and slow spools.
 MAX_LAG_S = 0.12
+#: Delays a fitted re-timing tries (ms).
+GRID_MS = np.arange(0.0, 1e3 * MAX_LAG_S / 2 + 1.0, 1.0)
 #: A signal's peak correlation below this says nothing about its timing.
 MIN_CORRELATION = 0.3
 #: A delay the rod does not share by this much is the readings' (ms: one sample).
@@ -40,8 +43,8 @@ READINGS = ("PP", "PA", "PB", "QP")
 SHARED_MAX_MS = 25.0
 #: Below this a shared delay is within one sample's jitter: nothing to note.
 SHARED_MIN_MS = 5.0
-#: Readings late together that a compliance of the cylinder lines (air, hoses) makes late
-#: too: their delay alone does not tell a sensor from the oil.
+#: Readings a compliance of the cylinder lines (air, hoses) makes late together: when both
+#: are late, their delay alone does not tell a sensor from the oil.
 CHAMBERS = frozenset({"PA", "PB"})
 
 
@@ -120,8 +123,11 @@ class Split:
     @property
     def some_late(self) -> bool:
         """Some readings are late and some are not: a sensor's lag the others do not share
-        (unless the late ones are the cylinder chambers, which a compliance delays too)."""
-        return bool(self.late) and len(self.late) < len(READINGS) and set(self.late) != CHAMBERS
+        (unless both cylinder chambers are among them, which a compliance of the lines
+        delays together: the third plant's soft hose read PA, PB and QP 13-17 ms later
+        than the rod, its air PA and PB 18-21 ms)."""
+        late = set(self.late)
+        return bool(late) and len(late) < len(READINGS) and not late >= CHAMBERS
 
     @property
     def shared(self) -> bool:
@@ -140,6 +146,25 @@ class Split:
             "late_signals": list(self.late),
             "shared_ms": None if self.shared_ms is None else round(self.shared_ms, 1),
         }
+
+
+def fitted_ms(
+    prep: Prepared, segments: Sequence[Segment], pred: dict[str, np.ndarray], signals: Sequence[str]
+) -> dict[str, float]:
+    """Per signal: the delay (ms, on a 1 ms grid to 60 ms) of the simulated reading
+    that matches the recording best over ``segments`` (least squares): a delay fitted, where
+    ``delays_ms`` locates a correlation peak (biased towards whole samples)."""
+    rows = np.concatenate([np.arange(s.score_from, s.stop) for s in segments])
+    out = {}
+    for name in signals:
+        y = prep.meas[name][rows]
+        costs = []
+        for ms in GRID_MS:
+            x = SensorTerm("sensor_delay", name, float(ms)).apply(prep, segments, pred)[name]
+            r = x[rows] - y
+            costs.append(float(np.nanmean(r**2)) if np.any(np.isfinite(r)) else np.inf)
+        out[name] = float(GRID_MS[int(np.argmin(costs))])
+    return out
 
 
 def split(delays: dict[str, float | None]) -> Split | None:
