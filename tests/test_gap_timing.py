@@ -57,19 +57,31 @@ def test_the_chambers_late_together_and_all_readings_late_are_not_read_as_some_s
     assert no_rod is not None and no_rod.reference == "readings" and no_rod.late == ("QP",)
 
 
-def _recording(effects: list[Effect], seed: int, late_ms: dict[str, float]) -> Recording:
+COMMANDS = ("SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp")
+
+
+def _recording(
+    effects: list[Effect], seed: int, late_ms: dict[str, float], all_late_ms: float = 0.0
+) -> Recording:
     """60 s of boom cycles on a machine a few percent off nominal, RodPos measured, the
-    engine speed with a white ripple; the columns of ``late_ms`` read that many ms late."""
+    engine speed with a white ripple; the columns of ``late_ms`` read that many ms late
+    (whole samples: a shift, no filter), and every reading ``all_late_ms`` late against the
+    commands logged beside them (the machine driven by the commands that much later: the
+    same for a time-invariant machine, in continuous time)."""
     cmd = make_cycle("boom", 60.0, seed)
     cols = dict(cmd.columns)
     rng = np.random.default_rng(seed + 1000)
     cols["EngineSpeed"] = cols["EngineSpeed"] + rng.normal(0.0, 5.0, len(cmd))
+    logged = {n: cols[n].copy() for n in COMMANDS}
+    for n in COMMANDS:
+        cols[n] = np.interp(cmd.t - all_late_ms / 1e3, cmd.t, cols[n])
     machine = apply(M, {"mass": 1.04, "gravity_load": 0.97, "volumes": 1.03})
     rec = simulate(Recording(cmd.t, cols, cmd.source), machine, effects=effects, seed=seed)
     drop = ("RodPosTrue", "RodVel", "SpoolPos")
-    cols = {n: v for n, v in rec.columns.items() if n not in drop}
+    cols = {n: v for n, v in rec.columns.items() if n not in drop} | logged
     for name, ms in late_ms.items():
-        cols[name] = np.interp(rec.t - ms / 1e3, rec.t, cols[name])
+        k = int(round(ms / 10.0))
+        cols[name] = np.concatenate([np.full(k, cols[name][0]), cols[name][:-k]])
     return Recording(rec.t, cols, "sim")
 
 
@@ -87,16 +99,16 @@ def test_pa_read_30_ms_late_is_a_sensor_lag_on_pa():
 
 
 def test_every_reading_15_ms_late_is_none_with_a_timing_note():
-    # Every reading, EngineSpeed and RodPos included (an acquisition late against the
-    # commands it logs).
-    late = {s: 15.0 for s in ("PP", "PA", "PB", "QP", "RodPos", "EngineSpeed")}
-    d = diagnose(_recording([], 42, late), M)
+    d = diagnose(_recording([], 42, {}, all_late_ms=15.0), M)
     rep = build_report(d, M)
     assert rep["verdict"] == "none"
     t = rep["timing"]
-    assert t["late_signals"] == [] and t["shared_ms"] == pytest.approx(15.0, abs=3.0)
+    assert t["late_signals"] == [] and t["shared_ms"] == pytest.approx(15.0, abs=4.0)
+    # Each reading re-timed by its delay fitted on the calibration part (1 ms grid).
+    assert all(v == pytest.approx(15.0, abs=2.0) for v in t["retimed"]["delays_ms"].values())
     assert t["retimed"]["heldout_reduction"] >= 0.5
-    assert "15 ms late" in t["decided_by"] and "not a fault" in t["decided_by"]
+    assert "ms late" in t["decided_by"] and "not a fault" in t["decided_by"]
+    assert rep.get("mechanism") is None  # none names no mechanism
 
 
 def test_a_soft_hose_is_not_a_sensor_lag():

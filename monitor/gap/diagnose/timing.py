@@ -203,7 +203,8 @@ def evidence(t: dict, verdict: str) -> str:
         return f"{head}; a lag of {on} alone does not explain the gap"
     if "retimed" in t:
         r = t["retimed"]
-        head = f"every reading {t['shared_ms']:.0f} ms late against the simulator"
+        ms = float(np.median(list(r["delays_ms"].values())))
+        head = f"every reading about {ms:.0f} ms late against the simulator"
         head += ", the rod included" if t["reference"] == "rod" else ""
         head += f"; re-timed by it, {r['heldout_reduction']:.0%} of the held-out gap goes"
         before = t["verdict_without_check"]
