@@ -5,26 +5,28 @@ calibrated simulator on the held-out part (``delays.delays_ms``) is split into t
 later than the rod (RodPos, read by its own sensor; without it, than the readings' median)
 and the delay the others share (``delays.split``):
 
-- **Some readings late, the rod and the other readings on time**: a lag those sensors have
-  and the machine does not.  The catalogue's ``sensor_lag`` reads all four late; the lag
-  on the late readings alone (their measured delay) is scored on the held-out part like
-  any candidate (one sensor-only evaluation: the plant runs are the baseline's) and named
+- **Some readings late, the rod and the other readings on time** (confirmed by each
+  reading's delay fitted on the calibration part, 1 ms grid): a lag those sensors have and
+  the machine does not.  The catalogue's ``sensor_lag`` reads all four late; the lag on
+  the late readings alone (their fitted delay) is scored on the held-out part like any
+  candidate (one sensor-only evaluation: the plant runs are the baseline's) and named
   ``sensor_lag`` on those signals when ``decide`` would name it alone and, where another
   effect was named, it beats that effect in ``SIGNIFICANT`` of the bootstrap resamples.
-  Both cylinder chambers late together is what a compliance of the lines does too: not
-  read as a sensor.
+  Both cylinder chambers among the late readings is what a compliance of the lines does
+  too: not read as a sensor.
 - **Every reading late by the same 5-25 ms, the rod included** (without a rod: unless the
   readings follow the engine's ripple late, ``lag_check``, as lagged sensors would): the
   recording's timing (its clock against the commands, the transducers' electronics), not
-  a fault.  The calibrated simulator's readings are re-timed, each by its measured delay,
-  on the held-out part (no simulation).  A slow spool or pump, or the all-readings lag,
-  named where that re-timing does as well (the effect not better in ``SIGNIFICANT`` of
-  the bootstrap resamples) is the delay: the verdict is what ``decide`` says of the
-  re-timed simulator without an effect.  An ``unexplained`` gap whose every suggested term
-  is a reading's delay, where the re-timing gains in ``SIGNIFICANT`` of the resamples, is
-  ``none``: what is left is the base mismatch of a healthy machine of another make (the
-  third plant's healthy machines: 8-20 ms late on every signal, a QP delay the only
-  suggestion).  Otherwise the shared delay stays a timing note beside the verdict.
+  a fault.  The calibrated simulator's held-out readings are re-timed, each by its delay
+  fitted on the calibration part (no simulation).  A slow spool or pump, or the
+  all-readings lag, that does not clearly beat that re-timing (a gain in ``SIGNIFICANT``
+  of the resamples and a practical share of what it leaves) is the delay: the verdict is
+  what ``decide`` says of the re-timed simulator without an effect.  An ``unexplained``
+  gap whose every suggested term is a reading's delay, where the re-timing gains in
+  ``SIGNIFICANT`` of the resamples, is ``none``: what is left is the base mismatch of a
+  healthy machine of another make (the third plant's healthy machines: 8-20 ms late on
+  every signal, a QP delay the only suggestion).  Otherwise the shared delay stays a
+  timing note beside the verdict.
 
 The JSON's ``timing`` holds the delays, the split, what was tried and what decided.
 """
