@@ -243,8 +243,8 @@ def evidence(t: dict, verdict: str) -> str:
             )
         if verdict != before:
             return (
-                f"{head}, as much as {before} removes: a delay the whole recording shares "
-                "(its timing), not the machine's dynamics"
+                f"{head}, and {before} does not clearly beat that: a delay the whole "
+                "recording shares (its timing), not a fault of the machine's dynamics"
             )
         return f"{head} (a timing note: the recording's delay, not a fault)"
     if t["late_signals"]:
