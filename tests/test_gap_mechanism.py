@@ -88,8 +88,14 @@ def test_a_worn_leak_leads_with_the_mechanism_and_names_wear_as_its_cause():
         "calibrated": {},
     }
     m = mechanism.describe(report)
-    assert m["name"] == "leakage P->tank" and m["cause"] == "wear"
+    # Mechanism first (the pump's leak, as an oil_viscosity verdict names it), then the cause.
+    assert (m["name"], m["signal"], m["cause"]) == ("pump leakage", "P->tank", "wear")
     assert "does not follow the viscosity" in m["decided_by"]
+    assert [(c["cause"], c["status"]) for c in m["causes"]] == [
+        ("oil_viscosity", "rejected"),
+        ("wear", "kept"),
+    ]
+    assert m["cause_decided"] is True
 
 
 def test_a_tolerance_at_its_bound_is_reported_as_evidence_for_the_effects_it_can_hide():
@@ -216,3 +222,54 @@ def test_a_verdict_the_rods_timing_decided_says_so_and_asks_for_no_other_recordi
     m = mechanism.describe(report)
     assert "the machine itself is late" in m["decided_by"]
     assert m["separating_recording"] is None and m["timing"] == m["decided_by"]
+
+
+def _walther_cst(t_c: float, nu40: float, nu100: float) -> float:
+    """ASTM D341 by hand: log10(log10(nu + 0.7)) is linear in log10 of the absolute
+    temperature, through the oil's 40 and 100 degC viscosities."""
+    x40, x100 = np.log10(313.15), np.log10(373.15)
+    y40, y100 = (np.log10(np.log10(nu + 0.7)) for nu in (nu40, nu100))
+    y = y40 + (y100 - y40) * (np.log10(t_c + 273.15) - x40) / (x100 - x40)
+    return float(10 ** (10**y) - 0.7)
+
+
+def test_a_warm_up_says_how_far_a_viscous_leak_would_swing_and_judges_both_causes():
+    # A 3 L/min per 100 bar pump leak (at 40 degC, ISO VG 46) over a 30 -> 60 degC warm-up.
+    chk = LeakCause("pump_leak_lpm_per_100bar", 30.0, _leak(3.0), _flat(0.85), 0.99, (30.0, 60.0))
+    nu30, nu60 = _walther_cst(30.0, 46.0, 6.8), _walther_cst(60.0, 46.0, 6.8)
+    # An ISO VG 46 oil: about 75 cSt at 30 degC, 21 at 60 (a 3.7-fold thinning).
+    assert 3.0 < nu30 / nu60 < 4.5
+    d = chk.as_dict()
+    assert d["oil_temp_c"] == [30.0, 60.0]
+    assert d["viscosity_ratio"] == pytest.approx(nu30 / nu60, rel=2e-3)
+    cold, warm = d["viscous_leak_cold_warm_lpm_per_100bar"]
+    assert cold == pytest.approx(3.0 * 46.0 / nu30, rel=2e-3)
+    assert warm == pytest.approx(3.0 * 46.0 / nu60, rel=2e-3)
+    assert f"thins {nu30 / nu60:.1f}-fold" in d["evidence"]
+    assert [(c["cause"], c["status"]) for c in d["causes"]] == [
+        ("oil_viscosity", "rejected"),
+        ("wear", "kept"),
+    ]
+    # A leak the constant law cannot beat: viscosity kept, wear rejected.
+    visc = LeakCause("pump_leak_lpm_per_100bar", 30.0, _leak(3.0), _flat(0.4), 0.01, (30.0, 60.0))
+    assert [c["status"] for c in visc.as_dict()["causes"]] == ["kept", "rejected"]
+    m = mechanism.describe(
+        {"verdict": "oil_viscosity", "ranking": [], "calibrated": {}, "cause_check": visc.as_dict()}
+    )
+    assert (m["name"], m["cause"], m["cause_decided"]) == ("pump leakage", "oil_viscosity", True)
+    assert m["separating_recording"] is None
+    lines = _mechanism_lines(m)
+    assert lines[1].startswith("Causes: oil_viscosity (leak ~ 1/viscosity (laminar)")
+    assert lines[1].endswith(
+        "wear (leak constant in oil temperature, removes 40 % of the held-out gap): rejected"
+    )
+
+
+def test_a_narrow_temperature_range_leaves_the_cause_undecided_and_asks_for_a_warm_up():
+    chk = LeakCause("pump_leak_lpm_per_100bar", 2.0, _leak(3.0), temps_c=(45.0, 47.0))
+    m = mechanism.describe(
+        {"verdict": "oil_viscosity", "ranking": [], "calibrated": {}, "cause_check": chk.as_dict()}
+    )
+    assert m["cause_decided"] is False
+    assert [c["status"] for c in m["causes"]] == ["undecided", "undecided"]
+    assert "warm-up" in m["separating_recording"]

@@ -23,6 +23,7 @@ from monitor.gap.diagnose.records import Calibrated, Parts, Scores
 from monitor.gap.fit.candidates import Candidate, Member, default_member, fit_candidate
 from monitor.gap.judge.decide import SIGNIFICANT, Decision, gain_share
 from monitor.gap.judge.where import scored_mask
+from monitor.sim.pack import viscosity_cst
 
 Progress = Callable[[str], None]
 
@@ -55,6 +56,32 @@ class LeakCause:
     flat: Candidate | None = None
     #: Share of bootstrap resamples in which the flat leak has the smaller held-out gap.
     flat_share: float | None = None
+    #: The oil temperature's 5th and 95th percentiles over the scored samples (degC).
+    temps_c: tuple[float, float] | None = None
+
+    def _nu_cst(self) -> np.ndarray | None:
+        """The named oil's viscosity at the cold and the warm end (cSt)."""
+        if self.temps_c is None:
+            return None
+        p = self.viscous.effects[0].params
+        return viscosity_cst(np.asarray(self.temps_c), p["nu40_cst"], p["nu100_cst"])
+
+    @property
+    def viscosity_ratio(self) -> float | None:
+        """How many times thicker the named oil is at the cold end of the recording than
+        at its warm end: how far a laminar leak (~ 1/viscosity) grows over the recording."""
+        nu = self._nu_cst()
+        return None if nu is None else float(nu[0] / nu[1])
+
+    def viscous_leak(self) -> tuple[float, float] | None:
+        """The named leak (L/min per 100 bar) at the cold and the warm end, as the
+        viscosity law puts it: its 40 degC value times nu40 / nu(T)."""
+        nu = self._nu_cst()
+        if nu is None:
+            return None
+        p = self.viscous.effects[0].params
+        cold, warm = float(p[self.path]) * p["nu40_cst"] / nu
+        return float(cold), float(warm)
 
     @property
     def cause(self) -> str | None:
@@ -81,8 +108,49 @@ class LeakCause:
             out["flat_heldout_reduction"] = round(float(self.flat.heldout_reduction), 4)
             out["flat_better_share"] = round(self.flat_share, 3)
             out["flat_leak_lpm_per_100bar"] = round(self.flat.effects[0].params[self.path], 4)
+        if self.temps_c is not None:
+            out["oil_temp_c"] = [round(t, 1) for t in self.temps_c]
+            out["viscosity_ratio"] = round(float(self.viscosity_ratio or 1.0), 3)
+            out["viscous_leak_cold_warm_lpm_per_100bar"] = [
+                round(v, 4) for v in self.viscous_leak() or ()
+            ]
         out["evidence"] = self.evidence()
+        out["causes"] = self.causes()
         return out
+
+    def causes(self) -> list[dict]:
+        """The two causes of the leak, each with its law, its held-out reduction and what
+        the check made of it: ``kept``, ``rejected`` or ``undecided``."""
+        cause = self.cause
+        laws = (
+            (NAME, "leak ~ 1/viscosity (laminar)", self.viscous),
+            ("wear", "leak constant in oil temperature", self.flat),
+        )
+        out = []
+        for name, law, c in laws:
+            status = "undecided" if cause is None else "kept" if cause == name else "rejected"
+            out.append(
+                {
+                    "cause": name,
+                    "law": law,
+                    "heldout_reduction": None
+                    if c is None
+                    else round(float(c.heldout_reduction), 4),
+                    "status": status,
+                }
+            )
+        return out
+
+    def _swing(self) -> str:
+        """The leak a viscosity law would show over the recording, in words."""
+        leak, r = self.viscous_leak(), self.viscosity_ratio
+        if leak is None or r is None or self.temps_c is None:
+            return ""
+        lo, hi = self.temps_c
+        return (
+            f" (from {lo:.0f} to {hi:.0f} degC the oil thins {r:.1f}-fold: a leak following "
+            f"1/viscosity goes from {leak[0]:.2g} to {leak[1]:.2g} L/min per 100 bar)"
+        )
 
     def evidence(self) -> str:
         """One line: what decided, or which recording would."""
@@ -92,32 +160,41 @@ class LeakCause:
                 "(viscosity) and one that does not (wear) look alike; a warm-up run (oil "
                 "from about 20 to 50 degC) would tell them apart"
             )
-        pct = 100 * self.flat_share
+        pct, swing = 100 * self.flat_share, self._swing()
         if self.cause == "wear":
+            flat = self.flat.effects[0].params[self.path] if self.flat is not None else 0.0
             return (
                 f"over {self.span_c:.0f} degC of oil temperature the leak does not follow "
-                f"the viscosity: a constant leak fits the held-out part better in {pct:.0f} % "
-                "of resamples (wear, not viscosity)"
+                f"the viscosity{swing}: a constant leak ({flat:.2g} L/min per 100 bar) fits "
+                f"the held-out part better in {pct:.0f} % of resamples (wear, not viscosity)"
             )
         if self.cause == NAME:
             return (
                 f"over {self.span_c:.0f} degC of oil temperature the leak follows the "
-                f"viscosity: a constant leak fits the held-out part better in only "
+                f"viscosity{swing}: a constant leak fits the held-out part better in only "
                 f"{pct:.0f} % of resamples"
             )
         return (
             f"over {self.span_c:.0f} degC of oil temperature a leak that follows the viscosity "
-            f"and a constant one fit alike (the constant one better in {pct:.0f} % of "
+            f"and a constant one fit alike{swing} (the constant one better in {pct:.0f} % of "
             "resamples): a longer warm-up would tell them apart"
         )
 
 
-def oil_span_c(parts: Parts) -> float:
-    """The oil temperature's 5th-95th percentile span over the scored samples (degC)."""
+def oil_range_c(parts: Parts) -> tuple[float, float] | None:
+    """The oil temperature's 5th and 95th percentiles over the scored samples (degC)."""
     prep = parts.prep
     temp = prep.cmd["OilTemp"][scored_mask(len(prep), parts.segments)]
     temp = temp[np.isfinite(temp)]
-    return float(np.percentile(temp, 95) - np.percentile(temp, 5)) if temp.size else 0.0
+    if not temp.size:
+        return None
+    return float(np.percentile(temp, 5)), float(np.percentile(temp, 95))
+
+
+def oil_span_c(parts: Parts) -> float:
+    """The oil temperature's 5th-95th percentile span over the scored samples (degC)."""
+    temps = oil_range_c(parts)
+    return temps[1] - temps[0] if temps is not None else 0.0
 
 
 def main_path(c: Candidate) -> str:
@@ -137,9 +214,10 @@ def check_leak(
 ) -> LeakCause:
     """The named ``oil_viscosity`` single ``chosen`` against the same leak with a flat oil,
     both with ``chosen``'s tolerances (one local fit and one held-out run)."""
-    span, path = oil_span_c(parts), main_path(chosen)
+    temps, path = oil_range_c(parts), main_path(chosen)
+    span = temps[1] - temps[0] if temps is not None else 0.0
     if span < MIN_SPAN_C:
-        return LeakCause(path, span, chosen)
+        return LeakCause(path, span, chosen, temps_c=temps)
     member = chosen.members[0] if chosen.members else default_member(NAME)
     flat_m = flat_member(member)
     residual = cal.readings.fit(chosen.prep).residual
@@ -151,7 +229,7 @@ def check_leak(
     score(flat, sums, cal.floor, base.gap0, base.n_eff)
     viscous_sums = cal.readings.held(chosen.prep).sums(chosen.factors, chosen.effects)
     share = gain_share(viscous_sums, sums, boot_idx, cal.floor)
-    return LeakCause(path, span, chosen, flat, share)
+    return LeakCause(path, span, chosen, flat, share, temps)
 
 
 def judge_cause(

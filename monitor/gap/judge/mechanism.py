@@ -114,8 +114,9 @@ def describe(report: dict) -> dict | None:
         return _unexplained(report, bounds)
     m = BY_EFFECT[verdict]
     name, where = m.name, m.where
-    if verdict == "oil_viscosity" and report.get("cause_check"):
-        name = report["cause_check"]["mechanism"]
+    chk = report.get("cause_check") if verdict == "oil_viscosity" else None
+    if chk:
+        name = chk["mechanism"]
     if verdict in ("sensor_calibration", "sensor_lag"):
         sig = _sensor_signal(report)
         name = f"sensor reading on {sig}" if sig else name
@@ -131,7 +132,20 @@ def describe(report: dict) -> dict | None:
     }
     if verdict in TIMED:
         out["timing"] = timing(report.get("delays_ms") or {})
+    if chk:
+        out.update(_leak_causes(chk))
     return out
+
+
+def _leak_causes(chk: dict) -> dict:
+    """A leak's mechanism keys from its oil-temperature check (``diagnose/cause.py``):
+    the path, both causes with their laws and what the check made of each (the evidence
+    in ``decided_by``), and whether the recording settled the cause."""
+    return {
+        "signal": chk["signal"],
+        "causes": chk.get("causes", []),
+        "cause_decided": chk["cause"] is not None,
+    }
 
 
 #: Verdicts whose look-alikes differ in which readings are late.
@@ -190,6 +204,10 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
         name = f"leakage {first['signal']}"
     cause = first.get("cause")
     chk = report.get("cause_check")
+    if chk and cause == "wear":
+        # Mechanism first: the leak's path (pump leakage), as an oil_viscosity verdict
+        # would name it; the cause (wear, not viscosity) second.
+        name = chk["mechanism"]
     decided = (
         chk["evidence"]
         if chk and cause == "wear"
@@ -198,7 +216,7 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
             f"({100 * first['heldout_reduction']:.0f} %): {first['description']}"
         )
     )
-    return {
+    out = {
         "name": name,
         "where": first["description"],
         "cause": cause or "outside the catalogue",
@@ -207,6 +225,9 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
         "separating_recording": None,
         "bounds": bounds,
     }
+    if chk and cause == "wear":
+        out.update(_leak_causes(chk))
+    return out
 
 
 def _sensor_signal(report: dict) -> str | None:

@@ -40,6 +40,9 @@ def _mechanism_lines(m: dict | None) -> list[str]:
     if not m or not m.get("name"):
         return []
     lines = [f"Mechanism: {m['name']}; cause: {m['cause']} ({m['decided_by']})"]
+    judged = [c for c in m.get("causes") or [] if "status" in c]
+    if judged:
+        lines.append("Causes: " + "; ".join(_cause_text(c) for c in judged))
     if m.get("timing"):
         lines.append(f"Timing: {m['timing']}")
     if m.get("separating_recording"):
@@ -54,6 +57,13 @@ def _timing_line(t: dict | None) -> list[str]:
         return []
     before = t["verdict_without_check"]
     return [f"Readings' timing: {t['decided_by']} (verdict without it: {before})"]
+
+
+def _cause_text(c: dict) -> str:
+    """One cause of a mechanism as its check judged it (``diagnose/cause.py``)."""
+    red = c.get("heldout_reduction")
+    removed = "" if red is None else f", removes {100 * red:.0f} % of the held-out gap"
+    return f"{c['cause']} ({c['law']}{removed}): {c['status']}"
 
 
 def _friction_line(fc: dict | None) -> list[str]:
