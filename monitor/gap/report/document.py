@@ -21,6 +21,7 @@ from monitor.gap.fit.score import SegmentSums, compared, gap, normalised, reduct
 from monitor.gap.judge import basemis, delays, mechanism
 from monitor.gap.judge import where as W
 from monitor.gap.judge.shrink import shrink_report
+from monitor.gap.report.bounds import calibration_bounds
 from monitor.signals import MEASURED_NAMES
 from monitor.sim.effects import CATALOGUE, Effect
 from monitor.sim.machine import MachineParams
@@ -205,6 +206,8 @@ def build_report(diag: Diagnosis, machine: MachineParams) -> dict:
         "recording": _recording(diag),
         "timings_s": {k: round(v, 2) for k, v in diag.timings_s.items()},
         "identifiability": diag.identifiability,
+        # A tolerance the calibration left at its bound, and the candidates it could hide.
+        "calibration_bounds": calibration_bounds(diag),
         # Per signal: how late the reading is against the calibrated simulator (held out).
         "delays_ms": delays.delays_ms(prep, diag.parts.heldout, diag.traces.nominal),
         **_checks(diag),

@@ -3,6 +3,7 @@ the first line says where the gap lies, then the verdict and what it rests on.""
 
 from __future__ import annotations
 
+from monitor.gap.report.bounds import bound_lines
 from monitor.signals import UNITS
 
 
@@ -24,6 +25,7 @@ def summary_text(report: dict) -> str:
     lines += _friction_line(report.get("friction_check"))
     lines.append(f"Confidence: {report['confidence']:.2f}")
     lines += _bounded(report["calibrated"])
+    lines += bound_lines(report.get("calibration_bounds") or [])
     lines += _tables(report)
     rec = report["recording"]
     lines += [

@@ -1,0 +1,103 @@
+"""A tolerance at its bound is evidence, not a result (``report/bounds.py``): which
+tolerance, at which bound, and which candidates it could be hiding, with what each one's
+joint fit made of it."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from monitor.gap.diagnose.records import Absorbed
+from monitor.gap.fit.candidates import Candidate, make_effect
+from monitor.gap.report.bounds import HIDES, bound_lines, calibration_bounds
+
+
+def _cand(effect: str, params: dict, factors: dict, reduction: float, gap: float) -> Candidate:
+    c = Candidate((make_effect(effect, params),), factors, 1.0)
+    c.heldout_reduction, c.heldout_gap = reduction, gap
+    return c
+
+
+class _Sums:
+    def __init__(self, mse: np.ndarray):
+        self._mse = mse
+
+    def mse(self) -> np.ndarray:
+        return self._mse
+
+
+def _diag() -> SimpleNamespace:
+    # The calibration took viscous friction to +30 % of its +-30 % band and the volumes to
+    # -14.8 % of +-15 % (98.7 % of the band: at its bound); the mass stayed inside (+5 %).
+    factors = {"viscous_friction": 1.30, "volumes": 0.852, "mass": 1.05}
+    fric = _cand(
+        "cylinder_friction",
+        {"coulomb_n": 500.0, "static_excess_n": 300.0, "stribeck_velocity_mm_s": 10.0},
+        {**factors, "viscous_friction": 1.06},
+        0.20,
+        3.0,
+    )
+    oil = _cand("oil_viscosity", {"pump_leak_lpm_per_100bar": 1.0}, factors, 0.05, 3.8)
+    # Friction's own tolerances without it leave a held-out gap of 6 (floor 0): the friction
+    # (gap 3) removes half of it, where against the calibrated machine it removed a fifth.
+    absorbed = {
+        fric.name: Absorbed(
+            {"viscous_friction": (1.30, 1.06)}, (_Sums(np.array([4.0, 2.0])), None)
+        )
+    }
+    return SimpleNamespace(
+        tolerances=SimpleNamespace(factors=factors, floor=np.zeros(2)),
+        ranking=SimpleNamespace(singles=[fric, oil], absorbed=absorbed),
+        identifiability=[{"pair": ["cylinder_friction", "viscous_friction"], "cosine": 0.94}],
+    )
+
+
+def test_each_bound_names_its_side_and_the_effects_it_could_be_hiding():
+    assert set(HIDES["viscous_friction"]) == {"cylinder_friction", "oil_viscosity"}
+    assert set(HIDES["volumes"]) == {"entrained_air", "hose_compliance"}
+    bounds = calibration_bounds(_diag())
+    assert [(b["tolerance"], b["bound"]) for b in bounds] == [
+        ("viscous_friction", "upper"),
+        ("volumes", "lower"),
+    ]
+    visc = bounds[0]
+    assert (visc["change_pct"], visc["band_pct"]) == (30.0, 30.0)
+    assert visc["could_hide"] == ["cylinder_friction", "oil_viscosity"]
+    fric, oil = visc["fits"]
+    # Friction's fit took viscous friction off its bound (+6 %) and removes 50 % of what its
+    # own tolerances leave; the identifiability of the pair is quoted.
+    assert fric == {
+        "effect": "cylinder_friction",
+        "with_effect_pct": 6.0,
+        "off_bound": True,
+        "heldout_reduction": 0.2,
+        "beyond_own_tolerances": 0.5,
+        "cosine": 0.94,
+    }
+    assert (oil["effect"], oil["off_bound"]) == ("oil_viscosity", False)
+    assert oil["with_effect_pct"] == 30.0
+    assert "beyond_own_tolerances" not in oil
+    # The volumes could hide air or a hose, neither of which was fitted here.
+    assert bounds[1]["could_hide"] == ["entrained_air", "hose_compliance"]
+    assert bounds[1]["fits"] == []
+
+
+def test_the_summary_says_the_bound_and_what_each_hidden_candidate_made_of_it():
+    lines = bound_lines(calibration_bounds(_diag()))
+    assert lines[0].startswith("The calibration, before any candidate, left at a bound")
+    assert lines[1] == (
+        "  viscous_friction at its upper bound (+30.0 % of +-30 %): it could be hiding "
+        "cylinder_friction, oil_viscosity"
+    )
+    assert lines[2] == (
+        "    cylinder_friction: fitted with it, viscous_friction +6.0 % (off its bound); "
+        "removes 50 % of the held-out gap the tolerances leave; signatures' cosine +0.94"
+    )
+    still = "oil_viscosity: fitted with it, viscous_friction +30.0 % (still at its bound)"
+    assert still in lines[3]
+    assert lines[4] == (
+        "  volumes at its lower bound (-14.8 % of +-15 %): it could be hiding "
+        "entrained_air, hose_compliance"
+    )
+    assert bound_lines([]) == []
