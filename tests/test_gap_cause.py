@@ -14,6 +14,7 @@ import pytest
 from benchmarks.gap_third.scenario import Scenario, record
 from monitor.gap.diagnose import diagnose
 from monitor.gap.report.document import build_report
+from monitor.gap.report.summary import summary_text
 from monitor.sampling.read import read_recording
 from monitor.sim.machine import load_machine
 
@@ -53,7 +54,7 @@ def test_a_worn_pump_over_a_warm_up_is_pump_leakage_from_wear(tmp_path):
     assert rep["verdict"] == "unexplained"
     first = rep["suggestion"][0]
     assert (first["term"], first["signal"], first["cause"]) == ("leakage", "P->tank", "wear")
-    assert rep["mechanism"]["name"] == "leakage P->tank" and rep["mechanism"]["cause"] == "wear"
+    assert rep["mechanism"]["name"] == "pump leakage" and rep["mechanism"]["cause"] == "wear"
 
 
 def test_a_thin_oil_over_a_warm_up_stays_oil_viscosity(tmp_path):
@@ -62,3 +63,59 @@ def test_a_thin_oil_over_a_warm_up_stays_oil_viscosity(tmp_path):
     assert rep["cause_check"]["cause"] == "oil_viscosity"
     assert rep["mechanism"]["cause"] == "oil_viscosity"
     assert rep["mechanism"]["separating_recording"] is None
+
+
+def _own(tmp_path: Path, oil: str) -> dict:
+    """This simulator's boom cycle over a 30 -> 60 degC warm-up with a 3 L/min per 100 bar
+    pump leak, following the oil (ISO VG 46) or constant (an oil whose viscosity does not
+    change: a worn pump's slip)."""
+    from monitor.io.csvio import write_csv
+    from monitor.sim.cycles import make_cycle
+    from monitor.sim.effects import parse_effect
+    from monitor.sim.simulate import simulate
+
+    cmd = make_cycle("boom", 300.0, 7)
+    cmd.columns["OilTemp"] = 30.0 + 30.0 * cmd.t / cmd.t[-1]
+    leak = parse_effect(f"oil_viscosity:pump_leak_lpm_per_100bar=3,friction_share=0,{oil}")
+    m = load_machine()
+    path = tmp_path / "warm_up.csv"
+    write_csv(path, simulate(cmd, m, effects=[leak], seed=7))
+    return build_report(diagnose(read_recording(path), m, effects=EFFECTS), m)
+
+
+def test_a_constant_pump_leak_over_a_warm_up_is_pump_leakage_not_viscosity(tmp_path):
+    rep = _own(tmp_path, "nu40_cst=20,nu100_cst=19.99")
+    mech, chk = rep["mechanism"], rep["cause_check"]
+    # Mechanism first, then the cause: the pump leaks, and not because the oil thins.
+    assert (mech["name"], mech["signal"], mech["cause"]) == ("pump leakage", "P->tank", "wear")
+    assert [(c["cause"], c["status"]) for c in mech["causes"]] == [
+        ("oil_viscosity", "rejected"),
+        ("wear", "kept"),
+    ]
+    assert rep["verdict"] == "unexplained"
+    # The leak as simulated: 3 L/min per 100 bar at every temperature.
+    assert chk["flat_leak_lpm_per_100bar"] == pytest.approx(3.0, rel=0.15)
+    # The warm-up as driven (percentiles of the scored samples), and the swing a
+    # 1/viscosity leak would have shown over it: an ISO VG 46 oil is 2.5-4 times thicker
+    # at 30-33 degC than at 57-60 degC.
+    lo, hi = chk["oil_temp_c"]
+    assert 30 <= lo < 34 and 56 < hi <= 60
+    assert 2.5 < chk["viscosity_ratio"] < 4.0
+    cold, warm = chk["viscous_leak_cold_warm_lpm_per_100bar"]
+    assert cold / warm == pytest.approx(chk["viscosity_ratio"], rel=1e-3)
+    assert "Causes: oil_viscosity" in summary_text(rep)
+
+
+def test_a_pump_leak_following_the_oil_over_a_warm_up_is_viscosity(tmp_path):
+    rep = _own(tmp_path, "nu40_cst=46,nu100_cst=6.8")
+    assert rep["verdict"] == "oil_viscosity"
+    mech = rep["mechanism"]
+    assert (mech["name"], mech["cause"], mech["cause_decided"]) == (
+        "pump leakage",
+        "oil_viscosity",
+        True,
+    )
+    assert [(c["cause"], c["status"]) for c in mech["causes"]] == [
+        ("oil_viscosity", "kept"),
+        ("wear", "rejected"),
+    ]
