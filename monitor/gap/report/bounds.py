@@ -5,9 +5,10 @@ candidate.  Where one ends at the edge of its band, either the machine is outsid
 tolerance its configuration assumes, or the band has taken up part of an effect that acts
 through the same signature (viscous friction for a Coulomb friction or a thick oil, the
 volumes for air or a soft hose).  Each such tolerance is listed with the catalogue effects
-it can stand in for, and for each of them what its own fit did: every candidate is fitted
-jointly with the tolerances, so its fit says where it left the tolerance and how much of the
-held-out gap it removes beyond the calibrated machine; where its fit moved the tolerance
+it can stand in for, and for each of them what its own fit did: each such effect is fitted
+jointly with the tolerances it trades off against (``CONFOUNDED``), so its fit says where
+it left the tolerance and how much of the held-out gap it removes beyond the calibrated
+machine; where its fit moved the tolerance
 off the bound, also beyond its own tolerances without it (``verdict.calibration_absorbed``,
 one held-out run each).  The recording's identifiability of the pair (``identify.py``) says
 whether the two can be told apart at all.
@@ -39,7 +40,7 @@ def _cosine(identifiability: Sequence[dict], a: str, b: str) -> float | None:
 
 
 def _hidden(diag: Diagnosis, tolerance: str, effect: str) -> dict | None:
-    """What ``effect``'s own fit (jointly with the tolerances) did with ``tolerance``."""
+    """What ``effect``'s own fit (``tolerance`` free in it) did with ``tolerance``."""
     c = _single(diag.ranking.singles, effect)
     if c is None:
         return None
@@ -78,7 +79,7 @@ def calibration_bounds(diag: Diagnosis) -> list[dict]:
                 "change_pct": round(100 * (f0 - 1), 2),
                 "band_pct": round(100 * t.band, 1),
                 "could_hide": list(HIDES[t.name]),
-                # Those of them fitted on this recording (each jointly with the tolerances).
+                # Those of them fitted on this recording (each with the tolerance free).
                 "fits": [r for r in rows if r is not None],
             }
         )
