@@ -8,10 +8,10 @@ volumes for air or a soft hose).  Each such tolerance is listed with the catalog
 it can stand in for, and for each of them what its own fit did: each such effect is fitted
 jointly with the tolerances it trades off against (``CONFOUNDED``), so its fit says where
 it left the tolerance and how much of the held-out gap it removes beyond the calibrated
-machine; where its fit moved the tolerance
-off the bound, also beyond its own tolerances without it (``verdict.calibration_absorbed``,
-one held-out run each).  The recording's identifiability of the pair (``identify.py``) says
-whether the two can be told apart at all.
+machine; where its fit moved the tolerance off the bound, also beyond its own tolerances
+without it (``verdict.calibration_absorbed``, one held-out run each, made for the verdict
+anyway).  The recording's identifiability of the pair (``identify.py``) says whether the
+two can be told apart at all.
 """
 
 from __future__ import annotations
