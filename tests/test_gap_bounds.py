@@ -7,7 +7,9 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
+from monitor.gap.diagnose import identify
 from monitor.gap.diagnose.records import Absorbed
 from monitor.gap.fit.candidates import Candidate, make_effect
 from monitor.gap.report.bounds import HIDES, bound_lines, calibration_bounds
@@ -101,3 +103,41 @@ def test_the_summary_says_the_bound_and_what_each_hidden_candidate_made_of_it():
         "entrained_air, hose_compliance"
     )
     assert bound_lines([]) == []
+
+
+class _MassFitEv:
+    """A residual linear in the mass factor and in a friction's Coulomb force, the two
+    directions at a cosine of 0.8."""
+
+    def __init__(self, u: np.ndarray, v: np.ndarray):
+        self.u, self.v = u, v
+
+    def residual(self, factors, effects):
+        r = 1.0 + (factors.get("mass", 1.0) - 1.0) * self.u
+        for e in effects:
+            r = r + e.params["coulomb_n"] / 100.0 * self.v
+        return r
+
+
+def test_a_tolerance_at_its_bound_has_its_identifiability_measured_with_what_it_can_hide():
+    rng = np.random.default_rng(5)
+    u, w = rng.standard_normal(400), rng.standard_normal(400)
+    w -= (w @ u) / (u @ u) * u
+    v = 0.8 * u / np.linalg.norm(u) + 0.6 * w / np.linalg.norm(w)
+    fit_ev = _MassFitEv(u, v)
+    cal = SimpleNamespace(readings=SimpleNamespace(fit=lambda prep: fit_ev))
+    fric = _cand(
+        "cylinder_friction",
+        {"coulomb_n": 500.0, "static_excess_n": 0.0, "stribeck_velocity_mm_s": 10.0},
+        {},
+        0.2,
+        1.0,
+    )
+    inside = SimpleNamespace(baseline=SimpleNamespace(factors={"mass": 0.95}), singles=[fric])
+    assert ["cylinder_friction", "mass"] not in [r["pair"] for r in identify.measure(cal, inside)]
+    # The mass at its lower bound (-15 %): its signature is a step up (+u), cosine +0.8.
+    at_bound = SimpleNamespace(baseline=SimpleNamespace(factors={"mass": 0.85}), singles=[fric])
+    rows = {tuple(r["pair"]): r for r in identify.measure(cal, at_bound)}
+    assert rows[("cylinder_friction", "mass")]["cosine"] == pytest.approx(0.8, abs=1e-3)
+    # Pairs whose effect was not fitted (no single) are left out, not guessed.
+    assert all("valve_deadband" not in p for p in rows)

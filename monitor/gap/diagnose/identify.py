@@ -11,7 +11,9 @@ cannot separate the pair (which recording would: ``judge/mechanism.py``); the ve
 evidence then has to come from a signature only one of them has (the engine's ripple
 read late, a leak against the oil temperature).
 
-Cost: one simulation of the fit segments per signature (eight at most; a sensor lag's
+Cost: one simulation of the fit segments per signature (eight, and one more for each
+tolerance the calibration left at its bound and each effect it can stand in for outside
+``PAIRS``: mass, valve gain, gravity load; valve deadband, load variation; a sensor lag's
 reuses the calibrated plant run).
 """
 
@@ -23,7 +25,7 @@ import numpy as np
 
 from monitor.gap.diagnose.records import Calibrated, Scores
 from monitor.gap.fit import calibrate as cal_mod
-from monitor.gap.fit.candidates import Candidate
+from monitor.gap.fit.candidates import CONFOUNDED, Candidate
 
 #: The pairs measured (an effect, or a tolerance by its ``calibrate`` name).
 PAIRS: tuple[tuple[str, str], ...] = (
@@ -36,6 +38,19 @@ PAIRS: tuple[tuple[str, str], ...] = (
 )
 #: A tolerance's signature: this share of its band, away from the nearer bound.
 TOLERANCE_STEP = 0.25
+
+
+def measured_pairs(factors: dict[str, float]) -> list[tuple[str, str]]:
+    """``PAIRS``, and each tolerance the calibration left at its bound with every effect
+    it can stand in for (``CONFOUNDED``): a bound is evidence only as far as the recording
+    can tell the two apart (``report/bounds.py`` quotes the cosine)."""
+    out = list(PAIRS)
+    for effect, tols in CONFOUNDED.items():
+        for t in tols:
+            at_bound = cal_mod.bound_side(t, factors.get(t, 1.0)) != 0
+            if at_bound and (effect, t) not in out:
+                out.append((effect, t))
+    return out
 
 
 def _signature(name: str, cal: Calibrated, scores: Scores, base: np.ndarray) -> np.ndarray | None:
@@ -63,10 +78,11 @@ def measure(cal: Calibrated, scores: Scores) -> list[dict]:
     fit_ev = cal.readings.fit(None)
     base = fit_ev.residual(scores.baseline.factors, ())
     base_rms = float(np.sqrt(np.mean(base**2))) or 1.0
-    names = sorted({n for pair in PAIRS for n in pair})
+    pairs = measured_pairs(scores.baseline.factors)
+    names = sorted({n for pair in pairs for n in pair})
     sigs = {n: _signature(n, cal, scores, base) for n in names}
     out = []
-    for a, b in PAIRS:
+    for a, b in pairs:
         sa, sb = sigs[a], sigs[b]
         if sa is None or sb is None:
             continue
