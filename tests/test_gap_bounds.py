@@ -72,12 +72,12 @@ def test_each_bound_names_its_side_and_the_effects_it_could_be_hiding():
     assert fric == {
         "effect": "cylinder_friction",
         "with_effect_pct": 6.0,
-        "off_bound": True,
+        "bound_with_effect": None,
         "heldout_reduction": 0.2,
         "beyond_own_tolerances": 0.5,
         "cosine": 0.94,
     }
-    assert (oil["effect"], oil["off_bound"]) == ("oil_viscosity", False)
+    assert (oil["effect"], oil["bound_with_effect"]) == ("oil_viscosity", "upper")
     assert oil["with_effect_pct"] == 30.0
     assert "beyond_own_tolerances" not in oil
     # The volumes could hide air or a hose, neither of which was fitted here.
@@ -93,10 +93,10 @@ def test_the_summary_says_the_bound_and_what_each_hidden_candidate_made_of_it():
         "cylinder_friction, oil_viscosity"
     )
     assert lines[2] == (
-        "    cylinder_friction: fitted with it, viscous_friction +6.0 % (off its bound); "
+        "    cylinder_friction: fitted with it, viscous_friction +6.0 % (inside its band); "
         "removes 50 % of the held-out gap the tolerances leave; signatures' cosine +0.94"
     )
-    still = "oil_viscosity: fitted with it, viscous_friction +30.0 % (still at its bound)"
+    still = "oil_viscosity: fitted with it, viscous_friction +30.0 % (at its upper bound)"
     assert still in lines[3]
     assert lines[4] == (
         "  volumes at its lower bound (-14.8 % of +-15 %): it could be hiding "

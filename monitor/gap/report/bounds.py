@@ -30,6 +30,9 @@ HIDES: dict[str, tuple[str, ...]] = {
 }
 
 
+_SIDE = {1: "upper", -1: "lower", 0: None}
+
+
 def _single(singles: Sequence[Candidate], effect: str) -> Candidate | None:
     return next((c for c in singles if len(c.effects) == 1 and c.effects[0].name == effect), None)
 
@@ -48,7 +51,8 @@ def _hidden(diag: Diagnosis, tolerance: str, effect: str) -> dict | None:
     row: dict = {
         "effect": effect,
         "with_effect_pct": round(100 * (f1 - 1), 2),
-        "off_bound": cal_mod.bound_side(tolerance, f1) == 0,
+        # Where its fit left the tolerance: "upper", "lower" or null (inside the band).
+        "bound_with_effect": _SIDE[cal_mod.bound_side(tolerance, f1)],
         # Against the calibrated machine (the tolerances at their bound).
         "heldout_reduction": round(float(c.heldout_reduction), 4),
     }
@@ -75,7 +79,7 @@ def calibration_bounds(diag: Diagnosis) -> list[dict]:
         out.append(
             {
                 "tolerance": t.name,
-                "bound": "upper" if side > 0 else "lower",
+                "bound": _SIDE[side],
                 "change_pct": round(100 * (f0 - 1), 2),
                 "band_pct": round(100 * t.band, 1),
                 "could_hide": list(HIDES[t.name]),
@@ -100,7 +104,8 @@ def bound_lines(bounds: Sequence[dict]) -> list[str]:
         lines.append(f"  {head}: it could be hiding {who}")
         for r in b["fits"]:
             beyond = r.get("beyond_own_tolerances", r["heldout_reduction"])
-            where = "off its bound" if r["off_bound"] else "still at its bound"
+            side = r["bound_with_effect"]
+            where = f"at its {side} bound" if side else "inside its band"
             cos = f"; signatures' cosine {r['cosine']:+.2f}" if "cosine" in r else ""
             tol = f"{b['tolerance']} {r['with_effect_pct']:+.1f} % ({where})"
             lines.append(
