@@ -5,9 +5,10 @@ simulated normal operation, and which loops alarm on a fault of one loop (or of 
 
 Normal runs: ``monitor simulate --machine excavator4`` mixed duty cycles of 600 s on the
 ``--normal`` seeds; faulty runs: the same on each ``--faulty`` seed with one fault of
-``FAULTS`` at severity ``--severity`` from 120 s.  Each run is judged per loop as
-``monitor detect --loop NAME --config config/excavator4.yaml`` judges it (the shipped
-config and models).  Prints one line per run and loop, then the table.
+``FAULTS`` at each severity of ``--severity`` (e.g. ``--severity 0.5 0.3``) from 120 s.
+Each run is judged per loop as ``monitor detect --loop NAME --config CONFIG`` judges it
+(``--config``: default the shipped config and its models).  Prints one line per run and
+loop, then the table.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ def _seeds(text: str) -> list[int]:
 
 
 def _simulate(out: Path, seed: int, fault: str | None, severity: float) -> Path:
-    name = f"{fault or 'normal'}_{seed}.csv"
+    name = f"{fault}_{severity}_{seed}.csv" if fault else f"normal_{seed}.csv"
     path = out / name
     if not path.exists():
         cmd = [sys.executable, "-m", "monitor", "simulate", "--machine", "excavator4"]
@@ -65,11 +66,17 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--normal", default="401-412", help="seeds of normal runs, A-B")
     ap.add_argument("--faulty", default="501", help="seeds of faulty runs, A-B")
-    ap.add_argument("--severity", type=float, default=0.5)
+    ap.add_argument("--severity", type=float, nargs="+", default=[0.5])
     ap.add_argument("--out", type=Path, required=True, help="folder for the simulated runs")
+    ap.add_argument(
+        "--config",
+        type=Path,
+        default=resource_path("config", "excavator4.yaml"),
+        help="the whole machine's config whose loop models are judged (default: shipped)",
+    )
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    cfg = load_config(resource_path("config", "excavator4.yaml"))
+    cfg = load_config(args.config)
     models = {lc.name: load_model(lc.model) for lc in cfg.monitored_loops}
     loops = list(models)
     alarms = {name: 0 for name in loops}
@@ -91,13 +98,16 @@ def main() -> int:
             f"{sensor[name]} with a sensor finding"
         )
     print()
-    for fault in FAULTS:
-        for seed in _seeds(args.faulty):
-            judged = _judge(_simulate(args.out, seed, fault, args.severity), cfg, models)
-            raised = [
-                f"{n} from {s['first_alarm_t']:.0f} s" for n, s in judged.items() if s["alarm"]
-            ]
-            print(f"{fault}:{args.severity} seed {seed}: alarms {', '.join(raised) or 'none'}")
+    for severity in args.severity:
+        for fault in FAULTS:
+            for seed in _seeds(args.faulty):
+                judged = _judge(_simulate(args.out, seed, fault, severity), cfg, models)
+                raised = [
+                    f"{n} from {s['first_alarm_t']:.0f} s"
+                    for n, s in judged.items()
+                    if s["alarm"]
+                ]
+                print(f"{fault}:{severity} seed {seed}: alarms {', '.join(raised) or 'none'}")
     return 0
 
 
