@@ -103,9 +103,7 @@ def main() -> int:
             for seed in _seeds(args.faulty):
                 judged = _judge(_simulate(args.out, seed, fault, severity), cfg, models)
                 raised = [
-                    f"{n} from {s['first_alarm_t']:.0f} s"
-                    for n, s in judged.items()
-                    if s["alarm"]
+                    f"{n} from {s['first_alarm_t']:.0f} s" for n, s in judged.items() if s["alarm"]
                 ]
                 print(f"{fault}:{severity} seed {seed}: alarms {', '.join(raised) or 'none'}")
     return 0
