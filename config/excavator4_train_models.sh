@@ -7,7 +7,7 @@
 # (N = 3000), b0 = 2 x max normal B.  Four hours and twenty minutes in all.  The lifting
 # runs are there for the long holds of a hung load: mixed work lifts now and then, each run
 # at its own oil temperature, so an hour of it held a light load (60-70 bar on the boom's
-# cap side) at two temperatures only, and a GRNN whose nearest patterns at that pressure and
+# cap side) in one run only, at 54 degC, and a GRNN whose nearest patterns at that pressure and
 # temperature are the load being hung (PA moving with every spool closed) predicts a held
 # load falling: B rose in long holds (docs/benchmarks.md, "Long holds of a hung load").  Two
 # held-out runs were too few for B: rare normal holds (such as a pressure trapped by a rod
@@ -15,7 +15,8 @@
 # them.  Each loop on the `section` preset (PP and the other loops' spool commands as
 # inputs: config/excavator4.yaml declares one load-sensing pump), no fault signatures (the
 # boom simulator has no neighbours); J leaves the samples settling on an end stop out (the
-# default of `monitor train`).  About 10 minutes a loop on one core.
+# default of `monitor train`).  17-18 minutes a loop wall-clock, the four run in parallel at a
+# load average of 25-28 on 2 cores (the GRNN fit 5-8 minutes of it).
 #   bash config/excavator4_train_models.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
