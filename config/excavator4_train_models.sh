@@ -15,8 +15,8 @@
 # them.  Each loop on the `section` preset (PP and the other loops' spool commands as
 # inputs: config/excavator4.yaml declares one load-sensing pump), no fault signatures (the
 # boom simulator has no neighbours); J leaves the samples settling on an end stop out (the
-# default of `monitor train`).  17-18 minutes a loop wall-clock, the four run in parallel at a
-# load average of 25-28 on 2 cores (the GRNN fit 5-8 minutes of it).
+# default of `monitor train`).  17-18 minutes a loop wall-clock (measured with the four run in parallel at a
+# load average of 25-28 on 2 cores; the GRNN fit 5-8 minutes of it).
 #   bash config/excavator4_train_models.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
