@@ -136,3 +136,27 @@ def wide_recording(cfg: MonitorConfig, recordings: dict[str, Recording]) -> Reco
             if name is not None and rec.has(contract) and name not in columns:
                 columns[name] = rec[contract]
     return Recording(t=first.t, columns=columns, source="+".join(recordings), meta={})
+
+
+def machine_rows(path: str | Path, cfg: MonitorConfig) -> tuple[tuple[str, ...], np.ndarray]:
+    """The daemon's rows of a whole-machine recording (candump log, or a CSV whose columns
+    are the DBC's signal names): (columns, ``[t, *columns]`` rows, NaN where a signal is
+    missing), as the daemon's sampler makes them; what the pump rule reads."""
+    if Path(path).is_dir():
+        raise InputFileError(f"{path}: is a folder; give a recording (.log or .csv) in it")
+    if not Path(path).is_file():
+        raise InputFileError(f"{path}: no such file")
+    codec = FrameCodec.from_dbc(cfg.dbc)
+    columns, _ = row_layout(cfg, codec)
+    optional = rod_columns(cfg.monitored_loops)
+    if Path(path).suffix.lower() == ".csv":
+        wide = read_csv(path, required=[c for c in columns if c not in optional])
+    else:
+        wide = recording_from_candump_bulk(path, codec, columns, optional=optional)
+    return columns, rows_of(wide, columns)
+
+
+def rows_of(wide: Recording, columns: Sequence[str]) -> np.ndarray:
+    """``[t, *columns]`` rows of a recording under the DBC's signal names (NaN: absent)."""
+    nan = np.full(len(wide), np.nan)
+    return np.column_stack([wide.t, *[wide[c] if wide.has(c) else nan for c in columns]])

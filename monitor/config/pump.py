@@ -1,0 +1,73 @@
+"""``pump:`` of a monitor config with several loops on one load-sensing pump: the pump
+model file (``monitor train --pump``), and where the pump rule reads its signals in the
+daemon's row (``monitor.detection.pump``).
+
+    pump:
+      model: pump_excavator4.pump.json
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from monitor.detection.pump import PumpColumns
+from monitor.errors import ConfigError
+from monitor.model.pumplaw import PumpModel, load_pump_model
+from monitor.schema.sections import shown
+
+if TYPE_CHECKING:
+    from monitor.config.settings import MonitorConfig
+
+#: The contract signals of a section the pump rule reads.
+SECTION_SIGNALS = ("SpoolCmd", "PA", "PB", "QP")
+
+
+def parse_pump(value: Any, source: Path, path: Callable[[Any, str], Path]) -> Path | None:
+    """``pump``: None, or a mapping with the one key ``model`` (an existing file)."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != {"model"}:
+        raise ConfigError(f"{source}: pump must be a mapping with one key, model; got {shown(value)}")
+    return path(value["model"], "pump.model")
+
+
+def pump_columns(cfg: MonitorConfig, columns: Sequence[str]) -> PumpColumns:
+    """The pump rule's signals in a row of ``columns``: the first loop's PP (one pump: every
+    loop's PP is its outlet) and every loop's spool command, ports and flow."""
+    loops = cfg.monitored_loops
+    sections = []
+    for lc in loops:
+        names = {c: lc.dbc_signal(c) for c in SECTION_SIGNALS}
+        missing = [c for c, n in names.items() if n is None or n not in columns]
+        if missing:
+            raise ConfigError(
+                f"{cfg.source}: the pump rule needs loop {lc.name}'s {', '.join(missing)}"
+            )
+        sections.append({c: str(n) for c, n in names.items()})
+    pp = loops[0].dbc_signal("PP")
+    if pp is None or pp not in columns:
+        raise ConfigError(f"{cfg.source}: the pump rule needs loop {loops[0].name}'s PP")
+    return PumpColumns.of(columns, pp, sections)
+
+
+def load_pump(cfg: MonitorConfig) -> PumpModel | None:
+    """The config's pump model (None without ``pump:``), its margin checked against the
+    config's ``plausibility.ls_margin_bar``."""
+    if cfg.pump_model is None:
+        return None
+    pump = cfg.gating.plausibility.pump
+    if not pump.load_sensing:
+        raise ConfigError(
+            f"{cfg.source}: pump.model needs plausibility.pump_system: load_sensing (the "
+            "margin law is a load-sensing pump's)"
+        )
+    model = load_pump_model(cfg.pump_model)
+    margin = pump.ls_margin_bar
+    if abs(model.counting.margin_bar - margin) > 1e-9:
+        raise ConfigError(
+            f"{cfg.source}: pump.model {cfg.pump_model} was trained with a margin of "
+            f"{model.counting.margin_bar:g} bar, plausibility.ls_margin_bar is {margin:g}"
+        )
+    return model
