@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
+from monitor.cli._detect_pump import add_pump_option, run_pump
 from monitor.cli._extras import require
 from monitor.cli._paths import output_file
 from monitor.detection.alarm import State
@@ -73,6 +74,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         help="also emit J every S seconds (0: state changes only; default 1)",
     )
     p.add_argument("--plot", type=output_file, default=None, metavar="F.png")
+    add_pump_option(p)
     p.set_defaults(func=run)
 
 
@@ -110,6 +112,8 @@ def _write_lines(lines: list[dict[str, Any]], fh: TextIO) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.pump:
+        return run_pump(args)
     if args.plot:
         require("matplotlib")  # the [analysis] extra: said before the work, not after
     from monitor.config.layout import check_loop_model

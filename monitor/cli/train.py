@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from monitor.cli._numbers import WINDOW_MAX, number
+from monitor.cli._train_pump import add_pump_option, run_pump
 from monitor.cli._paths import output_file
 from monitor.errors import ConfigError, MonitorError
 from monitor.model.spec import PRESETS
@@ -220,6 +221,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "that differs from the reference's by 5-15 %% looks like a fault to it too; refuse: "
         "exit 2 before any fitting (for a reference of this very machine); off: skip",
     )
+    add_pump_option(p)
     p.set_defaults(func=run)
 
 
@@ -351,6 +353,8 @@ def run(args: argparse.Namespace) -> int:
     from monitor.offline.recordings import read_loop
     from monitor.training.train import train
 
+    if args.pump:
+        return run_pump(args)
     monitor_cfg = load_config(args.config)
     preset, neighbours = _preset(args, monitor_cfg)
     cfg = _config(args, preset, neighbours)
