@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 from dataclasses import replace
+from pathlib import Path
 
 from monitor.errors import ConfigError, MonitorError
 
@@ -32,9 +32,7 @@ def run_pump(args: argparse.Namespace) -> int:
     if args.loop is not None:
         raise ConfigError("--pump judges the pump every loop shares: leave --loop out")
     if not args.held_out:
-        raise ConfigError(
-            "--pump needs --held-out normal recordings: its threshold is set on them"
-        )
+        raise ConfigError("--pump needs --held-out normal recordings: its threshold is set on them")
     cfg = load_config(args.config)
     pump = cfg.gating.plausibility.pump
     if not cfg.loops or not pump.load_sensing:

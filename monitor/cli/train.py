@@ -8,8 +8,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from monitor.cli._numbers import WINDOW_MAX, number
-from monitor.cli._train_pump import add_pump_option, run_pump
 from monitor.cli._paths import output_file
+from monitor.cli._train_pump import add_pump_option, run_pump
 from monitor.errors import ConfigError, MonitorError
 from monitor.model.spec import PRESETS
 from monitor.model.threshold import THRESHOLD_RULES, ThresholdRule

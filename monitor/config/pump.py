@@ -4,11 +4,13 @@ daemon's row (``monitor.detection.pump``).
 
     pump:
       model: pump_excavator4.pump.json
+      alarm_message: MON_Alarm_Pump   # the default
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,15 +24,39 @@ if TYPE_CHECKING:
 
 #: The contract signals of a section the pump rule reads.
 SECTION_SIGNALS = ("SpoolCmd", "PA", "PB", "QP")
+PUMP_ALARM = "MON_Alarm_Pump"
+#: The pump alarm message's signals (``monitor.live.machine``).
+PUMP_ALARM_SIGNALS = ("State", "Fault", "MarginResidual", "Threshold", "AlarmCount")
 
 
-def parse_pump(value: Any, source: Path, path: Callable[[Any, str], Path]) -> Path | None:
-    """``pump``: None, or a mapping with the one key ``model`` (an existing file)."""
+@dataclass(frozen=True)
+class PumpSection:
+    """``pump:``: the pump model file and the message its alarm goes out in."""
+
+    model: Path
+    alarm_message: str = PUMP_ALARM
+
+
+def parse_pump(value: Any, source: Path, path: Callable[[Any, str], Path]) -> PumpSection | None:
+    """``pump``: None, or a mapping with ``model`` (an existing file) and optionally
+    ``alarm_message``."""
     if value is None:
         return None
-    if not isinstance(value, dict) or set(value) != {"model"}:
-        raise ConfigError(f"{source}: pump must be a mapping with one key, model; got {shown(value)}")
-    return path(value["model"], "pump.model")
+    if (
+        not isinstance(value, dict)
+        or "model" not in value
+        or set(value) - {"model", "alarm_message"}
+    ):
+        raise ConfigError(
+            f"{source}: pump must be a mapping with model (and optionally alarm_message), "
+            f"got {shown(value)}"
+        )
+    message = value.get("alarm_message", PUMP_ALARM)
+    if not isinstance(message, str) or not message:
+        raise ConfigError(
+            f"{source}: pump.alarm_message must be a message name, got {shown(message)}"
+        )
+    return PumpSection(path(value["model"], "pump.model"), message)
 
 
 def pump_columns(cfg: MonitorConfig, columns: Sequence[str]) -> PumpColumns:
@@ -55,7 +81,7 @@ def pump_columns(cfg: MonitorConfig, columns: Sequence[str]) -> PumpColumns:
 def load_pump(cfg: MonitorConfig) -> PumpModel | None:
     """The config's pump model (None without ``pump:``), its margin checked against the
     config's ``plausibility.ls_margin_bar``."""
-    if cfg.pump_model is None:
+    if cfg.pump is None:
         return None
     pump = cfg.gating.plausibility.pump
     if not pump.load_sensing:
@@ -63,11 +89,11 @@ def load_pump(cfg: MonitorConfig) -> PumpModel | None:
             f"{cfg.source}: pump.model needs plausibility.pump_system: load_sensing (the "
             "margin law is a load-sensing pump's)"
         )
-    model = load_pump_model(cfg.pump_model)
+    model = load_pump_model(cfg.pump.model)
     margin = pump.ls_margin_bar
     if abs(model.counting.margin_bar - margin) > 1e-9:
         raise ConfigError(
-            f"{cfg.source}: pump.model {cfg.pump_model} was trained with a margin of "
+            f"{cfg.source}: pump.model {cfg.pump.model} was trained with a margin of "
             f"{model.counting.margin_bar:g} bar, plausibility.ls_margin_bar is {margin:g}"
         )
     return model

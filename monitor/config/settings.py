@@ -28,7 +28,7 @@ from typing import Any
 from monitor.bus.reader import BusConfig
 from monitor.codec.j1939 import dtc as j1939_dtc
 from monitor.config.loops import LoopConfig, default_loops, parse_loops
-from monitor.config.pump import parse_pump
+from monitor.config.pump import PumpSection, parse_pump
 from monitor.detection.alarm import AlarmConfig
 from monitor.detection.gating import GatingConfig
 from monitor.detection.opstate import OperatingConfig
@@ -246,8 +246,8 @@ class MonitorConfig:
     gating: GatingConfig = field(default_factory=GatingConfig)
     loops: tuple[LoopConfig, ...] = ()  # as written in the file; empty: no ``loops`` section
     machine: MachineSection = field(default_factory=MachineSection)
-    #: ``pump: {model: FILE}``: the shared pump's margin law (``monitor train --pump``).
-    pump_model: Path | None = None
+    #: ``pump:``: the shared pump's margin law (``monitor train --pump``), its alarm frame.
+    pump: PumpSection | None = None
 
     @property
     def machine_id(self) -> str | None:
@@ -336,7 +336,7 @@ def load_config(path: str | Path | None = None) -> MonitorConfig:
             section(ValidityConfig, "validity"),
         ),
         loops=loops,
-        pump_model=parse_pump(data.get("pump"), source, files.path),
+        pump=parse_pump(data.get("pump"), source, files.path),
         machine=MachineSection(
             _machine_id(data.get("machine_id"), source),
             machine,

@@ -128,7 +128,7 @@ class Decider:
         self.machine.skip_quiet(e, regimes)
 
 
-def _wall(t_s: float, start_time_s: float | None) -> str | None:
+def wall_time(t_s: float, start_time_s: float | None) -> str | None:
     """The wall clock of ``t_s`` s from the first sample (None without a start time)."""
     if start_time_s is None:
         return None
@@ -144,7 +144,7 @@ def withheld_record(
     return {
         "kind": "withheld",
         "t": round(float(t_s), 6),
-        "time": _wall(t_s, start_time_s),
+        "time": wall_time(t_s, start_time_s),
         "level": float(level),
         "reason": f"{reason}; {COMMISSION}",
     }
@@ -169,7 +169,7 @@ def event_record(
     fault from missing data names its signal: ``sensor`` it, ``sensor_check`` ``stale``."""
     return {
         "t": round(float(t_s), 6),
-        "time": _wall(t_s, start_time_s),
+        "time": wall_time(t_s, start_time_s),
         "state": state.label,
         "J": float(j) if math.isfinite(j) else None,
         "threshold": float(eps0),

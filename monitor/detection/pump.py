@@ -91,11 +91,23 @@ class PumpRule:
         self._sum = 0.0
         self._n = 0
         self._ring: list[float] = []  # the last ``blocks`` block sums
+        self._starts: list[float] = []  # and the row time each began at
+        self._t0 = math.nan
         self.state = State.INACTIVE
         self.stat_bar = math.nan
         self.counted = 0  # counted samples so far
         self.windows = 0  # statistics computed (one per block once the window is full)
         self.alarms = 0
+
+    @property
+    def window_start_s(self) -> float:
+        """Row time at which the current window's first counted sample came."""
+        return self._starts[0] if self._starts else math.nan
+
+    @property
+    def level(self) -> float:
+        """The statistic over the threshold (1 = alarm; NaN: no window yet, or off)."""
+        return self.stat_bar / self.threshold_bar
 
     @property
     def threshold_bar(self) -> float:
@@ -141,6 +153,8 @@ class PumpRule:
         if got is None:
             return False
         flow, pp, deficit = got
+        if self._n == 0:
+            self._t0 = row[0]
         self._sum += deficit - (self._a * flow + self._b * pp + self._c)
         self._n += 1
         self.counted += 1
@@ -148,8 +162,9 @@ class PumpRule:
             return False
         ring = self._ring
         ring.append(self._sum)
+        self._starts.append(self._t0)
         if len(ring) > self._blocks:
-            del ring[0]
+            del ring[0], self._starts[0]
         self._sum, self._n = 0.0, 0
         if len(ring) < self._blocks:
             return False
@@ -170,11 +185,12 @@ class PumpRule:
             self.alarms += 1
         return self.state is not was
 
-    def event(self, t_s: float, time: str | None = None) -> dict[str, Any]:
-        """The event line of the current state (``loop: pump``)."""
+    def event(self, t_s: float, time: str | None = None, origin_s: float = 0.0) -> dict[str, Any]:
+        """The event line of the current state (``loop: pump``) at row time ``t_s``;
+        ``t`` and ``window_from_t`` from ``origin_s`` (the first row)."""
         fault = self.state is State.FAULT
         return {
-            "t": round(float(t_s), 6),
+            "t": round(float(t_s - origin_s), 6),
             "time": time,
             "loop": PUMP,
             "state": self.state.label,
@@ -182,6 +198,7 @@ class PumpRule:
             "margin_residual_bar": _rounded(self.stat_bar),
             "threshold_bar": _rounded(self.threshold_bar),
             "counted_s": round(self.counted * 0.01, 2),
+            "window_from_t": _rounded(self.window_start_s - origin_s),
         }
 
 
@@ -205,7 +222,7 @@ def judge_rows(model: PumpModel, cols: PumpColumns, rows: np.ndarray) -> PumpDet
     peak = -math.inf
     for row in rows.tolist():
         if rule.tick(row):
-            events.append(rule.event(row[0] - rows[0, 0]))
+            events.append(rule.event(row[0], None, rows[0, 0]))
             if rule.state is State.FAULT and first_alarm is None:
                 first_alarm = events[-1]["t"]
         if rule.stat_bar > peak:

@@ -7,7 +7,11 @@ row (``monitor.offline.recordings.split_loops``), the loop's model, the config's
 and gating (the load-sensing plausibility rules).  One row per loop and run, scored as the
 boom's evaluation scores a run (``sim_eval.score_run``); a fault run's loops are then read
 together (``machine_row``): was the faulty loop's alarm raised, which loop alarmed first (the
-loop named) and which other loops alarmed after the onset (a neighbour's alarm).
+loop named) and which other loops alarmed after the onset (a neighbour's alarm).  With a
+pump model in the config (``pump:``) the pump rule judges every run too (``monitor detect
+--pump``), as one more row named ``pump``, and the loop named is the machine's finding
+(``monitor.detection.machine``): the pump when its rule alarmed (explaining the loops that
+alarmed after its window began), else the loop whose alarm came first.
 """
 
 from __future__ import annotations
@@ -19,21 +23,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from monitor.codec.frames import FrameCodec
+from monitor.config.layout import row_layout
+from monitor.config.pump import load_pump, pump_columns
 from monitor.config.settings import MonitorConfig, load_config
+from monitor.detection.machine import Alarm, finding_of
 from monitor.detection.offline import detect
+from monitor.detection.pump import PUMP, PumpColumns, PumpDetection, judge_rows
 from monitor.evaluation.machine_plan import MachinePlan, all_runs
 from monitor.evaluation.sim_eval import Eta, Progress, RunSpec, score_run
 from monitor.io.recording import Recording
 from monitor.model.machinecard import reference_reason
 from monitor.model.modelfile import MonitorModel, load_model
-from monitor.offline.recordings import split_loops
+from monitor.model.pumplaw import PumpModel
+from monitor.offline.recordings import rows_of, split_loops
 from monitor.sim.whole.cycles import make_whole_cycle
 from monitor.sim.whole.faults import MachineFault
 from monitor.sim.whole.params import WholeMachine, load_whole_machine
 from monitor.sim.whole.simulate import simulate_whole
 
-#: The fault of the pump is no loop's: any loop's alarm detects it, none names it.
-PUMP = "pump"
 #: Keys of a loop's row that the run's row already holds.
 _RUN_KEYS = ("seed", "duration_s", "fault", "severity", "onset")
 
@@ -47,17 +55,30 @@ class MachineUnderTest:
     normal: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     faults: list[dict[str, Any]] = field(default_factory=list)
     detect_s: float = 0.0
+    #: The config's pump model and where its rule reads a row (None: no ``pump:``).
+    pump: tuple[PumpModel, PumpColumns, tuple[str, ...]] | None = None
 
     @property
     def loops(self) -> list[str]:
         return list(self.models)
+
+    @property
+    def judges(self) -> list[str]:
+        """The loops, and ``pump`` when the pump rule judges too."""
+        return self.loops + ([PUMP] if self.pump is not None else [])
 
 
 @functools.cache
 def load_machine_monitor(config_path: str) -> MachineUnderTest:
     """The config and its loops' models, read once per process."""
     cfg = load_config(config_path)
-    return MachineUnderTest(cfg, {lc.name: load_model(lc.model) for lc in cfg.monitored_loops})
+    models = {lc.name: load_model(lc.model) for lc in cfg.monitored_loops}
+    pump_model = load_pump(cfg)
+    pump = None
+    if pump_model is not None:
+        columns, _ = row_layout(cfg, FrameCodec.from_dbc(cfg.dbc))
+        pump = (pump_model, pump_columns(cfg, columns), columns)
+    return MachineUnderTest(cfg, models, pump=pump)
 
 
 @functools.cache
@@ -91,7 +112,45 @@ def judge_loops(monitor: MachineUnderTest, rec: Recording, spec: RunSpec) -> dic
         row = score_run(det, spec)
         row["verdict"] = det.summary["verdict"]
         rows[name] = row
+    if monitor.pump is not None:
+        model, cols, columns = monitor.pump
+        pump = judge_rows(model, cols, rows_of(rec, columns))
+        rows[PUMP] = score_pump(pump, spec, float(rec.t[-1] - rec.t[0]))
     return rows
+
+
+def score_pump(det: PumpDetection, spec: RunSpec, duration_s: float) -> dict[str, Any]:
+    """The pump rule's row of one run, with ``score_run``'s keys."""
+    raised = [e for e in det.events if e["state"] == "fault"]
+    s = det.summary
+    level = None
+    if s["max_margin_residual_bar"] is not None and s["threshold_bar"]:
+        level = round(s["max_margin_residual_bar"] / s["threshold_bar"], 4)
+    out: dict[str, Any] = {
+        "seed": spec.seed,
+        "duration_s": round(duration_s, 2),
+        "max_level": level,
+        "sensor_fault": False,
+        "verdict": s["verdict"],
+        "counted_s": s["counted_s"],
+    }
+    if spec.fault is None:
+        out["alarm_episodes"] = len(raised)
+        out["alarm_times_s"] = [e["t"] for e in raised]
+        return out
+    post = [e for e in raised if e["t"] >= spec.onset_s]
+    out.update(fault=spec.fault, severity=spec.severity, onset=spec.onset)
+    out["pre_onset_alarms"] = len(raised) - len(post)
+    if not post:
+        out.update(detected=False, delay_s=None, isolated="none")
+        return out
+    out.update(
+        detected=True,
+        delay_s=round(post[0]["t"] - spec.onset_s, 2),
+        isolated="pump_wear",
+        window_from_t=post[0]["window_from_t"],
+    )
+    return out
 
 
 def machine_row(spec: RunSpec, loops: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -101,9 +160,11 @@ def machine_row(spec: RunSpec, loops: dict[str, dict[str, Any]]) -> dict[str, An
     the other loops that alarmed after the onset (for the pump, every loop that did)."""
     assert spec.fault is not None
     faulty = spec.fault.partition(".")[0]
-    alarmed = {n: r["delay_s"] for n, r in loops.items() if r["detected"]}
+    alarmed = {n: r["delay_s"] for n, r in loops.items() if r["detected"] and n != PUMP}
     first = min(alarmed, key=alarmed.__getitem__) if alarmed else "none"
-    if faulty == PUMP:
+    finding = finding_of(_alarm(n, r, spec.onset_s) for n, r in loops.items() if r["detected"])
+    named = finding.named or "none"
+    if faulty == PUMP and PUMP not in loops:  # no pump rule: any loop's alarm detects it
         detected, delay = bool(alarmed), (alarmed[first] if alarmed else None)
     else:
         detected, delay = bool(loops[faulty]["detected"]), loops[faulty]["delay_s"]
@@ -115,12 +176,21 @@ def machine_row(spec: RunSpec, loops: dict[str, dict[str, Any]]) -> dict[str, An
         "onset": spec.onset,
         "detected": detected,
         "delay_s": delay,
-        "named": first,
-        "right_loop": first == faulty,
+        "named": named,
+        "first_alarm": first,
+        "right_loop": named == faulty,
         "neighbours": sorted(n for n in alarmed if n != faulty),
+        "secondary": finding.secondary,
+        "explained_by_pump": finding.explained,
         "pre_onset_alarms": {n: r["pre_onset_alarms"] for n, r in loops.items()},
         "loops": {n: {k: v for k, v in r.items() if k not in _RUN_KEYS} for n, r in loops.items()},
     }
+
+
+def _alarm(name: str, row: dict[str, Any], onset_s: float) -> Alarm:
+    """A judge's first alarm after the onset, for the machine's finding."""
+    level = row["max_level"] if row["max_level"] is not None else float("nan")
+    return Alarm(name, onset_s + row["delay_s"], level, row.get("window_from_t"))
 
 
 def judge_spec(
@@ -143,13 +213,13 @@ def judge_batch(specs: list[RunSpec], config_path: str, sim_config: str | None) 
 def file_rows(monitor: MachineUnderTest, plan: Sequence[RunSpec], scored: Sequence[Any]) -> float:
     """File every run's row with the monitor (plan order); returns the simulation seconds."""
     sim_s = 0.0
-    monitor.normal = {name: [] for name in monitor.loops}
+    monitor.normal = {name: [] for name in monitor.judges}
     monitor.faults = []
     for spec, (row, s, d) in zip(plan, scored, strict=True):
         sim_s += s
         monitor.detect_s += d
         if spec.fault is None:
-            for name in monitor.loops:
+            for name in monitor.judges:
                 monitor.normal[name].append(row[name])
         else:
             monitor.faults.append(row)
@@ -170,7 +240,8 @@ def judge_all(
     say = progress or (lambda _msg: None)
     runs = all_runs(plan)
     loaded = load_machine_monitor(str(config_path))
-    monitor = MachineUnderTest(loaded.config, loaded.models)  # rows of this evaluation only
+    # Rows of this evaluation only.
+    monitor = MachineUnderTest(loaded.config, loaded.models, pump=loaded.pump)
     say(
         f"judging {len(runs) - len(plan_faults(runs))} normal and {len(plan_faults(runs))} "
         f"fault run(s) of the whole machine with {len(monitor.loops)} loops' models "

@@ -2,9 +2,11 @@
 
 Per loop: false alarms per hour of normal operation (entries into the fault state, with the
 one-sided 95 % Poisson bound, as the boom's evaluation) and sensor findings.  Per fault and
-severity: detected (the faulty loop's alarm at or after the onset; the pump's: any loop's),
-the median delay, the loop named (the first loop to alarm after the onset; right = the faulty
-loop) and the runs in which a neighbour's alarm was raised too, by loop.
+severity: detected (the faulty loop's alarm at or after the onset; the pump's: the pump
+rule's, or any loop's without one), the median delay, the loop named (the machine's finding,
+``monitor.detection.machine``: the pump when its rule alarmed, else the first loop to alarm
+after the onset; right = the faulty loop), the runs that named the pump, and the runs in
+which a neighbour's alarm was raised too, by loop (raised, whatever the finding named).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from monitor.detection.pump import PUMP
 from monitor.evaluation.machine_eval import MachineUnderTest
 from monitor.evaluation.machine_plan import (
     DEV_SEEDS,
@@ -38,7 +41,9 @@ def fault_cell(runs: Sequence[dict[str, Any]], loops: Sequence[str]) -> dict[str
         **detection_cell(runs),
         "named_right": right,
         "right_loop_rate": right / len(detected) if detected else None,
-        "named": {n: sum(r["named"] == n for r in runs) for n in (*loops, "none")},
+        "named": {n: sum(r["named"] == n for r in runs) for n in (*loops, PUMP, "none")},
+        "pump_named": sum(r["named"] == PUMP for r in runs),
+        "explained_by_pump_runs": sum(bool(r.get("explained_by_pump")) for r in runs),
         "neighbour_alarm_runs": sum(bool(r["neighbours"]) for r in runs),
         "neighbour_alarms": {n: sum(n in r["neighbours"] for r in runs) for n in loops},
         "pre_onset_false_alarms": sum(sum(r["pre_onset_alarms"].values()) for r in runs),
@@ -63,7 +68,31 @@ def loop_rows(m: MachineUnderTest, plan: MachinePlan) -> dict[str, Any]:
             "normal_runs_with_sensor_fault": sum(bool(r["sensor_fault"]) for r in normal),
             "false_alarms_pre_onset": _false_alarms(pre, pre_hours, "pre_onset_alarms"),
         }
+    if m.pump is not None:
+        out[PUMP] = _pump_row(m, plan, pre_hours)
     return out
+
+
+def _pump_row(m: MachineUnderTest, plan: MachinePlan, pre_hours: float) -> dict[str, Any]:
+    """The pump rule's false alarms, as a loop's."""
+    assert m.pump is not None
+    model = m.pump[0]
+    normal = m.normal[PUMP]
+    hours = sum(r["duration_s"] for r in normal) / 3600.0
+    levels = [r["max_level"] for r in normal if r["max_level"] is not None]
+    pre = [{"pre_onset_alarms": r["pre_onset_alarms"][PUMP]} for r in m.faults]
+    return {
+        "model": str(m.config.pump.model) if m.config.pump else None,
+        "preset": "pump margin law",
+        "outputs": ["margin residual (bar)"],
+        "threshold_bar": model.threshold_bar,
+        "off_reason": model.off_reason,
+        "false_alarms_normal": _false_alarms(normal, hours, "alarm_episodes"),
+        "normal_max_level": max(levels) if levels else None,
+        "normal_runs_with_sensor_fault": 0,
+        "normal_runs_not_judged": sum(r["verdict"] == "not_judged" for r in normal),
+        "false_alarms_pre_onset": _false_alarms(pre, pre_hours, "pre_onset_alarms"),
+    }
 
 
 def fault_rows(m: MachineUnderTest, plan: MachinePlan) -> list[dict[str, Any]]:
@@ -172,13 +201,15 @@ def machine_markdown(result: dict[str, Any]) -> str:
         )
     lines += [
         "",
-        "Per faulty loop (detected: the loop's own alarm; the pump's: any loop's; named: the "
-        "first loop to alarm after the onset is the faulty one, of the detected runs; "
-        "neighbour: runs in which another loop alarmed after the onset):",
+        "Per faulty loop (detected: the loop's own alarm; the pump's: the pump rule's, or "
+        "any loop's without one; named: the machine's finding, the pump when its rule "
+        "alarmed, else the first loop to alarm after the onset, is the faulty one, of the "
+        "detected runs; pump named: runs whose finding was the pump; neighbour: runs in "
+        "which another loop alarmed after the onset, whatever the finding named):",
         "",
         "| faulty loop | severities | runs | detected | median delay | named right "
-        "| runs with a neighbour's alarm |",
-        "|---|---|---:|---:|---:|---|---|",
+        "| pump named | runs with a neighbour's alarm |",
+        "|---|---|---:|---:|---:|---|---:|---|",
     ]
     for loop, cells in result["by_faulty_loop"].items():
         for sev, c in cells.items():
@@ -186,13 +217,13 @@ def machine_markdown(result: dict[str, Any]) -> str:
                 lines.append(
                     f"| {loop} | {sev.partition('severity')[2]} | {c['runs']} | "
                     f"{_pct(c['detection_rate'])} | {_sec(c['median_delay_s'])} | {_named(c)} "
-                    f"| {_neighbours(c)} |"
+                    f"| {c['pump_named']} | {_neighbours(c)} |"
                 )
     lines += [
         "",
         "Per fault and severity (onsets pooled):",
         "",
-        "| fault | severity | runs | detected | median delay | named right | named first "
+        "| fault | severity | runs | detected | median delay | named right | named "
         "| runs with a neighbour's alarm |",
         "|---|---:|---:|---:|---:|---|---|---|",
     ]

@@ -52,6 +52,7 @@ from monitor.live.disk import DiskOutputs
 from monitor.live.dm1 import Diagnostics
 from monitor.live.eventlog import bus_event_record
 from monitor.live.loops import Loop, worst_state
+from monitor.live.machine import MachineWatch
 from monitor.live.pipeline import FramePipeline
 from monitor.live.reload import Reload, Reloader, prepare, swap_in
 from monitor.live.status import Heartbeat
@@ -81,6 +82,8 @@ class Daemon:
         self.loops = [
             Loop(lc, cfg, self.codec, v) for lc, v in zip(cfg.monitored_loops, views, strict=True)
         ]
+        # Several loops: the pump rule (``pump:``) and the machine's finding over them.
+        self.machine = MachineWatch(cfg, self.codec, self.columns) if cfg.loops else None
         self.disk = DiskOutputs(cfg)  # its writer thread runs from here on
         self.reader = _reader(cfg, self.codec, self.columns, bus, opener)
         self.tx = Transmitter(self.reader, cfg.outputs.frames_max_per_s, cfg.bus.time_scale)
@@ -95,6 +98,8 @@ class Daemon:
             lambda: self.reader.heard_until,
             lambda: not self.reader.queue.empty(),
             lambda: self.reader.received_at,
+            self.machine,
+            self._machine_event,
         )
         self.heartbeat = Heartbeat(self.codec, self.loops, self.reader, self.disk, self.tx.send)
         self.reloader = Reloader(lambda: prepare(self.cfg, self.loops, self.disk.quota))
@@ -181,6 +186,7 @@ class Daemon:
             "tx_errors": self.tx.errors,
             "tx_capped": self.tx.capped,
             "bad_timestamps": self.pipeline.bad_timestamps,
+            **(self.machine.counts if self.machine is not None else {}),
             **diag,
             "error_frames": r.error_frames,
             **self.reader.recovery.as_dict(),
@@ -243,6 +249,35 @@ class Daemon:
         if tick.raised:  # a new episode; a fault back after a short gap is the same one
             self.disk.black_box.trigger(
                 self.pipeline.bus_time(tick.t_s), lp.alarm_label(), ev["seq"]
+            )
+        if self.on_event is not None:
+            self.on_event(ev)
+
+    def _machine_event(self, ev: dict[str, Any]) -> None:
+        """The pump rule's state change or the machine's finding: the event log, the
+        journal (a warning for a pump fault and a finding naming something)."""
+        self.disk.log_event(ev)
+        if ev.get("kind") == "finding":
+            level = logging.WARNING if ev["named"] else logging.INFO
+            log.log(
+                level,
+                "t=%.2f s: machine finding: %s%s%s",
+                ev["t"],
+                ev["named"] or "none",
+                f", explained by the pump: {', '.join(ev['explained_by_pump'])}"
+                if ev["explained_by_pump"]
+                else "",
+                f", secondary: {', '.join(ev['secondary'])}" if ev["secondary"] else "",
+            )
+        else:
+            level = logging.WARNING if ev["state"] == "fault" else logging.INFO
+            log.log(
+                level,
+                "t=%.2f s: pump: %s (margin residual %s bar, threshold %s bar)",
+                ev["t"],
+                ev["state"],
+                ev["margin_residual_bar"],
+                ev["threshold_bar"],
             )
         if self.on_event is not None:
             self.on_event(ev)

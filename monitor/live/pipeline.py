@@ -24,9 +24,11 @@ import numpy as np
 
 from monitor.codec.frames import FrameCodec
 from monitor.config.layout import rod_columns
+from monitor.detection.machine import Alarm
 from monitor.detection.ticker import Tick
 from monitor.io.candump import MAX_TIMESTAMP_S
 from monitor.live.loops import Loop
+from monitor.live.machine import MachineWatch, Say
 from monitor.live.silence import SilenceProof
 from monitor.sampling.sampler import Sampler, hydraulic_messages
 
@@ -49,9 +51,13 @@ class FramePipeline:
         heard_until: Callable[[], float] = time.monotonic,
         backlog: Callable[[], bool] = lambda: False,
         received_at: Callable[[], float] | None = None,
+        machine: MachineWatch | None = None,
+        say: Say = lambda _ev: None,
     ) -> None:
         self.codec = codec
         self.loops = loops
+        self.machine = machine  # the pump rule and the machine's finding (several loops)
+        self.say = say  # their event lines
         # A loop's rod sensor is optional: it never holds the first rows back (warming).
         optional = rod_columns(lp.cfg for lp in loops)
         self.sampler = Sampler.for_codec(codec, columns=columns, optional=optional)
@@ -130,11 +136,24 @@ class FramePipeline:
             bus_time = self.bus_time(float(row[0]))
             for lp in self.loops:
                 self._tick_loop(lp, row, bus_time)
+            if self.machine is not None:
+                self.machine.tick(row, bus_time, self.start_time_s, self.send, self.say)
+
+    def _finding(self, lp: Loop, tick: Tick) -> None:
+        """A loop's alarm raised or its episode over, to the machine's finding."""
+        assert self.machine is not None
+        if tick.raised:
+            alarm = Alarm(lp.name, tick.t_s, tick.level)
+            self.machine.raised(alarm, self.start_time_s, self.say)
+        elif not tick.episode_open:
+            self.machine.cleared(lp.name, tick.t_s, self.start_time_s, self.say)
 
     def _tick_loop(self, lp: Loop, row: np.ndarray, bus_time: float) -> None:
         tick = lp.tick(row)
         if tick.changed or tick.withheld:  # a withheld alarm is said, never raised
             self.on_change(tick, lp)
+            if self.machine is not None:
+                self._finding(lp, tick)
         ticker, frames = lp.ticker, lp.frames
         if frames.due(tick.t_s, tick.state, tick.state_changed):
             self.send(frames.alarm(tick.state, tick.j, ticker.eps0, ticker.fault, bus_time))

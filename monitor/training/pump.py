@@ -124,7 +124,5 @@ def fit_pump(
         f"{support['independent_windows']} independent {window_n * 0.01:g} s windows, largest "
         f"|mean residual| {peak:.4f} bar; other half's peak {support['transfer_ratio']:.2g} x"
     )
-    say(
-        f"pump rule off: {why}" if threshold is None else f"pump threshold {threshold:.4f} bar"
-    )
+    say(f"pump rule off: {why}" if threshold is None else f"pump threshold {threshold:.4f} bar")
     return replace(model, threshold_bar=threshold, off_reason=why, support=support)
