@@ -121,7 +121,8 @@ def test_loop_recording_gives_back_each_loops_signals(four_log) -> None:
 def test_each_loop_alarms_for_its_own_fault_and_only_it(run) -> None:
     by_loop: dict[str, list[dict[str, Any]]] = {name: [] for name in TRUTH}
     for e in run["events"]:
-        by_loop[e["loop"]].append(e)
+        if "kind" not in e:  # the machine's finding lines name no loop of their own
+            by_loop[e["loop"]].append(e)
     for loop, truth in TRUTH.items():
         faults = [e for e in by_loop[loop] if e["state"] == "fault"]
         if truth == "normal":
@@ -138,7 +139,7 @@ def test_each_loop_alarms_for_its_own_fault_and_only_it(run) -> None:
 def test_live_events_per_loop_equal_offline_detect(run, four_log) -> None:
     cfg = run["cfg"]
     for lc in cfg.loops:
-        live = [e for e in run["events"] if e["loop"] == lc.name]
+        live = [e for e in run["events"] if e.get("loop") == lc.name]
         rec = loop_recording(four_log, cfg, lc.name)
         offline = detect(load_model(lc.model), rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
         assert_same_events(live, offline)
