@@ -71,7 +71,12 @@ def test_plan_refuses(kw: dict[str, Any]) -> None:
 
 
 def _loop(delay: float | None, pre: int = 0) -> dict[str, Any]:
-    return {"detected": delay is not None, "delay_s": delay, "pre_onset_alarms": pre}
+    return {
+        "detected": delay is not None,
+        "delay_s": delay,
+        "pre_onset_alarms": pre,
+        "max_level": 1.5,
+    }
 
 
 def test_machine_row_names_the_first_loop_and_counts_neighbours() -> None:
@@ -93,6 +98,15 @@ def test_machine_row_names_the_first_loop_and_counts_neighbours() -> None:
     pump = machine_row(RunSpec(2, 600.0, "pump.pump_wear", 0.5, "abrupt", 120.0), loops)
     assert pump["detected"] and pump["delay_s"] == 12.0 and not pump["right_loop"]
     assert pump["neighbours"] == ["boom", "stick"]
+    # The pump's rule alarmed: the pump is named, and the loops that alarmed after its
+    # window began are explained by it, not neighbours' findings.
+    spec_p = RunSpec(2, 600.0, "pump.pump_wear", 0.5, "abrupt", 120.0)
+    pump_row = {**_loop(20.0), "max_level": 2.0, "window_from_t": 125.0}
+    named = machine_row(spec_p, {**loops, "pump": pump_row})
+    assert named["detected"] and named["delay_s"] == 20.0 and named["named"] == "pump"
+    assert named["right_loop"] and named["first_alarm"] == "stick"
+    assert named["explained_by_pump"] == ["stick", "boom"] and named["secondary"] == []
+    assert fault_cell([named], LOOPS)["pump_named"] == 1
     cell = fault_cell([row, late, missed], LOOPS)
     assert (cell["runs"], cell["detected"], cell["named_right"]) == (3, 2, 1)
     assert cell["median_delay_s"] == 26.0  # (12 + 40) / 2
@@ -196,7 +210,14 @@ def test_short_run_rows_match_an_independent_count(tmp_path: Path) -> None:
         first = (
             min((ts[0], n) for n, ts in after.items() if ts)[1] if any(after.values()) else "none"
         )
-        assert row["named"] == first
+        assert row["first_alarm"] == first
+        # The machine's finding names the first loop unless the pump's rule alarmed or a
+        # stronger loop alarmed within a second of it.
+        pump = row["loops"].get("pump", {})
+        if not pump.get("detected") and first != "none":
+            t_first = row["loops"][first]["delay_s"]
+            tied = [n for n in LOOPS if after[n] and after[n][0] - 60.0 - t_first <= 1.0]
+            assert row["named"] in tied
         assert row["neighbours"] == sorted(n for n in LOOPS if after[n] and n != row["loop"])
         raised += row["detected"]
     assert raised >= 1  # full spool wear in a section's flow: seen (not vacuous)
