@@ -15,9 +15,11 @@ band x the healthy leakage / full flow = 5 x 0.010 / 39.6 = 0.0013), then prints
 mean residual after the fault's onset (bar) with its standard error.  PLS is read as the
 highest feeding port (PA raising, PB lowering) of the sections whose spool is open beyond
 5 %; samples count where some section is open, every command has been steady for 0.5 s
-(no transient) and the sections draw over 2 L/min.  Runs are ``monitor simulate --machine
-excavator4`` mixed work of 600 s (``benchmarks/excavator4_loops.py``'s names, so a folder
-serves both), the fault ``pump.pump_wear`` from 120 s.
+(no transient) and the sections draw over 2 L/min: the pump rule's own counting
+(``monitor.detection.pump``), which each run is also judged by with the shipped pump model
+(``config/pump_excavator4.pump.json``, ``monitor detect --pump``).  Runs are ``monitor
+simulate --machine excavator4`` mixed work of 600 s (``benchmarks/excavator4_loops.py``'s
+names, so a folder serves both), the fault ``pump.pump_wear`` from 120 s.
 """
 
 from __future__ import annotations
@@ -29,36 +31,40 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.excavator4_loops import ONSET_S, _seeds, _simulate
-from monitor.io.csvio import read_csv
+from monitor.config.pump import load_pump, pump_columns
+from monitor.config.settings import load_config
+from monitor.detection.pump import counted_samples, judge_rows
+from monitor.model.pumplaw import Counting, MarginLaw, PumpModel
+from monitor.offline.recordings import machine_rows
+from monitor.resources import resource_path
 
-PREFIXES = ("", "Stick_", "Bucket_", "Swing_")
-MARGIN_BAR = 20.0  # config/excavator4.yaml's plausibility.ls_margin_bar
-OPEN_PCT = 5.0
-STEADY_SAMPLES = 50  # 0.5 s at 100 Hz
-MIN_FLOW_LPM = 2.0
+CONFIG = resource_path("config", "excavator4.yaml")
 #: Independent 0.5 s blocks for the standard error (the residual is correlated within one).
 BLOCK = 50
 
 
 def margin_samples(path: Path, after_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(total section flow L/min, PP bar, margin deficit bar) at the counted samples."""
-    rec = read_csv(path)
-    flow = sum(rec[p + "QP"] for p in PREFIXES)
-    pls = np.zeros(len(rec))
-    n_open = np.zeros(len(rec))
-    steady = np.ones(len(rec), dtype=bool)
-    idx = np.arange(len(rec))
-    for p in PREFIXES:
-        s = rec[p + "SpoolCmd"]
-        port = np.where(s > OPEN_PCT, rec[p + "PA"], np.where(s < -OPEN_PCT, rec[p + "PB"], 0.0))
-        pls = np.maximum(pls, port)
-        n_open += np.abs(s) > OPEN_PCT
-        changed = np.r_[True, np.abs(np.diff(s)) > 0.5]
-        last = np.maximum.accumulate(np.where(changed, idx, 0))
-        steady &= idx - last > STEADY_SAMPLES
-    deficit = pls + MARGIN_BAR - rec["PP"]
-    keep = (n_open > 0) & steady & (rec.t - rec.t[0] > after_s) & (flow > MIN_FLOW_LPM)
-    return flow[keep], rec["PP"][keep], deficit[keep]
+    """(total section flow L/min, PP bar, margin deficit bar) at the samples the pump rule
+    counts (``monitor.detection.pump``: its own choice, so the benchmark and the rule agree)."""
+    cfg = load_config(CONFIG)
+    columns, rows, _ = machine_rows(path, cfg)
+    rows = rows[rows[:, 0] - rows[0, 0] > after_s]
+    margin = cfg.gating.plausibility.pump.ls_margin_bar
+    blank = PumpModel(MarginLaw(0.0, 0.0, 0.0), Counting(margin), None)
+    s = counted_samples(blank, pump_columns(cfg, columns), rows)
+    return s[:, 0], s[:, 1], s[:, 2]
+
+
+def shipped_verdict(path: Path) -> str:
+    """The shipped pump model's verdict on the run (``monitor detect --pump``)."""
+    cfg = load_config(CONFIG)
+    model = load_pump(cfg)
+    if model is None:
+        return "no pump model"
+    columns, rows, _ = machine_rows(path, cfg)
+    s = judge_rows(model, pump_columns(cfg, columns), rows).summary
+    alarm = f" from {s['first_alarm_t']:.0f} s" if s["alarm"] else ""
+    return f"shipped rule {s['verdict']}{alarm} (peak {s['max_margin_residual_bar']} bar)"
 
 
 def _design(flow: np.ndarray, pp: np.ndarray) -> np.ndarray:
@@ -91,7 +97,7 @@ def main() -> int:
         se = float(np.std(r) / np.sqrt(n_blocks))
         print(
             f"{kind} seed {seed}: {len(r) / 100:.0f} s counted, mean residual "
-            f"{r.mean():+.3f} bar (se {se:.3f})",
+            f"{r.mean():+.3f} bar (se {se:.3f}); {shipped_verdict(path)}",
             flush=True,
         )
     return 0

@@ -34,8 +34,8 @@ def run_pump(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"{cfg.source}: no `pump: {{model: FILE}}` (train one with monitor train --pump)"
         )
-    columns, rows = machine_rows(args.recording, cfg)
-    det = judge_rows(model, pump_columns(cfg, columns), rows)
+    columns, rows, start_s = machine_rows(args.recording, cfg)
+    det = judge_rows(model, pump_columns(cfg, columns), rows, start_s)
     try:
         fh = args.events.open("w", encoding="utf-8") if args.events else sys.stdout
         for ev in det.events:

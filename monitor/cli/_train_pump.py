@@ -47,7 +47,7 @@ def run_pump(args: argparse.Namespace) -> int:
         nonlocal columns
         out = []
         for path in paths:
-            columns, rows = machine_rows(path, cfg)
+            columns, rows, _ = machine_rows(path, cfg)
             print(f"read {path}{what}: {len(rows) / 100:.0f} s", file=sys.stderr)
             out.append(rows)
         return out

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from monitor.detection.alarm import State
+from monitor.detection.decision import wall_time
 from monitor.model.pumplaw import PumpModel
 
 PUMP = "pump"
@@ -214,15 +215,19 @@ class PumpDetection:
     summary: dict[str, Any]
 
 
-def judge_rows(model: PumpModel, cols: PumpColumns, rows: np.ndarray) -> PumpDetection:
-    """``PumpRule`` ticked over ``rows`` (``[t, *columns]``, t from the first row)."""
+def judge_rows(
+    model: PumpModel, cols: PumpColumns, rows: np.ndarray, start_time_s: float | None = None
+) -> PumpDetection:
+    """``PumpRule`` ticked over ``rows`` (``[t, *columns]``; events' ``t`` from the first
+    row, ``time`` the wall clock when the log time of the first row is given)."""
     rule = PumpRule(model, cols)
     events = []
     first_alarm = None
     peak = -math.inf
     for row in rows.tolist():
         if rule.tick(row):
-            events.append(rule.event(row[0], None, rows[0, 0]))
+            t_s = row[0] - rows[0, 0]
+            events.append(rule.event(row[0], wall_time(t_s, start_time_s), rows[0, 0]))
             if rule.state is State.FAULT and first_alarm is None:
                 first_alarm = events[-1]["t"]
         if rule.stat_bar > peak:

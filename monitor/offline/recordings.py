@@ -138,10 +138,13 @@ def wide_recording(cfg: MonitorConfig, recordings: dict[str, Recording]) -> Reco
     return Recording(t=first.t, columns=columns, source="+".join(recordings), meta={})
 
 
-def machine_rows(path: str | Path, cfg: MonitorConfig) -> tuple[tuple[str, ...], np.ndarray]:
+def machine_rows(
+    path: str | Path, cfg: MonitorConfig
+) -> tuple[tuple[str, ...], np.ndarray, float | None]:
     """The daemon's rows of a whole-machine recording (candump log, or a CSV whose columns
     are the DBC's signal names): (columns, ``[t, *columns]`` rows, NaN where a signal is
-    missing), as the daemon's sampler makes them; what the pump rule reads."""
+    missing, and the log time of the first row, None for a CSV), as the daemon's sampler
+    makes them; what the pump rule reads."""
     if Path(path).is_dir():
         raise InputFileError(f"{path}: is a folder; give a recording (.log or .csv) in it")
     if not Path(path).is_file():
@@ -153,7 +156,8 @@ def machine_rows(path: str | Path, cfg: MonitorConfig) -> tuple[tuple[str, ...],
         wide = read_csv(path, required=[c for c in columns if c not in optional])
     else:
         wide = recording_from_candump_bulk(path, codec, columns, optional=optional)
-    return columns, rows_of(wide, columns)
+    start = wide.meta.get("start_time_s")
+    return columns, rows_of(wide, columns), float(start) if start is not None else None
 
 
 def rows_of(wide: Recording, columns: Sequence[str]) -> np.ndarray:
