@@ -30,7 +30,11 @@ COLS = PumpColumns.of(
 
 
 def _rows(
-    seed: int, duration_s: float, offset_bar: float = 0.0, from_s: float = 0.0
+    seed: int,
+    duration_s: float,
+    offset_bar: float = 0.0,
+    from_s: float = 0.0,
+    only_s1: bool = False,
 ) -> tuple[np.ndarray, int]:
     """Rows of two sections whose spools step every 5 s, and the number of samples that
     count by the schedule (a section open, both spools unchanged for 0.5 s)."""
@@ -54,6 +58,8 @@ def _rows(
     )
     flow = flow1 + flow2
     off = np.where(t >= from_s, offset_bar, 0.0)
+    if only_s1:  # a fault of section 1 that costs margin only while it is open
+        off = np.where(np.abs(spool1) > 5, off, 0.0)
     # PLS + margin - PP = A flow + B PP + C + offset, solved for PP, plus sensor noise.
     pp = (pls + MARGIN - A * flow - C - off) / (1 + B) + rng.normal(0, 0.3, n)
     rows = np.column_stack(
@@ -105,6 +111,25 @@ def test_a_known_offset_is_found_and_a_healthy_run_is_not() -> None:
     assert s["max_margin_residual_bar"] == pytest.approx(0.3 / (1 + B), abs=0.03)
     healthy = judge_rows(model, COLS, _rows(98, 600.0)[0]).summary
     assert healthy["verdict"] == "healthy" and not healthy["alarm"]
+
+
+def test_an_excess_only_one_section_carries_is_not_the_pumps() -> None:
+    model = _model()
+    # 0.5 bar short of margin while section 1 is open (as a leaking boom piston that draws
+    # the pump to its limit): the window's mean is far above the threshold, but section 1's
+    # closed samples show nothing.
+    rows, _ = _rows(95, 600.0, offset_bar=0.5, from_s=100.0, only_s1=True)
+    rule = PumpRule(model, COLS)
+    carried = set()
+    for row in rows.tolist():
+        rule.tick(row)
+        if rule.stat_bar > 2 * (model.threshold_bar or 0.0):
+            carried.add(rule.carried_by)
+    # Windows in which section 1 was hardly closed cannot tell (None); none says pump.
+    assert "section 1" in carried and carried <= {"section 1", None}
+    s = judge_rows(model, COLS, rows).summary
+    assert not s["alarm"] and s["verdict"] == "healthy"
+    assert s["max_margin_residual_bar"] > 2 * (model.threshold_bar or 0.0)
 
 
 def test_the_live_rule_gives_the_offline_events() -> None:

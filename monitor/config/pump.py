@@ -75,7 +75,7 @@ def pump_columns(cfg: MonitorConfig, columns: Sequence[str]) -> PumpColumns:
     pp = loops[0].dbc_signal("PP")
     if pp is None or pp not in columns:
         raise ConfigError(f"{cfg.source}: the pump rule needs loop {loops[0].name}'s PP")
-    return PumpColumns.of(columns, pp, sections)
+    return PumpColumns.of(columns, pp, sections, [lc.name for lc in loops])
 
 
 def load_pump(cfg: MonitorConfig) -> PumpModel | None:

@@ -7,8 +7,15 @@ daemon's row layout, ``monitor.config.layout``), decides whether the row counts 
 open, every spool steady, flow drawn), adds the law's residual to the current block, and at
 the end of a block compares the mean residual of the last window with the model's threshold:
 ``fault`` (``pump_wear``) above it, ``normal`` again below half of it, ``inactive`` until the
-first window is full or when the rule is off.  The daemon ticks it after the loops (a few
-float operations per section; lists, no numpy per row); ``monitor detect --pump`` and
+first window is full or when the rule is off.  A worn pump is short of margin whichever
+sections are open; a loop's own fault that costs margin (a leaking boom piston drawing the
+pump to its limit) is short only while its section is open.  So the excess must show in the
+window's samples with each section closed too (those of a section closed for at least a
+fifth of the window): where one section's closed samples show less than half the threshold
+the excess is that section's (``carried_by``) and the pump is not in fault; a section
+closed for less than that cannot be told apart, and the state stays as it was.  The daemon
+ticks it after the loops (a few float operations per section; lists, no numpy per row);
+``monitor detect --pump`` and
 ``monitor eval-sim --machine`` tick the same class over a recording's rows (``judge_rows``),
 so the live and the offline events are the same.
 """
@@ -30,6 +37,8 @@ PUMP = "pump"
 PUMP_FAULT = "pump_wear"
 #: Back to normal below this share of the threshold (no flapping on a window at the edge).
 CLEAR_SHARE = 0.5
+#: A section's share of the window closed that can say whether the excess is its own.
+MIN_CLOSED_SHARE = 0.2
 
 
 @dataclass(frozen=True)
@@ -42,9 +51,16 @@ class PumpColumns:
     pa: tuple[int, ...]
     pb: tuple[int, ...]
     qp: tuple[int, ...]
+    names: tuple[str, ...] = ()  # the sections' (loops') names, in order
 
     @classmethod
-    def of(cls, columns: Sequence[str], pp: str, sections: Sequence[dict[str, str]]) -> PumpColumns:
+    def of(
+        cls,
+        columns: Sequence[str],
+        pp: str,
+        sections: Sequence[dict[str, str]],
+        names: Sequence[str] = (),
+    ) -> PumpColumns:
         """From the row's column names: ``pp`` and per section its ``SpoolCmd``, ``PA``,
         ``PB`` and ``QP`` signal names (a ``KeyError`` naming the one missing)."""
 
@@ -59,6 +75,7 @@ class PumpColumns:
             tuple(at(s["PA"]) for s in sections),
             tuple(at(s["PB"]) for s in sections),
             tuple(at(s["QP"]) for s in sections),
+            tuple(names) or tuple(f"section {k + 1}" for k in range(len(sections))),
         )
 
 
@@ -94,6 +111,15 @@ class PumpRule:
         self._ring: list[float] = []  # the last ``blocks`` block sums
         self._starts: list[float] = []  # and the row time each began at
         self._t0 = math.nan
+        # Per section: the residual's sum and count over the counted samples it was closed
+        # in, this block's and the window's blocks'.
+        self._shut = [False] * n
+        self._csum = [0.0] * n
+        self._cn = [0] * n
+        self._cring: list[tuple[list[float], list[int]]] = []
+        #: Whose the excess over the threshold is: ``pump``, a section, None (none, or
+        #: cannot be told).
+        self.carried_by: str | None = None
         self.state = State.INACTIVE
         self.stat_bar = math.nan
         self.counted = 0  # counted samples so far
@@ -133,15 +159,19 @@ class PumpRule:
         flow = 0.0
         pls = 0.0
         n_open = 0
+        shut = self._shut
         for k, i in enumerate(cols.spool):
             s = row[i]
             flow += row[cols.qp[k]]
+            shut[k] = False
             if s > self._open:
                 n_open += 1
                 pls = max(pls, row[cols.pa[k]])
             elif s < -self._open:
                 n_open += 1
                 pls = max(pls, row[cols.pb[k]])
+            else:
+                shut[k] = True
         pp = row[cols.pp]
         deficit = pls + self._margin - pp
         if not n_open or not flow > self._min_flow or not math.isfinite(deficit + flow):
@@ -156,31 +186,69 @@ class PumpRule:
         flow, pp, deficit = got
         if self._n == 0:
             self._t0 = row[0]
-        self._sum += deficit - (self._a * flow + self._b * pp + self._c)
+        r = deficit - (self._a * flow + self._b * pp + self._c)
+        self._sum += r
         self._n += 1
         self.counted += 1
+        for k, shut in enumerate(self._shut):
+            if shut:
+                self._csum[k] += r
+                self._cn[k] += 1
         if self._n < self._block_n:
             return False
+        return self._block_end()
+
+    def _block_end(self) -> bool:
         ring = self._ring
         ring.append(self._sum)
         self._starts.append(self._t0)
+        self._cring.append((self._csum, self._cn))
         if len(ring) > self._blocks:
-            del ring[0], self._starts[0]
-        self._sum, self._n = 0.0, 0
+            del ring[0], self._starts[0], self._cring[0]
+        n = len(self._shut)
+        self._sum, self._n, self._csum, self._cn = 0.0, 0, [0.0] * n, [0] * n
         if len(ring) < self._blocks:
             return False
         self.stat_bar = sum(ring) / (self._blocks * self._block_n)
         self.windows += 1
+        self.carried_by = self._carried_by()
         return self._decide()
+
+    def _carried_by(self) -> str | None:
+        """Whose the window's excess is: ``PUMP`` when the samples with each section closed
+        show it too (at least half the threshold, each section closed for a fifth of the
+        window), the section whose closed samples show less than that, or None: no excess
+        over the threshold, or a section that was hardly ever closed (it cannot be told)."""
+        threshold = self.model.threshold_bar
+        if threshold is None or not self.stat_bar > threshold:
+            return None
+        need = MIN_CLOSED_SHARE * self._blocks * self._block_n
+        best, best_mean, told = None, CLEAR_SHARE * threshold, True
+        for k, name in enumerate(self.cols.names):
+            n = sum(c[1][k] for c in self._cring)
+            if n < need:
+                told = False
+                continue
+            mean = sum(c[0][k] for c in self._cring) / n
+            if mean < best_mean:
+                best, best_mean = name, mean
+        return best if best is not None else PUMP if told else None
 
     def _decide(self) -> bool:
         threshold = self.model.threshold_bar
         was = self.state
         if threshold is None:
             return False  # off: inactive, the model file says why
-        if self.stat_bar > threshold:
+        carried = self.carried_by
+        if carried == PUMP:
             self.state = State.FAULT
-        elif self.state is not State.FAULT or self.stat_bar < CLEAR_SHARE * threshold:
+        # The first window, a section's excess (not the pump's), or well below: normal; else
+        # (near the threshold, or a section that cannot be told apart) as it was.
+        elif (
+            self.state is State.INACTIVE
+            or carried is not None
+            or self.stat_bar < CLEAR_SHARE * threshold
+        ):
             self.state = State.NORMAL
         if self.state is State.FAULT and was is not State.FAULT:
             self.alarms += 1
@@ -200,6 +268,7 @@ class PumpRule:
             "threshold_bar": _rounded(self.threshold_bar),
             "counted_s": round(self.counted * 0.01, 2),
             "window_from_t": _rounded(self.window_start_s - origin_s),
+            "carried_by": self.carried_by,
         }
 
 
