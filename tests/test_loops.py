@@ -50,6 +50,7 @@ def _boom_model_config(folder: Path) -> Path:
     for loop in doc["loops"]:
         loop["model"] = boom
     doc.pop("plausibility", None)
+    doc.pop("pump", None)  # the pump rule is a load-sensing pump's
     path = folder / "excavator4_boom_models.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     return path

@@ -138,6 +138,9 @@ def _demo(scenario: Scenario, out: Path, speed: float, kept: bool) -> int:
     def on_event(ev: dict[str, Any]) -> None:
         if tty:
             print("\r" + " " * 100 + "\r", end="")
+        if ev.get("kind") == "finding":  # the machine's finding (several loops)
+            print(f"[log t={ev['t']:6.2f} s] machine finding: {ev['named'] or 'none'}", flush=True)
+            return
         fault = f", isolated: {ev['fault']}" if ev["fault"] else ""
         loop = f"{ev['loop']}: " if "loop" in ev else ""
         print(

@@ -112,8 +112,10 @@ def _write_lines(lines: list[dict[str, Any]], fh: TextIO) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.pump:
-        return run_pump(args)
+    return run_pump(args) if args.pump else _run_loop(args)
+
+
+def _run_loop(args: argparse.Namespace) -> int:
     if args.plot:
         require("matplotlib")  # the [analysis] extra: said before the work, not after
     from monitor.config.layout import check_loop_model

@@ -91,6 +91,75 @@ class PumpTick:
     raised: bool
 
 
+class _Spools:
+    """How long each section's spool command has been steady (no step over ``step_pct``)."""
+
+    def __init__(self, n: int, step_pct: float, steady_n: int) -> None:
+        self.step, self.steady_n = step_pct, steady_n
+        self.last = [math.nan] * n
+        self.since = [0] * n
+
+    def steady(self, row: Sequence[float], spool: tuple[int, ...]) -> bool:
+        """Every spool steady for ``steady_n`` rows (every row must pass here, in order)."""
+        ok = True
+        for k, i in enumerate(spool):
+            s = row[i]
+            # A step (or a missing command: NaN compares false) restarts the steady count.
+            if abs(s - self.last[k]) <= self.step:
+                self.since[k] += 1
+            else:
+                self.since[k] = 0
+            self.last[k] = s
+            ok = ok and self.since[k] >= self.steady_n
+        return ok
+
+
+class _Window:
+    """The counted residuals in blocks of ``block_n``, the last ``blocks`` of them: each
+    block's sum, the row time it began at, and per section the sum and count of the
+    residuals of the samples that section was closed in."""
+
+    def __init__(self, n: int, block_n: int, blocks: int) -> None:
+        self.n, self.block_n, self.blocks = n, block_n, blocks
+        self.block = self._empty()
+        self.full: list[tuple[float, float, list[float], list[int], int]] = []
+
+    def _empty(self) -> tuple[list[float], list[float], list[int], list[int]]:
+        # ([sum, t0], closed sums, closed counts, [count])
+        return [0.0, math.nan], [0.0] * self.n, [0] * self.n, [0]
+
+    def add(self, r: float, t_s: float, shut: list[bool]) -> bool:
+        """One counted residual; True when it ends a block and the window is full."""
+        head, csum, cn, count = self.block
+        if count[0] == 0:
+            head[1] = t_s
+        head[0] += r
+        count[0] += 1
+        for k, closed in enumerate(shut):
+            if closed:
+                csum[k] += r
+                cn[k] += 1
+        if count[0] < self.block_n:
+            return False
+        self.full.append((head[0], head[1], csum, cn, count[0]))
+        if len(self.full) > self.blocks:
+            del self.full[0]
+        self.block = self._empty()
+        return len(self.full) == self.blocks
+
+    @property
+    def mean(self) -> float:
+        return sum(b[0] for b in self.full) / sum(b[4] for b in self.full)
+
+    @property
+    def start_s(self) -> float:
+        return self.full[0][1] if self.full else math.nan
+
+    def closed(self, k: int) -> tuple[float, int]:
+        """Section ``k``'s closed samples of the window: (residual sum, count)."""
+        return sum(b[2][k] for b in self.full), sum(b[3][k] for b in self.full)
+
+
 class PumpRule:
     """The pump rule's state over a run of rows (see the module)."""
 
@@ -98,25 +167,10 @@ class PumpRule:
         self.model = model
         self.cols = cols
         c = model.counting
-        self._open, self._step, self._steady = c.open_pct, c.step_pct, c.steady_n
-        self._margin, self._min_flow = c.margin_bar, c.min_flow_lpm
-        self._block_n, self._blocks = c.block_n, c.blocks
-        law = model.law
-        self._a, self._b, self._c = law.flow_coef, law.pp_coef, law.offset_bar
         n = len(cols.spool)
-        self._last = [math.nan] * n
-        self._since = [0] * n
-        self._sum = 0.0
-        self._n = 0
-        self._ring: list[float] = []  # the last ``blocks`` block sums
-        self._starts: list[float] = []  # and the row time each began at
-        self._t0 = math.nan
-        # Per section: the residual's sum and count over the counted samples it was closed
-        # in, this block's and the window's blocks'.
-        self._shut = [False] * n
-        self._csum = [0.0] * n
-        self._cn = [0] * n
-        self._cring: list[tuple[list[float], list[int]]] = []
+        self._spools = _Spools(n, c.step_pct, c.steady_n)
+        self._window = _Window(n, c.block_n, c.blocks)
+        self._shut = [False] * n  # per section: closed in the last counted row
         #: Whose the excess over the threshold is: ``pump``, a section, None (none, or
         #: cannot be told).
         self.carried_by: str | None = None
@@ -129,7 +183,7 @@ class PumpRule:
     @property
     def window_start_s(self) -> float:
         """Row time at which the current window's first counted sample came."""
-        return self._starts[0] if self._starts else math.nan
+        return self._window.start_s
 
     @property
     def level(self) -> float:
@@ -143,38 +197,28 @@ class PumpRule:
     def sample(self, row: Sequence[float]) -> tuple[float, float, float] | None:
         """(total flow L/min, PP bar, margin deficit bar) of a row that counts, else None;
         updates the spools' steadiness (every row must pass here, in order)."""
-        cols = self.cols
-        steady = True
-        for k, i in enumerate(cols.spool):
-            s = row[i]
-            # A step (or a missing command: NaN compares false) restarts the steady count.
-            if abs(s - self._last[k]) <= self._step:
-                self._since[k] += 1
-            else:
-                self._since[k] = 0
-            self._last[k] = s
-            steady = steady and self._since[k] >= self._steady
-        if not steady:
+        cols, c = self.cols, self.model.counting
+        if not self._spools.steady(row, cols.spool):
             return None
         flow = 0.0
         pls = 0.0
         n_open = 0
-        shut = self._shut
+        shut, open_pct = self._shut, c.open_pct
         for k, i in enumerate(cols.spool):
             s = row[i]
             flow += row[cols.qp[k]]
             shut[k] = False
-            if s > self._open:
+            if s > open_pct:
                 n_open += 1
                 pls = max(pls, row[cols.pa[k]])
-            elif s < -self._open:
+            elif s < -open_pct:
                 n_open += 1
                 pls = max(pls, row[cols.pb[k]])
             else:
                 shut[k] = True
         pp = row[cols.pp]
-        deficit = pls + self._margin - pp
-        if not n_open or not flow > self._min_flow or not math.isfinite(deficit + flow):
+        deficit = pls + c.margin_bar - pp
+        if not n_open or not flow > c.min_flow_lpm or not math.isfinite(deficit + flow):
             return None
         return flow, pp, deficit
 
@@ -184,32 +228,10 @@ class PumpRule:
         if got is None:
             return False
         flow, pp, deficit = got
-        if self._n == 0:
-            self._t0 = row[0]
-        r = deficit - (self._a * flow + self._b * pp + self._c)
-        self._sum += r
-        self._n += 1
         self.counted += 1
-        for k, shut in enumerate(self._shut):
-            if shut:
-                self._csum[k] += r
-                self._cn[k] += 1
-        if self._n < self._block_n:
+        if not self._window.add(deficit - self.model.law.deficit(flow, pp), row[0], self._shut):
             return False
-        return self._block_end()
-
-    def _block_end(self) -> bool:
-        ring = self._ring
-        ring.append(self._sum)
-        self._starts.append(self._t0)
-        self._cring.append((self._csum, self._cn))
-        if len(ring) > self._blocks:
-            del ring[0], self._starts[0], self._cring[0]
-        n = len(self._shut)
-        self._sum, self._n, self._csum, self._cn = 0.0, 0, [0.0] * n, [0] * n
-        if len(ring) < self._blocks:
-            return False
-        self.stat_bar = sum(ring) / (self._blocks * self._block_n)
+        self.stat_bar = self._window.mean
         self.windows += 1
         self.carried_by = self._carried_by()
         return self._decide()
@@ -222,14 +244,14 @@ class PumpRule:
         threshold = self.model.threshold_bar
         if threshold is None or not self.stat_bar > threshold:
             return None
-        need = MIN_CLOSED_SHARE * self._blocks * self._block_n
+        need = MIN_CLOSED_SHARE * self.model.counting.window_n
         best, best_mean, told = None, CLEAR_SHARE * threshold, True
         for k, name in enumerate(self.cols.names):
-            n = sum(c[1][k] for c in self._cring)
+            total, n = self._window.closed(k)
             if n < need:
                 told = False
                 continue
-            mean = sum(c[0][k] for c in self._cring) / n
+            mean = total / n
             if mean < best_mean:
                 best, best_mean = name, mean
         return best if best is not None else PUMP if told else None

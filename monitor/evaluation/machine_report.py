@@ -174,6 +174,21 @@ def _neighbours(c: dict[str, Any]) -> str:
     return f"{c['neighbour_alarm_runs']}" + (f" ({', '.join(hit)})" if hit else "")
 
 
+def _loop_table(loops: dict[str, Any]) -> list[str]:
+    lines = [
+        "| loop | model outputs | false alarms on normal runs | largest level | sensor finding "
+        "| false alarms before an onset |",
+        "|---|---|---|---:|---:|---|",
+    ]
+    for name, r in loops.items():
+        level = "-" if r["normal_max_level"] is None else f"{r['normal_max_level']:.2f}"
+        lines.append(
+            f"| {name} | {', '.join(r['outputs'])} | {_fa(r['false_alarms_normal'])} | {level} "
+            f"| {r['normal_runs_with_sensor_fault']} runs | {_fa(r['false_alarms_pre_onset'])} |"
+        )
+    return lines
+
+
 def machine_markdown(result: dict[str, Any]) -> str:
     """The report: loops' false alarms, the issue's measures per faulty loop, every cell."""
     cfg, plan, rt = result["config"], result["plan"], result["runtime_s"]
@@ -189,16 +204,8 @@ def machine_markdown(result: dict[str, Any]) -> str:
         f"Run time {rt['total']:.0f} s (simulation {rt['simulate']:.0f} s, detection "
         f"{rt['detect']:.0f} s).",
         "",
-        "| loop | model outputs | false alarms on normal runs | largest level | sensor finding "
-        "| false alarms before an onset |",
-        "|---|---|---|---:|---:|---|",
+        *_loop_table(result["loops"]),
     ]
-    for name, r in result["loops"].items():
-        level = "-" if r["normal_max_level"] is None else f"{r['normal_max_level']:.2f}"
-        lines.append(
-            f"| {name} | {', '.join(r['outputs'])} | {_fa(r['false_alarms_normal'])} | {level} "
-            f"| {r['normal_runs_with_sensor_fault']} runs | {_fa(r['false_alarms_pre_onset'])} |"
-        )
     lines += [
         "",
         "Per faulty loop (detected: the loop's own alarm; the pump's: the pump rule's, or "
