@@ -154,10 +154,13 @@ def score_pump(det: PumpDetection, spec: RunSpec, duration_s: float) -> dict[str
 
 
 def machine_row(spec: RunSpec, loops: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """A fault run's loops read together.  ``detected``: the faulty loop's alarm at or after
-    the onset (the pump's: any loop's); ``named``: the loop whose alarm came first after the
-    onset (``none`` if none); ``right_loop``: that loop is the faulty one; ``neighbours``:
-    the other loops that alarmed after the onset (for the pump, every loop that did)."""
+    """A fault run's loops (and the pump rule's row, ``pump``) read together.
+    ``detected``: the faulty loop's alarm at or after the onset (the pump's: its rule's, or
+    any loop's without a rule); ``named``: the machine's finding over the alarms after the
+    onset (``monitor.detection.machine``; ``none`` if none), with its ``secondary`` and
+    ``explained_by_pump`` loops; ``first_alarm``: the loop whose alarm came first;
+    ``right_loop``: the finding is the faulty one; ``neighbours``: the other loops that
+    alarmed after the onset (for the pump, every loop that did)."""
     assert spec.fault is not None
     faulty = spec.fault.partition(".")[0]
     alarmed = {n: r["delay_s"] for n, r in loops.items() if r["detected"] and n != PUMP}
