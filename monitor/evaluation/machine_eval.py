@@ -248,7 +248,9 @@ def judge_all(
     say(
         f"judging {len(runs) - len(plan_faults(runs))} normal and {len(plan_faults(runs))} "
         f"fault run(s) of the whole machine with {len(monitor.loops)} loops' models "
-        f"({', '.join(monitor.loops)}) of {config_path}"
+        f"({', '.join(monitor.loops)})"
+        + (" and the pump rule" if monitor.pump is not None else "")
+        + f" of {config_path}"
     )
     eta = Eta(runs, say)
     if workers > 1:
