@@ -15,12 +15,10 @@ from monitor.cli._extras import require
 from monitor.cli._paths import output_file
 from monitor.detection.alarm import State
 from monitor.detection.opstate import OpState
-from monitor.errors import ConfigError, MonitorError
+from monitor.errors import MonitorError
 
 if TYPE_CHECKING:
-    from monitor.config.settings import MonitorConfig
     from monitor.detection.offline import Detection
-    from monitor.model.modelfile import MonitorModel
 
 
 def add_subparser(subparsers: argparse._SubParsersAction) -> None:
@@ -120,9 +118,8 @@ def _run_loop(args: argparse.Namespace) -> int:
         require("matplotlib")  # the [analysis] extra: said before the work, not after
     from monitor.config.layout import check_loop_model
     from monitor.config.settings import load_config
-    from monitor.detection.offline import detect
-    from monitor.model.machinecard import reference_reason
     from monitor.model.modelfile import load_model
+    from monitor.offline.loopjob import check_whole_recording, judge_recording
     from monitor.offline.recordings import read_loop
 
     cfg = load_config(args.config)
@@ -133,14 +130,12 @@ def _run_loop(args: argparse.Namespace) -> int:
     model_path = args.model or (loop.model if args.loop else cfg.model)
     model = load_model(model_path)
     check_loop_model(model, loop, cfg, model_path)  # before the recording is read
-    _check_whole_recording(args.loop, model, cfg, model_path)
-    rec = read_loop(args.recording, cfg, args.loop)
+    check_whole_recording(args.loop, model, cfg, model_path)
     tag = {} if args.loop is None else {"loop": args.loop}
-    horizon = args.horizon or cfg.horizon
     # A model not commissioned on the config's machine_id withholds its hydraulic alarms
     # (the daemon applies the same rule).
-    reference = reference_reason(model.card, cfg.machine_id)
-    det = detect(model, rec, cfg.alarm, horizon, gating=cfg.gating, reference=reference)
+    judged = judge_recording(model, args.recording, cfg, args.loop, cfg.machine_id, args.horizon)
+    rec, det, reference = judged.rec, judged.det, judged.reference
     det.summary.update(tag)
     lines = _lines(det, args.j_every, tag)
     try:
@@ -175,21 +170,6 @@ def _run_loop(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return 3 if s["verdict"] == "not_judged" else 0
-
-
-def _check_whole_recording(
-    loop: str | None, model: MonitorModel, cfg: MonitorConfig, model_path: Path
-) -> None:
-    """Without --loop the recording is read as one loop's: a model that reads the other
-    loops' commands (``SpoolCmd@LOOP``) needs --loop."""
-    from monitor.signals import is_neighbour
-
-    if loop is None and any(is_neighbour(v) for v in model.spec.variables):
-        names = ", ".join(lc.name for lc in cfg.monitored_loops)
-        raise ConfigError(
-            f"{model_path}: a model of one loop of several (it reads the other loops' "
-            f"commands): give --loop NAME ({names})"
-        )
 
 
 def _result_line(s: dict[str, Any]) -> str:

@@ -148,13 +148,15 @@ def run(args: argparse.Namespace) -> int:
             "commissioning/); give the fleet folder above it"
         )
 
-    _refuse_whole_machines(args.fleet, args.config)
+    default_model = None if args.model is None else str(args.model.resolve())
+    config = None if args.config is None else str(args.config.resolve())
     opts = RunOptions(
         workers=args.workers,
         scheduler=args.scheduler,
-        default_model=None if args.model is None else str(args.model.resolve()),
-        config=None if args.config is None else str(args.config.resolve()),
+        default_model=default_model,
+        config=config,
         isolation=args.isolation,
+        loops=_loops(args.fleet, config, default_model),
     )
     progress = Progress(sys.stderr, tty=sys.stderr.isatty())
     outcome = run_fleet(args.fleet.resolve(), args.out, opts, progress)
@@ -162,15 +164,16 @@ def run(args: argparse.Namespace) -> int:
     return outcome.exit_code
 
 
-def _refuse_whole_machines(fleet: Path, config: Path | None) -> None:
-    """Whole machines' logs, or a config of several loops: one line, before any work
-    (``monitor.fleet.wholemachine``)."""
+def _loops(fleet: Path, config: str | None, default_model: str | None) -> tuple[str, ...]:
+    """The loops each log is judged as (none: as one loop), or one line, before any work,
+    for what cannot be judged so (``monitor.fleet.wholemachine``)."""
     from monitor.config.settings import load_config
     from monitor.fleet.layout import scan_fleet
-    from monitor.fleet.wholemachine import refuse_whole_machines
+    from monitor.fleet.wholemachine import fleet_loops
 
-    loops = [lc.name for lc in load_config(config).monitored_loops]
-    refuse_whole_machines(scan_fleet(fleet.resolve()), loops)
+    cfg = load_config(None if config is None else Path(config))
+    loops = [lc.name for lc in cfg.monitored_loops]
+    return fleet_loops(scan_fleet(fleet.resolve()), loops, config, default_model)
 
 
 def report(args: argparse.Namespace) -> int:

@@ -226,25 +226,11 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _card(monitor_cfg: MonitorConfig, loop_name: str | None, recordings: list) -> ModelCard:
-    """The loop trained (``--loop``, or the config's first) and its configured machine; the
-    recordings must be ones that machine can produce (checked before training)."""
-    import numpy as np
+    """The loop trained (``--loop``, or the config's first) and its configured machine
+    (``monitor.offline.loopjob.loop_card``, as the fleet's commissioning writes it)."""
+    from monitor.offline.loopjob import loop_card
 
-    from monitor.model.machinecard import card_for, check_seen
-
-    loop = next(lc for lc in monitor_cfg.monitored_loops if loop_name in (None, lc.name))
-    where = f"{monitor_cfg.source} (machine {loop.machine_source})"
-    machine = loop.machine
-    if machine is not None:
-        for rec in recordings:
-            seen = {
-                s: float(np.nanmax(rec[s], initial=0.0))
-                for s in ("PP", "PA", "PB", "QP")
-                if rec.has(s)
-            }
-            check_seen(seen, machine, f"{rec.source}: shows", where)
-    source = None if loop.machine_source is None else str(loop.machine_source)
-    return card_for(loop.name, loop.machine, source, monitor_cfg.machine_id)
+    return loop_card(monitor_cfg, loop_name, recordings, monitor_cfg.machine_id)
 
 
 def _check_input(
@@ -307,16 +293,11 @@ def _check_input(
 
 def _preset(args: argparse.Namespace, monitor_cfg: MonitorConfig) -> tuple[str, tuple[str, ...]]:
     """(preset, the neighbours' demand columns it reads): ``section`` for a loop of a
-    load-sensing machine unless ``--preset`` says otherwise; with ``--loop`` a section
-    reads every other loop's spool command (``monitor.signals.neighbour``)."""
-    from monitor.signals import neighbour
+    load-sensing machine unless ``--preset`` says otherwise
+    (``monitor.offline.loopjob.section_inputs``, as the fleet's commissioning decides)."""
+    from monitor.offline.loopjob import section_inputs
 
-    ls = monitor_cfg.gating.plausibility.pump.load_sensing
-    preset = args.preset or ("section" if ls and args.loop else "default")
-    if preset != "section" or args.loop is None:
-        return preset, ()
-    others = [lc.name for lc in monitor_cfg.monitored_loops if lc.name != args.loop]
-    return preset, tuple(neighbour("SpoolCmd", name) for name in others)
+    return section_inputs(monitor_cfg, args.loop, args.preset)
 
 
 def _config(args: argparse.Namespace, preset: str, neighbours: tuple[str, ...]) -> TrainConfig:

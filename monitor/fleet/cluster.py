@@ -29,6 +29,8 @@ class RunOptions:
     default_model: str | None = None
     config: str | None = None
     isolation: str = "sim"
+    #: Each log judged per loop of the config's ``loops:`` (whole machines); () as one loop.
+    loops: tuple[str, ...] = ()
 
 
 class FleetInterrupted(KeyboardInterrupt):

@@ -1,6 +1,7 @@
-"""Commissioning in `monitor fleet run`: each machine's model, trained on the cluster from
-its commissioning logs, reused while they (and the training settings) are unchanged, or the
-default model for a machine without them or whose training failed."""
+"""Commissioning in `monitor fleet run`: each machine's model (a whole machine's: one per
+loop of the config's ``loops:``), trained on the cluster from its commissioning logs, reused
+while they (and the training settings) are unchanged, or the default model (the loop's
+model of the config) for a machine without them or whose training failed."""
 
 from __future__ import annotations
 
@@ -17,21 +18,37 @@ from monitor.io.digest import sha256_file
 
 
 def train_task(
-    paths: list[str], config: str | None, isolation: str, reference: bytes, machine_id: str
+    paths: list[str],
+    config: str | None,
+    isolation: str,
+    reference: bytes,
+    machine_id: str,
+    loop: str | None = None,
 ) -> bytes:
-    return pipeline.train_model_bytes(paths, config, isolation, reference, machine_id)
+    return pipeline.train_model_bytes(paths, config, isolation, reference, machine_id, loop)
 
 
-def _settings(default: bytes, opts: RunOptions) -> dict[str, Any]:
-    """What every machine's model is trained with besides its own commissioning files (hashed
-    once per run: the default model is megabytes)."""
+#: A model's key: (machine id, loop; None for a log judged as one loop).
+Unit = tuple[str, str | None]
+
+
+def model_name(unit: Unit) -> str:
+    """The model's name in RESULTS/models: ``M01`` (one loop) or ``M01.stick``."""
+    machine, loop = unit
+    return machine if loop is None else f"{machine}.{loop}"
+
+
+def _settings(default: bytes, opts: RunOptions, loop: str | None) -> dict[str, Any]:
+    """What every machine's model (of ``loop``) is trained with besides its own
+    commissioning files (hashed once per run: the default model is megabytes)."""
     config = None if opts.config is None else sha256_file(Path(opts.config))
-    return {
+    out = {
         "reference_sha256": hashlib.sha256(default).hexdigest(),
         "isolation": opts.isolation,
         "config_sha256": config,
         "train": pipeline.COMMISSIONING,
     }
+    return out if loop is None else {**out, "loop": loop}
 
 
 def _manifest(m: Machine, fleet: Fleet, settings: dict[str, Any]) -> dict[str, Any]:
@@ -43,8 +60,8 @@ def _manifest(m: Machine, fleet: Fleet, settings: dict[str, Any]) -> dict[str, A
     }
 
 
-#: machine id -> (a future or the bytes of its model, the model's label)
-Models = dict[str, tuple[Any, str]]
+#: (machine id, loop) -> (a future or the bytes of its model, the model's label)
+Models = dict[Unit, tuple[Any, str]]
 
 
 def models(
@@ -52,109 +69,120 @@ def models(
     fleet: Fleet,
     store: ResultStore,
     opts: RunOptions,
-    needed: set[str],
+    needed: set[Unit],
     stop: Stop,
     progress: Progress,
 ) -> Models:
-    """machine id -> (future or bytes of its model, model label), for the ``needed`` ones."""
-    default = pipeline.default_model_bytes(opts.default_model, opts.config)
-    out, manifests, to_train = _known(fleet, store, needed, default, opts, progress)
-    _submit(client, to_train, opts, default, out, stop, progress)
-    reused = [mid for mid, (_, label) in out.items() if label == "commissioned"]
+    """(machine id, loop) -> (future or bytes of its model, model label), for the
+    ``needed`` ones."""
+    loops = sorted({loop for _, loop in needed}, key=lambda x: (x is not None, x or ""))
+    defaults = {
+        loop: pipeline.default_model_bytes(opts.default_model, opts.config, loop) for loop in loops
+    }
+    out, manifests, to_train = _known(fleet, store, needed, defaults, opts, progress)
+    _submit(client, to_train, opts, defaults, out, stop, progress)
+    reused = [u for u, (_, label) in out.items() if label == "commissioned"]
     if reused:
-        progress.say(f"fleet: {len(reused)} machine model(s) reused (commissioning unchanged)")
-    _collect(out, manifests, default, store, stop, progress)
-    for mid, (data, label) in out.items():
+        what = "machine" if loops == [None] else "loop"
+        progress.say(f"fleet: {len(reused)} {what} model(s) reused (commissioning unchanged)")
+    _collect(out, manifests, defaults, store, stop, progress)
+    for unit, (data, label) in out.items():
         if label.startswith("default"):
-            store.save_model(mid, data, None)
+            store.save_model(model_name(unit), data, None)
     return out
 
 
 def _known(
     fleet: Fleet,
     store: ResultStore,
-    needed: set[str],
-    default: bytes,
+    needed: set[Unit],
+    defaults: dict[str | None, bytes],
     opts: RunOptions,
     progress: Progress,
-) -> tuple[Models, dict[str, dict[str, Any]], list[Machine]]:
+) -> tuple[Models, dict[Unit, dict[str, Any]], list[tuple[Machine, str | None]]]:
     """The models known without training (the default one, a stored one trained from the
-    same), each machine's manifest, and the machines to train."""
+    same), each model's manifest, and the (machine, loop)s to train."""
     out: Models = {}
-    manifests: dict[str, dict[str, Any]] = {}
-    settings = _settings(default, opts)
-    to_train: list[Machine] = []
+    manifests: dict[Unit, dict[str, Any]] = {}
+    settings = {loop: _settings(d, opts, loop) for loop, d in defaults.items()}
+    to_train: list[tuple[Machine, str | None]] = []
     for m in fleet.machines:
-        if m.machine_id not in needed:
-            continue
-        if not m.commissioning:
+        loops = [loop for mid, loop in needed if mid == m.machine_id]
+        if loops and not m.commissioning:
             progress.say(
                 f"fleet: {m.machine_id}: no commissioning data, judged with the default model"
+                + ("" if loops == [None] else "s: its loops uncommissioned")
             )
-            out[m.machine_id] = (default, "default")
-            continue
-        manifests[m.machine_id] = manifest = _manifest(m, fleet, settings)
-        cached = store.cached_model(m.machine_id, manifest)
-        if cached is not None:
-            out[m.machine_id] = (cached, "commissioned")
-        else:
-            to_train.append(m)
+        for loop in sorted(loops, key=lambda x: x or ""):
+            unit = (m.machine_id, loop)
+            if not m.commissioning:
+                out[unit] = (defaults[loop], "default")
+                continue
+            manifests[unit] = manifest = _manifest(m, fleet, settings[loop])
+            cached = store.cached_model(model_name(unit), manifest)
+            if cached is not None:
+                out[unit] = (cached, "commissioned")
+            else:
+                to_train.append((m, loop))
     return out, manifests, to_train
 
 
 def _submit(
     client: Any,
-    to_train: list[Machine],
+    to_train: list[tuple[Machine, str | None]],
     opts: RunOptions,
-    default: bytes,
+    defaults: dict[str | None, bytes],
     out: Models,
     stop: Stop,
     progress: Progress,
 ) -> None:
-    """One training task per machine, into ``out`` as ``training``."""
+    """One training task per machine (and loop), into ``out`` as ``training``."""
     if to_train:
         progress.commissioning(len(to_train))
-    for i, m in enumerate(to_train):
+    for i, (m, loop) in enumerate(to_train):
         # The default model floors the commissioned thresholds (minutes cannot show the
         # tail of hours: monitor.training.train.floor_thresholds).
+        unit = (m.machine_id, loop)
         fut = client.submit(
             train_task,
             [str(p) for p in m.commissioning],
             opts.config,
             opts.isolation,
-            default,
+            defaults[loop],
             m.machine_id,
-            key=f"train-{m.machine_id}",
+            loop,
+            key=f"train-{model_name(unit)}",
             pure=False,
         )
         if i == 0:  # alone: it fills numba's cache for the training kernels
             wait([fut], stop, progress)  # a failure is reported below, with the others'
-        out[m.machine_id] = (fut, "training")
+        out[unit] = (fut, "training")
 
 
 def _collect(
     out: Models,
-    manifests: dict[str, dict[str, Any]],
-    default: bytes,
+    manifests: dict[Unit, dict[str, Any]],
+    defaults: dict[str | None, bytes],
     store: ResultStore,
     stop: Stop,
     progress: Progress,
 ) -> None:
     """Wait for each training: its model stored, or the default one for a failed one."""
-    for mid, (fut, label) in list(out.items()):
+    for unit, (fut, label) in list(out.items()):
         if label != "training":
             continue
         wait([fut], stop, progress)
+        name = model_name(unit)
         try:
             data = fut.result()
         except Exception as exc:  # noqa: BLE001 - any failure of a machine's training
             progress.say(
-                f"fleet: {mid}: commissioning failed ({exc}); judged with the default model"
+                f"fleet: {name}: commissioning failed ({exc}); judged with the default model"
             )
-            out[mid] = (default, f"default (commissioning failed: {exc})")
+            out[unit] = (defaults[unit[1]], f"default (commissioning failed: {exc})")
             continue
         # Whether each statistic earned its threshold, and why not (the support rule's
         # line), beside what the model was trained from.
-        store.save_model(mid, data, manifests[mid], pipeline.statistic_notes(data))
-        out[mid] = (fut, "commissioned")
+        store.save_model(name, data, manifests[unit], pipeline.statistic_notes(data))
+        out[unit] = (fut, "commissioned")
         progress.commissioned()

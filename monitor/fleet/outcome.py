@@ -28,15 +28,23 @@ class Outcome:
     new: int
     skipped: int
     reasons: list[str] = field(default_factory=list)
+    per_loop: bool = False  # whole machines: a row per loop of each log
 
     @classmethod
     def of(
-        cls, rows: Iterable[dict[str, Any]], keys: set[tuple[str, str]], new: int, skipped: int
+        cls,
+        rows: Iterable[dict[str, Any]],
+        keys: set[tuple[str, str, str]],
+        new: int,
+        skipped: int,
+        per_loop: bool = False,
     ) -> Outcome:
+        from monitor.fleet.store import row_key
+
         judged = not_judged = 0
         failed: list[dict[str, Any]] = []
-        for r in sorted(rows, key=lambda r: r["log"]):
-            if (r["log"], r["sha256"] or "") not in keys:
+        for r in sorted(rows, key=lambda r: (r["log"], r.get("loop") or "")):
+            if row_key(r) not in keys:
                 continue
             if r["error"] is not None:
                 failed.append(r)
@@ -44,8 +52,11 @@ class Outcome:
                 not_judged += 1
             else:
                 judged += 1
-        reasons = [f"{r['log']}: {_short(r['error'])}" for r in failed[:FIRST_REASONS]]
-        return cls(judged, not_judged, len(failed), new, skipped, reasons)
+        reasons = [
+            f"{r['log']}{' (' + r['loop'] + ')' if r.get('loop') else ''}: {_short(r['error'])}"
+            for r in failed[:FIRST_REASONS]
+        ]
+        return cls(judged, not_judged, len(failed), new, skipped, reasons, per_loop)
 
     @property
     def exit_code(self) -> int:
@@ -54,8 +65,9 @@ class Outcome:
 
     def line(self) -> str:
         total = self.judged + self.not_judged + self.failed
+        unit = "log loops" if self.per_loop else "logs"
         text = (
-            f"fleet: {total} logs: {self.judged} judged, {self.not_judged} not judged, "
+            f"fleet: {total} {unit}: {self.judged} judged, {self.not_judged} not judged, "
             f"{self.failed} failed"
         )
         if self.reasons:

@@ -59,10 +59,22 @@ def model_from_bytes(data: bytes) -> Any:
         os.unlink(name)
 
 
-def default_model_bytes(model_path: str | None, config_path: str | None) -> bytes:
-    """The model `monitor detect` uses without --model (the config's), or ``model_path``."""
+def default_model_bytes(
+    model_path: str | None, config_path: str | None, loop: str | None = None
+) -> bytes:
+    """The model `monitor detect [--loop LOOP]` uses without --model (the config's, or its
+    loop's), or ``model_path``."""
+    from monitor.offline.loopjob import loop_config
+
     cfg = _config(config_path)
+    if model_path is None and loop is not None:
+        return Path(loop_config(cfg, loop).model).read_bytes()
     return Path(model_path or cfg.model).read_bytes()
+
+
+def config_loops(config_path: str | None) -> list[str]:
+    """The loops a config declares (``loops:``; one: the log judged as one loop)."""
+    return [lc.name for lc in _config(config_path).monitored_loops]
 
 
 class _Commissioning(TypedDict):
@@ -95,12 +107,17 @@ def train_model_bytes(
     isolation: str = "sim",
     reference: bytes | None = None,
     machine_id: str | None = None,
+    loop: str | None = None,
 ) -> bytes:
-    """`monitor train REC... --out M --folds 4 [--isolation I] [--reference R]`
+    """`monitor train REC... --out M --folds 4 [--isolation I] [--reference R] [--loop L]`
     with its other defaults (:data:`COMMISSIONING`): the model file's bytes
     (``reference``: the reference model's bytes; ``machine_id``: the machine commissioned,
-    recorded in the model as `monitor train` records the config's ``machine_id``)."""
+    recorded in the model as `monitor train` records the config's ``machine_id``).  With
+    ``loop``, that loop of whole-machine recordings, with `monitor train --loop`'s preset,
+    neighbours' inputs and card (``monitor.offline.loopjob``); a section model has no
+    simulated fault signatures (isolation ``none``, as `monitor train --loop` defaults)."""
     from monitor.model.machinecard import card_for
+    from monitor.offline.loopjob import loop_card, section_inputs
     from monitor.offline.recordings import read_loop
     from monitor.training.settings import (
         DGRNNSettings,
@@ -112,16 +129,23 @@ def train_model_bytes(
     from monitor.training.train import train
 
     cfg = _config(config_path)
-    recordings = [read_loop(p, cfg, None) for p in paths]
+    recordings = [read_loop(p, cfg, loop) for p in paths]
     ref = None if reference is None else model_from_bytes(reference)
+    if loop is None:
+        dgrnn = DGRNNSettings(lend=COMMISSIONING["lend"])
+    else:
+        preset, neighbours = section_inputs(cfg, loop)
+        dgrnn = DGRNNSettings(preset=preset, lend=COMMISSIONING["lend"], neighbours=neighbours)
+        isolation = "none" if neighbours else isolation
     settings = TrainConfig(
-        dgrnn=DGRNNSettings(lend=COMMISSIONING["lend"]),
+        dgrnn=dgrnn,
         thresholds=ThresholdSettings(folds=COMMISSIONING["folds"]),
         statistics=StatisticSettings(support_check=COMMISSIONING["support_check"]),
         isolation=IsolationSettings(method=isolation),
     )
+    card = None if loop is None else loop_card(cfg, loop, recordings, machine_id)
     model = train(recordings, settings, reference=ref)
-    model.card = card_for(None, None, None, machine_id)
+    model.card = card or card_for(None, None, None, machine_id)
     return model_to_bytes(model)
 
 
@@ -183,22 +207,32 @@ def statistic_ratios(summary: dict[str, Any]) -> dict[str, float | None]:
     return {ratio_column(stat.name): stat.peak_ratio(summary) for stat in registry()}
 
 
-def judge_log(
-    model_bytes: bytes, path: str, config_path: str | None = None, machine_id: str | None = None
-) -> Judged:
-    """`monitor detect PATH --model M --j-every 0` with the config's ``machine_id`` the
-    fleet's machine ``machine_id``: its summary as row keys, its events.  A model not
-    commissioned on that machine (the default model of a machine without commissioning)
-    withholds its hydraulic alarms, the row says ``reference_model``."""
-    from monitor.detection.offline import detect
-    from monitor.model.machinecard import reference_reason
-    from monitor.offline.recordings import read_loop
+def _judged(
+    model_bytes: bytes, path: str, config_path: str | None, machine_id: str | None, loop: str | None
+) -> Any:  # monitor.offline.loopjob.Judged, imported lazily
+    """`monitor detect PATH --model M [--loop LOOP]`'s judging, one implementation."""
+    from monitor.offline.loopjob import check_model, judge_recording
 
     cfg = _config(config_path)
     model = model_from_bytes(model_bytes)
-    rec = read_loop(path, cfg, None)
-    reference = reference_reason(model.card, machine_id)
-    det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating, reference=reference)
+    check_model(model, cfg, loop, "the machine's model")
+    return cfg, model, judge_recording(model, path, cfg, loop, machine_id)
+
+
+def judge_log(
+    model_bytes: bytes,
+    path: str,
+    config_path: str | None = None,
+    machine_id: str | None = None,
+    loop: str | None = None,
+) -> Judged:
+    """`monitor detect PATH --model M --j-every 0 [--loop LOOP]` with the config's
+    ``machine_id`` the fleet's machine ``machine_id``: its summary as row keys (``loop``
+    among them), its events.  A model not commissioned on that machine (the default model
+    of a machine without commissioning) withholds its hydraulic alarms, the row says
+    ``reference_model``."""
+    cfg, model, judged = _judged(model_bytes, path, config_path, machine_id, loop)
+    rec, det = judged.rec, judged.det
     s = json.loads(json.dumps(det.summary))  # exactly what --summary writes
     eps0 = float(s["threshold"])
     j = det.j[np.isfinite(det.j)]
@@ -223,6 +257,7 @@ def judge_log(
         "p50_j_ratio": float(np.median(j)) / eps0 if j.size else None,
         "p50_j_drift": _drift(j, model.training.get("j_median")),
         "reference_model": bool(s["reference_model"]),
+        "loop": loop,
     }
     events = [json.loads(json.dumps(dict(e, event="state"))) for e in det.events]
     end_s = float(rec.t[-1] - rec.t[0]) if len(rec) else 0.0
@@ -230,16 +265,14 @@ def judge_log(
     return Judged(row, events)
 
 
-def detect_frames(model_bytes: bytes, path: str, config_path: str | None = None) -> int:
-    """`monitor detect PATH --model M` without its output: load the model, read the log,
-    run the detector; the log's frames (what `monitor fleet bench` times beside the fleet)."""
-    from monitor.detection.offline import detect
-    from monitor.offline.recordings import read_loop
-
-    cfg = _config(config_path)
-    model = model_from_bytes(model_bytes)
-    rec = read_loop(path, cfg, None)
-    detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+def detect_frames(
+    model_bytes: bytes, path: str, config_path: str | None = None, loop: str | None = None
+) -> int:
+    """`monitor detect PATH --model M [--loop LOOP]` without its output: load the model,
+    read the log, run the detector; the log's frames (what `monitor fleet bench` times
+    beside the fleet)."""
+    _cfg, _model, judged = _judged(model_bytes, path, config_path, None, loop)
+    rec = judged.rec
     counts = rec.meta.get("counts")
     return int(counts.get("frames", 0)) if isinstance(counts, dict) else 0
 
@@ -248,17 +281,18 @@ def detect_frames(model_bytes: bytes, path: str, config_path: str | None = None)
 TRACE_SIGNALS = ("PP", "PA", "PB", "QP", "SpoolCmd", "OilTemp", "EngineSpeed")
 
 
-def trace_log(model_bytes: bytes, path: str, config_path: str | None = None) -> dict[str, Any]:
-    """A log judged again as `monitor detect` does, for the fleet page's plot around an
-    alarm: t (s from the first sample), the signals of ``TRACE_SIGNALS`` it has, J / eps0
-    and the alarm level (1.0 = alarm)."""
-    from monitor.detection.offline import detect
-    from monitor.offline.recordings import read_loop
-
-    cfg = _config(config_path)
-    model = model_from_bytes(model_bytes)
-    rec = read_loop(path, cfg, None)
-    det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+def trace_log(
+    model_bytes: bytes,
+    path: str,
+    config_path: str | None = None,
+    loop: str | None = None,
+    machine_id: str | None = None,
+) -> dict[str, Any]:
+    """A log (its loop ``loop``) of machine ``machine_id`` judged again as `monitor detect`
+    does, for the fleet page's plot around an alarm: t (s from the first sample), the
+    signals of ``TRACE_SIGNALS`` it has, J / eps0 and the alarm level (1.0 = alarm)."""
+    _cfg, model, judged = _judged(model_bytes, path, config_path, machine_id, loop)
+    rec, det = judged.rec, judged.det
     return {
         "t": rec.t - rec.t[0],
         "signals": {s: np.asarray(rec[s], float) for s in TRACE_SIGNALS if rec.has(s)},

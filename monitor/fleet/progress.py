@@ -37,6 +37,12 @@ class Progress:
         self.logs_total = self.logs_done = self.frames = 0
         self.machines_total = self.machines_done = 0
         self._judging_since: float | None = None
+        # What is counted: logs and machines, or (whole machines) each loop of them.
+        self.log_unit, self.model_unit = "logs", "machines"
+
+    def per_loop(self) -> None:
+        """Count every loop of a whole machine: a log judged per loop, a model per loop."""
+        self.log_unit, self.model_unit = "log loops", "loop models"
 
     # --- counts -----------------------------------------------------------------------
     def commissioning(self, machines: int) -> None:
@@ -62,13 +68,16 @@ class Progress:
         now = self.clock()
         parts = []
         if self._judging_since is not None:
-            parts.append(f"{self.logs_done}/{self.logs_total} logs")
+            parts.append(f"{self.logs_done}/{self.logs_total} {self.log_unit}")
         if self.machines_total:
-            parts.append(f"{self.machines_done}/{self.machines_total} machines commissioned")
+            parts.append(
+                f"{self.machines_done}/{self.machines_total} {self.model_unit} commissioned"
+            )
         since = self._judging_since
         if since is not None and self.logs_done and now > since:
             rate = self.logs_done / (now - since)
-            parts.append(f"{rate:.2f} logs/s, {self.frames / (now - since):,.0f} frames/s")
+            fps = self.frames / (now - since)
+            parts.append(f"{rate:.2f} {self.log_unit}/s, {fps:,.0f} frames/s")
             if self.logs_done < self.logs_total:
                 parts.append(f"about {_duration((self.logs_total - self.logs_done) / rate)} left")
         parts.append(f"{_duration(now - self.start)} elapsed")

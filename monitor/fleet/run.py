@@ -21,25 +21,31 @@ from monitor.fleet.layout import Fleet, Machine, scan_fleet
 from monitor.fleet.lock import results_lock
 from monitor.fleet.outcome import Outcome
 from monitor.fleet.progress import Progress
-from monitor.fleet.store import ResultStore
+from monitor.fleet.store import Key, ResultStore, row_key
 from monitor.io.digest import sha256_file
 
 __all__ = ["FleetInterrupted", "ResultsWriteError", "RunOptions", "judge_task", "run_fleet"]
 
 
 def judge_task(
-    model_bytes: bytes, path: str, config: str | None, machine_id: str | None = None
+    model_bytes: bytes,
+    path: str,
+    config: str | None,
+    machine_id: str | None = None,
+    loop: str | None = None,
 ) -> dict[str, Any]:
-    """A worker's task: the row keys and events of one log of machine ``machine_id``, or
-    why it could not be judged."""
+    """A worker's task: the row keys and events of one log (its loop ``loop``) of machine
+    ``machine_id``, or why it could not be judged."""
     try:
-        judged = pipeline.judge_log(model_bytes, path, config, machine_id)
+        judged = pipeline.judge_log(model_bytes, path, config, machine_id, loop)
         return {"row": judged.row, "events": judged.events, "error": None}
     except (MonitorError, OSError, ValueError, KeyError) as exc:
         return {"row": {}, "events": [], "error": f"{type(exc).__name__}: {exc}"}
 
 
-def _empty_row(machine: str, log: str, sha: str | None, model: str, error: str) -> dict:
+def _empty_row(
+    machine: str, log: str, sha: str | None, model: str, error: str, loop: str | None = None
+) -> dict:
     return {
         "machine": machine,
         "log": log,
@@ -62,15 +68,21 @@ def _empty_row(machine: str, log: str, sha: str | None, model: str, error: str) 
         "max_level": None,
         "p50_j_ratio": None,
         "p50_j_drift": None,
+        "loop": loop,
     }
 
 
-Todo = list[tuple[Machine, Path, str]]
+#: A log to judge: its machine, path, SHA-256, and loop (None: the log as one loop).
+Todo = list[tuple[Machine, Path, str, str | None]]
 
 
-def _todo(fleet: Fleet, store: ResultStore) -> tuple[Todo, list[dict], set[tuple[str, str]]]:
-    """Logs without a row yet, rows for what cannot be judged at all, and the (log, sha256)
-    key of every row this fleet has now (what the closing line counts)."""
+def _todo(
+    fleet: Fleet, store: ResultStore, loops: tuple[str, ...] = ()
+) -> tuple[Todo, list[dict], set[Key]]:
+    """Logs (each of ``loops`` of them; none: the log as one loop) without a row yet, rows
+    for what cannot be judged at all, and the (log, loop, sha256) key of every row this
+    fleet has now (what the closing line counts)."""
+    each: tuple[str | None, ...] = loops or (None,)
     done = store.done()
     todo, keys = [], set()
     bad = [_empty_row(r.machine, r.name, None, "-", f"refused: {r.reason}") for r in fleet.refused]
@@ -89,10 +101,12 @@ def _todo(fleet: Fleet, store: ResultStore) -> tuple[Todo, list[dict], set[tuple
                     _empty_row(m.machine_id, log, None, "-", f"unreadable: {exc.strerror or exc}")
                 )
                 continue
-            keys.add((log, sha))
-            if (log, sha) not in done:
-                todo.append((m, p, sha))
-    keys |= {(r["log"], "") for r in bad}
+            for loop in each:
+                key = row_key({"log": log, "sha256": sha, "loop": loop})
+                keys.add(key)
+                if key not in done:
+                    todo.append((m, p, sha, loop))
+    keys |= {row_key(r) for r in bad}
     return todo, bad, keys
 
 
@@ -108,21 +122,22 @@ def _judge(
     """Commission the machines of ``todo`` and judge its logs, each row stored as it comes."""
     from distributed import as_completed
 
-    needed = {m.machine_id for m, _p, _sha in todo}
+    needed = {(m.machine_id, loop) for m, _p, _sha, loop in todo}
     machine_models = models(client, fleet, store, opts, needed, stop, progress)
-    futures: dict[Any, tuple[Machine, Path, str]] = {}
+    futures: dict[Any, tuple[Machine, Path, str, str | None]] = {}
     progress.judging(len(todo))
-    for i, (m, p, sha) in enumerate(todo):
+    for i, (m, p, sha, loop) in enumerate(todo):
         fut = client.submit(
             judge_task,
-            machine_models[m.machine_id][0],
+            machine_models[(m.machine_id, loop)][0],
             str(p),
             opts.config,
             m.machine_id,
+            loop,
             key=f"judge-{sha[:16]}-{i}",
             pure=False,
         )
-        futures[fut] = (m, p, sha)
+        futures[fut] = (m, p, sha, loop)
         if i == 0:  # alone: it fills numba's cache for the detection kernels
             wait([fut], stop, progress)
     pending = as_completed(list(futures))
@@ -134,13 +149,13 @@ def _judge(
             time.sleep(0.1)
             continue
         for fut in batch:
-            m, p, sha = futures[fut]
+            m, p, sha, loop = futures[fut]
             try:
                 res = fut.result()
             except Exception as exc:  # noqa: BLE001 - a worker lost: the log's row says so
                 res = {"row": {}, "events": [], "error": f"worker failed: {exc!r}"}
-            label = machine_models[m.machine_id][1]
-            row = _empty_row(m.machine_id, fleet.relative(p), sha, label, res["error"])
+            label = machine_models[(m.machine_id, loop)][1]
+            row = _empty_row(m.machine_id, fleet.relative(p), sha, label, res["error"], loop)
             row.update(res["row"])
             store.add(row, res["events"])
             progress.judged(row.get("frames"))
@@ -179,12 +194,15 @@ def run_fleet(root: Path, out: Path, opts: RunOptions, progress: Progress) -> Ou
 def _run(fleet: Fleet, store: ResultStore, opts: RunOptions, progress: Progress) -> Outcome:
     stop = Stop()
     with flag_on_signals(stop):
-        todo, bad, keys = _todo(fleet, store)
+        todo, bad, keys = _todo(fleet, store, opts.loops)
         for row in bad:
             store.add(row, [])
         n_logs = sum(len(m.logs) for m in fleet.machines)
+        each = f" x {len(opts.loops)} loops ({', '.join(opts.loops)})" if opts.loops else ""
+        if opts.loops:
+            progress.per_loop()
         progress.say(
-            f"fleet: {len(fleet.machines)} machines, {n_logs} logs, {len(todo)} new"
+            f"fleet: {len(fleet.machines)} machines, {n_logs} logs{each}, {len(todo)} new"
             + (f", {len(fleet.refused)} refused" if fleet.refused else "")
         )
         try:
@@ -202,5 +220,5 @@ def _run(fleet: Fleet, store: ResultStore, opts: RunOptions, progress: Progress)
                 f"the tables as before the run; run again to resume"
             ) from None
         store.compact()
-    skipped = sum(1 for _log, sha in keys if sha) - len(todo)
-    return Outcome.of(store.rows(), keys, new=len(todo), skipped=skipped)
+    skipped = sum(1 for _log, _loop, sha in keys if sha) - len(todo)
+    return Outcome.of(store.rows(), keys, new=len(todo), skipped=skipped, per_loop=bool(opts.loops))

@@ -63,7 +63,14 @@ def log_schema() -> pa.Schema:
     from monitor.fleet.pipeline import statistics
 
     more = [column for _, _, column in statistics()]
-    return pa.schema([*LOG_SCHEMA, *((c, pa.float64()) for c in more if c not in LOG_SCHEMA.names)])
+    more = [(c, pa.float64()) for c in more if c not in LOG_SCHEMA.names]
+    return pa.schema([*LOG_SCHEMA, *more, LOOP_FIELD])
+
+
+#: The loop a row judges: a whole machine's log has a row per loop of the config's
+#: ``loops:`` (`monitor detect --loop`); null for a log judged as one loop (`monitor detect`
+#: without --loop).  Last, so the columns before it are those of fleets before it.
+LOOP_FIELD = pa.field("loop", pa.string())
 
 
 EVENT_SCHEMA = pa.schema(
@@ -78,12 +85,21 @@ EVENT_SCHEMA = pa.schema(
         ("threshold", pa.float64()),
         ("fault", pa.string()),
         ("event", pa.string()),
+        LOOP_FIELD,
     ]
 )
 
+#: A row's key: (log, loop or "", sha256 or "").
+Key = tuple[str, str, str]
 
-def _key(log: str, sha256: str | None) -> tuple[str, str]:
-    return (log, sha256 or "")
+
+def _key(log: str, sha256: str | None, loop: str | None = None) -> Key:
+    return (log, loop or "", sha256 or "")
+
+
+def row_key(row: dict[str, Any]) -> Key:
+    """The key of a row of logs.parquet (or of a part), old rows without ``loop`` too."""
+    return _key(row["log"], row["sha256"], row.get("loop"))
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
@@ -166,14 +182,16 @@ class ResultStore:
     def _model_paths(self, machine: str) -> tuple[Path, Path]:
         return self.models / f"{machine}.model.npz", self.models / f"{machine}.trained-from.json"
 
-    def done(self) -> set[tuple[str, str]]:
-        """(log, sha256) of every log with a row, in logs.parquet or a part."""
-        keys = {_key(r["log"], r["sha256"]) for r in self._rows_parquet()}
-        return keys | {_key(p["row"]["log"], p["row"]["sha256"]) for p in self._parts()}
+    def done(self) -> set[Key]:
+        """(log, loop, sha256) of every log (loop) with a row, in logs.parquet or a part."""
+        keys = {row_key(r) for r in self._rows_parquet()}
+        return keys | {row_key(p["row"]) for p in self._parts()}
 
     def add(self, row: dict[str, Any], events: list[dict[str, Any]]) -> None:
-        """One finished log, durable when this returns."""
-        name = hashlib.sha256(f"{row['log']}\0{row['sha256']}".encode()).hexdigest()[:32]
+        """One finished log (or loop of a log), durable when this returns."""
+        loop = f"\0{row['loop']}" if row.get("loop") else ""
+        key = f"{row['log']}\0{row['sha256']}{loop}"
+        name = hashlib.sha256(key.encode()).hexdigest()[:32]
         data = json.dumps({"row": row, "events": events}).encode("utf-8")
         _write_atomic(self.parts / f"{name}.json", data)
 
@@ -205,23 +223,23 @@ class ResultStore:
     def compact(self) -> int:
         """Merge the parts into logs.parquet and events.parquet; the number of rows."""
         parts = self._parts()
-        rows = {_key(r["log"], r["sha256"]): r for r in self._rows_parquet()}
+        rows = {row_key(r): r for r in self._rows_parquet()}
         events = [e for e in self._events_parquet()]
         for p in parts:
             row = p["row"]
-            key = _key(row["log"], row["sha256"])
+            key = row_key(row)
             if row["sha256"] is None or key not in rows:
-                events = [e for e in events if _key(e["log"], e["sha256"]) != key]
+                events = [e for e in events if row_key(e) != key]
                 events += [self._event(row, e) for e in p["events"]]
             rows[key] = row
-        # A log that changed (new hash) keeps one row: its newest.
-        latest: dict[str, dict[str, Any]] = {}
+        # A log that changed (new hash) keeps one row (per loop): its newest.
+        latest: dict[tuple[str, str], dict[str, Any]] = {}
         for r in rows.values():
-            latest[r["log"]] = r
-        keep = {_key(r["log"], r["sha256"]) for r in latest.values()}
-        table = pa.Table.from_pylist(sorted(latest.values(), key=lambda r: r["log"]), log_schema())
-        ev = [e for e in events if _key(e["log"], e["sha256"]) in keep]
-        ev.sort(key=lambda e: (e["log"], e["t"]))
+            latest[(r["log"], r.get("loop") or "")] = r
+        keep = {row_key(r) for r in latest.values()}
+        table = pa.Table.from_pylist([latest[k] for k in sorted(latest)], log_schema())
+        ev = [e for e in events if row_key(e) in keep]
+        ev.sort(key=lambda e: (e["log"], e.get("loop") or "", e["t"]))
         self._write_table(self.root / "logs.parquet", table)
         self._write_table(self.root / "events.parquet", pa.Table.from_pylist(ev, EVENT_SCHEMA))
         for done in self.parts.glob("*.json"):
@@ -241,6 +259,7 @@ class ResultStore:
             "threshold": e.get("threshold"),
             "fault": e.get("fault"),
             "event": json.dumps(e),
+            "loop": row.get("loop"),
         }
 
     @staticmethod

@@ -1,12 +1,14 @@
-"""What `monitor fleet run` does not judge yet: each loop of a whole machine's logs.
+"""Which loops `monitor fleet run` judges each log as, checked before any work.
 
-A fleet row is one log judged as one loop (`monitor detect LOG` without ``--loop``).  A
-whole-machine log (every loop's signals of dbc/excavator4.dbc, as `monitor simulate-fleet
---machine excavator4` writes) read that way is its boom loop alone, judged with a
-single-loop model: a stick, bucket or swing fault would never show and the machine would
-read healthy.  Rather than such a verdict, the run is refused before any work, with one
-line: a config of several loops (``loops:``), or a log that carries another loop's signals
-(a CSV column, or a frame of another loop's message, among its first lines).
+A fleet row is one log judged as one loop (`monitor detect LOG`), or, with a config of
+several loops (``loops:``, as config/excavator4.yaml), one row per loop of each log
+(`monitor detect LOG --loop NAME`), each loop commissioned on its own (`monitor train
+--loop NAME`).  What would give a verdict the data cannot support is refused with one
+line: a whole-machine log (every loop's signals of dbc/excavator4.dbc, as `monitor
+simulate-fleet --machine excavator4` writes) read as its first loop alone with a one-loop
+config (a stick, bucket or swing fault would never show and the machine would read
+healthy); a one-loop log under a config of several loops (its other loops have no
+signals); and ``--model`` with several loops (each loop's default model is its entry's).
 """
 
 from __future__ import annotations
@@ -15,28 +17,41 @@ from monitor.errors import ConfigError
 from monitor.fleet.layout import Fleet
 from monitor.offline.loopsniff import loops_in
 
-_DETECT_HINT = (
-    "judge a loop of a log with `monitor detect LOG --config config/excavator4.yaml "
-    "--loop NAME` (commissioned with `monitor train ... --loop NAME`)"
+_CONFIG_HINT = (
+    "judge each loop with a config of the machine's loops (`--config "
+    "config/excavator4.yaml`: a row per loop, each loop commissioned as `monitor train "
+    "--loop NAME` does)"
 )
 
 
-def refuse_whole_machines(fleet: Fleet, loops_in_config: list[str]) -> None:
-    """Raise a ``ConfigError`` (one line) when the run would judge whole machines as one
-    loop: a config of several ``loops`` (``loops_in_config``), or a log of several loops."""
-    if len(loops_in_config) > 1:
+def fleet_loops(
+    fleet: Fleet, loops_in_config: list[str], config: str | None, default_model: str | None
+) -> tuple[str, ...]:
+    """The loops each log is judged as: ``()`` (the log as one loop) for a one-loop config,
+    every loop of a config of several.  A ``ConfigError`` (one line) for what cannot be
+    judged so (module docstring)."""
+    several = len(loops_in_config) > 1
+    if several and default_model is not None:
         raise ConfigError(
-            f"--config declares {len(loops_in_config)} loops ({', '.join(loops_in_config)}): "
-            "`monitor fleet run` judges one loop per log and does not yet judge each loop of "
-            f"a whole machine; {_DETECT_HINT}"
+            f"--model {default_model}: the config declares {len(loops_in_config)} loops "
+            f"({', '.join(loops_in_config)}), each with its own default model (its "
+            "`loops:` entry's `model`); leave out --model"
         )
     for m in fleet.machines:
         for p in (*m.commissioning, *m.logs):
-            found = loops_in(p)
-            if found:
+            found = loops_in(p, config) if several else loops_in(p)
+            if found and not several:
                 raise ConfigError(
                     f"{fleet.relative(p)}: a whole-machine log (it carries the "
-                    f"{', '.join(found)} loops' signals of dbc/excavator4.dbc): `monitor "
-                    "fleet run` judges one loop per log and does not yet judge each loop "
-                    f"with its machine's per-loop commissioning; {_DETECT_HINT}"
+                    f"{', '.join(found)} loops' signals of dbc/excavator4.dbc), and the "
+                    f"config declares one loop: {_CONFIG_HINT}"
                 )
+            if several and not found:
+                raise ConfigError(
+                    f"{fleet.relative(p)}: a log of one loop (none of the "
+                    f"{', '.join(loops_in_config[1:])} loops' signals among its first "
+                    f"lines), and the config declares {len(loops_in_config)} loops "
+                    f"({', '.join(loops_in_config)}): judge a fleet of one-loop logs with "
+                    "a config of one loop"
+                )
+    return tuple(loops_in_config) if several else ()

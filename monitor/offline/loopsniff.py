@@ -16,14 +16,15 @@ from monitor.resources import resource_path
 SNIFF_BYTES = 32768
 
 
-@lru_cache(maxsize=1)
-def other_loops() -> tuple[dict[str, str], dict[int, str]]:
-    """The shipped whole machine's (config/excavator4.yaml) loops after the first: each
-    loop's DBC signal name -> loop, and each frame id carrying one of them -> loop."""
+@lru_cache(maxsize=4)
+def other_loops(config: str | None = None) -> tuple[dict[str, str], dict[int, str]]:
+    """A whole machine's loops after the first (``config``'s, default the shipped
+    config/excavator4.yaml): each loop's DBC signal name -> loop, and each frame id
+    carrying one of them -> loop."""
     from monitor.codec.dbc import load_dbc
     from monitor.config.settings import load_config
 
-    cfg = load_config(resource_path("config", "excavator4.yaml"))
+    cfg = load_config(Path(config) if config else resource_path("config", "excavator4.yaml"))
     names: dict[str, str] = {}
     for lc in cfg.monitored_loops[1:]:
         for signal in lc.signals.values():
@@ -39,10 +40,11 @@ def other_loops() -> tuple[dict[str, str], dict[int, str]]:
     return names, ids
 
 
-def loops_in(path: Path) -> list[str]:
-    """The other loops (stick, bucket, swing) whose signals the start of log ``path``
-    carries; [] for a one-loop log (or one that cannot be read: reading it will say why)."""
-    names, ids = other_loops()
+def loops_in(path: Path, config: str | None = None) -> list[str]:
+    """The other loops (stick, bucket, swing; ``config``'s after its first) whose signals
+    the start of log ``path`` carries; [] for a one-loop log (or one that cannot be read:
+    reading it will say why)."""
+    names, ids = other_loops(config)
     try:
         with path.open("rb") as fh:
             head = fh.read(SNIFF_BYTES).decode("ascii", errors="replace")
