@@ -29,6 +29,7 @@ from monitor.fleet.health import (
     health_index,
     log_day,
 )
+from monitor.fleet.loops import series_name, split
 
 
 def log_name(row: dict[str, Any]) -> str:
@@ -46,9 +47,15 @@ def period(row: dict[str, Any]) -> str:
 
 
 def alarm_id(row: dict[str, Any], ep: dict[str, Any]) -> str:
-    """An alarm's key in the acknowledgement file: log, kind and start (stable across
-    reruns of the same log)."""
-    return f"{row['log']}#{ep['kind']}@{ep['start_t']:.2f}"
+    """An alarm's key in the acknowledgement file: log, (a whole machine's) loop, kind and
+    start (stable across reruns of the same log)."""
+    loop = f"{row['loop']}:" if row.get("loop") else ""
+    return f"{row['log']}#{loop}{ep['kind']}@{ep['start_t']:.2f}"
+
+
+def page_name(machine: str, loop: str | None) -> str:
+    """A machine's page (``machine-M01.html``), or its loop's (``machine-M01-stick.html``)."""
+    return f"machine-{machine}.html" if loop is None else f"machine-{machine}-{loop}.html"
 
 
 @dataclass(frozen=True)
@@ -85,6 +92,16 @@ class Alarm:
     votes: dict[str, int]
     what: str  # e.g. "piston seal suspected" or "QP frozen"
     action: str
+    loop: str | None = None  # a whole machine's loop
+
+    @property
+    def page(self) -> str:
+        return page_name(self.machine, self.loop)
+
+    @property
+    def label(self) -> str:
+        """``M01``, or a whole machine's loop: ``M01 stick``."""
+        return series_name(self.machine, self.loop)
 
     @property
     def votes_text(self) -> str:
@@ -113,6 +130,7 @@ def _alarm(row: dict[str, Any], ep: dict[str, Any]) -> Alarm:
         ep.get("votes") or {},
         what,
         action,
+        row.get("loop"),
     )
 
 
@@ -131,10 +149,16 @@ class MachineView:
     index: float | None  # the newest judged log's health index
     drift: float | None
     alarms: list[Alarm] = field(default_factory=list)
+    loop: str | None = None  # a whole machine's loop: this view is that loop's
 
     @property
     def page(self) -> str:
-        return f"machine-{self.machine}.html"
+        return page_name(self.machine, self.loop)
+
+    @property
+    def name(self) -> str:
+        """``M01``, or a whole machine's loop: ``M01 stick``."""
+        return series_name(self.machine, self.loop)
 
 
 def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFault, state: str):
@@ -166,8 +190,10 @@ def _finding(rows: list[dict[str, Any]], alarms: list[Alarm], fault: MachineFaul
     )
 
 
-def machine_view(machine: str, rows: list[dict[str, Any]], k: int = 6) -> MachineView:
-    """One machine's line of the fleet table (rows in time order)."""
+def machine_view(
+    machine: str, rows: list[dict[str, Any]], k: int = 6, loop: str | None = None
+) -> MachineView:
+    """One machine's (or its loop's) line of the fleet table (rows in time order)."""
     alarms = [_alarm(r, ep) for r in rows for ep in row_episodes(r)]
     fault = machine_fault(rows)
     for a in alarms:
@@ -210,13 +236,19 @@ def machine_view(machine: str, rows: list[dict[str, Any]], k: int = 6) -> Machin
         health_index(judged[-1]) if judged else None,
         d,
         alarms,
+        loop,
     )
 
 
 def fleet_views(per: dict[str, list[dict[str, Any]]], k: int = 6) -> list[MachineView]:
-    """Every machine's view, those needing attention first (fault, sensor, wearing)."""
+    """Every machine's view (a whole machine's: each loop's), those needing attention
+    first (fault, sensor, wearing), a machine's loops in their order."""
     order = {"fault": 0, "sensor_fault": 1, "wearing?": 2, "error": 3, "not_judged": 4}
-    views = [machine_view(m, rows, k) for m, rows in per.items()]
+    views = [
+        machine_view(m, part, k, loop)
+        for m, rows in per.items()
+        for loop, part in split(rows).items()
+    ]
     return sorted(views, key=lambda v: (order.get(v.state, 5), v.machine))
 
 
@@ -247,8 +279,8 @@ def code_groups(views: list[MachineView]) -> tuple[list[CodeGroup], list[str]]:
             g = groups.setdefault(
                 (c.spn, c.fmi), CodeGroup(c.spn, c.fmi, _code_meaning(a), [], defaultdict(int))
             )
-            if a.machine not in g.machines:
-                g.machines.append(a.machine)
+            if a.label not in g.machines:
+                g.machines.append(a.label)
             g.per_period[a.period] += 1
             periods.add(a.period)
     return sorted(groups.values(), key=lambda g: (g.spn, g.fmi)), sorted(periods)

@@ -35,9 +35,11 @@ def connect(results: Path) -> Any:
         con.execute(f"CREATE VIEW events AS SELECT * FROM read_parquet({_sql_path(events)})")
     cols = {r[0] for r in con.execute("DESCRIBE logs").fetchall()}
     if "episodes" in cols:
+        # A whole machine's episodes name their loop (results from before: no loop column).
+        loop = ", loop" if "loop" in cols else ""
         con.execute(
             "CREATE VIEW episodes AS SELECT machine, log, e.kind, e.name, e.check, e.start_t, "
-            "e.end_t, e.duration_s, e.spn, e.fmi, e.open FROM (SELECT machine, log, "
+            f"e.end_t, e.duration_s, e.spn, e.fmi, e.open{loop} FROM (SELECT machine, log{loop}, "
             f"unnest(from_json(episodes, '[{_EPISODE}]')) AS e FROM logs "
             "WHERE episodes IS NOT NULL)"
         )

@@ -26,6 +26,7 @@ from monitor.fleet.health import (
     health_index,
     prognosis,
 )
+from monitor.fleet.loops import has_loops, loop_order, machine_verdict, series_name, split
 from monitor.fleet.pipeline import statistics, threshold_note
 from monitor.fleet.store import on_off_text, trained_statistics
 
@@ -250,10 +251,63 @@ def _statistics_section(stats: dict[str, dict[str, str] | None]) -> list[str]:
     return [head, "", *lines, ""]
 
 
+def _series(
+    per: dict[str, list[dict[str, Any]]],
+) -> tuple[dict[str, list[dict[str, Any]]], dict[str, str]]:
+    """Each machine's rows, or (whole machines) each machine's loop's, by the series'
+    name (``M01 stick``); and each series' model file stem in RESULTS/models."""
+    from monitor.fleet.commission import model_name
+
+    series, files = {}, {}
+    for mid, rows in per.items():
+        for loop, part in split(rows).items():
+            name = series_name(mid, loop)
+            series[name], files[name] = part, model_name((mid, loop))
+    return series, files
+
+
+def _machines_section(per: dict[str, list[dict[str, Any]]]) -> list[str]:
+    """Whole machines: per machine its verdict on its newest log, naming the loop, and a
+    cell per loop; [] for a fleet of one-loop logs."""
+    if not has_loops(per):
+        return []
+    verdicts = [machine_verdict(mid, rows) for mid, rows in per.items()]
+    loops = loop_order({loop for v in verdicts for loop in v.cells})
+    out = [
+        "## Machines (each loop judged on the newest log)",
+        "",
+        "| machine | newest log | verdict | " + " | ".join(loops) + " |",
+        "|---|---|---|" + "---|" * len(loops),
+    ]
+    for v in verdicts:
+        cells = [v.cells.get(loop, "-").replace("_", " ") for loop in loops]
+        out.append(f"| {v.machine} | {v.log} | {v.text} | " + " | ".join(cells) + " |")
+    uncommissioned = "an uncommissioned loop is judged with the config's model of another "
+    return [
+        *out,
+        "",
+        "A loop's verdict: fault, sensor fault, healthy, not judged (nothing its detector "
+        f"could judge), error, or uncommissioned ({uncommissioned}machine, its hydraulic "
+        "alarms withheld: never healthy). Each loop's history below is a row of its own "
+        "(`M01 stick`).",
+        "",
+    ]
+
+
+def _intro(per: dict[str, list[dict[str, Any]]], series: dict[str, list[dict[str, Any]]]) -> str:
+    n_rows = sum(len(r) for r in series.values())
+    if not has_loops(per):
+        return f"{len(per)} machines, {n_rows} logs."
+    logs = {r["log"] for rows in per.values() for r in rows}
+    return f"{len(per)} whole machines, {len(logs)} logs, {n_rows} log loops."
+
+
 def write_report(results: Path, out: Path, k: int = 6) -> Path:
     """Write ``out/fleet.md``, ``out/health.png``, ``out/timeline.png`` and, when the
-    results have drifts, ``out/drift.png``; the page's path."""
-    per = load_rows(results)
+    results have drifts, ``out/drift.png``; the page's path.  Whole machines' rows (a
+    ``loop`` each): a machines table, and each machine's loop a series of its own."""
+    machines = load_rows(results)
+    per, files = _series(machines)
     progs = {mid: prognosis(mid, rows, k) for mid, rows in per.items()}
     warns = {mid: first_warning(mid, rows, k) for mid, rows in per.items()}
     # A threshold resting on one commissioning event makes a machine less sensitive to
@@ -261,8 +315,8 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     # Which statistics a commissioned machine's model judges with (the reasons below).
     notes, stats = {}, {}
     for mid in per:
-        path = results / "models" / f"{mid}.model.npz"
-        stats[mid] = got = trained_statistics(results, mid)
+        path = results / "models" / f"{files[mid]}.model.npz"
+        stats[mid] = got = trained_statistics(results, files[mid])
         said = [threshold_note(path) if path.is_file() else None]
         said.append(None if got is None else on_off_text(got))
         if any(said):
@@ -276,7 +330,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     lines = [
         "# Fleet report",
         "",
-        f"{len(per)} machines, {sum(len(r) for r in per.values())} logs. Health index: "
+        f"{_intro(machines, per)} Health index: "
         f"the largest alarm level of a log, max({_ratios()}) (1.0 raises the alarm); "
         f"trend: Theil-Sen over the last {k} judged logs of their typical level (median J /"
         " eps0, which follows wear, scaled by the machine's peak-to-median ratio; the peak "
@@ -290,6 +344,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
         "the prognosis forecast a crossing with a bounded interval; dotted line on the "
         "plot), and how many logs (days) later the first alarm came.",
         "",
+        *_machines_section(machines),
         *_table(per, progs, warns, notes),
         "",
         "![health index](health.png)",
@@ -302,7 +357,10 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     errors = [r for rows in per.values() for r in rows if r["error"] is not None]
     if errors:
         lines += ["## Logs that could not be judged", ""]
-        lines += [f"- `{r['log']}`: {r['error']}" for r in errors]
+        lines += [
+            f"- `{r['log']}`{' (' + r['loop'] + ')' if r.get('loop') else ''}: {r['error']}"
+            for r in errors
+        ]
     page = out / "fleet.md"
     page.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return page

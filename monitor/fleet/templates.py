@@ -20,7 +20,7 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 .fault { background: #f8d0d0; color: #8b0000; } .sensor_fault { background: #ffe0b8; color:
 #7a3d00; }
 .wearing { background: #fff3b0; color: #6b5800; } .healthy { background: #d4efd4; color: #1b5e20; }
-.not_judged, .error { background: #e4e4e4; color: #444; }
+.not_judged, .error, .uncommissioned { background: #e4e4e4; color: #444; }
 .note { color: #555; font-size: 13px; max-width: 70em; }
 .banner { background: #eef4ff; border: 1px solid #b8cff5; padding: .5em .8em; max-width: 70em; }
 form.ack { display: flex; gap: .3em; flex-wrap: wrap; }
@@ -41,7 +41,22 @@ STATE = """{% macro state(s) -%}
 INDEX = (
     STATE
     + """{% extends "base" %}{% block body %}
-<h1>Fleet: {{ views|length }} machines, {{ n_logs }} logs</h1>
+{% if machines %}<h1>Fleet: {{ machines|length }} whole machines, {{ views|length }} loops,
+{{ n_logs }} log loops</h1>
+<h2>Machines</h2>
+<p class="note">Each machine's verdict on its newest log names the loop (FAULT: stick); a
+cell per loop, its verdict on that log (click for the loop's history). Uncommissioned: the
+loop was judged with the config's model of another machine, its hydraulic alarms withheld;
+never healthy.</p>
+<table id="machines"><tr><th>machine</th><th>newest log</th><th>verdict</th>
+{% for l in loops %}<th>{{ l }}</th>{% endfor %}</tr>
+{% for m in machines %}<tr id="machine-{{ m.machine }}"><td>{{ m.machine }}</td>
+<td>{{ m.log }}</td><td><span class="state {{ m.state }}">{{ m.text }}</span></td>
+{% for l in loops %}<td data-loop="{{ l }}">{% if l in m.cells %}<a href="{{ pages[(m.machine,
+l)] }}">{{ state(m.cells[l]) }}</a>{% else %}-{% endif %}</td>{% endfor %}</tr>
+{% endfor %}</table>
+<h2>Each loop</h2>
+{% else %}<h1>Fleet: {{ views|length }} machines, {{ n_logs }} logs</h1>{% endif %}
 <p class="note">State: the newest log's verdict (WEARING?: healthy, but its typical residual
 has doubled since commissioning). Fault / sensor: what the alarms name; a fault is named from
 the isolation votes of all its alarm episodes. First warning: the first log before any alarm
@@ -51,10 +66,10 @@ its alarms.</p>
 <tr><th>machine</th><th>state</th><th>fault / sensor</th><th>first seen</th>
 <th>first warning</th><th>what to do</th><th>health index<br>(newest log, 1.0 = alarm)</th>
 <th>logs</th><th>alarm episodes</th></tr>
-{% for v in views %}<tr id="row-{{ v.machine }}">
-<td><a href="{{ v.page }}">{{ v.machine }}</a>{% if v.rows[-1].model.startswith('default') %}
+{% for v in views %}<tr id="row-{{ v.machine }}{{ '-' ~ v.loop if v.loop else '' }}">
+<td><a href="{{ v.page }}">{{ v.name }}</a>{% if v.rows[-1].model.startswith('default') %}
 <br><span class="note">default model: no commissioning data</span>{% endif %}{% if
-stats.get(v.machine) %}<br><span class="note">{{ on_off(stats[v.machine]) }}</span>{% endif
+stats.get(v.name) %}<br><span class="note">{{ on_off(stats[v.name]) }}</span>{% endif
 %}</td>
 <td>{{ state(v.state) }}</td>
 <td>{{ v.finding or '-' }}{% if v.evidence %}<br>
@@ -87,7 +102,7 @@ name), as the monitor on the machine sends them in DM1.</p>
 MACHINE = (
     STATE
     + """{% extends "base" %}{% block body %}
-<h1>{{ v.machine }} {{ state(v.state) }}</h1>
+<h1>{{ v.name }} {{ state(v.state) }}</h1>
 <p><b>Fault / sensor:</b> {{ v.finding or 'none' }}{% if v.since %} (first seen {{ v.since }},
 last {{ v.last_seen }}){% endif %}{% if v.evidence %}; {{ v.evidence }}{% endif %}<br>
 <b>What to do:</b> {{ v.what_to_do }}<br><b>First warning:</b> {{ v.warning.text }}<br>
@@ -144,7 +159,7 @@ note, then the button. Shelving hides it for {{ shelve_days }} days. Kept in
 <th>fault / sensor</th><th>DM1 SPN / FMI</th><th>what to do</th><th>status</th>
 {% if live %}<th>acknowledge / shelve</th>{% endif %}</tr>
 {% for a in alarms %}<tr id="alarm-{{ loop.index }}" data-alarm="{{ a.id }}">
-<td><a href="machine-{{ a.machine }}.html">{{ a.machine }}</a></td><td>{{ a.log }}</td>
+<td><a href="{{ a.page }}">{{ a.label }}</a></td><td>{{ a.log }}</td>
 <td class="num">{{ '%.1f'|format(a.span.start_t) }}</td>
 <td class="num">{{ '%.1f'|format(a.span.duration_s) }}</td>
 <td>{{ a.what }}</td><td>{{ a.code.spn }} / {{ a.code.fmi }}</td><td>{{ a.action }}</td>
@@ -159,7 +174,7 @@ note, then the button. Shelving hides it for {{ shelve_days }} days. Kept in
 {% else %}<tr><td colspan="8">No alarm episodes.</td></tr>{% endfor %}</table>
 {% if shelved %}<h2>Shelved</h2><table id="shelved"><tr><th>machine</th><th>log</th>
 <th>fault / sensor</th><th>status</th>{% if live %}<th></th>{% endif %}</tr>
-{% for a in shelved %}<tr data-alarm="{{ a.id }}"><td>{{ a.machine }}</td><td>{{ a.log }}</td>
+{% for a in shelved %}<tr data-alarm="{{ a.id }}"><td>{{ a.label }}</td><td>{{ a.log }}</td>
 <td>{{ a.what }}</td><td class="status">{{ acks[a.id].text }}</td>
 {% if live %}<td><form class="ack" method="post" action="ack">
 <input type="hidden" name="alarm" value="{{ a.id }}">

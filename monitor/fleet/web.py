@@ -18,6 +18,7 @@ from monitor.fleet.acks import SHELVE_DAYS, ack_path, read_acks
 from monitor.fleet.episodes import row_episodes
 from monitor.fleet.fleetview import Alarm, MachineView, code_groups, fleet_views, log_name
 from monitor.fleet.health import health_index
+from monitor.fleet.loops import has_loops, loop_order, machine_verdict
 from monitor.fleet.store import on_off_text, trained_statistics
 
 #: Alarm episodes per machine whose signals are plotted: the first and the newest of each
@@ -60,6 +61,13 @@ def _picked(alarms: list[Alarm]) -> list[Alarm]:
     return out[:MAX_SIGNAL_PLOTS]
 
 
+def _model(v: MachineView) -> str:
+    """The view's model file stem in RESULTS/models (``M01``, ``M01.stick``)."""
+    from monitor.fleet.commission import model_name
+
+    return model_name((v.machine, v.loop))
+
+
 @dataclass
 class Site:
     """The fleet page of one results folder."""
@@ -73,10 +81,14 @@ class Site:
 
     def __post_init__(self) -> None:
         self.views = fleet_views(self.per, self.k)
-        # Commissioned machines: whether each statistic is on and why (trained-from.json).
+        # Commissioned machines (loops): whether each statistic is on and why
+        # (trained-from.json), by the view's name.
         self.stats = {
-            v.machine: s for v in self.views if (s := trained_statistics(self.results, v.machine))
+            v.name: s for v in self.views if (s := trained_statistics(self.results, _model(v)))
         }
+        # Whole machines: each one's verdict naming the loop, with a cell per loop.
+        self.machines = [machine_verdict(m, rows) for m, rows in self.per.items()]
+        self.machines = self.machines if has_loops(self.per) else []
         self._env = _env()
         self._plots: dict[str, tuple[list[str], str]] = {}  # per machine, made once
 
@@ -118,6 +130,9 @@ class Site:
             older=older,
             stats=self.stats,
             fleet_plot=fleet_plot(self.views),
+            machines=self.machines,
+            loops=loop_order({loop for m in self.machines for loop in m.cells}),
+            pages={(v.machine, v.loop): v.page for v in self.views},
         )
 
     def alarms_html(self, live: bool) -> str:
@@ -142,15 +157,15 @@ class Site:
     def machine_html(self, v: MachineView) -> str:
         from monitor.fleet.webplots import health_plot
 
-        if v.machine not in self._plots:
-            self._plots[v.machine] = self._signal_plots(v)
-        plots, note = self._plots[v.machine]
+        if v.page not in self._plots:
+            self._plots[v.page] = self._signal_plots(v)
+        plots, note = self._plots[v.page]
         return self._render(
             "machine",
-            title=f"{v.machine}",
+            title=f"{v.name}",
             plots=True,
             v=v,
-            stats=self.stats.get(v.machine),
+            stats=self.stats.get(v.name),
             acks=read_acks(self.results),
             signal_plots=plots,
             signals_note=note,
@@ -168,7 +183,7 @@ class Site:
                 "Give the fleet folder (--fleet FLEET) to see the signals and "
                 "statistics around each alarm, read from the log itself."
             )
-        model = self.results / "models" / f"{v.machine}.model.npz"
+        model = self.results / "models" / f"{_model(v)}.model.npz"
         if not model.is_file():
             return [], f"{model}: no such model file (needed to judge the log again)."
         logs = {log_name(r): r["log"] for r in v.rows}
@@ -180,7 +195,9 @@ class Site:
                 missing.append(str(path))
                 continue
             if a.log not in traces:
-                traces[a.log] = trace_log(model.read_bytes(), str(path), self.config)
+                traces[a.log] = trace_log(
+                    model.read_bytes(), str(path), self.config, v.loop, v.machine
+                )
             out.append(signal_plot(traces[a.log], a, f"signals-{i}"))
         return out, ("" if out else f"Logs not found: {', '.join(missing)}")
 
