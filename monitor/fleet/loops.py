@@ -61,9 +61,12 @@ def series_name(machine: str, loop: str | None) -> str:
 
 def cell(row: dict[str, Any]) -> str:
     """One loop's verdict on one log: fault, sensor_fault, healthy, not_judged, error, or
-    uncommissioned (judged with another machine's model: its alarms withheld)."""
+    uncommissioned (no model of this machine's loop: not judged, or judged with another
+    machine's model, its hydraulic alarms withheld)."""
     if row.get("error"):
         return "error"
+    if str(row.get("model") or "").startswith("default") and row["verdict"] == "not_judged":
+        return "uncommissioned"
     if row["verdict"] == "not_judged":
         return "not_judged"
     if row.get("reference_model") and row["verdict"] != "sensor_fault":

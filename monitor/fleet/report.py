@@ -302,6 +302,24 @@ def _intro(per: dict[str, list[dict[str, Any]]], series: dict[str, list[dict[str
     return f"{len(per)} whole machines, {len(logs)} logs, {n_rows} log loops."
 
 
+def _model_notes(
+    results: Path, files: dict[str, str]
+) -> tuple[dict[str, str], dict[str, dict[str, str] | None]]:
+    """Per series (its model file stem in ``files``), the note beside its model, and which
+    statistics its commissioned model judges with (the reasons below the table)."""
+    # A threshold resting on one commissioning event makes a machine less sensitive to
+    # slow wear than its neighbours: the page says so beside its model.
+    notes, stats = {}, {}
+    for mid, stem in files.items():
+        path = results / "models" / f"{stem}.model.npz"
+        stats[mid] = got = trained_statistics(results, stem)
+        said = [threshold_note(path) if path.is_file() else None]
+        said.append(None if got is None else on_off_text(got))
+        if any(said):
+            notes[mid] = "; ".join(n for n in said if n)
+    return notes, stats
+
+
 def write_report(results: Path, out: Path, k: int = 6) -> Path:
     """Write ``out/fleet.md``, ``out/health.png``, ``out/timeline.png`` and, when the
     results have drifts, ``out/drift.png``; the page's path.  Whole machines' rows (a
@@ -310,17 +328,7 @@ def write_report(results: Path, out: Path, k: int = 6) -> Path:
     per, files = _series(machines)
     progs = {mid: prognosis(mid, rows, k) for mid, rows in per.items()}
     warns = {mid: first_warning(mid, rows, k) for mid, rows in per.items()}
-    # A threshold resting on one commissioning event makes a machine less sensitive to
-    # slow wear than its neighbours: the page says so beside its model.
-    # Which statistics a commissioned machine's model judges with (the reasons below).
-    notes, stats = {}, {}
-    for mid in per:
-        path = results / "models" / f"{files[mid]}.model.npz"
-        stats[mid] = got = trained_statistics(results, files[mid])
-        said = [threshold_note(path) if path.is_file() else None]
-        said.append(None if got is None else on_off_text(got))
-        if any(said):
-            notes[mid] = "; ".join(n for n in said if n)
+    notes, stats = _model_notes(results, files)
     out.mkdir(parents=True, exist_ok=True)
     _health_png(per, progs, warns, out / "health.png", k)
     _timeline_png(per, out / "timeline.png")

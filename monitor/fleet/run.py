@@ -16,7 +16,7 @@ from typing import Any
 from monitor.errors import MonitorError
 from monitor.fleet import cluster, pipeline
 from monitor.fleet.cluster import FleetInterrupted, RunOptions, Stop, flag_on_signals, wait
-from monitor.fleet.commission import models
+from monitor.fleet.commission import Models, models
 from monitor.fleet.layout import Fleet, Machine, scan_fleet
 from monitor.fleet.lock import results_lock
 from monitor.fleet.outcome import Outcome
@@ -110,6 +110,43 @@ def _todo(
     return todo, bad, keys
 
 
+def _submit(
+    client: Any,
+    fleet: Fleet,
+    store: ResultStore,
+    opts: RunOptions,
+    todo: Todo,
+    machine_models: Models,
+    stop: Stop,
+    progress: Progress,
+) -> dict[Any, tuple[Machine, Path, str, str | None]]:
+    """One judging task per log (loop), each future with what it judges.  A whole
+    machine's loop without a model of its own (no commissioning data, or its training
+    failed) is not judged: the config's model of the loop is another machine's, and its
+    verdict would say healthy where the data cannot (its row: not judged, model default)."""
+    futures: dict[Any, tuple[Machine, Path, str, str | None]] = {}
+    for i, (m, p, sha, loop) in enumerate(todo):
+        model, label = machine_models[(m.machine_id, loop)]
+        if loop is not None and label.startswith("default"):
+            store.add(_empty_row(m.machine_id, fleet.relative(p), sha, label, None, loop), [])
+            progress.judged(None)
+            continue
+        fut = client.submit(
+            judge_task,
+            model,
+            str(p),
+            opts.config,
+            m.machine_id,
+            loop,
+            key=f"judge-{sha[:16]}-{i}",
+            pure=False,
+        )
+        futures[fut] = (m, p, sha, loop)
+        if len(futures) == 1:  # alone: it fills numba's cache for the detection kernels
+            wait([fut], stop, progress)
+    return futures
+
+
 def _judge(
     client: Any,
     fleet: Fleet,
@@ -124,22 +161,8 @@ def _judge(
 
     needed = {(m.machine_id, loop) for m, _p, _sha, loop in todo}
     machine_models = models(client, fleet, store, opts, needed, stop, progress)
-    futures: dict[Any, tuple[Machine, Path, str, str | None]] = {}
     progress.judging(len(todo))
-    for i, (m, p, sha, loop) in enumerate(todo):
-        fut = client.submit(
-            judge_task,
-            machine_models[(m.machine_id, loop)][0],
-            str(p),
-            opts.config,
-            m.machine_id,
-            loop,
-            key=f"judge-{sha[:16]}-{i}",
-            pure=False,
-        )
-        futures[fut] = (m, p, sha, loop)
-        if i == 0:  # alone: it fills numba's cache for the detection kernels
-            wait([fut], stop, progress)
+    futures = _submit(client, fleet, store, opts, todo, machine_models, stop, progress)
     pending = as_completed(list(futures))
     while not pending.is_empty():
         stop.check()
