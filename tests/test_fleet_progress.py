@@ -77,7 +77,7 @@ def test_the_closing_line_counts_judged_not_judged_and_failed_and_names_the_firs
         _row("M03/logs/b.log", "not_judged", "unreadable: Permission denied"),
         _row("M04/logs/gone.log", "not_judged", "an old row of a log since removed"),
     ]
-    keys = {(r["log"], "ab") for r in rows[:-1]}
+    keys = {(r["log"], "", "ab") for r in rows[:-1]}
     o = Outcome.of(rows, keys, new=4, skipped=2)
     assert (o.judged, o.not_judged, o.failed, o.exit_code) == (2, 1, 3, 3)
     assert o.line() == (

@@ -1,5 +1,6 @@
 """`monitor simulate-fleet --machine excavator4`: a fleet of whole machines in the fleet
-layout, its answer key, and `monitor fleet run` refusing to judge it as one loop."""
+layout, its answer key, and `monitor fleet run` refusing to judge it as one loop (or a
+one-loop log as a whole machine)."""
 
 from __future__ import annotations
 
@@ -102,7 +103,9 @@ def test_a_log_is_the_whole_machine_the_key_names(fleet):
             )
 
 
-def test_fleet_run_refuses_whole_machines_with_one_line_before_any_work(fleet, tmp_path, capsys):
+def test_fleet_run_refuses_whole_machines_under_a_one_loop_config_in_one_line(
+    fleet, tmp_path, capsys
+):
     out, _ = fleet
     results = tmp_path / "R"
     assert main(["fleet", "run", str(out), "--out", str(results)]) == 2
@@ -110,11 +113,33 @@ def test_fleet_run_refuses_whole_machines_with_one_line_before_any_work(fleet, t
     assert len(err) == 1
     assert err[0].startswith("monitor fleet: error: M01/commissioning/normal.log: a whole-machine")
     assert "stick, bucket, swing loops' signals" in err[0]
+    assert "the config declares one loop" in err[0] and "config/excavator4.yaml" in err[0]
     assert not results.exists()
+
+
+def test_a_config_of_several_loops_refuses_model_and_one_loop_logs_in_one_line(
+    fleet, tmp_path, capsys
+):
+    out, _ = fleet
+    results = tmp_path / "R"
     config = str(resource_path("config", "excavator4.yaml"))
-    assert main(["fleet", "run", str(out), "--out", str(results), "--config", config]) == 2
+    run = ["fleet", "run", "--out", str(results), "--config", config]
+    model = str(resource_path("config", "boom_excavator4.model.npz"))
+    assert main([*run, str(out), "--model", model]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "declares 4 loops (boom, stick, bucket, swing)" in err[0]
+    assert len(err) == 1 and "the config declares 4 loops (boom, stick, bucket, swing)" in err[0]
+    assert err[0].startswith(f"monitor fleet: error: --model {model}: ")
+    one = tmp_path / "F" / "M09" / "logs"
+    one.mkdir(parents=True)
+    rec = simulate(make_cycle("boom", 3.0, 1), load_machine(), seed=1)
+    from monitor.codec.logwrite import write_candump
+
+    write_candump(one / "day01.log", rec)
+    assert main([*run, str(tmp_path / "F")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("monitor fleet: error: M09/logs/day01.log: a log of one loop")
+    assert "none of the stick, bucket, swing loops' signals" in err[0]
     assert not results.exists()
 
 
