@@ -13,8 +13,8 @@ from monitor.cli import main
 from monitor.config.settings import load_config
 from monitor.fleet.simulate import FleetPlan
 from monitor.fleet.simulate_whole import TOLERANCED, simulate_whole_fleet, toleranced
-from monitor.offline.loopsniff import loops_in
 from monitor.io.csvio import write_csv
+from monitor.offline.loopsniff import loops_in
 from monitor.offline.recordings import loop_recordings
 from monitor.resources import resource_path
 from monitor.sim.cycles import make_cycle

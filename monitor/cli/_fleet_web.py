@@ -52,7 +52,8 @@ def add_query(sub: argparse._SubParsersAction) -> None:
         description="Run one DuckDB SQL statement over RESULTS and print the result as a "
         "table. Views: logs (RESULTS/logs.parquet), events (events.parquet) and episodes "
         "(one row per alarm episode: machine, log, kind, name, check, start_t, end_t, "
-        "duration_s, spn, fmi, open). Recipes: docs/how-to/fleet.md.",
+        "duration_s, spn, fmi, open; and loop for whole machines). Recipes: "
+        "docs/how-to/fleet.md.",
     )
     q.add_argument("results", type=Path, metavar="RESULTS")
     q.add_argument("sql", metavar="SQL")
