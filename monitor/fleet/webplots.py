@@ -88,17 +88,18 @@ def health_plot(rows: list[dict[str, Any]], names: list[str], warning_log: int |
 
 
 def fleet_plot(views: list[Any]) -> str:
-    """Every machine's health index per log on one plot (click a legend entry to hide)."""
+    """Every machine's (a whole machine's: every loop's) health index per log on one plot
+    (click a legend entry to hide)."""
     import plotly.graph_objects as go
 
     fig = go.Figure()
-    for v in sorted(views, key=lambda v: v.machine):
+    for v in sorted(views, key=lambda v: v.machine):  # stable: a machine's loops in order
         fig.add_trace(
             go.Scatter(
                 x=list(range(1, len(v.rows) + 1)),
                 y=[health_index(r) for r in v.rows],
                 mode="lines+markers",
-                name=v.machine,
+                name=v.name,
                 text=[r["log"] for r in v.rows],
                 hovertemplate="%{text}: %{y:.2f}<extra></extra>",
             )
