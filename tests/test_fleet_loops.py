@@ -159,19 +159,23 @@ def test_each_loop_model_is_train_loops_and_a_row_is_what_detect_loop_says(judge
     summary = tmp_path / "s.json"
     cmd = [sys.executable, "-m", "monitor", "detect", str(fleet / row["log"]), "--loop", "bucket"]
     model = results / "models" / "M02.bucket.model.npz"
-    subprocess.run(
+    proc = subprocess.run(
         [*cmd, "--config", CONFIG, "--model", str(model), "--summary", str(summary)],
         capture_output=True,
-        check=True,
+        text=True,
         env=env(),
     )
     s = json.loads(summary.read_text())
     # detect declares the config's machine (none): the model's machine M02 is not it, so
-    # it withholds; the fleet judges as machine M02.  Everything else is the same.
-    assert (row["max_level"], row["samples"], row["max_j"]) == (
+    # its alarm is withheld (not judged, exit 3); the fleet judges as machine M02 and
+    # alarms.  The detector's numbers are the same.
+    assert proc.returncode == 3 and s["verdict"] == "not_judged" and s["withheld"], proc.stderr
+    assert row["alarm"] and row["verdict"] == "fault"
+    assert (row["max_level"], row["samples"], row["max_j"], row["judged_s"]) == (
         s["max_level"],
         s["samples"],
         s["max_J"],
+        s["judged_s"],
     )
 
 
