@@ -282,14 +282,13 @@ def _machines_section(per: dict[str, list[dict[str, Any]]]) -> list[str]:
     for v in verdicts:
         cells = [v.cells.get(loop, "-").replace("_", " ") for loop in loops]
         out.append(f"| {v.machine} | {v.log} | {v.text} | " + " | ".join(cells) + " |")
-    uncommissioned = "an uncommissioned loop is judged with the config's model of another "
     return [
         *out,
         "",
         "A loop's verdict: fault, sensor fault, healthy, not judged (nothing its detector "
-        f"could judge), error, or uncommissioned ({uncommissioned}machine, its hydraulic "
-        "alarms withheld: never healthy). Each loop's history below is a row of its own "
-        "(`M01 stick`).",
+        "could judge), error, or uncommissioned (no model of this machine's loop: not "
+        "judged, or judged with another machine's model and its alarms withheld; never "
+        "healthy). Each loop's history below is a row of its own (`M01 stick`).",
         "",
     ]
 

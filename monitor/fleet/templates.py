@@ -45,9 +45,10 @@ INDEX = (
 {{ n_logs }} log loops</h1>
 <h2>Machines</h2>
 <p class="note">Each machine's verdict on its newest log names the loop (FAULT: stick); a
-cell per loop, its verdict on that log (click for the loop's history). Uncommissioned: the
-loop was judged with the config's model of another machine, its hydraulic alarms withheld;
-never healthy.</p>
+cell per loop, its verdict on that log (click for the loop's history). Uncommissioned: no
+model of this machine's loop (no commissioning data, or its training failed), so the loop is
+not judged (or was judged with another machine's model, its alarms withheld); never
+healthy.</p>
 <table id="machines"><tr><th>machine</th><th>newest log</th><th>verdict</th>
 {% for l in loops %}<th>{{ l }}</th>{% endfor %}</tr>
 {% for m in machines %}<tr id="machine-{{ m.machine }}"><td>{{ m.machine }}</td>
