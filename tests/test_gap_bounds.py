@@ -44,9 +44,7 @@ def _diag() -> SimpleNamespace:
     # Friction's own tolerances without it leave a held-out gap of 6 (floor 0): the friction
     # (gap 3) removes half of it, where against the calibrated machine it removed a fifth.
     absorbed = {
-        fric.name: Absorbed(
-            {"viscous_friction": (1.30, 1.06)}, (_Sums(np.array([4.0, 2.0])), None)
-        )
+        fric.name: Absorbed({"viscous_friction": (1.30, 1.06)}, (_Sums(np.array([4.0, 2.0])), None))
     }
     return SimpleNamespace(
         tolerances=SimpleNamespace(factors=factors, floor=np.zeros(2)),

@@ -113,8 +113,8 @@ def judge_loops(monitor: MachineUnderTest, rec: Recording, spec: RunSpec) -> dic
         row["verdict"] = det.summary["verdict"]
         rows[name] = row
     if monitor.pump is not None:
-        model, cols, columns = monitor.pump
-        pump = judge_rows(model, cols, rows_of(rec, columns))
+        pump_model, cols, columns = monitor.pump
+        pump = judge_rows(pump_model, cols, rows_of(rec, columns))
         rows[PUMP] = score_pump(pump, spec, float(rec.t[-1] - rec.t[0]))
     return rows
 

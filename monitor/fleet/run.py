@@ -44,7 +44,7 @@ def judge_task(
 
 
 def _empty_row(
-    machine: str, log: str, sha: str | None, model: str, error: str, loop: str | None = None
+    machine: str, log: str, sha: str | None, model: str, error: str | None, loop: str | None = None
 ) -> dict:
     return {
         "machine": machine,

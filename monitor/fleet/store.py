@@ -62,8 +62,8 @@ def log_schema() -> pa.Schema:
     (``max_b_ratio``, ...; null for a model without it)."""
     from monitor.fleet.pipeline import statistics
 
-    more = [column for _, _, column in statistics()]
-    more = [(c, pa.float64()) for c in more if c not in LOG_SCHEMA.names]
+    names = [column for _, _, column in statistics()]
+    more = [(c, pa.float64()) for c in names if c not in LOG_SCHEMA.names]
     return pa.schema([*LOG_SCHEMA, *more, LOOP_FIELD])
 
 

@@ -157,7 +157,8 @@ def machine_rows(
     else:
         wide = recording_from_candump_bulk(path, codec, columns, optional=optional)
     start = wide.meta.get("start_time_s")
-    return columns, rows_of(wide, columns), float(start) if start is not None else None
+    start_s = float(start) if isinstance(start, (int, float)) else None
+    return columns, rows_of(wide, columns), start_s
 
 
 def rows_of(wide: Recording, columns: Sequence[str]) -> np.ndarray:

@@ -204,7 +204,7 @@ def sense(
     """Noise-free sensor readings on the recording's grid (NaN outside the segments)."""
     delay_s = tau_s = 0.0
     gain, offset, cal_signal = 1.0, 0.0, None
-    lagged = ("PP", "PA", "PB", "QP")
+    lagged: tuple[str, ...] = ("PP", "PA", "PB", "QP")
     for e in effects:
         if e.name == "sensor_lag":
             delay_s = e.params["delay_ms"] * 1e-3

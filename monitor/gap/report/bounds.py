@@ -25,8 +25,7 @@ from monitor.gap.fit.score import gap, reduction
 
 #: Per tolerance: the catalogue effects it can stand in for (``CONFOUNDED`` turned round).
 HIDES: dict[str, tuple[str, ...]] = {
-    t.name: tuple(e for e, tols in CONFOUNDED.items() if t.name in tols)
-    for t in cal_mod.TOLERANCES
+    t.name: tuple(e for e, tols in CONFOUNDED.items() if t.name in tols) for t in cal_mod.TOLERANCES
 }
 
 
