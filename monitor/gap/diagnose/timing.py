@@ -45,7 +45,7 @@ from monitor.gap.fit import score as S
 from monitor.gap.fit.candidates import Candidate
 from monitor.gap.fit.sensorterms import SensorTerm
 from monitor.gap.judge import basemis, delays
-from monitor.gap.judge.decide import SIGNIFICANT, Decision, _not_named, decide, gain_share
+from monitor.gap.judge.decide import SIGNIFICANT, Decision, decide, gain_share, not_named
 from monitor.sim.effects import Effect
 
 Progress = Callable[[str], None]
@@ -174,7 +174,7 @@ def _retimed_row(
     """What re-timing removes, its bootstrap gain share and what ``decide`` says of it."""
     base, floor, idx = scores.baseline, cal.floor, paired.boot_idx
     # ``decide``'s own rule for a gap no effect explains, on the re-timed simulator.
-    alone = _not_named(whole, idx, floor, ({}, smooth), np.zeros(len(idx)), None, None)
+    alone = not_named(whole, idx, floor, ({}, smooth), np.zeros(len(idx)), None, None)
     return {
         "heldout_reduction": round(S.reduction(base.gap0, S.gap(whole.mse(), floor)), 4),
         "gain_share": round(gain_share(base.nominal, whole, idx, floor), 3),
@@ -207,7 +207,7 @@ def _delay_or_machine(
     row["effect_removes_practical"] = practical
     if beats >= SIGNIFICANT and practical:
         return d
-    alone = _not_named(whole, idx, floor, ({}, smooth), np.zeros(1), None, None)
+    alone = not_named(whole, idx, floor, ({}, smooth), np.zeros(1), None, None)
     return Decision(alone.verdict, None, None, float(alone.confidence))
 
 

@@ -199,7 +199,7 @@ def decide(
             absorbed = _absorbed_runner(singles[1:], sums, nominal, idx, floor, structured, against)
             if absorbed is not None:
                 return absorbed
-        return _not_named(nominal, idx, floor, structured, red_b, worse, traded)
+        return not_named(nominal, idx, floor, structured, red_b, worse, traded)
     return _named(best, singles, pairs, sums, nominal, idx, floor, (red_b, gain_b))
 
 
@@ -236,7 +236,7 @@ def _best_named(
     return named, worse, None
 
 
-def _not_named(
+def not_named(
     nominal: SegmentSums,
     idx: np.ndarray,
     floor: np.ndarray,
