@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from threadpoolctl import threadpool_limits
 
 from monitor.gap.diagnose import fitting as F
-from monitor.gap.diagnose import identify
+from monitor.gap.diagnose import identify, load
 from monitor.gap.diagnose import timing as T
 from monitor.gap.diagnose import verdict as V
 from monitor.gap.diagnose.records import (
@@ -82,6 +82,7 @@ def _diagnose(
     judged = V.check_timing(cal, refined, paired, judged, say)
     judged = T.check_split(cal, refined, paired, judged, say)
     judged = V.check_friction(parts, cal, refined, paired, judged, say)
+    judged = load.check_load(parts, cal, refined, paired, judged, say)
     judged = V.check_cause(parts, cal, refined, paired, judged, say)
     if judged.cause is not None:
         laps.lap("cause")

@@ -153,6 +153,8 @@ class Finding:
     #: Which readings are late, the delay the others share, and what that decided
     #: (``diagnose/timing.py``): the JSON's ``timing``.
     timing: dict | None = None
+    #: The rod's load read at rest (``diagnose/load.py``): the JSON's ``load_check``.
+    load_check: dict | None = None
 
 
 @dataclass(frozen=True)

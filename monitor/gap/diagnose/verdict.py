@@ -48,6 +48,8 @@ class Judged:
     #: Which readings are late and what the others share (``diagnose/timing.py``): the
     #: JSON's ``timing`` (None: not measured).
     split: dict | None = None
+    #: The rod's load read at rest (``diagnose/load.py``): the JSON's ``load_check``.
+    load: dict | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -262,6 +264,7 @@ def suggest_next(
         timing_check=judged.timing,
         friction_check=judged.friction,
         timing=judged.split,
+        load_check=judged.load,
     )
 
 

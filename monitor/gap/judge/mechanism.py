@@ -271,6 +271,10 @@ def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
         # The rod's force balance: Coulomb friction beside viscous friction held in its band.
         # Separated (viscous friction held in its band or free): no other recording needed.
         return fc["evidence"], bool(fc.get("separated"))
+    lc = report.get("load_check")
+    if verdict == "load_variation" and lc and lc.get("present"):
+        # The rod's holds: a load that changes with the pose, which no base mismatch enters.
+        return lc["evidence"], True
     tm = report.get("timing") or {}
     if (tm.get("sensor_lag_on_late") or {}).get("named"):
         # Some readings late, the rod and the others on time: a sensor's dynamics.

@@ -174,6 +174,7 @@ def _checks(diag: Diagnosis) -> dict:
         **({"timing_check": f.timing_check} if f.timing_check is not None else {}),
         **({"friction_check": f.friction_check} if f.friction_check is not None else {}),
         **({"timing": f.timing} if f.timing is not None else {}),
+        **({"load_check": f.load_check} if f.load_check is not None else {}),
         **_absorbed(f.chosen, diag.ranking.absorbed, tol.floor),
     }
 

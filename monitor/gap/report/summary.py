@@ -23,6 +23,7 @@ def summary_text(report: dict) -> str:
     lines += _timing_line(report.get("timing"))
     lines += _mechanism_lines(report.get("mechanism"))
     lines += _friction_line(report.get("friction_check"))
+    lines += _load_line(report.get("load_check"))
     lines.append(f"Confidence: {report['confidence']:.2f}")
     lines += _bounded(report["calibrated"])
     lines += bound_lines(report.get("calibration_bounds") or [])
@@ -73,6 +74,14 @@ def _friction_line(fc: dict | None) -> list[str]:
     if not fc or fc["friction_named"] == (fc["verdict_without_check"] == "cylinder_friction"):
         return []
     return [f"Friction: {fc['evidence']} (verdict without it: {fc['verdict_without_check']})"]
+
+
+def _load_line(lc: dict | None) -> list[str]:
+    """The rod's load at rest, when it named or withdrew a load variation
+    (``judge/loadcheck.py``)."""
+    if not lc or lc["load_named"] == (lc["verdict_without_check"] == "load_variation"):
+        return []
+    return [f"Load: {lc['evidence']} (verdict without it: {lc['verdict_without_check']})"]
 
 
 def _where_line(w: dict) -> str:
