@@ -6,8 +6,9 @@ base mismatch of those (the third plant's every machine runs late and meters dif
 near centre) does not either.  The simulator's load is one gravity force whatever the
 pose; ``load_variation`` makes it change with the rod position.  Each diagnosis segment
 starts from such a hold (``data/segments.py``), so one hold per segment, regressed on the
-rod position (linear and quadratic about the holds' mean) and on time, says how much the
-load changes over the stroke the recording visits and over the recording.
+rod position (linear and quadratic about the holds' mean) with a load of its own per
+quarter of the recording, says how much the load changes over the stroke the recording
+visits and over the recording (a payload taken on).
 
 On the third plant written apart (seed 924107) a load that changes by 1.8-5.0 kN over the
 visited stroke (a stick moment varying with the boom angle and a slope) was named by no fit:
@@ -56,9 +57,13 @@ HOLD_MIN, HOLD_MAX = 10, 100
 #: ... over which the smoothed rod moves by less than this (mm; RodPos's noise is 0.5 mm):
 #: a rod at rest.  (Its velocity's noise, 3 mm/s, left 12-28 of 70 segments as holds.)
 REST_MM = 3.0
-#: Least holds a bootstrap resample needs for the load's four coefficients; resamples
+#: Least distinct holds a bootstrap resample needs for the load's coefficients; resamples
 #: with fewer are not counted.
-MIN_RESAMPLE_HOLDS = 6
+MIN_RESAMPLE_HOLDS = 8
+TIME_BLOCKS = 4
+#: The recording's span of holds is cut into this many blocks of time, each with a load
+#: of its own: a payload taken on or put down shows as a step between blocks (a straight
+#: line over time left a step's holds scattered 190 N rms about it).
 #: Holds this close (mm) to an end of the stroke rest on the stop, not on the oil.
 STOP_MARGIN_MM = 15.0
 
@@ -68,15 +73,15 @@ class LoadSignature:
     """What the rod's holds say about its load."""
 
     holds: int
-    #: Load (N) at the holds' mean rod position, its slope (N/mm) and curvature (N/mm^2)
-    #: there, and its trend over time (N/s).
+    #: Load (N) at the holds' mean rod position (mean over the time blocks), its slope
+    #: (N/mm) and curvature (N/mm^2) there.
     load_n: float
     slope_n_per_mm: float
     curvature_n_per_mm2: float
-    trend_n_per_s: float
     #: Rod positions (mm) the holds span (5th-95th percentile).
     span_mm: tuple[float, float]
-    #: Change of the fitted load (N) over that span and over the recording.
+    #: Change of the fitted load (N) over that span, and between the quarters of the
+    #: recording.
     pose_change_n: float
     time_change_n: float
     #: Share of bootstrap resamples (of the segments) in which either change reaches
@@ -108,12 +113,12 @@ class LoadSignature:
             )
         lo, hi = self.span_mm
         return (
-            f"the rod's load at rest ({self.holds} holds): {self.load_n:.0f} N at "
-            f"{(lo + hi) / 2:.0f} mm, changing by {self.pose_change_n:.0f} N over "
+            f"the rod's load at rest ({self.holds} holds): {self.load_n:.0f} N at their "
+            f"mean rod position, changing by {self.pose_change_n:.0f} N over "
             f"{lo:.0f}-{hi:.0f} mm of stroke (slope {self.slope_n_per_mm:+.2f} N/mm) and by "
-            f"{self.time_change_n:.0f} N over the recording; {LEVEL_N:.0f} N or more in "
-            f"{100 * self.above_share:.0f} % of the resamples (holds scatter "
-            f"{self.rms_n:.0f} N rms)"
+            f"{self.time_change_n:.0f} N between quarters of the recording; "
+            f"{LEVEL_N:.0f} N or more in {100 * self.above_share:.0f} % of the resamples "
+            f"(holds scatter {self.rms_n:.0f} N rms)"
         )
 
     def as_dict(self) -> dict:
@@ -122,7 +127,6 @@ class LoadSignature:
             "load_n": _num(self.load_n, 1),
             "slope_n_per_mm": _num(self.slope_n_per_mm, 3),
             "curvature_n_per_mm2": _num(self.curvature_n_per_mm2, 5),
-            "trend_n_per_s": _num(self.trend_n_per_s, 3),
             "span_mm": [_num(v, 1) for v in self.span_mm],
             "pose_change_n": _num(self.pose_change_n, 1),
             "time_change_n": _num(self.time_change_n, 1),
@@ -164,30 +168,31 @@ def signature(prep: Prepared, segments: Sequence[Segment], machine: MachineParam
     which, h = holds(prep, segments, machine)
     if len(h) < MIN_HOLDS:
         return _unread(len(h))
-    x0, t0 = h[:, 1].mean(), h[:, 2].mean()
+    x0 = h[:, 1].mean()
     span = (float(np.percentile(h[:, 1], 5)), float(np.percentile(h[:, 1], 95)))
     if span[1] - span[0] < MIN_SPAN_MM:
         return _unread(len(h))
-    cols = np.column_stack([np.ones(len(h)), h[:, 1] - x0, (h[:, 1] - x0) ** 2, h[:, 2] - t0])
+    edges = np.linspace(h[:, 2].min(), h[:, 2].max(), TIME_BLOCKS + 1)
+    block = np.clip(np.searchsorted(edges, h[:, 2], side="right") - 1, 0, TIME_BLOCKS - 1)
+    cols = np.column_stack([h[:, 1] - x0, (h[:, 1] - x0) ** 2, np.eye(TIME_BLOCKS)[block]])
+    grid = np.linspace(span[0], span[1], 50) - x0
     beta = np.linalg.lstsq(cols, h[:, 0], rcond=None)[0]
     rms = float(np.sqrt(np.mean((h[:, 0] - cols @ beta) ** 2)))
-    grid = np.linspace(span[0], span[1], 50) - x0
-    duration = float(np.ptp(h[:, 2]))
-    pose, trend = _changes(beta, grid, duration)
+    pose, trend = _changes(beta, grid, np.unique(block))
     pos = {j: k for k, j in enumerate(which)}
     changes = []
     for b in resamples(len(segments), seed=2):
         rows = [pos[j] for j in b if j in pos]
         if len(set(rows)) >= MIN_RESAMPLE_HOLDS:
             bb = np.linalg.lstsq(cols[rows], h[rows, 0], rcond=None)[0]
-            changes.append(max(_changes(bb, grid, duration)))
+            changes.append(max(_changes(bb, grid, np.unique(block[rows]))))
     above = np.array(changes) >= LEVEL_N
+    at_x0 = beta[2:][np.unique(block)]
     return LoadSignature(
         holds=len(h),
-        load_n=float(beta[0]),
-        slope_n_per_mm=float(beta[1]),
-        curvature_n_per_mm2=float(beta[2]),
-        trend_n_per_s=float(beta[3]),
+        load_n=float(at_x0.mean()),
+        slope_n_per_mm=float(beta[0]),
+        curvature_n_per_mm2=float(beta[1]),
         span_mm=span,
         pose_change_n=pose,
         time_change_n=trend,
@@ -198,11 +203,11 @@ def signature(prep: Prepared, segments: Sequence[Segment], machine: MachineParam
     )
 
 
-def _changes(beta: np.ndarray, grid: np.ndarray, duration_s: float) -> tuple[float, float]:
-    """The fitted load's change over the stroke ``grid`` (mm about the mean) and over
-    ``duration_s``."""
-    curve = beta[1] * grid + beta[2] * grid**2
-    return float(np.ptp(curve)), float(abs(beta[3]) * duration_s)
+def _changes(beta: np.ndarray, grid: np.ndarray, blocks: np.ndarray) -> tuple[float, float]:
+    """The fitted load's change over the stroke ``grid`` (mm about the mean) and between
+    the time ``blocks`` that have holds."""
+    curve = beta[0] * grid + beta[1] * grid**2
+    return float(np.ptp(curve)), float(np.ptp(beta[2:][blocks]))
 
 
 def _num(v: float, digits: int) -> float | None:
@@ -211,4 +216,4 @@ def _num(v: float, digits: int) -> float | None:
 
 def _unread(n: int) -> LoadSignature:
     nan = float("nan")
-    return LoadSignature(n, nan, nan, nan, nan, (nan, nan), nan, nan, 0.0, 0.0, nan, False)
+    return LoadSignature(n, nan, nan, nan, (nan, nan), nan, nan, 0.0, 0.0, nan, False)
