@@ -1,5 +1,5 @@
 """The rod's load read at rest (``judge/loadcheck.py``) and the verdict it decides
-(``diagnose/load.py``), on recordings made with ``monitor simulate`` and with the third
+(``diagnose/atrest.py``), on recordings made with ``monitor simulate`` and with the third
 plant written apart (benchmarks/gap_third).
 
 Expected values from the physics the simulator was given: held still, the rod's hydraulic

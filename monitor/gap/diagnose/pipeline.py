@@ -14,8 +14,8 @@ from collections.abc import Sequence
 
 from threadpoolctl import threadpool_limits
 
+from monitor.gap.diagnose import atrest, identify
 from monitor.gap.diagnose import fitting as F
-from monitor.gap.diagnose import identify, load
 from monitor.gap.diagnose import timing as T
 from monitor.gap.diagnose import verdict as V
 from monitor.gap.diagnose.records import (
@@ -82,7 +82,8 @@ def _diagnose(
     judged = V.check_timing(cal, refined, paired, judged, say)
     judged = T.check_split(cal, refined, paired, judged, say)
     judged = V.check_friction(parts, cal, refined, paired, judged, say)
-    judged = load.check_load(parts, cal, refined, paired, judged, say)
+    judged = atrest.check_load(parts, cal, refined, paired, judged, say)
+    judged = atrest.check_air(cal, refined, judged, say)
     judged = V.check_cause(parts, cal, refined, paired, judged, say)
     if judged.cause is not None:
         laps.lap("cause")

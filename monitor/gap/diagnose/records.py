@@ -153,8 +153,10 @@ class Finding:
     #: Which readings are late, the delay the others share, and what that decided
     #: (``diagnose/timing.py``): the JSON's ``timing``.
     timing: dict | None = None
-    #: The rod's load read at rest (``diagnose/load.py``): the JSON's ``load_check``.
+    #: The rod's load read at rest (``diagnose/atrest.py``): the JSON's ``load_check``.
     load_check: dict | None = None
+    #: The drained chambers' stiffness at rest (``diagnose/atrest.py``): ``air_check``.
+    air_check: dict | None = None
 
 
 @dataclass(frozen=True)

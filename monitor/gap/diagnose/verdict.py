@@ -48,8 +48,10 @@ class Judged:
     #: Which readings are late and what the others share (``diagnose/timing.py``): the
     #: JSON's ``timing`` (None: not measured).
     split: dict | None = None
-    #: The rod's load read at rest (``diagnose/load.py``): the JSON's ``load_check``.
+    #: The rod's load read at rest (``diagnose/atrest.py``): the JSON's ``load_check``.
     load: dict | None = None
+    #: The drained chambers' stiffness at rest (``diagnose/atrest.py``): ``air_check``.
+    air: dict | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -265,6 +267,7 @@ def suggest_next(
         friction_check=judged.friction,
         timing=judged.split,
         load_check=judged.load,
+        air_check=judged.air,
     )
 
 

@@ -271,6 +271,10 @@ def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
         # The rod's force balance: Coulomb friction beside viscous friction held in its band.
         # Separated (viscous friction held in its band or free): no other recording needed.
         return fc["evidence"], bool(fc.get("separated"))
+    ac = report.get("air_check")
+    if verdict == "entrained_air" and ac and ac.get("present"):
+        # The drained chambers on the stops: soft near tank pressure, stiff loaded.
+        return ac["evidence"], True
     lc = report.get("load_check")
     if verdict == "load_variation" and lc and lc.get("present"):
         # The rod's holds: a load that changes with the pose, which no base mismatch enters.

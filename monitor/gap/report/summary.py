@@ -24,6 +24,7 @@ def summary_text(report: dict) -> str:
     lines += _mechanism_lines(report.get("mechanism"))
     lines += _friction_line(report.get("friction_check"))
     lines += _load_line(report.get("load_check"))
+    lines += _air_line(report.get("air_check"))
     lines.append(f"Confidence: {report['confidence']:.2f}")
     lines += _bounded(report["calibrated"])
     lines += bound_lines(report.get("calibration_bounds") or [])
@@ -82,6 +83,13 @@ def _load_line(lc: dict | None) -> list[str]:
     if not lc or lc["load_named"] == (lc["verdict_without_check"] == "load_variation"):
         return []
     return [f"Load: {lc['evidence']} (verdict without it: {lc['verdict_without_check']})"]
+
+
+def _air_line(ac: dict | None) -> list[str]:
+    """The drained chambers at rest, when they named entrained air (``judge/aircheck.py``)."""
+    if not ac or not ac["air_named"] or ac["verdict_without_check"] == "entrained_air":
+        return []
+    return [f"Air: {ac['evidence']} (verdict without it: {ac['verdict_without_check']})"]
 
 
 def _where_line(w: dict) -> str:
