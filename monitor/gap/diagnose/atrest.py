@@ -54,9 +54,7 @@ def check_load(
     return replace(judged, decision=d, load=checked)
 
 
-def check_air(
-    cal: Calibrated, scores: Scores, judged: Judged, say: Progress
-) -> Judged:
+def check_air(cal: Calibrated, scores: Scores, judged: Judged, say: Progress) -> Judged:
     """The verdict checked against the drained chambers on the end stops; the JSON's
     ``air_check``.  It only names: where nothing leaks at rest (this simulator, the
     outsider's plant) it reads nothing, and air is judged by the held-out fits alone."""
