@@ -38,13 +38,7 @@ def check_load(
     if sig.present and not named and load is not None:
         d = Decision(loadcheck.NAME, None, load, sig.above_share)
     elif named and sig.absent:
-        base = scores.baseline
-        rest = [c for c in scores.singles if c is not load]
-        plain = [q for q in paired.pairs if all(e.name != loadcheck.NAME for e in q.effects)]
-        against = {name: a.sums for name, a in judged.absorbed.items()}
-        structured = (paired.smooth, base.smooth_nominal)
-        args = (paired.sums, base.nominal, paired.boot_idx, cal.floor, structured, against)
-        d = decide(False, rest, plain, *args)
+        d = _without(loadcheck.NAME, cal, scores, paired, judged)
     checked = {
         **sig.as_dict(),
         "verdict_without_check": judged.decision.verdict,
@@ -52,6 +46,25 @@ def check_load(
     }
     say(f"load: {sig.evidence()}; verdict {judged.decision.verdict} -> {d.verdict}")
     return replace(judged, decision=d, load=checked)
+
+
+def _without(
+    name: str, cal: Calibrated, scores: Scores, paired: Paired, judged: Judged
+) -> Decision:
+    """The verdict decided again from every single and pair without effect ``name``."""
+    base = scores.baseline
+    against = {c: a.sums for c, a in judged.absorbed.items()}
+    return decide(
+        False,
+        [c for c in scores.singles if c.effects[0].name != name],
+        [q for q in paired.pairs if all(e.name != name for e in q.effects)],
+        paired.sums,
+        base.nominal,
+        paired.boot_idx,
+        cal.floor,
+        (paired.smooth, base.smooth_nominal),
+        against,
+    )
 
 
 def check_air(cal: Calibrated, scores: Scores, judged: Judged, say: Progress) -> Judged:
