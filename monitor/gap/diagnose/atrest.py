@@ -6,7 +6,7 @@ names an effect the held-out fits could not: a load that changes with the pose
 On the third plant written apart, both effects moved the held-out gap by less than that
 plant's base dynamics did: the fitted slope removed 0-6 % of it (while the holds' load
 changed by 2-5 kN over the stroke), the fitted air 3-17 % (while the drained chambers on the
-stops rose 0.05-0.32 times as fast as the loaded ones fell, 2.5-5.4 times on healthy
+stops rose 0.05-0.32 times as fast as the loaded ones fell, 2.5-5.5 times on healthy
 machines).  So when the holds show such evidence, the effect is the verdict, whatever the
 held-out criterion preferred; and a ``load_variation`` verdict on holds that clearly show
 one load everywhere is decided again without it.
