@@ -6,9 +6,9 @@ drained (near tank pressure) and the other loaded (some 200 bar).  Where oil lea
 the loaded chamber into the drained one (across the piston seal, or through the valve's
 centre), the same flow makes the loaded chamber's pressure fall at Q / C_loaded and the
 drained one's rise at Q / C_drained: the ratio of the two rates is the ratio of the two
-capacitances, C_loaded / C_drained.  With pure oil (or hoses, which soften both chambers
-alike) it is about the ratio of their volumes: the drained chamber on a stop is the small
-one, so the drained chamber rises faster than the loaded one falls.  With air the drained
+capacitances, C_loaded / C_drained.  With pure oil it is the ratio of their volumes: the
+drained chamber on a stop is the small one, so it rises faster than the loaded one falls;
+hoses add a capacitance to both and bring the two rates together.  With air the drained
 chamber swallows the leak: at 1 bar absolute a 1 % air fraction is some 150 times softer
 than the oil.
 
