@@ -232,6 +232,42 @@ def test_a_duty_cycle_is_seeded_and_moves_every_function(machine):
     assert all(np.isfinite(rec[n]).all() for n in rec.columns)
 
 
+
+def _lift_after_stick_s(rec: Recording) -> np.ndarray:
+    """For each lift (the boom's command rising from 0 above 0), its start less the end of
+    the stick's dig move around it (where the stick's command leaves its plateau), s."""
+    t, boom, stick = rec.t, rec["SpoolCmd"], rec["Stick_SpoolCmd"]
+    edges = np.diff((stick > 0).astype(int))
+    starts, ends = np.flatnonzero(edges == 1) + 1, np.flatnonzero(edges == -1) + 1
+    offsets = []
+    for k in np.flatnonzero((boom[:-1] <= 0) & (boom[1:] > 0)) + 1:
+        began = starts[starts < k]
+        if not len(began):
+            continue
+        lo = int(began[-1])  # the last stick-in move begun before the lift
+        hi = int(ends[ends > lo][0]) if (ends > lo).any() else len(t)
+        move = stick[lo:hi]
+        plateau_end = lo + int(np.flatnonzero(move == move.max())[-1])
+        offsets.append(t[k] - t[plateau_end])
+    return np.array(offsets)
+
+
+def test_the_dig_lift_cycle_starts_the_lift_at_every_phase_of_the_stick_s_dig_end(machine):
+    """`dig-lift` (training data) starts each lift 1.5 s before to 0.3 s after the stick's dig
+    move ends, so a boom ramping up meets a stick still open; truck loading starts it within
+    0.3 s of the dig's end (the later of the stick's and the bucket's), so rarely before the
+    stick's; and it is not one of the operator's cycles (fleets draw from those)."""
+    from monitor.sim.whole.cycles import TRAINING_CYCLES, WHOLE_CYCLES
+
+    assert "dig-lift" in TRAINING_CYCLES and "dig-lift" not in WHOLE_CYCLES
+    over = _lift_after_stick_s(make_whole_cycle("dig-lift", 600, 111, machine))
+    assert len(over) > 25 and over.min() < -1.2 and (over >= -1.5 - 0.02).all()
+    assert (over < -0.3).mean() > 0.5  # most lifts start with the stick still open
+    assert ((over > -0.3) & (over < 0.3)).any()  # and some as it closes
+    truck = _lift_after_stick_s(make_whole_cycle("truck-loading", 600, 111, machine))
+    assert len(truck) > 25 and (truck > -0.3 - 0.02).all()
+
+
 def _dbc_signals() -> list[str]:
     codec = FrameCodec.from_dbc(resource_path("dbc", "excavator4.dbc"))
     return [n for m in codec.messages.values() if m.name.startswith("HYD_") for n in m.signal_names]

@@ -16,7 +16,7 @@ from monitor.sim.cycles import CYCLES, make_cycle
 from monitor.sim.effects import describe_catalogue, parse_effect
 from monitor.sim.faults import parse_fault
 from monitor.sim.machine import load_machine
-from monitor.sim.whole.cycles import WHOLE_CYCLES
+from monitor.sim.whole.cycles import TRAINING_CYCLES, WHOLE_CYCLES
 
 MACHINES = ("excavator4",)
 
@@ -31,7 +31,9 @@ effects (--effect NAME[:param=value,...], off unless given; repeatable):
 {describe_catalogue()}
 
 whole machine (--machine excavator4: boom, stick, bucket and swing on one load-sensing pump,
-every loop's signals of dbc/excavator4.dbc; --cycle mixed (default), truck-loading, lifting):
+every loop's signals of dbc/excavator4.dbc; --cycle mixed (default), truck-loading, lifting;
+dig-lift, truck loading whose lift starts at every phase of the stick's dig move's end,
+is for training data):
   --fault LOOP.FAULT:SEV[@ONSET_S[+RAMP_S]], LOOP.FAULT one of
     boom, stick, bucket: piston_wear, spool_stroke, spool_wear (as above)
     swing: spool_stroke, spool_wear, motor_leakage
@@ -81,13 +83,14 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--cycle",
-        choices=CYCLES + WHOLE_CYCLES,
+        choices=CYCLES + WHOLE_CYCLES + TRAINING_CYCLES,
         default=None,
         help="boom: raise/hold/lower duty cycles (default); boom-cover: the same with twice "
         "the end-stop visits and the lever released anywhere around the stop, so spools "
         "close on trapped pressures (the shipped model's training data); ramp: slow spool "
         "triangles; step: spool steps.  With --machine: mixed (default: blocks of both), "
-        "truck-loading, lifting",
+        "truck-loading, lifting; dig-lift: truck loading whose lift starts at every phase of "
+        "the stick's dig move's end (training data)",
     )
     p.add_argument("--fault", action="append", default=[], metavar="NAME:SEV[@ONSET_S[+RAMP_S]]")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[:param=value,...]")
@@ -185,10 +188,10 @@ def _run_machine(args: argparse.Namespace, suffix: str) -> int:
 
     if args.cycle is None:
         args.cycle = "mixed"
-    elif args.cycle not in WHOLE_CYCLES:
+    elif args.cycle not in WHOLE_CYCLES + TRAINING_CYCLES:
         raise ConfigError(
             f"--cycle {args.cycle} is a boom-loop cycle; the whole machine "
-            f"runs {', '.join(WHOLE_CYCLES)}"
+            f"runs {', '.join(WHOLE_CYCLES + TRAINING_CYCLES)}"
         )
     if args.effect:
         raise ConfigError("--effect is not available with --machine yet (the boom loop's only)")
