@@ -17,6 +17,15 @@
 # boom simulator has no neighbours); J leaves the samples settling on an end stop out (the
 # default of `monitor train`).  17-18 minutes a loop wall-clock (measured with the four run in parallel at a
 # load average of 25-28 on 2 cores; the GRNN fit 5-8 minutes of it).
+# The stick's patterns add 2 x 600 s of the `dig-lift` training cycle (seeds 111-112: truck
+# loading whose lift starts at every phase of the stick's dig move's end).  Mixed work brings
+# the boom's lift ramp onto a stick still open at 60-100 % about 2.5 times an hour for
+# 0.1-0.2 s, so the fit held three such events, all of them the stick's pressures collapsing
+# as its spool closed, and the stick's model predicted that collapse where the stick had not
+# yet closed: B alarmed on 2 of 48 normal runs (docs/benchmarks.md, "Why the retrained
+# stick's bias statistic alarms").  The boom, bucket and swing models were built without those
+# two runs (their patterns and every loop's thresholds come from the same runs as before), so
+# the script rebuilds all four files as shipped.
 #   bash config/excavator4_train_models.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -26,13 +35,17 @@ seq 101 106 | xargs -P "$(nproc)" -I{} monitor simulate --machine excavator4 --d
   --seed {} --out "$work/fit_{}.csv" >/dev/null
 seq 107 110 | xargs -P "$(nproc)" -I{} monitor simulate --machine excavator4 --duration 600 \
   --cycle lifting --seed {} --out "$work/fit_{}.csv" >/dev/null
+seq 111 112 | xargs -P "$(nproc)" -I{} monitor simulate --machine excavator4 --duration 600 \
+  --cycle dig-lift --seed {} --out "$work/fit_{}.csv" >/dev/null
 seq 201 212 | xargs -P "$(nproc)" -I{} monitor simulate --machine excavator4 --duration 600 \
   --seed {} --out "$work/held_{}.csv" >/dev/null
 seq 213 216 | xargs -P "$(nproc)" -I{} monitor simulate --machine excavator4 --duration 600 \
   --cycle lifting --seed {} --out "$work/held_{}.csv" >/dev/null
 # --fault-check off: simulated normal operation by construction.
 for loop in boom stick bucket swing; do
-  monitor train "$work"/fit_{101..110}.csv --held-out "$work"/held_{201..216}.csv \
+  fit=("$work"/fit_{101..110}.csv)
+  if [ "$loop" = stick ]; then fit+=("$work"/fit_{111..112}.csv); fi
+  monitor train "${fit[@]}" --held-out "$work"/held_{201..216}.csv \
     --loop "$loop" --config "$here/excavator4.yaml" --fault-check off \
     --out "$here/${loop}_excavator4.model.npz"
 done
