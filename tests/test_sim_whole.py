@@ -232,7 +232,6 @@ def test_a_duty_cycle_is_seeded_and_moves_every_function(machine):
     assert all(np.isfinite(rec[n]).all() for n in rec.columns)
 
 
-
 def _lift_after_stick_s(rec: Recording) -> np.ndarray:
     """For each lift (the boom's command rising from 0 above 0), its start less the end of
     the stick's dig move around it (where the stick's command leaves its plateau), s."""

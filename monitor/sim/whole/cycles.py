@@ -7,13 +7,13 @@ bucket raised slowly, held for a long time, swung 30-90 deg, held, lowered.  ``m
 blocks of both.  Operator variability: every move's lever amplitude, the overlap of the
 functions (each starts with a random delay after the last), pauses, swing angles.
 
-``dig-lift`` (``TRAINING_CYCLES``, for commissioning data, not an operator's cycle of its
-own): truck loading whose lift starts anywhere from 1.5 s before the stick's dig move ends
-to 0.3 s after it, so the boom's ramp meets the stick still curling in, the stick's spool
-closing and the stick settled, at every phase.  In ``truck-loading`` the lift starts within
-0.3 s of the dig's end, and a lift ramp meeting a stick still open at 60-100 % comes about
-2.5 times an hour of mixed work for 0.1-0.2 s: too rare for a kernel model to learn, too
-often for one that never saw it (docs/benchmarks.md, the stick's bias statistic).
+``dig-lift`` (``TRAINING_CYCLES``, for training data, not an operator's cycle of its own):
+truck loading whose lift starts anywhere from 1.5 s before the stick's dig move ends to 0.3 s
+after it, so the boom's ramp meets the stick still curling in, the stick's spool closing and
+the stick settled, at every phase.  In ``truck-loading`` the lift starts within 0.3 s of the
+dig's end, and a lift ramp meeting a stick still open at 60-100 % comes about 2.5 times an
+hour of mixed work for 0.1-0.2 s: too rarely for a kernel model to learn it, often enough
+for one that has not to alarm (docs/benchmarks.md, the stick's bias statistic).
 
 The operator aims at rod positions by eye: each move's length comes from a rough speed
 (rated section flow x lever over the fed area, no flow sharing), so positions drift and now
