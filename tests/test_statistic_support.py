@@ -16,7 +16,7 @@ from monitor.io.recording import Recording
 from monitor.model.statistic import HeldOut, Statistic
 from monitor.model.support import implied_rate, independent_windows, rate_upper95, window_maxima
 from monitor.model.threshold import ThresholdRule
-from monitor.training.support import earned, halves
+from monitor.training.support import earned, halves, rests_on_one_event
 
 
 def test_poisson_bound_by_hand() -> None:
@@ -171,3 +171,62 @@ def test_one_recording_cannot_show_a_threshold_holds_between_sessions() -> None:
     why = earned(stat, held, ThresholdRule())
     assert why is not None and why.startswith("its threshold rests on one recording")
     assert "at least 2 sessions (--held-out)" in why
+
+
+def _spiked(spikes: Sequence[tuple[int, float]]) -> HeldOut:
+    """Five minutes in each of two parts, white residuals, plus a 5 s step of 20 z in
+    ``(part, minute)`` for each spike."""
+    held = _held(5.0, 0.0)
+    for part, minute in spikes:
+        a = int(minute * 6000)
+        held.residuals[part][a : a + 500, 0] += 20.0
+    return held
+
+
+def test_a_threshold_set_by_one_spike_is_called_thin() -> None:
+    """One 5 s step of 20 z at 3.0 min of the first part: its window's mean reaches about
+    20, every other window's stays near 3.5 sd of a 5 s mean (0.16), about 100 x less; the
+    max rule puts the threshold at 2 x 20. One line names the statistic's event, its time
+    and ratio and what data would switch the statistic on."""
+    held = _spiked([(0, 3.0)])
+    stat = Mean().fit(held, ThresholdRule())
+    assert stat.threshold_ == pytest.approx(40.0, rel=0.05)
+    why = rests_on_one_event(stat, held)
+    assert why is not None and why.startswith("its threshold rests on one event")
+    assert " at 3.0 min " in why and "would switch it on" in why
+    event = stat.support_["one_event"]
+    assert 60 < event["ratio"] < 200
+    assert 179.0 <= event["t_s"] <= 181.0  # the window holding the step's end
+
+
+def test_two_like_events_are_not_one() -> None:
+    """The same step in both parts: the threshold rests on two events, neither thin."""
+    held = _spiked([(0, 3.0), (1, 2.0)])
+    stat = Mean().fit(held, ThresholdRule())
+    assert rests_on_one_event(stat, held) is None and "one_event" not in stat.support_
+
+
+def test_an_optional_statistic_on_one_event_is_off_and_says_why(monkeypatch) -> None:
+    """`monitor train`'s rule: an optional statistic whose threshold rests on one event is
+    off, with the line; the model keeps no threshold for it."""
+    from monitor.training import statistics as stats
+
+    held = _spiked([(0, 3.0)])
+    monkeypatch.setattr(stats, "registry", lambda: [Mean])
+    monkeypatch.setattr(stats, "earned", lambda *a: None)  # the other checks pass
+
+    class Settings:
+        class thresholds:  # noqa: N801
+            rule = ThresholdRule()
+
+        class statistics:  # noqa: N801
+            support_check = True
+
+    class Model:
+        statistics: dict[str, Any] = {}  # noqa: RUF012
+
+    said: list[str] = []
+    notes, support = stats.fit_statistics(Model(), held, Settings(), said.append)
+    assert notes["mean_q"].startswith("off: its threshold rests on one event")
+    assert any(s.startswith("  mean statistic Q off: its threshold rests on one") for s in said)
+    assert support["Q"]["one_event"]["ratio"] > 60

@@ -18,7 +18,7 @@ from monitor.model.residual import on_stops
 from monitor.model.spec import DGRNNSpec
 from monitor.model.statistic import HeldOut, Statistic, registry
 from monitor.model.threshold import ThresholdRule
-from monitor.training.support import earned, support_line
+from monitor.training.support import earned, rests_on_one_event, support_line
 
 Progress = Callable[[str], None]
 
@@ -53,20 +53,23 @@ def fit_statistics(
             cls.put(model, None)
             notes[cls.key] = f"off: {exc}"
             continue
+        event = rests_on_one_event(stat, held)
         why = earned(stat, held, rule)
+        whys = [w for w in (event, why) if w is not None]
         support[cls.name] = stat.support_
-        if why is not None and cls.optional and settings.statistics.support_check:
-            say(f"  {cls.title} off: {why}")
+        if whys and cls.optional and settings.statistics.support_check:
+            for w in whys:
+                say(f"  {cls.title} off: {w}")
             cls.put(model, None)
-            notes[cls.key] = f"off: {why}"
+            notes[cls.key] = "off: " + "; ".join(whys)
             continue
         cls.put(model, stat.params_)
         on.add(cls.name)
-        notes[cls.key] = "on" if why is None else f"on, thinly supported: {why}"
+        notes[cls.key] = "on" if not whys else "on, thinly supported: " + "; ".join(whys)
         say(said(stat, held, rule))
         say(support_line(stat))
-        if why is not None:  # J stays on (the level rests on it), with the warning
-            say(f"  warning: {cls.title}'s threshold is thinly supported: {why}")
+        for w in whys:  # J stays on (the level rests on it), with the warning
+            say(f"  warning: {cls.title}'s threshold is thinly supported: {w}")
     return notes, support
 
 

@@ -110,7 +110,7 @@ def train(
     j_parts = [judge.series(e, r) for e, r in zip(e_val, parts.val, strict=True)]
     # Said only when the event sets the threshold (not when the reference's floor does).
     own = model.eps0 == own_eps0
-    event = one_event_note(j_parts, parts.val, window_n, say) if own else None
+    event = one_event_note(j_parts, parts.val, window_n) if own else None
     # The operating envelope of every training recording (patterns and held-out part): the
     # detector reports samples beyond it as out_of_range instead of judging them.
     model.envelope = envelope_from_recordings(parts.everything, AlarmConfig().min_engine_rpm)
@@ -260,20 +260,16 @@ def held_out_residuals(
 
 
 def one_event_note(
-    j_parts: list[np.ndarray], val_part: list[Recording], window_n: int, say: Progress
+    j_parts: list[np.ndarray], val_part: list[Recording], window_n: int
 ) -> dict[str, object] | None:
-    """The model file's note when J0 rests on one event (its source and time), else None."""
+    """The model file's note when J0 rests on one event (its source and time), else None;
+    ``monitor train`` says it with the support rule's warnings
+    (``monitor.training.support.rests_on_one_event``)."""
     found = one_event(j_parts, window_n)
     if found is None:
         return None
     rec = val_part[int(found.pop("part"))]
     t_s = float(rec.t[min(int(found.pop("start")), len(rec) - 1)])
-    say(
-        f"  note: J0 rests on one event, {rec.source} at {t_s / 60:.1f} min "
-        f"({found['ratio']:.1f} x any other window's J): the threshold is that much less "
-        "sensitive unless such events are this machine's normal work; check what it did "
-        "then"
-    )
     return {"source": rec.source, "t_s": t_s, **found}
 
 
