@@ -170,13 +170,16 @@ def run(args: argparse.Namespace) -> int:
 def _loops(fleet: Path, config: str | None, default_model: str | None) -> tuple[str, ...]:
     """The loops each log is judged as (none: as one loop), or one line, before any work,
     for what cannot be judged so (``monitor.fleet.wholemachine``)."""
+    from monitor.config.pump import load_pump
     from monitor.config.settings import load_config
     from monitor.fleet.layout import scan_fleet
     from monitor.fleet.wholemachine import fleet_loops
 
     cfg = load_config(None if config is None else Path(config))
     loops = [lc.name for lc in cfg.monitored_loops]
-    return fleet_loops(scan_fleet(fleet.resolve()), loops, config, default_model)
+    # A config's `pump:` (a load-sensing pump, checked here) adds the pump as a row of its own.
+    pump = len(loops) > 1 and load_pump(cfg) is not None
+    return fleet_loops(scan_fleet(fleet.resolve()), loops, config, default_model, pump)
 
 
 def report(args: argparse.Namespace) -> int:

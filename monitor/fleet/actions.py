@@ -26,6 +26,11 @@ FAULT_ACTIONS: dict[str, tuple[str, str]] = {
         "check the boom spool's pilot pressure, solenoid current and end "
         "stops: the spool does not reach full stroke",
     ),
+    "pump_wear": (
+        "worn pump suspected",
+        "check the shared pump's case drain flow and its load-sensing margin at full flow: "
+        "it falls short of its margin with every section, the regulator making up a leak",
+    ),
     "unknown": (
         "hydraulic fault, not isolated",
         "the loop no longer behaves as commissioned; look at the signals around "

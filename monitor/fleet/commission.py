@@ -1,7 +1,8 @@
 """Commissioning in `monitor fleet run`: each machine's model (a whole machine's: one per
-loop of the config's ``loops:``), trained on the cluster from its commissioning logs, reused
-while they (and the training settings) are unchanged, or the default model (the loop's
-model of the config) for a machine without them or whose training failed."""
+loop of the config's ``loops:``, and its pump's margin law with the config's ``pump:``),
+trained on the cluster from its commissioning logs, reused while they (and the training
+settings) are unchanged, or the default model (the loop's model of the config) for a machine
+without them or whose training failed (a pump has none: it is then not judged)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from monitor.fleet import pipeline
 from monitor.fleet.cluster import RunOptions, Stop, wait
 from monitor.fleet.layout import Fleet, Machine
 from monitor.fleet.progress import Progress
+from monitor.fleet.pumpjob import PUMP, pump_notes, train_pump_task
 from monitor.fleet.store import ResultStore
 from monitor.io.digest import sha256_file
 
@@ -76,8 +78,12 @@ def models(
     """(machine id, loop) -> (future or bytes of its model, model label), for the
     ``needed`` ones."""
     loops = sorted({loop for _, loop in needed}, key=lambda x: (x is not None, x or ""))
+    # The pump has no default model: its law is each machine's own (uncommissioned: unjudged).
     defaults = {
-        loop: pipeline.default_model_bytes(opts.default_model, opts.config, loop) for loop in loops
+        loop: b""
+        if loop == PUMP
+        else pipeline.default_model_bytes(opts.default_model, opts.config, loop)
+        for loop in loops
     }
     out, manifests, to_train = _known(fleet, store, needed, defaults, opts, progress)
     _submit(client, to_train, opts, defaults, out, stop, progress)
@@ -87,7 +93,7 @@ def models(
         progress.say(f"fleet: {len(reused)} {what} model(s) reused (commissioning unchanged)")
     _collect(out, manifests, defaults, store, stop, progress)
     for unit, (data, label) in out.items():
-        if label.startswith("default"):
+        if label.startswith("default") and data:
             store.save_model(model_name(unit), data, None)
     return out
 
@@ -143,17 +149,28 @@ def _submit(
         # The default model floors the commissioned thresholds (minutes cannot show the
         # tail of hours: monitor.training.train.floor_thresholds).
         unit = (m.machine_id, loop)
-        fut = client.submit(
-            train_task,
-            [str(p) for p in m.commissioning],
-            opts.config,
-            opts.isolation,
-            defaults[loop],
-            m.machine_id,
-            loop,
-            key=f"train-{model_name(unit)}",
-            pure=False,
-        )
+        paths = [str(p) for p in m.commissioning]
+        if loop == PUMP:
+            fut = client.submit(
+                train_pump_task,
+                paths,
+                opts.config,
+                m.machine_id,
+                key=f"train-{model_name(unit)}",
+                pure=False,
+            )
+        else:
+            fut = client.submit(
+                train_task,
+                paths,
+                opts.config,
+                opts.isolation,
+                defaults[loop],
+                m.machine_id,
+                loop,
+                key=f"train-{model_name(unit)}",
+                pure=False,
+            )
         if i == 0:  # alone: it fills numba's cache for the training kernels
             wait([fut], stop, progress)  # a failure is reported below, with the others'
         out[unit] = (fut, "training")
@@ -183,6 +200,7 @@ def _collect(
             continue
         # Whether each statistic earned its threshold, and why not (the support rule's
         # line), beside what the model was trained from.
-        store.save_model(name, data, manifests[unit], pipeline.statistic_notes(data))
+        notes = pump_notes(data) if unit[1] == PUMP else pipeline.statistic_notes(data)
+        store.save_model(name, data, manifests[unit], notes)
         out[unit] = (fut, "commissioned")
         progress.commissioned()

@@ -1,5 +1,6 @@
-"""A whole machine on the fleet's pages: its loops' verdicts and the machine's, which names
-the loop (``FAULT: stick``).
+"""A whole machine on the fleet's pages: its loops' verdicts (and its pump's, ``loop``
+``pump``) and the machine's, which names the loop or the pump (``FAULT: stick``,
+``FAULT: pump``) by the machine's finding.
 
 A row of logs.parquet with a ``loop`` is one loop of one log (`monitor fleet run` with a
 config of several loops); each (machine, loop) is then a series of its own (its health, trend
@@ -92,17 +93,22 @@ class MachineVerdict:
     log: str  # the newest log
     cells: dict[str, str]  # loop -> cell()
     state: str  # the worst cell (fault first)
+    finding: str | None = None  # the machine's finding on the log: the source it names
 
     @property
     def text(self) -> str:
         """``FAULT: stick``, ``SENSOR FAULT: swing``, ``healthy``: each state's loops, the
-        worst first (healthy ones said only beside loops not judged)."""
+        worst first (healthy ones said only beside loops not judged).  With several
+        alarms the machine's finding names one: ``FAULT: pump (also alarmed: boom)``."""
         if self.state == "healthy":
             return "healthy"
         groups = []
         for state in _SEVERITY:
             named = [loop for loop, c in self.cells.items() if c == state]
-            if named and not (state == "healthy" and self.state in ("fault", "sensor_fault")):
+            if state == "fault" and self.finding in named and len(named) > 1:
+                others = ", ".join(x for x in named if x != self.finding)
+                groups.append(f"FAULT: {self.finding} (also alarmed: {others})")
+            elif named and not (state == "healthy" and self.state in ("fault", "sensor_fault")):
                 groups.append(f"{_WORDS[state]}: {', '.join(named)}")
         return "; ".join(groups)
 
@@ -113,4 +119,40 @@ def machine_verdict(machine: str, rows: Rows) -> MachineVerdict:
     last = {r["loop"]: r for r in rows if r["log"] == newest and r.get("loop")}
     cells = {loop: cell(last[loop]) for loop in loop_order(set(last))}
     state = min(cells.values(), key=_SEVERITY.index) if cells else "not_judged"
-    return MachineVerdict(machine, newest, cells, state)
+    finding = next((r["finding"] for r in last.values() if r.get("finding")), None)
+    return MachineVerdict(machine, newest, cells, state, finding)
+
+
+def add_findings(rows: Rows) -> None:
+    """Each whole machine's log: the machine's finding over its rows' alarms
+    (``monitor.detection.machine``, as the daemon and `monitor eval-sim --machine` decide
+    it: the pump when its rule is in fault, else the loop whose alarm came first), set on
+    every row of the log as ``finding`` (the source named) and ``finding_role`` (the row's
+    part: ``named``, ``secondary``, ``explained_by_pump``).  Only a loop in fault counts
+    (``cell``: an uncommissioned loop's alarms are withheld)."""
+    from monitor.detection.machine import Alarm, decide
+
+    by: dict[tuple[str, str], Rows] = defaultdict(list)
+    for r in rows:
+        if r.get("loop"):
+            by[(r["machine"], r["log"])].append(r)
+    for same in by.values():
+        alarms = [
+            Alarm(
+                r["loop"],
+                float(r["first_alarm_t"]),
+                float("nan") if r.get("max_level") is None else float(r["max_level"]),
+                r.get("alarm_since_t"),
+            )
+            for r in same
+            if cell(r) == "fault" and r.get("first_alarm_t") is not None
+        ]
+        found = decide(alarms)
+        roles: dict[str, str] = {}
+        if found.named is not None:
+            roles = {s: "secondary" for s in found.secondary}
+            roles |= {e: "explained_by_pump" for e in found.explained}
+            roles[found.named] = "named"
+        for r in same:
+            r["finding"] = found.named
+            r["finding_role"] = roles.get(r["loop"])

@@ -282,13 +282,24 @@ def _machines_section(per: dict[str, list[dict[str, Any]]]) -> list[str]:
     for v in verdicts:
         cells = [v.cells.get(loop, "-").replace("_", " ") for loop in loops]
         out.append(f"| {v.machine} | {v.log} | {v.text} | " + " | ".join(cells) + " |")
+    # Why a row of the newest log is not judged (the pump's rule off, or no commissioning).
+    why = [
+        f"- {v.machine} {r['loop']}: not judged: {r['not_judged_why']}"
+        for v in verdicts
+        for r in per[v.machine]
+        if r["log"] == v.log and r.get("not_judged_why")
+    ]
     return [
         *out,
         "",
+        *(why + [""] if why else []),
         "A loop's verdict: fault, sensor fault, healthy, not judged (nothing its detector "
         "could judge), error, or uncommissioned (no model of this machine's loop: not "
         "judged, or judged with another machine's model and its alarms withheld; never "
-        "healthy). Each loop's history below is a row of its own (`M01 stick`).",
+        "healthy). The pump (with the config's `pump:`): its rule with the machine's own "
+        "margin law. With several alarms the machine's finding names one: the pump when "
+        "its rule is in fault, else the loop whose alarm came first. Each loop's history "
+        "below is a row of its own (`M01 stick`, `M01 pump`).",
         "",
     ]
 

@@ -21,6 +21,7 @@ from monitor.fleet.layout import Fleet, Machine, scan_fleet
 from monitor.fleet.lock import results_lock
 from monitor.fleet.outcome import Outcome
 from monitor.fleet.progress import Progress
+from monitor.fleet.pumpjob import PUMP, UNCOMMISSIONED, judge_pump_task
 from monitor.fleet.store import Key, ResultStore, row_key
 from monitor.io.digest import sha256_file
 
@@ -128,19 +129,19 @@ def _submit(
     for i, (m, p, sha, loop) in enumerate(todo):
         model, label = machine_models[(m.machine_id, loop)]
         if loop is not None and label.startswith("default"):
-            store.add(_empty_row(m.machine_id, fleet.relative(p), sha, label, None, loop), [])
+            row = _empty_row(m.machine_id, fleet.relative(p), sha, label, None, loop)
+            if loop == PUMP:
+                row["not_judged_why"] = UNCOMMISSIONED
+            store.add(row, [])
             progress.judged(None)
             continue
-        fut = client.submit(
-            judge_task,
-            model,
-            str(p),
-            opts.config,
-            m.machine_id,
-            loop,
-            key=f"judge-{sha[:16]}-{i}",
-            pure=False,
-        )
+        key = f"judge-{sha[:16]}-{i}"
+        if loop == PUMP:  # the pump rule with the machine's own margin law
+            fut = client.submit(judge_pump_task, model, str(p), opts.config, key=key, pure=False)
+        else:
+            fut = client.submit(
+                judge_task, model, str(p), opts.config, m.machine_id, loop, key=key, pure=False
+            )
         futures[fut] = (m, p, sha, loop)
         if len(futures) == 1:  # alone: it fills numba's cache for the detection kernels
             wait([fut], stop, progress)

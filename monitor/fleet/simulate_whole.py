@@ -60,9 +60,9 @@ COMMISSIONING_CYCLE = "mixed"
 _COMMISSIONING_OIL_C = (30.0, 60.0)  # degC at the start and end of the commissioning log
 
 
-def role(i: int) -> str:
-    """Machine ``i``'s (from 0) role: ``LOOP.FAULT`` of :data:`ROLES`, or ``healthy``."""
-    return ".".join(ROLES[i]) if i < len(ROLES) else "healthy"
+def role(i: int, roles: tuple[tuple[str, str], ...] = ROLES) -> str:
+    """Machine ``i``'s (from 0) role: ``LOOP.FAULT`` of ``roles``, or ``healthy``."""
+    return ".".join(roles[i]) if i < len(roles) and roles[i][1] else "healthy"
 
 
 def toleranced(nominal: WholeMachine, factors: dict[str, float], label: str) -> WholeMachine:
@@ -108,10 +108,11 @@ def _days(
     plan: FleetPlan,
     cycles: list[str],
     oil: list[float],
+    roles: tuple[tuple[str, str], ...] = ROLES,
 ) -> list[dict[str, Any]]:
     """Machine ``i``'s (from 0) daily logs written; one answer-key entry per log."""
     mid = f"M{i + 1:02d}"
-    loop, _, fault = role(i).partition(".")
+    loop, _, fault = role(i, roles).partition(".")
     base = plan.seed * 100_000 + i * 1000
     n_logs = plan.days * plan.logs_per_day
     days = []
@@ -138,10 +139,16 @@ def _days(
 
 
 def simulate_whole_fleet(
-    out: Path, plan: FleetPlan, say: Any = print, machine: WholeMachine | None = None
+    out: Path,
+    plan: FleetPlan,
+    say: Any = print,
+    machine: WholeMachine | None = None,
+    roles: tuple[tuple[str, str], ...] = ROLES,
 ) -> dict[str, Any]:
     """Write FLEET folders of whole machines under ``out`` and ``out/answer_key.json``;
-    returns the key (``machine``: the nominal whole machine, default the shipped one).
+    returns the key (``machine``: the nominal whole machine, default the shipped one;
+    ``roles``: the first machines' (loop, fault), :data:`ROLES` by default, ``("", "")``
+    for a healthy one).
     ``plan`` is the single-boom fleet's: machines x days x logs_per_day logs of log_s
     seconds, a commissioning log of commissioning_s, +-tolerance, wear_max."""
     rng = np.random.default_rng(plan.seed)
@@ -172,13 +179,13 @@ def simulate_whole_fleet(
         )
         n_logs = plan.days * plan.logs_per_day
         cycles = [WHOLE_CYCLES[int(c)] for c in rng.integers(0, len(WHOLE_CYCLES), n_logs)]
-        days = _days(out, i, machine_i, plan, cycles, oil)
+        days = _days(out, i, machine_i, plan, cycles, oil, roles)
         key["machines"][mid] = {
-            "role": role(i),
+            "role": role(i, roles),
             "factors": draw,
             "commissioning": {"cycle": COMMISSIONING_CYCLE, "seed": base},
             "days": days,
         }
-        say(f"simulate-fleet: {mid} ({role(i)}) written")
+        say(f"simulate-fleet: {mid} ({role(i, roles)}) written")
     (out / "answer_key.json").write_text(json.dumps(key, indent=2) + "\n", encoding="utf-8")
     return key

@@ -18,6 +18,8 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from monitor.fleet.loops import add_findings
+
 LOG_SCHEMA = pa.schema(
     [
         ("machine", pa.string()),
@@ -64,13 +66,26 @@ def log_schema() -> pa.Schema:
 
     names = [column for _, _, column in statistics()]
     more = [(c, pa.float64()) for c in names if c not in LOG_SCHEMA.names]
-    return pa.schema([*LOG_SCHEMA, *more, LOOP_FIELD])
+    return pa.schema([*LOG_SCHEMA, *more, LOOP_FIELD, *MACHINE_FIELDS])
 
 
 #: The loop a row judges: a whole machine's log has a row per loop of the config's
 #: ``loops:`` (`monitor detect --loop`); null for a log judged as one loop (`monitor detect`
 #: without --loop).  Last, so the columns before it are those of fleets before it.
 LOOP_FIELD = pa.field("loop", pa.string())
+
+#: After ``loop`` (null in one-loop fleets and in results written before them): why a row
+#: is not judged (the pump's: its rule off, or no commissioning data); when the window of
+#: the pump's first alarm began (s from the log's first sample); and the machine's finding
+#: on the row's log (``monitor.detection.machine``): the source it names (a loop or
+#: ``pump``, null: no alarm) and this row's part in it (``named``, ``secondary``,
+#: ``explained_by_pump``; null: no alarm of its own).
+MACHINE_FIELDS = (
+    pa.field("not_judged_why", pa.string()),
+    pa.field("alarm_since_t", pa.float64()),
+    pa.field("finding", pa.string()),
+    pa.field("finding_role", pa.string()),
+)
 
 
 EVENT_SCHEMA = pa.schema(
@@ -180,7 +195,9 @@ class ResultStore:
             _write_atomic(meta, json.dumps(record, sort_keys=True).encode())
 
     def _model_paths(self, machine: str) -> tuple[Path, Path]:
-        return self.models / f"{machine}.model.npz", self.models / f"{machine}.trained-from.json"
+        # A whole machine's pump (``M01.pump``): its pump model file, M01.pump.json.
+        model = f"{machine}.json" if machine.endswith(".pump") else f"{machine}.model.npz"
+        return self.models / model, self.models / f"{machine}.trained-from.json"
 
     def done(self) -> set[Key]:
         """(log, loop, sha256) of every log (loop) with a row, in logs.parquet or a part."""
@@ -237,7 +254,9 @@ class ResultStore:
         for r in rows.values():
             latest[(r["log"], r.get("loop") or "")] = r
         keep = {row_key(r) for r in latest.values()}
-        table = pa.Table.from_pylist([latest[k] for k in sorted(latest)], log_schema())
+        out = [latest[k] for k in sorted(latest)]
+        add_findings(out)  # each whole machine's log: which alarm names the fault
+        table = pa.Table.from_pylist(out, log_schema())
         ev = [e for e in events if row_key(e) in keep]
         ev.sort(key=lambda e: (e["log"], e.get("loop") or "", e["t"]))
         self._write_table(self.root / "logs.parquet", table)

@@ -19,6 +19,7 @@ from monitor.fleet.episodes import row_episodes
 from monitor.fleet.fleetview import Alarm, MachineView, code_groups, fleet_views, log_name
 from monitor.fleet.health import health_index
 from monitor.fleet.loops import has_loops, loop_order, machine_verdict
+from monitor.fleet.pumpjob import PUMP
 from monitor.fleet.store import on_off_text, trained_statistics
 
 #: Alarm episodes per machine whose signals are plotted: the first and the newest of each
@@ -174,6 +175,7 @@ class Site:
 
     def _signal_plots(self, v: MachineView) -> tuple[list[str], str]:
         from monitor.fleet.pipeline import trace_log
+        from monitor.fleet.pumpjob import trace_pump_log
         from monitor.fleet.webplots import signal_plot
 
         if not v.alarms:
@@ -183,7 +185,8 @@ class Site:
                 "Give the fleet folder (--fleet FLEET) to see the signals and "
                 "statistics around each alarm, read from the log itself."
             )
-        model = self.results / "models" / f"{_model(v)}.model.npz"
+        pump = v.loop == PUMP  # the pump rule's model and trace
+        model = self.results / "models" / f"{_model(v)}{'.json' if pump else '.model.npz'}"
         if not model.is_file():
             return [], f"{model}: no such model file (needed to judge the log again)."
         logs = {log_name(r): r["log"] for r in v.rows}
@@ -194,7 +197,9 @@ class Site:
             if not path.is_file():
                 missing.append(str(path))
                 continue
-            if a.log not in traces:
+            if a.log not in traces and pump:
+                traces[a.log] = trace_pump_log(model.read_bytes(), str(path), self.config)
+            elif a.log not in traces:
                 traces[a.log] = trace_log(
                     model.read_bytes(), str(path), self.config, v.loop, v.machine
                 )

@@ -169,7 +169,8 @@ def signal_plot(trace: dict[str, Any], alarm: Any, div_id: str) -> str:
     for name, unit in (("QP", "L/min"), ("SpoolCmd", "%")):
         if name in sig:
             fig.add_trace(go.Scatter(x=tw, y=y(sig[name]), name=f"{name} [{unit}]"), row=2, col=1)
-    fig.add_trace(go.Scatter(x=tw, y=y(trace["j_ratio"]), name="J / eps0"), row=3, col=1)
+    stat = trace.get("stat_name", "J / eps0")  # the pump's: its margin residual
+    fig.add_trace(go.Scatter(x=tw, y=y(trace["j_ratio"]), name=stat), row=3, col=1)
     if trace.get("level") is not None:
         fig.add_trace(
             go.Scatter(x=tw, y=y(trace["level"]), name="alarm level", line={"dash": "dot"}),

@@ -25,11 +25,16 @@ _CONFIG_HINT = (
 
 
 def fleet_loops(
-    fleet: Fleet, loops_in_config: list[str], config: str | None, default_model: str | None
+    fleet: Fleet,
+    loops_in_config: list[str],
+    config: str | None,
+    default_model: str | None,
+    pump: bool = False,
 ) -> tuple[str, ...]:
     """The loops each log is judged as: ``()`` (the log as one loop) for a one-loop config,
-    every loop of a config of several.  A ``ConfigError`` (one line) for what cannot be
-    judged so (module docstring)."""
+    every loop of a config of several, and ``pump`` last with ``pump`` (the config's
+    ``pump:``: the shared pump judged by its rule, commissioned per machine).  A
+    ``ConfigError`` (one line) for what cannot be judged so (module docstring)."""
     several = len(loops_in_config) > 1
     if several and default_model is not None:
         raise ConfigError(
@@ -54,4 +59,4 @@ def fleet_loops(
                     f"({', '.join(loops_in_config)}): judge a fleet of one-loop logs with "
                     "a config of one loop"
                 )
-    return tuple(loops_in_config) if several else ()
+    return (*loops_in_config, *(("pump",) if pump else ())) if several else ()

@@ -90,8 +90,18 @@ def load_pump_model(path: str | Path) -> PumpModel:
     """A pump model file; anything else (another kind, version, a missing or non-finite
     number) is one ``ModelFileError`` naming the file and the key."""
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
+        text = Path(path).read_text(encoding="utf-8")
     except (OSError, ValueError) as exc:
+        raise ModelFileError(f"{path}: not a pump model file ({exc})") from None
+    return pump_model_from_text(text, path)
+
+
+def pump_model_from_text(text: str, path: str | Path) -> PumpModel:
+    """The pump model of a pump model file's text (``path`` names it in a message); checked
+    as :func:`load_pump_model` checks a file (the fleet ships models as bytes)."""
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
         raise ModelFileError(f"{path}: not a pump model file ({exc})") from None
     if not isinstance(data, dict) or data.get("kind") != KIND:
         raise ModelFileError(f"{path}: not a pump model file (kind {KIND!r} expected)")

@@ -126,3 +126,78 @@ def fit_pump(
     )
     say(f"pump rule off: {why}" if threshold is None else f"pump threshold {threshold:.4f} bar")
     return replace(model, threshold_bar=threshold, off_reason=why, support=support)
+
+
+def _cross_fitted(
+    blank: PumpModel, cols: PumpColumns, recordings: Sequence[np.ndarray], folds: int
+) -> list[list[tuple[np.ndarray, int]]]:
+    """Each recording cut into ``folds`` pieces in time order, each piece's window
+    statistics by a law fitted on every other piece (a piece whose others cannot fit a law
+    is left out): per recording, its pieces' (statistics, counted samples)."""
+    pieces = [np.array_split(rows, folds) for rows in recordings]
+    out = []
+    for i, parts in enumerate(pieces):
+        judged = []
+        for k, piece in enumerate(parts):
+            others = [
+                p for j, ps in enumerate(pieces) for m, p in enumerate(ps) if (j, m) != (i, k)
+            ]
+            try:
+                law = fit_law(blank, cols, others)
+            except InputFileError:
+                continue
+            judged.append(window_stats(replace(blank, law=law), cols, piece))
+        out.append(judged)
+    return out
+
+
+def commission_pump(
+    recordings: Sequence[np.ndarray], cols: PumpColumns, margin_bar: float, folds: int = 4
+) -> PumpModel:
+    """The pump model of one machine from its commissioning recordings alone (`monitor fleet
+    run`), as its loops are commissioned (`monitor train --folds`): the law fitted on all of
+    them, the threshold ``FACTOR`` x the largest |window mean residual| cross-fitted over
+    ``folds`` pieces of each recording.  The support rule as for a loop's J, the statistic
+    the pump's level rests on: too few independent windows of steady open flow and the rule
+    is off (the pump unjudged, never healthy); one session, or halves (one recording: its
+    cooler and warmer half) that do not transfer, keep it on with the reason noted
+    (``support["warning"]``)."""
+    blank = PumpModel(MarginLaw(0.0, 0.0, 0.0), Counting(margin_bar), None)
+    try:
+        law = fit_law(blank, cols, recordings)
+    except InputFileError as exc:
+        return replace(blank, off_reason=str(exc), support={"sessions": len(recordings)})
+    judged = _cross_fitted(blank, cols, recordings, folds)
+    window_n = blank.counting.window_n
+    pieces = [s for rec in judged for s, _ in rec]
+    # The transfer check's halves: the sessions, or one recording's cooler and warmer half.
+    groups = [np.concatenate([s for s, _ in rec] or [np.zeros(0)]) for rec in judged]
+    if len(judged) == 1:
+        half = (len(judged[0]) + 1) // 2
+        groups = [
+            np.concatenate([s for s, _ in part] or [np.zeros(0)])
+            for part in (judged[0][:half], judged[0][half:])
+        ]
+    counted = sum(n for rec in judged for _, n in rec)
+    hours = sum(float(r[-1, 0] - r[0, 0]) for r in recordings if len(r)) / 3600.0
+    peak = _peak(pieces)
+    support = {
+        "held_out_h": round(hours, 3),
+        "cross_fitted_folds": folds,
+        "sessions": len(recordings),
+        "counted_s": round(counted * 0.01, 1),
+        "counted_share": round(counted * 0.01 / max(hours * 3600.0, 1e-9), 3),
+        "window_s": window_n * 0.01,
+        "independent_windows": sum(n // window_n for rec in judged for _, n in rec),
+        "held_out_max_bar": None if peak != peak else round(peak, 5),
+        "transfer_ratio": round(_transfer(groups, FACTOR), 4),
+    }
+    why = off_reason(support)
+    if support["independent_windows"] < MIN_BLOCKS or not peak > 0:
+        why = why or "no window of steady open flow in the commissioning data"
+        return PumpModel(law, blank.counting, None, why, support)
+    if why is not None:  # J's way: on, with what more data would support it
+        support["warning"] = why.replace("would rest", "rests").replace(
+            "switch it on", "support it"
+        )
+    return PumpModel(law, blank.counting, round(FACTOR * peak, 5), None, support)

@@ -35,9 +35,16 @@ DEFAULT_FAULT_SPN = {
     "spool_stroke": PROPRIETARY_SPN_FIRST + 1,
     "spool_wear": PROPRIETARY_SPN_FIRST + 2,
     "unknown": PROPRIETARY_SPN_FIRST + 3,  # a hydraulic fault isolation could not name
+    "pump_wear": PROPRIETARY_SPN_FIRST + 4,  # the shared pump's rule (a whole machine's)
 }
 # FMI 7: mechanical system not responding or out of adjustment; 11: root cause not known.
-DEFAULT_FAULT_FMI = {"piston_wear": 7, "spool_stroke": 7, "spool_wear": 7, "unknown": 11}
+DEFAULT_FAULT_FMI = {
+    "piston_wear": 7,
+    "spool_stroke": 7,
+    "spool_wear": 7,
+    "unknown": 11,
+    "pump_wear": 7,
+}
 DEFAULT_SENSOR_SPN = {
     name: PROPRIETARY_SPN_FIRST + 16 + i
     for i, name in enumerate(
