@@ -5,6 +5,7 @@ daemon's row (``monitor.detection.pump``).
     pump:
       model: pump_excavator4.pump.json
       alarm_message: MON_Alarm_Pump   # the default
+      source_address: 164             # the default (0xA4): the pump's DM1 with J1939 on
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ if TYPE_CHECKING:
 #: The contract signals of a section the pump rule reads.
 SECTION_SIGNALS = ("SpoolCmd", "PA", "PB", "QP")
 PUMP_ALARM = "MON_Alarm_Pump"
+PUMP_SOURCE_ADDRESS = 0xA4
+_KEYS = {"model", "alarm_message", "source_address"}
 #: The pump alarm message's signals (``monitor.live.machine``).
 PUMP_ALARM_SIGNALS = ("State", "Fault", "MarginResidual", "Threshold", "AlarmCount")
 
@@ -35,28 +38,32 @@ class PumpSection:
 
     model: Path
     alarm_message: str = PUMP_ALARM
+    #: The pump's J1939 address (its DM1 with ``j1939.enabled``), MON_Alarm_Pump's 0xA4.
+    source_address: int = PUMP_SOURCE_ADDRESS
 
 
 def parse_pump(value: Any, source: Path, path: Callable[[Any, str], Path]) -> PumpSection | None:
     """``pump``: None, or a mapping with ``model`` (an existing file) and optionally
-    ``alarm_message``."""
+    ``alarm_message`` and ``source_address``."""
     if value is None:
         return None
-    if (
-        not isinstance(value, dict)
-        or "model" not in value
-        or set(value) - {"model", "alarm_message"}
-    ):
+    if not isinstance(value, dict) or "model" not in value or set(value) - _KEYS:
         raise ConfigError(
-            f"{source}: pump must be a mapping with model (and optionally alarm_message), "
-            f"got {shown(value)}"
+            f"{source}: pump must be a mapping with model (and optionally alarm_message, "
+            f"source_address), got {shown(value)}"
+        )
+    address = value.get("source_address", PUMP_SOURCE_ADDRESS)
+    if isinstance(address, bool) or not isinstance(address, int) or not 0 <= address <= 253:
+        raise ConfigError(
+            f"{source}: pump.source_address must be 0..253 (254 null, 255 global), "
+            f"got {shown(address)}"
         )
     message = value.get("alarm_message", PUMP_ALARM)
     if not isinstance(message, str) or not message:
         raise ConfigError(
             f"{source}: pump.alarm_message must be a message name, got {shown(message)}"
         )
-    return PumpSection(path(value["model"], "pump.model"), message)
+    return PumpSection(path(value["model"], "pump.model"), message, address)
 
 
 def pump_columns(cfg: MonitorConfig, columns: Sequence[str]) -> PumpColumns:

@@ -101,7 +101,15 @@ class Daemon:
             self.machine,
             self._machine_event,
         )
-        self.heartbeat = Heartbeat(self.codec, self.loops, self.reader, self.disk, self.tx.send)
+        machine = self.machine
+        self.heartbeat = Heartbeat(
+            self.codec,
+            self.loops,
+            self.reader,
+            self.disk,
+            self.tx.send,
+            (lambda: machine.state) if machine is not None else (lambda: None),
+        )
         self.reloader = Reloader(lambda: prepare(self.cfg, self.loops, self.disk.quota))
         self.reloads = 0  # reloads swapped in
         self.reload_attempts = 0  # reloads finished, successful or not

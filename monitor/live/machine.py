@@ -1,6 +1,7 @@
 """The daemon's machine-level parts, beside its loops: the pump rule on the shared row
-(``monitor.detection.pump``, the config's ``pump:``) with its alarm frame (MON_Alarm_Pump),
-and the machine's finding over every loop's and the pump's alarms
+(``monitor.detection.pump``, the config's ``pump:``) with its alarm frame (MON_Alarm_Pump)
+and, with J1939 on, its DM1 at ``pump.source_address`` (``pump_wear``'s DTC in fault, as a
+loop's alarm raises its fault's), and the machine's finding over every loop's and the pump's alarms
 (``monitor.detection.machine``), said as an event line when it changes.
 
 Per row the pump rule costs a few float operations per section on the row as a list; the
@@ -11,6 +12,7 @@ pump model is read at start.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import can
@@ -24,6 +26,7 @@ from monitor.detection.decision import wall_time
 from monitor.detection.machine import Alarm, MachineFinding
 from monitor.detection.pump import PUMP, PUMP_FAULT, PumpRule
 from monitor.errors import ConfigError
+from monitor.live.dm1 import Diagnostics
 from monitor.live.outputs import AlarmFrames
 
 Say = Callable[[dict[str, Any]], None]
@@ -54,6 +57,7 @@ class MachineWatch:
         self.finding = MachineFinding()
         self.rule: PumpRule | None = None
         self.frames: PumpFrames | None = None
+        self.diag: Diagnostics | None = None
         model = load_pump(cfg)
         if model is None or cfg.pump is None:
             return
@@ -67,6 +71,17 @@ class MachineWatch:
             )
         self.rule = PumpRule(model, pump_columns(cfg, columns))
         self.frames = PumpFrames(codec, cfg.outputs, message)
+        if cfg.j1939.enabled:
+            # The pump's own DM1/DM2, as each loop has: pump_wear's DTC while in fault.
+            address = cfg.pump.source_address
+            taken = [lc.name for lc in cfg.monitored_loops if lc.source_address == address]
+            if taken:
+                raise ConfigError(
+                    f"{cfg.source}: pump.source_address {address} is loop {taken[0]}'s; "
+                    "the pump's DM1 needs an address of its own"
+                )
+            j1939 = replace(cfg.j1939, source_address=address)
+            self.diag = Diagnostics(j1939, (), columns)
 
     def tick(
         self, row: np.ndarray, bus_time_s: float, start_s: float | None, send: Send, say: Say
@@ -79,6 +94,9 @@ class MachineWatch:
         t_s = float(row[0])
         if frames.due(t_s, rule.state, changed):
             send(frames.pump_alarm(rule, bus_time_s))
+        if self.diag is not None:
+            for msg in self.diag.tick(t_s, bus_time_s, rule.state, PUMP_FAULT, row):
+                send(msg)
         if not changed:
             return
         say(rule.event(t_s, wall_time(t_s, start_s)))
@@ -109,4 +127,12 @@ class MachineWatch:
     def counts(self) -> dict[str, int]:
         if self.rule is None or self.frames is None:
             return {}
-        return {"pump_alarms": self.rule.alarms, "pump_alarm_frames": self.frames.sent}
+        out = {"pump_alarms": self.rule.alarms, "pump_alarm_frames": self.frames.sent}
+        if self.diag is not None:
+            out["pump_dm1_messages"] = self.diag.counts()["dm1_messages"]
+        return out
+
+    @property
+    def state(self) -> State | None:
+        """The pump rule's state (None: no pump rule), for MON_Status."""
+        return None if self.rule is None else self.rule.state

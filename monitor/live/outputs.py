@@ -90,6 +90,7 @@ class AlarmFrames:
         sensor_check: bool = False,
         bus_events: int = 0,
         disk_error: bool = False,
+        pump_fault: bool = False,
     ) -> can.Message:
         """``op_state`` (monitor.detection.opstate.OpState), ``out_of_range`` (outside the model's
         training envelope) and ``sensor_check`` (a named plausibility finding active, even
@@ -97,7 +98,8 @@ class AlarmFrames:
         SensorCheck; ``bus_events`` (link down, bus-off, error-passive since the start) into
         the wrapping BusEvents counter; ``disk_error`` (a write of the event log or a black
         box failed since the last MON_Status, or events wait in memory for the disk) into
-        DiskError."""
+        DiskError; ``pump_fault`` (the pump rule in fault) into PumpFault where the DBC's
+        MON_Status has it (dbc/excavator4.dbc)."""
         # Counters wrap (the DBC says so): a receiver looks at differences.
         values = {
             "State": int(state),
@@ -110,4 +112,6 @@ class AlarmFrames:
             "BusEvents": bus_events % 16,
             "DiskError": int(bool(disk_error)),
         }
+        if "PumpFault" in self.codec.messages[STATUS].signal_names:
+            values["PumpFault"] = int(bool(pump_fault))
         return self.codec.encode_message(STATUS, values, bus_time_s)

@@ -63,6 +63,8 @@ class FramePipeline:
         self.sampler = Sampler.for_codec(codec, columns=columns, optional=optional)
         self._hydraulic = hydraulic_messages(codec, columns)
         self._diags = [lp.diag for lp in loops if lp.diag is not None]  # kept on reload
+        if machine is not None and machine.diag is not None:
+            self._diags.append(machine.diag)  # the pump's DM1/DM2 answers requests too
         self.send = send
         self.on_change = on_change
         self._scale = time_scale

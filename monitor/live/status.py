@@ -1,5 +1,6 @@
 """MON_Status, the daemon's heartbeat: every ``outputs.status_period_s`` of wall time, the
-most pressing loop's state, the reader's and decoder's counters, the operating state and the
+most pressing state of the loops and the pump rule (and PumpFault: the pump's, where the
+DBC has it), the reader's and decoder's counters, the operating state and the
 gating's news (shared by the loops), the bus events and the disk's trouble."""
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import can
 
 from monitor.bus.reader import BusReader
 from monitor.codec.frames import FrameCodec
+from monitor.detection.alarm import State
 from monitor.live.disk import DiskOutputs
 from monitor.live.loops import Loop, worst_state
 
@@ -23,8 +25,10 @@ class Heartbeat:
         reader: BusReader,
         disk: DiskOutputs,
         send: Callable[[can.Message], None],
+        pump: Callable[[], State | None] = lambda: None,
     ) -> None:
         self.codec = codec
+        self.pump = pump  # the pump rule's state now (None: no pump rule)
         self.loops = loops
         self.reader = reader
         self.disk = disk
@@ -41,10 +45,12 @@ class Heartbeat:
         r, rc = self.reader.counts, self.reader.recovery
         gates = [lp.ticker.gate for lp in self.loops]  # the operating state is shared
         oor, check = any(g.oor >= 0 for g in gates), any(g.check != 0 for g in gates)
+        pump = self.pump()
+        states = [lp.state for lp in self.loops] + ([pump] if pump is not None else [])
         self.send(
             # Every loop's frames share MON_Status's layout; the first loop's build it.
             self.loops[0].frames.status(
-                worst_state([lp.state for lp in self.loops]),
+                worst_state(states),
                 r.received,
                 self.codec.counts.rejected_total,
                 r.dropped,
@@ -54,5 +60,6 @@ class Heartbeat:
                 check,
                 rc.bus_down + rc.bus_off + rc.error_passive,
                 disk_error,
+                pump is State.FAULT,
             )
         )
