@@ -23,7 +23,9 @@ CPU per tick is the detector thread's ``time.thread_time`` across ``Ticker.tick`
 ``--loops 4`` runs the daemon with four loops (config/excavator4.yaml, every loop on the
 benchmark's model and the same simulated run, so every row costs four full ticks): then a
 tick's latency runs to the last loop's result for the row, and its CPU is the four ticks'
-sum: the per-row budget of a four-loop machine.
+sum: the per-row budget of a four-loop machine.  The config's pump rule (``pump:``) ticks after
+the loops in each row: its tick (``MachineWatch.tick``: the rule, MON_Alarm_Pump and its
+DM1) is timed apart (``pump_tick_cpu_*_us``) and with the row (``row_with_pump_*``).
 
 ``--writes inline`` runs the event log's fsync and the black-box dumps in the detector thread
 (the path before the disk-writer thread, ``monitor.live.writer``); ``--writes thread,inline
@@ -51,6 +53,7 @@ import can
 import numpy as np
 
 from monitor.bench.data import test_recording
+from monitor.bench.pump_tick import PumpProbe
 from monitor.codec.frames import FrameCodec
 from monitor.config.settings import BusConfig, MonitorConfig, load_config
 from monitor.detection.ticker import Tick
@@ -151,6 +154,10 @@ class _Probe:
         pipeline = daemon.pipeline
         for k, lp in enumerate(daemon.loops):
             _wrap(lp.ticker, "tick", self._timed_tick(k, lp.ticker.tick))
+        # The pump rule (config/excavator4.yaml's `pump:`), ticked after the loops.
+        self.pump = PumpProbe(self.current)
+        if daemon.machine is not None and daemon.machine.rule is not None:
+            _wrap(daemon.machine, "tick", self.pump.timed(daemon.machine.tick))
         _wrap(pipeline, "feed", self._timed_feed(pipeline.feed))
         _wrap(pipeline, "send", self._timed_send(pipeline.send))
         _wrap(pipeline, "on_change", self._timed_change(pipeline.on_change))
@@ -257,6 +264,7 @@ def _tick_latencies(probe: _Probe) -> dict[str, Any]:
         # Where the slowest ticks were (row time s, latency ms): stalls cluster or not.
         "slowest_ticks": [(float(probe.row_t[i]), float(lat[i])) for i in np.argsort(lat)[-10:]],
         "ticks_over_1ms": int(np.count_nonzero(lat > 1.0)),
+        **probe.pump.summary(cpu),
         "_latency_ms": lat,
         "_cpu_ms": cpu,
     }

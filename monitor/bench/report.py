@@ -169,5 +169,20 @@ def _four_loops(four: dict[str, Any]) -> str:
         f"{four['tick_max_ms']:.1f} ms; CPU per row (four ticks) median "
         f"{four['tick_cpu_median_ms']:.3f} ms, p99 {four['tick_cpu_p99_ms']:.3f} ms, of a "
         f"10 ms sample period; peak RSS {four['peak_rss_mb']:.0f} MB; {four['dropped']} "
-        "frames dropped."
+        "frames dropped." + _pump(four)
+    )
+
+
+def _pump(four: dict[str, Any]) -> str:
+    """The pump rule's tick beside the four loops' (config/excavator4.yaml's `pump:`)."""
+    if "pump_tick_cpu_median_us" not in four:
+        return ""
+    return (
+        f" The pump rule after them (its tick, MON_Alarm_Pump and DM1): CPU median "
+        f"{four['pump_tick_cpu_median_us']:.1f} us, p99 {four['pump_tick_cpu_p99_us']:.1f} us "
+        f"per row ({four['pump_share_of_row_cpu_median']:.1%} of the row's CPU); the row "
+        f"with it: latency p50 {four['row_with_pump_p50_ms']:.3f} ms, p99 "
+        f"{four['row_with_pump_p99_ms']:.3f} ms, CPU median "
+        f"{four['row_cpu_with_pump_median_ms']:.3f} ms, p99 "
+        f"{four['row_cpu_with_pump_p99_ms']:.3f} ms."
     )
