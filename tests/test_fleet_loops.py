@@ -124,20 +124,29 @@ def test_every_loop_of_every_log_is_a_row_and_the_worn_loop_alone_alarms(judged)
     _fleet, results, key, stderr = judged
     rows = {(r["log"], r["loop"]): r for r in pq.read_table(results / "logs.parquet").to_pylist()}
     logs = [d["log"] for m in key["machines"].values() for d in m["days"]]
-    assert sorted(rows) == sorted((log, loop) for log in logs for loop in LOOPS)
+    # The config's `pump:` adds the shared pump, a row of its own per log.
+    assert sorted(rows) == sorted((log, loop) for log in logs for loop in [*LOOPS, "pump"])
     # M01 has no commissioning data: none of its loops is judged (the config's loop models
-    # are not this machine's), and none reads healthy.
+    # are not this machine's), nor its pump (no margin law of its own), and none reads healthy.
     for log in logs[:2]:
-        for loop in LOOPS:
+        for loop in [*LOOPS, "pump"]:
             r = rows[(log, loop)]
             assert (r["verdict"], r["model"], r["error"]) == ("not_judged", "default", None)
+        assert rows[(log, "pump")]["not_judged_why"].startswith("no commissioning data")
+    # M02's 180 s of commissioning hold too little steady open flow for the pump's threshold
+    # (the support rule): commissioned, its rule off, not judged with the reason.
+    for log in logs[2:]:
+        r = rows[(log, "pump")]
+        assert (r["verdict"], r["model"], r["alarm"]) == ("not_judged", "commissioned", False)
+        why = r["not_judged_why"]
+        assert "the pump's law needs" in why or "independent windows" in why, why
     # M02: the key says its bucket's spool is worn 0.6 in its second log, nothing before.
     assert [d["fault"] for d in key["machines"]["M02"]["days"]] == [None, "bucket.spool_wear"]
     alarms = {(log, loop) for (log, loop), r in rows.items() if r["alarm"]}
     assert alarms == {("M02/logs/day01-2.log", "bucket")}
     for log in logs[2:]:
         assert {rows[(log, loop)]["model"] for loop in LOOPS} == {"commissioned"}
-    assert "16 log loops: 8 judged, 8 not judged, 0 failed" in stderr.splitlines()[-1]
+    assert "20 log loops: 8 judged, 12 not judged, 0 failed" in stderr.splitlines()[-1]
 
 
 def test_each_loop_model_is_train_loops_and_a_row_is_what_detect_loop_says(judged, tmp_path):
@@ -191,10 +200,12 @@ def test_the_report_names_the_loop_and_says_uncommissioned(judged, tmp_path):
     assert proc.returncode == 0, proc.stderr
     page = (out / "fleet.md").read_text()
     assert (
-        "| M01 | M01/logs/day01-2.log | uncommissioned: boom, stick, bucket, swing | "
-        "uncommissioned | uncommissioned | uncommissioned | uncommissioned |"
+        "| M01 | M01/logs/day01-2.log | uncommissioned: boom, stick, bucket, swing, pump | "
+        "uncommissioned | uncommissioned | uncommissioned | uncommissioned | uncommissioned |"
     ) in page
     assert (
-        "| M02 | M02/logs/day01-2.log | FAULT: bucket | healthy | healthy | fault | healthy |"
+        "| M02 | M02/logs/day01-2.log | FAULT: bucket; not judged: pump | healthy | healthy | "
+        "fault | healthy | not judged |"
     ) in page
+    assert "- M02 pump: not judged: " in page
     assert "| M02 bucket | 2 | fault |" in page

@@ -192,7 +192,8 @@ def commission_pump(
         "held_out_max_bar": None if peak != peak else round(peak, 5),
         "transfer_ratio": round(_transfer(groups, FACTOR), 4),
     }
-    why = off_reason(support)
+    # The commissioning data are all there is: more of it, not --held-out, would help.
+    why = (off_reason(support) or "").replace("(--held-out)", "(commissioning logs)") or None
     if support["independent_windows"] < MIN_BLOCKS or not peak > 0:
         why = why or "no window of steady open flow in the commissioning data"
         return PumpModel(law, blank.counting, None, why, support)
