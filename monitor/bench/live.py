@@ -306,7 +306,7 @@ def run(
         "wall_s": sent_s,
         "frames": frames,
         **_tick_latencies(probe),
-        "state_changes": [e["state"] for e in events],
+        "state_changes": [e["state"] for e in events if "state" in e],  # not findings
         "dropped": daemon.counts()["dropped"],
         "disk_writer": daemon.disk.writer.counts.as_dict(),
         "black_box_files": len(list((tmp / "blackbox").glob("alarm-*.log"))),
