@@ -13,7 +13,7 @@ hydraulic alarms are withheld.
 from __future__ import annotations
 
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
 
@@ -94,6 +94,7 @@ class MachineVerdict:
     cells: dict[str, str]  # loop -> cell()
     state: str  # the worst cell (fault first)
     finding: str | None = None  # the machine's finding on the log: the source it names
+    why: dict[str, str] = field(default_factory=dict)  # loop -> why it is not judged
 
     @property
     def text(self) -> str:
@@ -120,7 +121,8 @@ def machine_verdict(machine: str, rows: Rows) -> MachineVerdict:
     cells = {loop: cell(last[loop]) for loop in loop_order(set(last))}
     state = min(cells.values(), key=_SEVERITY.index) if cells else "not_judged"
     finding = next((r["finding"] for r in last.values() if r.get("finding")), None)
-    return MachineVerdict(machine, newest, cells, state, finding)
+    why = {loop: r["not_judged_why"] for loop, r in last.items() if r.get("not_judged_why")}
+    return MachineVerdict(machine, newest, cells, state, finding, why)
 
 
 def add_findings(rows: Rows) -> None:

@@ -283,12 +283,7 @@ def _machines_section(per: dict[str, list[dict[str, Any]]]) -> list[str]:
         cells = [v.cells.get(loop, "-").replace("_", " ") for loop in loops]
         out.append(f"| {v.machine} | {v.log} | {v.text} | " + " | ".join(cells) + " |")
     # Why a row of the newest log is not judged (the pump's rule off, or no commissioning).
-    why = [
-        f"- {v.machine} {r['loop']}: not judged: {r['not_judged_why']}"
-        for v in verdicts
-        for r in per[v.machine]
-        if r["log"] == v.log and r.get("not_judged_why")
-    ]
+    why = [f"- {v.machine} {loop}: not judged: {w}" for v in verdicts for loop, w in v.why.items()]
     return [
         *out,
         "",

@@ -48,7 +48,9 @@ INDEX = (
 cell per loop, its verdict on that log (click for the loop's history). Uncommissioned: no
 model of this machine's loop (no commissioning data, or its training failed), so the loop is
 not judged (or was judged with another machine's model, its alarms withheld); never
-healthy.</p>
+healthy. The pump (the config's pump:) is judged by its rule with the machine's own margin
+law; with several alarms the machine's finding names one: the pump when its rule is in
+fault, else the loop whose alarm came first.</p>
 <table id="machines"><tr><th>machine</th><th>newest log</th><th>verdict</th>
 {% for l in loops %}<th>{{ l }}</th>{% endfor %}</tr>
 {% for m in machines %}<tr id="machine-{{ m.machine }}"><td>{{ m.machine }}</td>
@@ -56,6 +58,8 @@ healthy.</p>
 {% for l in loops %}<td data-loop="{{ l }}">{% if l in m.cells %}<a href="{{ pages[(m.machine,
 l)] }}">{{ state(m.cells[l]) }}</a>{% else %}-{% endif %}</td>{% endfor %}</tr>
 {% endfor %}</table>
+{% for m in machines %}{% for l, why in m.why.items() %}<p class="note">{{ m.machine }}
+{{ l }}: not judged: {{ why }}</p>{% endfor %}{% endfor %}
 <h2>Each loop</h2>
 {% else %}<h1>Fleet: {{ views|length }} machines, {{ n_logs }} logs</h1>{% endif %}
 <p class="note">State: the newest log's verdict (WEARING?: healthy, but its typical residual
