@@ -130,8 +130,9 @@ def _submit(
         model, label = machine_models[(m.machine_id, loop)]
         if loop is not None and label.startswith("default"):
             row = _empty_row(m.machine_id, fleet.relative(p), sha, label, None, loop)
-            if loop == PUMP:
-                row["not_judged_why"] = UNCOMMISSIONED
+            if loop == PUMP:  # no commissioning data, or its commissioning failed
+                failed = label.removeprefix("default (").removesuffix(")")
+                row["not_judged_why"] = UNCOMMISSIONED if label == "default" else failed
             store.add(row, [])
             progress.judged(None)
             continue
