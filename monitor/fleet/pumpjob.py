@@ -82,7 +82,7 @@ def _episodes(events: list[dict[str, Any]], end_s: float, j1939: Any) -> str:
         ep.update(
             name=PUMP_FAULT,
             check=None,
-            votes={PUMP_FAULT: 1},  # named by the rule, not by isolation's votes
+            votes={},  # named by the pump rule, not by isolation's votes
             spn=int(j1939.fault_spn[PUMP_FAULT]),
             fmi=int(j1939.fault_fmi[PUMP_FAULT]),
             duration_s=round(ep["end_t"] - ep["start_t"], 3),

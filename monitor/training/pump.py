@@ -192,8 +192,9 @@ def commission_pump(
         "held_out_max_bar": None if peak != peak else round(peak, 5),
         "transfer_ratio": round(_transfer(groups, FACTOR), 4),
     }
-    # The commissioning data are all there is: more of it, not --held-out, would help.
-    why = (off_reason(support) or "").replace("(--held-out)", "(commissioning logs)") or None
+    # The commissioning data are all there is: more of them, not --held-out, would help.
+    said = (off_reason(support) or "").replace(" (--held-out)", "")
+    why = said.replace("held-out normal", "commissioning").replace("recordings", "logs") or None
     if support["independent_windows"] < MIN_BLOCKS or not peak > 0:
         why = why or "no window of steady open flow in the commissioning data"
         return PumpModel(law, blank.counting, None, why, support)
