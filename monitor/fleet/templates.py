@@ -128,7 +128,8 @@ when its held-out data earns its threshold):</p>
 <td class="num">{{ '%.1f'|format(a.span.end_t) }}{% if a.span.open
 %} (open at the end of the log){% endif %}</td>
 <td class="num">{{ '%.1f'|format(a.span.duration_s) }}</td><td>{{ a.what }}</td>
-<td>{{ a.votes_text or "- (sensor check)" }}</td><td class="num">{{ a.code.spn }}</td>
+<td>{{ a.votes_text or ("- (the pump rule)" if a.loop == "pump" else "- (sensor check)")
+}}</td><td class="num">{{ a.code.spn }}</td>
 <td class="num">{{ a.code.fmi }}</td>
 <td>{{ acks[a.id].text if a.id in acks else 'active' }}</td></tr>
 {% endfor %}</table>{% else %}<p>No alarm episodes.</p>{% endif %}
