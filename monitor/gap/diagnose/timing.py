@@ -22,11 +22,17 @@ and the delay the others share (``delays.split``):
   all-readings lag, that does not clearly beat that re-timing (a gain in ``SIGNIFICANT``
   of the resamples and a practical share of what it leaves) is the delay: the verdict is
   what ``decide`` says of the re-timed simulator without an effect.  An ``unexplained``
-  gap whose every suggested term is a reading's delay, where the re-timing gains in
+  gap whose every suggested term (with none suggested, the best term tried) is a reading's
+  delay, where the re-timing gains in
   ``SIGNIFICANT`` of the resamples, is ``none``: what is left is the base mismatch of a
   healthy machine of another make (the third plant's healthy machines: 8-20 ms late on
   every signal, a QP delay the only suggestion).  Otherwise the shared delay stays a
   timing note beside the verdict.
+
+- **A deadband verdict where the readings share a delay** (``onsets``): it stands only
+  where the moves out of a centred spool start later than the returns to centre (a
+  deadband's signature; a shared delay shifts both alike) and it clearly beats the
+  re-timed simulator; otherwise the verdict is the re-timed simulator's.
 
 The JSON's ``timing`` holds the delays, the split, what was tried and what decided.
 """
