@@ -12,6 +12,8 @@ deadband; a deadband stays `valve_deadband`."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -68,6 +70,24 @@ def test_a_deadband_delays_the_openings_and_advances_the_closings():
     step_ms = 1e3 * 4.0 / RATE_LIMIT_PCT_S
     assert large.open_ms - small.open_ms == pytest.approx(step_ms, abs=4.0)
     assert large.close_ms - small.close_ms == pytest.approx(-step_ms, abs=4.0)
+
+
+def test_a_lag_of_every_reading_delays_the_pump_and_the_chambers_alike():
+    # Every reading shifted by three 10 ms samples: 30 ms at every closing, on PP and QP as
+    # on PA and PB.  A soft hose: the chambers settle as the spool closes while the pump
+    # keeps feeding the soft lines, so PP and QP respond later than PA and PB.
+    prep = prepare(_sim([]), M)
+    segs = make_segments(prep)
+    late = {k: np.concatenate([np.full(3, v[0]), v[:-3]]) for k, v in prep.meas.items()}
+    lag = onsets.chambers_apart(replace(prep, meas=late), segs, prep.meas)
+    assert lag is not None and lag["closings"] >= onsets.MIN_EVENTS
+    assert lag["pump_closing_ms"] == pytest.approx(30.0, abs=2.0)
+    assert lag["chambers_closing_ms"] == pytest.approx(30.0, abs=2.0)
+    assert lag["apart_share"] == 0.0
+    soft = prepare(_sim([Effect.make("hose_compliance", wall_modulus_gpa=0.3)]), M)
+    hose = onsets.chambers_apart(replace(prep, meas=soft.meas), segs, prep.meas)
+    assert hose is not None
+    assert hose["pump_closing_ms"] - hose["chambers_closing_ms"] >= onsets.APART_MS
 
 
 def _finding(suggestion: list[dict], tried: list[dict], gain_share: float) -> Finding:
