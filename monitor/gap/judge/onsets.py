@@ -184,8 +184,8 @@ def chambers_apart(
     acts on by the same at every event; a compliance of the cylinder lines does not: as the
     spool closes, the chambers' pressures settle at once while the pump, still feeding the
     soft lines, keeps its pressure and flow up (the third plant's hoses: the pump's
-    readings 19-77 ms later than the chambers' at the closings, its lagged sensors within
-    5 ms).  None with fewer than ``MIN_EVENTS`` closings."""
+    readings 21-80 ms later than the chambers' at the closings, its lagged sensors within
+    3 ms).  None with fewer than ``MIN_EVENTS`` closings."""
     _, closes = events(prep.cmd["SpoolCmd"], segments)
     if len(closes) < MIN_EVENTS:
         return None
