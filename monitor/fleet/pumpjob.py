@@ -38,7 +38,8 @@ def train_pump_bytes(paths: list[str], config_path: str | None, machine_id: str)
     from monitor.training.pump import commission_pump
 
     cfg = _config(config_path)
-    recordings, columns = [], ()
+    recordings: list[Any] = []  # each recording's rows (numpy arrays)
+    columns: tuple[str, ...] = ()
     for p in paths:
         columns, rows, _ = machine_rows(p, cfg)
         recordings.append(rows)

@@ -181,7 +181,7 @@ def commission_pump(
     counted = sum(n for rec in judged for _, n in rec)
     hours = sum(float(r[-1, 0] - r[0, 0]) for r in recordings if len(r)) / 3600.0
     peak = _peak(pieces)
-    support = {
+    support: dict[str, Any] = {
         "held_out_h": round(hours, 3),
         "cross_fitted_folds": folds,
         "sessions": len(recordings),
