@@ -203,7 +203,11 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         source=src,
         stroke_mm=machine.cylinder.stroke_m * 1e3,
         unscored=unscored,
-        below_zero=reads_below_zero({n: meas[n] for n in MEASURED_NAMES}),
+        # RodPos too: a stroke sensor that clips at zero hides how far a rod read 0 is
+        # above its end stop (``predict.py`` reads its starts and velocity through it).
+        below_zero=reads_below_zero(
+            {n: meas[n] for n in MEASURED_NAMES} | ({"RodPos": cols["RodPos"]} if has_rod else {})
+        ),
     )
 
 

@@ -250,24 +250,44 @@ def judge_cause(
     say(f"oil_viscosity against the oil temperature: {chk.evidence()}")
     if chk.cause == "wear":
         return Decision("unexplained", None, None, float(chk.flat_share or 0.0)), chk
+    if chk.cause is None:
+        # The mechanism is decided (the leak removes the gap), its cause is not: a verdict
+        # names no cause its evidence did not decide.  ``unexplained`` with the leak first
+        # in the suggestion (cause undecided) and the recording that would decide; the
+        # confidence is the leak's, as the mechanism is as sure as the effect was.
+        return Decision("unexplained", None, None, d.confidence), chk
     return d, chk
 
 
 def suggestion_entry(chk: LeakCause) -> dict:
-    """The worn leak as the suggestion's first term (the contract's object)."""
-    assert chk.flat is not None
+    """The leak as the suggestion's first term (the contract's object) when its cause is
+    wear (the constant leak) or undecided (the better-scoring of the two laws' leaks, at the
+    recording's oil temperature)."""
     mechanism, signal = PATHS[chk.path]
-    leak = float(chk.flat.effects[0].params[chk.path])
+    fits = [c for c in (chk.viscous, chk.flat) if c is not None]
+    if chk.cause == "wear":
+        assert chk.flat is not None
+        fits = [chk.flat]
+    best = max(fits, key=lambda c: float(c.heldout_reduction))
+    if best is chk.flat:
+        leak = float(best.effects[0].params[chk.path])
+    else:  # the viscous law's leak at the recording's mean oil temperature
+        ends = chk.viscous_leak()
+        leak = float(np.mean(ends)) if ends else float(best.effects[0].params[chk.path])
+    if chk.cause == "wear":
+        text = f"{mechanism} that does not follow the oil temperature (wear)"
+    else:
+        text = (
+            f"{mechanism}, cause undecided (oil viscosity or wear; a warm-up run over a wider "
+            "oil temperature span would decide)"
+        )
     return {
         "term": "leakage",
         "signal": signal,
         "shape": "dp",
-        "description": (
-            f"{mechanism} that does not follow the oil temperature (wear): "
-            f"{leak:.3g} L/min per 100 bar"
-        ),
+        "description": f"{text}: {leak:.3g} L/min per 100 bar",
         "coefficient": round(leak, 6),
         "unit": "L/min per 100 bar",
-        "heldout_reduction": round(float(chk.flat.heldout_reduction), 4),
-        "cause": "wear",
+        "heldout_reduction": round(float(best.heldout_reduction), 4),
+        "cause": chk.cause or "undecided",
     }

@@ -52,6 +52,9 @@ class Judged:
     load: dict | None = None
     #: The drained chambers' stiffness at rest (``diagnose/atrest.py``): ``air_check``.
     air: dict | None = None
+    #: The best single, a sensor calibration, judged on its own signal
+    #: (``sensorphysics.own_signal``; None: not judged so).
+    own_signal: sensorphysics.OwnSignal | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -89,7 +92,30 @@ def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Jud
             f"sensor lag against the engine's speed ripple: readings {lag_checked['readings']}"
             f"; verdict {before} -> {d.verdict}"
         )
-    return Judged(decision=d, lag_check=lag_checked, absorbed=absorbed, noise_only=noise_only)
+    own = _own_signal(d, scores, paired, cal)
+    if own is not None and own.named:
+        say(f"sensor calibration judged on its own signal: {own.evidence()}")
+        d = Decision(sensorcal.NAME, None, scores.singles[0], own.share)
+    return Judged(
+        decision=d, lag_check=lag_checked, absorbed=absorbed, noise_only=noise_only, own_signal=own
+    )
+
+
+def _own_signal(
+    d: Decision, scores: Scores, paired: Paired, cal: Calibrated
+) -> sensorphysics.OwnSignal | None:
+    """An ``unexplained`` gap whose best single is a sensor calibration: that calibration
+    judged on the one signal it reads (``sensorphysics.own_signal``)."""
+    if d.verdict != "unexplained" or not scores.singles:
+        return None
+    best = scores.singles[0]
+    if best.effects[0].name != sensorcal.NAME:
+        return None
+    names = S.compared(cal.prep)
+    base = scores.baseline
+    return sensorphysics.own_signal(
+        best, names, base.nominal, paired.sums[best.name], paired.boot_idx, cal.floor
+    )
 
 
 def check_cause(
@@ -249,8 +275,9 @@ def suggest_next(
         say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
     chk = judged.cause
     ranked = lead.ranked if lead and d.verdict == "unexplained" else []
-    if chk is not None and chk.cause == "wear":
-        # The worn leak was fitted and scored like the terms: it leads the suggestion.
+    if chk is not None and chk.cause != cause_mod.NAME:
+        # The worn leak (or the leak of undecided cause) was fitted and scored like the
+        # terms: it leads the suggestion.
         ranked = [cause_mod.suggestion_entry(chk), *ranked]
     return Finding(
         verdict=d.verdict,
@@ -259,7 +286,7 @@ def suggest_next(
         confidence=d.confidence,
         suggestion=ranked,
         suggestion_tried=lead.tried if lead else [],
-        sensor_check=checked.as_dict() if checked is not None else None,
+        sensor_check=_sensor_check(checked, judged.own_signal),
         traded=_traded(d, scores.singles, S.compared(cal.prep)),
         lag_check=judged.lag_check,
         cause_check=None if chk is None else chk.as_dict(),
@@ -269,6 +296,17 @@ def suggest_next(
         load_check=judged.load,
         air_check=judged.air,
     )
+
+
+def _sensor_check(
+    checked: sensorphysics.Comparison | None, own: sensorphysics.OwnSignal | None
+) -> dict | None:
+    """The JSON's ``sensor_check``: the plant terms' comparison, and the own-signal judgement
+    when the calibration was named by it."""
+    if own is None or not own.named:
+        return checked.as_dict() if checked is not None else None
+    out = checked.as_dict() if checked is not None else {"signal": own.signal}
+    return {**out, **own.as_dict()}
 
 
 def calibration_absorbed(

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from monitor.gap.data.prepare import ROD_VEL, Prepared, rod_velocity, smooth_rod
+from monitor.gap.data.prepare import ROD_VEL, ZERO_MARGIN, Prepared, rod_velocity, smooth_rod
 from monitor.gap.data.segments import Segment
 from monitor.gap.fit.score import compared
 from monitor.io.recording import Recording
@@ -63,6 +63,9 @@ class _Start:
     rod_m: float
     vel_m_s: float
     spool: float
+    #: The rod read at its sensor's zero by a sensor that clips there: the reading does
+    #: not say how far above the end stop the rod is.
+    rod_at_zero: bool = False
 
 
 def _measured_start(prep: Prepared, seg: Segment) -> _Start:
@@ -82,6 +85,7 @@ def _measured_start(prep: Prepared, seg: Segment) -> _Start:
         prep.rod_mm[i] * 1e-3,
         v_m_s,
         float(np.clip(prep.cmd["SpoolCmd"][i], -100, 100)) / 100.0,
+        prep.has_rodpos and "RodPos" not in prep.below_zero and prep.rod_mm[i] < ZERO_MARGIN,
     )
 
 
@@ -94,6 +98,10 @@ def _true_start(start: _Start, cal: Effect | None) -> _Start:
     signal = cal.labels["signal"]
     if signal == "RodPos":
         rod_m = (start.rod_m * 1e3 - offset) / gain * 1e-3
+        if start.rod_at_zero and offset < 0:
+            # A negative offset reads 0 anywhere from the stop up to -offset / gain: a rod
+            # read there rests on (or leaves, or nears) its stop, not -offset above it.
+            rod_m = 0.0
         return replace(start, rod_m=rod_m, vel_m_s=start.vel_m_s / gain)
     field = {"PP": "pp_pa", "PA": "pa_pa", "PB": "pb_pa"}[signal]
     true_pa = (getattr(start, field) - offset * BAR) / gain
@@ -239,9 +247,12 @@ def sense(
             # The simulated and the measured rod position filtered alike within the segment
             # (same edges), so the residual is the filtered difference of the two rods.  The
             # rod position sensor is not lagged.
-            sim_v = rod_velocity(smooth_rod(tr.rod_pos_m[idx] * 1e3))
+            sim_rod = tr.rod_pos_m[idx] * 1e3
             if cal_signal == "RodPos":
-                sim_v = gain * sim_v  # an offset of RodPos does not change its velocity
+                # The rod as its sensor reads it: the offset moves the reading only, except
+                # where a sensor that clips at zero then reads 0 while the rod still moves.
+                sim_rod = prep.reading("RodPos", gain * sim_rod + offset)
+            sim_v = rod_velocity(smooth_rod(sim_rod))
             out[ROD_VEL][rows] = prep.meas[ROD_VEL][rows] + sim_v - rod_velocity(prep.rod_mm[rows])
     return out
 

@@ -137,6 +137,17 @@ def describe(report: dict) -> dict | None:
     return out
 
 
+def _leak_separating(chk: dict) -> str:
+    """The recording that would decide a leak's cause: a warm-up, or a wider one than this
+    recording's when it had one and the two laws still fit alike."""
+    text = BY_EFFECT["oil_viscosity"].separating_recording
+    span = chk.get("oil_temp_span_c") or 0.0
+    if chk.get("flat_better_share") is None:
+        return text
+    wider = f"a warm-up over a wider oil temperature span than this recording's {span:.0f} degC"
+    return f"{wider}; {text}"
+
+
 def _leak_causes(chk: dict) -> dict:
     """A leak's mechanism keys from its oil-temperature check (``diagnose/cause.py``):
     the path, both causes with their laws and what the check made of each (the evidence
@@ -204,13 +215,14 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
         name = f"leakage {first['signal']}"
     cause = first.get("cause")
     chk = report.get("cause_check")
-    if chk and cause == "wear":
+    leak = bool(chk) and cause in ("wear", "undecided")
+    if leak:
         # Mechanism first: the leak's path (pump leakage), as an oil_viscosity verdict
-        # would name it; the cause (wear, not viscosity) second.
+        # would name it; the cause (wear, or undecided between wear and viscosity) second.
         name = chk["mechanism"]
     decided = (
         chk["evidence"]
-        if chk and cause == "wear"
+        if leak
         else (
             f"the correction term that removes the most of the held-out gap "
             f"({100 * first['heldout_reduction']:.0f} %): {first['description']}"
@@ -222,10 +234,11 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
         "cause": cause or "outside the catalogue",
         "causes": [],
         "decided_by": decided,
-        "separating_recording": None,
+        # A leak of undecided cause: the recording that would decide it.
+        "separating_recording": _leak_separating(chk) if leak and cause == "undecided" else None,
         "bounds": bounds,
     }
-    if chk and cause == "wear":
+    if leak:
         out.update(_leak_causes(chk))
     return out
 
@@ -292,7 +305,8 @@ def _decided_by(report: dict, verdict: str) -> tuple[str, bool]:
         return f"the readings follow the engine's speed ripple late ({lag.get('readings')})", True
     sc = report.get("sensor_check")
     if verdict == "sensor_calibration" and sc:
-        return "a sensor error moves one signal only: no plant term explains more", True
+        plant = "a sensor error moves one signal only: no plant term explains more"
+        return (f"{sc['evidence']}; {plant}" if sc.get("evidence") else plant), True
     ab = report.get("absorbed")
     if ab:
         tols = ", ".join(
