@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -191,3 +192,42 @@ def test_a_compensator_setting_is_not_called_a_pp_sensor_error():
     assert check["signal"] == "PP" and not check["sensor_named"]
     assert check["term_heldout_reduction"] > check["sensor_heldout_reduction"]
     assert "Not a sensor error" in summary_text(rep)
+
+
+def test_a_rodpos_offset_on_a_sensor_that_clips_at_zero_is_named_with_its_offset():
+    # A stroke sensor reading 25 mm low whose output stops at 0 (as this simulator's and
+    # the third plant's do): the rod resting on its bottom stop reads 0, not -25, and so does its last
+    # 25 mm of travel; on its top stop it reads stroke - 25.  The offset moves the reading,
+    # not the machine: the plant below is the healthy one.  Before the clip was read, the
+    # rod read 0 was started 25 mm above its stop and the offset came out wrong (the third
+    # plant's -30 mm was fitted at -16 and judged unexplained).
+    offset_mm = -25.0
+    rec = simulate(
+        make_cycle("boom-cover", 120.0, 45),  # a cycle that drives the rod onto its stops
+        apply(M, MACHINE_TOLERANCE),
+        effects=[Effect.make("sensor_calibration", signal="RodPos", gain=1.0, offset=offset_mm)],
+        seed=45,
+    )
+    # This simulator's stroke sensor stops at 0 too: the clip shows.
+    assert rec["RodPos"].min() == 0.0 and np.mean(rec["RodPos"] == 0.0) > 0.01
+    assert "RodPos" not in prepare(rec, M).below_zero
+    rep = _report(rec)
+    assert rep["verdict"] == "sensor_calibration"
+    fitted = rep["params"]["sensor_calibration"]
+    assert fitted["RodPos_offset_mm"] == pytest.approx(offset_mm, abs=3.0)
+    assert fitted["RodPos_gain"] == pytest.approx(1.0, abs=0.03)
+    assert rep["mechanism"]["name"] == "sensor reading on RodPos"
+
+
+def test_a_rod_read_at_a_clipping_sensors_zero_starts_on_its_stop():
+    # Read 0 by a sensor 30 mm low that clips at zero: the rod is somewhere between its
+    # stop and 30 mm above it; it rests on the stop (not 30 mm above it, the inverse of 0).
+    start = _Start(
+        pp_pa=20 * BAR, pa_pa=5 * BAR, pb_pa=40 * BAR, rod_m=0.0, vel_m_s=0.0, spool=0.0
+    )
+    rod = Effect.make("sensor_calibration", signal="RodPos", gain=1.0, offset=-30.0)
+    assert _true_start(start, rod).rod_m == pytest.approx(0.030)  # a sensor reading below 0
+    clipped = replace(start, rod_at_zero=True)
+    assert _true_start(clipped, rod).rod_m == 0.0
+    # Above its zero the reading is read through the inverse as before: 100 mm -> 130 mm.
+    assert _true_start(replace(start, rod_m=0.1), rod).rod_m == pytest.approx(0.130)

@@ -64,7 +64,8 @@ class Prepared:
     #: Samples not compared (``score.normalised`` leaves them out): without RodPos, the
     #: moments the rod arrives on an end stop (``rodflow.arrivals``).  None: every sample.
     unscored: np.ndarray | None = None
-    #: Signals whose sensor reads below zero in this recording (``reads_below_zero``).
+    #: Signals whose sensor reads below zero in this recording (``reads_below_zero``);
+    #: RodPos unless its reading shows a clip at zero (``rod_clips``).
     below_zero: frozenset[str] = frozenset()
 
     def __len__(self) -> int:
@@ -90,6 +91,16 @@ def reads_below_zero(meas: dict[str, np.ndarray]) -> frozenset[str]:
     return frozenset(
         n for n, v in meas.items() if np.mean(v[np.isfinite(v)] < -ZERO_MARGIN) >= BELOW_ZERO_SHARE
     )
+
+
+def rod_clips(rod_mm: np.ndarray) -> bool:
+    """Whether a RodPos reading shows a sensor that clips at zero: never below it, and at
+    exactly zero in at least ``BELOW_ZERO_SHARE`` of the samples (a rod resting on its stop
+    reads noise around zero on a sensor that does not clip).  Such a sensor hides how far a
+    rod read 0 is above its end stop: ``predict.py`` reads the starts and the simulated rod
+    through the clip."""
+    rod = rod_mm[np.isfinite(rod_mm)]
+    return bool(rod.size) and bool(rod.min() >= 0.0 and np.mean(rod == 0.0) >= BELOW_ZERO_SHARE)
 
 
 def _resample(rec: Recording) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
@@ -203,11 +214,8 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         source=src,
         stroke_mm=machine.cylinder.stroke_m * 1e3,
         unscored=unscored,
-        # RodPos too: a stroke sensor that clips at zero hides how far a rod read 0 is
-        # above its end stop (``predict.py`` reads its starts and velocity through it).
-        below_zero=reads_below_zero(
-            {n: meas[n] for n in MEASURED_NAMES} | ({"RodPos": cols["RodPos"]} if has_rod else {})
-        ),
+        below_zero=reads_below_zero({n: meas[n] for n in MEASURED_NAMES})
+        | ({"RodPos"} if has_rod and not rod_clips(cols["RodPos"]) else frozenset()),
     )
 
 

@@ -286,7 +286,7 @@ def suggest_next(
         confidence=d.confidence,
         suggestion=ranked,
         suggestion_tried=lead.tried if lead else [],
-        sensor_check=_sensor_check(checked, judged.own_signal),
+        sensor_check=_sensor_check(checked, judged.own_signal, d, cal),
         traded=_traded(d, scores.singles, S.compared(cal.prep)),
         lag_check=judged.lag_check,
         cause_check=None if chk is None else chk.as_dict(),
@@ -299,14 +299,22 @@ def suggest_next(
 
 
 def _sensor_check(
-    checked: sensorphysics.Comparison | None, own: sensorphysics.OwnSignal | None
+    checked: sensorphysics.Comparison | None,
+    own: sensorphysics.OwnSignal | None,
+    d: Decision,
+    cal: Calibrated,
 ) -> dict | None:
-    """The JSON's ``sensor_check``: the plant terms' comparison, and the own-signal judgement
-    when the calibration was named by it."""
-    if own is None or not own.named:
-        return checked.as_dict() if checked is not None else None
-    out = checked.as_dict() if checked is not None else {"signal": own.signal}
-    return {**out, **own.as_dict()}
+    """The JSON's ``sensor_check``: the plant terms' comparison, with the evidence that
+    named the calibration: its own signal's gap, or for RodPos the rod's stops."""
+    if own is not None and own.named:
+        out = checked.as_dict() if checked is not None else {"signal": own.signal}
+        return {**out, **own.as_dict()}
+    if checked is None:
+        return None
+    out = checked.as_dict()
+    if d.verdict == sensorcal.NAME and d.chosen is not None and checked.signal == "RodPos":
+        out["evidence"] = sensorphysics.rod_evidence(d.chosen.effects[0], cal.prep)
+    return out
 
 
 def calibration_absorbed(

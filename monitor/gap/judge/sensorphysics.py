@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monitor.gap.data.prepare import Prepared
 from monitor.gap.fit import sensorcal
 from monitor.gap.fit.candidates import Candidate
 from monitor.gap.fit.score import SegmentSums, gap, reduction
@@ -27,7 +28,7 @@ from monitor.gap.fit.terms import PlantTerm
 from monitor.gap.judge.decide import EXPLAIN_MIN, SIGNIFICANT, boot_gain, gain_share
 from monitor.gap.judge.shrink import boot_reduction
 from monitor.gap.judge.suggest import Suggestions
-from monitor.sim.effects import CATALOGUE, SENSOR_CAL_SIGNALS
+from monitor.sim.effects import CATALOGUE, SENSOR_CAL_SIGNALS, Effect
 
 
 @dataclass
@@ -147,3 +148,21 @@ def own_signal(
         or abs(effect.params["offset"]) > o - 1e-3
     )
     return OwnSignal(signal, red, share, at_bound)
+
+
+def rod_evidence(effect: Effect, prep: Prepared) -> str:
+    """What fixes a RodPos gain and offset, in words: the rod's speed per pump flow (the
+    gain) and the readings at its end stops (the offset), which set the segments' starts."""
+    gain, offset = effect.params["gain"], effect.params["offset"]
+    top = gain * prep.stroke_mm + offset
+    clip = (
+        "; the sensor clips at 0, so a rod read 0 rests on its bottom stop"
+        if offset < 0 and "RodPos" not in prep.below_zero
+        else ""
+    )
+    return (
+        f"a stroke sensor error moves the reading, not the rod: the gain ({gain:.3f}) from "
+        f"the rod's speed per pump flow, the offset ({offset:+.1f} mm) from where the rod "
+        f"rests on its stops, the top one read at {top:.0f} mm of a {prep.stroke_mm:.0f} mm "
+        f"stroke{clip}"
+    )
