@@ -196,11 +196,11 @@ def test_a_compensator_setting_is_not_called_a_pp_sensor_error():
 
 def test_a_rodpos_offset_on_a_sensor_that_clips_at_zero_is_named_with_its_offset():
     # A stroke sensor reading 25 mm low whose output stops at 0 (as this simulator's and
-    # the third plant's do): the rod resting on its bottom stop reads 0, not -25, and so does its last
-    # 25 mm of travel; on its top stop it reads stroke - 25.  The offset moves the reading,
-    # not the machine: the plant below is the healthy one.  Before the clip was read, the
-    # rod read 0 was started 25 mm above its stop and the offset came out wrong (the third
-    # plant's -30 mm was fitted at -16 and judged unexplained).
+    # the third plant's do): the rod resting on its bottom stop reads 0, not -25, and so
+    # does its last 25 mm of travel; on its top stop it reads stroke - 25.  The offset
+    # moves the reading, not the machine: the plant below is the healthy one.  Before, the
+    # rod read 0 was started 25 mm above its stop and the offset searched through the
+    # starts alone (the third plant's -30 mm was fitted at -16 and judged unexplained).
     offset_mm = -25.0
     rec = simulate(
         make_cycle("boom-cover", 120.0, 45),  # a cycle that drives the rod onto its stops

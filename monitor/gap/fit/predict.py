@@ -64,8 +64,10 @@ class _Start:
     vel_m_s: float
     spool: float
     #: The rod read at its sensor's zero by a sensor that clips there: the reading does
-    #: not say how far above the end stop the rod is.
+    #: not say how far above the end stop the rod is ...
     rod_at_zero: bool = False
+    #: ... only that it is within this of it (m; 0: no such doubt).
+    rod_zero_span_m: float = 0.0
 
 
 def _measured_start(prep: Prepared, seg: Segment) -> _Start:
@@ -99,17 +101,28 @@ def _true_start(start: _Start, cal: Effect | None) -> _Start:
     if signal == "RodPos":
         rod_m = (start.rod_m * 1e3 - offset) / gain * 1e-3
         if start.rod_at_zero and offset < 0:
-            # A negative offset reads 0 anywhere from the stop up to -offset / gain: a rod
-            # read there rests on (or leaves, or nears) its stop, not -offset above it.
-            rod_m = 0.0
+            # A negative offset reads 0 anywhere from the stop up to -offset / gain, not
+            # -offset above it: on the stop, or held above it (``_start_state``).
+            return replace(start, rod_m=0.0, vel_m_s=start.vel_m_s / gain, rod_zero_span_m=rod_m)
         return replace(start, rod_m=rod_m, vel_m_s=start.vel_m_s / gain)
     field = {"PP": "pp_pa", "PA": "pa_pa", "PB": "pb_pa"}[signal]
     true_pa = (getattr(start, field) - offset * BAR) / gain
     return replace(start, **{field: max(true_pa, 0.0)})
 
 
+#: A rod whose chambers push it up by at least this share of the gravity load is held
+#: above the bottom stop, not resting on it (a rod pressed onto it pushes less).
+HELD_LOAD_SHARE = 0.5
+
+
 def _start_state(start: _Start, machine: MachineParams, prm: np.ndarray) -> np.ndarray:
     x_m = start.rod_m
+    cyl = machine.cylinder
+    up_n = start.pa_pa * cyl.area_a_m2 - start.pb_pa * cyl.area_b_m2
+    if start.rod_zero_span_m > 0 and up_n >= HELD_LOAD_SHARE * machine.load.gravity_load_n:
+        # Held somewhere in what a clipped reading allows (the third plant's rod stopped
+        # 15-25 mm above its stop, read 0 under a -30 mm offset): its middle.
+        x_m = start.rod_zero_span_m / 2
     if x_m < END_STOP_SNAP_M:
         x_m = 0.0
     elif x_m > machine.cylinder.stroke_m - END_STOP_SNAP_M:

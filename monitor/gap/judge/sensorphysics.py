@@ -156,7 +156,8 @@ def rod_evidence(effect: Effect, prep: Prepared) -> str:
     gain, offset = effect.params["gain"], effect.params["offset"]
     top = gain * prep.stroke_mm + offset
     clip = (
-        "; the sensor clips at 0, so a rod read 0 rests on its bottom stop"
+        "; the sensor clips at 0: a rod read 0 rests on its bottom stop, or hangs above it "
+        "where its chambers hold the load"
         if offset < 0 and "RodPos" not in prep.below_zero
         else ""
     )
