@@ -231,3 +231,20 @@ def test_a_rod_read_at_a_clipping_sensors_zero_starts_on_its_stop():
     assert _true_start(clipped, rod).rod_m == 0.0
     # Above its zero the reading is read through the inverse as before: 100 mm -> 130 mm.
     assert _true_start(replace(start, rod_m=0.1), rod).rod_m == pytest.approx(0.130)
+
+
+def test_a_pp_gain_beside_a_gap_no_sensor_error_of_pp_reaches_is_named_on_pp():
+    # A PP transducer reading 6 % high on a machine whose flow meter also carries a slow
+    # 3 L/min ripple (0.3 Hz): no catalogue effect holds a periodic error of one reading, and
+    # no gain or offset of PP reaches QP.  The whole gap holds both, so judged on the whole
+    # gap the PP error was ``unexplained``; a reading error is judged on the signal it reads.
+    rec = _recording([Effect.make("sensor_calibration", signal="PP", gain=1.06, offset=0.0)], 46)
+    rec.columns["QP"] = rec["QP"] + 3.0 * np.sin(2 * np.pi * 0.3 * rec.t)
+    rep = _report(rec)
+    assert rep["verdict"] == "sensor_calibration"
+    fitted = rep["params"]["sensor_calibration"]
+    assert set(fitted) == {"PP_gain", "PP_offset_bar"}
+    assert fitted["PP_gain"] == pytest.approx(1.06, abs=0.02)
+    check = rep["sensor_check"]
+    assert check["own_signal_heldout_reduction"] >= 0.5 and check["at_bound"] is False
+    assert "its own signal" in rep["mechanism"]["decided_by"]
