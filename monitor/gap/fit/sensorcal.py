@@ -183,7 +183,9 @@ def _rod_offset(
         return float(np.mean(S.stacked(prep, segments, pred) ** 2)), effect
 
     at_stop = top_stop_offset(prep, gain)
-    if at_stop is not None:
+    # Beyond what the catalogue names it is not this sensor's stop (a QP gain read as a
+    # RodPos gain of 1.12 put the outsider's top stop at -62 mm): searched instead.
+    if at_stop is not None and abs(at_stop) <= SENSOR_CAL_SIGNALS["RodPos"].max_offset:
         # Read where the rod rests on its top stop: below that offset the same rods start on
         # the stops, so the starts cannot tell (a -25 mm offset was searched at -35).
         done = cost(at_stop)
