@@ -135,7 +135,16 @@ def test_a_flow_sensor_that_reads_below_zero_is_named_with_its_offset():
 )
 def test_a_physical_effect_is_not_called_a_sensor_error(effect, seed):
     rep = _report(_recording([effect], seed=seed))
-    assert rep["verdict"] == effect.name
+    if effect.name == "oil_viscosity":
+        # A warm machine (oil within 2 degC): the pump leaks, and the recording cannot say
+        # whether thin oil or wear makes it leak, so the verdict names the mechanism only.
+        assert rep["verdict"] == "unexplained"
+        assert (rep["mechanism"]["name"], rep["mechanism"]["cause"]) == (
+            "pump leakage",
+            "undecided",
+        )
+    else:
+        assert rep["verdict"] == effect.name
     sensor = next(r for r in rep["ranking"] if r["effect"] == "sensor_calibration")
     assert rep["ranking"].index(sensor) > 0
     assert sensor["heldout_reduction"] < 0.5, sensor
@@ -210,7 +219,7 @@ def test_a_rodpos_offset_on_a_sensor_that_clips_at_zero_is_named_with_its_offset
     )
     # This simulator's stroke sensor stops at 0 too: the clip shows.
     assert rec["RodPos"].min() == 0.0 and np.mean(rec["RodPos"] == 0.0) > 0.01
-    assert "RodPos" not in prepare(rec, M).below_zero
+    assert prepare(rec, M).rod_clips
     rep = _report(rec)
     assert rep["verdict"] == "sensor_calibration"
     fitted = rep["params"]["sensor_calibration"]

@@ -64,9 +64,10 @@ class Prepared:
     #: Samples not compared (``score.normalised`` leaves them out): without RodPos, the
     #: moments the rod arrives on an end stop (``rodflow.arrivals``).  None: every sample.
     unscored: np.ndarray | None = None
-    #: Signals whose sensor reads below zero in this recording (``reads_below_zero``);
-    #: RodPos unless its reading shows a clip at zero (``rod_clips``).
+    #: Signals whose sensor reads below zero in this recording (``reads_below_zero``).
     below_zero: frozenset[str] = frozenset()
+    #: RodPos measured by a sensor whose reading shows a clip at zero (``rod_clips``).
+    rod_clips: bool = False
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -214,8 +215,8 @@ def prepare(rec: Recording, machine: MachineParams) -> Prepared:
         source=src,
         stroke_mm=machine.cylinder.stroke_m * 1e3,
         unscored=unscored,
-        below_zero=reads_below_zero({n: meas[n] for n in MEASURED_NAMES})
-        | ({"RodPos"} if has_rod and not rod_clips(cols["RodPos"]) else frozenset()),
+        below_zero=reads_below_zero({n: meas[n] for n in MEASURED_NAMES}),
+        rod_clips=bool(has_rod) and rod_clips(cols["RodPos"]),
     )
 
 

@@ -87,7 +87,7 @@ def _measured_start(prep: Prepared, seg: Segment) -> _Start:
         prep.rod_mm[i] * 1e-3,
         v_m_s,
         float(np.clip(prep.cmd["SpoolCmd"][i], -100, 100)) / 100.0,
-        prep.has_rodpos and "RodPos" not in prep.below_zero and prep.rod_mm[i] < ZERO_MARGIN,
+        prep.rod_clips and prep.rod_mm[i] < ZERO_MARGIN,
     )
 
 
@@ -264,7 +264,8 @@ def sense(
             if cal_signal == "RodPos":
                 # The rod as its sensor reads it: the offset moves the reading only, except
                 # where a sensor that clips at zero then reads 0 while the rod still moves.
-                sim_rod = prep.reading("RodPos", gain * sim_rod + offset)
+                sim_rod = gain * sim_rod + offset
+                sim_rod = np.maximum(sim_rod, 0.0) if prep.rod_clips else sim_rod
             sim_v = rod_velocity(smooth_rod(sim_rod))
             out[ROD_VEL][rows] = prep.meas[ROD_VEL][rows] + sim_v - rod_velocity(prep.rod_mm[rows])
     return out

@@ -158,7 +158,7 @@ def rod_evidence(effect: Effect, prep: Prepared) -> str:
     clip = (
         "; the sensor clips at 0: a rod read 0 rests on its bottom stop, or hangs above it "
         "where its chambers hold the load"
-        if offset < 0 and "RodPos" not in prep.below_zero
+        if offset < 0 and prep.rod_clips
         else ""
     )
     return (
