@@ -127,6 +127,14 @@ def _verdict_unexplained(report: dict) -> list[str]:
         lines = ["Verdict: unexplained. " + _sensor_line(report["sensor_check"])]
     elif report.get("trade_off"):
         lines = ["Verdict: unexplained. " + _trade_line(report["trade_off"])]
+    elif (report.get("cause_check") or {}).get("mechanism"):
+        chk = report["cause_check"]
+        cause = "wear, not oil viscosity" if chk["cause"] == "wear" else "undecided"
+        lines = [
+            f"Verdict: unexplained: {chk['mechanism']} ({chk['signal']}), its cause {cause}: "
+            "the catalogue names a leak only as oil viscosity, and this recording did not "
+            "show that"
+        ]
     else:
         lines = [
             "Verdict: unexplained: no catalogue effect removes a clear share of the "
