@@ -29,7 +29,6 @@ from scipy.optimize import minimize_scalar
 from monitor.gap.data.prepare import ROD_VEL, Prepared
 from monitor.gap.data.segments import Segment
 from monitor.gap.fit import score as S
-from monitor.gap.fit.calibrate import knobs
 from monitor.gap.fit.candidates import Candidate
 from monitor.gap.fit.kinematics import (
     kinematic_ratio,
@@ -246,9 +245,8 @@ def _hypotheses(
     predict: Predict,
     factors: dict[str, float],
     reread: Reread | None = None,
-) -> list[tuple[float, Effect, Prepared | None, dict[str, float]]]:
-    """(calibration cost, effect, the recording as the effect reads it or None, the
-    tolerances) per signal:
+) -> list[tuple[float, Effect, Prepared | None]]:
+    """(calibration cost, effect, the recording as the effect reads it or None) per signal:
     gain and offset in closed form on the calibrated nominal's plant runs, refitted from
     corrected start states where the signal sets them (a RodPos offset is searched: the
     velocity does not show it), and on the recording reread through the effect where it
@@ -272,26 +270,12 @@ def _hypotheses(
         if not kinematically_consistent(prep, segments, base, effect):
             continue
         # The same readings and samples either way (``reread.py``): costs comparable.
-        cost, fx = float(np.mean(S.stacked(prep, segments, pred) ** 2)), dict(factors)
-        if signal in LOAD_SIGNALS:
-            first = Candidate((effect,), fx, cost)
-            freed = refit_with_tolerances(prep, segments, predict, first, _load_knobs())
-            if freed.fit_cost < cost:
-                cost, effect, fx = freed.fit_cost, freed.effects[0], freed.factors
-        out.append((cost, effect, own, fx))
+        out.append((float(np.mean(S.stacked(prep, segments, pred) ** 2)), effect, own))
     return out
 
 
-#: Readings that hold the load at a hold (PA x cap area - PB x annulus area = the load):
-#: an error of either reads as a lighter or heavier load, which the tolerance calibration
-#: had taken up before any candidate (a PA reading 6 % high less 9.5 bar left the gravity
-#: load at its -15 % bound and a PA gain of 1.008 fitted).  Their hypotheses are fitted with
-#: the gravity load free: PP and the motion, which the load also sets, then anchor it.
+#: The chamber pressures, whose transients carry the base's timing (``_steady``).
 LOAD_SIGNALS = ("PA", "PB")
-
-
-def _load_knobs() -> list[Knob]:
-    return [k for k in knobs() if k.name == "gravity_load"]
 
 
 def _fitted_on(
@@ -344,8 +328,8 @@ def fit_candidate(
     fits the calibration part best (a few linear fits and a few dozen plant runs of the
     fit segments, for the signals that set the start states or reread the recording)."""
     hyps = _hypotheses(prep, segments, predict, factors, reread)
-    cost, effect, own, fx = min(hyps, key=lambda h: h[0])
-    return Candidate((effect,), fx, cost, prep=own)
+    cost, effect, own = min(hyps, key=lambda h: h[0])
+    return Candidate((effect,), dict(factors), cost, prep=own)
 
 
 def refit_with_tolerances(
