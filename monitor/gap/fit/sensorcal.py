@@ -189,7 +189,11 @@ def _rod_offset(
         # the stops, so the starts cannot tell (a -25 mm offset was searched at -35).
         done = cost(at_stop)
         return done[1] if done[0] <= (1.0 - ROD_OFFSET_MIN_GAIN) * cost(0.0)[0] else cost(0.0)[1]
-    tried = {o: cost(o) for o in ROD_OFFSET_GRID_MM}
+    # A sensor that clips at zero shows a negative offset only at the top stop, which the
+    # rod did not rest on: searched among the offsets its bottom reading would show.  (Free
+    # to go negative, the starts it moves took up 73 % of a pump leak's gap at -28 mm.)
+    grid_mm = [o for o in ROD_OFFSET_GRID_MM if o >= 0.0 or not prep.rod_clips]
+    tried = {o: cost(o) for o in grid_mm}
     grid = sorted(tried)
     i = min(range(len(grid)), key=lambda k: tried[grid[k]][0])
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
