@@ -231,9 +231,7 @@ def test_a_rodpos_offset_on_a_sensor_that_clips_at_zero_is_named_with_its_offset
 def test_a_rod_read_at_a_clipping_sensors_zero_starts_on_its_stop():
     # Read 0 by a sensor 30 mm low that clips at zero: the rod is somewhere between its
     # stop and 30 mm above it; it rests on the stop (not 30 mm above it, the inverse of 0).
-    start = _Start(
-        pp_pa=20 * BAR, pa_pa=5 * BAR, pb_pa=40 * BAR, rod_m=0.0, vel_m_s=0.0, spool=0.0
-    )
+    start = _Start(pp_pa=20 * BAR, pa_pa=5 * BAR, pb_pa=40 * BAR, rod_m=0.0, vel_m_s=0.0, spool=0.0)
     rod = Effect.make("sensor_calibration", signal="RodPos", gain=1.0, offset=-30.0)
     assert _true_start(start, rod).rod_m == pytest.approx(0.030)  # a sensor reading below 0
     clipped = replace(start, rod_at_zero=True)

@@ -33,7 +33,6 @@ def velocity_base(prep: Prepared, segments: Sequence[Segment], col: str) -> np.n
     return out
 
 
-
 #: Kinematics a flow or rod-position error must leave consistent (relative): read through
 #: the hypothesis, measured rod speed per measured pump flow must match the simulator's
 #: within this, or at least not be further off than without the hypothesis.

@@ -214,7 +214,7 @@ def _unexplained(report: dict, bounds: list[str]) -> dict | None:
     elif first["term"] == "leakage":
         name = f"leakage {first['signal']}"
     cause = first.get("cause")
-    chk = report.get("cause_check")
+    chk: dict = report.get("cause_check") or {}
     leak = bool(chk) and cause in ("wear", "undecided")
     if leak:
         # Mechanism first: the leak's path (pump leakage), as an oil_viscosity verdict
