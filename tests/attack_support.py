@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import can
-from live_support import REPO, own_udp_port, start_daemon, wait_for_text
+from live_support import REPO, own_udp_port, sigint_default, start_daemon, wait_for_text
 
 from monitor.live.storage import rotated_logs
 
@@ -135,6 +135,9 @@ class AttackRig:
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
             env=self.env,
+            # SIGINT stops it: a suite started in the background of a shell without job
+            # control inherits SIGINT ignored, and so would the logger (it hung there).
+            preexec_fn=sigint_default,
         )
 
     def sniffed(self) -> list[can.Message]:

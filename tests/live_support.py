@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -234,3 +235,11 @@ def assert_same_events_as_sent(
     sent = events_of_frames(live, float(det.t[-1]), ticked_to_s)
     assert_same_events(sent, det)
     return sent
+
+
+def sigint_default() -> None:
+    """``preexec_fn`` of a helper process that the tests stop with SIGINT (python-can's
+    logger, candump): its SIGINT back to the default.  A suite run in the background of a
+    shell without job control inherits SIGINT ignored, and the helper would ignore the
+    stop and hang."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

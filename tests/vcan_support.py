@@ -20,6 +20,7 @@ from pathlib import Path
 
 import can
 import cantools
+from live_support import sigint_default
 
 from monitor.io.candump import format_line, read_candump
 from monitor.resources import resource_path
@@ -119,7 +120,11 @@ class Capture:
     def __init__(self, path: Path) -> None:
         self.path = path
         with path.open("wb") as out:
-            self.proc = subprocess.Popen(["stdbuf", "-oL", "candump", "-L", CHANNEL], stdout=out)
+            self.proc = subprocess.Popen(
+                ["stdbuf", "-oL", "candump", "-L", CHANNEL],
+                stdout=out,
+                preexec_fn=sigint_default,  # stopped by SIGINT even if the suite ignores it
+            )
 
     def snapshot(self) -> list[can.Message]:
         """The frames captured so far (complete lines only)."""
