@@ -30,7 +30,7 @@ import numpy as np
 
 from monitor.gap.data.prepare import Prepared
 from monitor.gap.judge.decide import SIGNIFICANT
-from monitor.gap.judge.shrink import resamples
+from monitor.gap.judge.shrink import finite_or_none, resamples
 from monitor.signals import SAMPLE_PERIOD_S
 from monitor.sim.machine import BAR, MachineParams
 
@@ -107,13 +107,13 @@ class AirSignature:
     def as_dict(self) -> dict:
         return {
             "holds": self.holds,
-            "rise_bar_s": _num(self.rise_bar_s, 3),
-            "fall_bar_s": _num(self.fall_bar_s, 3),
-            "drained_bar": _num(self.drained_bar, 2),
-            "ratio": _num(self.ratio, 3),
+            "rise_bar_s": finite_or_none(self.rise_bar_s, 3),
+            "fall_bar_s": finite_or_none(self.fall_bar_s, 3),
+            "drained_bar": finite_or_none(self.drained_bar, 2),
+            "ratio": finite_or_none(self.ratio, 3),
             "ratio_level": RATIO,
             "below_share": round(self.below_share, 3),
-            "air_fraction": _num(self.air_fraction, 4),
+            "air_fraction": finite_or_none(self.air_fraction, 4),
             "readable": self.readable,
             "present": self.present,
             "evidence": self.evidence(),
@@ -191,7 +191,3 @@ def _fraction(h: np.ndarray, beta_pa: float) -> float:
 
 def _f(v: float) -> str:
     return f"{v:.2f}" if np.isfinite(v) else "-"
-
-
-def _num(v: float, digits: int) -> float | None:
-    return round(float(v), digits) if np.isfinite(v) else None

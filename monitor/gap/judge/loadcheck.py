@@ -33,7 +33,7 @@ import numpy as np
 from monitor.gap.data.prepare import Prepared, smooth_rod
 from monitor.gap.data.segments import Segment
 from monitor.gap.judge.decide import SIGNIFICANT
-from monitor.gap.judge.shrink import resamples
+from monitor.gap.judge.shrink import finite_or_none, resamples
 from monitor.sim.machine import BAR, MachineParams
 
 #: The catalogue effect this reads.
@@ -130,17 +130,17 @@ class LoadSignature:
     def as_dict(self) -> dict:
         return {
             "holds": self.holds,
-            "load_n": _num(self.load_n, 1),
-            "slope_n_per_mm": _num(self.slope_n_per_mm, 3),
-            "curvature_n_per_mm2": _num(self.curvature_n_per_mm2, 5),
-            "span_mm": [_num(v, 1) for v in self.span_mm],
-            "pose_change_n": _num(self.pose_change_n, 1),
-            "time_change_n": _num(self.time_change_n, 1),
+            "load_n": finite_or_none(self.load_n, 1),
+            "slope_n_per_mm": finite_or_none(self.slope_n_per_mm, 3),
+            "curvature_n_per_mm2": finite_or_none(self.curvature_n_per_mm2, 5),
+            "span_mm": [finite_or_none(v, 1) for v in self.span_mm],
+            "pose_change_n": finite_or_none(self.pose_change_n, 1),
+            "time_change_n": finite_or_none(self.time_change_n, 1),
             "level_n": LEVEL_N,
             "absent_n": ABSENT_N,
             "above_share": round(self.above_share, 3),
             "below_share": round(self.below_share, 3),
-            "rms_n": _num(self.rms_n, 1),
+            "rms_n": finite_or_none(self.rms_n, 1),
             "readable": self.readable,
             "present": self.present,
             "evidence": self.evidence(),
@@ -216,10 +216,6 @@ def _changes(beta: np.ndarray, grid: np.ndarray, blocks: np.ndarray) -> tuple[fl
     the time ``blocks`` that have holds."""
     curve = beta[0] * grid + beta[1] * grid**2
     return float(np.ptp(curve)), float(np.ptp(beta[2:][blocks]))
-
-
-def _num(v: float, digits: int) -> float | None:
-    return round(float(v), digits) if np.isfinite(v) else None
 
 
 def _unread(n: int) -> LoadSignature:

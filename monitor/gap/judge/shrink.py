@@ -41,6 +41,11 @@ def boot_reduction(
     return np.where(g0 > 0, 1.0 - g1 / np.maximum(g0, 1e-300), 0.0)
 
 
+def finite_or_none(value: float, digits: int) -> float | None:
+    """A bootstrap figure for the JSON: rounded to ``digits``, None where nothing was read."""
+    return round(float(value), digits) if np.isfinite(value) else None
+
+
 def _ci(values: np.ndarray) -> list[float]:
     lo, hi = np.percentile(values, [5, 95])
     return [round(float(lo), 5), round(float(hi), 5)]
