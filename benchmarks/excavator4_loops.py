@@ -38,8 +38,17 @@ FAULTS = (
 
 
 def _seeds(text: str) -> list[int]:
+    """``A-B`` (or ``A``) as the seeds A..B; ``none`` as no seeds (only faulty runs)."""
+    if text == "none":
+        return []
     lo, _, hi = text.partition("-")
-    return list(range(int(lo), int(hi or lo) + 1))
+    try:
+        seeds = list(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds A-B expected, got {text!r}") from None
+    if not seeds:
+        raise argparse.ArgumentTypeError(f"seeds A-B with A <= B expected, got {text!r}")
+    return seeds
 
 
 def _simulate(out: Path, seed: int, fault: str | None, severity: float) -> Path:
@@ -65,8 +74,10 @@ def _judge(path: Path, cfg, models) -> dict[str, dict]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--normal", default="401-412", help="seeds of normal runs, A-B")
-    ap.add_argument("--faulty", default="501", help="seeds of faulty runs, A-B")
+    ap.add_argument(
+        "--normal", type=_seeds, default="401-412", help="seeds of normal runs, A-B, or none"
+    )
+    ap.add_argument("--faulty", type=_seeds, default="501", help="seeds of faulty runs, A-B")
     ap.add_argument("--severity", type=float, nargs="+", default=[0.5])
     ap.add_argument("--out", type=Path, required=True, help="folder for the simulated runs")
     ap.add_argument(
@@ -92,7 +103,7 @@ def main() -> int:
     alarms = {name: 0 for name in loops}
     sensor = {name: 0 for name in loops}
     hours = 0.0
-    for seed in _seeds(args.normal):
+    for seed in args.normal:
         judged = _judge(_simulate(args.out, seed, None, 0.0), cfg, models)
         hours += DURATION_S / 3600
         line = []
@@ -102,7 +113,7 @@ def main() -> int:
             line.append(f"{name} {s['verdict']} (level {s['max_level'] or 0:.2f})")
         print(f"normal seed {seed}: " + ", ".join(line), flush=True)
     print(f"\nnormal: {hours:.1f} h per loop")
-    for name in loops:
+    for name in loops if hours else ():
         print(
             f"  {name}: {alarms[name]} runs with an alarm ({alarms[name] / hours:.2f}/h), "
             f"{sensor[name]} with a sensor finding"
@@ -110,7 +121,7 @@ def main() -> int:
     print()
     for severity in args.severity:
         for fault in FAULTS:
-            for seed in _seeds(args.faulty):
+            for seed in args.faulty:
                 judged = _judge(_simulate(args.out, seed, fault, severity), cfg, models)
                 raised = [
                     f"{n} from {s['first_alarm_t']:.0f} s" for n, s in judged.items() if s["alarm"]
