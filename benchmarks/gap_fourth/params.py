@@ -32,6 +32,14 @@ def nominal() -> np.ndarray:
     """The nominal parameter vector (SI): the reference machine's values where the docs
     give them, this plant's own base dynamics around them."""
     p = np.zeros(pl.N_PARAMS)
+    _oil_and_valve(p)
+    _pump(p)
+    _cylinder_and_boom(p)
+    _engine_and_oil(p)
+    return p
+
+
+def _oil_and_valve(p: np.ndarray) -> None:
     p[pl.RHO] = 870.0
     p[pl.BETA0] = 1.5e9
     p[pl.WAL_A], p[pl.WAL_B] = walther(46.0, 6.8)
@@ -50,6 +58,9 @@ def nominal() -> np.ndarray:
     p[pl.DP_REG] = 0.2 * BAR
     p[pl.CLEAR_G] = math.pi * 0.016 * (2e-6) ** 3 / 12.0  # 16 mm spool, 2 um clearance
     p[pl.CLEAR_L0] = 1e-3
+
+
+def _pump(p: np.ndarray) -> None:
     # pump: 11 cm^3/rev, compensator 190-200 bar through its own spool and servo piston
     p[pl.D_MAX] = 11e-6 / (2.0 * math.pi)
     p[pl.PC_START], p[pl.PC_FULL] = 190.0 * BAR, 200.0 * BAR
@@ -62,6 +73,9 @@ def nominal() -> np.ndarray:
     p[pl.RELIEF_CRACK], p[pl.RELIEF_FULL] = 210.0 * BAR, 220.0 * BAR
     p[pl.RELIEF_Q] = 40.0 * LPM
     p[pl.V_PUMP] = 0.5e-3
+
+
+def _cylinder_and_boom(p: np.ndarray) -> None:
     p[pl.A_CAP] = math.pi / 4.0 * 0.063**2
     p[pl.A_ROD] = p[pl.A_CAP] - math.pi / 4.0 * 0.036**2
     p[pl.STROKE] = 0.5
@@ -88,6 +102,9 @@ def nominal() -> np.ndarray:
     p[pl.RETURN_TAU] = 0.005
     p[pl.AIR_TAU_D], p[pl.AIR_TAU_R], p[pl.AIR_BUNSEN] = 1.5, 0.2, 0.09
     p[pl.HOSE_TAU], p[pl.HOSE_PUMP_SHARE] = 0.3, 0.5
+
+
+def _engine_and_oil(p: np.ndarray) -> None:
     # engine: droop governor, 2240 rpm at no load, 2150 rpm at 60 N m; 3 cylinders
     p[pl.J_ENG] = 0.25
     p[pl.W_NOLOAD], p[pl.W_FULLLOAD] = 2240.0 * RPM, 2150.0 * RPM
@@ -96,7 +113,6 @@ def nominal() -> np.ndarray:
     # oil heat balance: 35 kJ/K, a thermostat opening the cooler at 45-50 degC
     p[pl.C_TH], p[pl.HA0], p[pl.HA_COOL], p[pl.T_THERMO] = 35e3, 30.0, 400.0, 45.0
     p[pl.T_AMB] = 20.0
-    return p
 
 
 # The tolerances: (name, parameter indices, share of the class's band). Masses, gravity
