@@ -24,8 +24,8 @@ from benchmarks.gap_fourth import effects
 from benchmarks.gap_fourth.generate import refuse_blind
 
 
-def diagnose(out: Path, name: str) -> dict[str, Any]:
-    """One diagnosis (cached): the gap JSON (or None) with its exit code and CPU."""
+def diagnose(out: Path, name: str, monitor: str) -> dict[str, Any]:
+    """One diagnosis (cached): its exit code, CPU and the `monitor` revision that ran it."""
     gap_dir = out / "gap"
     res, meta = gap_dir / f"{name}.json", gap_dir / f"{name}.run.json"
     if meta.exists():
@@ -39,7 +39,7 @@ def diagnose(out: Path, name: str) -> dict[str, Any]:
         _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
     run = {"name": name, "exit": proc.returncode, "wall_s": round(time.monotonic() - t0, 2),
-           "cpu_s": round(usage.ru_utime + usage.ru_stime, 2)}
+           "cpu_s": round(usage.ru_utime + usage.ru_stime, 2), "monitor": monitor}
     if tmp.exists():
         tmp.replace(res)
     meta.write_text(json.dumps(run) + "\n")
@@ -110,6 +110,7 @@ def summarise(rows: list[dict], runs: list[dict]) -> dict[str, Any]:
         "worn_pump_cause_wear": _frac(worn, "cause_wear"),
         "median_cpu_s": round(statistics.median(cpu), 1) if cpu else None,
         "failed": [r["name"] for r in runs if r["exit"] != 0],
+        "monitor_revisions": sorted({str(r.get("monitor")) for r in runs}),
     }
 
 
@@ -120,14 +121,17 @@ def which_monitor() -> dict[str, str]:
                           check=False).stdout.strip()
     git = ["git", "-C", path or ".", "describe", "--always", "--dirty"]
     rev = subprocess.run(git, capture_output=True, text=True, check=False).stdout.strip()
-    return {"python": sys.executable, "monitor": path, "git": rev or "not in a git tree"}
+    last = ["git", "-C", path or ".", "log", "-1", "--format=%h %cs", "--", "."]
+    changed = subprocess.run(last, capture_output=True, text=True, check=False).stdout.strip()
+    return {"python": sys.executable, "monitor": path, "git": rev or "not in a git tree",
+            "monitor_last_change": changed or "unknown"}
 
 
 def markdown(summary: dict[str, Any], rows: list[dict], meta: dict[str, Any]) -> str:
     s = summary
     lines = [f"# monitor gap on the fourth plant, seed {meta['seed']} ({meta['set']})", "",
-             f"monitor: {meta['which']['monitor']} ({meta['which']['git']}); "
-             f"load {meta['load']}", "",
+             f"monitor: {meta['which']['monitor']} ({meta['which']['git']}; monitor/ last "
+             f"changed in {meta['which']['monitor_last_change']}); load {meta['load']}", "",
              f"- single effects top-1: {s['single_effects']['right']}/{s['single_effects']['of']}"
              f" ({s['single_effects']['pct']} %)",
              f"- healthy `none`: {s['healthy_none']}",
@@ -136,7 +140,8 @@ def markdown(summary: dict[str, Any], rows: list[dict], meta: dict[str, Any]) ->
              f"{s['outside_unexplained_right_mechanism']}",
              f"- worn pump (warm-up) named pump leakage, not viscosity: "
              f"{s['worn_pump_leak_not_viscosity']} (cause wear: {s['worn_pump_cause_wear']})",
-             f"- median CPU per diagnosis: {s['median_cpu_s']} s", "",
+             f"- median CPU per diagnosis: {s['median_cpu_s']} s",
+             f"- diagnosed by: {', '.join(s['monitor_revisions'])}", "",
              "| family | right |", "|---|---|"]
     lines += [f"| {e} | {v} |" for e, v in s["families"].items()]
     lines += ["", "| recording | effect | band | RodPos | warm-up | expected | verdict | "
@@ -168,9 +173,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     (a.out / "gap").mkdir(exist_ok=True)
     entries = key["recordings"]
+    which = which_monitor()
+    rev = f"{which['git']} (monitor/ {which['monitor_last_change']})"
     with ThreadPoolExecutor(max(a.jobs, 1)) as pool:
         runs = []
-        for i, run in enumerate(pool.map(lambda e: diagnose(a.out, e["name"]), entries), 1):
+        for i, run in enumerate(pool.map(lambda e: diagnose(a.out, e["name"], rev), entries), 1):
             runs.append(run)
             print(f"\r{i}/{len(entries)} diagnosed", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
@@ -178,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     for e in entries:
         res = a.out / "gap" / f"{e['name']}.json"
         rows.append(judge(e, json.loads(res.read_text()) if res.exists() else None))
-    meta = {"seed": key["seed"], "set": key["set"], "which": which_monitor(),
+    meta = {"seed": key["seed"], "set": key["set"], "which": which,
             "load": " ".join(f"{x:.1f}" for x in os.getloadavg())}
     summary = summarise(rows, runs)
     a.json.write_text(json.dumps({"meta": meta, "summary": summary, "recordings": rows,
