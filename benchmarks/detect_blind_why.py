@@ -12,6 +12,16 @@ below), and each share is its sum over the window / the window's sum.  With each
 payload, operator style and oil temperatures from the key: what the commissioning run did
 not show.  Lives apart from benchmarks/detect_blind (written without our code), because it
 reads the monitor's internals.
+
+    python -m benchmarks.detect_blind_why --work W/s3 --separation [--md sep.md]
+
+asks instead whether any threshold could have told the faults from the normal logs: per
+machine, the largest level (each statistic / its threshold, as the detector compares with
+1) of any of its normal logs, against each fault run's largest level after its onset.  A
+run above every normal log would be detected without a false alarm by some threshold of
+that machine; one below is missed by every threshold that keeps the normal logs quiet, so
+no choice of threshold (per machine, per regime or cross-fitted) detects it: the residual
+has to change.  Runs never judged after their onset count as not separable.
 """
 
 from __future__ import annotations
@@ -49,21 +59,31 @@ def window_shares(
     return out / total if total > 0 else out
 
 
-def _peak(work: Path, entry: dict) -> dict | None:
-    """The log's peak J / threshold, its time and the window's shares; None when it never
-    judged a full window."""
+def _detect(work: Path, entry: dict):  # noqa: ANN202 - (model, recording, Detection)
+    """The log run through the monitor's own detector with its machine's scored model."""
     from monitor.config.settings import load_config
     from monitor.detection.offline import detect
     from monitor.io.csvio import read_csv
-    from monitor.model.bias import HOLD_PCT
     from monitor.model.modelfile import load_model
-    from monitor.model.residual import J, leave_out_stops
 
-    machine_dir = "/".join(entry["path"].split("/")[:3])
-    model = load_model(work / "models" / (machine_dir.replace("/", "_") + ".npz"))
+    model = load_model(work / "models" / (machine_of(entry).replace("/", "_") + ".npz"))
     rec = read_csv(work / "data" / entry["path"])
     cfg = load_config()
-    det = detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+    return model, rec, detect(model, rec, cfg.alarm, cfg.horizon, gating=cfg.gating)
+
+
+def machine_of(entry: dict) -> str:
+    """``types/pm15/pm15_m0`` of a key entry's path."""
+    return "/".join(entry["path"].split("/")[:3])
+
+
+def _peak(work: Path, entry: dict) -> dict | None:
+    """The log's peak J / threshold, its time and the window's shares; None when it never
+    judged a full window."""
+    from monitor.model.bias import HOLD_PCT
+    from monitor.model.residual import J, leave_out_stops
+
+    model, rec, det = _detect(work, entry)
     if det.level is None or not np.isfinite(det.level).any():
         return None
     k = int(np.nanargmax(det.level))
@@ -119,6 +139,65 @@ def table(found: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def largest_level(level: np.ndarray | None, t_s: np.ndarray, from_s: float) -> float | None:
+    """The largest finite level at or after ``from_s`` (seconds from the log's start); None
+    when nothing there was judged."""
+    if level is None:
+        return None
+    lv = np.asarray(level, dtype=np.float64)[np.asarray(t_s) >= from_s]
+    lv = lv[np.isfinite(lv)]
+    return float(lv.max()) if lv.size else None
+
+
+def separable(normal: list[float | None], fault: float | None) -> bool:
+    """A fault run some threshold tells from every normal log of its machine: its largest
+    level after the onset above every normal log's largest (never judged: not separable)."""
+    top = max((v for v in normal if v is not None), default=0.0)
+    return fault is not None and fault > top
+
+
+def separation(work: Path, tname: str | None) -> dict[str, dict]:
+    """Per machine: each normal log's and each fault run's largest level (fault runs after
+    their onset), by log name."""
+    key = json.loads((work / "data" / "key.json").read_text())
+    out: dict[str, dict] = {}
+    for entry in key["files"]:
+        kind = entry["kind"]
+        if kind not in ("normal", "fault") or (tname and f"/{tname}/" not in f"/{entry['path']}"):
+            continue
+        _model, rec, det = _detect(work, entry)
+        t_s = rec.t - rec.t[0]
+        onset = float(entry.get("onset_s", 0.0)) if kind == "fault" else 0.0
+        name = Path(entry["path"]).stem
+        logs = out.setdefault(machine_of(entry), {"normal": {}, "fault": {}})
+        logs[kind][name] = (entry, largest_level(det.level, t_s, onset))
+    return out
+
+
+def separation_table(found: dict[str, dict]) -> str:
+    """One row per fault run: its machine's largest normal level, its own after the onset,
+    and whether a threshold could separate them; then the count per type and severity."""
+    lines = [
+        "| machine | largest normal (log) | fault run | largest after onset | separable |",
+        "|---|---|---|---|---|",
+    ]
+    count: dict[tuple[str, float], list[bool]] = {}
+    for machine, logs in sorted(found.items()):
+        normal = {n: v for n, (_e, v) in logs["normal"].items()}
+        judged = {n: v for n, v in normal.items() if v is not None}
+        top = max(judged, key=judged.__getitem__) if judged else None
+        top_cell = f"{judged[top]:.2f} ({top})" if top else "none judged"
+        for name, (entry, v) in sorted(logs["fault"].items()):
+            ok = separable(list(normal.values()), v)
+            count.setdefault((machine.split("/")[1], entry["severity"]), []).append(ok)
+            cell = "not judged" if v is None else f"{v:.2f}"
+            lines.append(f"| {machine} | {top_cell} | {name} | {cell} | {'yes' if ok else 'no'} |")
+    lines += ["", "| type | severity | separable |", "|---|---|---|"]
+    for (t, sev), oks in sorted(count.items()):
+        lines.append(f"| {t} | {sev:g} | {sum(oks)}/{len(oks)} |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m benchmarks.detect_blind_why", description=__doc__.split("\n\n")[0]
@@ -126,15 +205,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--work", type=Path, required=True, help="a scored seed's --work folder")
     ap.add_argument("--type", dest="tname", help="pm05 or pm15 (default: both)")
     ap.add_argument("--md", type=Path, help="write the table here (default: stdout)")
+    ap.add_argument(
+        "--separation",
+        action="store_true",
+        help="whether any threshold tells each fault run from its machine's normal logs",
+    )
     args = ap.parse_args(argv)
     if not (args.work / "data" / "key.json").exists():
         print(f"error: {args.work}: no data/key.json (score this seed first)", file=sys.stderr)
         return 2
+    if args.separation:
+        return _write(separation_table(separation(args.work, args.tname)), args.md)
     found = rows(args.work, args.tname)
     what = f" of type {args.tname}" if args.tname else ""
     text = table(found) if found else f"no normal log{what} in {args.work} alarmed\n"
-    if args.md:
-        args.md.write_text(text)
+    return _write(text, args.md)
+
+
+def _write(text: str, md: Path | None) -> int:
+    if md:
+        md.write_text(text)
     else:
         print(text, end="")
     return 0

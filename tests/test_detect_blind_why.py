@@ -1,12 +1,19 @@
 """benchmarks.detect_blind_why: J's window at a false alarm's peak split by output and spool
-regime, against shares worked by hand and J itself."""
+regime, against shares worked by hand and J itself; whether any threshold separates a fault
+run from its machine's normal logs."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from benchmarks.detect_blind_why import main, window_shares
+from benchmarks.detect_blind_why import (
+    largest_level,
+    main,
+    separable,
+    separation_table,
+    window_shares,
+)
 from monitor.model.residual import window_j
 
 # Two outputs; a NaN pauses J's window (sample 2 is not judged).  Lever: raise, lower, and
@@ -52,3 +59,50 @@ def test_no_alarm_is_said(tmp_path, capsys) -> None:
     summary.write_text(json.dumps({"alarm": False}))
     assert main(["--work", str(tmp_path)]) == 0
     assert capsys.readouterr().out == f"no normal log in {tmp_path} alarmed\n"
+
+
+def test_largest_level_after_the_onset() -> None:
+    """Only what the detector judged at or after the onset counts: 3.0 at 0 s is before it,
+    NaN (not judged) is skipped; nothing judged after it is None, never 0."""
+    level = np.array([3.0, np.nan, 0.5, 0.7, np.nan])
+    t = np.arange(5.0)
+    assert largest_level(level, t, 2.0) == 0.7
+    assert largest_level(level, t, 0.0) == 3.0
+    assert largest_level(level, t, 4.0) is None
+    assert largest_level(None, t, 0.0) is None
+
+
+def test_separable_worked_by_hand() -> None:
+    """Above every judged normal log is separable; equal to the largest is not (no threshold
+    lies strictly between); a run never judged is not; with no normal log judged any judged
+    run is."""
+    normal = [0.4, None, 0.9]
+    assert separable(normal, 1.0)
+    assert not separable(normal, 0.9)
+    assert not separable(normal, 0.5)
+    assert not separable(normal, None)
+    assert separable([None, None], 0.1)
+
+
+def test_separation_table_counts_by_type_and_severity() -> None:
+    """Two machines: pm05's normal logs reach 1.2, its faults 1.5 (yes) and 0.8 (no); pm15's
+    reach 0.6 and its one fault was not judged (no): pm05 0.3 1/1, pm05 0.5 0/1, pm15 0.3
+    0/1."""
+
+    def e(sev: float) -> dict:
+        return {"severity": sev}
+
+    found = {
+        "types/pm05/pm05_m0": {
+            "normal": {"n000": (e(0.0), 1.2), "n001": (e(0.0), None)},
+            "fault": {"piston_wear_0.30_00": (e(0.3), 1.5), "spool_wear_0.50_00": (e(0.5), 0.8)},
+        },
+        "types/pm15/pm15_m0": {
+            "normal": {"n000": (e(0.0), 0.6)},
+            "fault": {"spool_stroke_0.30_00": (e(0.3), None)},
+        },
+    }
+    text = separation_table(found)
+    assert "| types/pm05/pm05_m0 | 1.20 (n000) | piston_wear_0.30_00 | 1.50 | yes |" in text
+    assert "| types/pm15/pm15_m0 | 0.60 (n000) | spool_stroke_0.30_00 | not judged | no |" in text
+    assert text.endswith("| pm05 | 0.3 | 1/1 |\n| pm05 | 0.5 | 0/1 |\n| pm15 | 0.3 | 0/1 |\n")
