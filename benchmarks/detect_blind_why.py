@@ -21,7 +21,10 @@ machine, the largest level (each statistic / its threshold, as the detector comp
 run above every normal log would be detected without a false alarm by some threshold of
 that machine; one below is missed by every threshold that keeps the normal logs quiet, so
 no choice of threshold (per machine, per regime or cross-fitted) detects it: the residual
-has to change.  Runs never judged after their onset count as not separable.
+has to change.  Runs never judged after their onset count as not separable.  "By regime"
+asks the same of J's window sum split by each sample's regime (J = J_hold + J_raise +
+J_lower, each / eps0): a run is separable so when one part after its onset exceeds that
+part in every normal log, as thresholds per regime would judge it.
 """
 
 from __future__ import annotations
@@ -156,21 +159,58 @@ def separable(normal: list[float | None], fault: float | None) -> bool:
     return fault is not None and fault > top
 
 
+def regime_parts(
+    e: np.ndarray, spool_pct: np.ndarray, window_n: int, hold_pct: float = 5.0
+) -> np.ndarray:
+    """(regimes, samples): the part of J (eq. 9) each regime's samples contribute; the parts
+    add up to J, and a sample J does not judge (NaN) pauses every part's window alike."""
+    from monitor.model.residual import window_j
+
+    e = np.asarray(e, dtype=np.float64)
+    judged = np.isfinite(e).all(axis=1)
+    reg = regime_of(spool_pct, hold_pct)
+    parts = []
+    for r in range(len(REGIMES)):
+        part = e.copy()
+        part[judged & (reg != r)] = 0.0
+        parts.append(window_j(part, window_n))
+    return np.array(parts)
+
+
+def separable_by_regime(normal: list[list[float | None]], fault: list[float | None]) -> bool:
+    """Some regime's part of J after the onset above that part in every normal log."""
+    for r, v in enumerate(fault):
+        top = max((n[r] for n in normal if n[r] is not None), default=0.0)
+        if v is not None and v > top:
+            return True
+    return False
+
+
 def separation(work: Path, tname: str | None) -> dict[str, dict]:
-    """Per machine: each normal log's and each fault run's largest level (fault runs after
-    their onset), by log name."""
+    """Per machine: each normal log's and each fault run's largest level and largest part of
+    J / eps0 per regime (fault runs after their onset), by log name."""
+    from monitor.model.bias import HOLD_PCT
+    from monitor.model.residual import J, leave_out_stops
+
     key = json.loads((work / "data" / "key.json").read_text())
     out: dict[str, dict] = {}
     for entry in key["files"]:
         kind = entry["kind"]
         if kind not in ("normal", "fault") or (tname and f"/{tname}/" not in f"/{entry['path']}"):
             continue
-        _model, rec, det = _detect(work, entry)
+        model, rec, det = _detect(work, entry)
         t_s = rec.t - rec.t[0]
         onset = float(entry.get("onset_s", 0.0)) if kind == "fault" else 0.0
-        name = Path(entry["path"]).stem
+        j = J.get(model)
+        e = leave_out_stops(det.residual, rec) if j.stops else det.residual
+        parts = regime_parts(e, rec["SpoolCmd"], j.window_n, HOLD_PCT) / j.eps0
+        by_regime = [largest_level(p, t_s, onset) for p in parts]
         logs = out.setdefault(machine_of(entry), {"normal": {}, "fault": {}})
-        logs[kind][name] = (entry, largest_level(det.level, t_s, onset))
+        logs[kind][Path(entry["path"]).stem] = (
+            entry,
+            largest_level(det.level, t_s, onset),
+            by_regime,
+        )
     return out
 
 
@@ -178,23 +218,29 @@ def separation_table(found: dict[str, dict]) -> str:
     """One row per fault run: its machine's largest normal level, its own after the onset,
     and whether a threshold could separate them; then the count per type and severity."""
     lines = [
-        "| machine | largest normal (log) | fault run | largest after onset | separable |",
-        "|---|---|---|---|---|",
+        "| machine | largest normal (log) | fault run | largest after onset | separable "
+        "| by regime |",
+        "|---|---|---|---|---|---|",
     ]
-    count: dict[tuple[str, float], list[bool]] = {}
+    yes = {True: "yes", False: "no"}
+    count: dict[tuple[str, float], list[tuple[bool, bool]]] = {}
     for machine, logs in sorted(found.items()):
-        normal = {n: v for n, (_e, v) in logs["normal"].items()}
+        normal = {n: v for n, (_e, v, _p) in logs["normal"].items()}
+        parts = [p for _e, _v, p in logs["normal"].values()]
         judged = {n: v for n, v in normal.items() if v is not None}
         top = max(judged, key=judged.__getitem__) if judged else None
         top_cell = f"{judged[top]:.2f} ({top})" if top else "none judged"
-        for name, (entry, v) in sorted(logs["fault"].items()):
-            ok = separable(list(normal.values()), v)
+        for name, (entry, v, p) in sorted(logs["fault"].items()):
+            ok = (separable(list(normal.values()), v), separable_by_regime(parts, p))
             count.setdefault((machine.split("/")[1], entry["severity"]), []).append(ok)
             cell = "not judged" if v is None else f"{v:.2f}"
-            lines.append(f"| {machine} | {top_cell} | {name} | {cell} | {'yes' if ok else 'no'} |")
-    lines += ["", "| type | severity | separable |", "|---|---|---|"]
+            lines.append(
+                f"| {machine} | {top_cell} | {name} | {cell} | {yes[ok[0]]} | {yes[ok[1]]} |"
+            )
+    lines += ["", "| type | severity | separable | by regime |", "|---|---|---|---|"]
     for (t, sev), oks in sorted(count.items()):
-        lines.append(f"| {t} | {sev:g} | {sum(oks)}/{len(oks)} |")
+        n, a, b = len(oks), sum(o[0] for o in oks), sum(o[1] for o in oks)
+        lines.append(f"| {t} | {sev:g} | {a}/{n} | {b}/{n} |")
     return "\n".join(lines) + "\n"
 
 

@@ -10,7 +10,9 @@ import pytest
 from benchmarks.detect_blind_why import (
     largest_level,
     main,
+    regime_parts,
     separable,
+    separable_by_regime,
     separation_table,
     window_shares,
 )
@@ -84,25 +86,58 @@ def test_separable_worked_by_hand() -> None:
     assert separable([None, None], 0.1)
 
 
+def test_regime_parts_worked_by_hand() -> None:
+    """N = 2, the window ending at sample 4 (judged samples 1, 3, 4; e^2 [0, 4] lower,
+    [1, 1] and [9, 0] holds) over 3 samples x 2 outputs: hold 11/6, raise 0, lower 4/6,
+    adding up to J = 15/6; sample 2 (not judged) is NaN in every part."""
+    parts = regime_parts(E, SPOOL, 2)
+    np.testing.assert_allclose(parts[:, 4], [11.0 / 6.0, 0.0, 4.0 / 6.0], rtol=1e-12)
+    np.testing.assert_allclose(parts.sum(axis=0), window_j(E, 2), rtol=1e-12)
+    assert np.isnan(parts[:, 2]).all()
+
+
+def test_separable_by_regime_worked_by_hand() -> None:
+    """Normal logs reach hold 0.5, raise 1.0, lower never judged: a run at raise 0.9 and
+    hold 0.6 is separable by its hold part (above 0.5), one at hold 0.4 and raise 1.0 is not,
+    any judged lower part is (no normal log judged there)."""
+    normal = [[0.5, 0.2, None], [0.1, 1.0, None]]
+    assert separable_by_regime(normal, [0.6, 0.9, None])
+    assert not separable_by_regime(normal, [0.4, 1.0, None])
+    assert separable_by_regime(normal, [None, None, 0.01])
+    assert not separable_by_regime(normal, [None, None, None])
+
+
 def test_separation_table_counts_by_type_and_severity() -> None:
-    """Two machines: pm05's normal logs reach 1.2, its faults 1.5 (yes) and 0.8 (no); pm15's
-    reach 0.6 and its one fault was not judged (no): pm05 0.3 1/1, pm05 0.5 0/1, pm15 0.3
-    0/1."""
+    """Two machines: pm05's normal logs reach 1.2 (hold 1.0, raise 0.3), its faults 1.5 (yes,
+    and by its hold part 1.4) and 0.8 (no; by regime yes, raise 0.5 > 0.3); pm15's reach
+    0.6 and its one fault was not judged (no, no): pm05 0.3 1/1 1/1, pm05 0.5 0/1 1/1, pm15
+    0.3 0/1 0/1."""
 
     def e(sev: float) -> dict:
         return {"severity": sev}
 
     found = {
         "types/pm05/pm05_m0": {
-            "normal": {"n000": (e(0.0), 1.2), "n001": (e(0.0), None)},
-            "fault": {"piston_wear_0.30_00": (e(0.3), 1.5), "spool_wear_0.50_00": (e(0.5), 0.8)},
+            "normal": {
+                "n000": (e(0.0), 1.2, [1.0, 0.3, 0.1]),
+                "n001": (e(0.0), None, [None, None, None]),
+            },
+            "fault": {
+                "piston_wear_0.30_00": (e(0.3), 1.5, [1.4, 0.1, 0.0]),
+                "spool_wear_0.50_00": (e(0.5), 0.8, [0.2, 0.5, 0.1]),
+            },
         },
         "types/pm15/pm15_m0": {
-            "normal": {"n000": (e(0.0), 0.6)},
-            "fault": {"spool_stroke_0.30_00": (e(0.3), None)},
+            "normal": {"n000": (e(0.0), 0.6, [0.3, 0.2, 0.1])},
+            "fault": {"spool_stroke_0.30_00": (e(0.3), None, [None, None, None])},
         },
     }
     text = separation_table(found)
-    assert "| types/pm05/pm05_m0 | 1.20 (n000) | piston_wear_0.30_00 | 1.50 | yes |" in text
-    assert "| types/pm15/pm15_m0 | 0.60 (n000) | spool_stroke_0.30_00 | not judged | no |" in text
-    assert text.endswith("| pm05 | 0.3 | 1/1 |\n| pm05 | 0.5 | 0/1 |\n| pm15 | 0.3 | 0/1 |\n")
+    assert "| types/pm05/pm05_m0 | 1.20 (n000) | piston_wear_0.30_00 | 1.50 | yes | yes |" in text
+    assert "| types/pm05/pm05_m0 | 1.20 (n000) | spool_wear_0.50_00 | 0.80 | no | yes |" in text
+    assert (
+        "| types/pm15/pm15_m0 | 0.60 (n000) | spool_stroke_0.30_00 | not judged | no | no |" in text
+    )
+    assert text.endswith(
+        "| pm05 | 0.3 | 1/1 | 1/1 |\n| pm05 | 0.5 | 0/1 | 1/1 |\n| pm15 | 0.3 | 0/1 | 0/1 |\n"
+    )
