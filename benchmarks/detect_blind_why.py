@@ -19,12 +19,12 @@ asks instead whether any threshold could have told the faults from the normal lo
 machine, the largest level (each statistic / its threshold, as the detector compares with
 1) of any of its normal logs, against each fault run's largest level after its onset.  A
 run above every normal log would be detected without a false alarm by some threshold of
-that machine; one below is missed by every threshold that keeps the normal logs quiet, so
-no choice of threshold (per machine, per regime or cross-fitted) detects it: the residual
-has to change.  Runs never judged after their onset count as not separable.  "By regime"
-asks the same of J's window sum split by each sample's regime (J = J_hold + J_raise +
-J_lower, each / eps0): a run is separable so when one part after its onset exceeds that
-part in every normal log, as thresholds per regime would judge it.
+that machine; one below is missed by every threshold on the level that keeps the normal
+logs quiet, however it is set (held out, cross-fitted, conformal, per machine): the
+statistic or the residual has to change.  Runs never judged after their onset count as
+not separable.  "By regime" asks the same of J's window sum split by each sample's regime
+(J = J_hold + J_raise + J_lower, each / eps0): a run is separable so when one part after
+its onset exceeds that part in every normal log, as thresholds per regime would judge it.
 """
 
 from __future__ import annotations
