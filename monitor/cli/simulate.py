@@ -33,7 +33,8 @@ effects (--effect NAME[:param=value,...], off unless given; repeatable):
 whole machine (--machine excavator4: boom, stick, bucket and swing on one load-sensing pump,
 every loop's signals of dbc/excavator4.dbc; --cycle mixed (default), truck-loading, lifting;
 dig-lift, truck loading whose lift starts at every phase of the stick's dig move's end,
-is for training data):
+and return-to-stop, truck loading whose return sets the boom down onto its bottom stop as
+the swing brakes, are for training data):
   --fault LOOP.FAULT:SEV[@ONSET_S[+RAMP_S]], LOOP.FAULT one of
     boom, stick, bucket: piston_wear, spool_stroke, spool_wear (as above)
     swing: spool_stroke, spool_wear, motor_leakage
@@ -90,7 +91,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "close on trapped pressures (the shipped model's training data); ramp: slow spool "
         "triangles; step: spool steps.  With --machine: mixed (default: blocks of both), "
         "truck-loading, lifting; dig-lift: truck loading whose lift starts at every phase of "
-        "the stick's dig move's end (training data)",
+        "the stick's dig move's end; return-to-stop: truck loading whose return sets the boom "
+        "down onto its bottom stop as the swing brakes (both training data)",
     )
     p.add_argument("--fault", action="append", default=[], metavar="NAME:SEV[@ONSET_S[+RAMP_S]]")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[:param=value,...]")

@@ -15,6 +15,17 @@ dig's end, and a lift ramp meeting a stick still open at 60-100 % comes about 2.
 hour of mixed work for 0.1-0.2 s: too rarely for a kernel model to learn it, often enough
 for one that has not to alarm (docs/benchmarks.md, the stick's bias statistic).
 
+``return-to-stop`` (``TRAINING_CYCLES``): truck loading whose return sets the boom down onto
+its bottom stop, feathered at 8-25 % over the last few percent of its stroke, the rod
+estimated to land 1.5 s before to 0.5 s after the swing back ends and the lever held 0.5 s
+less to 1.5 s more than that; a lift with long holds after one load in three.  A boom
+stalled on its stop puts its pressure on the load-sense line, and a swing braking then has
+its meter-in starved as its spool closes: the motor traps 72-76 bar (mixed work: 55-68 bar,
+71.5 at most in the hour the models were fitted on), and at rest the swing model must
+predict that held.  The swing model trained without this cycle predicted the trapped
+pressures drifting apart there, 0.3 bar a step, and B alarmed on a normal run
+(docs/benchmarks.md, the swing's bias statistic).
+
 The operator aims at rod positions by eye: each move's length comes from a rough speed
 (rated section flow x lever over the fed area, no flow sharing), so positions drift and now
 and then reach a stop, as in real work.  Returns a ``Recording`` with every loop's spool
@@ -35,9 +46,14 @@ from monitor.sim.whole.params import CYLINDERS, WholeMachine
 
 WHOLE_CYCLES = ("mixed", "truck-loading", "lifting")
 #: Cycles for training data only; kept apart from WHOLE_CYCLES, which fleets draw from.
-TRAINING_CYCLES = ("dig-lift",)
+TRAINING_CYCLES = ("dig-lift", "return-to-stop")
 #: Where the lift starts in ``dig-lift``, s after the stick's dig move ends.
 DIG_LIFT_OFFSET_S = (-1.5, 0.3)
+#: ``return-to-stop``: when the boom's rod is estimated to land on its bottom stop, s after
+#: the swing back ends, and how long the lever stays open after that (negative: released
+#: before; the estimate is rough, so the rod lands anywhere around it).
+STOP_LANDING_S = (-1.5, 0.5)
+STOP_HOLD_S = (-0.5, 1.5)
 SPOOL_SIGNALS = {
     "boom": "SpoolCmd",
     "stick": "Stick_SpoolCmd",
@@ -85,6 +101,25 @@ class _Operator:
         self.spool["swing"][self._span(start, dur)] = math.copysign(amp, angle_rad)
         return start + dur
 
+    def land(self, loop: str, earliest: float, land_at: float, amp: float, hold_s: float) -> float:
+        """Lower a cylinder onto its bottom stop as an operator sets it down: at ``amp`` to
+        a few percent of its stroke above, then feathered at 8-25 % so the rod is estimated
+        to land at ``land_at`` (starting no earlier than ``earliest``), the lever held
+        ``hold_s`` beyond; return the lever's release.  Feathered, the pump rises to the
+        stall on the stop over a tenth to half a second, not at once."""
+        r = self.rng
+        rate = self.m.rated_flow_m3_s(loop) / self.m.area_b_m2(loop)  # m/s at a full lever
+        feather_pct = r.uniform(8.0, 25.0)
+        near = min(self.pos[loop], r.uniform(0.02, 0.1) * self.m.stroke_m(loop))
+        feather_s = near / (feather_pct / 100.0 * rate)
+        fast_s = (self.pos[loop] - near) / (amp / 100.0 * rate)
+        start = max(earliest, land_at - feather_s - fast_s)
+        self.spool[loop][self._span(start, fast_s)] = -amp
+        end = max(start + fast_s + 0.4, start + fast_s + feather_s + hold_s)
+        self.spool[loop][self._span(start + fast_s, end - start - fast_s)] = -feather_pct
+        self.pos[loop] = 0.0
+        return end
+
     def set_payload(self, start: float, dur: float, kg: float) -> None:
         span = self._span(start, dur)
         k = span.stop - span.start
@@ -96,9 +131,13 @@ class _Operator:
     def lag(self) -> float:
         return float(self.rng.uniform(0.0, 0.8))
 
-    def truck_loading(self, lift_after_stick_s: tuple[float, float] | None = None) -> None:
+    def truck_loading(
+        self, lift_after_stick_s: tuple[float, float] | None = None, to_stop: bool = False
+    ) -> None:
         """One truck load; ``lift_after_stick_s`` starts the lift that long after the stick's
-        dig move ends (drawn in the range) instead of within 0.3 s of the whole dig's end."""
+        dig move ends (drawn in the range) instead of within 0.3 s of the whole dig's end;
+        ``to_stop`` lowers the boom onto its bottom stop on the return (``STOP_LANDING_S``,
+        ``STOP_HOLD_S``) instead of to 10-30 % of its stroke."""
         r = self.rng
         t = self.t
         # Dig: stick in and bucket curl against the soil while the bucket fills.
@@ -124,7 +163,11 @@ class _Operator:
         # Return: swing back with the boom lowering.
         t = max(end_s, end_k) + r.uniform(0.0, 0.5)
         end_w = self.swing(t, -angle, r.uniform(60, 100))
-        end_b = self.move("boom", t + self.lag(), r.uniform(0.1, 0.3), r.uniform(40, 90))
+        if to_stop:
+            land_at = end_w + r.uniform(*STOP_LANDING_S)
+            end_b = self.land("boom", t, land_at, r.uniform(40, 90), r.uniform(*STOP_HOLD_S))
+        else:
+            end_b = self.move("boom", t + self.lag(), r.uniform(0.1, 0.3), r.uniform(40, 90))
         self.t = max(end_w, end_b) + r.uniform(0.3, 3.0)
 
     def lifting(self) -> None:
@@ -158,6 +201,10 @@ def make_whole_cycle(cycle: str, duration_s: float, seed: int, machine: WholeMac
             op.lifting()
         elif cycle == "dig-lift":
             op.truck_loading(lift_after_stick_s=DIG_LIFT_OFFSET_S)
+        elif cycle == "return-to-stop":
+            op.truck_loading(to_stop=True)
+            if rng.random() < 1 / 3:
+                op.lifting()
         else:  # mixed: a few truck loads, now and then a lift
             for _ in range(int(rng.integers(2, 8))):
                 op.truck_loading()
