@@ -12,6 +12,12 @@ and open, its pressures steady, so the model must predict them steady until the 
 closes.  The stick model trained without the ``dig-lift`` cycle had seen that combination
 three times, each time as the spool closed and PA collapsed, and predicted the collapse at
 10 bar a step on a stick that had not closed yet: B alarmed on two normal runs.
+
+And a swing stopped while the boom stalled on its bottom stop keeps what its motor trapped:
+the stalled boom starves the swing's meter-in as its spool closes, and the motor holds 72-76
+bar at rest (mixed work: 55-68).  The swing model trained without the ``return-to-stop``
+cycle predicted those pressures drifting apart by 0.3 bar a step, and B alarmed at the end
+of a minute's rest (normal run 23000022 of seed set 2, 2.98 x b0).
 """
 
 from __future__ import annotations
@@ -36,6 +42,11 @@ MAX_DRIFT_BAR = 0.1
 #: without the dig-lift cycle predicted the collapse that follows the spool's closing, 10-12
 #: bar a step, there.
 MAX_STEP_BAR = 2.0
+#: Largest predicted drift of the swing's trapped pressures at rest (bar per 10 ms step):
+#: half the simulator's pressure noise per step.  The swing model trained without the
+#: return-to-stop cycle predicted 0.29-0.31 there, and over a minute's rest B reached 2.98 x
+#: its threshold.
+MAX_SWING_DRIFT_BAR = 0.2
 
 
 def _loop_model(name: str = "boom"):
@@ -106,3 +117,33 @@ def test_the_shipped_stick_model_keeps_a_digging_stick_steady_while_the_boom_sta
         step = y_hat[ramp, outputs.index(name)] - rec[name][19:39]
         worst = step[np.argmax(np.abs(step))]
         assert abs(worst) < MAX_STEP_BAR, f"{name} predicted to move {worst:+.2f} bar/step"
+
+
+def _swing_at_rest(trapped_bar: float, oil_c: float, n: int = 300) -> Recording:
+    """The swing stopped, both motor ports holding ``trapped_bar`` with every spool closed
+    and the pump at its 20 bar standby (normal run 23000022, 545-600 s: 74.3-75.3 bar at
+    40.8 degC), with the simulator's sensor noise."""
+    rng = np.random.default_rng(0)
+    noise = rng.standard_normal((3, n))
+    cols = {
+        "SpoolCmd": np.zeros(n),
+        "PP": 20.0 + 0.3 * noise[0],
+        "PA": trapped_bar + 0.3 * noise[1],
+        "PB": trapped_bar + 0.3 * noise[2],
+        "QP": np.zeros(n),
+        "EngineSpeed": np.full(n, 2200.0),
+        "OilTemp": np.full(n, oil_c),
+    }
+    for other in ("boom", "stick", "bucket"):
+        cols[f"SpoolCmd@{other}"] = np.zeros(n)
+    return Recording(np.arange(n) * 0.01, cols, source="a swing at rest")
+
+
+def test_the_shipped_swing_model_keeps_what_a_swing_stopped_against_a_stalled_boom_trapped():
+    model = _loop_model("swing")
+    rec = _swing_at_rest(74.8, 40.8)
+    y_hat, _ = residual_series(model, rec, np.zeros(len(rec.t), dtype=bool))
+    outputs = list(model.spec.outputs)
+    for name in ("PA", "PB"):
+        drift = np.nanmean(y_hat[1:, outputs.index(name)] - rec[name][:-1])
+        assert abs(drift) < MAX_SWING_DRIFT_BAR, f"{name} predicted to move {drift:+.3f} bar/step"
