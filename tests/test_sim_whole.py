@@ -267,6 +267,27 @@ def test_the_dig_lift_cycle_starts_the_lift_at_every_phase_of_the_stick_s_dig_en
     assert len(truck) > 25 and (truck > -0.3 - 0.02).all()
 
 
+def test_the_return_to_stop_cycle_feathers_the_boom_down_onto_its_stop(machine):
+    """`return-to-stop` (training data, not an operator's cycle) ends most boom lowerings
+    with the lever feathered at 8-25 % (the returns; a lift's lowering runs at 20-40 %);
+    truck loading's returns lower at 40-90 % and never feather."""
+    from monitor.sim.whole.cycles import TRAINING_CYCLES, WHOLE_CYCLES
+
+    assert "return-to-stop" in TRAINING_CYCLES and "return-to-stop" not in WHOLE_CYCLES
+
+    def last_levels(rec: Recording) -> np.ndarray:
+        """Each lowering's lever before its return (the return takes 0.5 s at most)."""
+        boom = rec["SpoolCmd"]
+        ends = np.flatnonzero(np.diff((boom < 0).astype(int)) == -1) + 1
+        return boom[ends - 51]
+
+    ours = last_levels(make_whole_cycle("return-to-stop", 600, 113, machine))
+    feathered = (ours >= -25.0) & (ours <= -8.0)
+    assert feathered.sum() >= 10 and feathered.mean() > 0.6
+    truck = last_levels(make_whole_cycle("truck-loading", 600, 113, machine))
+    assert len(truck) > 20 and (truck <= -40.0 + 1e-9).all()
+
+
 def _dbc_signals() -> list[str]:
     codec = FrameCodec.from_dbc(resource_path("dbc", "excavator4.dbc"))
     return [n for m in codec.messages.values() if m.name.startswith("HYD_") for n in m.signal_names]
