@@ -55,20 +55,29 @@ def _loop_model(name: str = "boom"):
     return load_model(loop.model)
 
 
-def _hold(pa_bar: float, pb_bar: float, oil_c: float, n: int = 300) -> Recording:
-    """The boom held with every spool closed and the pump at its 20 bar standby."""
+def _closed(
+    pa_bar: float, pb_bar: float, oil_c: float, others: tuple[str, ...], noise_bar: float, n: int
+) -> Recording:
+    """A loop held with every spool closed and the pump at its 20 bar standby; the pressure
+    readings with ``noise_bar`` of sensor noise (seeded)."""
+    noise = noise_bar * np.random.default_rng(0).standard_normal((3, n))
     cols = {
         "SpoolCmd": np.zeros(n),
-        "PP": np.full(n, 20.0),
-        "PA": np.full(n, pa_bar),
-        "PB": np.full(n, pb_bar),
+        "PP": 20.0 + noise[0],
+        "PA": pa_bar + noise[1],
+        "PB": pb_bar + noise[2],
         "QP": np.zeros(n),
         "EngineSpeed": np.full(n, 2200.0),
         "OilTemp": np.full(n, oil_c),
     }
-    for other in ("stick", "bucket", "swing"):
+    for other in others:
         cols[f"SpoolCmd@{other}"] = np.zeros(n)
-    return Recording(np.arange(n) * 0.01, cols, source="a held boom")
+    return Recording(np.arange(n) * 0.01, cols, source="a loop held closed")
+
+
+def _hold(pa_bar: float, pb_bar: float, oil_c: float, n: int = 300) -> Recording:
+    """The boom held with every spool closed and the pump at its 20 bar standby."""
+    return _closed(pa_bar, pb_bar, oil_c, ("stick", "bucket", "swing"), 0.0, n)
 
 
 # A hung load of 100-300 kg (the lifting cycle's) holds the boom's cap side at 60-110 bar
@@ -123,20 +132,7 @@ def _swing_at_rest(trapped_bar: float, oil_c: float, n: int = 300) -> Recording:
     """The swing stopped, both motor ports holding ``trapped_bar`` with every spool closed
     and the pump at its 20 bar standby (normal run 23000022, 545-600 s: 74.3-75.3 bar at
     40.8 degC), with the simulator's sensor noise."""
-    rng = np.random.default_rng(0)
-    noise = rng.standard_normal((3, n))
-    cols = {
-        "SpoolCmd": np.zeros(n),
-        "PP": 20.0 + 0.3 * noise[0],
-        "PA": trapped_bar + 0.3 * noise[1],
-        "PB": trapped_bar + 0.3 * noise[2],
-        "QP": np.zeros(n),
-        "EngineSpeed": np.full(n, 2200.0),
-        "OilTemp": np.full(n, oil_c),
-    }
-    for other in ("boom", "stick", "bucket"):
-        cols[f"SpoolCmd@{other}"] = np.zeros(n)
-    return Recording(np.arange(n) * 0.01, cols, source="a swing at rest")
+    return _closed(trapped_bar, trapped_bar, oil_c, ("boom", "stick", "bucket"), 0.3, n)
 
 
 def test_the_shipped_swing_model_keeps_what_a_swing_stopped_against_a_stalled_boom_trapped():
