@@ -21,7 +21,7 @@ estimated to land 1.5 s before to 0.5 s after the swing back ends and the lever 
 less to 1.5 s more than that; a lift with long holds after one load in three.  A boom
 stalled on its stop puts its pressure on the load-sense line, and a swing braking then has
 its meter-in starved as its spool closes: the motor traps 72-76 bar (mixed work: 55-68 bar,
-71.5 at most in the hour the models were fitted on), and at rest the swing model must
+71.5 at most in the 100 minutes the models were fitted on), and at rest the swing model must
 predict that held.  The swing model trained without this cycle predicted the trapped
 pressures drifting apart there, 0.3 bar a step, and B alarmed on a normal run
 (docs/benchmarks.md, the swing's bias statistic).
