@@ -95,7 +95,8 @@ def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Jud
     own = _own_signal(d, scores, paired, cal)
     if own is not None and own.named:
         say(f"sensor calibration judged on its own signal: {own.evidence()}")
-        d = Decision(sensorcal.NAME, None, scores.singles[0], own.share)
+        sensor = next(c for c in scores.singles if c.effects[0].name == sensorcal.NAME)
+        d = Decision(sensorcal.NAME, None, sensor, own.share)
     return Judged(
         decision=d, lag_check=lag_checked, absorbed=absorbed, noise_only=noise_only, own_signal=own
     )
@@ -104,18 +105,44 @@ def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Jud
 def _own_signal(
     d: Decision, scores: Scores, paired: Paired, cal: Calibrated
 ) -> sensorphysics.OwnSignal | None:
-    """An ``unexplained`` gap whose best single is a sensor calibration: that calibration
-    judged on the one signal it reads (``sensorphysics.own_signal``)."""
+    """An ``unexplained`` gap whose best single is a sensor calibration, or whose sensor
+    calibration is of a reading later than the others (``delays.split``; a lag or a slow
+    spool then ranks above it on that reading's timing): that calibration judged on the one
+    signal it reads, aligned by that signal's own delay (``sensorphysics.own_signal``)."""
     if d.verdict != "unexplained" or not scores.singles:
         return None
-    best = scores.singles[0]
-    if best.effects[0].name != sensorcal.NAME:
+    prep, base = cal.prep, scores.baseline
+    held = cal.readings.held(None).segments
+    lags = delays.delays_ms(prep, held, base.pred0)
+    sensor = _own_candidate(scores.singles, lags)
+    if sensor is None:
         return None
-    names = S.compared(cal.prep)
-    base = scores.baseline
+    signal = sensor.effects[0].labels["signal"]
+    names = S.compared(prep)
+    if signal not in names:
+        return None
+    ms = sensorphysics.aligned_ms(lags.get(signal))
+    before, after = base.nominal, paired.sums[sensor.name]
+    if ms:
+        ev = cal.readings.held(sensor.prep)
+        pred = ev.predict(sensor.factors, sensor.effects)
+        before = sensorphysics.aligned_sums(prep, held, base.pred0, signal, ms)
+        after = sensorphysics.aligned_sums(ev.prep, held, pred, signal, ms)
     return sensorphysics.own_signal(
-        best, names, base.nominal, paired.sums[best.name], paired.boot_idx, cal.floor
+        sensor, names, before, after, paired.boot_idx, cal.floor, aligned_ms=ms
     )
+
+
+def _own_candidate(singles: Sequence[Candidate], lags: dict[str, float | None]) -> Candidate | None:
+    """The sensor calibration single judged on its own signal: the best single, or one of
+    a reading the timing shows late (None: neither)."""
+    if singles[0].effects[0].name == sensorcal.NAME:
+        return singles[0]
+    sensor = next((c for c in singles if c.effects[0].name == sensorcal.NAME), None)
+    late = delays.split(lags)
+    if sensor is None or late is None or sensor.effects[0].labels["signal"] not in late.late:
+        return None
+    return sensor
 
 
 def check_cause(
