@@ -255,3 +255,23 @@ def test_a_pp_gain_beside_a_gap_no_sensor_error_of_pp_reaches_is_named_on_pp():
     check = rep["sensor_check"]
     assert check["own_signal_heldout_reduction"] >= 0.5 and check["at_bound"] is False
     assert "its own signal" in rep["mechanism"]["decided_by"]
+
+
+def test_a_pa_gain_on_a_late_pa_is_named_on_pa_once_its_delay_is_aligned():
+    # A PA transducer reading 6 % high and 9 bar low whose electronics deliver it 20 ms
+    # late (no other reading is late: the catalogue's sensor lag delays all four), beside
+    # the flow meter's slow ripple no effect holds.  Judged as it arrives, PA's own gap is
+    # half timing, which no gain or offset removes; aligned by PA's own delay, the gain and
+    # offset remove most of what is left.  On the code before, ``unexplained``.
+    rec = _recording([Effect.make("sensor_calibration", signal="PA", gain=1.06, offset=-9.0)], 47)
+    late = 2  # samples at 100 Hz: 20 ms
+    rec.columns["PA"] = np.concatenate([np.full(late, rec["PA"][0]), rec["PA"][:-late]])
+    rec.columns["QP"] = rec["QP"] + 3.0 * np.sin(2 * np.pi * 0.3 * rec.t)
+    rep = _report(rec)
+    assert rep["verdict"] == "sensor_calibration"
+    fitted = rep["params"]["sensor_calibration"]
+    assert set(fitted) == {"PA_gain", "PA_offset_bar"}
+    assert fitted["PA_gain"] == pytest.approx(1.06, abs=0.03)
+    check = rep["sensor_check"]
+    assert check["own_signal_aligned_ms"] == pytest.approx(20.0, abs=5.0)
+    assert check["own_signal_heldout_reduction"] >= 0.5 and check["own_signal_share"] >= 0.95

@@ -108,7 +108,8 @@ def _own_signal(
     """An ``unexplained`` gap whose best single is a sensor calibration, or whose sensor
     calibration is of a reading later than the others (``delays.split``; a lag or a slow
     spool then ranks above it on that reading's timing): that calibration judged on the one
-    signal it reads, aligned by that signal's own delay (``sensorphysics.own_signal``)."""
+    signal it reads, each of the simulator and the hypothesis aligned by its own delay
+    (``sensorphysics.own_signal``)."""
     if d.verdict != "unexplained" or not scores.singles:
         return None
     prep, base = cal.prep, scores.baseline
@@ -121,13 +122,11 @@ def _own_signal(
     names = S.compared(prep)
     if signal not in names:
         return None
-    ms = sensorphysics.aligned_ms(lags.get(signal))
-    before, after = base.nominal, paired.sums[sensor.name]
-    if ms:
-        ev = cal.readings.held(sensor.prep)
-        pred = ev.predict(sensor.factors, sensor.effects)
-        before = sensorphysics.aligned_sums(prep, held, base.pred0, signal, ms)
-        after = sensorphysics.aligned_sums(ev.prep, held, pred, signal, ms)
+    # Each of the calibrated simulator and the hypothesis aligned by its own delay.
+    ev = cal.readings.held(sensor.prep)
+    pred = ev.predict(sensor.factors, sensor.effects)
+    before, _ = sensorphysics.aligned_sums(prep, held, base.pred0, signal)
+    after, ms = sensorphysics.aligned_sums(ev.prep, held, pred, signal)
     return sensorphysics.own_signal(
         sensor, names, before, after, paired.boot_idx, cal.floor, aligned_ms=ms
     )

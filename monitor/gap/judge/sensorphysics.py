@@ -28,6 +28,7 @@ from monitor.gap.fit.candidates import Candidate
 from monitor.gap.fit.score import SegmentSums, gap, reduction, segment_sums
 from monitor.gap.fit.sensorterms import SensorTerm
 from monitor.gap.fit.terms import PlantTerm
+from monitor.gap.judge import delays
 from monitor.gap.judge.decide import EXPLAIN_MIN, SIGNIFICANT, boot_gain, gain_share
 from monitor.gap.judge.shrink import boot_reduction
 from monitor.gap.judge.suggest import Suggestions
@@ -92,8 +93,8 @@ class OwnSignal:
     reduction: float  # share of that signal's held-out gap the gain and offset remove
     share: float  # bootstrap resamples in which it removes EXPLAIN_MIN of it and gains
     at_bound: bool  # the gain or the offset at the catalogue's range
-    #: The signal's own delay against the calibrated simulator (ms), by which both were
-    #: aligned before comparing (0: not aligned).
+    #: The delay (ms) the sensor hypothesis's reading of the signal was aligned by before
+    #: comparing (``aligned_sums``; 0: not aligned).
     aligned_ms: float = 0.0
 
     @property
@@ -102,7 +103,7 @@ class OwnSignal:
 
     def evidence(self) -> str:
         late = (
-            f", once {self.signal} is read {self.aligned_ms:.0f} ms later as the recording reads it"
+            f", with {self.signal} read {self.aligned_ms:.0f} ms late as the recording reads it"
             if self.aligned_ms
             else ""
         )
@@ -145,7 +146,8 @@ def own_signal(
     PP reading 5.8 % high removed a third of the third plant's whole gap, most of PP's).
     Judged on the whole gap it was ``unexplained``; on its signal it is named, and the
     plant terms still get their say (``compare``).  ``nominal`` and ``after``: the held-out
-    sums, both with the signal read ``aligned_ms`` late (``aligned_sums``)."""
+    sums, each with the signal aligned by its own delay (``aligned_sums``), the hypothesis's
+    ``aligned_ms``."""
     effect = sensor.effects[0]
     signal = effect.labels["signal"]
     if signal == "RodPos" or signal not in names:
@@ -164,35 +166,23 @@ def own_signal(
     return OwnSignal(signal, red, share, at_bound, aligned_ms)
 
 
-#: A reading this late (ms) against the calibrated simulator is aligned before its gain and
-#: offset are judged on it (below: within a sample's jitter, nothing to align).
-ALIGN_MIN_MS = 5.0
-
-
-def aligned_ms(delay_ms: float | None) -> float:
-    """The delay (ms) a reading is aligned by before its gain and offset are judged: its
-    own delay against the calibrated simulator, 0 below ``ALIGN_MIN_MS`` or without one."""
-    return float(delay_ms) if delay_ms is not None and delay_ms >= ALIGN_MIN_MS else 0.0
-
-
 def aligned_sums(
     prep: Prepared,
     segments: Sequence[Segment],
     pred: dict[str, np.ndarray],
     signal: str,
-    delay_ms: float,
-) -> SegmentSums:
-    """The held-out sums of ``pred`` with ``signal`` read ``delay_ms`` late.
+) -> tuple[SegmentSums, float]:
+    """The held-out sums of ``pred`` with ``signal`` read as late as fits the recording best
+    (least squares, 0-60 ms: ``delays.fitted_ms``), and that delay (ms).
 
-    A late reading hides its calibration: on the third plant PA read 20 ms late, and a PA
-    gain of 1.063 with a -9.5 bar offset removed 49 % of PA's held-out gap, the rest its
-    timing (57 % aligned, in 96 % of resamples).  The delay comes from the correlation of
-    the signal's changes with the simulator's (``delays.delays_ms``), which neither a gain
-    nor an offset moves, and the calibrated simulator and the sensor hypothesis are read
-    through it alike: the sensor is judged on what its gain and offset explain, not on
-    when the signal arrives."""
-    term = SensorTerm("sensor_delay", signal, delay_ms)
-    return segment_sums(prep, segments, term.apply(prep, segments, pred) if delay_ms else pred)
+    A late reading hides its calibration: on the third plant PA read 14-20 ms late, and a
+    PA gain of 1.063 with a -9.5 bar offset (fitted 1.027, -4.2 bar) removed 49 % of PA's
+    held-out gap as it arrived, the rest its timing; each of the calibrated simulator and
+    the sensor hypothesis read at its own best delay, 63 % in every resample.  Each gets
+    the same one delay to fit, so the gain and offset are judged on what they add to it."""
+    ms = delays.fitted_ms(prep, segments, pred, [signal])[signal]
+    term = SensorTerm("sensor_delay", signal, ms)
+    return segment_sums(prep, segments, term.apply(prep, segments, pred) if ms else pred), ms
 
 
 def rod_evidence(effect: Effect, prep: Prepared) -> str:
