@@ -7,8 +7,10 @@ temperature (the same paths and knobs, ``FLAT_OIL``) and compares the two on the
 part under the block bootstrap, like an effect against the simulator it must beat.  It
 needs the oil temperature to move: over a warm-up from 20 to 55 degC an ISO VG 46 oil
 thins by a factor of five, so the two laws part by far more than the noise; on a warm
-machine whose oil stays within a few degrees they are one law, and the verdict says which
-recording would tell them apart.
+machine whose oil stays within a few degrees they are one law.  There what else a thinner
+oil changes decides, where the recording shows it: the rod's viscous friction falls with
+the viscosity, a worn pump leaves it alone (``judge/thinoil.py``).  Otherwise the verdict
+says which recording would tell the causes apart.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 from monitor.gap.diagnose.evaluate import score
 from monitor.gap.diagnose.records import Calibrated, Parts, Scores
 from monitor.gap.fit.candidates import Candidate, Member, default_member, fit_candidate
+from monitor.gap.judge import thinoil
 from monitor.gap.judge.decide import SIGNIFICANT, Decision, gain_share
 from monitor.gap.judge.where import scored_mask
 from monitor.sim.pack import viscosity_cst
@@ -58,6 +61,9 @@ class LeakCause:
     flat_share: float | None = None
     #: The oil temperature's 5th and 95th percentiles over the scored samples (degC).
     temps_c: tuple[float, float] | None = None
+    #: Where the span was too small: the rod's viscous friction against what the
+    #: configured oil allows (``judge/thinoil.py``; None: not read).
+    oil: thinoil.ThinOil | None = None
 
     def _nu_cst(self) -> np.ndarray | None:
         """The named oil's viscosity at the cold and the warm end (cSt)."""
@@ -87,7 +93,7 @@ class LeakCause:
     def cause(self) -> str | None:
         """``oil_viscosity`` or ``wear``; None: the recording cannot tell."""
         if self.flat_share is None:
-            return None
+            return NAME if self.oil is not None and self.oil.thin else None
         if self.flat_share >= SIGNIFICANT:
             return "wear"
         if self.flat_share <= 1.0 - SIGNIFICANT:
@@ -108,6 +114,11 @@ class LeakCause:
             out["flat_heldout_reduction"] = round(float(self.flat.heldout_reduction), 4)
             out["flat_better_share"] = round(self.flat_share, 3)
             out["flat_leak_lpm_per_100bar"] = round(self.flat.effects[0].params[self.path], 4)
+        if self.oil is not None:
+            out["oil_friction"] = self.oil.as_dict()
+            out["decided_by"] = "rod friction" if self.oil.thin else None
+        elif self.cause is not None:
+            out["decided_by"] = "oil temperature"
         if self.temps_c is not None:
             out["oil_temp_c"] = [round(t, 1) for t in self.temps_c]
             out["viscosity_ratio"] = round(float(self.viscosity_ratio or 1.0), 3)
@@ -154,10 +165,18 @@ class LeakCause:
 
     def evidence(self) -> str:
         """One line: what decided, or which recording would."""
+        if self.flat_share is None and self.cause == NAME:
+            assert self.oil is not None
+            return (
+                f"the oil temperature spans {self.span_c:.0f} degC, too little to follow the "
+                f"leak through it, but {self.oil.evidence()}: the oil explains the leak and "
+                "the friction together, a worn pump the leak only"
+            )
         if self.flat_share is None:
+            rod = f" ({self.oil.evidence()})" if self.oil is not None else ""
             return (
                 f"the oil temperature spans {self.span_c:.0f} degC: a leak that follows it "
-                "(viscosity) and one that does not (wear) look alike; a warm-up run (oil "
+                f"(viscosity) and one that does not (wear) look alike{rod}; a warm-up run (oil "
                 "from about 20 to 50 degC) would tell them apart"
             )
         pct, swing = 100 * self.flat_share, self._swing()
@@ -217,7 +236,8 @@ def check_leak(
     temps, path = oil_range_c(parts), main_path(chosen)
     span = temps[1] - temps[0] if temps is not None else 0.0
     if span < MIN_SPAN_C:
-        return LeakCause(path, span, chosen, temps_c=temps)
+        oil = thinoil.signature(cal.readings.prep, parts.segments, cal.fit_machine)
+        return LeakCause(path, span, chosen, temps_c=temps, oil=oil)
     member = chosen.members[0] if chosen.members else default_member(NAME)
     flat_m = flat_member(member)
     residual = cal.readings.fit(chosen.prep).residual

@@ -58,7 +58,7 @@ MIN_SAMPLES = 1000
 NAME = "cylinder_friction"
 #: Columns of the regression: gravity (N), its slope (N/mm), viscous friction (N s/m),
 #: Coulomb friction (N), mass (kg).
-_VISCOUS, _COULOMB = 2, 3
+VISCOUS, _COULOMB = 2, 3
 
 
 @dataclass(frozen=True)
@@ -140,28 +140,10 @@ def signature(
 ) -> FrictionSignature:
     """The friction the moving rod's measured force balance shows (``segments``: the
     bootstrap's blocks)."""
-    cyl = machine.cylinder
-    force = (prep.meas["PA"] * cyl.area_a_m2 - prep.meas["PB"] * cyl.area_b_m2) * BAR
-    v = rod_velocity(smooth_rod(prep.rod_mm))
-    a = np.gradient(v, SAMPLE_PERIOD_S)
-    x = prep.rod_mm
-    ok = (
-        prep.valid
-        & np.isfinite(force)
-        & (np.abs(v) >= MIN_SPEED_MM_S)
-        & (np.abs(a) <= MAX_ACCEL_MM_S2)
-        & (x > STOP_MARGIN_MM)
-        & (x < prep.stroke_mm - STOP_MARGIN_MM)
-    )
-    if prep.unscored is not None:
-        ok &= ~prep.unscored
-    cols = np.column_stack(
-        [np.ones_like(v), x - x[ok].mean() if ok.any() else x, v * 1e-3, np.sign(v), a * 1e-3]
-    )
     nominal = machine.load.viscous_friction_n_s_m
     band = BY_NAME["viscous_friction"].band
     bounds = (nominal * (1.0 - band), nominal * (1.0 + band))
-    xtx, xty, yty, n = _segment_sums(cols, force, ok, segments)
+    xtx, xty, yty, n = balance_sums(prep, segments, machine)
     total = (xtx.sum(axis=0), xty.sum(axis=0), float(yty.sum()), int(n.sum()))
     if total[3] < MIN_SAMPLES:
         return FrictionSignature(0.0, nominal, bounds, 0, 0.0, np.inf, total[3], False)
@@ -182,7 +164,7 @@ def signature(
     above = np.mean(boot >= LEVEL_N, axis=0)
     return FrictionSignature(
         coulomb_n=float(beta[_COULOMB]),
-        viscous_n_s_m=float(beta[_VISCOUS]),
+        viscous_n_s_m=float(beta[VISCOUS]),
         viscous_band=bounds,
         viscous_at_bound=side,
         above_share=float(above[0]),
@@ -192,6 +174,32 @@ def signature(
         free_coulomb_n=float(_bounded(total[0], total[1], free)[0][_COULOMB]),
         free_share=float(above[1]),
     )
+
+
+def balance_sums(
+    prep: Prepared, segments: Sequence[Segment], machine: MachineParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per segment, the normal equations' sums of the moving rod's force balance (columns:
+    gravity, its slope, viscous friction, Coulomb friction, mass)."""
+    cyl = machine.cylinder
+    force = (prep.meas["PA"] * cyl.area_a_m2 - prep.meas["PB"] * cyl.area_b_m2) * BAR
+    v = rod_velocity(smooth_rod(prep.rod_mm))
+    a = np.gradient(v, SAMPLE_PERIOD_S)
+    x = prep.rod_mm
+    ok = (
+        prep.valid
+        & np.isfinite(force)
+        & (np.abs(v) >= MIN_SPEED_MM_S)
+        & (np.abs(a) <= MAX_ACCEL_MM_S2)
+        & (x > STOP_MARGIN_MM)
+        & (x < prep.stroke_mm - STOP_MARGIN_MM)
+    )
+    if prep.unscored is not None:
+        ok &= ~prep.unscored
+    cols = np.column_stack(
+        [np.ones_like(v), x - x[ok].mean() if ok.any() else x, v * 1e-3, np.sign(v), a * 1e-3]
+    )
+    return _segment_sums(cols, force, ok, segments)
 
 
 def _segment_sums(
@@ -216,17 +224,17 @@ def _bounded(
     solution, or (a convex quadratic's minimum over an interval lies on its edge when not
     inside) the others solved with the viscous one at the nearer edge."""
     beta = np.linalg.lstsq(xtx, xty, rcond=None)[0]
-    c = beta[_VISCOUS]
+    c = beta[VISCOUS]
     if bounds[0] <= c <= bounds[1]:
         return beta, 0
     side = 1 if c > bounds[1] else -1
     c = bounds[1] if side > 0 else bounds[0]
-    keep = [j for j in range(len(beta)) if j != _VISCOUS]
-    sub = np.linalg.lstsq(xtx[np.ix_(keep, keep)], xty[keep] - xtx[keep, _VISCOUS] * c, rcond=None)[
+    keep = [j for j in range(len(beta)) if j != VISCOUS]
+    sub = np.linalg.lstsq(xtx[np.ix_(keep, keep)], xty[keep] - xtx[keep, VISCOUS] * c, rcond=None)[
         0
     ]
     out = np.empty_like(beta)
-    out[keep], out[_VISCOUS] = sub, c
+    out[keep], out[VISCOUS] = sub, c
     return out, side
 
 
