@@ -106,10 +106,10 @@ def _own_signal(
     d: Decision, scores: Scores, paired: Paired, cal: Calibrated
 ) -> sensorphysics.OwnSignal | None:
     """An ``unexplained`` gap whose best single is a sensor calibration, or whose sensor
-    calibration is of a reading later than the others (``delays.split``; a lag or a slow
-    spool then ranks above it on that reading's timing): that calibration judged on the one
-    signal it reads, each of the simulator and the hypothesis aligned by its own delay
-    (``sensorphysics.own_signal``)."""
+    calibration is of a reading later than the others (``delays.Split.some_late``; a lag
+    or a slow spool then ranks above it on that reading's timing): that calibration judged
+    on the one signal it reads, each of the simulator and the hypothesis aligned by its own
+    delay (``sensorphysics.own_signal``)."""
     if d.verdict != "unexplained" or not scores.singles:
         return None
     prep, base = cal.prep, scores.baseline
@@ -139,9 +139,11 @@ def _own_candidate(singles: Sequence[Candidate], lags: dict[str, float | None]) 
         return singles[0]
     sensor = next((c for c in singles if c.effects[0].name == sensorcal.NAME), None)
     late = delays.split(lags)
-    if sensor is None or late is None or sensor.effects[0].labels["signal"] not in late.late:
+    if sensor is None or late is None or not late.some_late:
         return None
-    return sensor
+    # Later than the others: every reading late is a shared delay or a lag of them all,
+    # both chambers late a compliance of the lines (``Split.some_late``).
+    return sensor if sensor.effects[0].labels["signal"] in late.late else None
 
 
 def check_cause(
