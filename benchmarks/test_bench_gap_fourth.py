@@ -96,8 +96,13 @@ def base_extend():
 
 
 def test_friction_raises_the_pressure_that_moves_the_rod(base_extend):
-    p = with_effect("cylinder_friction", coulomb_at_100bar_n=800.0, zero_pressure_share=0.5,
-                    breakaway_ratio=1.5, stribeck_mm_s=10.0)
+    p = with_effect(
+        "cylinder_friction",
+        coulomb_at_100bar_n=800.0,
+        zero_pressure_share=0.5,
+        breakaway_ratio=1.5,
+        stribeck_mm_s=10.0,
+    )
     tr = _extend(p)
     m = slice(1200, 1600)
     dpa = (tr[m, C["pA"]] - base_extend[m, C["pA"]]).mean()
@@ -112,13 +117,18 @@ def test_thin_oil_leaks_more_from_the_pump(base_extend):
     m = slice(1200, 1600)
     # while the pump delivers at ~60 bar its laminar slip grows as the viscosity falls
     ratio = pl.viscosity_cst(pr.nominal(), 45.0) / pl.viscosity_cst(p, 45.0)
-    extra = p[pl.SLIP40] * tr[m, C["PP"]].mean() * (ratio - 1.0) * 46.0 / pl.viscosity_cst(
-        pr.nominal(), 45.0)
+    extra = (
+        p[pl.SLIP40]
+        * tr[m, C["PP"]].mean()
+        * (ratio - 1.0)
+        * 46.0
+        / pl.viscosity_cst(pr.nominal(), 45.0)
+    )
     assert (base_extend[m, C["QP"]] - tr[m, C["QP"]]).mean() == pytest.approx(extra, rel=0.1)
 
 
 def _rise_ms(tr, col, start_ms=500):
-    x = tr[start_ms:start_ms + 600, C[col]]
+    x = tr[start_ms : start_ms + 600, C[col]]
     lo, hi = x[0], x[-100:].mean()
     return int(np.argmax((x - lo) / (hi - lo) > 0.9))
 
@@ -147,8 +157,9 @@ def test_oil_column_rings_at_its_natural_frequency(base_extend):
 
 def test_air_and_hoses_soften_the_lines(base_extend):
     air = _extend(with_effect("entrained_air", air_share_at_1atm=0.02, dissolve_s=2.0))
-    hose = _extend(with_effect("hose_compliance", hose_cm3_per_bar=0.2, instant_share=0.6,
-                               creep_s=0.3))
+    hose = _extend(
+        with_effect("hose_compliance", hose_cm3_per_bar=0.2, instant_share=0.6, creep_s=0.3)
+    )
     # more oil for the same pressure rise: a softer column rings slower
     base = _ringing_hz(base_extend)
     assert _ringing_hz(air) < 0.92 * base
@@ -219,8 +230,9 @@ def test_outside_faults_move_their_paths(base_extend):
     assert relief[-1, C["x1"]] < 0.25 - 0.005  # the cap's oil leaks to tank: the boom sinks
     chip = _extend(with_effect("chip_in_notch", blocked_share=0.4), lever=0.45)
     assert chip[1500, C["v1"]] < 0.8 * _extend(pr.nominal(), lever=0.45)[1500, C["v1"]]
-    vib = run(with_effect("travel_vibration", amplitude_n=800.0, frequency_hz=2.0,
-                          phase_rad=0.0), rest)
+    vib = run(
+        with_effect("travel_vibration", amplitude_n=800.0, frequency_hz=2.0, phase_rad=0.0), rest
+    )
     pa = vib[1000:, C["pA"]] / 1e5
     spec = np.abs(np.fft.rfft(pa - pa.mean()))
     assert np.argmax(spec) == 2  # 2 Hz over the 1 s window

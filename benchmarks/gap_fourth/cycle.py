@@ -22,8 +22,7 @@ def _move(rng: np.random.Generator, sign: float, lever: float, dist_m: float) ->
     down = float(rng.uniform(0.1, 0.4))
     speed = _speed_guess(lever) * float(rng.uniform(0.8, 1.25))
     flat = max(dist_m / speed - 0.5 * (up + down), 0.05)
-    return [(up, 0.0, sign * lever), (flat, sign * lever, sign * lever),
-            (down, sign * lever, 0.0)]
+    return [(up, 0.0, sign * lever), (flat, sign * lever, sign * lever), (down, sign * lever, 0.0)]
 
 
 def _action(rng: np.random.Generator, pos: float) -> tuple[list, float]:
@@ -67,8 +66,9 @@ def _render(pieces: list, n: int) -> np.ndarray:
     return out
 
 
-def spool_commands(rng: np.random.Generator, duration_s: float, pre_s: float,
-                   rod0_m: float) -> np.ndarray:
+def spool_commands(
+    rng: np.random.Generator, duration_s: float, pre_s: float, rod0_m: float
+) -> np.ndarray:
     """The lever (-1..1) at 1 ms over pre_s of rest and duration_s of work."""
     n = int(round((duration_s + pre_s) * MS))
     pieces = [(pre_s + float(rng.uniform(1.0, 3.0)), 0.0, 0.0)]

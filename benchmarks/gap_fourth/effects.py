@@ -16,8 +16,15 @@ from benchmarks.gap_fourth import params as pr
 from benchmarks.gap_fourth import plant as pl
 
 CATALOGUE = (
-    "cylinder_friction", "sensor_lag", "oil_viscosity", "entrained_air", "hose_compliance",
-    "valve_deadband", "spool_dynamics", "pump_control_dynamics", "load_variation",
+    "cylinder_friction",
+    "sensor_lag",
+    "oil_viscosity",
+    "entrained_air",
+    "hose_compliance",
+    "valve_deadband",
+    "spool_dynamics",
+    "pump_control_dynamics",
+    "load_variation",
     "sensor_calibration",
 )
 OUTSIDE = {
@@ -36,8 +43,12 @@ def _u(rng: np.random.Generator, lo: float, hi: float, nd: int = 4) -> float:
 
 def _friction(rng):
     f100 = _u(rng, 450.0, 900.0, 1)
-    return {"coulomb_at_100bar_n": f100, "zero_pressure_share": _u(rng, 0.35, 0.6, 3),
-            "breakaway_ratio": _u(rng, 1.3, 1.8, 3), "stribeck_mm_s": _u(rng, 5.0, 20.0, 2)}
+    return {
+        "coulomb_at_100bar_n": f100,
+        "zero_pressure_share": _u(rng, 0.35, 0.6, 3),
+        "breakaway_ratio": _u(rng, 1.3, 1.8, 3),
+        "stribeck_mm_s": _u(rng, 5.0, 20.0, 2),
+    }
 
 
 def _friction_apply(p, s, k):
@@ -77,8 +88,11 @@ def _air_apply(p, s, k):
 
 
 def _hose(rng):
-    return {"hose_cm3_per_bar": _u(rng, 0.08, 0.25, 4), "instant_share": _u(rng, 0.5, 0.7, 3),
-            "creep_s": _u(rng, 0.2, 0.6, 3)}
+    return {
+        "hose_cm3_per_bar": _u(rng, 0.08, 0.25, 4),
+        "instant_share": _u(rng, 0.5, 0.7, 3),
+        "creep_s": _u(rng, 0.2, 0.6, 3),
+    }
 
 
 def _hose_apply(p, s, k):
@@ -116,8 +130,10 @@ def _pumpdyn_apply(p, s, k):
 
 def _load(rng):
     sign = 1.0 if rng.uniform() < 0.5 else -1.0
-    return {"boom_angle_mid_rad": round(sign * float(rng.uniform(0.25, 0.5)), 4),
-            "angle_span_rad": _u(rng, 0.9, 1.3, 4)}
+    return {
+        "boom_angle_mid_rad": round(sign * float(rng.uniform(0.25, 0.5)), 4),
+        "angle_span_rad": _u(rng, 0.9, 1.3, 4),
+    }
 
 
 def _load_apply(p, s, k):
@@ -186,8 +202,11 @@ def _comp_apply(p, s, k):
 
 
 def _vib(rng):
-    return {"amplitude_n": _u(rng, 400.0, 900.0, 1), "frequency_hz": _u(rng, 1.2, 3.0, 3),
-            "phase_rad": _u(rng, 0.0, 6.283, 3)}
+    return {
+        "amplitude_n": _u(rng, 400.0, 900.0, 1),
+        "frequency_hz": _u(rng, 1.2, 3.0, 3),
+        "phase_rad": _u(rng, 0.0, 6.283, 3),
+    }
 
 
 def _vib_apply(p, s, k):
@@ -227,8 +246,13 @@ EFFECTS: dict[str, Effect] = {
 
 
 def sensor_defaults() -> dict[str, Any]:
-    return {"delay_ms": 0, "snubber_ms": 0.0, "cal_signal": None, "cal_gain": 1.0,
-            "cal_offset": 0.0}
+    return {
+        "delay_ms": 0,
+        "snubber_ms": 0.0,
+        "cal_signal": None,
+        "cal_gain": 1.0,
+        "cal_offset": 0.0,
+    }
 
 
 def apply(effect: str, k: dict, p: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:

@@ -59,7 +59,9 @@ def _conditions(rng: np.random.Generator, effect: str, cal_signal: str | None) -
     start = ambient + float(rng.uniform(0.0, 5.0)) if warm else float(rng.uniform(43.0, 50.0))
     rodpos = bool(rng.uniform() >= 1.0 / 3.0) or cal_signal == "RodPos"
     return {
-        "rodpos": rodpos, "warm_up": warm, "ambient_c": ambient,
+        "rodpos": rodpos,
+        "warm_up": warm,
+        "ambient_c": ambient,
         "oil_start_c": round(start, 2),
         "pump_mode": str(rng.choice(["matching", "full", "eco"], p=[0.5, 0.3, 0.2])),
         "rod0_mm": round(float(rng.uniform(50.0, 450.0)), 1),
@@ -85,31 +87,44 @@ def draw(seed: int, kind: str, duration_s: float) -> list[dict[str, Any]]:
             prm = effects._cal(rng, cal_signal)
         else:
             prm = effects.EFFECTS[effect][0](rng)
-        entries.append({
-            "name": name, "effect": effect, "expected": expected(effect, prm),
-            "params": prm, "tolerance_band": band,
-            "tolerances": {k: round(v, 6) for k, v in pr.draw_tolerances(rng, band).items()},
-            "conditions": _conditions(rng, effect, cal_signal),
-            "noise_seed": int(rng.integers(0, 2**62)), "duration_s": float(duration_s),
-        })
+        entries.append(
+            {
+                "name": name,
+                "effect": effect,
+                "expected": expected(effect, prm),
+                "params": prm,
+                "tolerance_band": band,
+                "tolerances": {k: round(v, 6) for k, v in pr.draw_tolerances(rng, band).items()},
+                "conditions": _conditions(rng, effect, cal_signal),
+                "noise_seed": int(rng.integers(0, 2**62)),
+                "duration_s": float(duration_s),
+            }
+        )
     return sorted(entries, key=lambda e: e["name"])
 
 
 def refuse_blind(seed: int, spend: bool, what: str) -> str | None:
     if seed >= BLIND_FROM and not spend:
-        return (f"{what}: seed {seed} is a blind seed (>= {BLIND_FROM}); blind draws are "
-                "spent once, by the lead: add --spend-blind to spend it")
+        return (
+            f"{what}: seed {seed} is a blind seed (>= {BLIND_FROM}); blind draws are "
+            "spent once, by the lead: add --spend-blind to spend it"
+        )
     if seed < 1:
         return f"{what}: seed {seed}: development seeds are 1-{BLIND_FROM - 1}"
     return None
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.gap_fourth.generate",
-                                 description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.gap_fourth.generate", description=__doc__.split("\n\n")[0]
+    )
     ap.add_argument("out", type=Path, help="output folder (created)")
-    ap.add_argument("--seed", type=int, required=True,
-                    help="1-999 development, >= 1000 blind (needs --spend-blind)")
+    ap.add_argument(
+        "--seed",
+        type=int,
+        required=True,
+        help="1-999 development, >= 1000 blind (needs --spend-blind)",
+    )
     ap.add_argument("--set", dest="kind", choices=("small", "full"), default="small")
     ap.add_argument("--duration", type=float, default=300.0, help="seconds per recording")
     ap.add_argument("--spend-blind", action="store_true", help="draw a blind seed")
@@ -128,11 +143,18 @@ def main(argv: list[str] | None = None) -> int:
         record.build(e, a.out)
         print(f"\r{i}/{len(entries)} recordings", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
-    key = {"plant": "gap_fourth", "seed": a.seed, "set": a.kind, "blind": a.seed >= BLIND_FROM,
-           "duration_s": a.duration, "recordings": entries}
+    key = {
+        "plant": "gap_fourth",
+        "seed": a.seed,
+        "set": a.kind,
+        "blind": a.seed >= BLIND_FROM,
+        "duration_s": a.duration,
+        "recordings": entries,
+    }
     (a.out / "key.json").write_text(json.dumps(key, indent=1) + "\n")
-    print(f"{len(entries)} recordings and key.json in {a.out} "
-          f"({time.process_time() - t0:.0f} s CPU)")
+    print(
+        f"{len(entries)} recordings and key.json in {a.out} ({time.process_time() - t0:.0f} s CPU)"
+    )
     return 0
 
 

@@ -137,8 +137,9 @@ TOLERANCES: tuple[tuple[str, tuple[int, ...], float], ...] = (
 
 def draw_tolerances(rng: np.random.Generator, band: float) -> dict[str, float]:
     """Each tolerance's factor, uniform within +-band x its share."""
-    return {name: 1.0 + band * share * float(rng.uniform(-1.0, 1.0))
-            for name, _, share in TOLERANCES}
+    return {
+        name: 1.0 + band * share * float(rng.uniform(-1.0, 1.0)) for name, _, share in TOLERANCES
+    }
 
 
 def apply_tolerances(p: np.ndarray, factors: dict[str, float]) -> np.ndarray:

@@ -207,7 +207,7 @@ def seal_friction(p, v, pa, pb):
     fc = p[FR_C0] + p[FR_KP] * max(pa, pb, 0.0)
     if fc <= 0.0:
         return 0.0
-    f = fc * (1.0 + (p[FR_STATIC] - 1.0) * np.exp(-(v / p[FR_VS]) ** 2))
+    f = fc * (1.0 + (p[FR_STATIC] - 1.0) * np.exp(-((v / p[FR_VS]) ** 2)))
     return f * np.tanh(v / p[FR_VREG])
 
 

@@ -65,8 +65,9 @@ def sensed(sim: dict[str, Any]) -> dict[str, np.ndarray]:
     return out
 
 
-def readings(entry: dict[str, Any], sim: dict[str, Any],
-             rng: np.random.Generator) -> dict[str, np.ndarray]:
+def readings(
+    entry: dict[str, Any], sim: dict[str, Any], rng: np.random.Generator
+) -> dict[str, np.ndarray]:
     """The logger's columns (contract names and units; NaN where a frame was missed)."""
     n = int(round(float(entry["duration_s"]) * 100))
     t = np.round((np.arange(n) * 0.01 + np.clip(rng.normal(0, 3e-4, n), -1e-3, 1e-3)) * 1e4) / 1e4
@@ -75,20 +76,28 @@ def readings(entry: dict[str, Any], sim: dict[str, Any],
     cond, s = entry["conditions"], sim["sens"]
     raw = sensed(sim)
     cmd_t = sensors.frame_times(rng, inst)
-    cols = {"t": t,
-            "SpoolCmd": sensors.commands(sim["lever"], cmd_t),
-            "PumpDispCmd": sensors.commands(sim["disp"], cmd_t),
-            "EngineSpeed": sensors.engine_speed(sim["trace"][:, sensors.COL["we"]], cmd_t),
-            "OilTemp": sensors.oil_temp(rng, sim["trace"][:, sensors.COL["T"]], inst,
-                                        cond["temp_offset_c"])}
+    cols = {
+        "t": t,
+        "SpoolCmd": sensors.commands(sim["lever"], cmd_t),
+        "PumpDispCmd": sensors.commands(sim["disp"], cmd_t),
+        "EngineSpeed": sensors.engine_speed(sim["trace"][:, sensors.COL["we"]], cmd_t),
+        "OilTemp": sensors.oil_temp(
+            rng, sim["trace"][:, sensors.COL["T"]], inst, cond["temp_offset_c"]
+        ),
+    }
     frames = {"PP": "press", "PA": "press", "PB": "press", "QP": "flow", "RodPos": "rod"}
     when = {f: sensors.frame_times(rng, inst) for f in ("press", "flow", "rod")}
     lost = {f: sensors.dropouts(rng, n) for f in ("press", "flow", "rod")}
     for name in MEASURED:
         cal = s["cal_signal"] == name
-        val = sensors.transmitter(rng, name, sensors.sample(raw[name], when[frames[name]]),
-                                  cond["zero_pct"][name], s["cal_gain"] if cal else 1.0,
-                                  s["cal_offset"] if cal else 0.0)
+        val = sensors.transmitter(
+            rng,
+            name,
+            sensors.sample(raw[name], when[frames[name]]),
+            cond["zero_pct"][name],
+            s["cal_gain"] if cal else 1.0,
+            s["cal_offset"] if cal else 0.0,
+        )
         val[lost[frames[name]]] = np.nan
         cols[name] = val
     if not cond["rodpos"]:
@@ -96,9 +105,18 @@ def readings(entry: dict[str, Any], sim: dict[str, Any],
     return cols
 
 
-FORMATS = {"t": "%.4f", "SpoolCmd": "%.2f", "PumpDispCmd": "%.2f", "EngineSpeed": "%.3f",
-           "OilTemp": "%.5f", "PP": "%.2f", "PA": "%.2f", "PB": "%.2f", "QP": "%.2f",
-           "RodPos": "%.2f"}
+FORMATS = {
+    "t": "%.4f",
+    "SpoolCmd": "%.2f",
+    "PumpDispCmd": "%.2f",
+    "EngineSpeed": "%.3f",
+    "OilTemp": "%.5f",
+    "PP": "%.2f",
+    "PA": "%.2f",
+    "PB": "%.2f",
+    "QP": "%.2f",
+    "RodPos": "%.2f",
+}
 
 
 def write_csv(path: Path, cols: dict[str, np.ndarray]) -> None:

@@ -54,8 +54,14 @@ def true_signals(trace: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def transmitter(rng: np.random.Generator, name: str, x: np.ndarray, zero_pct: float,
-                gain: float = 1.0, offset: float = 0.0) -> np.ndarray:
+def transmitter(
+    rng: np.random.Generator,
+    name: str,
+    x: np.ndarray,
+    zero_pct: float,
+    gain: float = 1.0,
+    offset: float = 0.0,
+) -> np.ndarray:
     """A 4-20 mA transmitter (span `gain`, zero `offset` in signal units plus its own
     zero error in % of full scale), the ADC and the CAN signal's resolution and range."""
     fs = FULL_SCALE[name]
@@ -85,8 +91,9 @@ def engine_speed(we_1ms: np.ndarray, t_s: np.ndarray) -> np.ndarray:
     return np.round(mean * 8.0) / 8.0
 
 
-def oil_temp(rng: np.random.Generator, temp_1ms: np.ndarray, rows_t: np.ndarray,
-             offset_c: float) -> np.ndarray:
+def oil_temp(
+    rng: np.random.Generator, temp_1ms: np.ndarray, rows_t: np.ndarray, offset_c: float
+) -> np.ndarray:
     """The NTC reading, sent once a second and held by the logger (0.03125 degC)."""
     sensed = first_order(temp_1ms, 20.0) + offset_c
     phase = float(rng.uniform(0.0, 1.0))
