@@ -8,8 +8,9 @@ Normal runs: ``monitor simulate --machine excavator4`` mixed duty cycles of 600 
 ``FAULTS`` at each severity of ``--severity`` (e.g. ``--severity 0.5 0.3``) from 120 s.
 Each run is judged per loop as ``monitor detect --loop NAME --config CONFIG`` judges it
 (``--config``: default the shipped config and its models); ``--loops`` judges only those
-(a retrained loop's runs without the others').  Prints one line per run and loop, then the
-table.
+(a retrained loop's runs without the others'); ``--faults`` the faults (default ``FAULTS``; any
+``LOOP.FAULT`` of ``monitor simulate --machine excavator4``).  Prints one line per run and
+loop, then the table.
 """
 
 from __future__ import annotations
@@ -87,6 +88,9 @@ def main() -> int:
         help="the whole machine's config whose loop models are judged (default: shipped)",
     )
     ap.add_argument("--loops", nargs="+", metavar="NAME", help="judge only these loops")
+    ap.add_argument(
+        "--faults", nargs="+", metavar="LOOP.FAULT", default=list(FAULTS), help="default FAULTS"
+    )
     args = ap.parse_args()
     cfg = load_config(args.config)
     names = [lc.name for lc in cfg.monitored_loops]
@@ -120,7 +124,7 @@ def main() -> int:
         )
     print()
     for severity in args.severity:
-        for fault in FAULTS:
+        for fault in args.faults:
             for seed in args.faulty:
                 judged = _judge(_simulate(args.out, seed, fault, severity), cfg, models)
                 raised = [

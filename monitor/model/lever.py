@@ -1,5 +1,6 @@
-"""The full-lever statistic L: the pump pressure's mean residual while the lever is near
-full stroke, beside J and B.
+"""The full-lever statistic L: the pump pressure's (or, on a section of a shared
+load-sensing pump, the section flow's) mean residual while the lever is near full stroke,
+beside J and B.
 
 A spool whose stroke is limited (a bent linkage, a pilot pressure too low, a stop screw)
 acts only when the operator asks for more than it can open: on an excavator's boom cycle a
@@ -19,6 +20,17 @@ L by the same rule as eps0 from J (twice the largest, by default).  Like J and B
 judged only on a full window and a NaN residual pauses it.  One step kernel (``_push``)
 serves the live ticker and the batch series.  Measured in docs/benchmarks.md ("The
 full-lever statistic L").
+
+On a section of a load-sensing pump shared by several loops (the whole excavator's
+``section`` preset) PP is an input, not an output: the pump holds it at the highest load
+plus its margin whatever one spool's opening.  There the post-compensated section's flow
+is what the opening meters (flow = Kv x opening x sqrt(margin)), so a spool limited to
+(1 - 0.6 s) of its stroke caps the section flow QP at that share of full flow whenever the
+lever asks for more, with the port pressures unchanged (the compensator holds the drop).
+The model, predicting QP from the lever, then predicts more than the section delivers at
+every sample beyond the limit: L watches QP (``FLOW_OUTPUT``) on such a model, with the
+same kernel, window and rule.  Measured in docs/benchmarks.md ("Stroke limits on the whole
+machine").
 """
 
 from __future__ import annotations
@@ -40,6 +52,9 @@ from monitor.model.statistic import HeldOut, Statistic, column, register, signal
 FULL_PCT = 80.0
 #: The output L watches: the pump pressure, near-algebraic in the metering opening.
 LEVER_OUTPUT = "PP"
+#: ... or, on a model that takes PP as an input (a section of a shared load-sensing pump),
+#: the section's flow, proportional to the opening.
+FLOW_OUTPUT = "QP"
 N_DIRECTIONS = 2  # raising, lowering
 
 
@@ -60,7 +75,7 @@ class LeverModel:
 
     window_n: int  # samples (6000: 60 s at 100 Hz)
     min_count: int  # samples beyond FULL_PCT in one direction before it counts
-    output: int  # index of LEVER_OUTPUT among the model's outputs
+    output: int  # index of LEVER_OUTPUT (or FLOW_OUTPUT) among the model's outputs
     scale: np.ndarray  # (N_DIRECTIONS,), z-units: the largest held-out |mean|
     l0: float = float("nan")  # threshold; NaN: L is computed but never alarms
 
@@ -265,7 +280,8 @@ class LeverWindow:
 
 @register
 class Lever(Statistic):
-    """L as a member of the family: PP's mean residual with the lever near full stroke."""
+    """L as a member of the family: PP's (or a shared pump's section's QP's) mean residual
+    with the lever near full stroke."""
 
     name = "L"
     key = "lever"
@@ -282,10 +298,16 @@ class Lever(Statistic):
 
     @classmethod
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Lever | str:
-        if "B" not in on or LEVER_OUTPUT not in outputs:
-            return "off (with the bias statistic, on a model that predicts PP)"
         stats = settings.statistics
-        return cls(stats.bias_window_n, stats.lever_min_count, outputs.index(LEVER_OUTPUT))
+        if LEVER_OUTPUT in outputs:  # a loop on its own pump: with B, as it always was
+            if "B" not in on:
+                return "off (with the bias statistic, on a model that predicts PP)"
+            return cls(stats.bias_window_n, stats.lever_min_count, outputs.index(LEVER_OUTPUT))
+        if not settings.with_bias or FLOW_OUTPUT not in outputs:
+            return "off (asked with the bias statistic, on a model that predicts PP or QP)"
+        # A section of a shared pump: on its own support, not B's (the bucket's B is off for
+        # its spread with oil temperature over every regime, which L's windows need not share).
+        return cls(stats.bias_window_n, stats.lever_min_count, outputs.index(FLOW_OUTPUT))
 
     def unscaled(self, held: HeldOut) -> LeverModel:
         directions = [lever_directions(r["SpoolCmd"]) for r in held.recordings]
