@@ -361,13 +361,14 @@ def bias_statistic(e, regimes, scale, window, min_count):
     return out
 
 
-def lever_statistic(e, spool_pct, output, scale, window, min_count):
+def lever_statistic(e, spool_pct, output, scale, window, min_count, sign=0):
     """The full-lever statistic L from its definition, recomputed from scratch at every
     sample: direction 1 (raising) where SpoolCmd > 80 %, 2 (lowering) where < -80 %, else 0;
     the last ``window`` samples whose residuals are all finite; per direction d with at least
-    ``min_count`` of them, v_d = |mean of e[:, output] over them| / scale[d - 1]; L = the
-    larger v_d.  NaN at a sample with a missing residual, before ``window`` valid samples
-    have been seen, and where neither direction counts."""
+    ``min_count`` of them, v_d = |mean of e[:, output] over them| / scale[d - 1] (``sign``
+    1: max(mean, 0) instead of |mean|, a shortfall only); L = the larger v_d.  NaN at a
+    sample with a missing residual, before ``window`` valid samples have been seen, and where
+    neither direction counts."""
     e = np.asarray(e, dtype=float)
     out = np.full(len(e), np.nan)
     valid = []  # indices of the valid samples so far
@@ -389,7 +390,7 @@ def lever_statistic(e, spool_pct, output, scale, window, min_count):
             if len(members) < min_count:
                 continue
             mean = math.fsum(e[k, output] for k in members) / len(members)
-            values.append(abs(mean) / scale[d - 1])
+            values.append((abs(mean) if sign == 0 else max(mean, 0.0)) / scale[d - 1])
         if values:
             out[i] = max(values)
     return out

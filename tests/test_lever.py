@@ -62,6 +62,24 @@ def test_series_matches_the_definition_on_another_output_and_sparse_commands() -
     np.testing.assert_allclose(got[ok], want[ok], rtol=1e-9, atol=1e-12)
 
 
+def test_a_shortfall_only_series_matches_the_definition() -> None:
+    """``sign`` 1 (L on a section's flow): only a positive mean (predicted above measured)
+    counts, a negative one is 0, the same kernel live and batch."""
+    e, spool, scale = _data(6, n=1500, n_out=3)
+    lever = LeverModel(50, 5, 2, scale, 1.0, sign=1)
+    got = lever_series(e, lever_directions(spool), lever)
+    want = lever_statistic(e, spool, 2, scale, 50, 5, sign=1)
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    ok = np.isfinite(want)
+    assert (want[ok] == 0).sum() > 50 and (want[ok] > 0).sum() > 50  # both signs occur
+    np.testing.assert_allclose(got[ok], want[ok], rtol=1e-9, atol=1e-12)
+    window = LeverWindow(lever)
+    live = np.array([window.push(e[i], int(d)) for i, d in enumerate(lever_directions(spool))])
+    np.testing.assert_array_equal(live, got)
+    assert LeverModel.from_dict(lever.to_dict()).sign == 1
+    assert "sign" not in LeverModel(50, 5, 2, scale).to_dict()  # two-sided files unchanged
+
+
 def test_live_window_gives_the_series_numbers() -> None:
     """The ticker's one-sample pushes and the offline series give the very same numbers."""
     e, spool, scale = _data(6, n=3000)

@@ -29,8 +29,12 @@ is what the opening meters (flow = Kv x opening x sqrt(margin)), so a spool limi
 lever asks for more, with the port pressures unchanged (the compensator holds the drop).
 The model, predicting QP from the lever, then predicts more than the section delivers at
 every sample beyond the limit: L watches QP (``FLOW_OUTPUT``) on such a model, with the
-same kernel, window and rule.  Measured in docs/benchmarks.md ("Stroke limits on the whole
-machine").
+same kernel, window and rule, and counts only a shortfall (``sign`` +1: the mean of
+predicted minus measured, where positive).  A limit only takes flow away; normal work at
+full lever departs both ways for a second at a time (a neighbour's move pulling the shared
+pump into saturation, a spool's opening ramp), and on the whole machine's held-out runs the
+largest excess was up to twice the largest shortfall (``|mean|`` would set the scale on
+it).  Measured in docs/benchmarks.md ("Stroke limits on the whole machine").
 """
 
 from __future__ import annotations
@@ -78,6 +82,9 @@ class LeverModel:
     output: int  # index of LEVER_OUTPUT (or FLOW_OUTPUT) among the model's outputs
     scale: np.ndarray  # (N_DIRECTIONS,), z-units: the largest held-out |mean|
     l0: float = float("nan")  # threshold; NaN: L is computed but never alarms
+    #: 0: |mean| counts (PP: either way); 1: only a positive mean, the output measured
+    #: below its prediction (QP: a section delivering less than the lever asks).
+    sign: int = 0
 
     def __post_init__(self) -> None:
         if self.window_n < 2 or not 1 <= self.min_count <= self.window_n or self.output < 0:
@@ -85,19 +92,24 @@ class LeverModel:
                 f"lever window {self.window_n}, min_count {self.min_count} and output "
                 f"{self.output} must satisfy 1 <= min_count <= window, output >= 0"
             )
+        if self.sign not in (0, 1):
+            raise ConfigError(f"lever sign must be 0 (either way) or 1 (shortfall): {self.sign}")
         s = np.asarray(self.scale, dtype=np.float64)
         if s.shape != (N_DIRECTIONS,) or not np.all(s > 0):
             raise ConfigError(f"lever scale must be {N_DIRECTIONS} positive numbers, got {s}")
         object.__setattr__(self, "scale", np.ascontiguousarray(s))
 
     def to_dict(self) -> dict[str, object]:
-        return {
+        out: dict[str, object] = {
             "window_n": int(self.window_n),
             "min_count": int(self.min_count),
             "output": int(self.output),
             "scale": [float(v) for v in self.scale],
             "l0": float(self.l0),
         }
+        if self.sign:  # files of a two-sided L stay as they were
+            out["sign"] = int(self.sign)
+        return out
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> LeverModel:
@@ -107,6 +119,7 @@ class LeverModel:
             int(d["output"]),
             np.asarray(d["scale"], dtype=np.float64),
             float(d["l0"]),
+            int(d.get("sign", 0)),
         )
 
 
@@ -116,10 +129,10 @@ _POS, _COUNT, _PUSHES = 0, 1, 2
 
 @jit(aot=True)
 def _push(
-    ring_e, ring_d, sums, counts, state, e, direction, output, scale, min_count, resum_every
+    ring_e, ring_d, sums, counts, state, e, direction, output, scale, min_count, resum_every, sign
 ):  # pragma: no cover - numba
     """One sample into the window; returns L (NaN: paused, window not full, or no direction
-    counted)."""
+    counted); ``sign`` 0: |mean|, 1: the positive part of the mean."""
     for o in range(e.shape[0]):
         if np.isnan(e[o]):
             return np.nan
@@ -148,14 +161,15 @@ def _push(
     for d in range(1, sums.shape[0]):  # 0: samples that do not count
         k = counts[d]
         if k >= min_count:
-            v = abs(sums[d] / k) / scale[d - 1]
+            m = sums[d] / k
+            v = (abs(m) if sign == 0 else max(m, 0.0)) / scale[d - 1]
             if not v <= out:  # NaN-safe max
                 out = v
     return out
 
 
 @jit(aot=True)
-def _series(e, directions, output, scale, window, min_count, resum_every):  # pragma: no cover
+def _series(e, directions, output, scale, window, min_count, resum_every, sign):  # pragma: no cover
     n = e.shape[0]
     out = np.empty(n)
     ring_e = np.zeros(window)
@@ -176,6 +190,7 @@ def _series(e, directions, output, scale, window, min_count, resum_every):  # pr
             scale,
             min_count,
             resum_every,
+            sign,
         )
     return out
 
@@ -194,6 +209,7 @@ def lever_series(e: np.ndarray, directions: np.ndarray, lever: LeverModel) -> np
         lever.window_n,
         lever.min_count,
         resum_interval(lever.window_n),
+        lever.sign,
     )
 
 
@@ -203,11 +219,13 @@ def fit_lever_scale(
     window_n: int,
     min_count: int,
     output: int,
+    sign: int = 0,
 ) -> np.ndarray:
-    """Per direction, the largest |window mean| of the output's residual over held-out normal
-    data (the statistic's own windows: L's series with unit scales).  ``InputFileError``
-    when a direction never counts: the held-out data never held the lever that far."""
-    unit = LeverModel(window_n, min_count, output, np.ones(N_DIRECTIONS))
+    """Per direction, the largest |window mean| (``sign`` 1: positive window mean) of the
+    output's residual over held-out normal data (the statistic's own windows: L's series
+    with unit scales).  ``InputFileError`` when a direction never counts: the held-out data
+    never held the lever that far."""
+    unit = LeverModel(window_n, min_count, output, np.ones(N_DIRECTIONS), sign=sign)
     # One direction at a time: the other direction's samples do not count.
     top = np.array(
         [
@@ -255,6 +273,7 @@ class LeverWindow:
             lv.scale,
             lv.min_count,
             self._resum,
+            lv.sign,
         )
         return float(value)
 
@@ -274,6 +293,7 @@ class LeverWindow:
             lv.scale,
             lv.min_count,
             self._resum,
+            lv.sign,
         )
         return float(value)
 
@@ -291,10 +311,13 @@ class Lever(Statistic):
     counts = ("window_n", "min_count")
     order = 2
 
-    def __init__(self, window_n: int = 6000, min_count: int = 100, output: int = 0) -> None:
+    def __init__(
+        self, window_n: int = 6000, min_count: int = 100, output: int = 0, sign: int = 0
+    ) -> None:
         self.window_n_setting = window_n
         self.min_count = min_count
         self.output = output
+        self.sign = sign
 
     @classmethod
     def configure(cls, settings: Any, outputs: tuple[str, ...], on: set[str]) -> Lever | str:
@@ -307,14 +330,19 @@ class Lever(Statistic):
             return "off (asked with the bias statistic, on a model that predicts PP or QP)"
         # A section of a shared pump: on its own support, not B's (the bucket's B is off for
         # its spread with oil temperature over every regime, which L's windows need not share).
-        return cls(stats.bias_window_n, stats.lever_min_count, outputs.index(FLOW_OUTPUT))
+        return cls(stats.bias_window_n, stats.lever_min_count, outputs.index(FLOW_OUTPUT), 1)
 
     def unscaled(self, held: HeldOut) -> LeverModel:
         directions = [lever_directions(r["SpoolCmd"]) for r in held.recordings]
         scale = fit_lever_scale(
-            list(held.residuals), directions, self.window_n_setting, self.min_count, self.output
+            list(held.residuals),
+            directions,
+            self.window_n_setting,
+            self.min_count,
+            self.output,
+            self.sign,
         )
-        return LeverModel(self.window_n_setting, self.min_count, self.output, scale)
+        return LeverModel(self.window_n_setting, self.min_count, self.output, scale, sign=self.sign)
 
     def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
         return lever_series(e, lever_directions(signal(rec, "SpoolCmd", 0.0)), self.params_)
