@@ -32,9 +32,9 @@ every sample beyond the limit: L watches QP (``FLOW_OUTPUT``) on such a model, w
 same kernel, window and rule, and counts only a shortfall (``sign`` +1: the mean of
 predicted minus measured, where positive).  A limit only takes flow away; normal work at
 full lever departs both ways for a second at a time (a neighbour's move pulling the shared
-pump into saturation, a spool's opening ramp), and on the whole machine's held-out runs the
-largest excess was up to twice the largest shortfall (``|mean|`` would set the scale on
-it).  Measured in docs/benchmarks.md ("Stroke limits on the whole machine").
+pump into saturation, a spool's opening ramp): on the whole machine's held-out runs the
+largest |mean| was 1.0-3.1 times the largest shortfall, and would have set the scale.
+Measured in docs/benchmarks.md ("Stroke limits on the whole machine").
 """
 
 from __future__ import annotations
