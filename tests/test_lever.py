@@ -407,3 +407,21 @@ def test_short_held_out_data_trains_without_lever(boom_runs) -> None:
     assert m.bias is None
     assert m.lever is None
     assert m.training["lever"].startswith("off")
+
+
+def test_l_watches_pp_with_b_and_a_sections_flow_shortfall_on_its_own() -> None:
+    """A loop on its own pump: L on PP, two-sided, only with B on (as it always was).  A
+    section of a shared load-sensing pump (PP an input): L on QP, a shortfall only, over 3 s
+    of full lever, asked with B but not resting on B's support."""
+    from monitor.model.lever import Lever
+    from monitor.training.settings import DGRNNSettings, TrainConfig
+
+    own = TrainConfig()
+    pp = Lever.configure(own, ("PP", "PA", "PB", "QP"), {"J", "B"})
+    assert isinstance(pp, Lever) and (pp.output, pp.sign, pp.min_count) == (0, 0, 100)
+    assert isinstance(Lever.configure(own, ("PP", "PA", "PB", "QP"), {"J"}), str)
+    section = TrainConfig(DGRNNSettings(preset="section"))
+    qp = Lever.configure(section, ("PA", "PB", "QP"), {"J"})  # the bucket's B is off
+    assert isinstance(qp, Lever) and (qp.output, qp.sign, qp.min_count) == (2, 1, 300)
+    paper = TrainConfig(DGRNNSettings(preset="paper"))  # no B asked: no L either
+    assert isinstance(Lever.configure(paper, ("PA", "PB", "QP"), {"J"}), str)

@@ -330,7 +330,7 @@ class Lever(Statistic):
             return "off (asked with the bias statistic, on a model that predicts PP or QP)"
         # A section of a shared pump: on its own support, not B's (the bucket's B is off for
         # its spread with oil temperature over every regime, which L's windows need not share).
-        return cls(stats.bias_window_n, stats.lever_min_count, outputs.index(FLOW_OUTPUT), 1)
+        return cls(stats.bias_window_n, stats.flow_min_count, outputs.index(FLOW_OUTPUT), 1)
 
     def unscaled(self, held: HeldOut) -> LeverModel:
         directions = [lever_directions(r["SpoolCmd"]) for r in held.recordings]

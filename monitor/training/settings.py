@@ -90,6 +90,11 @@ class StatisticSettings:
     #: The full-lever statistic L (``monitor.model.lever``), on with B, over B's window:
     #: 1 s of lever beyond full in one direction before that direction counts.
     lever_min_count: int = 100
+    #: ... and on a section's flow (a shortfall only): 3 s, longer than a neighbour's pull
+    #: of the shared pump into saturation (1-2 s).  At 1 s a normal bucket run of the whole
+    #: machine's development 8 h reached 1.01 x l0, at 3 s 0.56 x (docs/benchmarks.md,
+    #: "Stroke limits on the whole machine").
+    flow_min_count: int = 300
     #: The hold statistic H (``monitor.model.hold``), over B's window and only with B: a
     #: hold's samples count once it has lasted 2 s (the move's pressure transients have died
     #: out), 3 s of such samples in the window before H is judged, holds on an end stop
@@ -109,8 +114,9 @@ class StatisticSettings:
             raise ConfigError(f"window N must be at least 1 sample, got {self.window_n}")
         if not 1 <= self.bias_min_count <= self.bias_window_n:
             raise ConfigError("bias min_count must be within 1..bias window")
-        if not 1 <= self.lever_min_count <= self.bias_window_n:
-            raise ConfigError("lever min_count must be within 1..bias window")
+        for count in (self.lever_min_count, self.flow_min_count):
+            if not 1 <= count <= self.bias_window_n:
+                raise ConfigError("lever min_count must be within 1..bias window")
         if not 1 <= self.hold_min_count <= self.bias_window_n or self.hold_settle_n < 0:
             raise ConfigError("hold min_count must be within 1..bias window, settle >= 0")
 
