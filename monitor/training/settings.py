@@ -92,8 +92,8 @@ class StatisticSettings:
     lever_min_count: int = 100
     #: ... and on a section's flow (a shortfall only): 3 s, longer than a neighbour's pull
     #: of the shared pump into saturation (1-2 s).  At 1 s a normal bucket run of the whole
-    #: machine's development 8 h reached 1.01 x l0, at 3 s 0.56 x (docs/benchmarks.md,
-    #: "Stroke limits on the whole machine").
+    #: machine's development 8 h reached 1.01 x l0, at 3 s the largest was 0.60 x
+    #: (docs/benchmarks.md, "Stroke limits on the whole machine").
     flow_min_count: int = 300
     #: The hold statistic H (``monitor.model.hold``), over B's window and only with B: a
     #: hold's samples count once it has lasted 2 s (the move's pressure transients have died
