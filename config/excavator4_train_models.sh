@@ -36,8 +36,9 @@
 # `monitor train` fits the full-lever statistic L on each loop's flow QP (a shortfall at full
 # lever: a stroke limit); on the held-out runs 201-216 it earns its threshold on the boom
 # and bucket, not the swing (transfer check 1.07) or the stick (never lowered at full lever
-# for 3 s).  The shipped bucket file carries it (added to the shipped network on those runs,
-# as this script fits it); the boom's, stick's and swing's files predate it.
+# for 3 s).  The shipped bucket file carries it (added to the shipped network on those runs
+# by benchmarks/excavator4_add_lever.py, as this script fits it); the boom's, stick's and
+# swing's files predate it.
 #   bash config/excavator4_train_models.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
