@@ -34,9 +34,9 @@
 # alarmed on a normal run (docs/benchmarks.md, "The swing trained on a boom set down on its
 # stop").  The boom, stick and bucket models are built without those runs.
 # `monitor train` fits the full-lever statistic L on each loop's flow QP (a shortfall at full
-# lever: a stroke limit); on the held-out runs 201-216 it earns its threshold on the boom
-# and bucket, not the swing (transfer check 1.07) or the stick (never lowered at full lever
-# for 3 s).  The shipped bucket file carries it (added to the shipped network on those runs
+# lever: a stroke limit); on the held-out runs 201-216 it earns its threshold on the boom,
+# bucket and swing (as retrained with return-to-stop), not the stick (never lowered at full
+# lever for 3 s).  The shipped bucket file carries it (added to the shipped network on those runs
 # by benchmarks/excavator4_add_lever.py, as this script fits it); the boom's, stick's and
 # swing's files predate it.
 #   bash config/excavator4_train_models.sh
