@@ -36,9 +36,9 @@
 # `monitor train` fits the full-lever statistic L on each loop's flow QP (a shortfall at full
 # lever: a stroke limit); on the held-out runs 201-216 it earns its threshold on the boom,
 # bucket and swing (as retrained with return-to-stop), not the stick (never lowered at full
-# lever for 3 s).  The shipped bucket file carries it (added to the shipped network on those runs
-# by benchmarks/excavator4_add_lever.py, as this script fits it); the boom's, stick's and
-# swing's files predate it.
+# lever for 3 s).  The shipped bucket, boom and swing files carry it (added to the shipped
+# networks on those runs by benchmarks/excavator4_add_lever.py, as this script fits it); the
+# stick's file predates it (its L would be off).
 #   bash config/excavator4_train_models.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
