@@ -168,3 +168,28 @@ def test_the_third_plants_deadband_stays_a_deadband(tmp_path):
     b = rep["timing"]["deadband"]
     assert b["named"] is True and b["onsets"]["apart_share"] >= 0.95
     assert b["onsets"]["opening_ms"] > 0 > b["onsets"]["closing_ms"]
+
+
+def _late_readings(rec: Recording, rows: int) -> Recording:
+    """Every reading ``rows`` samples late, the commands on time."""
+    cols = dict(rec.columns)
+    for name in ("PP", "PA", "PB", "QP", "RodPos"):
+        if name in cols:
+            cols[name] = np.concatenate([np.full(rows, cols[name][0]), cols[name][:-rows]])
+    return Recording(rec.t, cols, rec.source, dict(rec.meta))
+
+
+def test_a_small_overlap_on_stepped_commands_is_read_from_the_held_flows():
+    # Our simulator with a 6 % overlap, its commands stepped (an overlap crossed within a
+    # sample: the openings are not later than the closings) and every reading 20 ms late
+    # (a shared delay the re-timed simulator takes).  Main withdrew the deadband: its
+    # timing did not show; the held flows fall short as the overlap makes them.
+    cmd = make_cycle("step", 90.0, 5)
+    rec = simulate(cmd, M, effects=[Effect.make("valve_deadband", overlap_pct=6.0)], seed=5)
+    rep = build_report(diagnose(_late_readings(rec, 2), M, effects=("valve_deadband",)), M)
+    b = rep["timing"]["deadband"]
+    assert rep["verdict"] == "valve_deadband"
+    assert b["onsets"] is None or b["onsets"]["apart_share"] < 0.95
+    assert b["evidence"] == ["held_flows"]
+    assert b["held_flows"]["overlap_pct"] == pytest.approx(6.0, abs=1.5)
+    assert "held flows" in rep["timing"]["decided_by"]

@@ -1,0 +1,143 @@
+"""Stage 6c'', part of the timing check (``timing.py``): a ``valve_deadband`` verdict on a
+recording whose readings share a delay.  A delay every reading shares and another make's
+metering near centre are both fitted by a small overlap; a deadband stands only where it
+shows in what a shared delay cannot do:
+
+- **the openings and the closings** (``judge/onsets.py``): the moves out of a centred spool
+  start later than the returns to centre by ``onsets.APART_MS`` in ``SIGNIFICANT`` of the
+  resamples of the events (a shared delay shifts both alike).  Read where the spool crosses
+  the overlap slowly; a spool ramped at 900 %/s crosses 10 % in one sample.
+- **the held flows** (``judge/heldflow.py``): at held commands where the valve sets the
+  flow, the flow falls short as the fitted overlap (alone, on the calibrated simulator)
+  makes it, more at the smaller commands, reading an overlap of
+  ``heldflow.MIN_OVERLAP_PCT`` or more in ``SIGNIFICANT`` of the resamples of the held
+  levels.  No delay moves a settled flow, nor does a slow spool or pump once settled.
+
+and it clearly beats the simulator re-timed by each reading's fitted delay (a gain in
+``SIGNIFICANT`` of the resamples and a practical share of what re-timing leaves).  Otherwise
+the verdict is what ``decide`` says of the re-timed simulator: the third plant's healthy
+machines, 9-12 ms behind the simulator, were named a deadband of 3-6 % while their closings
+were as late as their openings and their held flows read -1 to 2.4 %; its small deadbands
+(s730896_13, 14, 44: openings 10-23 ms later than closings, not significant) read 5-7 %.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from monitor.gap.diagnose.records import Calibrated, Paired, Scores
+from monitor.gap.fit import score as S
+from monitor.gap.judge import basemis, delays, heldflow, onsets
+from monitor.gap.judge.decide import SIGNIFICANT, Decision, gain_share, not_named
+
+NAME = "valve_deadband"
+#: The evidence a deadband can stand on (``timing.deadband.evidence``).
+TIMING = "openings_and_closings"
+HELD = "held_flows"
+
+
+def deadband_or_delay(
+    d: Decision,
+    sp: delays.Split,
+    retimed: tuple[dict[str, float], S.SegmentSums, S.SegmentSums],
+    cal: Calibrated,
+    scores: Scores,
+    paired: Paired,
+) -> tuple[Decision, dict]:
+    """The deadband ``d`` names, weighed against the shared delay (see the module);
+    ``retimed``: each reading's fitted delay and the re-timed simulator's sums."""
+    assert d.chosen is not None
+    c, base, held = d.chosen, scores.baseline, cal.readings.held(None).segments
+    fitted, whole, smooth = retimed
+    measured = onsets.measure(cal.prep, held, base.pred0)
+    own = cal.readings.held(c.prep).predict(c.factors, c.effects)
+    fitted_onsets = onsets.measure(cal.prep, held, base.pred0, meas=own)
+    flows = _held_flows(c, cal, scores)
+    shown = []
+    if measured is None or measured.apart_share >= SIGNIFICANT:
+        shown.append(TIMING)
+    if flows is not None and flows.share >= SIGNIFICANT:
+        shown.append(HELD)
+    beats = gain_share(whole, paired.sums[c.name], paired.boot_idx, cal.floor)
+    effect_s = paired.smooth.get(c.name)
+    practical = effect_s is not None and basemis.removes_practical(
+        smooth, effect_s, basemis.smoothed_floor(cal.floor)
+    )
+    named = bool(shown) and beats >= SIGNIFICANT and practical
+    row = {
+        "onsets": None if measured is None else measured.as_dict(),
+        "fitted_onsets": None if fitted_onsets is None else fitted_onsets.as_dict(),
+        "held_flows": None if flows is None else flows.as_dict(),
+        "shared_ms": round(float(sp.shared_ms or 0.0), 1),
+        "retimed_delays_ms": fitted,
+        "beats_retimed_share": round(beats, 3),
+        "removes_practical": practical,
+        "named": named,
+        "evidence": shown if named else [],
+    }
+    if named:
+        return d, row
+    alone = not_named(whole, paired.boot_idx, cal.floor, ({}, smooth), np.zeros(1), None, None)
+    return Decision(alone.verdict, None, None, float(alone.confidence)), row
+
+
+def _held_flows(c, cal: Calibrated, scores: Scores) -> heldflow.HeldFlow | None:
+    """The held flows against the fitted overlap alone on the calibrated simulator (one
+    simulation of the held-out part)."""
+    eff = next((e for e in c.effects if e.name == NAME), None)
+    if eff is None:
+        return None
+    base, held = scores.baseline, cal.readings.held(None)
+    overlapped = held.predict(base.factors, (eff,))
+    return heldflow.measure(
+        cal.prep, held.segments, base.pred0, overlapped, float(eff.params["overlap_pct"])
+    )
+
+
+def _held_line(f: dict | None) -> str:
+    if f is None:
+        return "too few held commands where an overlap would matter"
+    return (
+        f"the flows at {f['held_levels']} held commands read an overlap of "
+        f"{f['overlap_pct']:.0f} % (fitted {f['fitted_overlap_pct']:.0f} %)"
+    )
+
+
+def evidence(b: dict, verdict: str) -> str:
+    """One line: the openings' and closings' timing, the held flows, and what they decided
+    of a deadband."""
+    o = b["onsets"]
+    if o is None:
+        head = "too few openings out of centre or returns to it to time"
+    else:
+        head = (
+            f"moves out of a centred spool {o['opening_ms']:.0f} ms late against the "
+            f"simulator, returns to centre {o['closing_ms']:.0f} ms"
+        )
+        f = b["fitted_onsets"]
+        if f is not None:
+            head += f" (the fitted deadband: {f['asymmetry_ms']:.0f} ms apart)"
+    head += "; " + _held_line(b.get("held_flows"))
+    vs = (
+        "; against the simulator re-timed by the shared delay it gains in "
+        f"{b['beats_retimed_share']:.0%} of resamples"
+    )
+    if b["named"]:
+        by = " and ".join(
+            "the openings later than the closings" if e == TIMING else "the held flows"
+            for e in b["evidence"]
+        )
+        return f"{head}: a deadband's signature ({by}), not a shared delay{vs}"
+    held = b.get("held_flows")
+    if (o is not None and o["apart_share"] < SIGNIFICANT) and (
+        held is None or held["share"] < SIGNIFICANT
+    ):
+        why = "a shared delay shifts openings and closings alike and moves no held flow"
+    else:
+        why = "it does not clearly beat that re-timing"
+    rest = (
+        ", and no term but a reading's delay explains what re-timing leaves (base mismatch)"
+        if verdict == "none"
+        else ""
+    )
+    return f"{head}: not a deadband ({why}){vs}{rest}; verdict {verdict}"
