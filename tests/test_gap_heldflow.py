@@ -19,9 +19,7 @@ import pytest
 
 from monitor.gap.data.prepare import prepare
 from monitor.gap.data.segments import make_segments
-from monitor.gap.diagnose import diagnose
 from monitor.gap.judge import heldflow, onsets
-from monitor.gap.report.document import build_report
 from monitor.io.recording import Recording
 from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import Effect
@@ -29,23 +27,12 @@ from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
 
 M = load_machine()
-READINGS = ("PP", "PA", "PB", "QP", "RodPos")
 
 
 def _step(overlap_pct: float = 0.0, seconds: float = 90.0) -> Recording:
     cmd = make_cycle("step", seconds, 5)
     effects = [Effect.make("valve_deadband", overlap_pct=overlap_pct)] if overlap_pct else []
     return simulate(cmd, M, effects=effects, seed=5)
-
-
-def _late(rec: Recording, rows: int) -> Recording:
-    """Every reading ``rows`` samples late (the commands on time)."""
-    cols = dict(rec.columns)
-    for name in READINGS:
-        if name in cols:
-            v = cols[name]
-            cols[name] = np.concatenate([np.full(rows, v[0]), v[:-rows]])
-    return Recording(rec.t, cols, rec.source, dict(rec.meta))
 
 
 @pytest.fixture(scope="module")
@@ -79,8 +66,6 @@ def test_held_flows_read_a_small_overlap_the_timing_cannot(stepped):
 def test_a_shared_delay_moves_no_held_flow(stepped):
     base, segs = stepped["base"], stepped["segments"]
     late = {k: np.concatenate([np.full(2, v[0]), v[:-2]]) for k, v in base.meas.items()}
-    got = heldflow.measure(
-        replace(base, meas=late), segs, base.meas, stepped["ten"], 10.0
-    )
+    got = heldflow.measure(replace(base, meas=late), segs, base.meas, stepped["ten"], 10.0)
     assert got is not None
     assert abs(got.overlap_pct) < 1.0 and got.share == 0.0
