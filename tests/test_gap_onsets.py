@@ -179,17 +179,36 @@ def _late_readings(rec: Recording, rows: int) -> Recording:
     return Recording(rec.t, cols, rec.source, dict(rec.meta))
 
 
-def test_a_small_overlap_on_stepped_commands_is_read_from_the_held_flows():
-    # Our simulator with a 6 % overlap, its commands stepped (an overlap crossed within a
-    # sample: the openings are not later than the closings) and every reading 20 ms late
-    # (a shared delay the re-timed simulator takes).  Main withdrew the deadband: its
-    # timing did not show; the held flows fall short as the overlap makes them.
+def _stepped_small(overlap_pct: float) -> Recording:
+    """Our simulator on stepped commands of 10-50 % (the ``step`` cycle halved), every
+    reading one 10 ms sample late."""
     cmd = make_cycle("step", 90.0, 5)
-    rec = simulate(cmd, M, effects=[Effect.make("valve_deadband", overlap_pct=6.0)], seed=5)
-    rep = build_report(diagnose(_late_readings(rec, 2), M, effects=("valve_deadband",)), M)
+    cmd = Recording(cmd.t, {**cmd.columns, "SpoolCmd": 0.5 * cmd["SpoolCmd"]}, cmd.source)
+    effects = [Effect.make("valve_deadband", overlap_pct=overlap_pct)] if overlap_pct else []
+    return _late_readings(simulate(cmd, M, effects=effects, seed=5), 1)
+
+
+def test_a_small_overlap_on_stepped_commands_is_read_from_the_held_flows():
+    # A 6 % overlap crossed within a sample (the openings are not later than the closings)
+    # and every reading 10 ms late (a shared delay the re-timed simulator takes).  Main
+    # withdrew the deadband (`none`): its timing did not show.  The held flows fall short as
+    # the overlap makes them: (A - 6) / 94 of the valve's opening at a held command A.
+    rep = build_report(diagnose(_stepped_small(6.0), M, effects=("valve_deadband",)), M)
     b = rep["timing"]["deadband"]
     assert rep["verdict"] == "valve_deadband"
     assert b["onsets"] is None or b["onsets"]["apart_share"] < 0.95
     assert b["evidence"] == ["held_flows"]
     assert b["held_flows"]["overlap_pct"] == pytest.approx(6.0, abs=1.5)
     assert "held flows" in rep["timing"]["decided_by"]
+
+
+def test_a_shared_delay_on_stepped_commands_is_not_a_deadband():
+    # The same commands and delay without an overlap: whatever the deadband candidate
+    # fits, the held flows read no overlap and the verdict is not a deadband.
+    rep = build_report(diagnose(_stepped_small(0.0), M, effects=("valve_deadband",)), M)
+    assert rep["verdict"] != "valve_deadband"
+    b = rep["timing"].get("deadband")
+    if b is not None:
+        assert b["named"] is False
+        held = b["held_flows"]
+        assert held is None or held["overlap_pct"] < 1.5
