@@ -8,7 +8,7 @@ shows in what a shared delay cannot do:
   resamples of the events (a shared delay shifts both alike).  Read where the spool crosses
   the overlap slowly; a spool ramped at 900 %/s crosses 10 % in one sample.
 - **the held flows** (``judge/heldflow.py``): at held commands where the valve sets the
-  flow, the flow falls short as the fitted overlap (alone, on the calibrated simulator)
+  flow, the flow falls short as an overlap (a probe, alone on the calibrated simulator)
   makes it, more at the smaller commands, reading an overlap of
   ``heldflow.MIN_OVERLAP_PCT`` or more in ``SIGNIFICANT`` of the resamples of the held
   levels.  No delay moves a settled flow, nor does a slow spool or pump once settled.
@@ -29,6 +29,7 @@ from monitor.gap.diagnose.records import Calibrated, Paired, Scores
 from monitor.gap.fit import score as S
 from monitor.gap.judge import basemis, delays, heldflow, onsets
 from monitor.gap.judge.decide import SIGNIFICANT, Decision, gain_share, not_named
+from monitor.sim.effects import Effect
 
 NAME = "valve_deadband"
 #: The evidence a deadband can stand on (``timing.deadband.evidence``).
@@ -52,7 +53,7 @@ def deadband_or_delay(
     measured = onsets.measure(cal.prep, held, base.pred0)
     own = cal.readings.held(c.prep).predict(c.factors, c.effects)
     fitted_onsets = onsets.measure(cal.prep, held, base.pred0, meas=own)
-    flows = _held_flows(c, cal, scores)
+    flows = _held_flows(cal, scores)
     shown = []
     if measured is None or measured.apart_share >= SIGNIFICANT:
         shown.append(TIMING)
@@ -81,25 +82,20 @@ def deadband_or_delay(
     return Decision(alone.verdict, None, None, float(alone.confidence)), row
 
 
-def _held_flows(c, cal: Calibrated, scores: Scores) -> heldflow.HeldFlow | None:
-    """The held flows against the fitted overlap alone on the calibrated simulator (one
+def _held_flows(cal: Calibrated, scores: Scores) -> heldflow.HeldFlow | None:
+    """The held flows against the probe overlap alone on the calibrated simulator (one
     simulation of the held-out part)."""
-    eff = next((e for e in c.effects if e.name == NAME), None)
-    if eff is None:
-        return None
     base, held = scores.baseline, cal.readings.held(None)
-    overlapped = held.predict(base.factors, (eff,))
-    return heldflow.measure(
-        cal.prep, held.segments, base.pred0, overlapped, float(eff.params["overlap_pct"])
-    )
+    probe = Effect.make(NAME, overlap_pct=heldflow.PROBE_PCT)
+    overlapped = held.predict(base.factors, (probe,))
+    return heldflow.measure(cal.prep, held.segments, base.pred0, overlapped, heldflow.PROBE_PCT)
 
 
 def _held_line(f: dict | None) -> str:
     if f is None:
         return "too few held commands where an overlap would matter"
     return (
-        f"the flows at {f['held_levels']} held commands read an overlap of "
-        f"{f['overlap_pct']:.0f} % (fitted {f['fitted_overlap_pct']:.0f} %)"
+        f"the flows at {f['held_levels']} held commands read an overlap of {f['overlap_pct']:.0f} %"
     )
 
 

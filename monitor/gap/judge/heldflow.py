@@ -13,19 +13,20 @@ fifth of the flow at a command of 30 %.
 
 Per held command (the spool held ``HOLD_S`` or more out of centre, its first ``SETTLE_S``
 left to settle), the recording's mean flow over the calibrated simulator's (``r``) and the
-simulator's with the fitted overlap over the same (``s``, what the overlap leaves there).
+simulator's with a probe overlap (``PROBE_PCT``) over the same (``s``, what it leaves there).
 Read are the levels the valve already sets in the simulator (the overlap moves the pump's
 pressure by ``PP_MOVED_BAR`` or less: the pump at its compensator) and where the overlap
 takes ``MATTERS`` or more; the levels it leaves alone give the gain ``g`` every level shares
 (the pump's displacement and speed).  Each level's shortfall ``1 - r / g`` against the
-overlap's ``1 - s``, least squares through the origin, is the share of the fitted overlap
-the held flows bear out.  Its shape decides what it is: an overlap takes more of the flow
+overlap's ``1 - s``, least squares through the origin, is the share of the probe overlap
+the held flows bear out (nearly linear: an overlap ``o`` takes ``o / (1 - o)`` of a level's
+opening share).  Its shape decides what it is: an overlap takes more of the flow
 at a smaller command, while a valve gain off its nominal or a spool held short of its
 command by the flow force takes about the same share at every level (the third plant's
 slow spool s730896_39: 9-11 % at 28-48 %); a shortfall that the overlap's shape does not fit
 better than a like one at every level shows no overlap.  Resampling the held levels gives
 the share of resamples reading ``MIN_OVERLAP_PCT`` or more.  No simulation beyond the
-fitted overlap's.
+probe overlap's.
 """
 
 from __future__ import annotations
@@ -39,6 +40,10 @@ from monitor.gap.data.prepare import Prepared
 from monitor.gap.data.segments import Segment
 from monitor.signals import SAMPLE_PERIOD_S
 
+#: The probe overlap (% stroke): the catalogue's default, one hypothesis for every recording
+#: (the fitted overlap's own simulation moves the pump's pressure at more levels the
+#: larger it is, and reads a different set of levels).
+PROBE_PCT = 10.0
 #: The flows read: the pump's, and the rod's where a stroke sensor gives it.
 FLOWS = ("QP", "RodVel")
 #: A held command: steady within this (% stroke) for ``HOLD_S`` (s), out of centre.
@@ -47,7 +52,7 @@ HOLD_S = 0.4
 CENTRE_PCT = 2.0
 #: Left to settle at the start of a held command (s).
 SETTLE_S = 0.2
-#: A held level counts where the fitted overlap takes this share of its flow or more.
+#: A held level counts where the probe overlap takes this share of its flow or more.
 MATTERS = 0.05
 #: A level the valve sets: the overlap moves the pump's pressure there by this or less (bar).
 PP_MOVED_BAR = 5.0
@@ -56,17 +61,17 @@ PP_MOVED_BAR = 5.0
 MIN_LEVELS = 3
 #: The least overlap (% stroke) the held flows must read to show a deadband: another make's
 #: metering at small openings reads as a little (the third plant's twelve healthy machines
-#: of two draws: -1.0 to 2.4 %, its small deadbands 5-7 %, against a 10 % hypothesis).
+#: of two draws: -1.0 to 2.4 %, its small deadbands 5-7 %).
 MIN_OVERLAP_PCT = 3.5
 RESAMPLES = 400
 
 
 @dataclass(frozen=True)
 class HeldFlow:
-    """The overlap (% stroke) the held flows read against the fitted one."""
+    """The overlap (% stroke) the held flows read against a probe overlap's."""
 
     overlap_pct: float
-    fitted_pct: float
+    probe_pct: float
     levels: int
     #: The overlap's shape against a shortfall alike at every level (squared residuals).
     shape_ratio: float
@@ -77,7 +82,7 @@ class HeldFlow:
     def as_dict(self) -> dict:
         return {
             "overlap_pct": round(self.overlap_pct, 1),
-            "fitted_overlap_pct": round(self.fitted_pct, 1),
+            "probe_overlap_pct": round(self.probe_pct, 1),
             "held_levels": self.levels,
             "shape_vs_alike": round(self.shape_ratio, 3),
             "share": round(self.share, 3),
@@ -120,10 +125,10 @@ def measure(
     segments: Sequence[Segment],
     pred: dict[str, np.ndarray],
     overlapped: dict[str, np.ndarray],
-    fitted_pct: float,
+    probe_pct: float,
 ) -> HeldFlow | None:
     """The overlap the held flows of the recording read, ``pred`` the calibrated simulator
-    and ``overlapped`` the same with an overlap of ``fitted_pct``; None with fewer than
+    and ``overlapped`` the same with an overlap of ``probe_pct``; None with fewer than
     ``MIN_LEVELS`` held levels where that overlap matters or where it does not."""
     windows = held(prep.cmd["SpoolCmd"], segments)
     r_rows, s_rows = [], []
@@ -150,15 +155,15 @@ def measure(
     if matters.sum() < MIN_LEVELS or shares.sum() < MIN_LEVELS:
         return None
     r_m, s_m, r_g = r[matters], s[matters], r[shares]
-    est, shape = _overlap(r_m, s_m, r_g, fitted_pct)
+    est, shape = _overlap(r_m, s_m, r_g, probe_pct)
     rng = np.random.default_rng(0)
     draws = np.empty(RESAMPLES)
     for i in range(RESAMPLES):
         pick = rng.integers(0, len(r_m), len(r_m))
         g_pick = rng.integers(0, len(r_g), len(r_g))
-        draws[i] = _overlap(r_m[pick], s_m[pick], r_g[g_pick], fitted_pct)[0]
+        draws[i] = _overlap(r_m[pick], s_m[pick], r_g[g_pick], probe_pct)[0]
     share = float(np.mean(draws >= MIN_OVERLAP_PCT)) if shape < 1.0 else 0.0
-    return HeldFlow(est, fitted_pct, int(matters.sum()), shape, share)
+    return HeldFlow(est, probe_pct, int(matters.sum()), shape, share)
 
 
 def _level_means(rows: np.ndarray) -> np.ndarray:
@@ -170,9 +175,9 @@ def _level_means(rows: np.ndarray) -> np.ndarray:
 
 
 def _overlap(
-    r: np.ndarray, s: np.ndarray, r_shared: np.ndarray, fitted_pct: float
+    r: np.ndarray, s: np.ndarray, r_shared: np.ndarray, probe_pct: float
 ) -> tuple[float, float]:
-    """The fitted overlap times the share of its flow shortfall the held levels bear out
+    """The probe overlap times the share of its flow shortfall the held levels bear out
     (each level's shortfall against the shared gain, ``1 - r / g``, over the overlap's,
     ``1 - s``, least squares through the origin), and how well that shape fits against a
     shortfall alike at every level (a valve's gain, a spool held short of its command):
@@ -184,4 +189,4 @@ def _overlap(
     b = float(np.sum(short * own) / np.sum(own * own))
     sse_overlap = float(np.sum((short - b * own) ** 2))
     sse_alike = float(np.sum((short - short.mean()) ** 2))
-    return b * fitted_pct, sse_overlap / max(sse_alike, 1e-12)
+    return b * probe_pct, sse_overlap / max(sse_alike, 1e-12)
