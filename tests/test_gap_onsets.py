@@ -180,25 +180,26 @@ def _late_readings(rec: Recording, rows: int) -> Recording:
 
 
 def _stepped_small(overlap_pct: float) -> Recording:
-    """Our simulator on stepped commands of 10-50 % (the ``step`` cycle halved), every
+    """Our simulator on stepped commands of 14-70 % (the ``step`` cycle at 0.7), every
     reading one 10 ms sample late."""
     cmd = make_cycle("step", 90.0, 5)
-    cmd = Recording(cmd.t, {**cmd.columns, "SpoolCmd": 0.5 * cmd["SpoolCmd"]}, cmd.source)
+    cmd = Recording(cmd.t, {**cmd.columns, "SpoolCmd": 0.7 * cmd["SpoolCmd"]}, cmd.source)
     effects = [Effect.make("valve_deadband", overlap_pct=overlap_pct)] if overlap_pct else []
     return _late_readings(simulate(cmd, M, effects=effects, seed=5), 1)
 
 
 def test_a_small_overlap_on_stepped_commands_is_read_from_the_held_flows():
-    # A 6 % overlap crossed within a sample (the openings are not later than the closings)
+    # An 8 % overlap crossed within a sample (the openings are not later than the closings)
     # and every reading 10 ms late (a shared delay the re-timed simulator takes).  Main
     # withdrew the deadband (`none`): its timing did not show.  The held flows fall short as
-    # the overlap makes them: (A - 6) / 94 of the valve's opening at a held command A.
-    rep = build_report(diagnose(_stepped_small(6.0), M, effects=("valve_deadband",)), M)
+    # the overlap makes them, (A - 8) / 92 of the valve's opening at a held command A; the
+    # calibrated valve gain takes a part of it at every level, so they read less than 8 %.
+    rep = build_report(diagnose(_stepped_small(8.0), M, effects=("valve_deadband",)), M)
     b = rep["timing"]["deadband"]
     assert rep["verdict"] == "valve_deadband"
     assert b["onsets"] is None or b["onsets"]["apart_share"] < 0.95
     assert b["evidence"] == ["held_flows"]
-    assert b["held_flows"]["overlap_pct"] == pytest.approx(6.0, abs=1.5)
+    assert 4.0 <= b["held_flows"]["overlap_pct"] <= 9.0
     assert "held flows" in rep["timing"]["decided_by"]
 
 
