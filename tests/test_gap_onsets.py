@@ -213,3 +213,26 @@ def test_a_shared_delay_on_stepped_commands_is_not_a_deadband():
         assert b["named"] is False
         held = b["held_flows"]
         assert held is None or held["overlap_pct"] < 1.5
+
+
+def test_a_pump_displacement_within_tolerance_beside_a_delay_is_the_recordings_timing():
+    # The third plant's healthy s730896_60 (+-3 %): a -4.4 % pump displacement suggested
+    # with a 15 ms QP delay, re-timing significant: `unexplained` (pump_setting) on main.
+    # Within the 15 % the calibration grants the valve's gain it is a tolerance.
+    disp = {
+        "term": "pump_setting",
+        "signal": "displacement",
+        "coefficient": -4.43,
+        "description": "pump displacement (max displacement): -4.43 % change",
+        "heldout_reduction": 0.48,
+    }
+    delay = {"term": "sensor_delay", "signal": "QP", "heldout_reduction": 0.67}
+    f = check_shared(_finding([disp, delay], [disp], 1.0), lambda _m: None)
+    assert f.verdict == "none" and f.timing is not None
+    assert "within the 15 %" in f.timing["decided_by"]
+    # Beyond the band, or without a reading's delay beside it, it is a departure.
+    far = {**disp, "coefficient": -20.0}
+    assert check_shared(_finding([far, delay], [far], 1.0), lambda _m: None).verdict == (
+        "unexplained"
+    )
+    assert check_shared(_finding([disp], [disp], 1.0), lambda _m: None).verdict == "unexplained"
