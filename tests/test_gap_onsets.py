@@ -236,3 +236,6 @@ def test_a_pump_displacement_within_tolerance_beside_a_delay_is_the_recordings_t
         "unexplained"
     )
     assert check_shared(_finding([disp], [disp], 1.0), lambda _m: None).verdict == "unexplained"
+    # One valve edge's gain (s924107_65: P->A -12.8 %): the calibration fits all four alike.
+    edge = {"term": "valve_setting", "signal": "P->A", "coefficient": -12.81, "description": "e"}
+    assert check_shared(_finding([edge, delay], [edge], 1.0), lambda _m: None).verdict == "none"
