@@ -60,8 +60,8 @@ PP_MOVED_BAR = 5.0
 #: nothing.
 MIN_LEVELS = 3
 #: The least overlap (% stroke) the held flows must read to show a deadband: another make's
-#: metering at small openings reads as a little (the third plant's twelve healthy machines
-#: of two draws: -1.0 to 2.4 %, its small deadbands 5-7 %).
+#: metering at small openings reads as a little (seven healthy machines of the third
+#: plant's two development draws: -1.0 to 2.4 %, its small deadbands 5-7 %).
 MIN_OVERLAP_PCT = 3.5
 RESAMPLES = 400
 
