@@ -218,3 +218,33 @@ def test_a_friction_the_balance_did_not_decide_keeps_its_own_evidence():
     # Named by the balance: its evidence decided.
     named = mechanism.describe({**base, "friction_check": {**chk, "verdict_without_check": "none"}})
     assert named["decided_by"].startswith("the rod's force balance")
+
+
+def test_a_drop_between_the_chambers_and_the_sensors_is_not_coulomb_friction(tmp_path):
+    # PA and PB read at the valve's work ports behind a hose restriction: each reads its
+    # chamber plus the turbulent drop K Q |Q| of the flow into A (A_A v) and out of B
+    # (A_B v), so the force they show gains K (A_A^3 + A_B^3) v |v|.  K = 8e11 Pa s^2/m^6
+    # (2 bar at 30 L/min): with the reference cylinder (63/36 mm; A_A 3.117e-3, A_B
+    # 2.099e-3 m^2) 31 600 N s^2/m^2, some 530 N at the cycle's 0.13 m/s.  Held in its
+    # band, viscous friction cannot carry it, and the Coulomb column took it (a friction
+    # where the machine has none); the balance's own column for the drop reads it.
+    path = _simulate(tmp_path, "ports")
+    rec = np.genfromtxt(path, delimiter=",", names=True)
+    names = rec.dtype.names
+    a_a = np.pi / 4 * 0.063**2
+    a_b = a_a - np.pi / 4 * 0.036**2
+    # The rod's speed from RodPos over 0.1 s (its 0.5 mm noise differenced sample to
+    # sample would be a 35 mm/s noise in the drop).
+    rod_m = np.convolve(rec["RodPos"] * 1e-3, np.ones(11) / 11, mode="same")
+    v = np.gradient(rod_m, rec["t"])
+    k_pa_s2_m6 = 8e11
+    rec["PA"] += k_pa_s2_m6 * (a_a * v) * np.abs(a_a * v) / 1e5
+    rec["PB"] -= k_pa_s2_m6 * (a_b * v) * np.abs(a_b * v) / 1e5
+    np.savetxt(path, rec, delimiter=",", header=",".join(names), comments="", fmt="%.6g")
+    sig = _signature(path)
+    assert sig.readable and sig.absent
+    assert abs(sig.coulomb_n) < 0.5 * friction.LEVEL_N
+    expected = k_pa_s2_m6 * (a_a**3 + a_b**3)
+    assert sig.quadratic_n_s2_m2 == pytest.approx(expected, rel=0.15)
+    assert sig.viscous_n_s_m == pytest.approx(2000.0, rel=0.15)
+    assert "square of the speed" in sig.evidence()

@@ -12,6 +12,20 @@ within the band the tolerance calibration allows (``calibrate.TOLERANCES``, +-30
 the configured value): what the band cannot carry is Coulomb friction, and a viscous
 coefficient that ends on the band's edge is reported as evidence.
 
+PA and PB are read where the sensors sit, not in the chambers: a pressure sensor at the
+valve's work port reads the chamber pressure plus the drop across the hose and its
+fittings, a turbulent drop growing with the square of the flow (Q_A = A_A v into A, A_B v
+out of B), which adds r v |v| to the force with r = K (A_A^3 + A_B^3) >= 0 (K the
+restriction's dp / Q^2).  Held in its band, the viscous coefficient cannot carry it, and
+the Coulomb column took it: on the fourth plant (PA and PB read behind hose
+restrictions, 1-1.5 bar at 30 L/min) healthy machines read 140-200 N of Coulomb friction
+in 98-100 % of resamples beside viscous friction at the band's top, and a free viscous
+coefficient read 4900-6000 N s/m against their 2000-2200.  So the balance has a column of
+its own for that drop, never negative (a restriction's drop opposes the flow): it is
+convex in speed where a Coulomb friction is concave, so it cannot take a friction, and
+healthy machines' Coulomb friction falls to -15..-1 N with viscous friction back at
+2000-2800 N s/m (r 15 000-18 000 N s^2/m^2).
+
 No simulation: the recording alone.  The blocks of the bootstrap are the diagnosis's
 segments (each a move or two started from rest), so a few segments with a force the
 balance does not describe cannot carry the estimate.
@@ -57,8 +71,10 @@ MIN_SAMPLES = 1000
 #: The catalogue effect this reads.
 NAME = "cylinder_friction"
 #: Columns of the regression: gravity (N), its slope (N/mm), viscous friction (N s/m),
-#: Coulomb friction (N), mass (kg).
-VISCOUS, _COULOMB = 2, 3
+#: Coulomb friction (N), mass (kg), the drop between chambers and sensors (N s^2/m^2).
+VISCOUS, _COULOMB, QUADRATIC = 2, 3, 5
+#: Speed (m/s) at which the evidence says what that drop adds to the force.
+_AT_SPEED_M_S = 0.15
 
 
 @dataclass(frozen=True)
@@ -84,6 +100,9 @@ class FrictionSignature:
     #: rod's viscous friction take it for Coulomb friction.
     free_coulomb_n: float = 0.0
     free_share: float = 0.0
+    #: The force growing with the square of the speed (N s^2/m^2, held >= 0): the pressure
+    #: drop between the chambers and where PA and PB are read, beside the frictions.
+    quadratic_n_s2_m2: float = 0.0
 
     @property
     def present(self) -> bool:
@@ -111,10 +130,17 @@ class FrictionSignature:
             f"with viscous friction free {self.free_coulomb_n:.0f} N "
             f"({100 * self.free_share:.0f} %)"
         )
+        drop = self.quadratic_n_s2_m2 * _AT_SPEED_M_S**2
+        quad = (
+            f" and a drop between the chambers and the pressure sensors growing with the "
+            f"square of the speed ({drop:.0f} N at {1e3 * _AT_SPEED_M_S:.0f} mm/s)"
+            if drop >= 0.5 * LEVEL_N
+            else ""
+        )
         return (
             f"the rod's force balance: Coulomb friction {self.coulomb_n:.0f} N beside viscous "
-            f"friction {self.viscous_n_s_m:.0f} N s/m{bound}, at {LEVEL_N:.0f} N or more in "
-            f"{100 * self.above_share:.0f} % of the resamples; {free}"
+            f"friction {self.viscous_n_s_m:.0f} N s/m{bound}{quad}, at {LEVEL_N:.0f} N or "
+            f"more in {100 * self.above_share:.0f} % of the resamples; {free}"
         )
 
     def as_dict(self) -> dict:
@@ -128,6 +154,7 @@ class FrictionSignature:
             "free_coulomb_n": round(self.free_coulomb_n, 1),
             "free_above_share": round(self.free_share, 3),
             "separated": self.separated,
+            "quadratic_n_s2_m2": round(self.quadratic_n_s2_m2, 1),
             "rms_n": round(self.rms_n, 1),
             "samples": self.samples,
             "readable": self.readable,
@@ -173,6 +200,7 @@ def signature(
         readable=rms <= MAX_RMS_N,
         free_coulomb_n=float(_bounded(total[0], total[1], free)[0][_COULOMB]),
         free_share=float(above[1]),
+        quadratic_n_s2_m2=float(beta[QUADRATIC]),
     )
 
 
@@ -180,7 +208,8 @@ def balance_sums(
     prep: Prepared, segments: Sequence[Segment], machine: MachineParams
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per segment, the normal equations' sums of the moving rod's force balance (columns:
-    gravity, its slope, viscous friction, Coulomb friction, mass)."""
+    gravity, its slope, viscous friction, Coulomb friction, mass, the sensors' drop
+    growing with the square of the speed)."""
     cyl = machine.cylinder
     force = (prep.meas["PA"] * cyl.area_a_m2 - prep.meas["PB"] * cyl.area_b_m2) * BAR
     v = rod_velocity(smooth_rod(prep.rod_mm))
@@ -196,8 +225,10 @@ def balance_sums(
     )
     if prep.unscored is not None:
         ok &= ~prep.unscored
+    v_m_s = v * 1e-3
+    slope = x - x[ok].mean() if ok.any() else x
     cols = np.column_stack(
-        [np.ones_like(v), x - x[ok].mean() if ok.any() else x, v * 1e-3, np.sign(v), a * 1e-3]
+        [np.ones_like(v), slope, v_m_s, np.sign(v), a * 1e-3, v_m_s * np.abs(v_m_s)]
     )
     return _segment_sums(cols, force, ok, segments)
 
@@ -220,22 +251,55 @@ def _segment_sums(
 def _bounded(
     xtx: np.ndarray, xty: np.ndarray, bounds: tuple[float, float]
 ) -> tuple[np.ndarray, int]:
-    """Least squares with the viscous coefficient held within ``bounds``: the unbounded
-    solution, or (a convex quadratic's minimum over an interval lies on its edge when not
-    inside) the others solved with the viscous one at the nearer edge."""
-    beta = np.linalg.lstsq(xtx, xty, rcond=None)[0]
-    c = beta[VISCOUS]
-    if bounds[0] <= c <= bounds[1]:
-        return beta, 0
-    side = 1 if c > bounds[1] else -1
-    c = bounds[1] if side > 0 else bounds[0]
-    keep = [j for j in range(len(beta)) if j != VISCOUS]
-    sub = np.linalg.lstsq(xtx[np.ix_(keep, keep)], xty[keep] - xtx[keep, VISCOUS] * c, rcond=None)[
-        0
-    ]
-    out = np.empty_like(beta)
-    out[keep], out[VISCOUS] = sub, c
-    return out, side
+    """Least squares with the viscous coefficient held within ``bounds``, and which edge
+    of them it ended on.  The drop growing with the square of the speed is read first with
+    the viscous coefficient free (``readout``), where only a curvature of the force over
+    speed can carry it: a friction bends the force the other way, and on a duty cycle that
+    moves the rod at one speed each way the drop reads nothing.  Then it is held there:
+    with the viscous coefficient held in its band, the drop and the Coulomb friction would
+    share whatever the band refuses, and a friction at one speed looks like either."""
+    drop = readout(xtx, xty)
+    if not (np.isfinite(bounds[0]) or np.isfinite(bounds[1])):
+        return drop, 0
+    return _least(xtx, xty, bounds, drop[QUADRATIC])
+
+
+def readout(xtx: np.ndarray, xty: np.ndarray) -> np.ndarray:
+    """The balance's coefficients with every one free but the quadratic drop, held at zero
+    or more (what ``thinoil`` reads the viscous friction from)."""
+    return _least(xtx, xty, (-np.inf, np.inf), None)[0]
+
+
+def _least(
+    xtx: np.ndarray, xty: np.ndarray, bounds: tuple[float, float], drop: float | None
+) -> tuple[np.ndarray, int]:
+    """Least squares with the viscous coefficient within ``bounds`` and the drop held at
+    ``drop`` (None: zero or more).  A convex quadratic's minimum over a box is the least
+    of its minima on the box's faces that lie in the box: each coefficient free or on one
+    of its edges."""
+    best, cost, side = np.zeros(len(xty)), np.inf, 0
+    edges = [(None, 0)] + [(b, s) for b, s in ((bounds[0], -1), (bounds[1], 1)) if np.isfinite(b)]
+    for c, c_side in edges:
+        for q in (None, 0.0) if drop is None else (drop,):
+            beta = _on_face(xtx, xty, {VISCOUS: c, QUADRATIC: q})
+            inside = bounds[0] <= beta[VISCOUS] <= bounds[1] and beta[QUADRATIC] >= 0.0
+            here = float(beta @ xtx @ beta - 2.0 * beta @ xty)
+            if inside and here < cost:
+                best, cost, side = beta, here, c_side
+    return best, side
+
+
+def _on_face(xtx: np.ndarray, xty: np.ndarray, fixed: dict[int, float | None]) -> np.ndarray:
+    """Least squares with the coefficients ``fixed`` names held at their values (None:
+    free)."""
+    held = {j: v for j, v in fixed.items() if v is not None}
+    keep = [j for j in range(len(xty)) if j not in held]
+    rhs = xty[keep] - sum((xtx[keep, j] * v for j, v in held.items()), np.zeros(len(keep)))
+    out = np.empty(len(xty))
+    out[keep] = np.linalg.lstsq(xtx[np.ix_(keep, keep)], rhs, rcond=None)[0]
+    for j, v in held.items():
+        out[j] = v
+    return out
 
 
 def named_by_signature(

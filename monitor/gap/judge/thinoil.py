@@ -6,7 +6,8 @@ cannot say which.  But a thinner oil does not only leak more: the viscous part o
 rod's friction (the seals' and the guide's oil films) falls with the viscosity, while a
 worn pump leaves the rod alone.  So the rod's viscous friction is read from its measured
 force balance (``friction.balance_sums``: F = G + k (x - x_ref) + c v + F_c sign(v) + m a
-over the moving samples, with c free), bootstrapped over the segments, and compared with
++ r v |v| over the moving samples, with c free and r, the drop between the chambers and
+the pressure sensors, at zero or more), bootstrapped over the segments, and compared with
 the least the simulator's tolerance band allows a machine with the configured oil
 (``calibrate.TOLERANCES``: the configured viscous friction less 30 %).  Below it in
 ``SIGNIFICANT`` of the resamples, the oil is thinner than the configured one: a cause that
@@ -35,7 +36,7 @@ from monitor.gap.data.prepare import Prepared
 from monitor.gap.data.segments import Segment
 from monitor.gap.fit.calibrate import BY_NAME
 from monitor.gap.judge.decide import SIGNIFICANT
-from monitor.gap.judge.friction import MAX_RMS_N, MIN_SAMPLES, VISCOUS, balance_sums
+from monitor.gap.judge.friction import MAX_RMS_N, MIN_SAMPLES, VISCOUS, balance_sums, readout
 from monitor.gap.judge.shrink import resamples
 from monitor.sim.machine import MachineParams
 
@@ -102,13 +103,13 @@ def signature(prep: Prepared, segments: Sequence[Segment], machine: MachineParam
     if total < MIN_SAMPLES:
         return _unread(low, f"{total} moving samples (need {MIN_SAMPLES})", samples=total)
     a, b = xtx.sum(axis=0), xty.sum(axis=0)
-    beta = np.linalg.lstsq(a, b, rcond=None)[0]
+    beta = readout(a, b)
     rms = float(np.sqrt(max(float(yty.sum()) - 2 * beta @ b + beta @ a @ beta, 0.0) / total))
     if rms > MAX_RMS_N:
         return _unread(low, f"the balance leaves {rms:.0f} N rms", rms, total)
     boot = np.array(
         [
-            np.linalg.lstsq(xtx[i].sum(axis=0), xty[i].sum(axis=0), rcond=None)[0][VISCOUS]
+            readout(xtx[i].sum(axis=0), xty[i].sum(axis=0))[VISCOUS]
             for i in resamples(len(segments), seed=1)
         ]
     )
