@@ -75,6 +75,14 @@ NAME = "cylinder_friction"
 VISCOUS, _COULOMB, QUADRATIC = 2, 3, 5
 #: Speed (m/s) at which the evidence says what that drop adds to the force.
 _AT_SPEED_M_S = 0.15
+#: The drop is read only where the rod moves at speeds far enough apart to tell a square
+#: from a line: this many moving samples (1 s) at ``CLEAR_SPEED_MM_S`` or more but below
+#: half the median of those speeds.  A duty cycle that moves the rod at one speed each way
+#: has 0-18 (the outsider's and the third plant's, this simulator's boom cycle: there a
+#: drop read anyway took 15-35 % of the viscous coefficient), the fourth plant's 183-2141,
+#: this simulator's spool ramps 362.
+SLOW_SAMPLES = 100
+CLEAR_SPEED_MM_S = 20.0
 
 
 @dataclass(frozen=True)
@@ -227,10 +235,19 @@ def balance_sums(
         ok &= ~prep.unscored
     v_m_s = v * 1e-3
     slope = x - x[ok].mean() if ok.any() else x
-    cols = np.column_stack(
-        [np.ones_like(v), slope, v_m_s, np.sign(v), a * 1e-3, v_m_s * np.abs(v_m_s)]
-    )
+    # A column of zeros where the speeds cannot tell the drop from viscous friction: its
+    # coefficient is then zero (least squares' least-norm solution).
+    drop = v_m_s * np.abs(v_m_s) if _speeds_apart(np.abs(v[ok])) else np.zeros_like(v)
+    cols = np.column_stack([np.ones_like(v), slope, v_m_s, np.sign(v), a * 1e-3, drop])
     return _segment_sums(cols, force, ok, segments)
+
+
+def _speeds_apart(speed_mm_s: np.ndarray) -> bool:
+    """Whether the rod moved at speeds far enough apart to read the drop (``SLOW_SAMPLES``)."""
+    clear = speed_mm_s[speed_mm_s >= CLEAR_SPEED_MM_S]
+    if clear.size == 0:
+        return False
+    return int(np.sum(clear < 0.5 * np.median(clear))) >= SLOW_SAMPLES
 
 
 def _segment_sums(
