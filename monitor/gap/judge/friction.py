@@ -18,13 +18,13 @@ fittings, a turbulent drop growing with the square of the flow (Q_A = A_A v into
 out of B), which adds r v |v| to the force with r = K (A_A^3 + A_B^3) >= 0 (K the
 restriction's dp / Q^2).  Held in its band, the viscous coefficient cannot carry it, and
 the Coulomb column took it: on the fourth plant (PA and PB read behind hose
-restrictions, 1-1.5 bar at 30 L/min) healthy machines read 140-200 N of Coulomb friction
-in 98-100 % of resamples beside viscous friction at the band's top, and a free viscous
-coefficient read 4900-6000 N s/m against their 2000-2200.  So the balance has a column of
-its own for that drop, never negative (a restriction's drop opposes the flow): it is
-convex in speed where a Coulomb friction is concave, so it cannot take a friction, and
-healthy machines' Coulomb friction falls to -15..-1 N with viscous friction back at
-2000-2800 N s/m (r 15 000-18 000 N s^2/m^2).
+restrictions, 1-1.5 bar at 30 L/min) healthy machines read 137-203 N of Coulomb friction
+in 98-100 % of resamples beside viscous friction at the band's top (free, 4900-6000 N
+s/m).  So the balance has a column of its own for that drop, never negative (a drop
+opposes the flow), read with the viscous coefficient free and then held while the
+frictions are read (``_bounded``), and only where the rod's speeds are far enough apart to
+tell a square of the speed from a line (``SLOW_SAMPLES``).  Healthy machines there then
+read -8 to 4 N beside 1930-2680 N s/m free and a drop of 15 000-18 000 N s^2/m^2.
 
 No simulation: the recording alone.  The blocks of the bootstrap are the diagnosis's
 segments (each a move or two started from rest), so a few segments with a force the
