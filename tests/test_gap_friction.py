@@ -254,3 +254,26 @@ def test_a_drop_between_the_chambers_and_the_sensors_is_not_coulomb_friction(tmp
     assert sig.viscous_n_s_m == pytest.approx(2000.0, rel=0.15)
     assert "square of the speed" in sig.evidence()
 
+
+def test_the_balance_least_squares_within_bounds_matches_scipys():
+    # The box-constrained least squares the balance solves (viscous coefficient within its
+    # band, the drop at zero or more, the rest free), against scipy's bounded solver on
+    # the same rows: problems whose free solution breaks one bound, both, or none.
+    from scipy.optimize import lsq_linear
+
+    rng = np.random.default_rng(5)
+    band = (1.0, 2.0)
+    for truth_c, truth_q in ((3.0, -1.0), (0.5, 2.0), (1.5, 0.5), (1.2, -3.0)):
+        x = rng.normal(size=(400, 6))
+        beta = np.array([0.3, -0.2, truth_c, 0.7, 0.1, truth_q])
+        y = x @ beta + 0.1 * rng.normal(size=400)
+        lb = np.full(6, -np.inf)
+        ub = np.full(6, np.inf)
+        lb[friction.VISCOUS], ub[friction.VISCOUS] = band
+        lb[friction.QUADRATIC] = 0.0
+        ref = lsq_linear(x, y, bounds=(lb, ub), tol=1e-12).x
+        got, side = friction._least(x.T @ x, x.T @ y, band, None)
+        np.testing.assert_allclose(got, ref, atol=1e-6)
+        expected_side = 1 if ref[friction.VISCOUS] >= band[1] - 1e-9 else 0
+        expected_side = -1 if ref[friction.VISCOUS] <= band[0] + 1e-9 else expected_side
+        assert side == expected_side
