@@ -22,6 +22,7 @@ from monitor.sim.laws import (
     edge_corrections,
     force_corrections,
     leak,
+    metering,
     orifice,
     pump_flow,
 )
@@ -54,7 +55,8 @@ LEAK_BT_LIN, LEAK_BT_SQRT, LEAK_AB_LIN, LEAK_AB_SQRT = 54, 55, 56, 57
 F_VEL, F_SIGN, F_POS, F_PER_COS, F_PER_SIN, F_PER_W = 58, 59, 60, 61, 62, 63
 KV_PA_REL, KV_PB_REL, KV_AT_REL, KV_BT_REL = 64, 65, 66, 67
 LEAK_AT_SQ, CORR_ON = 68, 69
-N_PARAMS = 70
+NOTCH = 70  # -, share of the stroke metered through notches (0: linear edges)
+N_PARAMS = 71
 
 # --- input columns (per input sample, linearly interpolated inside a step) ----------------
 IN_SPOOL, IN_DISP, IN_SPEED_RPS, IN_VISC_RATIO, IN_LEAK, IN_STROKE_LIM, IN_UNDERLAP = range(7)
@@ -154,6 +156,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
     xs = clip(xs, -lim, lim)
     ov = prm[OVERLAP]
     mag = max(abs(xs) - ov, 0.0) / (1.0 - ov)
+    if prm[NOTCH] > 0.0:
+        mag = metering(mag, prm[NOTCH])
     s = mag if xs >= 0.0 else -mag
     o_pos = clip(s + ul, 0.0, 1.0)  # P->A and B->T
     o_neg = clip(-s + ul, 0.0, 1.0)  # P->B and A->T

@@ -27,6 +27,20 @@ def orifice(kv_open: float, dp: float, dp_lam: float) -> float:
 
 
 @jit(inline="always")
+def metering(opening: float, notch: float) -> float:
+    """The open area of a metering edge (share of its full-stroke area) at ``opening``
+    (share of the stroke past the lap) when notches meter the first ``notch`` of the stroke:
+    a V notch's area grows with the square of its opening, then the full land opens
+    linearly; the two joined with one slope, ``notch / (2 - notch)`` of the area at the
+    notch's end (a third at half the stroke).  ``notch`` 0 < n < 1."""
+    at_end = notch / (2.0 - notch)
+    if opening < notch:
+        r = opening / notch
+        return at_end * r * r
+    return at_end + (opening - notch) * (1.0 - at_end) / (1.0 - notch)
+
+
+@jit(inline="always")
 def clip(v: float, lo: float, hi: float) -> float:
     return lo if v < lo else (hi if v > hi else v)
 

@@ -57,6 +57,10 @@ class Valve:
     valve_rated_dp_pa: float = 10 * BAR
     laminar_dp_pa: float = 0.3 * BAR
     tank_pa: float = 0.0
+    #: Share of the stroke over which each metering edge opens through notches (0: a
+    #: linear edge): the open area grows with the square of the opening there and
+    #: linearly beyond, the two joined with one slope (``monitor.sim.laws.metering``).
+    notch_share: float = 0.0
 
     @property
     def valve_kv(self) -> float:
@@ -173,6 +177,7 @@ _KEYS: dict[str, dict[str, tuple[str, float, float, float]]] = {
         "rated_dp_bar": ("valve_rated_dp_pa", BAR, 0.5, 100),
         "laminar_dp_bar": ("laminar_dp_pa", BAR, 0.01, 5),
         "tank_bar": ("tank_pa", BAR, 0, 20),
+        "notch_share_pct": ("notch_share", 0.01, 0, 90),
     },
     "cylinder": {
         "bore_mm": ("bore_m", 1e-3, 10, 500),

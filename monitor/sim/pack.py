@@ -57,6 +57,7 @@ def pack_params(
     prm[K.KV] = m.valve.valve_kv
     prm[K.DP_LAM] = m.valve.laminar_dp_pa
     prm[K.PTANK] = m.valve.tank_pa
+    prm[K.NOTCH] = m.valve.notch_share
     prm[K.DISP_MAX] = m.pump.pump_disp_m3_rev
     prm[K.COMP_ON] = 1.0 if m.pump.compensator_enabled else 0.0
     prm[K.COMP_START] = m.pump.compensator_start_pa

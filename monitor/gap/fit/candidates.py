@@ -56,7 +56,7 @@ assert set(KNOBS) == set(CATALOGUE)
 CONFOUNDED: dict[str, tuple[str, ...]] = {
     "entrained_air": ("volumes",),
     "hose_compliance": ("volumes",),
-    "valve_deadband": ("valve_gain",),
+    "valve_deadband": ("valve_gain", "valve_metering"),
     "cylinder_friction": ("viscous_friction", "valve_gain", "mass"),
     "oil_viscosity": ("viscous_friction",),
     "load_variation": ("gravity_load",),

@@ -194,8 +194,8 @@ def _refit_with_tolerances(runs: _Runs, f: Fitted, factors: dict[str, float]) ->
     term, tols = f.terms[0], cal_mod.TOLERANCES
     assert isinstance(term, PlantTerm)
     n = len(term.steps)
-    low = np.array([*term.low, *(1 - t.band for t in tols)])
-    high = np.array([*term.high, *(1 + t.band for t in tols)])
+    low = np.array([*term.low, *(t.knob().low for t in tols)])
+    high = np.array([*term.high, *(t.knob().high for t in tols)])
     steps = np.array([*term.steps, *([_FACTOR_STEP] * len(tols))])
 
     def fac(x: np.ndarray) -> dict[str, float]:
