@@ -23,15 +23,25 @@ were as late as their openings and their held flows read -1 to 2.4 %; its small 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import replace
+
 import numpy as np
 
-from monitor.gap.diagnose.records import Calibrated, Paired, Scores
+from monitor.gap.diagnose.records import Calibrated, Paired, Parts, Scores
+from monitor.gap.diagnose.verdict import Judged
 from monitor.gap.fit import score as S
+from monitor.gap.fit.sensorterms import SensorTerm
 from monitor.gap.judge import basemis, delays, heldflow, onsets
-from monitor.gap.judge.decide import SIGNIFICANT, Decision, gain_share, not_named
+from monitor.gap.judge.decide import SIGNIFICANT, Decision, decide, gain_share, not_named
 from monitor.sim.effects import Effect
 
 NAME = "valve_deadband"
+#: The calibration's tolerance for the valve's metering curve (``calibrate.TOLERANCES``).
+METERING = "valve_metering"
+#: The deadband's fit moved the calibration's notches by more than this (share of the
+#: stroke): it is timed against its own tolerances (``deadband_or_delay``).
+NOTCH_GIVEN_BACK = 0.05
 #: The evidence a deadband can stand on (``timing.deadband.evidence``).
 TIMING = "openings_and_closings"
 HELD = "held_flows"
@@ -50,10 +60,19 @@ def deadband_or_delay(
     assert d.chosen is not None
     c, base, held = d.chosen, scores.baseline, cal.readings.held(None).segments
     fitted, whole, smooth = retimed
-    measured = onsets.measure(cal.prep, held, base.pred0)
+    # Timed against the deadband's own tolerances without it where the calibration took up
+    # notches the deadband's fit gave back: notches delay the flow at small openings as an
+    # overlap does, and a calibrated simulator with them hides the overlap's timing.
+    # It is weighed against that simulator re-timed, too (what the calibration absorbed).
+    factors, ref = base.factors, base.pred0
+    if abs(c.factors.get(METERING, 1.0) - factors.get(METERING, 1.0)) > NOTCH_GIVEN_BACK:
+        factors = c.factors
+        ref = cal.readings.held(None).predict(factors, ())
+        whole, smooth = _retimed(cal, ref, fitted)
+    measured = onsets.measure(cal.prep, held, ref)
     own = cal.readings.held(c.prep).predict(c.factors, c.effects)
-    fitted_onsets = onsets.measure(cal.prep, held, base.pred0, meas=own)
-    flows = _held_flows(cal, scores)
+    fitted_onsets = onsets.measure(cal.prep, held, ref, meas=own)
+    flows = _held_flows(cal, factors, ref)
     shown = []
     if measured is None or measured.apart_share >= SIGNIFICANT:
         shown.append(TIMING)
@@ -82,13 +101,26 @@ def deadband_or_delay(
     return Decision(alone.verdict, None, None, float(alone.confidence)), row
 
 
-def _held_flows(cal: Calibrated, scores: Scores) -> heldflow.HeldFlow | None:
-    """The held flows against the probe overlap alone on the calibrated simulator (one
-    simulation of the held-out part)."""
-    base, held = scores.baseline, cal.readings.held(None)
+def _retimed(
+    cal: Calibrated, pred: dict[str, np.ndarray], delays_ms: dict[str, float]
+) -> tuple[S.SegmentSums, S.SegmentSums]:
+    """``pred``'s held-out readings each delayed by its fitted delay: whole, smoothed sums."""
+    prep, held = cal.prep, cal.readings.held(None).segments
+    for name, ms in delays_ms.items():
+        if ms > 0.0:
+            pred = SensorTerm("sensor_delay", name, ms).apply(prep, held, pred)
+    return S.segment_sums(prep, held, pred), basemis.smoothed_sums(prep, held, pred)
+
+
+def _held_flows(
+    cal: Calibrated, factors: dict[str, float], pred: dict[str, np.ndarray]
+) -> heldflow.HeldFlow | None:
+    """The held flows against the probe overlap alone on the simulator at ``factors``
+    (``pred``; one simulation of the held-out part)."""
+    held = cal.readings.held(None)
     probe = Effect.make(NAME, overlap_pct=heldflow.PROBE_PCT)
-    overlapped = held.predict(base.factors, (probe,))
-    return heldflow.measure(cal.prep, held.segments, base.pred0, overlapped, heldflow.PROBE_PCT)
+    overlapped = held.predict(factors, (probe,))
+    return heldflow.measure(cal.prep, held.segments, pred, overlapped, heldflow.PROBE_PCT)
 
 
 def _held_line(f: dict | None) -> str:
@@ -137,3 +169,77 @@ def evidence(b: dict, verdict: str) -> str:
         else ""
     )
     return f"{head}: not a deadband ({why}){vs}{rest}; verdict {verdict}"
+
+
+# --- Stage 6e: an overlap or notches ---------------------------------------------------
+
+
+def check_metering(
+    parts: Parts,
+    cal: Calibrated,
+    scores: Scores,
+    paired: Paired,
+    judged: Judged,
+    say: Callable[[str], None],
+) -> Judged:
+    """Stage 6e: a deadband verdict against a progressive metering curve.  An overlap
+    passes nothing until the spool has crossed it; notches pass a small flow growing with
+    the square of the opening.  Where the held levels, read by the orifice law on every
+    segment (``heldflow.metering``), show an overlap of ``heldflow.MIN_OVERLAP_PCT`` or more
+    (the notches free) in no more than ``1 - SIGNIFICANT`` of the resamples, the valve is
+    progressive, not overlapped: the verdict is decided again without the deadband.  The
+    JSON's ``metering_check`` (also, as evidence, where the calibration took up notches)."""
+    d, base = judged.decision, scores.baseline
+    notch_pct = 100.0 * (base.factors.get(METERING, 1.0) - 1.0)
+    deadband = d.verdict == NAME and d.chosen is not None
+    if not deadband and notch_pct < 1.0:
+        return judged
+    read = heldflow.metering(cal.prep, parts.segments, cal.readings.machine)
+    progressive = read is not None and read.overlap_share <= 1.0 - SIGNIFICANT
+    row = {
+        "verdict_without_check": d.verdict,
+        "calibrated_notch_pct": round(notch_pct, 1),
+        "fitted_overlap_pct": _fitted_overlap(d) if deadband else None,
+        "held_flows": None if read is None else read.as_dict(),
+        "progressive": progressive,
+    }
+    if deadband and progressive:
+        rest = [c for c in scores.singles if c.name != NAME]
+        plain = [q for q in paired.pairs if all(e.name != NAME for e in q.effects)]
+        against = {name: a.sums for name, a in judged.absorbed.items()}
+        structured = (paired.smooth, base.smooth_nominal)
+        args = (paired.sums, base.nominal, paired.boot_idx, cal.floor, structured, against)
+        d = decide(False, rest, plain, *args)
+    row["decided_by"] = metering_line(row, d.verdict)
+    say(f"metering: {row['decided_by']}")
+    return replace(judged, decision=d, metering=row)
+
+
+def _fitted_overlap(d: Decision) -> float | None:
+    assert d.chosen is not None
+    e = next((e for e in d.chosen.effects if e.name == NAME), None)
+    return None if e is None else round(float(e.params["overlap_pct"]), 1)
+
+
+def metering_line(row: dict, verdict: str) -> str:
+    """One line: what the held flows read of the valve's curve near centre, and what it
+    decided."""
+    f = row["held_flows"]
+    cal = f"the calibration took up notches over {row['calibrated_notch_pct']:.0f} % of the stroke"
+    if f is None:
+        return f"{cal}; too few held commands near centre to tell an overlap from notches"
+    read = (
+        f"{cal}; the flows at {f['held_levels']} held commands ({f['near_centre']} within "
+        f"{100 * heldflow.NEAR_CENTRE:.0f} % of centre) read by the orifice law: overlap "
+        f"{f['overlap_pct']:.0f} % with notches over {f['notch_pct']:.0f} % "
+        f"(an overlap of {heldflow.MIN_OVERLAP_PCT:g} % or more in "
+        f"{f['overlap_share']:.0%} of resamples)"
+    )
+    if row["verdict_without_check"] != NAME:
+        return read
+    if row["progressive"]:
+        return (
+            f"{read}: flow passes where the fitted overlap ({row['fitted_overlap_pct']} %) "
+            f"would pass none, a progressive metering curve, not a deadband; verdict {verdict}"
+        )
+    return f"{read}: the deadband stands"

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 from threadpoolctl import threadpool_limits
 
-from monitor.gap.diagnose import atrest, identify
+from monitor.gap.diagnose import atrest, deadband, identify
 from monitor.gap.diagnose import fitting as F
 from monitor.gap.diagnose import timing as T
 from monitor.gap.diagnose import verdict as V
@@ -81,6 +81,7 @@ def _diagnose(
     judged = V.judge(cal, refined, paired, say)
     judged = V.check_timing(cal, refined, paired, judged, say)
     judged = T.check_split(cal, refined, paired, judged, say)
+    judged = deadband.check_metering(parts, cal, refined, paired, judged, say)
     judged = V.check_friction(parts, cal, refined, paired, judged, say)
     judged = atrest.check_load(parts, cal, refined, paired, judged, say)
     judged = atrest.check_air(cal, refined, judged, say)

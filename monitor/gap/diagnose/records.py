@@ -157,6 +157,9 @@ class Finding:
     load_check: dict | None = None
     #: The drained chambers' stiffness at rest (``diagnose/atrest.py``): ``air_check``.
     air_check: dict | None = None
+    #: A deadband told from a progressive metering curve by the held flows
+    #: (``diagnose/deadband.py``): the JSON's ``metering_check``.
+    metering_check: dict | None = None
 
 
 @dataclass(frozen=True)

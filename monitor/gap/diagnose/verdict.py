@@ -55,6 +55,8 @@ class Judged:
     #: The best single, a sensor calibration, judged on its own signal
     #: (``sensorphysics.own_signal``; None: not judged so).
     own_signal: sensorphysics.OwnSignal | None = None
+    #: A deadband against a progressive metering curve (``deadband.check_metering``).
+    metering: dict | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -323,6 +325,7 @@ def suggest_next(
         timing=judged.split,
         load_check=judged.load,
         air_check=judged.air,
+        metering_check=judged.metering,
     )
 
 
@@ -349,7 +352,8 @@ def calibration_absorbed(
     singles: Sequence[Candidate], factors: dict[str, float], readings: Readings
 ) -> dict[str, Absorbed]:
     """Per physical single effect whose fit moved a confounded tolerance off the bound the
-    calibration (``factors``) left it at (by ``MOVED_OFF`` of the band): what its own
+    calibration (``factors``) left it at (by ``MOVED_OFF`` of the band), or gave back a
+    shape the calibration took up (``calibrate.gave_back``): what its own
     tolerances do without it (one held-out simulation each; none on a machine whose
     calibration is inside its bands)."""
     out = {}
@@ -358,12 +362,19 @@ def calibration_absorbed(
         moved = {
             t: (f0, f1)
             for t in CONFOUNDED.get(name, ())
-            if cal_mod.bound_side(t, f0 := factors.get(t, 1.0)) != 0
-            and abs((f1 := c.factors.get(t, 1.0)) - f0) >= MOVED_OFF * cal_mod.BY_NAME[t].band
+            if _moved(t, f0 := factors.get(t, 1.0), f1 := c.factors.get(t, 1.0))
         }
         if moved and len(c.effects) == 1:
             out[c.name] = Absorbed(moved, readings.held(c.prep).both_sums(c.factors, ()))
     return out
+
+
+def _moved(name: str, calibrated: float, fitted: float) -> bool:
+    """An effect's fit moved tolerance ``name`` off the bound the calibration left it at, or
+    gave back a shape the calibration took up."""
+    off = abs(fitted - calibrated) >= MOVED_OFF * cal_mod.BY_NAME[name].band
+    at_bound = cal_mod.bound_side(name, calibrated) != 0
+    return (at_bound and off) or cal_mod.gave_back(name, calibrated, fitted)
 
 
 def _traded(d: Decision, singles: Sequence[Candidate], names: Sequence[str]) -> dict | None:

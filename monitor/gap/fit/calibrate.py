@@ -81,6 +81,24 @@ AT_BOUND_SHARE = 0.98
 
 BY_NAME = {t.name: t for t in TOLERANCES}
 
+#: A shape tolerance (``Tolerance.added``: its nominal is its bound) the calibration took up
+#: this much of its band or more ...
+SHAPE_TAKEN_SHARE = 0.1
+#: ... is given back by an effect's fit that leaves this share of it or less (a 6 % overlap
+#: on a linear valve: the calibration took notches over 13 % of the stroke, the deadband's
+#: joint fit 3 %).
+SHAPE_LEFT_SHARE = 0.5
+
+
+def gave_back(name: str, calibrated: float, fitted: float) -> bool:
+    """Whether an effect's fit (``fitted`` factor) gave back the shape the calibration
+    (``calibrated``) took up for tolerance ``name``: the calibration absorbed the effect."""
+    t = BY_NAME[name]
+    taken = calibrated - 1.0
+    return (
+        t.added and taken >= SHAPE_TAKEN_SHARE * t.band and fitted - 1.0 <= SHAPE_LEFT_SHARE * taken
+    )
+
 
 def bound_side(name: str, factor: float) -> int:
     """+1 or -1 when tolerance ``name``'s factor ended at its upper or lower bound, else 0."""

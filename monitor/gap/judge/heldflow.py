@@ -36,9 +36,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.gap.data.prepare import Prepared
+from monitor.gap.data.prepare import ROD_VEL, Prepared
 from monitor.gap.data.segments import Segment
 from monitor.signals import SAMPLE_PERIOD_S
+from monitor.sim.machine import BAR, LPM, MachineParams
 
 #: The probe overlap (% stroke): the catalogue's default, one hypothesis for every recording
 #: (the fitted overlap's own simulation moves the pump's pressure at more levels the
@@ -190,3 +191,154 @@ def _overlap(
     sse_overlap = float(np.sum((short - b * own) ** 2))
     sse_alike = float(np.sum((short - short.mean()) ** 2))
     return b * probe_pct, sse_overlap / max(sse_alike, 1e-12)
+
+
+# --- An overlap or a progressive metering curve (notches) --------------------------------
+#
+# An overlap ``o`` passes nothing until the spool has crossed it, then opens linearly;
+# notches over the first ``n`` of the stroke pass a small flow growing with the square of the
+# opening (``monitor.sim.laws.metering``).  Both bend the flow at small commands, and a
+# linear simulator fitted to either names an overlap.  The held levels tell them apart,
+# read by the orifice law alone (no simulation): at a held command ``A`` each metering edge
+# passes ``Q = kv * a(A) * sqrt(dp)``, so the flow through it over the root of the drop the
+# readings show across it is its open area ``a`` (times the valve's gain).  The meter-in edge
+# passes the pump's flow (P->A raising, P->B lowering, across PP - PA or PP - PB); with the
+# rod measured, the meter-out edge passes the rod's displaced flow (B->T, A->T, across PB or
+# PA to tank).  The law ``g * metering(max(|A| - o, 0) / (1 - o), n)`` fitted on a grid of
+# ``o`` and ``n`` (the gain ``g`` in closed form): a deadband reads ``o`` at its overlap
+# whatever the notches do; a notched valve reads ``o`` near 0, the flow at its smallest
+# commands small but there.
+
+#: The grids (share of the stroke): the catalogue's overlaps, notches to 90 %.
+OVERLAP_GRID = np.linspace(0.0, 0.30, 31)
+NOTCH_GRID = np.linspace(0.0, 0.90, 46)
+#: Fewer levels than ``MIN_LEVELS`` or than this below ``NEAR_CENTRE`` (share of the stroke,
+#: the largest overlap the catalogue has): the smallest commands are not held, the shapes
+#: not told.
+NEAR_CENTRE = 0.30
+MIN_NEAR = 2
+#: A drop across an edge below this (bar) reads no area (laminar, or the noise).
+MIN_DROP_BAR = 5.0
+#: A rod this close to an end stop (mm) passes no flow whatever the valve's opening.
+STOP_MARGIN_MM = 5.0
+
+
+@dataclass(frozen=True)
+class Metering:
+    """The valve's curve near centre read from the held flows: the overlap with the notches
+    free, and how the two pure shapes fit."""
+
+    overlap_pct: float
+    notch_pct: float
+    levels: int
+    near_centre: int
+    #: Share of resamples of the levels reading ``MIN_OVERLAP_PCT`` or more of overlap.
+    overlap_share: float
+    #: Squared residuals of the best overlap alone (linear edges) over the best notches
+    #: alone (no overlap): above 1 the notches' shape fits the held flows better.
+    overlap_vs_notch: float
+    #: Per level read: the command (%) and the open area the flows read (share of the
+    #: fitted law's full-stroke area).
+    points: tuple[tuple[float, float], ...]
+
+    def as_dict(self) -> dict:
+        return {
+            "overlap_pct": round(self.overlap_pct, 1),
+            "notch_pct": round(self.notch_pct, 1),
+            "held_levels": self.levels,
+            "near_centre": self.near_centre,
+            "overlap_share": round(self.overlap_share, 3),
+            "overlap_vs_notch": round(self.overlap_vs_notch, 3),
+            "area_by_command": [[round(a, 1), round(b, 3)] for a, b in self.points],
+        }
+
+
+def open_area(command: np.ndarray, overlap: float, notch: float) -> np.ndarray:
+    """The simulator's open area (share of full stroke) at ``command`` (share of the stroke):
+    the overlap crossed, then the notches' metering (``monitor.sim.laws.metering``)."""
+    x = np.maximum(np.abs(command) - overlap, 0.0) / (1.0 - overlap)
+    if notch <= 0.0:
+        return x
+    at_end = notch / (2.0 - notch)
+    return np.where(
+        x < notch, at_end * (x / notch) ** 2, at_end + (x - notch) * (1.0 - at_end) / (1.0 - notch)
+    )
+
+
+def edge_areas(
+    prep: Prepared, windows: list[tuple[int, int]], machine: MachineParams
+) -> np.ndarray:
+    """Per held level, the open area its edges read (m^3/s per sqrt(Pa) over the valve's
+    ``kv``: a share of the full-stroke area), the mean over the edges read; NaN where none
+    (a drop below ``MIN_DROP_BAR``, the rod at a stop)."""
+    m = {n: _means(prep.meas[n], windows) for n in ("PP", "PA", "PB", "QP")}
+    cmd = _means(prep.cmd["SpoolCmd"], windows)
+    rod = _means(prep.rod_mm, windows)
+    free = (rod > STOP_MARGIN_MM) & (rod < prep.stroke_mm - STOP_MARGIN_MM)
+    up, kv, tank = cmd > 0, machine.valve.valve_kv, machine.valve.tank_pa / BAR
+    rows = [_area(m["QP"] * LPM, np.where(up, m["PP"] - m["PA"], m["PP"] - m["PB"]), kv)]
+    if ROD_VEL in prep.meas:
+        v = np.abs(_means(prep.meas[ROD_VEL], windows)) * 1e-3
+        cyl = machine.cylinder
+        out = np.where(up, cyl.area_b_m2 * v, cyl.area_a_m2 * v)
+        rows.append(_area(out, np.where(up, m["PB"], m["PA"]) - tank, kv))
+    return np.where(free, _level_means(np.array(rows)), np.nan)
+
+
+def _area(q_m3_s: np.ndarray, drop_bar: np.ndarray, kv: float) -> np.ndarray:
+    ok = np.isfinite(q_m3_s + drop_bar) & (drop_bar >= MIN_DROP_BAR)
+    return np.where(ok, np.abs(q_m3_s) / (kv * np.sqrt(np.where(ok, drop_bar, 1.0) * BAR)), np.nan)
+
+
+def metering(
+    prep: Prepared, segments: Sequence[Segment], machine: MachineParams
+) -> Metering | None:
+    """The overlap and notches the held flows of the recording read (``machine``: the
+    valve's gain and the cylinder's areas); None with fewer than ``MIN_LEVELS`` levels read
+    or fewer than ``MIN_NEAR`` of them near centre."""
+    windows = held(prep.cmd["SpoolCmd"], segments)
+    cmd = _means(prep.cmd["SpoolCmd"], windows) / 100.0
+    area = edge_areas(prep, windows, machine)
+    ok = np.isfinite(area)
+    near = ok & (np.abs(cmd) < NEAR_CENTRE)
+    if ok.sum() < MIN_LEVELS or near.sum() < MIN_NEAR:
+        return None
+    a = area[ok]
+    f, o, n = _curves(np.abs(cmd[ok]))
+    k = _law(f, a)[0]
+    g = float(f[k] @ a) / max(float(f[k] @ f[k]), 1e-12)
+    rng = np.random.default_rng(0)
+    draws = np.empty(RESAMPLES)
+    for i in range(RESAMPLES):
+        pick = rng.integers(0, len(a), len(a))
+        draws[i] = o[_law(f[:, pick], a[pick])[0]]
+    only_overlap = _law(f, a, n == 0.0)[1]
+    only_notch = _law(f, a, o == 0.0)[1]
+    return Metering(
+        100.0 * o[k],
+        100.0 * n[k],
+        int(ok.sum()),
+        int(near.sum()),
+        float(np.mean(100.0 * draws >= MIN_OVERLAP_PCT)),
+        only_overlap / max(only_notch, 1e-12),
+        tuple((100.0 * float(x), float(y) / g) for x, y in sorted(zip(cmd[ok], a, strict=True))),
+    )
+
+
+def _curves(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every grid law's open area at commands ``c``: rows (overlap, notch), and the two."""
+    o, n = np.meshgrid(OVERLAP_GRID, NOTCH_GRID, indexing="ij")
+    o, n = o.ravel(), n.ravel()
+    return np.array([open_area(c, a, b) for a, b in zip(o, n, strict=True)]), o, n
+
+
+def _law(f: np.ndarray, a: np.ndarray, rows: np.ndarray | None = None) -> tuple[int, float]:
+    """The grid law (row of ``f``, among ``rows``) whose curve times its best gain fits
+    the open areas ``a`` best, and its squared residuals (closed form in the gain)."""
+    if rows is not None:
+        f = f[rows]
+    ff = np.einsum("gl,gl->g", f, f)
+    fa = f @ a
+    sse = float(a @ a) - np.where(ff > 0.0, fa * fa / np.where(ff > 0.0, ff, 1.0), 0.0)
+    k = int(np.argmin(sse))
+    return (k if rows is None else int(np.flatnonzero(rows)[k])), float(max(sse[k], 0.0))

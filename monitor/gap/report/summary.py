@@ -21,6 +21,8 @@ def summary_text(report: dict) -> str:
     else:
         lines += _verdict_named(report)
     lines += _timing_line(report.get("timing"))
+    if report.get("metering_check"):
+        lines.append(f"Valve metering: {report['metering_check']['decided_by']}")
     lines += _mechanism_lines(report.get("mechanism"))
     lines += _friction_line(report.get("friction_check"))
     lines += _load_line(report.get("load_check"))
