@@ -99,6 +99,7 @@ def test_report_keeps_the_contract_keys(deadband_run):
         "viscous_friction",
         "valve_gain",
         "volumes",
+        "valve_metering",
     }
     for name in (
         "summary.txt",

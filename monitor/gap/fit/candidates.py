@@ -202,13 +202,18 @@ def fit_candidate(
         # The effect's default starts with the tolerances both where the calibration put
         # them and at nominal: a calibration that pushed a tolerance to its bound to mimic
         # the effect would otherwise start every fit in the effect's shadow.
+        # A shape the calibration took up (the valve's notches) is also started from its
+        # nominal with the rest calibrated: notches stand in for an overlap, and a
+        # deadband fitted on top of them ends beside them.
         units = mem[0].start_units() if own_starts else default_starts(len(eff_knobs))
+        shapes = {k.name for k in tolerances if k.name in SHAPES and factors.get(k.name, 1.0) > 1}
+        places = ("cal", "nominal", "shape") if shapes else ("cal", "nominal")
         start_points = [
             {
-                **{k.name: (factors.get(k.name, 1.0) if at_cal else 1.0) for k in tolerances},
+                **{k.name: _start(k.name, factors, at, shapes) for k in tolerances},
                 **{k.name: k.value(float(x)) for k, x in zip(eff_knobs, u, strict=True)},
             }
-            for at_cal in ((True, False) if tolerances else (True,))
+            for at in (places if tolerances else ("cal",))
             for u in units
         ]
     elif starts is not None:
@@ -221,6 +226,17 @@ def fit_candidate(
     result = fit(lambda v: residual(*split(v)), knobs, start_points, max_iterations, local_starts)
     f, fx = split(result.values)
     return Candidate(fx, f, result.cost, tuple(mem) if members else ())
+
+
+#: Tolerances that are a shape added to the nominal machine (``Tolerance.added``).
+SHAPES = frozenset(t.name for t in TOLERANCES if t.added)
+
+
+def _start(name: str, factors: dict[str, float], at: str, shapes: set[str]) -> float:
+    """A tolerance's starting factor: calibrated, nominal, or nominal if a shape (``at``)."""
+    if at == "nominal" or (at == "shape" and name in shapes):
+        return 1.0
+    return factors.get(name, 1.0)
 
 
 def criterion(gap: float, floor: np.ndarray, n_eff: float, k: int) -> float:
