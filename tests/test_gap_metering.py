@@ -93,15 +93,17 @@ def test_an_overlap_passes_nothing_below_it_notches_a_small_growing_flow(stairs)
     # The notched valve reads no overlap (its notches at 50 %), the overlapped one 10 %.
     assert notched.overlap_pct <= 1.0 and notched.notch_pct == pytest.approx(50, abs=4)
     assert notched.overlap_share <= 0.05 and notched.overlap_vs_notch > 10
+    assert notched.notch_share >= 0.95 and notched.progressive
     assert overlap.overlap_pct == pytest.approx(10, abs=1) and overlap.notch_pct <= 4
     assert overlap.overlap_share >= 0.95 and overlap.overlap_vs_notch < 0.1
+    assert not overlap.progressive
 
 
 def test_an_overlap_on_a_notched_valve_still_reads_as_an_overlap(stairs):
     both = stairs["both"]
     assert both is not None
     assert both.overlap_pct == pytest.approx(6, abs=1)
-    assert both.overlap_share >= 0.95
+    assert both.overlap_share >= 0.95 and not both.progressive
 
 
 def test_the_metering_tolerance_is_added_and_only_upwards():
@@ -116,8 +118,8 @@ def test_the_metering_tolerance_is_added_and_only_upwards():
     assert not calibrate.gave_back("valve_metering", 1.03, 1.0)  # too little was taken
 
 
-def _diagnosed(machine, overlap_pct: float = 0.0) -> dict:
-    cmd = make_cycle("boom", 60.0, 7)
+def _diagnosed(machine, overlap_pct: float = 0.0, stairs: bool = False) -> dict:
+    cmd = _stairs() if stairs else make_cycle("boom", 60.0, 7)
     effects = [Effect.make("valve_deadband", overlap_pct=overlap_pct)] if overlap_pct else []
     rec = simulate(cmd, machine, effects=effects, seed=7)
     return build_report(diagnose(rec, M, effects=("valve_deadband",)), M)
@@ -125,18 +127,21 @@ def _diagnosed(machine, overlap_pct: float = 0.0) -> dict:
 
 def test_a_healthy_notched_valve_is_calibrated_away_not_a_deadband():
     # Main named this machine a deadband: a linear simulator beside notches over half
-    # the stroke.  The calibration takes the notches up (+50 % of the stroke) and nothing
-    # is left to name.
-    rep = _diagnosed(NOTCHED)
+    # the stroke.  The held flows show the notches and rule out an overlap, so the
+    # calibration takes the notches up (+50 % of the stroke) and nothing is left to name.
+    rep = _diagnosed(NOTCHED, stairs=True)
     assert rep["verdict"] == "none"
     assert rep["calibrated"]["valve_metering"]["change_pct"] == pytest.approx(50, abs=5)
+    held = rep["metering_check"]["held_flows"]
+    assert held["overlap_pct"] <= 1.0 and held["notch_share"] >= 0.95
 
 
 @pytest.mark.parametrize("overlap_pct", [6.0, 10.0])
 def test_a_deadband_on_a_linear_valve_is_still_named(overlap_pct):
-    # The calibration takes up notches for part of the overlap (13 % of the stroke under a
-    # 6 % overlap); the deadband's fit gives them back and is judged against its own
-    # tolerances: the calibration absorbed it.
+    # The boom cycle holds no command near centre: the held flows cannot rule out an
+    # overlap, the calibration keeps the valve linear (notches would take up part of it:
+    # over 13 % of the stroke under a 6 % overlap) and the deadband is named as before.
     rep = _diagnosed(M, overlap_pct)
     assert rep["verdict"] == "valve_deadband"
-    assert rep["params"]["overlap_pct"]["value"] == pytest.approx(overlap_pct, abs=2)
+    assert rep["params"]["overlap_pct"]["value"] == pytest.approx(overlap_pct, abs=1)
+    assert rep["calibrated"]["valve_metering"]["change_pct"] == 0.0

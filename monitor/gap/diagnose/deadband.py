@@ -185,9 +185,9 @@ def check_metering(
     """Stage 6e: a deadband verdict against a progressive metering curve.  An overlap
     passes nothing until the spool has crossed it; notches pass a small flow growing with
     the square of the opening.  Where the held levels, read by the orifice law on every
-    segment (``heldflow.metering``), show an overlap of ``heldflow.MIN_OVERLAP_PCT`` or more
-    (the notches free) in no more than ``1 - SIGNIFICANT`` of the resamples, the valve is
-    progressive, not overlapped: the verdict is decided again without the deadband.  The
+    segment (``heldflow.metering``), show notches and rule out an overlap
+    (``Metering.progressive``), the valve is progressive, not overlapped: the verdict is
+    decided again without the deadband.  The
     JSON's ``metering_check`` (also, as evidence, where the calibration took up notches)."""
     d, base = judged.decision, scores.baseline
     notch_pct = 100.0 * (base.factors.get(METERING, 1.0) - 1.0)
@@ -195,7 +195,7 @@ def check_metering(
     if not deadband and notch_pct < 1.0:
         return judged
     read = heldflow.metering(cal.prep, parts.segments, cal.readings.machine)
-    progressive = read is not None and read.overlap_share <= 1.0 - SIGNIFICANT
+    progressive = read is not None and read.progressive
     row = {
         "verdict_without_check": d.verdict,
         "calibrated_notch_pct": round(notch_pct, 1),
@@ -233,7 +233,8 @@ def metering_line(row: dict, verdict: str) -> str:
         f"{100 * heldflow.NEAR_CENTRE:.0f} % of centre) read by the orifice law: overlap "
         f"{f['overlap_pct']:.0f} % with notches over {f['notch_pct']:.0f} % "
         f"(an overlap of {heldflow.MIN_OVERLAP_PCT:g} % or more in "
-        f"{f['overlap_share']:.0%} of resamples)"
+        f"{f['overlap_share']:.0%} of resamples, notches over {heldflow.MIN_NOTCH_PCT:g} % "
+        f"or more in {f['notch_share']:.0%})"
     )
     if row["verdict_without_check"] != NAME:
         return read

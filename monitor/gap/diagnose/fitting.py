@@ -21,7 +21,7 @@ from monitor.gap.fit import score as S
 from monitor.gap.fit import sensorcal
 from monitor.gap.fit.candidates import CONFOUNDED, Candidate, Member, default_member, fit_candidate
 from monitor.gap.fit.families import fit_family
-from monitor.gap.judge import basemis
+from monitor.gap.judge import basemis, heldflow
 from monitor.gap.judge.decide import pair_plan, within_noise
 from monitor.gap.judge.shrink import resamples
 from monitor.io.recording import Recording
@@ -105,7 +105,11 @@ def calibrate_tolerances(parts: Parts, machine: MachineParams, say: Progress) ->
     prep, fit_segs = parts.prep, parts.fitted
     readings = Readings(prep, (fit_segs, fit_machine), (parts.heldout, held_machine), machine)
     fit_ev = readings.fit(None)
-    tol = cal_mod.knobs()
+    # The metering curve's shape is a tolerance only where the held flows show notches and
+    # rule out an overlap (``heldflow.metering``): elsewhere notches would take an overlap
+    # up (a smooth-cornered 6-14 % one read as notches over 20-29 % of the stroke).
+    curve = heldflow.metering(prep, parts.segments, machine)
+    tol = cal_mod.knobs(shapes=curve is not None and curve.progressive)
     tol_fit = fit_candidate([], fit_ev.residual, {}, tol, [({}, ())], CAL_ITERATIONS)
     guess = sensorcal.fit_signal(prep, fit_segs, fit_ev.predict(tol_fit.factors, ()), "QP")
     common = prep if guess is None else without_arrivals_of(prep, guess, machine)
@@ -142,7 +146,7 @@ def _fit_single(name: str, parts: Parts, cal: Calibrated) -> tuple[Candidate, Su
             cal.prep, parts.fitted, fit_ev.predict, base.factors, cal.readings.reread_for
         )
         return c, held_sums(c, cal, base)
-    free = [k for k in cal_mod.knobs() if k.name in CONFOUNDED.get(name, ())]
+    free = [k for k in cal_mod.knobs(base.factors) if k.name in CONFOUNDED.get(name, ())]
     local = CONFOUNDED_LOCAL_STARTS if free and name in TWO_LOCAL_FITS else 1
     judge = MemberJudge(cal.readings.held(None), cal.floor, base.gap0, base.n_eff)
     c = fit_family(name, fit_ev.residual, base.factors, free, local, judge, base.cal.fit_cost)
@@ -169,7 +173,7 @@ def fit_singles(parts: Parts, cal: Calibrated, effects: Sequence[str], say: Prog
 
 def _refit(c: Candidate, parts: Parts, cal: Calibrated, base: Baseline) -> Candidate:
     """``c`` refitted with all the tolerances jointly (unscored)."""
-    tol = cal_mod.knobs()
+    tol = cal_mod.knobs(base.factors)
     if c.name == sensorcal.NAME:
         own = c.prep if c.prep is not None else cal.prep
         predict = cal.readings.fit(c.prep).predict
@@ -198,7 +202,8 @@ def refine(parts: Parts, cal: Calibrated, scores: Scores, say: Progress) -> Scor
             sums[c.name], smooth[c.name] = both
     from_refits = [(base.factors, ())] + [(c.factors, ()) for c in singles[:REFINE_TOP]]
     fit_ev = cal.readings.fit(None)
-    recal = fit_candidate([], fit_ev.residual, base.factors, cal_mod.knobs(), from_refits)
+    tol = cal_mod.knobs(base.factors)
+    recal = fit_candidate([], fit_ev.residual, base.factors, tol, from_refits)
     if recal.fit_cost < base.cal.fit_cost:
         base = make_baseline(cal.prep, parts, cal.readings.held(None), cal.floor, recal)
         say("recalibrated " + percent(base.factors))

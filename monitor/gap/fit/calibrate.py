@@ -71,9 +71,15 @@ def apply(machine: MachineParams, factors: dict[str, float]) -> MachineParams:
     return machine.with_changes(**changes)
 
 
-def knobs() -> list[Knob]:
-    """Every tolerance as a fitted factor (1 = nominal) within its band."""
-    return [t.knob() for t in TOLERANCES]
+def knobs(fitted: dict[str, float] | None = None, shapes: bool = True) -> list[Knob]:
+    """Every tolerance as a fitted factor (1 = nominal) within its band: only those in
+    ``fitted`` (a calibration's factors) if given; without the shapes (``Tolerance.added``,
+    held at nominal) unless ``shapes``."""
+    return [
+        t.knob()
+        for t in TOLERANCES
+        if (fitted is None or t.name in fitted) and (shapes or not t.added)
+    ]
 
 
 #: A factor this close to the edge of its band (as a share of the band) ended at its bound.

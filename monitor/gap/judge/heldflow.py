@@ -221,6 +221,11 @@ MIN_NEAR = 2
 MIN_DROP_BAR = 5.0
 #: A rod this close to an end stop (mm) passes no flow whatever the valve's opening.
 STOP_MARGIN_MM = 5.0
+#: The held flows show a progressive curve where they read notches over ``MIN_NOTCH_PCT``
+#: of the stroke or more in ``1 - RULED_OUT`` of the resamples and an overlap of
+#: ``MIN_OVERLAP_PCT`` or more in ``RULED_OUT`` or fewer (a linear valve reads neither).
+MIN_NOTCH_PCT = 10.0
+RULED_OUT = 0.05
 
 
 @dataclass(frozen=True)
@@ -234,12 +239,19 @@ class Metering:
     near_centre: int
     #: Share of resamples of the levels reading ``MIN_OVERLAP_PCT`` or more of overlap.
     overlap_share: float
+    #: Share of resamples reading notches over ``MIN_NOTCH_PCT`` or more of the stroke.
+    notch_share: float
     #: Squared residuals of the best overlap alone (linear edges) over the best notches
     #: alone (no overlap): above 1 the notches' shape fits the held flows better.
     overlap_vs_notch: float
     #: Per level read: the command (%) and the open area the flows read (share of the
     #: fitted law's full-stroke area).
     points: tuple[tuple[float, float], ...]
+
+    @property
+    def progressive(self) -> bool:
+        """Notches shown and an overlap ruled out: flow where an overlap would pass none."""
+        return self.overlap_share <= RULED_OUT and self.notch_share >= 1.0 - RULED_OUT
 
     def as_dict(self) -> dict:
         return {
@@ -248,6 +260,7 @@ class Metering:
             "held_levels": self.levels,
             "near_centre": self.near_centre,
             "overlap_share": round(self.overlap_share, 3),
+            "notch_share": round(self.notch_share, 3),
             "overlap_vs_notch": round(self.overlap_vs_notch, 3),
             "area_by_command": [[round(a, 1), round(b, 3)] for a, b in self.points],
         }
@@ -308,10 +321,11 @@ def metering(
     k = _law(f, a)[0]
     g = float(f[k] @ a) / max(float(f[k] @ f[k]), 1e-12)
     rng = np.random.default_rng(0)
-    draws = np.empty(RESAMPLES)
+    draws = np.empty((RESAMPLES, 2))
     for i in range(RESAMPLES):
         pick = rng.integers(0, len(a), len(a))
-        draws[i] = o[_law(f[:, pick], a[pick])[0]]
+        j = _law(f[:, pick], a[pick])[0]
+        draws[i] = o[j], n[j]
     only_overlap = _law(f, a, n == 0.0)[1]
     only_notch = _law(f, a, o == 0.0)[1]
     return Metering(
@@ -319,7 +333,8 @@ def metering(
         100.0 * n[k],
         int(ok.sum()),
         int(near.sum()),
-        float(np.mean(100.0 * draws >= MIN_OVERLAP_PCT)),
+        float(np.mean(100.0 * draws[:, 0] >= MIN_OVERLAP_PCT)),
+        float(np.mean(100.0 * draws[:, 1] >= MIN_NOTCH_PCT)),
         only_overlap / max(only_notch, 1e-12),
         tuple((100.0 * float(x), float(y) / g) for x, y in sorted(zip(cmd[ok], a, strict=True))),
     )

@@ -191,7 +191,8 @@ def _refit_with_tolerances(runs: _Runs, f: Fitted, factors: dict[str, float]) ->
     Gauss-Newton steps from the better of the calibrated and the nominal factors): the
     calibration, made without the term, may have bent the machine towards it (an A->tank
     leak takes mass, gravity load and volumes to their bounds)."""
-    term, tols = f.terms[0], cal_mod.TOLERANCES
+    term = f.terms[0]
+    tols = [t for t in cal_mod.TOLERANCES if t.name in factors or not t.added]
     assert isinstance(term, PlantTerm)
     n = len(term.steps)
     low = np.array([*term.low, *(t.knob().low for t in tols)])
