@@ -120,6 +120,7 @@ def _diagnose(
         traces=traces,
         timings_s=laps.timings,
         identifiability=pairs_apart,
+        metering_check=judged.metering,
     )
 
 

@@ -157,9 +157,6 @@ class Finding:
     load_check: dict | None = None
     #: The drained chambers' stiffness at rest (``diagnose/atrest.py``): ``air_check``.
     air_check: dict | None = None
-    #: A deadband told from a progressive metering curve by the held flows
-    #: (``diagnose/deadband.py``): the JSON's ``metering_check``.
-    metering_check: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -174,3 +171,6 @@ class Diagnosis:
     timings_s: dict[str, float]
     #: How well the recording separates the look-alike pairs (``identify.py``).
     identifiability: list[dict] = field(default_factory=list)
+    #: A deadband told from a progressive metering curve by the held flows
+    #: (``diagnose/deadband.py``): the JSON's ``metering_check``.
+    metering_check: dict | None = None

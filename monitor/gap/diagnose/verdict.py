@@ -325,7 +325,6 @@ def suggest_next(
         timing=judged.split,
         load_check=judged.load,
         air_check=judged.air,
-        metering_check=judged.metering,
     )
 
 

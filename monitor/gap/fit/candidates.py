@@ -206,16 +206,7 @@ def fit_candidate(
         # nominal with the rest calibrated: notches stand in for an overlap, and a
         # deadband fitted on top of them ends beside them.
         units = mem[0].start_units() if own_starts else default_starts(len(eff_knobs))
-        shapes = {k.name for k in tolerances if k.name in SHAPES and factors.get(k.name, 1.0) > 1}
-        places = ("cal", "nominal", "shape") if shapes else ("cal", "nominal")
-        start_points = [
-            {
-                **{k.name: _start(k.name, factors, at, shapes) for k in tolerances},
-                **{k.name: k.value(float(x)) for k, x in zip(eff_knobs, u, strict=True)},
-            }
-            for at in (places if tolerances else ("cal",))
-            for u in units
-        ]
+        start_points = _default_starts(factors, tolerances, eff_knobs, units)
     elif starts is not None:
         start_points = []
         for f0, fx0 in starts:
@@ -230,6 +221,26 @@ def fit_candidate(
 
 #: Tolerances that are a shape added to the nominal machine (``Tolerance.added``).
 SHAPES = frozenset(t.name for t in TOLERANCES if t.added)
+
+
+def _default_starts(
+    factors: dict[str, float],
+    tolerances: Sequence[Knob],
+    eff_knobs: Sequence[Knob],
+    units: Sequence[np.ndarray],
+) -> list[dict[str, float]]:
+    """The effect's starting ``units`` with the tolerances calibrated, at nominal, and (a
+    shape the calibration took up) with the shape at nominal."""
+    shapes = {k.name for k in tolerances if k.name in SHAPES and factors.get(k.name, 1.0) > 1}
+    places = ("cal", "nominal", "shape") if shapes else ("cal", "nominal")
+    return [
+        {
+            **{k.name: _start(k.name, factors, at, shapes) for k in tolerances},
+            **{k.name: k.value(float(x)) for k, x in zip(eff_knobs, u, strict=True)},
+        }
+        for at in (places if tolerances else ("cal",))
+        for u in units
+    ]
 
 
 def _start(name: str, factors: dict[str, float], at: str, shapes: set[str]) -> float:
