@@ -19,6 +19,11 @@ the verdict is what ``decide`` says of the re-timed simulator: the third plant's
 machines, 9-12 ms behind the simulator, were named a deadband of 3-6 % while their closings
 were as late as their openings and their held flows read -1 to 2.4 %; its small deadbands
 (s730896_13, 14, 44: openings 10-23 ms later than closings, not significant) read 5-7 %.
+
+Stage 6e (``check_metering``): a deadband verdict where the held flows, read by the orifice
+law, show notches and rule out an overlap is decided again without the deadband
+(``heldflow.metering``; notches pass a small flow growing with the opening, an overlap
+passes nothing below it).
 """
 
 from __future__ import annotations
@@ -187,8 +192,8 @@ def check_metering(
     the square of the opening.  Where the held levels, read by the orifice law on every
     segment (``heldflow.metering``), show notches and rule out an overlap
     (``Metering.progressive``), the valve is progressive, not overlapped: the verdict is
-    decided again without the deadband.  The
-    JSON's ``metering_check`` (also, as evidence, where the calibration took up notches)."""
+    decided again without the deadband.  The JSON's ``metering_check`` (also, as evidence,
+    where the calibration took up notches)."""
     d, base = judged.decision, scores.baseline
     notch_pct = 100.0 * (base.factors.get(METERING, 1.0) - 1.0)
     deadband = d.verdict == NAME and d.chosen is not None
