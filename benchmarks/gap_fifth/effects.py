@@ -136,7 +136,7 @@ def _lag(rng, v, s, w):
 
 def _load(rng, v, s, w):
     v["bal_f0_n"] = rng.uniform(500.0, 1100.0)
-    v["bal_gas_m"] = rng.uniform(0.65, 1.0)
+    v["bal_gas_m"] = rng.uniform(0.8, 1.2)
     g = v["bal_gas_m"]
     bottom = v["bal_f0_n"] * (g / (g - v["stroke_m"])) ** 1.3
     return (
