@@ -230,4 +230,6 @@ def test_scoring_rules():
     gap = {"verdict": "sensor_calibration", "params": {"sensor_calibration": {"PA_gain": 1.1}}}
     row = score.judge(cal, gap)
     assert row["right"] and not row["right_signal"]
+    flat = {"verdict": "sensor_calibration", "params": {"PB_gain": {"value": 1.05}}}
+    assert score.judge(cal, flat)["right_signal"]
     assert score.judge(cal, None)["verdict"] == "failed"

@@ -23,6 +23,8 @@ from pathlib import Path
 from benchmarks.gap_fifth import effects as ef
 from benchmarks.gap_fifth.generate import BLIND_FROM
 
+SIGNALS = ("PP", "PA", "PB", "QP", "RodPos")
+
 
 def diagnose(out: Path, name: str) -> dict:
     """One `monitor gap` run (or the one kept from before): exit code, CPU and wall seconds."""
@@ -58,10 +60,11 @@ def suggestion_first(gap: dict) -> tuple[str | None, str | None]:
 
 def sensor_signal(gap: dict) -> str | None:
     """The signal of params.sensor_calibration's keys (PA_gain -> PA)."""
-    cal = (gap.get("params") or {}).get("sensor_calibration")
-    if not isinstance(cal, dict) or not cal:
-        return None
-    return sorted({k.split("_")[0] for k in cal})[0]
+    params = gap.get("params") or {}
+    cal = params.get("sensor_calibration")
+    if not isinstance(cal, dict) or not cal:  # the same names, flat in params
+        cal = {k: v for k, v in params.items() if k.split("_")[0] in SIGNALS and "_" in k}
+    return sorted({k.split("_")[0] for k in cal})[0] if cal else None
 
 
 def judge(entry: dict, gap: dict | None) -> dict:
