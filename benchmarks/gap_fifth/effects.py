@@ -30,6 +30,8 @@ OUTSIDE = {
     "displacement_stop": ("pump_setting", "displacement"),
 }
 CM3_PER_BAR = 1e-6 / 1e5  # m^3/Pa
+PC_STROKE_S = 0.06  # supply edge share = this / the drawn full stroke: 0.2-0.5
+PC_LS_TAU_TO_VENT = 4.0  # vent edge share = this x the drawn LS line lag: 0.16-0.6
 
 
 @dataclass(frozen=True)
@@ -91,8 +93,19 @@ def _deadband(rng, v, s, w):
 
 
 def _pump_dyn(rng, v, s, w):
-    v["ls_tau_s"] = rng.uniform(0.04, 0.15)
-    v["swash_tau_s"] = rng.uniform(0.12, 0.3)
+    ls_tau, full_stroke = rng.uniform(0.04, 0.15), rng.uniform(0.12, 0.3)
+    if v["pump_pc"]:
+        # the compensated pump: restrictions in the control piston's port, the vent (on-stroke)
+        # narrower than the supply (destroke); the same two draws as the load-sensing pump's
+        v["ctl_restrict_in"] = PC_STROKE_S / full_stroke
+        v["ctl_restrict_vent"] = PC_LS_TAU_TO_VENT * ls_tau
+        return (
+            {"supply_edge_share": v["ctl_restrict_in"], "vent_edge_share": v["ctl_restrict_vent"]},
+            s,
+            w,
+        )
+    v["ls_tau_s"] = ls_tau
+    v["swash_tau_s"] = full_stroke
     return {"ls_line_tau_s": v["ls_tau_s"], "swash_full_stroke_s": v["swash_tau_s"]}, s, w
 
 

@@ -1,6 +1,7 @@
 """Draw a set of fifth-plant recordings and their key.
 
-    python -m benchmarks.gap_fifth.generate OUT --seed S [--set small|full] [--duration 300]
+    python -m benchmarks.gap_fifth.generate OUT --seed S [--set small|full] [--pump pc|ls]
+        [--duration 300]
 
 Seeds 1-999 are for development; seeds 1000 and above are blind and refused without
 --spend-blind. Prints only counts: the key (OUT/key.json) says what each recording holds.
@@ -60,8 +61,9 @@ def plan(rng: np.random.Generator, which: str) -> list[dict]:
     return rows
 
 
-def draw(seed: int, which: str) -> list[dict]:
-    """Key entries: shuffled names, own seeds, RodPos on two thirds (always for a RodPos error)."""
+def draw(seed: int, which: str, pump: str = "pc") -> list[dict]:
+    """Key entries: shuffled names, own seeds, RodPos on two thirds (always for a RodPos error);
+    every entry names its pump (`pc` compensated, `ls` load sensing)."""
     rng = np.random.default_rng(seed)
     rows = plan(rng, which)
     n = len(rows)
@@ -76,6 +78,7 @@ def draw(seed: int, which: str) -> list[dict]:
         row["seed"] = int(rng.integers(1, 2**31 - 1))
         row["name_csv"] = f"s{seed}_{slot:02d}.csv"
         row["expected"] = _expected(row["kind"], row["name"], row.get("signal"))
+        row["pump"] = pump
         entries.append(row)
     return entries
 
@@ -85,6 +88,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out", type=Path)
     ap.add_argument("--seed", type=int, required=True)
     ap.add_argument("--set", dest="which", choices=("small", "full"), default="full")
+    ap.add_argument(
+        "--pump",
+        choices=("pc", "ls"),
+        default="pc",
+        help="base pump: pc pressure-compensated (the reference machine's law), ls load sensing",
+    )
     ap.add_argument("--duration", type=float, default=300.0, help="seconds per recording")
     ap.add_argument("--spend-blind", action="store_true", help="allow a seed >= 1000")
     args = ap.parse_args(argv)
@@ -102,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --duration {args.duration}: 40..3600 s", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    entries = draw(args.seed, args.which)
+    entries = draw(args.seed, args.which, args.pump)
     for e in entries:
         content, info = record.build(e, args.duration)
         (args.out / e["name_csv"]).write_bytes(content)
@@ -111,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
         "plant": "gap_fifth",
         "seed": args.seed,
         "set": args.which,
+        "pump": args.pump,
         "duration_s": args.duration,
         "recordings": entries,
     }

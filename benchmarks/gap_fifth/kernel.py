@@ -1,11 +1,14 @@
 """The fifth plant's equations of motion (numba, fixed-step RK4, SI units).
 
-States: engine speed and governor integral; swashplate (share of full displacement),
-margin spool and the load-sensing line; pump line, chamber A and B pressures (each chamber
-merged with its hose; the readings sit at the valve ports, a line drop away); solenoid
-force and spool position and speed (share of full stroke); boom angle and rate (the
-included angle at the boom pivot); the LuGre bristle; the creep volumes of the hose walls;
-the return-line pressure; the pump's delivered volume (what a gear flow meter counts).
+States: engine speed and governor integral; swashplate (share of full displacement), the
+pump regulator's spool and what it senses (load-sensing pump: the margin spool and the LS
+line; pressure-compensated pump: the compensator spool and the pump pressure through its
+sensing passage); pump line, chamber A and B pressures (each chamber merged with its hose;
+the readings sit at the valve ports, a line drop away); solenoid force and spool position
+and speed (share of full stroke); boom angle and rate (the included angle at the boom
+pivot); the LuGre bristle; the creep volumes of the hose walls; the return-line pressure;
+the pump's delivered volume (what a gear flow meter counts); and, for the compensated pump
+only, the control piston's pressure, the swashplate's rate and the displacement stop.
 
 Inputs (one row a millisecond): spool command (-1..1), displacement limit (0..1), engine
 speed set point (rad/s), oil viscosity (cSt), load torque of the engine's other consumers
@@ -21,12 +24,13 @@ from numba import njit
 
 from benchmarks.gap_fifth import params as pr
 
-N_STATES = 19
+N_STATES = 22
 (S_WE, S_GI, S_ALPHA, S_YMAR, S_PLS, S_PP, S_PA, S_PB, S_ISOL, S_XS, S_VS, S_PSI, S_WB,
- S_Z, S_VEA, S_VEB, S_VEP, S_PT, S_QCUM) = range(N_STATES)  # fmt: skip
+ S_Z, S_VEA, S_VEB, S_VEP, S_PT, S_QCUM, S_PC, S_VSW, S_LIM) = range(N_STATES)  # fmt: skip
 OUT_NAMES = ("pp", "pa_port", "pb_port", "q_out", "q_cum", "stroke", "speed_rad_s",
              "pa", "pb", "alpha", "spool", "rod_v")  # fmt: skip
 P_ATM = 1.013e5
+STOP_RELAX_S = 0.002  # a swashplate on a stop loses its own rate within a few ms
 
 
 @njit(cache=True)
@@ -114,8 +118,8 @@ def _pump(p, y, u, nu_cst, out):
 
 
 @njit(cache=True)
-def _pump_control(p, y, u, dy):
-    """Engine governor, load-sensing margin spool, pressure cut-off and swashplate."""
+def _governor(p, y, u, dy):
+    """The engine's isochronous PI governor: its torque (N m), limited."""
     e = u[2] - y[S_WE]
     t_eng = p[pr.P_GOV_KP] * e + y[S_GI]
     dy[S_GI] = p[pr.P_GOV_KI] * e
@@ -125,6 +129,19 @@ def _pump_control(p, y, u, dy):
     elif t_eng < 0.0:
         t_eng = 0.0
         dy[S_GI] = max(dy[S_GI], 0.0)
+    return t_eng
+
+
+@njit(cache=True)
+def _ls_control(p, y, u, dy):
+    """Load-sensing margin spool, pressure cut-off and an integrating swashplate servo."""
+    # load sensing: the opened work port's pressure, else the drained LS line
+    xmax = p[pr.P_OVERLAP_M] + p[pr.P_HOLE_D_M]
+    opening = abs(y[S_XS]) * xmax - p[pr.P_OVERLAP_M]
+    target = y[S_PT]
+    if opening > 0.0:
+        target = y[S_PA] if y[S_XS] > 0.0 else y[S_PB]
+    dy[S_PLS] = (target - y[S_PLS]) / p[pr.P_LS_TAU_S]
     err = (y[S_PP] - y[S_PLS] - p[pr.P_MARGIN_PA]) / p[pr.P_MARGIN_BAND_PA]
     dy[S_YMAR] = (min(max(err, -1.0), 1.0) - y[S_YMAR]) / p[pr.P_MARGIN_TAU_S]
     cut = min(max((y[S_PP] - p[pr.P_CUTOFF_PA]) / p[pr.P_CUTOFF_BAND_PA], 0.0), 1.0)
@@ -136,7 +153,59 @@ def _pump_control(p, y, u, dy):
     if (y[S_ALPHA] <= 0.0 and rate < 0.0) or (y[S_ALPHA] >= 1.0 and rate > 0.0):
         rate = 0.0
     dy[S_ALPHA] = rate
-    return t_eng
+
+
+@njit(cache=True)
+def _ctl_edge(p, area, dp):
+    """A control edge's flow (m^3/s): turbulent, laminar below about half a bar."""
+    return p[pr.P_CTL_CD] * area * math.sqrt(2.0 / p[pr.P_RHO]) * dp / math.sqrt(abs(dp) + 0.5e5)
+
+
+@njit(cache=True)
+def _pc_control(p, y, u, dy):
+    """Compensator spool, control piston against the bias spring, swashplate and its
+    displacement stop; returns the control flow taken from the pump line (m^3/s).
+
+    The spool (a first-order lag) sees the pump pressure through a sensing passage against
+    its spring: above the setting it opens the pump line to the control piston, below it
+    vents the piston to the case; it is underlapped, so both edges bleed at null. The
+    piston (its chamber compressible) pushes the swashplate towards zero displacement
+    against a bias spring and with the pistons' own moment; the swashplate has mass and
+    viscous damping, and rests on a stop that `PumpDispCmd` sets through a solenoid.
+    """
+    pp, pc, pt = y[S_PP], y[S_PC], y[S_PT]
+    dy[S_PLS] = (pp - y[S_PLS]) / p[pr.P_COMP_SENSE_TAU_S]
+    # the feedback spring: the swashplate's stroke towards zero loads the spool's spring
+    null = p[pr.P_COMP_SET_PA] + p[pr.P_COMP_DROOP_PA] * (1.0 - y[S_ALPHA])
+    aim = min(max((y[S_PLS] - null) / p[pr.P_COMP_BAND_PA], -1.0), 1.0)
+    dy[S_YMAR] = (aim - y[S_YMAR]) / p[pr.P_COMP_TAU_S]
+    area = p[pr.P_CTL_AREA_M2]
+    lap = p[pr.P_COMP_UNDERLAP]
+    a_in = area * p[pr.P_CTL_RESTRICT_IN] * max(y[S_YMAR] + lap, 0.0)
+    a_vent = area * p[pr.P_CTL_RESTRICT_VENT] * max(lap - y[S_YMAR], 0.0)
+    q_in = _ctl_edge(p, a_in, pp - pc)
+    q_vent = _ctl_edge(p, a_vent, pc - pt)
+    x_full = p[pr.P_CTL_STROKE_M]
+    x = (1.0 - y[S_ALPHA]) * x_full  # the piston's travel from full displacement
+    xdot = -y[S_VSW] * x_full
+    a_cp = p[pr.P_CTL_PISTON_M2]
+    c_ctl = _capacitance(p, pc, p[pr.P_CTL_DEAD_M3] + a_cp * x)
+    dy[S_PC] = (q_in - q_vent - a_cp * xdot) / c_ctl
+    if pc < -0.98e5 and dy[S_PC] < 0.0:
+        dy[S_PC] = 0.0
+    destroke = pc * a_cp + p[pr.P_SWASH_MOMENT_M2] * max(pp, 0.0)
+    destroke -= p[pr.P_BIAS_F0_N] + p[pr.P_BIAS_K_N_M] * x + p[pr.P_SWASH_C_N_S_M] * xdot
+    acc = -destroke / (p[pr.P_SWASH_MASS_KG] * x_full)  # swashplate, share/s^2
+    dy[S_LIM] = (min(u[1], p[pr.P_DISP_STOP]) - y[S_LIM]) / p[pr.P_STOP_TAU_S]
+    dy[S_ALPHA] = y[S_VSW]
+    dy[S_VSW] = acc
+    if y[S_ALPHA] >= y[S_LIM] and acc >= 0.0:  # held on the stop, riding with it
+        dy[S_ALPHA] = dy[S_LIM]
+        dy[S_VSW] = (dy[S_LIM] - y[S_VSW]) / STOP_RELAX_S
+    elif y[S_ALPHA] <= 0.0 and acc <= 0.0:  # on the zero-displacement end
+        dy[S_ALPHA] = 0.0
+        dy[S_VSW] = -y[S_VSW] / STOP_RELAX_S
+    return q_in
 
 
 @njit(cache=True)
@@ -185,18 +254,15 @@ def _deriv(p, y, u, dy, work):
     _valve(p, y, nu_cst, work)
     q_pa, q_at, q_pb, q_bt, f_flow = work[0], work[1], work[2], work[3], work[4]
     _pump(p, y, u, nu_cst, work[5:8])
+    t_eng = _governor(p, y, u, dy)
+    if p[pr.P_PUMP_PC] > 0.5:
+        work[5] -= _pc_control(p, y, u, dy)  # the compensator draws its flow inside the pump
+    else:
+        _ls_control(p, y, u, dy)
     q_out, t_pump, q_rel = work[5], work[6], work[7]
-    t_eng = _pump_control(p, y, u, dy)
     dy[S_WE] = (t_eng - t_pump - u[4]) / p[pr.P_ENG_INERTIA]
     pa, pb, pp, pt = y[S_PA], y[S_PB], y[S_PP], y[S_PT]
     v, s = _rod(p, y, u, dy, pa, pb)
-    # load sensing: the opened work port's pressure, else the drained LS line
-    xmax = p[pr.P_OVERLAP_M] + p[pr.P_HOLE_D_M]
-    opening = abs(y[S_XS]) * xmax - p[pr.P_OVERLAP_M]
-    target = pt
-    if opening > 0.0:
-        target = pa if y[S_XS] > 0.0 else pb
-    dy[S_PLS] = (target - y[S_PLS]) / p[pr.P_LS_TAU_S]
     # spool: solenoid lag, spring-centred spool pushed back by the steady flow force
     dy[S_ISOL] = (u[0] - y[S_ISOL]) / p[pr.P_SOL_TAU_S]
     sign = 1.0 if y[S_XS] > 0.0 else -1.0
@@ -262,7 +328,8 @@ def integrate(p, y0, inputs, substeps):
             _deriv(p, tmp, u, k4, work)
             for j in range(N_STATES):
                 y[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-            y[S_ALPHA] = min(max(y[S_ALPHA], 0.0), 1.0)
+            top = y[S_LIM] if p[pr.P_PUMP_PC] > 0.5 else 1.0
+            y[S_ALPHA] = min(max(y[S_ALPHA], 0.0), top)
             y[S_XS] = min(max(y[S_XS], -1.0), 1.0)
         _deriv(p, y, u, k1, work)
         q_ain = work[0] - work[1]

@@ -2,7 +2,9 @@
 
 The kernel takes one float64 vector; its slots are the module constants below (numba reads
 module-level ints as compile-time constants). Everything here is the plant's own choice:
-a load-sensing pump with a margin spool and an integrating swashplate, a spool with round
+a pressure-compensated pump (compensator spool, control piston against a bias spring, a
+swashplate with its own mass and damping; the default) or a load-sensing pump with a
+margin spool and an integrating swashplate (`pump_pc` 0), a spool with round
 metering holes and steady flow forces, a boom pinned on a linkage (the cylinder's lever arm
 changes with the boom angle), seal friction with LuGre bristles, an oil whose viscosity
 follows Vogel's law and whose bulk modulus rises with pressure and falls with free air.
@@ -24,6 +26,11 @@ NAMES = (
     "disp_max_m3", "margin_pa", "margin_band_pa", "margin_tau_s", "swash_tau_s",
     "ls_tau_s", "cutoff_pa", "cutoff_band_pa", "slip_wilson", "wear_leak_k",
     "disp_stop", "relief_crack_pa", "relief_full_pa", "relief_q_m3s",
+    # pressure-compensated pump (pump_pc 1): compensator spool, control piston, bias spring
+    "pump_pc", "comp_set_pa", "comp_droop_pa", "comp_band_pa", "comp_tau_s",
+    "comp_sense_tau_s", "comp_underlap", "ctl_area_m2", "ctl_restrict_in", "ctl_restrict_vent",
+    "ctl_cd", "ctl_piston_m2", "ctl_stroke_m", "ctl_dead_m3", "bias_f0_n", "bias_k_n_m",
+    "swash_moment_m2", "swash_mass_kg", "swash_c_n_s_m", "stop_tau_s",
     # pump line and tank
     "vol_p_m3", "tank_p0_pa", "tank_k_pa_s2_m6", "tank_tau_s",
     # valve
@@ -76,6 +83,26 @@ NOMINAL: dict[str, float] = {
     "relief_crack_pa": 210e5,
     "relief_full_pa": 222e5,
     "relief_q_m3s": 30.0 / 60000.0,
+    "pump_pc": 1.0,
+    "comp_set_pa": 188e5,  # the compensator spool's null at full displacement
+    "comp_droop_pa": 12e5,  # the null rises this much from full to zero displacement
+    "comp_band_pa": 8e5,  # PP over the null that opens a control edge fully
+    "comp_tau_s": 0.001,  # the compensator spool's lag (its end-chamber damping)
+    "comp_sense_tau_s": 0.001,  # the spool's sensing passage from the pump line
+    "comp_underlap": 0.08,  # both control edges open this share at null: a bleed
+    "ctl_area_m2": 0.5e-6,  # each control edge's area at full spool opening
+    "ctl_restrict_in": 1.0,  # share of the supply edge's area a restriction passes
+    "ctl_restrict_vent": 1.0,  # share of the vent edge's area a restriction passes
+    "ctl_cd": 0.65,
+    "ctl_piston_m2": math.pi * 0.016**2 / 4,  # 16 mm control piston
+    "ctl_stroke_m": 0.014,  # its stroke from full to zero displacement
+    "ctl_dead_m3": 8e-6,  # its chamber and the passages at full displacement
+    "bias_f0_n": 900.0,  # bias spring at full displacement
+    "bias_k_n_m": 30e3,
+    "swash_moment_m2": 1e-5,  # the pistons' destroking moment, as N at the piston per Pa
+    "swash_mass_kg": 1.5,  # swashplate and control piston, reduced to the piston
+    "swash_c_n_s_m": 1500.0,  # the swashplate's bearings and the piston's seal
+    "stop_tau_s": 0.05,  # the displacement stop's proportional solenoid
     "vol_p_m3": 0.5e-3,
     "tank_p0_pa": 1.2e5,
     "tank_k_pa_s2_m6": 1.0e12,
@@ -134,6 +161,9 @@ TOLERANCED = (
     "disp_max_m3", "margin_pa", "swash_tau_s", "spring_full_n", "slip_wilson", "beta0_pa",
     "cd_inf", "sol_tau_s", "tank_p0_pa",
 )  # fmt: skip
+# The pressure-compensated pump's parts in the load-sensing pump's two slots (same draws).
+PC_TOLERANCED = {"margin_pa": "comp_band_pa", "swash_tau_s": "ctl_area_m2"}
+SETTING_SHARE = 0.25  # a compensator is set within a quarter of the band of its setting
 
 
 def vector(values: dict[str, float]) -> np.ndarray:
@@ -144,17 +174,25 @@ def vector(values: dict[str, float]) -> np.ndarray:
     return np.array([float(values[n]) for n in NAMES], dtype=np.float64)
 
 
-def machine(rng: np.random.Generator, band: float) -> dict[str, float]:
+def machine(rng: np.random.Generator, band: float, pump: str = "pc") -> dict[str, float]:
     """A machine whose toleranced parts are each uniformly within +-band of nominal.
 
     The displacement only goes down (a pump above its rating would read as another machine).
+    `pump` "pc": the compensator's spring rate and control edges take the load-sensing
+    pump's two slots (margin, servo), then its setting is drawn within a quarter of the band;
+    "ls": the load-sensing pump, drawn exactly as before the compensated pump was added.
     """
     values = dict(NOMINAL)
+    values["pump_pc"] = 1.0 if pump == "pc" else 0.0
     for name in TOLERANCED:
         factor = 1.0 + band * rng.uniform(-1.0, 1.0)
         if name == "disp_max_m3":
             factor = 1.0 - band * rng.uniform(0.0, 1.0)
+        if pump == "pc":
+            name = PC_TOLERANCED.get(name, name)
         values[name] = NOMINAL[name] * factor
+    if pump == "pc":
+        values["comp_set_pa"] *= 1.0 + SETTING_SHARE * band * rng.uniform(-1.0, 1.0)
     return values
 
 

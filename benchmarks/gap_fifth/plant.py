@@ -32,8 +32,12 @@ def psi_at(values: dict[str, float], stroke_m: float) -> float:
     return math.acos((a * a + b * b - length * length) / (2 * a * b))
 
 
-def initial_state(values: dict[str, float], stroke_m: float, rpm: float) -> np.ndarray:
-    """At rest, spool centred, the rod held where it is by chamber A (B at tank pressure)."""
+def initial_state(
+    values: dict[str, float], stroke_m: float, rpm: float, disp: float = 1.0
+) -> np.ndarray:
+    """At rest, spool centred, the rod held where it is by chamber A (B at tank pressure);
+    the pump at its stand-by (load sensing) or at its setting, nearly destroked (compensated:
+    the control piston's pressure balancing the bias spring; the stop at `disp`, 0..1)."""
     y = np.zeros(kn.N_STATES)
     psi = psi_at(values, stroke_m)
     a, b = values["link_a_m"], values["link_b_m"]
@@ -54,6 +58,13 @@ def initial_state(values: dict[str, float], stroke_m: float, rpm: float) -> np.n
     y[kn.S_WE] = rpm * math.pi / 30.0
     y[kn.S_GI] = 8.0
     y[kn.S_ALPHA] = 0.05
+    if values["pump_pc"]:
+        pp = values["comp_set_pa"] + 0.95 * values["comp_droop_pa"]
+        x = (1.0 - 0.05) * values["ctl_stroke_m"]
+        bias = values["bias_f0_n"] + values["bias_k_n_m"] * x - values["swash_moment_m2"] * pp
+        y[kn.S_PP] = y[kn.S_PLS] = pp
+        y[kn.S_PC] = bias / values["ctl_piston_m2"]
+        y[kn.S_LIM] = disp
     return y
 
 
@@ -68,6 +79,6 @@ def run(values: dict[str, float], cmd: Commands, nu_cst: np.ndarray, stroke0_m: 
     inputs[:, 4] = cmd.torque_nm
     inputs[:, 5] = np.arange(n) * 1e-3
     p = pr.vector(values)
-    y0 = initial_state(values, stroke0_m, float(cmd.rpm_set[0]))
+    y0 = initial_state(values, stroke0_m, float(cmd.rpm_set[0]), float(cmd.disp[0]))
     out, _ = kn.integrate(p, y0, inputs, SUBSTEPS)
     return {name: out[:, k] for k, name in enumerate(kn.OUT_NAMES)}

@@ -32,7 +32,8 @@ def simulate(entry: dict, duration_s: float) -> tuple[dict[str, np.ndarray], dic
     """The recording's columns (contract names, RodPos when the entry has it), and what
     the key says about it (the effect's parameters, the oil temperature's span)."""
     rng = np.random.default_rng(entry["seed"])
-    values = pr.machine(rng, entry["band_pct"] / 100.0)
+    # keys written before the compensated pump name no pump: theirs was load sensing
+    values = pr.machine(rng, entry["band_pct"] / 100.0, entry.get("pump", "ls"))
     sensors = se.healthy_spread(rng)
     warm = cy.draw_warmup(rng)
     change = ef.apply(rng, entry["kind"], entry["name"], values, sensors, warm, entry.get("signal"))
