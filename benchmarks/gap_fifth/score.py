@@ -141,7 +141,11 @@ def which_monitor() -> dict:
 
 
 def markdown(summary: dict, rows: list[dict]) -> str:
-    lines = [f"# monitor gap on the fifth plant, seed {summary['seed']} ({summary['set']})", ""]
+    lines = [
+        f"# monitor gap on the fifth plant, seed {summary['seed']} ({summary['set']}, "
+        f"pump {summary['pump']})",
+        "",
+    ]
     for key in ("single_effects", "single_effects_pct", "healthy_none", "sensor_right_signal",
                 "outside_unexplained_right_term", "worn_pump_leak_not_viscosity",
                 "worn_pump_cause_wear", "median_cpu_s", "load_average", "monitor"):  # fmt: skip
@@ -202,6 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     summary.update(
         seed=key["seed"],
         set=key["set"],
+        pump=key.get("pump", "ls"),  # keys from before the compensated pump: load sensing
         load_average=[round(x, 2) for x in os.getloadavg()],
         monitor=which_monitor(),
     )
