@@ -175,7 +175,7 @@ def test_slow_spool_and_deadband():
     step = _steps(0.6, n=3000, off_ms=2500)
     base = _run(dict(pr.NOMINAL), step)
     slow = _run(_with("spool_dynamics").values, step)
-    # (the flow forces at the compensator's pressure hold a 0.6 command near 0.45)
+    # (the flow forces at the compensator's pressure hold a 0.6 command near 0.43)
     assert _time_to(slow["spool"], 0.35) > _time_to(base["spool"], 0.35) + 20
     small = _steps(0.12, n=3000, off_ms=2800)
     assert _run(dict(pr.NOMINAL), small)["rod_v"][2500] > 0.005
