@@ -368,7 +368,7 @@ def lever_statistic(e, spool_pct, output, scale, window, min_count, sign=0):
     ``min_count`` of them, v_d = |mean of e[:, output] over them| / scale[d - 1] (``sign``
     1: max(mean, 0) instead of |mean|, a shortfall only); L = the larger v_d.  NaN at a
     sample with a missing residual, before ``window`` valid samples have been seen, and where
-    neither direction counts."""
+    neither direction counts (a direction with an infinite scale never counts)."""
     e = np.asarray(e, dtype=float)
     out = np.full(len(e), np.nan)
     valid = []  # indices of the valid samples so far
@@ -387,7 +387,7 @@ def lever_statistic(e, spool_pct, output, scale, window, min_count, sign=0):
                 direction = 1 if s > 80.0 else 2 if s < -80.0 else 0
                 if direction == d:
                     members.append(k)
-            if len(members) < min_count:
+            if len(members) < min_count or math.isinf(scale[d - 1]):
                 continue
             mean = math.fsum(e[k, output] for k in members) / len(members)
             values.append((abs(mean) if sign == 0 else max(mean, 0.0)) / scale[d - 1])

@@ -244,18 +244,43 @@ def test_fit_scale_is_the_per_direction_max_of_the_definition() -> None:
     np.testing.assert_allclose(got, want, rtol=1e-9)
 
 
-def test_fit_scale_needs_both_directions_in_a_full_window() -> None:
+def test_fit_scale_leaves_out_a_direction_never_held_at_full_lever() -> None:
+    """A direction the held-out data never holds at full lever for ``min_count`` samples
+    within a full window gets an infinite scale (left out); neither direction: no L."""
     e = np.ones((20, 1))
     never_lowered = lever_directions(np.full(20, 90.0))
-    with pytest.raises(InputFileError):
-        fit_lever_scale([e], [never_lowered], 4, 2, 0)
+    np.testing.assert_array_equal(fit_lever_scale([e], [never_lowered], 4, 2, 0), [1.0, np.inf])
     # Two lowering samples, but only before the first full window of 4 (3 samples long).
     short = lever_directions(np.array([-90.0, -90.0, 90.0]))
-    with pytest.raises(InputFileError):
+    with pytest.raises(InputFileError, match="either direction"):
         fit_lever_scale([e[:3]], [short], 4, 2, 0)
     # ... and the same with the window reached: fits.
     ok = lever_directions(np.array([-90.0, -90.0, 90.0, 90.0]))
     np.testing.assert_array_equal(fit_lever_scale([e[:4]], [ok], 4, 2, 0), [1.0, 1.0])
+    # A shortfall-only L whose lowering windows were all in excess (mean -1): no shortfall
+    # to scale by, so lowering is left out too.
+    np.testing.assert_array_equal(
+        fit_lever_scale([np.where(ok == 2, -1.0, 1.0)[:, None]], [ok], 4, 2, 0, sign=1),
+        [1.0, np.inf],
+    )
+
+
+def test_a_direction_left_out_never_counts_live_or_batch() -> None:
+    """Lowering left out (infinite scale): L is the raising direction's alone, NaN where
+    only lowering counts, as the definition's twin says; live == batch."""
+    e, spool, _ = _data(7, n=1500, n_out=3)
+    scale = np.array([0.8, np.inf])
+    lever = LeverModel(50, 5, 2, scale, 2.0, sign=1)
+    got = lever_series(e, lever_directions(spool), lever)
+    want = lever_statistic(e, spool, 2, scale, 50, 5, sign=1)
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    raising_only = lever_statistic(e, np.where(spool > 0, spool, 0.0), 2, [0.8, 1.0], 50, 5, 1)
+    np.testing.assert_allclose(got, raising_only, rtol=1e-9, atol=1e-12, equal_nan=True)
+    window = LeverWindow(lever)
+    live = np.array([window.push(e[i], int(d)) for i, d in enumerate(lever_directions(spool))])
+    np.testing.assert_array_equal(live, got)
+    back = LeverModel.from_dict(json.loads(json.dumps(lever.to_dict())))  # the file's header
+    np.testing.assert_array_equal(back.scale, scale)
 
 
 J = np.array([np.nan, 1.0, 1.0, 1.0, 3.0, 1.0])  # / eps0 2: nan, 0.5, 0.5, 0.5, 1.5, 0.5
@@ -389,15 +414,19 @@ def test_training_puts_l0_at_twice_the_held_out_max(boom_runs) -> None:
     assert any("full-lever statistic" in line for line in said)
 
 
-def test_held_out_data_never_lowering_at_full_lever_trains_without_l(boom_runs) -> None:
+def test_held_out_data_never_lowering_at_full_lever_trains_l_on_raising(boom_runs) -> None:
     import copy
 
     held = [copy.deepcopy(r) for r in boom_runs[2:]]
     for r in held:  # the lever never pushed beyond -80 %
         r.columns["SpoolCmd"] = np.maximum(r.columns["SpoolCmd"], -79.0)
     m, _ = _train(boom_runs[:2], held)
-    assert m.bias is not None
-    assert m.lever is None
+    assert m.bias is not None and m.lever is not None
+    assert np.isfinite(m.lever.scale[0]) and m.lever.scale[1] == np.inf
+    for r in held:  # ... nor beyond +80 % either: nothing to fit L on
+        r.columns["SpoolCmd"] = np.clip(r.columns["SpoolCmd"], -79.0, 79.0)
+    m, _ = _train(boom_runs[:2], held)
+    assert m.bias is not None and m.lever is None
     assert m.training["lever"].startswith("off")
 
 

@@ -15,6 +15,9 @@ operation:
 
     L = max over directions d with n_d >= min_count of |mean_d(e_PP)| / scale[d]
 
+(a direction the held-out data never held at full lever long enough has an infinite scale
+and is left out).
+
 On the held-out data L is at most 1 by construction; its threshold l0 comes from the held-out
 L by the same rule as eps0 from J (twice the largest, by default).  Like J and B, L is
 judged only on a full window and a NaN residual pauses it.  One step kernel (``_push``)
@@ -160,7 +163,7 @@ def _push(
     out = np.nan
     for d in range(1, sums.shape[0]):  # 0: samples that do not count
         k = counts[d]
-        if k >= min_count:
+        if k >= min_count and scale[d - 1] < np.inf:  # inf: a direction left out
             m = sums[d] / k
             v = (abs(m) if sign == 0 else max(m, 0.0)) / scale[d - 1]
             if not v <= out:  # NaN-safe max
@@ -223,8 +226,10 @@ def fit_lever_scale(
 ) -> np.ndarray:
     """Per direction, the largest |window mean| (``sign`` 1: positive window mean) of the
     output's residual over held-out normal data (the statistic's own windows: L's series
-    with unit scales).  ``InputFileError`` when a direction never counts: the held-out data
-    never held the lever that far."""
+    with unit scales).  A direction that never counts there gets an infinite scale: L
+    leaves it out (what normal operation does at that full lever is unknown), and a stroke
+    limit, which caps the spool both ways, is judged in the other.  ``InputFileError``
+    when neither direction counts: the held-out data never held the lever that far."""
     unit = LeverModel(window_n, min_count, output, np.ones(N_DIRECTIONS), sign=sign)
     # One direction at a time: the other direction's samples do not count.
     top = np.array(
@@ -236,13 +241,13 @@ def fit_lever_scale(
             for k in range(N_DIRECTIONS)
         ]
     )
-    if not np.all(top > 0):
+    if not np.any(top > 0):
         raise InputFileError(
             f"the held-out normal data never has {min_count / 100:g} s of lever beyond "
-            f"{FULL_PCT:g} % in both directions within {window_n / 100:g} s: the full-lever "
+            f"{FULL_PCT:g} % in either direction within {window_n / 100:g} s: the full-lever "
             "statistic needs such data"
         )
-    return top
+    return np.where(top > 0, top, np.inf)
 
 
 class LeverWindow:
