@@ -37,8 +37,15 @@
 # lever: a stroke limit); on the held-out runs 201-216 it earns its threshold on the boom,
 # bucket and swing (as retrained with return-to-stop), not the stick (never lowered at full
 # lever for 3 s).  The shipped bucket, boom and swing files carry it (added to the shipped
-# networks on those runs by benchmarks/excavator4_add_lever.py, as this script fits it); the
-# stick's file predates it (its L would be off).
+# networks on those runs by benchmarks/excavator4_add_lever.py, as this script fits it).
+# The stick's L (raising only: lowering at full lever its flow is never short of the
+# model's prediction) rests on 44 more held-out runs, the stick's alone: seeds 217-220 of
+# `dig-lift` and 221-260 of mixed work, as held_stick_SEED.csv beside the runs above,
+#   python benchmarks/excavator4_add_lever.py HELD OUT --loops stick
+# (on 201-216 alone the stick at full lever beside the bucket at full lever, the pump's
+# whole flow, left it 0.095 z short once, and its threshold did not carry between halves).
+# Not given to `monitor train` here: its J and B would be refitted on them too, and on
+# dig-lift seed 220 at 8.0 min the stick's J reaches 4.2 x its eps0 (B 11 x).
 #   bash config/excavator4_train_models.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
