@@ -166,9 +166,7 @@ def _limited_runs(tmp_path_factory, loop: str, seed: int) -> dict:
     commands = make_whole_cycle("truck-loading", 120.0, seed, machine)
     out = {}
     for name, faults in (("healthy", []), ("limited", [f"{loop}.spool_stroke:0.5"])):
-        rec = simulate_whole(
-            commands, machine, [parse_machine_fault(f) for f in faults], seed=seed
-        )
+        rec = simulate_whole(commands, machine, [parse_machine_fault(f) for f in faults], seed=seed)
         path = tmp_path_factory.mktemp(loop) / f"{name}.csv"
         write_csv(path, rec)
         rows = loop_recording(path, cfg, loop)
