@@ -196,9 +196,9 @@ def test_a_bucket_spool_limited_in_its_stroke_alarms_at_full_lever(bucket_runs) 
 
 def test_a_stick_spool_limited_in_its_stroke_alarms_at_full_lever(tmp_path_factory) -> None:
     """Seed 28: the stick curled in at full lever for 8.6 s (5.0 s within one minute, the
-    dig moves).  At 0.5 the stick's flow at full lever is 70/80-70/100 of what the lever
-    asks, 2.6-6.6 L/min short of 22, far beyond the model's residual bound on QP (0.277 z),
-    so every such sample counts at the bound: L = 0.277 / 0.125 (the largest shortfall
+    dig moves).  At 0.5 the stick's spool opens 70 % at most, 2.2-6.6 L/min short of the
+    17.6-22 L/min a lever at 80-100 % asks, at or beyond the model's residual bound on QP
+    (0.277 z), so each such sample counts at the bound: L = 0.277 / 0.125 (the largest shortfall
     of its held-out runs, the stick at full lever beside the bucket at full lever) = 2.2,
     above l0 = 2.  The stick's file without L (main's) misses it on J."""
     _alarms_by_l(_limited_runs(tmp_path_factory, "stick", 28))
