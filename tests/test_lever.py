@@ -279,7 +279,8 @@ def test_a_direction_left_out_never_counts_live_or_batch() -> None:
     window = LeverWindow(lever)
     live = np.array([window.push(e[i], int(d)) for i, d in enumerate(lever_directions(spool))])
     np.testing.assert_array_equal(live, got)
-    back = LeverModel.from_dict(json.loads(json.dumps(lever.to_dict())))  # the file's header
+    # The file's header is strict JSON (null, not Infinity) and reads back the same.
+    back = LeverModel.from_dict(json.loads(json.dumps(lever.to_dict(), allow_nan=False)))
     np.testing.assert_array_equal(back.scale, scale)
 
 

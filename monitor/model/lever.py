@@ -107,7 +107,8 @@ class LeverModel:
             "window_n": int(self.window_n),
             "min_count": int(self.min_count),
             "output": int(self.output),
-            "scale": [float(v) for v in self.scale],
+            # null, not JSON's non-standard Infinity: a direction left out
+            "scale": [float(v) if np.isfinite(v) else None for v in self.scale],
             "l0": float(self.l0),
         }
         if self.sign:  # files of a two-sided L stay as they were
@@ -120,7 +121,7 @@ class LeverModel:
             int(d["window_n"]),
             int(d["min_count"]),
             int(d["output"]),
-            np.asarray(d["scale"], dtype=np.float64),
+            np.array([np.inf if v is None else v for v in d["scale"]], dtype=np.float64),
             float(d["l0"]),
             int(d.get("sign", 0)),
         )
