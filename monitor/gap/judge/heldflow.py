@@ -345,9 +345,10 @@ def metering(
 
 def _curves(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every grid law's open area at commands ``c``: rows (overlap, notch), and the two."""
-    o, n = np.meshgrid(OVERLAP_GRID, NOTCH_GRID, indexing="ij")
-    o, n = o.ravel(), n.ravel()
-    return np.array([open_area(c, a, b) for a, b in zip(o, n, strict=True)]), o, n
+    o_grid, n_grid = np.meshgrid(OVERLAP_GRID, NOTCH_GRID, indexing="ij")
+    o, n = o_grid.ravel(), n_grid.ravel()
+    rows = [open_area(c, float(a), float(b)) for a, b in zip(o, n, strict=True)]
+    return np.array(rows), o, n
 
 
 def _law(f: np.ndarray, a: np.ndarray, rows: np.ndarray | None = None) -> tuple[int, float]:
