@@ -288,6 +288,37 @@ def test_the_return_to_stop_cycle_feathers_the_boom_down_onto_its_stop(machine):
     assert len(truck) > 20 and (truck <= -40.0 + 1e-9).all()
 
 
+def test_the_rest_on_stop_cycle_lets_the_boom_s_lever_go_as_the_rod_lands(machine, monkeypatch):
+    """`rest-on-stop` (training data) lets the boom's lever go where the simulated rod lands,
+    and the moment sets what the rod side traps for the rest on the stop: the return started
+    at the landing holds the stall (the pump's cut-off, 200 bar less the section's drop),
+    started earlier by a third of the return's time (0.075 s from 45 % at 200 %/s) it traps
+    part of the rise, well below the stall and above the lowering pressure (26-47 bar while
+    the rod moved), and started earlier by 0.6 of it the rod stops short of the stop."""
+    from monitor.sim.whole import landing
+    from monitor.sim.whole.cycles import TRAINING_CYCLES, WHOLE_CYCLES
+
+    assert "rest-on-stop" in TRAINING_CYCLES and "rest-on-stop" not in WHOLE_CYCLES
+    lowering = _commands(3.0, boom=-45.0)  # from 30 % of the stroke: lands after 1.4 s
+
+    def released(early: float) -> tuple[float, float, float]:
+        monkeypatch.setattr(landing, "RELEASE_EARLY", (early, early))
+        cmd = landing.release_on_landing(lowering, machine, seed=1)
+        trace = run_whole(cmd, machine)
+        return (
+            float(cmd["SpoolCmd"][-1]),
+            float(trace.loop("boom", 3)[-1]),
+            float(trace.loop("boom", 1)[-1] / BAR),
+        )
+
+    lever, rod_m, stall_bar = released(0.0)
+    assert lever == 0.0 and rod_m <= landing.LANDED_M and stall_bar > 180.0
+    lever, rod_m, part_bar = released(1 / 3)
+    assert lever == 0.0 and rod_m <= landing.LANDED_M and 60.0 < part_bar < 0.8 * stall_bar
+    _, rod_m, _ = released(0.6)
+    assert rod_m > landing.LANDED_M  # the rod held on its cap side just above the stop
+
+
 def _dbc_signals() -> list[str]:
     codec = FrameCodec.from_dbc(resource_path("dbc", "excavator4.dbc"))
     return [n for m in codec.messages.values() if m.name.startswith("HYD_") for n in m.signal_names]

@@ -33,8 +33,9 @@ effects (--effect NAME[:param=value,...], off unless given; repeatable):
 whole machine (--machine excavator4: boom, stick, bucket and swing on one load-sensing pump,
 every loop's signals of dbc/excavator4.dbc; --cycle mixed (default), truck-loading, lifting;
 dig-lift, truck loading whose lift starts at every phase of the stick's dig move's end,
-and return-to-stop, truck loading whose return sets the boom down onto its bottom stop as
-the swing brakes, are for training data):
+return-to-stop, truck loading whose return sets the boom down onto its bottom stop as
+the swing brakes, and rest-on-stop, truck loading whose return lowers the boom onto its
+stop, the lever let go as the rod lands, are for training data):
   --fault LOOP.FAULT:SEV[@ONSET_S[+RAMP_S]], LOOP.FAULT one of
     boom, stick, bucket: piston_wear, spool_stroke, spool_wear (as above)
     swing: spool_stroke, spool_wear, motor_leakage
@@ -92,7 +93,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "triangles; step: spool steps.  With --machine: mixed (default: blocks of both), "
         "truck-loading, lifting; dig-lift: truck loading whose lift starts at every phase of "
         "the stick's dig move's end; return-to-stop: truck loading whose return sets the boom "
-        "down onto its bottom stop as the swing brakes (both training data)",
+        "down onto its bottom stop as the swing brakes; rest-on-stop: truck loading whose "
+        "return lowers the boom onto its stop, the lever let go as the rod lands (all three "
+        "training data)",
     )
     p.add_argument("--fault", action="append", default=[], metavar="NAME:SEV[@ONSET_S[+RAMP_S]]")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[:param=value,...]")
@@ -185,6 +188,7 @@ def _run_machine(args: argparse.Namespace, suffix: str) -> int:
     from monitor.resources import resource_path
     from monitor.sim.whole.cycles import make_whole_cycle
     from monitor.sim.whole.faults import parse_machine_fault
+    from monitor.sim.whole.landing import release_on_landing
     from monitor.sim.whole.params import load_whole_machine
     from monitor.sim.whole.simulate import simulate_whole
 
@@ -206,6 +210,8 @@ def _run_machine(args: argparse.Namespace, suffix: str) -> int:
     machine = load_whole_machine(args.config)
     start = time.perf_counter()
     commands = make_whole_cycle(args.cycle, args.duration, args.seed, machine)
+    if args.cycle == "rest-on-stop":
+        commands = release_on_landing(commands, machine, args.seed)
     rec = simulate_whole(commands, machine, faults, seed=None if args.no_noise else args.seed)
     elapsed = time.perf_counter() - start
     what = _write(args.out, suffix, rec, dbc=resource_path("dbc", "excavator4.dbc"))

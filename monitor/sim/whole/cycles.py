@@ -46,7 +46,7 @@ from monitor.sim.whole.params import CYLINDERS, WholeMachine
 
 WHOLE_CYCLES = ("mixed", "truck-loading", "lifting")
 #: Cycles for training data only; kept apart from WHOLE_CYCLES, which fleets draw from.
-TRAINING_CYCLES = ("dig-lift", "return-to-stop")
+TRAINING_CYCLES = ("dig-lift", "return-to-stop", "rest-on-stop")
 #: Where the lift starts in ``dig-lift``, s after the stick's dig move ends.
 DIG_LIFT_OFFSET_S = (-1.5, 0.3)
 #: ``return-to-stop``: when the boom's rod is estimated to land on its bottom stop, s after
@@ -54,6 +54,9 @@ DIG_LIFT_OFFSET_S = (-1.5, 0.3)
 #: before; the estimate is rough, so the rod lands anywhere around it).
 STOP_LANDING_S = (-1.5, 0.5)
 STOP_HOLD_S = (-0.5, 1.5)
+#: ``rest-on-stop``: how long the lever stays open beyond the estimated landing before
+#: ``monitor.sim.whole.landing`` lets it go where the simulated rod lands.
+REST_HOLD_S = 1.5
 SPOOL_SIGNALS = {
     "boom": "SpoolCmd",
     "stick": "Stick_SpoolCmd",
@@ -132,12 +135,16 @@ class _Operator:
         return float(self.rng.uniform(0.0, 0.8))
 
     def truck_loading(
-        self, lift_after_stick_s: tuple[float, float] | None = None, to_stop: bool = False
+        self,
+        lift_after_stick_s: tuple[float, float] | None = None,
+        to_stop: bool = False,
+        onto_stop: bool = False,
     ) -> None:
         """One truck load; ``lift_after_stick_s`` starts the lift that long after the stick's
         dig move ends (drawn in the range) instead of within 0.3 s of the whole dig's end;
         ``to_stop`` lowers the boom onto its bottom stop on the return (``STOP_LANDING_S``,
-        ``STOP_HOLD_S``) instead of to 10-30 % of its stroke."""
+        ``STOP_HOLD_S``) instead of to 10-30 % of its stroke, feathered; ``onto_stop`` at
+        the return's 40-90 % (``lower_onto_stop``)."""
         r = self.rng
         t = self.t
         # Dig: stick in and bucket curl against the soil while the bucket fills.
@@ -166,9 +173,25 @@ class _Operator:
         if to_stop:
             land_at = end_w + r.uniform(*STOP_LANDING_S)
             end_b = self.land("boom", t, land_at, r.uniform(40, 90), r.uniform(*STOP_HOLD_S))
+        elif onto_stop:
+            end_b = self.lower_onto_stop(t + self.lag(), r.uniform(40, 90))
         else:
             end_b = self.move("boom", t + self.lag(), r.uniform(0.1, 0.3), r.uniform(40, 90))
         self.t = max(end_w, end_b) + r.uniform(0.3, 3.0)
+
+    def lower_onto_stop(self, start: float, amp: float) -> float:
+        """Lower ``boom`` at ``amp`` towards its bottom stop, the lever held ``REST_HOLD_S``
+        beyond the estimated landing; return the lever's release."""
+        end = self.move("boom", start, 0.0, amp)
+        self.spool["boom"][self._span(end, REST_HOLD_S)] = -amp
+        return end + REST_HOLD_S
+
+    def rest_on_stop(self) -> None:
+        """One truck load whose return lowers the boom onto its stop, the next dig to run
+        with it resting there; after one in three, a lift with long holds."""
+        self.truck_loading(onto_stop=True)
+        if self.rng.random() < 1 / 3:
+            self.lifting()
 
     def lifting(self) -> None:
         r = self.rng
@@ -201,6 +224,8 @@ def make_whole_cycle(cycle: str, duration_s: float, seed: int, machine: WholeMac
             op.lifting()
         elif cycle == "dig-lift":
             op.truck_loading(lift_after_stick_s=DIG_LIFT_OFFSET_S)
+        elif cycle == "rest-on-stop":
+            op.rest_on_stop()
         elif cycle == "return-to-stop":
             op.truck_loading(to_stop=True)
             if rng.random() < 1 / 3:
