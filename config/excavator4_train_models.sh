@@ -40,8 +40,8 @@
 # 15-70 bar there now and then, which the 100 minutes fitted held for 9 s with a neighbour
 # working, and the boom's model predicted its cap side rising 5-12 bar a step when the bucket
 # opened: B alarmed on 4 runs of 100 h (docs/benchmarks.md, "The boom at rest on its
-# stop").  Its thresholds rest on 4 x 600 s of lifting more (seeds 217-220, held out for the
-# boom only): the retrained boom's B on the 16 runs held out peaked on one lifting run's hung
+# stop").  Its thresholds rest on 4 x 600 s of lifting more (seeds 217-220 of `lifting`,
+# held out for the boom only; the stick's 217-220 below are `dig-lift` runs): the retrained boom's B on the 16 runs held out peaked on one lifting run's hung
 # load at 2.3 x every other run, and the support rule's transfer check (1.18 x) switched B
 # off; its L is fitted on the 16 runs as before (benchmarks/excavator4_add_lever.py after
 # this script), where with 20 its transfer check (2.04 x) would switch it off.
@@ -103,5 +103,6 @@ done
 # The boom's L on the 16 runs the others' thresholds rest on (see above).
 mkdir "$work/held16" "$work/lever"
 ln -s "$work"/held_{201..216}.csv "$work/held16/"
-python "$here/../benchmarks/excavator4_add_lever.py" "$work/held16" "$work/lever" >/dev/null
+python "$here/../benchmarks/excavator4_add_lever.py" "$work/held16" "$work/lever" --loops boom \
+  >/dev/null
 cp "$work/lever/boom_excavator4.model.npz" "$here/"
