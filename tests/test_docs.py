@@ -79,5 +79,7 @@ def test_benchmarks_page_is_generated_from_its_records() -> None:
     assert (REPO / "docs" / "benchmarks.md").read_text() == page.render(records), (
         "docs/benchmarks.md is out of date: run python docs/hooks/benchmarks_page.py"
     )
-    # Each area shows its current figures on top.
+    # Each area shows its current figures on top, each figure whole (a record's single
+    # string once came out one character per line).
     assert {r.area for r in records if r.current} == set(page.AREAS)
+    assert all(len(f) > 3 for r in records for f in r.current)

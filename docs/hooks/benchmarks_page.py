@@ -77,9 +77,20 @@ def read_record(path: Path) -> Record:
         time=str(meta.get("time", "12:00")),
         area=str(meta["area"]),
         command=meta.get("command"),
-        current=tuple(meta.get("current") or ()),
+        current=_figures(meta.get("current")),
         body=body.strip(),
     )
+
+
+def _figures(current: object) -> tuple[str, ...]:
+    """``current`` as its figures: one string is one figure (not one per character)."""
+    if not current:
+        return ()
+    if isinstance(current, str):
+        return (current,)
+    if isinstance(current, list):
+        return tuple(str(c) for c in current)
+    raise ValueError(f"current must be a string or a list of strings, got {current!r}")
 
 
 def _dated(r: Record) -> str:
