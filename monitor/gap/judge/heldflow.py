@@ -39,6 +39,7 @@ import numpy as np
 from monitor.gap.data.prepare import ROD_VEL, Prepared
 from monitor.gap.data.segments import Segment
 from monitor.signals import SAMPLE_PERIOD_S
+from monitor.sim import laws
 from monitor.sim.machine import BAR, LPM, MachineParams
 
 #: The probe overlap (% stroke): the catalogue's default, one hypothesis for every recording
@@ -271,14 +272,12 @@ class Metering:
 
 def open_area(command: np.ndarray, overlap: float, notch: float) -> np.ndarray:
     """The simulator's open area (share of full stroke) at ``command`` (share of the stroke):
-    the overlap crossed, then the notches' metering (``monitor.sim.laws.metering``)."""
+    the overlap crossed, then the notches' metering by the simulator's own law (one rule:
+    ``monitor.sim.laws.metering``, element by element)."""
     x = np.maximum(np.abs(command) - overlap, 0.0) / (1.0 - overlap)
     if notch <= 0.0:
         return x
-    at_end = notch / (2.0 - notch)
-    return np.where(
-        x < notch, at_end * (x / notch) ** 2, at_end + (x - notch) * (1.0 - at_end) / (1.0 - notch)
-    )
+    return np.array([laws.metering(float(v), notch) for v in x])
 
 
 def edge_areas(
