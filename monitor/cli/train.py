@@ -57,6 +57,13 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "config whose plausibility.pump_system is load_sensing, else default)",
     )
     p.add_argument(
+        "--rod-speed",
+        action="store_true",
+        help="section preset: predict the rod's speed (mm/s, from RodPos over 0.1 s) as a "
+        "fourth output, so a piston leak that slows the rod for the same flow shows; the "
+        "recordings need RodPos, and so does every recording the model judges",
+    )
+    p.add_argument(
         "--horizon",
         type=int,
         default=None,
@@ -309,6 +316,7 @@ def _config(args: argparse.Namespace, preset: str, neighbours: tuple[str, ...]) 
             max_patterns=args.max_patterns,
             lend=args.lend == "on",
             neighbours=neighbours,
+            rod_speed=args.rod_speed,
         ),
         thresholds=ThresholdSettings(
             rule=ThresholdRule(args.threshold_rule, args.quantile, args.factor, args.rate),

@@ -23,6 +23,7 @@ from monitor.model.dgrnn import predict_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.spec import table
 from monitor.model.statistic import active, level_series
+from monitor.signals import source_signal
 
 
 @dataclass
@@ -99,7 +100,7 @@ def gated_residuals(
 def check_recording(model: MonitorModel, rec: Recording, horizon: int | None = None) -> None:
     spec = model.spec
     needed = (*spec.variables, "EngineSpeed")
-    missing = [n for n in dict.fromkeys(needed) if not rec.has(n)]
+    missing = [source_signal(n) for n in dict.fromkeys(needed) if not rec.has(n)]
     if missing:
         raise InputFileError(
             f"{rec.source}: the model needs signal(s) {', '.join(missing)}, which the "
@@ -211,7 +212,7 @@ def _decide_all(
         episodes.add(d, float(t_rel[i]), decider.fault)
         if d.changed:
             t_s, stale_i = float(t_rel[i]), int(stale[i])
-            stale_name = model.spec.variables[stale_i] if stale_i >= 0 else None
+            stale_name = source_signal(model.spec.variables[stale_i]) if stale_i >= 0 else None
             event = _event(
                 t_s, d, float(j[i]), model.eps0, decider.fault, start_s, gate, g, i, stale_name
             )

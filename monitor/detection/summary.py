@@ -20,6 +20,7 @@ from monitor.model.machinecard import COMMISSION
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import J, on_stops
 from monitor.model.statistic import statistic_keys, statistics_entries
+from monitor.signals import source_signal
 
 
 def detection_summary(
@@ -77,7 +78,8 @@ def detection_summary(
     summary["on_stop_not_judged_s"] = on_stop_seconds(model, rec, states, period)
     summary["rejected"] = rejected_counts(rec)
     summary["statistics"] = statistics_entries(model)
-    summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, model.spec.variables)
+    names = tuple(map(source_signal, model.spec.variables))
+    summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, names)
     return summary
 
 

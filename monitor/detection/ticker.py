@@ -29,6 +29,7 @@ from monitor.model.modelfile import MonitorModel
 from monitor.model.statistic import active, raise_level
 from monitor.sampling.ring import RowRing
 from monitor.sampling.sampler import ROW_COLUMNS
+from monitor.signals import ROD_SPEED, ROD_SPEED_SPAN, rod_speed_mm_s, source_signal
 
 
 @dataclass
@@ -57,9 +58,16 @@ class _Inputs:
 
     def __init__(self, model: MonitorModel, columns: tuple[str, ...]) -> None:
         spec = model.spec
-        # Row layout is [t, *columns]: +1 skips t.
-        self.var_idx = np.array([1 + columns.index(v) for v in spec.variables], dtype=np.int64)
-        self.names = tuple(spec.variables)
+        # Row layout is [t, *columns]: +1 skips t.  A derived signal (RodSpeed) is read from
+        # the column it is computed from (``monitor.signals.DERIVED``).
+        sources = tuple(source_signal(v) for v in spec.variables)
+        self.var_idx = np.array([1 + columns.index(v) for v in sources], dtype=np.int64)
+        self.names = sources  # what goes stale is the measured signal
+        speed = ROD_SPEED.name
+        self.speed_at = spec.variables.index(speed) if speed in spec.variables else -1
+        # RodPos of the last ROD_SPEED_SPAN rows, oldest at ``pos_next`` (empty: no row yet).
+        self.pos_ring: list[float] = []
+        self.pos_next = 0
         self.engine_col = 1 + columns.index("EngineSpeed")
         self.spool_col = 1 + columns.index("SpoolCmd") if "SpoolCmd" in columns else -1
         norm_cols = [model.normalizer.names_.index(v) for v in spec.variables]
@@ -72,10 +80,23 @@ class _Inputs:
         """``raw`` and ``z`` from ``row``; True when every model signal is present."""
         raw, z = self.raw, self.z
         np.take(row, self.var_idx, out=raw)
+        if self.speed_at >= 0:
+            self._rod_speed(raw)
         np.subtract(raw, self.mean, out=z)
         np.divide(z, self.std, out=z)
         # A sum is finite exactly when every term is (values are far from overflow).
         return math.isfinite(float(np.add.reduce(raw)))
+
+    def _rod_speed(self, raw: np.ndarray) -> None:
+        """RodPos (read into ``raw[speed_at]``) becomes the rod speed over the last
+        ``ROD_SPEED_SPAN`` rows, as ``Recording`` derives it offline."""
+        k = self.speed_at
+        pos = float(raw[k])
+        if not self.pos_ring:  # the first rows span back to the first row
+            self.pos_ring = [pos] * ROD_SPEED_SPAN
+        raw[k] = rod_speed_mm_s(pos, self.pos_ring[self.pos_next])
+        self.pos_ring[self.pos_next] = pos
+        self.pos_next = (self.pos_next + 1) % ROD_SPEED_SPAN
 
     def stale_signal(self) -> str:
         """The first model signal missing from the last row read (one not finite)."""
@@ -159,7 +180,8 @@ class Ticker:
         #: hydraulic alarms are withheld (``Decider``); None: this machine's own model.
         self.reference = reference
         self.alarm = alarm or AlarmConfig()
-        missing = [n for n in (*model.spec.variables, "EngineSpeed") if n not in columns]
+        needed = (*map(source_signal, model.spec.variables), "EngineSpeed")
+        missing = [n for n in needed if n not in columns]
         if missing:
             raise ModelFileError(f"the model needs signal(s) the rows lack: {missing}")
         self._inputs = _Inputs(model, columns)

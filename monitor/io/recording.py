@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.errors import InputFileError
-from monitor.signals import SIGNAL_NAMES
+from monitor.signals import DERIVED, ROD_SPEED_SPAN, SIGNAL_NAMES, rod_speed_mm_s
 
 
 @dataclass
@@ -45,10 +45,22 @@ class Recording:
         try:
             return self.columns[name]
         except KeyError:
+            if name in DERIVED and DERIVED[name] in self.columns:
+                return self._derived(name)
             raise InputFileError(f"{self.source}: no signal {name!r}") from None
 
     def has(self, name: str) -> bool:
-        return name == "t" or name in self.columns
+        return name == "t" or name in self.columns or DERIVED.get(name, "") in self.columns
+
+    def _derived(self, name: str) -> np.ndarray:
+        """A derived signal (``monitor.signals.DERIVED``; only RodSpeed today), computed on
+        each read, never stored: RodPos ``ROD_SPEED_SPAN`` rows apart (the first rows back
+        to the first row), as the live ticker computes it row by row."""
+        pos = self.columns[DERIVED[name]]
+        k = min(ROD_SPEED_SPAN, pos.shape[0])
+        first = pos[0] if pos.shape[0] else np.nan
+        then = np.concatenate((np.full(k, first), pos[: pos.shape[0] - k]))
+        return np.asarray(rod_speed_mm_s(pos, then), dtype=np.float64)
 
     def require(self, names: tuple[str, ...] = SIGNAL_NAMES) -> None:
         """Raise naming the file and every missing contract signal."""

@@ -24,6 +24,7 @@ from monitor.live.dm1 import Diagnostics
 from monitor.live.outputs import AlarmFrames
 from monitor.model.machinecard import COMMISSION, reference_reason
 from monitor.model.modelfile import MonitorModel, load_model
+from monitor.signals import source_signal
 
 log = logging.getLogger("monitor")
 
@@ -51,7 +52,8 @@ class Loop:
         self.diag: Diagnostics | None = None
         if cfg.j1939.enabled:
             j1939 = replace(cfg.j1939, source_address=lc.source_address)
-            self.diag = Diagnostics(j1939, self.model.spec.variables, view)
+            signals = tuple(map(source_signal, self.model.spec.variables))
+            self.diag = Diagnostics(j1939, signals, view)
         self.tag = {"loop": lc.name} if cfg.loops else {}  # events name the loop when loops are set
         self.last_j = float("nan")
         self.last_level = float("nan")  # max(J / eps0, B / b0) of the last tick, 1 = alarm

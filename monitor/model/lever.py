@@ -53,6 +53,7 @@ from monitor.io.recording import Recording
 from monitor.jit import jit
 from monitor.model.residual import largest_finite, resum_interval
 from monitor.model.statistic import HeldOut, Statistic, column, register, signal
+from monitor.signals import ROD_SPEED
 
 #: Lever command (%) beyond which a sample counts for L: near full stroke, where a stroke
 #: limit of severity 0.3 (82 %) or more acts on every sample that counts.
@@ -62,6 +63,11 @@ LEVER_OUTPUT = "PP"
 #: ... or, on a model that takes PP as an input (a section of a shared load-sensing pump),
 #: the section's flow, proportional to the opening.
 FLOW_OUTPUT = "QP"
+#: ... or, on a section model that predicts the rod's speed (``--rod-speed``), that speed:
+#: the section's flow over the piston's area, less what leaks across a worn piston.  A stroke
+#: limit slows the rod as it cuts the flow; a piston leak slows it with the flow unchanged,
+#: most where the lever is full and the load high (the drop across the piston).
+SPEED_OUTPUT = ROD_SPEED.name
 N_DIRECTIONS = 2  # raising, lowering
 
 
@@ -336,7 +342,9 @@ class Lever(Statistic):
             return "off (asked with the bias statistic, on a model that predicts PP or QP)"
         # A section of a shared pump: on its own support, not B's (the bucket's B is off for
         # its spread with oil temperature over every regime, which L's windows need not share).
-        return cls(stats.bias_window_n, stats.flow_min_count, outputs.index(FLOW_OUTPUT), 1)
+        # A section model that predicts the rod's speed: L watches that (``SPEED_OUTPUT``).
+        watched = SPEED_OUTPUT if SPEED_OUTPUT in outputs else FLOW_OUTPUT
+        return cls(stats.bias_window_n, stats.flow_min_count, outputs.index(watched), 1)
 
     def unscaled(self, held: HeldOut) -> LeverModel:
         directions = [lever_directions(r["SpoolCmd"]) for r in held.recordings]

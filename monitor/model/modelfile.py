@@ -34,7 +34,7 @@ from monitor.model.machinecard import ModelCard
 from monitor.model.spec import DGRNNSpec, Normalizer
 from monitor.model.statistic import registry
 from monitor.model.threshold import ThresholdRule
-from monitor.signals import SIGNAL_NAMES, contract_name
+from monitor.signals import DERIVED, SIGNAL_NAMES, contract_name
 
 log = logging.getLogger("monitor")
 
@@ -217,7 +217,9 @@ def load_model(path: str | Path) -> MonitorModel:
 def _from_header(header: dict[str, Any], data: dict[str, np.ndarray]) -> MonitorModel:
     spec = DGRNNSpec.from_dict(header["spec"])
     # Another loop's signal is named SIGNAL@LOOP (``monitor.signals.neighbour``).
-    unknown = [v for v in spec.variables if contract_name(v) not in SIGNAL_NAMES]
+    unknown = [
+        v for v in spec.variables if contract_name(v) not in SIGNAL_NAMES and v not in DERIVED
+    ]
     if unknown:
         raise ValueError(f"the model uses signals this monitor does not know: {unknown}")
     normalizer = Normalizer.from_dict(header["normalizer"])

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from monitor.errors import ConfigError, InputFileError
-from monitor.signals import contract_name
+from monitor.signals import ROD_SPEED, contract_name
 
 
 @dataclass(frozen=True)
@@ -141,10 +141,15 @@ class DGRNNSpec:
 
     @classmethod
     def preset(
-        cls, name: str, horizon: int | None = None, neighbours: Sequence[str] = ()
+        cls,
+        name: str,
+        horizon: int | None = None,
+        neighbours: Sequence[str] = (),
+        rod_speed: bool = False,
     ) -> DGRNNSpec:
         """Preset ``name``; ``neighbours``: the other loops' demand columns a ``section``
-        model takes as inputs (``SpoolCmd@LOOP``, ``monitor.signals.neighbour``)."""
+        model takes as inputs (``SpoolCmd@LOOP``, ``monitor.signals.neighbour``);
+        ``rod_speed``: a ``section`` model predicts the rod's speed too (``section_spec``)."""
         try:
             spec = PRESETS[name]
         except KeyError:
@@ -152,13 +157,15 @@ class DGRNNSpec:
                 f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}"
             ) from None
         if name == "section":
-            spec = section_spec(neighbours)
+            spec = section_spec(neighbours, rod_speed)
+        elif rod_speed:
+            raise ConfigError(f"the rod speed is an output of the section preset, not {name!r}")
         if horizon is None:
             return spec
         return cls(spec.outputs, spec.exogenous, spec.lags, horizon, spec.delta)
 
 
-def section_spec(neighbours: Sequence[str] = ()) -> DGRNNSpec:
+def section_spec(neighbours: Sequence[str] = (), rod_speed: bool = False) -> DGRNNSpec:
     """A section of a load-sensing valve on a pump it shares with ``neighbours`` (their
     spool commands): PA, PB and the section's flow QP predicted; PP an input.  The pump
     sets PP at the highest load pressure of every open section plus its margin, so PP is
@@ -166,9 +173,14 @@ def section_spec(neighbours: Sequence[str] = ()) -> DGRNNSpec:
     signals would read a neighbour's load as a fault here.  Given PP (at t and t-1), a
     post-compensated section's flow is its opening times the common drop, the same whatever
     its load, until the pump saturates: then every section's flow shrinks by the pump's
-    flow over the total demand, which the neighbours' commands at t say."""
+    flow over the total demand, which the neighbours' commands at t say.
+
+    ``rod_speed``: RodSpeed (``monitor.signals.ROD_SPEED``, from RodPos) is a fourth output,
+    predicted from the section's flow and pressures at their lags, never from its own past
+    (which would carry a slow rod over as normal): a piston leak passes part of the flow
+    across the piston, so the rod moves slower for the same flow and drop."""
     return DGRNNSpec(
-        outputs=("PA", "PB", "QP"),
+        outputs=("PA", "PB", "QP", *((ROD_SPEED.name,) if rod_speed else ())),
         exogenous=("PP", "SpoolCmd", "EngineSpeed", "OilTemp", *neighbours),
         lags=(
             ("PA", (1, 2)),
@@ -245,6 +257,10 @@ DEFAULT_MIN_STD: dict[str, float] = {
     "PumpDispCmd": 1.0,
     "EngineSpeed": 10.0,
     "OilTemp": 15.0,
+    # Far above the rod speed's own spread (some 50 mm/s): J averages the outputs' squared
+    # z residuals, and RodPos's 0.5 mm scatter (7 mm/s on the speed) would outweigh the
+    # pressures' and the flow's.  The GRNN's average and L's own scales do not depend on it.
+    "RodSpeed": 500.0,
 }
 
 

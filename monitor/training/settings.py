@@ -25,13 +25,15 @@ class DGRNNSettings:
     lend: bool = True
     #: The other loops' demand columns a ``section`` model reads (``--loop``).
     neighbours: tuple[str, ...] = ()
+    #: A ``section`` model predicts the rod's speed from RodPos too (``--rod-speed``).
+    rod_speed: bool = False
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
             raise ConfigError(f"unknown preset {self.preset!r}; known: {', '.join(PRESETS)}")
 
     def spec(self) -> DGRNNSpec:
-        return DGRNNSpec.preset(self.preset, self.horizon, self.neighbours)
+        return DGRNNSpec.preset(self.preset, self.horizon, self.neighbours, self.rod_speed)
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from monitor.model.residual import J
 from monitor.model.spec import DGRNNSpec, Normalizer, table
 from monitor.model.statistic import HeldOut
 from monitor.model.threshold import one_event
-from monitor.signals import FAULT_NAMES
+from monitor.signals import FAULT_NAMES, source_signal
 from monitor.training.crossfit import cross_fitted_residuals, n_blocks
 from monitor.training.settings import ThresholdSettings, TrainConfig
 from monitor.training.statistics import check_reference, fit_statistics, floor_thresholds
@@ -152,7 +152,7 @@ def check_inputs(
     if reference is not None:
         check_reference(reference, spec, cfg.statistics.window_n)
     for rec in [*recordings, *(held_out or ())]:
-        missing = [n for n in spec.variables if not rec.has(n)]
+        missing = [source_signal(n) for n in spec.variables if not rec.has(n)]
         if missing:
             raise InputFileError(f"{rec.source}: missing signal(s) {', '.join(missing)}")
 
