@@ -64,6 +64,11 @@
 # whole flow, left it 0.095 z short once, and its threshold did not carry between halves).
 # Not given to `monitor train` here: its J and B would be refitted on them too, and on
 # dig-lift seed 220 at 8.0 min the stick's J reaches 4.2 x its eps0 (B 11 x).
+# The bucket's model predicts its rod's speed too (`--rod-speed`: RodSpeed, from
+# Bucket_RodPos over 0.1 s, a fourth output), and its L watches that speed's shortfall at
+# full lever instead of the flow's: a piston leak slows the rod for the same section flow,
+# which the flow and the pressures hardly show (its piston wear at 0.5 was found on 0 of 4
+# runs of seed sets 9-12); a stroke limit slows it as it cuts the flow.
 #   bash config/excavator4_train_models.sh
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -92,6 +97,7 @@ for loop in boom stick bucket swing; do
   patterns=()
   if [ "$loop" = boom ]; then fit+=("$work"/fit_{117..122}.csv); held+=("$work"/held_{217..220}.csv); fi
   if [ "$loop" = stick ]; then fit+=("$work"/fit_{111..112}.csv); fi
+  if [ "$loop" = bucket ]; then patterns=(--rod-speed); fi
   if [ "$loop" = swing ]; then
     fit+=("$work"/fit_{113..116}.csv "$work"/hot_{646,703,810,854}.csv)
     patterns=(--max-patterns 8000)
