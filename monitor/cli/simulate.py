@@ -34,8 +34,9 @@ whole machine (--machine excavator4: boom, stick, bucket and swing on one load-s
 every loop's signals of dbc/excavator4.dbc; --cycle mixed (default), truck-loading, lifting;
 dig-lift, truck loading whose lift starts at every phase of the stick's dig move's end,
 return-to-stop, truck loading whose return sets the boom down onto its bottom stop as
-the swing brakes, and rest-on-stop, truck loading whose return lowers the boom onto its
-stop, the lever let go as the rod lands, are for training data):
+the swing brakes, rest-on-stop, truck loading whose return lowers the boom onto its
+stop, the lever let go as the rod lands, and swing-stop, short fast swings let go to centre
+at once between truck loads, are for training data):
   --fault LOOP.FAULT:SEV[@ONSET_S[+RAMP_S]], LOOP.FAULT one of
     boom, stick, bucket: piston_wear, spool_stroke, spool_wear (as above)
     swing: spool_stroke, spool_wear, motor_leakage
@@ -94,8 +95,9 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "truck-loading, lifting; dig-lift: truck loading whose lift starts at every phase of "
         "the stick's dig move's end; return-to-stop: truck loading whose return sets the boom "
         "down onto its bottom stop as the swing brakes; rest-on-stop: truck loading whose "
-        "return lowers the boom onto its stop, the lever let go as the rod lands (all three "
-        "training data)",
+        "return lowers the boom onto its stop, the lever let go as the rod lands; swing-stop: "
+        "short fast swings let go to centre at once between truck loads (all four training "
+        "data)",
     )
     p.add_argument("--fault", action="append", default=[], metavar="NAME:SEV[@ONSET_S[+RAMP_S]]")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[:param=value,...]")

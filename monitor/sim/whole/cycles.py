@@ -43,10 +43,11 @@ from monitor.errors import ConfigError
 from monitor.io.recording import Recording
 from monitor.sim.cycles import RATE_LIMIT_PCT_S, _oil_temp, _time_axis, rate_limit
 from monitor.sim.whole.params import CYLINDERS, WholeMachine
+from monitor.sim.whole.swingstop import swing_stops
 
 WHOLE_CYCLES = ("mixed", "truck-loading", "lifting")
 #: Cycles for training data only; kept apart from WHOLE_CYCLES, which fleets draw from.
-TRAINING_CYCLES = ("dig-lift", "return-to-stop", "rest-on-stop")
+TRAINING_CYCLES = ("dig-lift", "return-to-stop", "rest-on-stop", "swing-stop")
 #: Where the lift starts in ``dig-lift``, s after the stick's dig move ends.
 DIG_LIFT_OFFSET_S = (-1.5, 0.3)
 #: ``return-to-stop``: when the boom's rod is estimated to land on its bottom stop, s after
@@ -226,6 +227,8 @@ def make_whole_cycle(cycle: str, duration_s: float, seed: int, machine: WholeMac
             op.truck_loading(lift_after_stick_s=DIG_LIFT_OFFSET_S)
         elif cycle == "rest-on-stop":
             op.rest_on_stop()
+        elif cycle == "swing-stop":
+            swing_stops(op)
         elif cycle == "return-to-stop":
             op.truck_loading(to_stop=True)
             if rng.random() < 1 / 3:
