@@ -378,3 +378,37 @@ def test_cli_help_lists_the_machine_and_bad_machine_arguments_exit_2(tmp_path, c
         full = ["simulate", "--duration", "5", *args, "--out", out]
         assert main(full) == 2, args
         assert fragment in capsys.readouterr().err, args
+
+
+def test_the_swing_stop_cycle_lets_short_fast_swings_go_to_centre(machine):
+    """`swing-stop` (training data, not an operator's cycle) holds the swing's lever 0.8-3.5 s
+    at 40-100 % and lets it go to centre in 0.2-0.6 s, never faster than the operator's
+    200 %/s (so at least lever/200 s), a neighbour's lever let go within 0.6 s of it in most;
+    truck loading holds the swing longer (a 90-180 degree swing)."""
+    from monitor.sim.whole.cycles import TRAINING_CYCLES, WHOLE_CYCLES
+
+    assert "swing-stop" in TRAINING_CYCLES and "swing-stop" not in WHOLE_CYCLES
+    rec = make_whole_cycle("swing-stop", 300, 123, machine)
+    swing = np.asarray(rec["Swing_SpoolCmd"])
+    neighbours = np.abs(
+        np.stack([rec[n] for n in ("SpoolCmd", "Stick_SpoolCmd", "Bucket_SpoolCmd")])
+    )
+    moving = np.abs(swing) > 1e-9
+    starts = np.flatnonzero(np.diff(moving.astype(int)) == 1) + 1
+    ends = np.flatnonzero(np.diff(moving.astype(int)) == -1) + 1
+    quick = shared = 0
+    for a in starts[starts < ends[-1]]:  # a swing still running at the end left out
+        b = ends[ends > a][0]
+        amp = np.abs(swing[a:b]).max()
+        top = a + np.flatnonzero(np.abs(swing[a:b]) >= amp - 1e-9)
+        held_s, release_s = (top[-1] - top[0]) * 0.01, (b - top[-1]) * 0.01
+        if held_s > 3.5 + 0.02:
+            continue  # a truck load's swing
+        quick += 1
+        assert 40.0 - 1e-9 <= amp <= 100.0 + 1e-9
+        assert max(0.2, amp / 200.0) - 0.02 <= release_s <= 0.6 + 0.02, (amp, release_s)
+        let_go = np.flatnonzero(
+            np.diff((neighbours[:, b - 80 : b + 80] > 1e-9).any(axis=0).astype(int)) < 0
+        )
+        shared += bool(let_go.size)
+    assert quick >= 20 and shared / quick > 0.5
