@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import shutil
 import signal
@@ -13,6 +14,7 @@ import time
 from pathlib import Path
 
 import pyarrow.parquet as pq
+import pytest
 
 from monitor.fleet.simulate import FleetPlan, simulate_fleet
 
@@ -20,11 +22,22 @@ ROOT = Path(__file__).resolve().parents[1]
 PLAN = FleetPlan(machines=3, days=2, seed=7, log_s=60.0, commissioning_s=180.0)
 
 
-def make_fleet(where: Path) -> Path:
-    """M01 piston wear, M02 spool wear, M03 frozen QP; 2 days each."""
-    fleet = where / "fleet"
-    simulate_fleet(fleet, PLAN, say=lambda _m: None)
-    return fleet
+def make_fleet(where: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """M01 piston wear, M02 spool wear, M03 frozen QP; 2 days each: ``where/fleet``, a copy
+    of the one fleet of PLAN simulated per test session (its seed makes it the same every
+    time), so test_fleet, test_fleet_browser and test_fleet_scheduler simulate it once,
+    not once each.  Under pytest-xdist the first worker to ask simulates it, under a lock in
+    the session's temporary folder its workers share, and the others wait and copy it."""
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    built = shared / "fleet-support-plan"
+    with open(shared / "fleet-support-plan.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not (built / "complete").exists():
+            shutil.rmtree(built, ignore_errors=True)
+            simulate_fleet(built / "fleet", PLAN, say=lambda _m: None)
+            (built / "complete").touch()
+    return copy_fleet(built / "fleet", where / "fleet")
 
 
 def copy_fleet(src: Path, dst: Path) -> Path:

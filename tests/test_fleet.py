@@ -23,7 +23,7 @@ from tests.fleet_support import copy_fleet, env, fleet_cmd, kill, make_fleet, ro
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory):
-    return make_fleet(tmp_path_factory.mktemp("fleet"))
+    return make_fleet(tmp_path_factory.mktemp("fleet"), tmp_path_factory)
 
 
 @pytest.fixture(scope="module")

@@ -36,7 +36,7 @@ def judged(tmp_path_factory):
     from monitor.resources import resource_path
 
     where = tmp_path_factory.mktemp("browser")
-    fleet = make_fleet(where)
+    fleet = make_fleet(where, tmp_path_factory)
     ref = fleet / "reference" / "logs"
     ref.mkdir(parents=True)
     for day, name in ((1, "normal.log"), (2, "piston_wear.log")):

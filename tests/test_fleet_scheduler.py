@@ -19,10 +19,10 @@ def _start(*args: str) -> subprocess.Popen:
     )
 
 
-def test_external_scheduler_and_a_worker_killed_mid_run(tmp_path):
+def test_external_scheduler_and_a_worker_killed_mid_run(tmp_path, tmp_path_factory):
     from distributed import Client
 
-    fleet = make_fleet(tmp_path)
+    fleet = make_fleet(tmp_path, tmp_path_factory)
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     procs = [
