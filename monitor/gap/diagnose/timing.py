@@ -52,7 +52,7 @@ from monitor.gap.fit import score as S
 from monitor.gap.fit.calibrate import TOLERANCES
 from monitor.gap.fit.candidates import Candidate
 from monitor.gap.fit.sensorterms import SensorTerm
-from monitor.gap.judge import basemis, delays, onsets
+from monitor.gap.judge import basemis, delays, lagcheck, onsets
 from monitor.gap.judge.decide import SIGNIFICANT, Decision, decide, gain_share, not_named
 from monitor.sim.effects import Effect
 
@@ -86,11 +86,12 @@ def check_split(cal: Calibrated, scores: Scores, paired: Paired, judged: Judged,
     if sp.some_late:
         fitted = _fitted(S.compared(prep), cal, scores)
         d, out["sensor_lag_on_late"] = _sensor_on(sp, fitted, cal, scores, paired, d)
-    elif sp.shared and (sp.reference == "rod" or not _ripple_late(judged)):
+    elif sp.shared and (sp.reference == "rod" or not _ripple_late(judged, cal, scores, out)):
         # With the rod sharing the delay the sensors are not what is late (a rod read as
         # late as the pressures is the acquisition); without it, readings that follow the
-        # engine's ripple late may be lagged sensors, and the lag stands.
-        fitted = _fitted(S.compared(prep), cal, scores)
+        # engine's ripple later than the shared delay makes them may be lagged sensors,
+        # and the lag stands.
+        fitted = out.get("ripple", {}).get("delays_ms") or _fitted(S.compared(prep), cal, scores)
         whole, smooth = _retimed(fitted, cal, scores)
         out["retimed"] = {"delays_ms": fitted, **_retimed_row(whole, smooth, cal, scores, paired)}
         if d.verdict in MACHINE_DELAY and d.chosen is not None:
@@ -156,9 +157,26 @@ def _within_tolerance(term: dict) -> bool:
     ) <= TOLERANCE_PCT
 
 
-def _ripple_late(judged: Judged) -> bool:
-    """The readings follow the engine's ripple as late as a sensor lag (``lagcheck``)."""
-    return bool(judged.lag_check and judged.lag_check.get("readings") == "late")
+def _ripple_late(judged: Judged, cal: Calibrated, scores: Scores, out: dict) -> bool:
+    """The readings follow the engine's ripple as late as the fitted sensor lag
+    (``lagcheck``), and later than the delay they share makes them.  A delay moves the
+    ripple's response as a filter does not (a pure delay of one sample turns the lag-zero
+    response of a white ripple's change to minus half of it, a first-order lag only shrinks
+    it): so the ripple is weighed again with the calibrated simulator re-timed by each
+    reading's fitted delay in place of the undelayed one (no plant run but the lag's).
+    The third plant's healthy s730896_62 read QP's response at -0.40 against 0.75
+    undelayed and -0.01 lagged: beyond the lag, as a delay of its 10-17 ms makes it."""
+    if not (judged.lag_check and judged.lag_check.get("readings") == "late"):
+        return False
+    lag_c = next((c for c in scores.singles if c.effects[0].name == NAME), None)
+    if lag_c is None:
+        return True
+    fitted = _fitted(S.compared(cal.prep), cal, scores)
+    held = cal.readings.held(None).segments
+    lagged = cal.readings.held(lag_c.prep).predict(lag_c.factors, lag_c.effects)
+    chk = lagcheck.check(cal.readings.prep, held, _retimed_pred(fitted, cal, scores), lagged)
+    out["ripple"] = {"delays_ms": fitted, "against": "re-timed", **chk.as_dict()}
+    return chk.late
 
 
 def _fitted(signals, cal: Calibrated, scores: Scores) -> dict[str, float]:
@@ -210,11 +228,18 @@ def _retimed(fitted: dict[str, float], cal: Calibrated, scores: Scores) -> Sums:
     """The calibrated simulator's held-out readings, each delayed by its delay fitted on the
     calibration part, whole and smoothed sums."""
     prep, held = cal.readings.prep, cal.readings.held(None).segments
+    pred = _retimed_pred(fitted, cal, scores)
+    return S.segment_sums(prep, held, pred), basemis.smoothed_sums(prep, held, pred)
+
+
+def _retimed_pred(fitted: dict[str, float], cal: Calibrated, scores: Scores) -> dict:
+    """The calibrated simulator's held-out readings, each delayed by its fitted delay."""
+    prep, held = cal.readings.prep, cal.readings.held(None).segments
     pred = scores.baseline.pred0
     for name, ms in fitted.items():
         if ms > 0.0:
             pred = SensorTerm("sensor_delay", name, ms).apply(prep, held, pred)
-    return S.segment_sums(prep, held, pred), basemis.smoothed_sums(prep, held, pred)
+    return pred
 
 
 def _chambers_only(sp: delays.Split) -> bool:
