@@ -172,3 +172,24 @@ def test_a_lagged_sensor_without_rodpos_keeps_its_verdict():
     assert d.finding.verdict == "sensor_lag"
     assert d.finding.lag_check is not None and d.finding.lag_check["sensor_named"] is True
     assert d.finding.lag_check["readings"] == "late"
+
+
+def test_readings_late_by_the_delay_they_share_are_the_recordings_timing():
+    """Every reading 15 ms late (a pure delay of all four, as a recording's acquisition
+    makes it), no rod to compare with: a delay of 1.5 samples moves
+    the engine ripple's lag-zero response as the fitted lag does, so the ripple reads
+    ``late`` against the undelayed simulator; against the simulator re-timed by each
+    reading's fitted delay it shows nothing more, and the delay every reading shares
+    (5-25 ms: the recording's timing) decides: the lag must clearly beat the re-timing.
+    On main the ripple alone kept ``sensor_lag``."""
+    rec = _without_rodpos([Effect.make("sensor_lag", delay_ms=15.0)], 33, 10.0)
+    d = diagnose(rec, M, effects=CANDIDATES)
+    t = d.finding.timing
+    assert d.finding.lag_check is not None and d.finding.lag_check["readings"] == "late"
+    assert t is not None and 5.0 <= t["shared_ms"] <= 25.0 and not t["late_signals"]
+    # The re-timed readings answer the ripple as the recording does: not late beyond them.
+    assert t["ripple"]["against"] == "re-timed" and t["ripple"]["readings"] != "late"
+    assert all(0.0 < ms <= 25.0 for ms in t["ripple"]["delays_ms"].values())
+    # Re-timed, the readings leave no structured gap the lag removes at a practical level.
+    assert t["retimed"]["effect_removes_practical"] is False
+    assert d.finding.verdict == "none"
