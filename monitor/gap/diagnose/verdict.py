@@ -54,7 +54,7 @@ class Judged:
     air: dict | None = None
     #: The best single, a sensor calibration, judged on its own signal
     #: (``sensorphysics.own_signal``; None: not judged so).
-    own_signal: sensorphysics.OwnSignal | None = None
+    own_signal: sensorphysics.OwnSignal | sensorphysics.RodKinematics | None = None
     #: A deadband against a progressive metering curve (``deadband.check_metering``).
     metering: dict | None = None
 
@@ -106,7 +106,7 @@ def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Jud
 
 def _own_signal(
     d: Decision, scores: Scores, paired: Paired, cal: Calibrated
-) -> sensorphysics.OwnSignal | None:
+) -> sensorphysics.OwnSignal | sensorphysics.RodKinematics | None:
     """An ``unexplained`` gap whose best single is a sensor calibration, or whose sensor
     calibration is of a reading later than the others (``delays.Split.some_late``; a lag
     or a slow spool then ranks above it on that reading's timing): that calibration judged
@@ -121,6 +121,8 @@ def _own_signal(
     if sensor is None:
         return None
     signal = sensor.effects[0].labels["signal"]
+    if signal == "RodPos":
+        return sensorphysics.rod_kinematics(sensor, prep, held, base.pred0, paired.boot_idx)
     names = S.compared(prep)
     if signal not in names:
         return None
@@ -330,7 +332,7 @@ def suggest_next(
 
 def _sensor_check(
     checked: sensorphysics.Comparison | None,
-    own: sensorphysics.OwnSignal | None,
+    own: sensorphysics.OwnSignal | sensorphysics.RodKinematics | None,
     d: Decision,
     cal: Calibrated,
 ) -> dict | None:

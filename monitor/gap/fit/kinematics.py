@@ -51,16 +51,54 @@ def kinematic_ratio(
 ) -> float | None:
     """Measured rod speed per pump flow over the simulator's (medians on extension rows
     with flow and speed well above noise); None with too few such rows."""
-    ok = (
-        (prep.cmd["SpoolCmd"][rows] > _MIN_SPOOL_PCT)  # extension: QP all goes to the cap side
+    # Extension: QP all goes to the cap side.
+    ok = _extending(prep, rows, q_sim, v_sim, q_meas, v_meas)
+    if ok.sum() < 50:
+        return None
+    return float(np.median(v_meas[ok] / q_meas[ok]) / np.median(v_sim[ok] / q_sim[ok]))
+
+
+def _extending(prep, rows, q_sim, v_sim, q_meas, v_meas) -> np.ndarray:
+    """Extension rows with flow and speed well above noise (``kinematic_ratio``'s)."""
+    return (
+        (prep.cmd["SpoolCmd"][rows] > _MIN_SPOOL_PCT)
         & (q_meas > _MIN_FLOW_LPM)
         & (q_sim > _MIN_FLOW_LPM)
         & (v_meas > _MIN_SPEED_MM_S)
         & (v_sim > _MIN_SPEED_MM_S)
     )
-    if ok.sum() < 50:
-        return None
-    return float(np.median(v_meas[ok] / q_meas[ok]) / np.median(v_sim[ok] / q_sim[ok]))
+
+
+def _read_through(
+    prep: Prepared, segments: Sequence[Segment], base: dict[str, np.ndarray], effect: Effect | None
+) -> tuple[np.ndarray, ...]:
+    """Scored rows' measured QP and rod speed (read through ``effect``'s inverse) and the
+    simulator's: ``q_meas, v_meas, q_sim, v_sim``."""
+    rows = scored_rows(segments)
+    q_meas, v_meas = prep.meas["QP"][rows], prep.meas[ROD_VEL][rows]
+    v_sim = base[ROD_VEL][rows] - velocity_base(prep, segments, ROD_VEL)[rows]
+    q_sim = base["QP"][rows]
+    if effect is not None and effect.labels["signal"] == "QP":
+        q_meas = (q_meas - effect.params["offset"]) / effect.params["gain"]
+    elif effect is not None and effect.labels["signal"] == "RodPos":
+        v_meas = v_meas / effect.params["gain"]
+    return q_meas, v_meas, q_sim, v_sim
+
+
+def segment_speeds_per_flow(
+    prep: Prepared, segments: Sequence[Segment], base: dict[str, np.ndarray], effect: Effect | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per segment, summed over its extension rows (``kinematic_ratio``'s): measured rod
+    speed per measured pump flow (read through ``effect``'s inverse), and the simulator's;
+    their sums over any resample of the segments give that resample's ratio."""
+    q_meas, v_meas, q_sim, v_sim = _read_through(prep, segments, base, effect)
+    ok = _extending(prep, scored_rows(segments), q_sim, v_sim, q_meas, v_meas)
+    seg = np.repeat(np.arange(len(segments)), [s.stop - s.score_from for s in segments])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        meas = np.where(ok, v_meas / q_meas, 0.0)
+        sim = np.where(ok, v_sim / q_sim, 0.0)
+    n = len(segments)
+    return np.bincount(seg, meas, n), np.bincount(seg, sim, n)
 
 
 def kinematic_mismatch(
@@ -75,15 +113,8 @@ def kinematic_mismatch(
     residual of the signal alone (and, for RodPos, through the start states)."""
     if ROD_VEL not in base:
         return None
-    rows = scored_rows(segments)
-    q_meas, v_meas = prep.meas["QP"][rows], prep.meas[ROD_VEL][rows]
-    v_sim = base[ROD_VEL][rows] - velocity_base(prep, segments, ROD_VEL)[rows]
-    q_sim = base["QP"][rows]
-    if effect is not None and effect.labels["signal"] == "QP":
-        q_meas = (q_meas - effect.params["offset"]) / effect.params["gain"]
-    elif effect is not None and effect.labels["signal"] == "RodPos":
-        v_meas = v_meas / effect.params["gain"]
-    ratio = kinematic_ratio(prep, rows, q_sim, v_sim, q_meas, v_meas)
+    q_meas, v_meas, q_sim, v_sim = _read_through(prep, segments, base, effect)
+    ratio = kinematic_ratio(prep, scored_rows(segments), q_sim, v_sim, q_meas, v_meas)
     return None if ratio is None else abs(float(np.log(ratio)))
 
 
