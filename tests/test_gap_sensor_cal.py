@@ -275,3 +275,29 @@ def test_a_pa_gain_on_a_late_pa_is_named_on_pa_once_its_delay_is_aligned():
     check = rep["sensor_check"]
     assert check["own_signal_aligned_ms"] == pytest.approx(20.0, abs=5.0)
     assert check["own_signal_heldout_reduction"] >= 0.5 and check["own_signal_share"] >= 0.95
+
+
+def test_a_rod_read_faster_than_the_pump_flow_can_drive_it_is_a_rodpos_gain():
+    # Flow continuity: extending, the cap side takes the pump's flow less any leak, so no
+    # physical effect moves the rod faster per litre of measured pump flow than the cap area
+    # lets it; a stroke sensor reading 13 % fast does.  The rod's speed per flow against the
+    # calibrated simulator's is the sensor's gain (by construction 1.13), and read through
+    # the fitted gain it is the simulator's: the RodPos calibration is named by it where the
+    # residual's bootstrap is no clear evidence (the third plant's s730896_57).
+    from monitor.gap.judge import sensorphysics
+    from monitor.gap.judge.shrink import resamples
+
+    fast = Effect.make("sensor_calibration", signal="RodPos", gain=1.13, offset=0.0)
+    d = diagnose(_recording([fast], 48), M, effects=("sensor_calibration",))
+    sensor = d.ranking.singles[0]
+    assert sensor.effects[0].labels["signal"] == "RodPos"
+    segs, pred = d.parts.segments, d.traces.nominal
+    idx = resamples(len(segs))
+    chk = sensorphysics.rod_kinematics(sensor, d.parts.prep, segs, pred, idx)
+    assert chk is not None and chk.named
+    assert chk.ratio == pytest.approx(1.13, abs=0.02)
+    assert abs(chk.after - 1.0) <= 0.03 and chk.share >= 0.95
+    assert "flow continuity" in chk.evidence()
+    # A rod read slow is what any leak makes: not judged so.
+    slow = replace(sensor, effects=(Effect.make("sensor_calibration", signal="RodPos", gain=0.9),))
+    assert sensorphysics.rod_kinematics(slow, d.parts.prep, segs, pred, idx) is None
