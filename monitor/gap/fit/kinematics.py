@@ -58,7 +58,14 @@ def kinematic_ratio(
     return float(np.median(v_meas[ok] / q_meas[ok]) / np.median(v_sim[ok] / q_sim[ok]))
 
 
-def _extending(prep, rows, q_sim, v_sim, q_meas, v_meas) -> np.ndarray:
+def _extending(
+    prep: Prepared,
+    rows: np.ndarray,
+    q_sim: np.ndarray,
+    v_sim: np.ndarray,
+    q_meas: np.ndarray,
+    v_meas: np.ndarray,
+) -> np.ndarray:
     """Extension rows with flow and speed well above noise (``kinematic_ratio``'s)."""
     return (
         (prep.cmd["SpoolCmd"][rows] > _MIN_SPOOL_PCT)
