@@ -87,11 +87,12 @@ def check_split(cal: Calibrated, scores: Scores, paired: Paired, judged: Judged,
         fitted = _fitted(S.compared(prep), cal, scores)
         d, out["sensor_lag_on_late"] = _sensor_on(sp, fitted, cal, scores, paired, d)
     elif sp.shared and (sp.reference == "rod" or not _ripple_late(judged, cal, scores, out)):
-        # With the rod sharing the delay the sensors are not what is late (a rod read as
-        # late as the pressures is the acquisition); without it, readings that follow the
-        # engine's ripple later than the shared delay makes them may be lagged sensors,
-        # and the lag stands.
+        # A rod as late as the pressures is the acquisition; without it, readings following
+        # the ripple later than the shared delay makes them may be lagged, and the lag stands.
         fitted = out.get("ripple", {}).get("delays_ms") or _fitted(S.compared(prep), cal, scores)
+        if "ripple" in out and d.verdict == NAME:  # lines first, as below (s924107_20's hose)
+            d, lines = _lag_or_lines(d, cal, scores, paired, judged)
+            out.update({"lines": lines} if d.verdict != NAME else {})
         whole, smooth = _retimed(fitted, cal, scores)
         out["retimed"] = {"delays_ms": fitted, **_retimed_row(whole, smooth, cal, scores, paired)}
         if d.verdict in MACHINE_DELAY and d.chosen is not None:
@@ -158,14 +159,10 @@ def _within_tolerance(term: dict) -> bool:
 
 
 def _ripple_late(judged: Judged, cal: Calibrated, scores: Scores, out: dict) -> bool:
-    """The readings follow the engine's ripple as late as the fitted sensor lag
-    (``lagcheck``), and later than the delay they share makes them.  A delay moves the
-    ripple's response as a filter does not (a pure delay of one sample turns the lag-zero
-    response of a white ripple's change to minus half of it, a first-order lag only shrinks
-    it): so the ripple is weighed again with the calibrated simulator re-timed by each
-    reading's fitted delay in place of the undelayed one (no plant run but the lag's).
-    The third plant's healthy s730896_62 read QP's response at -0.40 against 0.75
-    undelayed and -0.01 lagged: beyond the lag, as a delay of its 10-17 ms makes it."""
+    """The readings follow the engine's ripple late (``lagcheck``) against the simulator
+    re-timed by each reading's fitted delay too: a delay of one sample turns a white
+    ripple's lag-zero response to minus half of it, which no first-order lag does (the
+    third plant's healthy s730896_62: QP -0.40 against +0.75 undelayed, -0.28 re-timed)."""
     if not (judged.lag_check and judged.lag_check.get("readings") == "late"):
         return False
     lag_c = next((c for c in scores.singles if c.effects[0].name == NAME), None)
@@ -225,15 +222,15 @@ def _sensor_on(
 
 
 def _retimed(fitted: dict[str, float], cal: Calibrated, scores: Scores) -> Sums:
-    """The calibrated simulator's held-out readings, each delayed by its delay fitted on the
-    calibration part, whole and smoothed sums."""
-    prep, held = cal.readings.prep, cal.readings.held(None).segments
-    pred = _retimed_pred(fitted, cal, scores)
+    """``_retimed_pred``'s whole and smoothed sums."""
+    prep, pred = cal.readings.prep, _retimed_pred(fitted, cal, scores)
+    held = cal.readings.held(None).segments
     return S.segment_sums(prep, held, pred), basemis.smoothed_sums(prep, held, pred)
 
 
 def _retimed_pred(fitted: dict[str, float], cal: Calibrated, scores: Scores) -> dict:
-    """The calibrated simulator's held-out readings, each delayed by its fitted delay."""
+    """The calibrated simulator's held-out readings, each delayed by its delay fitted on the
+    calibration part."""
     prep, held = cal.readings.prep, cal.readings.held(None).segments
     pred = scores.baseline.pred0
     for name, ms in fitted.items():
