@@ -20,6 +20,7 @@ from monitor.sim.laws import (
     clip,
     disp_target,
     edge_corrections,
+    flow_forced,
     force_corrections,
     leak,
     metering,
@@ -56,7 +57,8 @@ F_VEL, F_SIGN, F_POS, F_PER_COS, F_PER_SIN, F_PER_W = 58, 59, 60, 61, 62, 63
 KV_PA_REL, KV_PB_REL, KV_AT_REL, KV_BT_REL = 64, 65, 66, 67
 LEAK_AT_SQ, CORR_ON = 68, 69
 NOTCH = 70  # -, share of the stroke metered through notches (0: linear edges)
-N_PARAMS = 71
+FLOW_FORCE = 71  # 1/Pa, the spool's opening over (1 + this * the open edges' drops); 0: none
+N_PARAMS = 72
 
 # --- input columns (per input sample, linearly interpolated inside a step) ----------------
 IN_SPOOL, IN_DISP, IN_SPEED_RPS, IN_VISC_RATIO, IN_LEAK, IN_STROKE_LIM, IN_UNDERLAP = range(7)
@@ -154,6 +156,8 @@ def rhs(y: np.ndarray, u: np.ndarray, prm: np.ndarray, dy: np.ndarray) -> float:
         dy[S_XS] = 0.0
         dy[S_VS] = 0.0
     xs = clip(xs, -lim, lim)
+    if prm[FLOW_FORCE] > 0.0:
+        xs = flow_forced(xs, pp, pa, pb, ptank, prm[FLOW_FORCE])
     ov = prm[OVERLAP]
     mag = max(abs(xs) - ov, 0.0) / (1.0 - ov)
     if prm[NOTCH] > 0.0:

@@ -41,6 +41,21 @@ def metering(opening: float, notch: float) -> float:
 
 
 @jit(inline="always")
+def flow_forced(xs: float, pp: float, pa: float, pb: float, ptank: float, k: float) -> float:
+    """The spool's position ``xs`` (share of the stroke) where steady flow forces close it
+    against its centring spring: each open metering edge pulls the spool shut with a force
+    proportional to its opening times its pressure drop, so a spool the solenoid (or pilot)
+    sends to ``xs`` settles at ``xs / (1 + k * (drop in + drop out))`` (``k`` in 1/Pa: the
+    flow forces' gain over the spring's rate).  The drops of the edges ``xs`` opens: P->A
+    and B->T raising, P->B and A->T lowering; a negative drop pushes nothing."""
+    if xs >= 0.0:
+        drops = max(pp - pa, 0.0) + max(pb - ptank, 0.0)
+    else:
+        drops = max(pp - pb, 0.0) + max(pa - ptank, 0.0)
+    return xs / (1.0 + k * drops)
+
+
+@jit(inline="always")
 def clip(v: float, lo: float, hi: float) -> float:
     return lo if v < lo else (hi if v > hi else v)
 

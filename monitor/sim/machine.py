@@ -61,6 +61,11 @@ class Valve:
     #: linear edge): the open area grows with the square of the opening there and
     #: linearly beyond, the two joined with one slope (``monitor.sim.laws.metering``).
     notch_share: float = 0.0
+    #: Steady flow forces against a soft centring spring (1/Pa, 0: none): the spool sent to
+    #: ``x`` settles at ``x / (1 + flow_force * (drop in + drop out))`` across the edges it
+    #: opens (``monitor.sim.laws.flow_forced``; a direct-operated spool).  The rated flow
+    #: stays the flow at the rated drop across each edge, flow forces included.
+    flow_force: float = 0.0
 
     @property
     def valve_kv(self) -> float:
@@ -178,6 +183,7 @@ _KEYS: dict[str, dict[str, tuple[str, float, float, float]]] = {
         "laminar_dp_bar": ("laminar_dp_pa", BAR, 0.01, 5),
         "tank_bar": ("tank_pa", BAR, 0, 20),
         "notch_share_pct": ("notch_share", 0.01, 0, 90),
+        "flow_force_per_bar": ("flow_force", 1.0 / BAR, 0, 1),
     },
     "cylinder": {
         "bore_mm": ("bore_m", 1e-3, 10, 500),

@@ -58,6 +58,11 @@ def pack_params(
     prm[K.DP_LAM] = m.valve.laminar_dp_pa
     prm[K.PTANK] = m.valve.tank_pa
     prm[K.NOTCH] = m.valve.notch_share
+    prm[K.FLOW_FORCE] = m.valve.flow_force
+    if m.valve.flow_force > 0.0:
+        # The rated flow is the flow at the rated drop across each edge with the flow forces
+        # that drop sets: the open edge's own coefficient is that much larger.
+        prm[K.KV] *= 1.0 + m.valve.flow_force * 2.0 * m.valve.valve_rated_dp_pa
     prm[K.DISP_MAX] = m.pump.pump_disp_m3_rev
     prm[K.COMP_ON] = 1.0 if m.pump.compensator_enabled else 0.0
     prm[K.COMP_START] = m.pump.compensator_start_pa

@@ -37,9 +37,10 @@ from monitor.gap.diagnose.records import Calibrated, Paired, Parts, Scores
 from monitor.gap.diagnose.verdict import Judged
 from monitor.gap.fit import score as S
 from monitor.gap.fit.sensorterms import SensorTerm
-from monitor.gap.judge import basemis, delays, heldflow, onsets
+from monitor.gap.judge import basemis, delays, flowforce, heldflow, onsets
 from monitor.gap.judge.decide import SIGNIFICANT, Decision, decide, gain_share, not_named
 from monitor.sim.effects import Effect
+from monitor.sim.machine import BAR
 
 NAME = "valve_deadband"
 #: The calibration's tolerance for the valve's metering curve (``calibrate.TOLERANCES``).
@@ -194,21 +195,29 @@ def check_metering(
     (``Metering.progressive``), the valve is progressive, not overlapped: the verdict is
     decided again without the deadband.  The JSON's ``metering_check`` (also, as evidence,
     where the calibration took up notches)."""
-    d, base = judged.decision, scores.baseline
+    d, base, machine = judged.decision, scores.baseline, cal.readings.machine
     notch_pct = 100.0 * (base.factors.get(METERING, 1.0) - 1.0)
     deadband = d.verdict == NAME and d.chosen is not None
-    if not deadband and notch_pct < 1.0:
+    forced = machine.valve.flow_force > 0.0
+    if not deadband and notch_pct < 1.0 and not forced:
         return judged
-    read = heldflow.metering(cal.prep, parts.segments, cal.readings.machine)
+    read = heldflow.metering(cal.prep, parts.segments, machine)
     progressive = read is not None and read.progressive
+    forces = flowforce.read(cal.prep, parts.segments, machine) if deadband or forced else None
+    # Flow through the edges below the overlap: with the flow forces read beside it, the
+    # held flows rule an overlap out.
+    ruled_out = forces is not None and forces.shown and forces.overlap_share <= heldflow.RULED_OUT
     row = {
         "verdict_without_check": d.verdict,
         "calibrated_notch_pct": round(notch_pct, 1),
         "fitted_overlap_pct": _fitted_overlap(d) if deadband else None,
         "held_flows": None if read is None else read.as_dict(),
         "progressive": progressive,
+        "flow_forces": None if forces is None else forces.as_dict(),
+        "simulated_flow_force_per_bar": round(machine.valve.flow_force * BAR, 4),
+        "overlap_ruled_out": ruled_out,
     }
-    if deadband and progressive:
+    if deadband and (progressive or ruled_out):
         rest = [c for c in scores.singles if c.name != NAME]
         plain = [q for q in paired.pairs if all(e.name != NAME for e in q.effects)]
         against = {name: a.sums for name, a in judged.absorbed.items()}
@@ -231,6 +240,13 @@ def metering_line(row: dict, verdict: str) -> str:
     decided."""
     f = row["held_flows"]
     cal = f"the calibration took up notches over {row['calibrated_notch_pct']:.0f} % of the stroke"
+    if row.get("flow_forces") is not None:
+        cal = f"{cal}; {flowforce.line(row['flow_forces'])}"
+    if row.get("overlap_ruled_out") and row["verdict_without_check"] == NAME:
+        return (
+            f"{cal}: flow passes where the fitted overlap ({row['fitted_overlap_pct']} %) would "
+            f"pass none at drops where the flow forces give flow, not a deadband; verdict {verdict}"
+        )
     if f is None:
         return f"{cal}; too few held commands near centre to tell an overlap from notches"
     read = (

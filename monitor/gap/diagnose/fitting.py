@@ -21,11 +21,11 @@ from monitor.gap.fit import score as S
 from monitor.gap.fit import sensorcal
 from monitor.gap.fit.candidates import CONFOUNDED, Candidate, Member, default_member, fit_candidate
 from monitor.gap.fit.families import fit_family
-from monitor.gap.judge import basemis, heldflow
+from monitor.gap.judge import basemis, flowforce, heldflow
 from monitor.gap.judge.decide import pair_plan, within_noise
 from monitor.gap.judge.shrink import resamples
 from monitor.io.recording import Recording
-from monitor.sim.machine import MachineParams
+from monitor.sim.machine import BAR, MachineParams
 
 Progress = Callable[[str], None]
 
@@ -76,6 +76,21 @@ def split_recording(rec: Recording, machine: MachineParams, say: Progress) -> Pa
         f"{len(held)} held out; RodPos {'measured' if prep.has_rodpos else 'from flow'}"
     )
     return Parts(prep=prep, segments=segments, calibration=cal, heldout=held, fitted=fit_segs)
+
+
+def valve_law(parts: Parts, machine: MachineParams, say: Progress) -> MachineParams:
+    """Stage 1b: the simulator's valve closed by flow forces where the held flows show it
+    (``flowforce.read``: levels held against drops far apart, the opening falling with the
+    drop, read jointly with an overlap so that an overlap is not taken for it), at the
+    flow forces they read; elsewhere ``machine`` as configured.  Read, not calibrated: with
+    a compensated pump the small commands meet the high drops, and a calibration fitting
+    both takes an overlap up as flow forces (the fifth plant's deadbands of 14-16 %:
+    flow forces calibrated at 0.008-0.015/bar, read at 0.004)."""
+    read = flowforce.read(parts.prep, parts.segments, machine)
+    if read is None or not read.shown or machine.valve.flow_force > 0.0:
+        return machine
+    say(f"valve: {flowforce.line(read.as_dict())}")
+    return machine.with_changes(flow_force=read.k_per_bar / BAR)
 
 
 def make_baseline(

@@ -69,6 +69,7 @@ def _diagnose(
 ) -> Diagnosis:
     laps = _Laps()
     parts = F.split_recording(rec, machine, say)
+    machine = F.valve_law(parts, machine, say)
     cal = F.calibrate_tolerances(parts, machine, say)
     parts = F.with_prep(parts, cal)
     laps.lap("calibrate")
