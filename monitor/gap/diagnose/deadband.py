@@ -188,13 +188,15 @@ def check_metering(
     judged: Judged,
     say: Callable[[str], None],
 ) -> Judged:
-    """Stage 6e: a deadband verdict against a progressive metering curve.  An overlap
-    passes nothing until the spool has crossed it; notches pass a small flow growing with
-    the square of the opening.  Where the held levels, read by the orifice law on every
-    segment (``heldflow.metering``), show notches and rule out an overlap
-    (``Metering.progressive``), the valve is progressive, not overlapped: the verdict is
-    decided again without the deadband.  The JSON's ``metering_check`` (also, as evidence,
-    where the calibration took up notches)."""
+    """Stage 6e: a deadband verdict against a progressive metering curve or a spool
+    closed by flow forces.  An overlap passes nothing until the spool has crossed it;
+    notches pass a small flow growing with the square of the opening, and a spool closed by
+    flow forces passes less at a higher drop, not nothing.  Where the held levels, read by
+    the orifice law on every segment, show notches and rule out an overlap
+    (``heldflow.metering``, ``Metering.progressive``), or show flow forces and, read
+    beside them, rule out an overlap (``flowforce.read``), the verdict is decided again
+    without the deadband.  The JSON's ``metering_check`` (also, as evidence, where the
+    calibration took up notches or the simulator's spool closes by flow forces)."""
     d, base, machine = judged.decision, scores.baseline, cal.readings.machine
     notch_pct = 100.0 * (base.factors.get(METERING, 1.0) - 1.0)
     deadband = d.verdict == NAME and d.chosen is not None
@@ -241,7 +243,8 @@ def metering_line(row: dict, verdict: str) -> str:
     f = row["held_flows"]
     cal = f"the calibration took up notches over {row['calibrated_notch_pct']:.0f} % of the stroke"
     if row.get("flow_forces") is not None:
-        cal = f"{cal}; {flowforce.line(row['flow_forces'])}"
+        forces = flowforce.line(row["flow_forces"])
+        cal = forces if row["calibrated_notch_pct"] < 1.0 else f"{cal}; {forces}"
     if row.get("overlap_ruled_out") and row["verdict_without_check"] == NAME:
         return (
             f"{cal}: flow passes where the fitted overlap ({row['fitted_overlap_pct']} %) would "
