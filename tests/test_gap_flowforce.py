@@ -129,8 +129,9 @@ def _diagnosed(machine, overlap_pct: float = 0.0) -> dict:
 
 
 def test_a_healthy_spool_closed_by_flow_forces_is_not_a_deadband():
-    # Without the flow forces the linear simulator reads the small flows at high drops as
-    # an overlap; with them read from the held flows nothing is left to name.
+    # Without the flow forces read (the linear simulator beside this valve) the verdict is
+    # `unexplained`: the deadband fitted an overlap for the small flows at high drops but
+    # not enough of the gap.  With them read from the held flows nothing is left to name.
     rep = _diagnosed(FORCED)
     assert rep["verdict"] == "none"
     check = rep["metering_check"]
