@@ -25,12 +25,12 @@ from monitor.gap.judge import flowforce
 from monitor.gap.report.document import build_report
 from monitor.io.recording import Recording
 from monitor.sim import kernel as K
-from monitor.sim.cycles import make_cycle
 from monitor.sim.effects import Effect
 from monitor.sim.laws import flow_forced as _flow_forced
 from monitor.sim.machine import BAR, LPM, load_machine, machine_from_mapping
 from monitor.sim.pack import pack_params
 from monitor.sim.simulate import simulate
+from tests.held_levels import held_levels
 
 #: The law as Python (no compile): the kernel's own.
 flow_forced = _flow_forced.py_func
@@ -64,14 +64,8 @@ def test_the_yaml_key_and_the_default_leave_the_kernel_as_it_was():
     assert forced[K.KV] == pytest.approx(1.1 * M.valve.valve_kv)
 
 
-def _ladder(seconds: float = 60.0) -> Recording:
-    cmd = make_cycle("step", seconds, 5)
-    spool = np.zeros_like(cmd.t)
-    period = 2.2
-    for i in range(int(seconds / period) - 1):
-        level = LEVELS[(i // 2) % len(LEVELS)] * (1 if i % 2 == 0 else -1)
-        spool[(cmd.t >= i * period + 0.8) & (cmd.t < (i + 1) * period)] = level
-    return Recording(cmd.t, {**cmd.columns, "SpoolCmd": spool}, "ladder")
+def _ladder() -> Recording:
+    return held_levels(LEVELS, name="ladder")
 
 
 @pytest.fixture(scope="module")

@@ -27,6 +27,7 @@ from monitor.sim.effects import Effect
 from monitor.sim.laws import metering as _metering
 from monitor.sim.machine import load_machine
 from monitor.sim.simulate import simulate
+from tests.held_levels import held_levels
 
 #: The law as Python (no compile): the kernel's own.
 metering = _metering.py_func
@@ -51,14 +52,8 @@ def test_the_notches_law_by_hand():
     assert twin == pytest.approx([metering(max(x - 0.1, 0.0) / 0.9, 0.5) for x in c])
 
 
-def _stairs(seconds: float = 60.0) -> Recording:
-    cmd = make_cycle("step", seconds, 5)
-    spool = np.zeros_like(cmd.t)
-    period = 2.2
-    for i in range(int(seconds / period) - 1):
-        level = LEVELS[(i // 2) % len(LEVELS)] * (1 if i % 2 == 0 else -1)
-        spool[(cmd.t >= i * period + 0.8) & (cmd.t < (i + 1) * period)] = level
-    return Recording(cmd.t, {**cmd.columns, "SpoolCmd": spool}, "stairs")
+def _stairs() -> Recording:
+    return held_levels(LEVELS)
 
 
 @pytest.fixture(scope="module")
