@@ -34,9 +34,11 @@ from monitor.sim.machine import MachineParams
 #: a command halved at 50 bar across the two edges).
 K_GRID_PER_BAR = np.linspace(0.0, 0.02, 41)
 #: The flow forces shown: ``k`` of this (1/bar) or more in ``1 - heldflow.RULED_OUT`` of the
-#: resamples (0.003: a third of the opening gone at 170 bar across the edges).  The fifth
-#: plant's recordings read 0.0035-0.0125; the third plant's smooth-cornered 12 % deadband
-#: s730896_42 and slow spool s924107_40 0.0025 (with 0.002 in 96-100 % of the resamples).
+#: resamples (0.003: a third of the opening gone at 170 bar across the edges).  Shown on 65
+#: of the fifth plant's 72 recordings of seed 276946 (0.0035-0.0125, its healthy machines
+#: 0.004-0.008); on none of 240 of the third and fourth plants' and the outsider's (the
+#: third plant's 12 % deadbands s730896_42, s924107_44 and slow spool s924107_40 read
+#: 0.0025, 0.003 or more in 4-43 % of the resamples).
 MIN_K_PER_BAR = 0.003
 #: ... read over levels whose drops span this (bar) or more: at one drop a flow force is a
 #: gain like any other.
