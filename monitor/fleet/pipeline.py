@@ -119,6 +119,7 @@ def train_model_bytes(
     from monitor.model.machinecard import card_for
     from monitor.offline.loopjob import loop_card, section_inputs
     from monitor.offline.recordings import read_loop
+    from monitor.signals import ROD_SPEED
     from monitor.training.settings import (
         DGRNNSettings,
         IsolationSettings,
@@ -135,7 +136,11 @@ def train_model_bytes(
         dgrnn = DGRNNSettings(lend=COMMISSIONING["lend"])
     else:
         preset, neighbours = section_inputs(cfg, loop)
-        dgrnn = DGRNNSettings(preset=preset, lend=COMMISSIONING["lend"], neighbours=neighbours)
+        # A loop is commissioned as its reference was trained: a rod speed it predicts too.
+        rod_speed = ref is not None and ROD_SPEED.name in ref.spec.outputs
+        dgrnn = DGRNNSettings(
+            preset=preset, lend=COMMISSIONING["lend"], neighbours=neighbours, rod_speed=rod_speed
+        )
         isolation = "none" if neighbours else isolation
     settings = TrainConfig(
         dgrnn=dgrnn,
