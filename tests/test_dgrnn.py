@@ -89,6 +89,8 @@ def test_default_preset():
         ({"outputs": ("y",), "exogenous": (), "lags": (("y", (1,)),), "horizon": 0}, "horizon"),
         ({"outputs": (), "exogenous": ("u",), "lags": (("u", (1,)),)}, "output"),
         ({"outputs": ("y",), "exogenous": ("u",), "lags": (("u", (-1,)),)}, ">= 0"),
+        # A model file's header once held a null output name (found by tests/test_fuzz.py).
+        ({"outputs": (None, "y"), "exogenous": (), "lags": (("y", (1,)),)}, "signal names"),
     ],
 )
 def test_spec_validation(kwargs, match):

@@ -52,6 +52,10 @@ class DGRNNSpec:
         if not self.outputs:
             raise ConfigError("a DGRNN needs at least one output")
         variables = self.variables
+        # A model file's spec may hold anything JSON holds; a name is a non-empty string.
+        odd = [v for v in variables if not isinstance(v, str) or not v]
+        if odd:
+            raise ConfigError(f"outputs and exogenous inputs must be signal names, got {odd!r}")
         if len(set(variables)) != len(variables):
             raise ConfigError(f"a variable is listed twice in outputs/exogenous: {variables}")
         names = [name for name, _ in self.lags]
