@@ -16,9 +16,13 @@ def resource_path(kind: str, name: str) -> Path:
     """Path of a shipped file, e.g. ``resource_path("dbc", "monitor.dbc")``."""
     if kind not in _KINDS:
         raise KeyError(f"unknown resource kind {kind!r}; expected one of {_KINDS}")
+    checkout = Path(__file__).resolve().parents[2]
+    if (checkout / "pyproject.toml").is_file() and (checkout / kind).is_dir():
+        # Imported from a source checkout (a git worktree on PYTHONPATH, say): its own files,
+        # not those of whichever checkout an editable install maps the resources to.
+        return checkout / kind / name
     try:
         folder = Path(str(resources.files(f"monitor.resources.{kind}")))
     except ModuleNotFoundError:
-        # Imported straight from a source checkout (not installed): the top-level folder.
-        folder = Path(__file__).resolve().parents[2] / kind
+        folder = checkout / kind
     return folder / name
