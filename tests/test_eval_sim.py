@@ -140,36 +140,6 @@ def _check_invariants(result: dict[str, Any]) -> None:
             assert r["delay_s"] is None or r["delay_s"] >= 0.0
 
 
-def test_cli_shipped_model_small_set(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    out = tmp_path / "eval.json"
-    code = main(
-        [
-            "eval-sim",
-            "--model",
-            "shipped",
-            "--severities",
-            "1.0",
-            "--runs",
-            "1",
-            "--normal-hours",
-            "0.02",
-            "--json",
-            str(out),
-        ]
-    )
-    assert code == 0
-    result = json.loads(out.read_text())
-    assert list(result["models"]) == ["shipped"]
-    assert result["plan"]["fault_runs"] == 6
-    _check_invariants(result)
-    m = result["models"]["shipped"]
-    wear = next(r for r in m["per_severity"] if r["fault"] == "spool_wear")
-    # Empirical (full evaluation): severity-1.0 spool wear peaks J far above eps0.
-    assert wear["abrupt"]["detected"] == 1
-    md = capsys.readouterr().out
-    assert "| spool_wear | 1 |" in md and "Isolation confusion" in md
-
-
 def test_cli_trains_paper_preset(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """A preset trained afresh, its fault signatures from one simulated run per fault and
     severity (--isolation-runs 1; the default 8 took most of this test's time)."""
@@ -238,24 +208,36 @@ def test_cli_json_folder_missing(tmp_path: Path) -> None:
     assert main(["eval-sim", "--model", "shipped", "--json", str(tmp_path / "no" / "x.json")]) == 2
 
 
-def test_cli_dask_workers_give_the_one_process_rows(tmp_path: Path) -> None:
-    """--workers 2 (a Dask LocalCluster) scores the same runs to the same rows as the
-    one-process loop; only the timings differ."""
+def test_cli_shipped_model_small_set_and_dask_workers_give_the_one_process_rows(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """The shipped model on a small set (each fault at full severity, both onsets, one run
+    each): its invariants and the markdown table; then --workers 2 (a Dask LocalCluster)
+    scores the same runs to the same rows as that one-process loop; only the timings
+    differ.  (One one-process run for both: they were two runs of the same model.)"""
     common = [
         "eval-sim",
         "--model",
         "shipped",
         "--severities",
-        "0.3,1.0",
+        "1.0",
         "--runs",
         "1",
         "--normal-hours",
         "0.1",
-        "--onsets",
-        "abrupt",
     ]
     one, two = tmp_path / "one.json", tmp_path / "two.json"
     assert main([*common, "--json", str(one)]) == 0
+    result = json.loads(one.read_text())
+    assert list(result["models"]) == ["shipped"]
+    assert result["plan"]["fault_runs"] == 6
+    _check_invariants(result)
+    m = result["models"]["shipped"]
+    wear = next(r for r in m["per_severity"] if r["fault"] == "spool_wear")
+    # Empirical (full evaluation): severity-1.0 spool wear peaks J far above eps0.
+    assert wear["abrupt"]["detected"] == 1
+    md = capsys.readouterr().out
+    assert "| spool_wear | 1 |" in md and "Isolation confusion" in md
     assert main([*common, "--workers", "2", "--json", str(two)]) == 0
     a, b = (json.loads(p.read_text())["models"]["shipped"]["runs"] for p in (one, two))
     assert a == b
