@@ -91,7 +91,7 @@ def warm_numba_cache(tmp_path_factory) -> tuple[list[str], Path]:
 HEAVY_FILES: dict[str, float] = {
     "test_gap_sensor_cal.py": 200,
     "test_gap_suggest.py": 135,
-    "test_eval_sim.py": 100,
+    "test_eval_sim.py": 90,
     "test_gap_cli.py": 75,
     "test_gap_families.py": 70,
     "test_hold.py": 30,
@@ -102,18 +102,23 @@ HEAVY_FILES: dict[str, float] = {
 #: The heaviest files kept whole (one unit, on one worker), in the same order.
 HEAVY_WHOLE: dict[str, float] = {
     "test_live_field.py": 160,
+    # test_fleet_pump, _loops and _commission_support: their module fixtures commission
+    # simulated machines (223, 72 and 35 CPU-seconds at load 10; about 120 of the first on CI).
+    "test_fleet_pump.py": 130,
     "test_bench.py": 120,
     "test_fleet.py": 100,
     "test_attack_flood.py": 100,
     "test_gap_bench.py": 90,
     "test_startup.py": 80,
     "test_attack_restart.py": 75,
-    "test_install.py": 70,
     "test_controller_wheel.py": 60,
+    "test_install.py": 55,
+    "test_fleet_loops.py": 45,
     "test_fleet_browser.py": 41,
     "test_sim_faults_effects.py": 32,
     "test_fleet_scheduler.py": 32,
     "test_grnn_index.py": 22,
+    "test_fleet_commission_support.py": 20,
     "test_detector.py": 17,
     "test_crossfit.py": 13,
 }
