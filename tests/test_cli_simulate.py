@@ -30,6 +30,17 @@ def test_simulate_csv_has_the_contract_columns_and_rodpos(tmp_path, capsys):
     assert "wrote 501 rows" in capsys.readouterr().err
 
 
+def test_simulate_oil_temp_holds_or_warms_the_oil_linearly(tmp_path):
+    out = tmp_path / "warm.csv"
+    assert main(["simulate", "--duration", "5", "--oil-temp", "25:55", "--out", str(out)]) == 0
+    rec = read_csv(out)
+    # OilTemp is sampled and held once a second (the sensor's period): 25, 31, ... 55.
+    assert rec["OilTemp"][0] == pytest.approx(25.0) and rec["OilTemp"][-1] == pytest.approx(55.0)
+    assert np.all(np.diff(rec["OilTemp"]) >= 0)
+    assert main(["simulate", "--duration", "2", "--oil-temp", "45", "--out", str(out)]) == 0
+    assert np.all(read_csv(out)["OilTemp"] == 45.0)
+
+
 def test_simulate_log_decodes_back_to_the_same_signals(tmp_path):
     csv, log = tmp_path / "run.csv", tmp_path / "run.log"
     args = [
@@ -60,6 +71,8 @@ def test_simulate_log_decodes_back_to_the_same_signals(tmp_path):
         (["--duration", "5", "--effect", "magic"], "unknown effect 'magic'"),
         (["--duration", "5", "--effect", "valve_deadband:overlap_pct=80"], "outside 0..30"),
         (["--duration", "5", "--fault", "piston_wear:0.5@10"], "after the end"),
+        (["--duration", "5", "--oil-temp", "25:200"], "must be within -20..120 degC, got 200"),
+        (["--duration", "5", "--oil-temp", "25:40:55"], "expected C or C:C_END in degC"),
     ],
 )
 def test_simulate_user_errors_exit_2_with_one_line(tmp_path, capsys, args, fragment):

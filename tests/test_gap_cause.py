@@ -12,9 +12,12 @@ from pathlib import Path
 import pytest
 
 from benchmarks.gap_third.scenario import Scenario, record
+import numpy as np
+
+from monitor.cli import main
 from monitor.gap.diagnose import diagnose
 from monitor.gap.report.document import build_report
-from monitor.gap.report.summary import summary_text
+from monitor.gap.report.summary import mechanism_line, summary_text
 from monitor.sampling.read import read_recording
 from monitor.sim.machine import load_machine
 
@@ -150,6 +153,8 @@ def test_a_constant_pump_leak_on_a_warm_machine_is_pump_leakage_of_undecided_cau
     # The leak as simulated, 3 L/min per 100 bar, read at the recording's temperature.
     assert first["coefficient"] == pytest.approx(3.0, rel=0.2)
     assert "To tell the causes apart, record: " in summary_text(rep)
+    line = mechanism_line(rep) or ""
+    assert "cause: undecided (oil_viscosity or wear)" in line and "record: a warm-up" in line
 
 
 #: A machine whose oil stays at 55-56 degC, where ISO VG 46 is 0.54 of its 40 degC viscosity.
@@ -191,3 +196,77 @@ def test_a_worn_pump_at_the_same_steady_temperature_stays_of_undecided_cause(tmp
     mech = rep["mechanism"]
     assert (mech["name"], mech["cause"]) == ("pump leakage", "undecided")
     assert "warm-up" in mech["separating_recording"]
+
+
+def _warm_up(tmp_path: Path, name: str, *effect: str) -> dict:
+    """A user's warm-up recording: ``monitor simulate`` of 60 s of the boom cycle (seed 5)
+    with the oil warming from 25 to 55 degC, diagnosed against the shipped simulator."""
+    out = tmp_path / f"{name}.csv"
+    args = ["simulate", "--duration", "60", "--seed", "5", "--oil-temp", "25:55", *effect]
+    assert main([*args, "--out", str(out)]) == 0
+    m = load_machine()
+    return build_report(diagnose(read_recording(out), m, effects=EFFECTS), m)
+
+
+def _walther_cst(temp_c: np.ndarray) -> np.ndarray:
+    """ISO VG 46 (46 cSt at 40 degC, 6.8 at 100) by ASTM D341, written apart from the
+    simulator: log10(log10(nu + 0.7)) is linear in log10(T / K)."""
+    x = np.log10(np.array([40.0, 100.0]) + 273.15)
+    y = np.log10(np.log10(np.array([46.0, 6.8]) + 0.7))
+    slope = (y[1] - y[0]) / (x[1] - x[0])
+    return 10 ** (10 ** (y[0] + slope * (np.log10(temp_c + 273.15) - x[0]))) - 0.7
+
+
+#: 3 L/min per 100 bar of pump leakage: a worn pump's (an oil of constant viscosity:
+#: the same leak at every temperature) and a thin oil's (ISO VG 46: ~ 1/viscosity).
+WORN = "oil_viscosity:pump_leak_lpm_per_100bar=3,friction_share=0,nu40_cst=20,nu100_cst=19.99"
+THIN = "oil_viscosity:pump_leak_lpm_per_100bar=3,friction_share=0"
+
+
+def test_a_users_warm_up_of_a_worn_pump_is_pump_leakage_from_wear(tmp_path):
+    rep = _warm_up(tmp_path, "worn", "--effect", WORN)
+    assert rep["verdict"] == "unexplained"
+    mech, chk = rep["mechanism"], rep["cause_check"]
+    assert (mech["name"], mech["signal"], mech["cause"], mech["cause_decided"]) == (
+        "pump leakage",
+        "P->tank",
+        "wear",
+        True,
+    )
+    assert mech["separating_recording"] is None and chk["decided_by"] == "oil temperature"
+    # The oil as driven: the 5th and 95th percentiles of a 25 -> 55 degC ramp.
+    lo, hi = chk["oil_temp_c"]
+    assert lo == pytest.approx(26.5, abs=1.0) and hi == pytest.approx(53.5, abs=1.0)
+    # The evidence: a viscous leak would have grown by nu(lo) / nu(hi) over the warm-up.
+    ratio = _walther_cst(np.array(lo)) / _walther_cst(np.array(hi))
+    assert chk["viscosity_ratio"] == pytest.approx(ratio, rel=0.01)
+    assert chk["flat_better_share"] >= 0.95
+    assert chk["flat_leak_lpm_per_100bar"] == pytest.approx(3.0, rel=0.25)
+    # What the terminal says after the verdict line.
+    assert mechanism_line(rep).startswith(
+        "mechanism: pump leakage (P->tank); cause: wear, not oil_viscosity "
+        "(decided by the oil temperature)"
+    )
+
+
+def test_a_users_warm_up_of_a_thin_oils_leak_is_viscosity(tmp_path):
+    rep = _warm_up(tmp_path, "thin", "--effect", THIN)
+    assert rep["verdict"] == "oil_viscosity"
+    assert rep["params"]["pump_leak_lpm_per_100bar"]["value"] == pytest.approx(3.0, rel=0.1)
+    mech = rep["mechanism"]
+    assert (mech["name"], mech["cause"], mech["cause_decided"]) == (
+        "pump leakage",
+        "oil_viscosity",
+        True,
+    )
+    assert rep["cause_check"]["flat_better_share"] <= 0.05
+    assert mechanism_line(rep) == (
+        "mechanism: pump leakage (P->tank); cause: oil_viscosity, not wear "
+        "(decided by the oil temperature)"
+    )
+
+
+def test_a_users_warm_up_of_a_healthy_machine_is_none(tmp_path):
+    rep = _warm_up(tmp_path, "healthy")
+    assert rep["verdict"] == "none" and rep["mechanism"] is None
+    assert mechanism_line(rep) is None

@@ -123,7 +123,7 @@ def _read_loop(args: argparse.Namespace) -> tuple[MachineParams, Recording]:
 def run(args: argparse.Namespace) -> int:
     from monitor.gap.diagnose import diagnose
     from monitor.gap.report.document import build_report
-    from monitor.gap.report.summary import summary_text
+    from monitor.gap.report.summary import mechanism_line, summary_text
 
     if args.report is not None and args.report.exists() and not args.report.is_dir():
         raise ConfigError(f"--report {args.report}: exists and is not a directory")
@@ -161,4 +161,7 @@ def run(args: argparse.Namespace) -> int:
         f"{line}; confidence {report['confidence']:.2f}; held-out gap removed "
         f"{100 * report['shrink']['heldout_reduction']:.0f} %"
     )
+    mechanism = mechanism_line(report)
+    if mechanism:
+        print(mechanism)
     return 0

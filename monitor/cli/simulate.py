@@ -19,6 +19,8 @@ from monitor.sim.machine import load_machine
 from monitor.sim.whole.cycles import TRAINING_CYCLES, WHOLE_CYCLES
 
 MACHINES = ("excavator4",)
+#: --oil-temp's range (degC): a mobile machine's oil from a cold start to its hottest.
+OIL_TEMP_MIN_C, OIL_TEMP_MAX_C = -20.0, 120.0
 
 _EPILOG = f"""\
 faults (--fault NAME:SEV[@ONSET_S[+RAMP_S]], severity 0..1, abrupt at ONSET_S or ramped
@@ -48,6 +50,8 @@ examples:
   monitor simulate --duration 600 --seed 1 --out normal.csv
   monitor simulate --duration 120 --seed 2 --fault piston_wear:0.5@60 --out wear.log
   monitor simulate --duration 60 --seed 3 --effect spool_dynamics:natural_freq_hz=8 --out s.csv
+  monitor simulate --duration 300 --seed 5 --oil-temp 25:55 \\
+      --effect oil_viscosity:pump_leak_lpm_per_100bar=3 --out thin_oil_warm_up.csv
   monitor simulate --machine excavator4 --duration 600 --seed 4 --cycle truck-loading \\
       --fault stick.piston_wear:0.5@300 --out whole.log
 """
@@ -108,6 +112,15 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         metavar="MM",
         help="initial rod position in mm from fully retracted (default 100)",
     )
+    p.add_argument(
+        "--oil-temp",
+        type=_oil_temp,
+        default=None,
+        metavar="C[:C_END]",
+        help="oil temperature in degC, held (C) or warming linearly from C to C_END over the "
+        "run (a warm-up: 25:55), within -20..120 (default: a warm machine, 40-60 degC drifting "
+        "a degree or two, drawn from the seed)",
+    )
     p.add_argument("--no-noise", action="store_true", help="noise-free sensors (still quantised)")
     p.add_argument(
         "--config",
@@ -148,6 +161,10 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--fault {fault.name}: onset {fault.onset_s:g} s is after the end")
     start = time.perf_counter()
     commands = make_cycle(args.cycle, args.duration, args.seed)
+    if args.oil_temp is not None:
+        first, last = args.oil_temp
+        t = commands.t - commands.t[0]
+        commands.columns["OilTemp"] = first + (last - first) * t / max(float(t[-1]), 1e-9)
     rec = simulate(
         commands,
         machine,
@@ -164,6 +181,16 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def _oil_temp(text: str) -> tuple[float, float]:
+    """``C`` or ``C:C_END`` (degC): the oil held at C, or warming from C to C_END."""
+    parse = number(OIL_TEMP_MIN_C, OIL_TEMP_MAX_C, unit="degC")
+    parts = text.split(":")
+    if len(parts) > 2:
+        raise argparse.ArgumentTypeError(f"expected C or C:C_END in degC, got {text[:40]!r}")
+    ends = [float(parse(part)) for part in parts]
+    return ends[0], ends[-1]
 
 
 def _write(out: Path, suffix: str, rec: Recording, dbc: Path | None = None) -> str:
@@ -203,6 +230,8 @@ def _run_machine(args: argparse.Namespace, suffix: str) -> int:
         )
     if args.effect:
         raise ConfigError("--effect is not available with --machine yet (the boom loop's only)")
+    if args.oil_temp is not None:
+        raise ConfigError("--oil-temp is the boom loop's; the whole machine draws its own")
     if args.rod_pos is not None:
         raise ConfigError("--rod-pos is the boom loop's; the whole machine starts at 30 % stroke")
     faults = [parse_machine_fault(text) for text in args.fault]

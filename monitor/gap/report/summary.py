@@ -56,6 +56,39 @@ def _mechanism_lines(m: dict | None) -> list[str]:
     return lines
 
 
+def mechanism_line(report: dict) -> str | None:
+    """The terminal's line after the verdict: the mechanism, then its cause (kept against
+    the look-alikes the recording rejected, or undecided with the recording that would
+    decide), so ``unexplained`` with a worn pump's leak reads as pump leakage from wear."""
+    m = report.get("mechanism")
+    if not m or not m.get("name"):
+        return None
+    name = f"{m['name']} ({m['signal']})" if m.get("signal") else m["name"]
+    judged = [c for c in m.get("causes") or [] if "status" in c]
+    rejected = [c["cause"] for c in judged if c["status"] == "rejected"]
+    undecided = [c["cause"] for c in judged if c["status"] == "undecided"]
+    cause = str(m["cause"])
+    if undecided:
+        cause = f"undecided ({' or '.join(undecided)})"
+    elif rejected:
+        cause += f", not {' or '.join(rejected)}"
+    by = (report.get("cause_check") or {}).get("decided_by")
+    if by and not undecided:
+        cause += f" (decided by the {by})"
+    line = f"mechanism: {name}; cause: {cause}"
+    first = (report.get("suggestion") or [None])[0]
+    if report["verdict"] == "unexplained" and first and "heldout_reduction" in first:
+        # The verdict's own reduction is the catalogue's (none); the mechanism's term's is not.
+        size = f" ({first['coefficient']:.3g} {first['unit']})" if "coefficient" in first else ""
+        line += (
+            f"; as a term{size} it removes {100 * first['heldout_reduction']:.0f} % of the "
+            "held-out gap"
+        )
+    if m.get("separating_recording"):
+        line += f"; to tell the causes apart, record: {m['separating_recording']}"
+    return line
+
+
 def _timing_line(t: dict | None) -> list[str]:
     """Which readings are late and what the others share (``diagnose/timing.py``), when it
     says more than that every reading is on time."""
