@@ -9,11 +9,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from benchmarks.gap_third.scenario import Scenario, record
-import numpy as np
-
 from monitor.cli import main
 from monitor.gap.diagnose import diagnose
 from monitor.gap.report.document import build_report
