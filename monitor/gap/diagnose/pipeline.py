@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 from threadpoolctl import threadpool_limits
 
-from monitor.gap.diagnose import atrest, deadband, identify
+from monitor.gap.diagnose import atrest, deadband, identify, slip
 from monitor.gap.diagnose import fitting as F
 from monitor.gap.diagnose import timing as T
 from monitor.gap.diagnose import verdict as V
@@ -87,6 +87,7 @@ def _diagnose(
     judged = atrest.check_load(parts, cal, refined, paired, judged, say)
     judged = atrest.check_air(cal, refined, judged, say)
     judged = V.check_cause(parts, cal, refined, paired, judged, say)
+    judged = slip.check_slip(parts, cal, refined, paired, judged, say)
     if judged.cause is not None:
         laps.lap("cause")
     finding = V.suggest_next(parts, cal, refined, paired, judged, say)

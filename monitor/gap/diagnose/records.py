@@ -157,6 +157,8 @@ class Finding:
     load_check: dict | None = None
     #: The drained chambers' stiffness at rest (``diagnose/atrest.py``): ``air_check``.
     air_check: dict | None = None
+    #: A pump leakage against a healthy pump's slip (``diagnose/slip.py``): ``slip_check``.
+    slip_check: dict | None = None
 
 
 @dataclass(frozen=True)

@@ -57,6 +57,9 @@ class Judged:
     own_signal: sensorphysics.OwnSignal | sensorphysics.RodKinematics | None = None
     #: A deadband against a progressive metering curve (``deadband.check_metering``).
     metering: dict | None = None
+    #: A pump leakage against a healthy pump's slip (``slip.check_slip``): the JSON's
+    #: ``slip_check`` (None: not checked).
+    slip: dict | None = None
 
 
 def judge(cal: Calibrated, scores: Scores, paired: Paired, say: Progress) -> Judged:
@@ -307,7 +310,7 @@ def suggest_next(
         say("what to model next: " + (lead.ranked[0]["description"] if lead.ranked else "-"))
     chk = judged.cause
     ranked = lead.ranked if lead and d.verdict == "unexplained" else []
-    if chk is not None and chk.cause != cause_mod.NAME:
+    if chk is not None and chk.cause != cause_mod.NAME and d.verdict == "unexplained":
         # The worn leak (or the leak of undecided cause) was fitted and scored like the
         # terms: it leads the suggestion.
         ranked = [cause_mod.suggestion_entry(chk), *ranked]
@@ -327,6 +330,7 @@ def suggest_next(
         timing=judged.split,
         load_check=judged.load,
         air_check=judged.air,
+        slip_check=judged.slip,
     )
 
 

@@ -176,6 +176,7 @@ def _checks(diag: Diagnosis) -> dict:
         **({"timing": f.timing} if f.timing is not None else {}),
         **({"load_check": f.load_check} if f.load_check is not None else {}),
         **({"air_check": f.air_check} if f.air_check is not None else {}),
+        **({"slip_check": f.slip_check} if f.slip_check is not None else {}),
         **({"metering_check": diag.metering_check} if diag.metering_check else {}),
         **_absorbed(f.chosen, diag.ranking.absorbed, tol.floor),
     }

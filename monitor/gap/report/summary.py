@@ -27,6 +27,8 @@ def summary_text(report: dict) -> str:
     lines += _friction_line(report.get("friction_check"))
     lines += _load_line(report.get("load_check"))
     lines += _air_line(report.get("air_check"))
+    if report.get("slip_check"):
+        lines.append(f"Pump slip: {report['slip_check']['evidence']}")
     lines.append(f"Confidence: {report['confidence']:.2f}")
     lines += _bounded(report["calibrated"])
     lines += bound_lines(report.get("calibration_bounds") or [])
