@@ -2,7 +2,7 @@
 
 Run on ``unexplained`` verdicts whose ``oil_viscosity`` single leaks mainly from the pump
 (named pump leakage of wear or undecided cause by ``cause.py``, or below the naming bar):
-the leak at the warm end of the recording against the slip of a pump at 95 % volumetric
+the leak at the recording's oil temperature against the slip of a pump at 95 % volumetric
 efficiency, and the simulator with it against what a healthy machine leaves.
 """
 
@@ -26,17 +26,19 @@ Progress = Callable[[str], None]
 PUMP = "pump_leak_lpm_per_100bar"
 
 
-def warm_leak(c: Candidate, chk: cause_mod.LeakCause | None, parts: Parts) -> float:
-    """The pump leak (L/min per 100 bar) at the warm end of the recording: the constant
-    leak where the oil temperature said wear, else the viscous one at the 95th percentile
-    of the oil temperature (the most a leak following the oil lost over the recording)."""
-    if chk is not None and chk.cause == "wear" and chk.flat is not None:
-        return float(chk.flat.effects[0].params[PUMP])
+def recorded_leak(c: Candidate, chk: cause_mod.LeakCause | None, parts: Parts) -> float:
+    """The pump leak (L/min per 100 bar) at the recording's oil temperature, as the
+    suggestion gives it (``cause.suggestion_entry``): the constant leak where the oil
+    temperature said wear, else the better-scoring law's at the mean of the oil
+    temperature's 5th and 95th percentiles (without a cause check, below the naming bar:
+    the viscous law's there)."""
+    if chk is not None:
+        return float(cause_mod.suggestion_entry(chk)["coefficient"])
     p = c.effects[0].params
     temps = cause_mod.oil_range_c(parts)
     if temps is None:
         return float(p[PUMP])
-    nu = viscosity_cst(np.asarray([temps[1]]), p["nu40_cst"], p["nu100_cst"])
+    nu = viscosity_cst(np.asarray([np.mean(temps)]), p["nu40_cst"], p["nu100_cst"])
     return float(p[PUMP] * p["nu40_cst"] / nu[0])
 
 
@@ -55,7 +57,7 @@ def check_slip(
         paired.sums[c.name], paired.smooth[c.name], paired.boot_idx, cal.floor
     )
     slip = pumpslip.PumpSlip(
-        leak_lpm_per_100bar=warm_leak(c, judged.cause, parts),
+        leak_lpm_per_100bar=recorded_leak(c, judged.cause, parts),
         healthy_max_lpm_per_100bar=pumpslip.healthy_max_lpm_per_100bar(m),
         full_flow_lpm=pumpslip.full_flow_lpm(m),
         rated_bar=pumpslip.rated_bar(m),

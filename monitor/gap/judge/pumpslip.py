@@ -67,8 +67,7 @@ def rest_is_none(
 class PumpSlip:
     """A pump leakage against a healthy pump's slip."""
 
-    #: The fitted pump leak at the warm end of the recording (L/min per 100 bar): the most
-    #: the pump lost over it.
+    #: The fitted pump leak at the recording's oil temperature (L/min per 100 bar).
     leak_lpm_per_100bar: float
     #: ``healthy_max_lpm_per_100bar`` of the configured pump.
     healthy_max_lpm_per_100bar: float
