@@ -197,6 +197,7 @@ class AlarmMachine:
         self._above = 0
         self._below = 0
         self._valid = 0
+        self._named = ""  # the fault the statistic setting the level names ("": none)
         # The last N residuals (and regimes) seed the isolation when an alarm is raised:
         # the samples that pushed J over the threshold.
         n_out = isolator.n_outputs if isolator is not None else 0
@@ -211,13 +212,16 @@ class AlarmMachine:
         regime: int = 0,
         operating: bool = True,
         running: bool = False,
+        named: str = "",
     ) -> State:
         """``operating`` False: the machine runs outside normal operation (warm-up, see
         ``monitor.detection.opstate``) and the monitor is inactive as with the engine off.
         ``running``: the engine runs whatever ``engine_rpm`` says (it is missing while the
-        pump shows a working machine: ``opstate.silent_source``)."""
+        pump shows a working machine: ``opstate.silent_source``).  ``named``: the fault the
+        statistic setting ``j`` names (``Statistic.names``; "": the isolator names it)."""
         cfg = self.config
         self.raised = False
+        self._named = named
         # NaN engine speed: off, unless ``running``
         if not ((running or engine_rpm >= cfg.min_engine_rpm) and operating):
             self._in_gap()
@@ -250,6 +254,8 @@ class AlarmMachine:
             if self.isolator is not None and e is not None:
                 self.isolator.add(e, regime)
                 self.fault = self.isolator.label()
+            if named:
+                self.fault = named
             self._below = self._below + 1 if j < cfg.clear_ratio * self.eps0 else 0
             if self._below >= cfg.clear_samples:
                 self.episode_open = False
@@ -302,6 +308,8 @@ class AlarmMachine:
                     self.isolator.reset()
                     self.isolator.add_many(self._seed.e, self._seed.regime)
                     self.fault = self.isolator.label()
+                if self._named:
+                    self.fault = self._named
             else:
                 self.fault = "none"
             if state is not State.NORMAL:

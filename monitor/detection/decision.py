@@ -94,17 +94,26 @@ class Decider:
         oor: int = -1,
         check: int = 0,
         sensor: int = -1,
+        named: str = "",
     ) -> Decision:
         """Step the alarm machine on one sample: ``inputs_ok`` every model signal present,
         ``check`` the plausibility finding (a finding is a sensor fault), ``op_state`` the
         operating state (warm-up counts as not operating, like the engine off).  A ``STALE``
         finding (EngineSpeed silent, the pump working) counts the engine as running.  The
         engine runs or stops as ``op_state`` reports, which waits for more than one frame of
-        evidence (``monitor.detection.evidence``), not as one EngineSpeed reading says."""
+        evidence (``monitor.detection.evidence``), not as one EngineSpeed reading says.
+        ``named``: the fault the statistic setting ``j`` names ("": the isolator's)."""
         sensor_ok = inputs_ok and check == 0
         on = check == STALE or op_state != OpState.ENGINE_OFF
         state = self.machine.step(
-            j, sensor_ok, engine_rpm if on else math.nan, e, regime, op_state != OpState.WARM_UP, on
+            j,
+            sensor_ok,
+            engine_rpm if on else math.nan,
+            e,
+            regime,
+            op_state != OpState.WARM_UP,
+            on,
+            named,
         )
         m = self.machine
         raised, episode_open, withheld = m.raised, m.episode_open, False

@@ -22,7 +22,7 @@ from monitor.io.recording import Recording
 from monitor.model.dgrnn import predict_series
 from monitor.model.modelfile import MonitorModel
 from monitor.model.spec import table
-from monitor.model.statistic import active, level_series
+from monitor.model.statistic import active, level_series, naming_series
 from monitor.signals import source_signal
 
 
@@ -138,9 +138,11 @@ def detect(
     stats = active(model)  # J first: the level rests on it
     series = {s.name: s.series(e, rec) for s in stats}
     # The alarm machine compares the level with 1: each statistic against its threshold.
-    level = level_series([(series[s.name], s.threshold_) for s in stats])
+    pairs = [(series[s.name], s.threshold_) for s in stats]
+    level = level_series(pairs)
+    named = naming_series(pairs, [s.names for s in stats])
     decider = Decider(alarm, 1.0, make_isolator(model), model.window_n, reference)
-    run = _decide_all(decider, model, rec, gate, g, e, series["J"], level, missing)
+    run = _decide_all(decider, model, rec, gate, g, e, series["J"], level, missing, named)
     summary = detection_summary(
         model, rec, gate, g, run, series, level, horizon, missing, reference
     )
@@ -183,6 +185,7 @@ def _decide_all(
     j: np.ndarray,
     level: np.ndarray,
     missing: np.ndarray,
+    named: np.ndarray,
 ) -> Alarms:
     """The shared per-sample decision over every sample of the recording, in order; runs
     of quiet samples go to ``skip_quiet`` at once, the rest are decided one by one."""
@@ -207,7 +210,9 @@ def _decide_all(
             i = r
             continue
         status = int(g.op_state[i]), int(g.oor[i]), int(g.check[i]), int(g.sensor[i])
-        d = decider.decide(level[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]), *status)
+        d = decider.decide(
+            level[i], bool(inputs_ok[i]), engine[i], e[i], int(regimes[i]), *status, named[i]
+        )
         states[i] = d.state
         episodes.add(d, float(t_rel[i]), decider.fault)
         if d.changed:

@@ -147,6 +147,8 @@ class _Family:
         self.thresholds = tuple(s.threshold_ for s in self.stats)
         self.index = {s.name: k for k, s in enumerate(self.stats)}
         self.values = [math.nan] * len(self.stats)  # each statistic at the last tick
+        self.names = tuple(s.names for s in self.stats)
+        self.named = ""  # the fault the statistic setting the level names (naming_series)
 
     def step(self, e: np.ndarray, row: np.ndarray) -> tuple[float, float]:
         """(J, level) of this row."""
@@ -154,10 +156,15 @@ class _Family:
         j = steps[0](e, row)
         values[0] = j
         level = j / thresholds[0]
+        named = self.names[0]
         for k in range(1, len(steps)):
             v = steps[k](e, row)
             values[k] = v
-            level = raise_level(level, v, thresholds[k])
+            raised = raise_level(level, v, thresholds[k])
+            if raised > level:  # False with NaN: as ``naming_series``
+                named = self.names[k]
+            level = raised
+        self.named = named
         return j, level
 
     def value(self, name: str) -> float:
@@ -241,6 +248,7 @@ class Ticker:
             gate.oor,
             gate.check,
             gate.sensor,
+            self._family.named,
         )
         self.ticks += 1
         return Tick(

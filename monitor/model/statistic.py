@@ -39,6 +39,7 @@ BUILTIN = (
     "monitor.model.bias",
     "monitor.model.lever",
     "monitor.model.hold",
+    "monitor.model.flow",
 )
 _REGISTRY: dict[str, type[Statistic]] = {}
 
@@ -104,6 +105,25 @@ def level_series(pairs: Sequence[tuple[np.ndarray, float]]) -> np.ndarray:
     return level
 
 
+def naming_series(pairs: Sequence[tuple[np.ndarray, float]], names: Sequence[str]) -> np.ndarray:
+    """Per sample, the fault named by the member whose ratio sets the level (``names``, one
+    per pair, "" for a member that names none), as :func:`level_series` raises it: a later
+    member takes over only where its ratio is finite and above the level so far."""
+    first, threshold = pairs[0]
+    level = np.asarray(first, dtype=np.float64) / threshold
+    out = np.full(level.shape, names[0], dtype=object)
+    with np.errstate(invalid="ignore"):
+        for (series, thr), name in zip(pairs[1:], names[1:], strict=True):
+            if thr != thr:
+                continue
+            ratio = np.asarray(series, dtype=np.float64) / thr
+            both = np.isfinite(level) & np.isfinite(ratio)
+            takes = both & (ratio > level)
+            out[takes] = name
+            level = np.where(both, np.maximum(level, ratio), level)
+    return out
+
+
 def register(cls: type[Statistic]) -> type[Statistic]:
     """Add a member to the family (a class decorator); a name registered again is replaced."""
     _REGISTRY[cls.name] = cls
@@ -155,6 +175,16 @@ class Statistic(ABC):
     asked_by: ClassVar[str] = ""
     #: Whole numbers of samples in its header section, checked 1..MAX_WINDOW_N.
     counts: ClassVar[tuple[str, ...]] = ("window_n",)
+    #: The fault an alarm names while this statistic sets the level ("": the isolation's
+    #: residual signatures name it): a statistic that only one fault moves.
+    names: ClassVar[str] = ""
+    #: Its values do not rest on the DGRNN's residuals: it is fitted on every normal
+    #: recording given to training (``HeldOut.every``) and holds out its own data.
+    own_held_out: ClassVar[bool] = False
+    #: Held-out sessions and independent windows its threshold needs (0: the training's
+    #: rule, ``monitor.training.support``).
+    min_sessions: ClassVar[int] = 0
+    min_windows: ClassVar[int] = 0
     params_: Any
 
     # -- a member's own maths ------------------------------------------------------------

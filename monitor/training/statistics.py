@@ -12,6 +12,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from monitor.errors import ConfigError, InputFileError
 from monitor.model.modelfile import MonitorModel
 from monitor.model.residual import on_stops
@@ -44,8 +46,9 @@ def fit_statistics(
             cls.put(model, None)
             notes[cls.key] = stat
             continue
+        data = own_data(held) if cls.own_held_out else held
         try:
-            stat.fit(held, rule)
+            stat.fit(data, rule)
         except InputFileError as exc:
             if not cls.optional:
                 raise
@@ -53,8 +56,8 @@ def fit_statistics(
             cls.put(model, None)
             notes[cls.key] = f"off: {exc}"
             continue
-        event = rests_on_one_event(stat, held)
-        why = earned(stat, held, rule)
+        event = rests_on_one_event(stat, data)
+        why = earned(stat, data, rule)
         whys = [w for w in (event, why) if w is not None]
         support[cls.name] = stat.support_
         if whys and cls.optional and settings.statistics.support_check:
@@ -66,11 +69,24 @@ def fit_statistics(
         cls.put(model, stat.params_)
         on.add(cls.name)
         notes[cls.key] = "on" if not whys else "on, thinly supported: " + "; ".join(whys)
-        say(said(stat, held, rule))
+        say(said(stat, data, rule))
         say(support_line(stat))
         for w in whys:  # J stays on (the level rests on it), with the warning
             say(f"  warning: {cls.title}'s threshold is thinly supported: {w}")
     return notes, support
+
+
+def own_data(held: HeldOut) -> HeldOut:
+    """What a member that holds out its own data (``Statistic.own_held_out``) is fitted on:
+    every normal recording given to training, without the DGRNN's residuals (none there)."""
+    every = list(held.every) or list(held.recordings)
+    return HeldOut(
+        [np.zeros((len(r), 0)) for r in every],
+        every,
+        held.outputs,
+        every,
+        "its own: every normal recording, cross-fitted",
+    )
 
 
 def said(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str:

@@ -131,19 +131,21 @@ def earned(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str | None:
     then = "switch it on" if stat.optional else "support it"  # J is on regardless
     n_eff = float(sup.get("independent_windows", 0.0))
     window_s = float(sup.get("window_s", stat.window_n * 0.01))
-    if n_eff < MIN_BLOCKS:
+    blocks = stat.min_windows or MIN_BLOCKS
+    if n_eff < blocks:
         per = float(sup.get("windows", 0)) / n_eff if n_eff > 0 else 1.0
-        more_min = (MIN_BLOCKS - n_eff) * per * window_s / 60.0
+        more_min = (blocks - n_eff) * per * window_s / 60.0
         return (
             f"its threshold rests on {n_eff:.1f} independent {window_s:g} s windows of "
-            f"held-out data, it needs {MIN_BLOCKS}: about {more_min:.2g} min more held-out "
+            f"held-out data, it needs {blocks}: about {more_min:.2g} min more held-out "
             f"normal data (--held-out, or a longer run with --folds) would {then}"
         )
-    if len(held.recordings) < MIN_SESSIONS:
+    sessions = stat.min_sessions or MIN_SESSIONS
+    if len(held.recordings) < sessions:
         return (
             "its threshold rests on one recording (one session: one load, one operator, one "
             "warm-up), whose halves cannot show how it moves between sessions; held-out "
-            f"normal recordings of at least {MIN_SESSIONS} sessions (--held-out) would {then}"
+            f"normal recordings of at least {sessions} sessions (--held-out) would {then}"
         )
     moved = transfer(stat, held, rule)
     sup["transfer"] = moved
