@@ -465,3 +465,37 @@ def near_stop(
             run = 0
         out.append(1 if low < margin or high > 1.0 - margin else 0)
     return np.array(out, dtype=np.int64)
+
+
+def flow_statistic(spool_pct, rod_mm, qp_lpm, ok, a, b, lo_mm, hi_mm, scale, count_n):
+    """The flow-continuity statistic F from its definition, each sample's test re-read from
+    the raw series (no rings, no running counts).
+
+    A sample is valid when ``ok`` and its SpoolCmd, RodPos and QP are finite; an invalid one
+    gives NaN.  Sample i counts when samples i-20..i are all valid, SpoolCmd < -20 % on
+    i-10..i, v = (x[i] - x[i-10]) / 0.1 < -10 mm/s, |v - (x[i-10] - x[i-20]) / 0.1| < 15 mm/s
+    and x[i], x[i-10] are both more than 25 mm inside (lo, hi).  Its excess is the mean QP
+    over i-9..i less a + b |v|.  F = max(0, mean of the last ``count_n`` counted excesses)
+    / scale, NaN until ``count_n`` have counted; a valid sample that does not count keeps
+    the F of the last that did."""
+    spool, rod, qp = (np.asarray(x, dtype=float) for x in (spool_pct, rod_mm, qp_lpm))
+    n = len(spool)
+    valid = [
+        bool(ok[i]) and all(math.isfinite(x) for x in (spool[i], rod[i], qp[i])) for i in range(n)
+    ]
+    excesses: list[float] = []
+    last = math.nan
+    out = np.full(n, np.nan)
+    for i in range(n):
+        if not valid[i]:
+            continue
+        if i >= 20 and all(valid[i - 20 : i + 1]) and all(s < -20.0 for s in spool[i - 10 : i + 1]):
+            v = (rod[i] - rod[i - 10]) / 0.1
+            before = (rod[i - 10] - rod[i - 20]) / 0.1
+            inside = all(lo_mm + 25.0 < x < hi_mm - 25.0 for x in (rod[i], rod[i - 10]))
+            if v < -10.0 and abs(v - before) < 15.0 and inside:
+                excesses.append(math.fsum(qp[i - 9 : i + 1]) / 10.0 - (a + b * abs(v)))
+                if len(excesses) >= count_n:
+                    last = max(math.fsum(excesses[-count_n:]) / count_n, 0.0) / scale
+        out[i] = last
+    return out

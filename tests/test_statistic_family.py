@@ -237,18 +237,25 @@ def test_training_fits_a_registered_statistic(shift) -> None:
 
 def test_summary_says_which_statistics_were_on_and_why(model) -> None:
     """The shipped model: all four on with their thresholds, support from what the model
-    file knows (held out, 120 parts, the rule); a model without B says it is off and why."""
+    file knows (held out, 120 parts, the rule); F, newer than the file, off as not in it;
+    a model without B says it is off and why."""
     from monitor.model.statistic import statistics_entries
 
     entries = statistics_entries(model)
-    assert list(entries) == ["J", "B", "L", "H"]
+    assert list(entries) == ["J", "B", "L", "H", "F"]
     assert [entries[n]["threshold"] for n in "JBLH"] == [
         model.eps0,
         model.bias.b0,
         model.lever.l0,
         model.hold.h0,
     ]
-    assert all(e["on"] for e in entries.values())
+    assert all(entries[n]["on"] for n in "JBLH")
+    assert entries["F"] == {
+        "on": False,
+        "threshold": None,
+        "why": "off: not in this model file",
+        "support": {},
+    }
     assert entries["B"]["support"] == {
         "validation": "held out",
         "parts": 120,

@@ -190,9 +190,11 @@ def _feature(ring_x, ring_q, state, fstate, spool, rod, qp, ok, lo, hi):  # prag
 def _push(
     ring_x, ring_q, ring_w, state, fstate, spool, rod, qp, ok, a, b, lo, hi, scale, resum_every
 ):  # pragma: no cover - numba
-    """One sample; returns F (NaN: a gated sample, or fewer than ``count_n`` counted yet)."""
-    if not ok:
-        _feature(ring_x, ring_q, state, fstate, spool, rod, qp, ok, lo, hi)
+    """One sample; returns F (NaN: a gated or incomplete sample, or fewer than ``count_n``
+    counted yet)."""
+    if not ok or np.isnan(spool) or np.isnan(rod) or np.isnan(qp):
+        state[_VALID] = 0  # the runs start again; the window stays
+        state[_LOW] = 0
         return np.nan
     if _feature(ring_x, ring_q, state, fstate, spool, rod, qp, ok, lo, hi):
         size = ring_w.shape[0]
@@ -422,7 +424,7 @@ class Flow(Statistic):
         span = min(MAX_WINDOW_N, max(self.count_n, round(self.count_n * judged / counted)))
         folds = _folds(recs, feats)
         excess = np.concatenate(
-            [(q - (fa + fb * s))[c == 1] for (c, s, q), (fa, fb) in zip(feats, folds)]
+            [(q - (fa + fb * s))[c == 1] for (c, s, q), (fa, fb) in zip(feats, folds, strict=True)]
         )
         unit = FlowModel(self.count_n, span, a, b, lo, hi, 1.0)
         self._held = [
@@ -448,7 +450,8 @@ class Flow(Statistic):
         self.support_ = self.support(held, parts)
         if threshold < MIN_SCORE:
             self.support_["floor"] = (
-                f"f0 {threshold:.3g} -> {MIN_SCORE:g} standard errors of a window's mean"
+                f"f0 {threshold:.3g} -> {MIN_SCORE:g} standard errors of a window's mean "
+                f"({MIN_SCORE * self.params_.scale:.3g} L/min)"
             )
         return self
 
@@ -507,25 +510,18 @@ def _all(feats: Sequence[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, np.ndarra
 def _folds(
     recs: Sequence[Recording], feats: Sequence[tuple[np.ndarray, ...]]
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per recording, per sample (a, b) of the line fitted without its fold: 60 s
-    blocks dealt round-robin to ``FOLDS`` folds over the recordings in order."""
+    """Per recording, per sample (a, b) of the line fitted without the sample's fold: 60 s
+    blocks dealt round-robin to ``FOLDS`` folds over the recordings in order (a fold with
+    too few counted samples elsewhere gets the line of them all)."""
     fold_of, start = [], 0
     for r in recs:
         blocks = np.arange(len(r)) // FOLD_BLOCK_N
         fold_of.append((start + blocks) % FOLDS)
         start += int(blocks[-1]) + 1 if len(r) else 0
-    lines = []
+    lines = np.empty((FOLDS, 2))
     for k in range(FOLDS):
-        rest = [(c == 1) & (f != k) for (c, _, _), f in zip(feats, fold_of)]
-        s = np.concatenate([x[m] for (_, x, _), m in zip(feats, rest)])
-        q = np.concatenate([x[m] for (_, _, x), m in zip(feats, rest)])
-        lines.append(fit_line(s, q) if len(s) >= 2 else fit_line(*_all(feats)))
-    out = []
-    for f in fold_of:
-        out.append(
-            (
-                np.array([lines[k][0] for k in range(FOLDS)])[f],
-                np.array([lines[k][1] for k in range(FOLDS)])[f],
-            )
-        )
-    return out
+        rest = [(c == 1) & (f != k) for (c, _, _), f in zip(feats, fold_of, strict=True)]
+        s = np.concatenate([x[m] for (_, x, _), m in zip(feats, rest, strict=True)])
+        q = np.concatenate([x[m] for (_, _, x), m in zip(feats, rest, strict=True)])
+        lines[k] = fit_line(s, q) if len(s) >= 2 else fit_line(*_all(feats))
+    return [(lines[f, 0], lines[f, 1]) for f in fold_of]

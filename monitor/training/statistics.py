@@ -97,9 +97,10 @@ def said(stat: Statistic, held: HeldOut, rule: ThresholdRule) -> str:
             f"  J0 {stat.params_.j0:.4g} ({rule.rule} of J on {len(held.recordings)} "
             f"{kind} part(s)), eps0 {stat.threshold_:.4g}: {rule.describe()}{_stops(stat, held)}"
         )
+    floor = getattr(stat, "support_", {}).get("floor")  # a member's own least threshold
     return (
         f"  {stat.title} over {stat.window_n / 100:g} s, {stat.threshold_key} "
-        f"{stat.threshold_:.4g}: {rule.describe()}"
+        f"{stat.threshold_:.4g}: {rule.describe()}" + (f", floored: {floor}" if floor else "")
     )
 
 

@@ -1,0 +1,162 @@
+"""The flow-continuity statistic F (monitor.model.flow, issue 38): the pump's flow beyond what
+the rod's lowering speed takes, tested against the twin in tests/naive.py written from the
+definition alone, and against recordings whose flow is known by construction."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from naive import flow_statistic
+
+from monitor.detection.alarm import AlarmConfig, AlarmMachine, State
+from monitor.errors import InputFileError
+from monitor.io.recording import Recording
+from monitor.model.flow import Flow, FlowModel, FlowWindow, flow_series
+from monitor.model.statistic import HeldOut, Statistic, naming_series
+from monitor.model.threshold import ThresholdRule
+from monitor.training.statistics import own_data
+
+
+def _lowering(
+    n: int,
+    speed_mm_s: float,
+    qp_lpm: np.ndarray | float,
+    start_mm: float = 480.0,
+    spool_pct: float = -50.0,
+) -> dict[str, np.ndarray]:
+    """A boom lowering at a constant speed from ``start_mm`` with a given pump flow."""
+    t = np.arange(n) * 0.01
+    return {
+        "SpoolCmd": np.full(n, spool_pct),
+        "RodPos": start_mm - speed_mm_s * t,
+        "QP": np.broadcast_to(np.asarray(qp_lpm, dtype=float), (n,)).copy(),
+        "EngineSpeed": np.full(n, 2000.0),
+    }
+
+
+def _rec(cols: dict[str, np.ndarray]) -> Recording:
+    n = len(cols["SpoolCmd"])
+    return Recording(np.arange(n) * 0.01, dict(cols))
+
+
+def _messy(seed: int, n: int = 3000) -> tuple[np.ndarray, ...]:
+    """Lowerings and raisings at varied speeds, bounces, stops, NaN samples and gated rows."""
+    rng = np.random.default_rng(seed)
+    speed = np.repeat(rng.choice([-150.0, -60.0, -9.0, 0.0, 80.0], n), rng.integers(5, 60, n))[:n]
+    speed += rng.normal(0.0, 4.0, n)  # some steps change the speed by more than 15 mm/s
+    rod = np.clip(250.0 + np.cumsum(speed) * 0.01, 0.0, 500.0)
+    spool = np.where(speed < -20.0, -60.0, np.where(speed > 20.0, 40.0, -25.0))
+    spool[rng.random(n) < 0.02] = -15.0
+    qp = 0.4 + 0.11 * np.abs(speed) + rng.normal(0.0, 0.3, n)
+    for x in (spool, rod, qp):
+        x[rng.random(n) < 0.005] = np.nan
+    ok = rng.random(n) > 0.01
+    return spool, rod, qp, ok
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_series_and_live_window_match_the_definition(seed: int) -> None:
+    spool, rod, qp, ok = _messy(seed)
+    flow = FlowModel(40, 200, 0.3, 0.105, 0.0, 500.0, 0.7)
+    rec = _rec({"SpoolCmd": spool, "RodPos": rod, "QP": qp})
+    got = flow_series(rec, ok, flow)
+    want = flow_statistic(spool, rod, qp, ok, 0.3, 0.105, 0.0, 500.0, 0.7, 40)
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    assert np.isfinite(want).sum() > 1000 and len(np.unique(want[np.isfinite(want)])) > 50
+    np.testing.assert_allclose(got[np.isfinite(want)], want[np.isfinite(want)], rtol=1e-9)
+    window = FlowWindow(flow)
+    live = [window.push(bool(k), s, x, q) for k, s, x, q in zip(ok, spool, rod, qp, strict=True)]
+    np.testing.assert_array_equal(np.asarray(live), got)
+
+
+def test_a_known_leak_gives_its_mean_in_standard_errors() -> None:
+    """QP = a + b |v| + 0.6 L/min: every counted sample's excess is the leak, so F is the
+    leak over the scale.  Lowering at 20 mm/s from 480.05 mm, RodPos is below 475 mm (25 mm
+    inside the stroke's 500) from sample 26 on, RodPos 0.1 s before from sample 36: the
+    first counted sample (the speed's 21 samples of history are there from sample 20), and
+    the window of 100 is full at sample 135."""
+    a, b, leak, v = 0.4, 0.12, 0.6, 20.0
+    cols = _lowering(600, v, a + b * v + leak, start_mm=480.05)
+    flow = FlowModel(100, 500, a, b, 0.0, 500.0, 0.15)
+    f = flow_series(_rec(cols), np.ones(600, dtype=bool), flow)
+    assert np.all(np.isnan(f[:135]))
+    np.testing.assert_allclose(f[135:], leak / 0.15, rtol=1e-9)
+    # A flow short of the line is no leak: F is 0, not negative.
+    cols["QP"] = np.full(600, a + b * v - 0.6)
+    assert np.nanmax(flow_series(_rec(cols), np.ones(600, dtype=bool), flow)) == 0.0
+
+
+def _commissioning(seed: int, leak: float = 0.0) -> Recording:
+    """24 lowerings of 1.5 s at 60-180 mm/s from 480 mm, each raised back, QP = 0.5 + 0.1 |v|
+    (+ ``leak`` while lowering) with a flow meter's noise of 0.2 L/min."""
+    rng = np.random.default_rng(seed)
+    parts = []
+    for speed in rng.uniform(60.0, 180.0, 24):
+        down = _lowering(150, speed, 0.5 + 0.1 * speed + leak, start_mm=480.0)
+        up = _lowering(150, -speed, 0.5 + 0.1 * speed, start_mm=float(down["RodPos"][-1]))
+        up["SpoolCmd"][:] = 50.0
+        parts += [down, up]
+    cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    cols["QP"] = cols["QP"] + rng.normal(0.0, 0.2, len(cols["QP"]))
+    return _rec(cols)
+
+
+def _fit(rec: Recording, count_n: int = 500) -> Flow:
+    held = own_data(HeldOut([np.zeros((len(rec), 0))], [rec], ("PP", "QP"), [rec]))
+    return Flow(count_n).fit(held, ThresholdRule())
+
+
+def test_fit_learns_the_line_and_a_leak_stands_out() -> None:
+    """Fitted on healthy lowerings the line is the one the flow was made from (to the meter's
+    noise), the stroke is the span RodPos covered; the scale is the standard error of a
+    window's mean, the noise over sqrt(count_n) (a counted sample's excess is the mean of
+    ten readings, and neighbours share nine of them); F on a machine that leaks 0.5 L/min
+    while lowering is that leak over the scale, far above the threshold, which is at least
+    ``MIN_SCORE``; on another healthy recording F stays below it."""
+    rec = _commissioning(1)
+    stat = _fit(rec)
+    p = stat.params_
+    assert p.a_lpm == pytest.approx(0.5, abs=0.05)
+    assert p.b_lpm_per_mm_s == pytest.approx(0.1, abs=0.001)
+    assert p.lo_mm == pytest.approx(float(np.min(rec["RodPos"])))
+    assert p.hi_mm == pytest.approx(480.0)
+    assert p.scale == pytest.approx(0.2 / np.sqrt(500), rel=0.15)
+    assert p.f0 >= 4.0
+    assert stat.support_["lowering_s"] > 10.0 and "standard_error_lpm" in stat.support_
+    healthy = _commissioning(2)
+    assert np.nanmax(stat.series(np.zeros((len(healthy), 0)), healthy)) < p.f0
+    worn = _commissioning(3, leak=0.5)
+    f = stat.series(np.zeros((len(worn), 0)), worn)
+    assert np.nanmax(f) == pytest.approx(0.5 / p.scale, rel=0.15)
+
+
+def test_off_with_its_reason_without_rodpos_or_lowering() -> None:
+    rec = _commissioning(1)
+    no_rod = Recording(rec.t, {k: v for k, v in rec.columns.items() if k != "RodPos"})
+    with pytest.raises(InputFileError, match="no RodPos"):
+        _fit(no_rod)
+    with pytest.raises(InputFileError, match="s of steady lowering"):
+        _fit(rec, count_n=5000)
+
+
+def test_header_round_trip_and_checks() -> None:
+    flow = FlowModel(2000, 30000, 0.4, 0.11, -1.0, 507.0, 0.05, 4.0)
+    header = {"flow": flow.to_dict()}
+    Flow.check_header(header)
+    assert Flow.read(header, 4) == flow
+    header["flow"]["count_n"] = 0
+    with pytest.raises(ValueError, match="count_n"):
+        Flow.check_header(header)
+
+
+def test_an_alarm_f_raises_is_named_piston_wear() -> None:
+    """The level's member names the fault: where F's ratio tops J's (strictly) the name
+    is F's; where J is NaN the level is NaN and nothing names it."""
+    j = np.array([0.5, 0.5, 2.0, np.nan, 0.5])
+    f = np.array([np.nan, 3.0, 3.0, 3.0, 1.2])  # ratios: -, 1.5, 1.5, 1.5, 0.6
+    named = naming_series([(j, 1.0), (f, 2.0)], ["", Flow.names])
+    assert list(named) == ["", "piston_wear", "", "", "piston_wear"]
+    assert issubclass(Flow, Statistic) and Flow.names == "piston_wear"
+    machine = AlarmMachine(AlarmConfig(raise_samples=2), 1.0)
+    states = [machine.step(1.5, True, 2000.0, named="piston_wear") for _ in range(3)]
+    assert states[-1] is State.FAULT and machine.fault == "piston_wear"
