@@ -165,7 +165,8 @@ def rests_on_one_event(stat: Statistic, held: HeldOut) -> str | None:
     ``ONE_EVENT_RATIO`` times above every other (``monitor.model.threshold.one_event``) and
     its member did not floor the threshold (``support_["floor"]``: the largest value did not
     set it); then one line: the statistic, where the event is, its ratio to the next window
-    and what data would support the threshold.  Records the event in ``stat.support_["one_event"]``."""
+    and what data would support the threshold.  Records the event in
+    ``stat.support_["one_event"]``."""
     if getattr(stat, "support_", {}).get("floor"):
         return None  # a threshold its member floored does not rest on its largest value
     parts = [stat.series(e, r) for e, r in zip(held.residuals, held.recordings, strict=True)]
