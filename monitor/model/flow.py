@@ -488,6 +488,10 @@ class Flow(Statistic):
         flow_series(rec, ok, flow)
         lowering_features(rec, ok, flow.lo_mm, flow.hi_mm)
         FlowWindow(flow).push(True, -50.0, 250.0, 10.0)
+        # The step's inner kernel, called here as ``_push`` calls it, so that it has a
+        # signature of its own to be compiled ahead of time with.
+        ring_x, ring_q, _, state, fstate = _fresh(1)
+        _feature(ring_x, ring_q, state, fstate, -50.0, 250.0, 10.0, True, 0.0, 500.0)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FlowModel:
