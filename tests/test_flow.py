@@ -160,3 +160,39 @@ def test_an_alarm_f_raises_is_named_piston_wear() -> None:
     machine = AlarmMachine(AlarmConfig(raise_samples=2), 1.0)
     states = [machine.step(1.5, True, 2000.0, named="piston_wear") for _ in range(3)]
     assert states[-1] is State.FAULT and machine.fault == "piston_wear"
+
+
+def test_live_ticker_gives_the_offline_f_and_events_named_piston_wear(model) -> None:
+    """The live ticker's F equals the offline series sample by sample; with F ruling the
+    level (a line of zero flow: every lowering's whole QP is excess) both paths raise the
+    same alarm and name it piston_wear."""
+    import dataclasses
+
+    from live_support import assert_same_events, rows_of
+
+    from monitor.config.settings import load_config
+    from monitor.detection.offline import detect
+    from monitor.detection.ticker import Ticker, event
+    from monitor.sim.cycles import make_cycle
+    from monitor.sim.machine import load_machine
+    from monitor.sim.simulate import simulate
+
+    cfg = load_config()
+    rec = simulate(make_cycle("boom", 40.0, 6), load_machine(), seed=6)
+    flow = FlowModel(200, 1000, 0.0, 0.0, -1e3, 1e3, 1.0, 4.0)
+    m = dataclasses.replace(model, statistics={**model.statistics, "flow": flow})
+    det = detect(m, rec, cfg.alarm, cfg.horizon)
+    assert det.summary["alarm"] and det.summary["fault"] == "piston_wear"
+    ticker = Ticker(m, cfg.alarm, cfg.horizon)
+    fs, events = np.empty(len(rec)), []
+    for i, row in enumerate(rows_of(rec)):
+        tick = ticker.tick(row)
+        fs[i] = ticker.value("F")
+        if tick.changed:
+            events.append(event(tick, ticker.fault, ticker.eps0, rec.meta.get("start_time_s")))
+    assert np.array_equal(np.isnan(fs), np.isnan(det.series["F"]))
+    ok = np.isfinite(det.series["F"])
+    assert ok.sum() > 500
+    np.testing.assert_allclose(fs[ok], det.series["F"][ok], rtol=1e-9)
+    assert_same_events(events, det)
+    assert {e["fault"] for e in events if e["state"] == "fault"} == {"piston_wear"}
