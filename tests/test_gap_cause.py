@@ -298,3 +298,48 @@ def test_a_pump_slipping_as_a_sound_pump_does_is_none(tmp_path, leak, verdict):
         assert "Pump slip: pump leakage of 0.5 L/min per 100 bar" in summary_text(rep)
     else:
         assert rep["mechanism"]["name"] == "pump leakage"
+
+
+def _thirds(levels: list[float], inv_nu: list[float], a: list[float] | None = None):
+    """Nine segments, three at each of 20-22, 40-42 and 60-62 degC, whose own constant leak
+    is ``levels`` (L/min per 100 bar): linearised sums at 3 L/min per 100 bar with
+    ``b = a (3 - level)``, so a set's level is the ``a``-weighted mean of its segments'."""
+    from monitor.gap.judge.leakratio import leak_ratio
+
+    temps = np.array([20.0, 21, 22, 40, 41, 42, 60, 61, 62])
+    w = np.ones(9) if a is None else np.array(a)
+    return leak_ratio(w, w * (3.0 - np.array(levels)), temps, np.array(inv_nu), 3.0)
+
+
+def test_a_leak_twice_as_high_warm_as_cold_is_read_against_the_viscous_ratio():
+    # Cold third 2, warm third 4: 2-fold in every resample.  An oil twice as thin warm
+    # predicts 2-fold: viscosity (1 is excluded).
+    lv = [2.0] * 3 + [3.0] * 3 + [4.0] * 3
+    r = _thirds(lv, [1.0] * 3 + [1.5] * 3 + [2.0] * 3)
+    assert r.leaks == pytest.approx((2.0, 4.0)) and r.interval == pytest.approx((2.0, 2.0))
+    assert r.temps_c == pytest.approx((21.0, 61.0))
+    assert r.viscous_ratio == pytest.approx(2.0) and r.cause == "oil_viscosity"
+    # Excluding both 1 and the viscous ratio, the nearer on a log scale decides: 2-fold is
+    # nearer 3-fold than 1 (viscosity), nearer 1 than 9-fold (wear: 3 is their mean).
+    r = _thirds(lv, [1.0] * 6 + [3.0] * 3)
+    assert r.viscous_ratio == pytest.approx(3.0) and r.cause == "oil_viscosity"
+    r = _thirds(lv, [1.0] * 6 + [9.0] * 3)
+    assert r.viscous_ratio == pytest.approx(9.0) and r.cause == "wear"
+    # Warm segments of 1, 4 and 7: a resample's warm level is at most the cold 2 (sum of
+    # three draws <= 6) in 4 of 27 cases and below the viscous 4 (sum < 12) in 10 of 27:
+    # the interval holds both 1 and 2, and neither cause is decided.
+    r = _thirds([2.0] * 3 + [3.0] * 3 + [1.0, 4.0, 7.0], [1.0] * 6 + [2.0] * 3)
+    assert r.above_one == pytest.approx(23 / 27, abs=0.05)
+    assert r.below_viscous == pytest.approx(10 / 27, abs=0.05) and r.cause is None
+    # The viscous ratio weights each segment's 1/viscosity as the fit weights its level:
+    # warm (1 x 1 + 1 x 1 + 2 x 4) / 4 = 2.5 over cold 1.
+    r = _thirds(lv, [1.0] * 6 + [1.0, 1.0, 4.0], a=[1.0] * 8 + [2.0])
+    assert r.viscous_ratio == pytest.approx(2.5)
+
+
+def test_a_constant_leak_over_the_thirds_is_wear():
+    # 3 L/min per 100 bar +- 0.1 on every segment where viscosity predicts 3-fold.
+    noise = np.random.default_rng(1).normal(0.0, 0.1, 9)
+    r = _thirds(list(3.0 + noise), [1.0] * 3 + [2.0] * 3 + [3.0] * 3)
+    assert r.ratio == pytest.approx(1.0, abs=0.2) and r.interval[1] < 3.0
+    assert r.cause == "wear" and r.below_viscous == 1.0
