@@ -241,6 +241,11 @@ def test_a_users_warm_up_of_a_worn_pump_is_pump_leakage_from_wear(tmp_path):
     assert chk["viscosity_ratio"] == pytest.approx(ratio, rel=0.01)
     assert chk["flat_better_share"] >= 0.95
     assert chk["flat_leak_lpm_per_100bar"] == pytest.approx(3.0, rel=0.25)
+    # What decided: the leak's level is the same on the cold and the warm third (a worn
+    # pump's ratio 1), where a viscous leak would grow by the named oil's ratio (> 2).
+    thirds = chk["thirds"]
+    assert thirds["cause"] == "wear" and thirds["ratio"] == pytest.approx(1.0, abs=0.1)
+    assert thirds["interval"][1] < thirds["viscous_ratio"] and thirds["viscous_ratio"] > 2
     # 3 L/min per 100 bar is 75 % volumetric efficiency at 200 bar: no sound pump's slip.
     assert rep["slip_check"]["healthy"] is False
     # What the terminal says after the verdict line.
@@ -261,6 +266,10 @@ def test_a_users_warm_up_of_a_thin_oils_leak_is_viscosity(tmp_path):
         True,
     )
     assert rep["cause_check"]["flat_better_share"] <= 0.05
+    # The leak 3 L/min per 100 bar at 40 degC: warm over cold as the oil thins between them.
+    thirds = rep["cause_check"]["thirds"]
+    assert thirds["ratio"] == pytest.approx(thirds["viscous_ratio"], rel=0.15)
+    assert thirds["interval"][0] > 1 and thirds["cause"] == "oil_viscosity"
     assert mechanism_line(rep) == (
         "mechanism: pump leakage (P->tank); cause: oil_viscosity, not wear "
         "(decided by the oil temperature)"
