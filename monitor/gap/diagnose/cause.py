@@ -190,15 +190,19 @@ class LeakCause:
             )
         pct, swing = 100 * self.flat_share, self._swing()
         if self.thirds is not None:
+            t = self.thirds
+            grew = t.above_one >= SIGNIFICANT
             verdict = {
-                "wear": "it does not follow the viscosity (wear, not viscosity)",
+                "wear": "it does not follow the viscosity (wear, not viscosity"
+                + ("; it grew, but nearer a worn pump's 1" if grew else "")
+                + ")",
                 NAME: "it follows the viscosity (viscosity, not wear)",
                 None: "the two causes are not told apart: a longer warm-up would tell them apart",
             }[self.cause]
             return (
-                f"over {self.span_c:.0f} degC of oil temperature{swing}, "
-                f"{self.thirds.evidence()}: {verdict} (over the whole recording a constant "
-                f"leak fits the held-out part better in {pct:.0f} % of resamples)"
+                f"over {self.span_c:.0f} degC of oil temperature, {t.evidence()}: {verdict}; "
+                f"over the whole recording a constant leak fits the held-out part better in "
+                f"{pct:.0f} % of resamples"
             )
         if self.cause == "wear":
             flat = self.flat.effects[0].params[self.path] if self.flat is not None else 0.0
