@@ -277,7 +277,9 @@ def _arrays(rec: Recording, ok: np.ndarray) -> tuple[np.ndarray, ...]:
         np.ascontiguousarray(signal(rec, "SpoolCmd", 0.0), dtype=np.float64),
         np.ascontiguousarray(signal(rec, ROD_POS.name, np.nan), dtype=np.float64),
         np.ascontiguousarray(signal(rec, "QP", np.nan), dtype=np.float64),
-        np.ascontiguousarray(ok, dtype=np.int64),
+        # Boolean, as the ticker's ``push`` passes it: one compiled signature per kernel
+        # (the controller's ahead-of-time module takes exactly one).
+        np.ascontiguousarray(ok, dtype=np.bool_),
     )
 
 
