@@ -180,6 +180,17 @@ def test_thinning_bounds_pattern_count_and_is_recorded():
         np.testing.assert_allclose(g.patterns_[i], X[near == i].mean(0), rtol=1e-12, atol=1e-15)
         assert g.targets_[i, 0] == pytest.approx(Y[near == i].mean(), rel=1e-12, abs=1e-15)
     np.testing.assert_array_equal(g.counts_, np.bincount(near))
+    # Two seeds at one place: every row there joins the first (argmin's rule); a row with a
+    # NaN joins seed 0, as a full scan (no distance is below NaN) leaves it.
+    seeds = X[g.pattern_index_]
+    twin = np.vstack([seeds[:3], seeds[1:2], seeds[3:]])
+    Xn = X.copy()
+    Xn[7, 0] = np.nan
+    assign = cluster(Xn, Y[:, None], twin)[0]
+    want = ((Xn[:, None] - twin[None]) ** 2).sum(2).argmin(1)
+    want[7] = 0
+    np.testing.assert_array_equal(assign, want)
+    assert 3 not in assign and (assign == 1).any()
     plain = GRNN(sigma=0.3, min_distance=0.001, max_patterns=200, cluster_weights=False)
     plain.fit(X, Y)
     np.testing.assert_array_equal(plain.pattern_index_, g.pattern_index_)  # same seeds
@@ -234,14 +245,15 @@ def test_a_hold_outweighs_a_transient_passing_close_by():
     assert flat.predict(np.zeros((1, 1)))[0, 0] > 0.8
 
 
-@pytest.mark.parametrize("m", [0, 5, 40])
-def test_cluster_loo_matches_naive(m):
+@pytest.mark.parametrize(("m", "sigma"), [(0, 0.2), (5, 0.2), (40, 0.2), (5, 0.02)])
+def test_cluster_loo_matches_naive(m, sigma):
+    # sigma 0.02: most clusters' weights underflow to exactly 0 beside the nearest.
     X, Y = _series(n=500)
     assign, counts, _, _ = cluster(X, Y[:, None], X[thin_min_distance(X, 0.15)])
     tidx = np.arange(500) + (np.arange(500) >= 250) * 1000
     rows = np.arange(0, 500, 9)
-    got = loo_errors(rows, X, Y, assign, 0.2, m, tidx)
-    want = naive.cluster_loo_errors(rows, X, Y, tidx, assign, 0.2, m)
+    got = loo_errors(rows, X, Y, assign, sigma, m, tidx)
+    want = naive.cluster_loo_errors(rows, X, Y, tidx, assign, sigma, m)
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-14)
     assert counts.sum() == 500
 

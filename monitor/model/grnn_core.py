@@ -71,21 +71,39 @@ def _sqdist(Q, P):  # pragma: no cover - numba
 
 
 @pjit
-def _nearest(X, P):  # pragma: no cover - numba
-    """Index of the nearest pattern for every row of X (first one on ties)."""
-    out = np.empty(X.shape[0], dtype=np.int64)
-    for q in prange(X.shape[0]):
-        best = np.inf
+def _nearest(X, P, nchunk):  # pragma: no cover - numba
+    """Index of the nearest pattern for every row of X (first one on ties).
+
+    Exact, but quicker than a full scan: the previous row's answer is the first guess
+    (consecutive rows are close), and a pattern's sum stops once it exceeds the best so far
+    (a sum of squares only grows, rounding included)."""
+    nq, n, nf = X.shape[0], P.shape[0], P.shape[1]
+    out = np.zeros(nq, dtype=np.int64)
+    if n == 0:
+        return out
+    nchunk = max(1, min(nq, nchunk))
+    for c in prange(nchunk):
         k = 0
-        for i in range(P.shape[0]):
-            acc = 0.0
-            for f in range(P.shape[1]):
-                diff = X[q, f] - P[i, f]
-                acc += diff * diff
-            if acc < best:
-                best = acc
-                k = i
-        out[q] = k
+        for q in range(c * nq // nchunk, (c + 1) * nq // nchunk):
+            best = 0.0
+            for f in range(nf):
+                diff = X[q, f] - P[k, f]
+                best += diff * diff
+            if best != best:  # a NaN in the row: no pattern is nearer, the full scan's 0
+                k = 0
+                out[q] = 0
+                continue
+            for i in range(n):
+                acc = 0.0
+                for f in range(nf):
+                    diff = X[q, f] - P[i, f]
+                    acc += diff * diff
+                    if acc > best:
+                        break
+                if acc < best or (acc == best and i < k):
+                    best = acc
+                    k = i
+            out[q] = k
     return out
 
 
@@ -103,6 +121,9 @@ def _loo_errors(D, Xq, qrow, lo, hi, assign, X, Y, counts, xsums, ysums, inv2s2,
     nf, nout = X.shape[1], Y.shape[1]
     err = np.empty(nq)
     nchunk = max(1, min(nq, nchunk))
+    logc = np.empty(n)
+    for i in range(n):
+        logc[i] = math.log(counts[i]) if counts[i] > 0.0 else -np.inf
     for c in prange(nchunk):
         cnt = counts.copy()
         xs = xsums.copy()
@@ -130,7 +151,7 @@ def _loo_errors(D, Xq, qrow, lo, hi, assign, X, Y, counts, xsums, ysums, inv2s2,
                         for f in range(nf):
                             diff = Xq[q, f] - xs[i, f] / cnt[i]
                             d2 += diff * diff
-                    d = d2 * inv2s2 - math.log(cnt[i])
+                    d = d2 * inv2s2 - (math.log(cnt[i]) if touched[i] else logc[i])
                     if d < dmin:
                         dmin = d
                 dbuf[i] = d
@@ -139,7 +160,8 @@ def _loo_errors(D, Xq, qrow, lo, hi, assign, X, Y, counts, xsums, ysums, inv2s2,
                     num[k] = 0.0
                 den = 0.0
                 for i in range(n):
-                    if dbuf[i] < np.inf:
+                    # exp() below -746 is exactly 0.0: such a cluster adds nothing.
+                    if dbuf[i] - dmin < 746.0:
                         # Weight c_i exp(-d_i) times the member mean ys_i / c_i.
                         w = math.exp(dmin - dbuf[i])
                         den += w
@@ -179,6 +201,8 @@ def _greedy_min_distance(X, r2, max_keep):  # pragma: no cover - numba
             for f in range(nf):
                 diff = X[i, f] - X[kk, f]
                 acc += diff * diff
+                if acc > r2:
+                    break  # a sum of squares only grows, rounding included: too far
             if acc <= r2:
                 ok = False
                 break
@@ -278,7 +302,7 @@ def cluster(X: Any, Y: Any, seeds: Any) -> tuple[np.ndarray, np.ndarray, np.ndar
     X) would get count 0.
     """
     Xa, Ya, P = _as_matrix(X, "X"), _as_matrix(Y, "Y"), _as_matrix(seeds, "seeds")
-    assign = _nearest(Xa, P)
+    assign = _nearest(Xa, P, n_chunks())
     counts = np.bincount(assign, minlength=P.shape[0]).astype(np.float64)
     xs = np.zeros(P.shape)
     np.add.at(xs, assign, Xa)
