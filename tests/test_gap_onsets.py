@@ -230,12 +230,16 @@ def test_a_pump_displacement_within_tolerance_beside_a_delay_is_the_recordings_t
     f = check_shared(_finding([disp, delay], [disp], 1.0), lambda _m: None)
     assert f.verdict == "none" and f.timing is not None
     assert "within the 15 %" in f.timing["decided_by"]
-    # Beyond the band, or without a reading's delay beside it, it is a departure.
+    # Beyond the band it is a departure; within it, alone too (s336080_65, +-12 %: +3.9 %
+    # suggested, no delay beside it), a tolerance, but only where re-timing is significant.
     far = {**disp, "coefficient": -20.0}
     assert check_shared(_finding([far, delay], [far], 1.0), lambda _m: None).verdict == (
         "unexplained"
     )
-    assert check_shared(_finding([disp], [disp], 1.0), lambda _m: None).verdict == "unexplained"
+    alone = check_shared(_finding([disp], [disp], 1.0), lambda _m: None)
+    assert alone.verdict == "none" and alone.timing is not None
+    assert alone.timing["tolerance_terms"][0]["coefficient"] == -4.43
+    assert check_shared(_finding([disp], [disp], 0.9), lambda _m: None).verdict == "unexplained"
     # One valve edge's gain (s924107_65: P->A -12.8 %): the calibration fits all four alike.
     edge = {"term": "valve_setting", "signal": "P->A", "coefficient": -12.81, "description": "e"}
     assert check_shared(_finding([edge, delay], [edge], 1.0), lambda _m: None).verdict == "none"

@@ -61,13 +61,18 @@ COMMANDS = ("SpoolCmd", "PumpDispCmd", "EngineSpeed", "OilTemp")
 
 
 def _recording(
-    effects: list[Effect], seed: int, late_ms: dict[str, float], all_late_ms: float = 0.0
+    effects: list[Effect],
+    seed: int,
+    late_ms: dict[str, float],
+    all_late_ms: float = 0.0,
+    displacement: float = 1.0,
 ) -> Recording:
     """60 s of boom cycles on a machine a few percent off nominal, RodPos measured, the
     engine speed with a white ripple; the columns of ``late_ms`` read that many ms late
     (whole samples: a shift, no filter), and every reading ``all_late_ms`` late against the
     commands logged beside them (the machine driven by the commands that much later: the
-    same for a time-invariant machine, in continuous time)."""
+    same for a time-invariant machine, in continuous time); the pump's displacement
+    ``displacement`` times the configured one (a tolerance the calibration does not fit)."""
     cmd = make_cycle("boom", 60.0, seed)
     cols = dict(cmd.columns)
     rng = np.random.default_rng(seed + 1000)
@@ -76,6 +81,7 @@ def _recording(
     for n in COMMANDS:
         cols[n] = np.interp(cmd.t - all_late_ms / 1e3, cmd.t, cols[n])
     machine = apply(M, {"mass": 1.04, "gravity_load": 0.97, "volumes": 1.03})
+    machine = machine.with_changes(pump_disp_m3_rev=displacement * M.pump.pump_disp_m3_rev)
     rec = simulate(Recording(cmd.t, cols, cmd.source), machine, effects=effects, seed=seed)
     drop = ("RodPosTrue", "RodVel", "SpoolPos")
     cols = {n: v for n, v in rec.columns.items() if n not in drop} | logged
@@ -121,3 +127,22 @@ def test_a_soft_hose_is_not_a_sensor_lag():
     assert rep["verdict"] != "sensor_lag"
     t = rep.get("timing") or {}
     assert not (t.get("sensor_lag_on_late") or {}).get("named", False)
+
+
+def test_a_pump_10_pct_large_and_every_reading_late_is_none_with_the_tolerance_said():
+    # A healthy machine of another make: its pump 10 % larger than configured (within the
+    # 15 % band the calibration grants the valve's gain, but not fitted by it) and every
+    # reading 15 ms late.  Only the displacement's term explains what is left (the
+    # calibration cannot: it has no pump), so it is suggested alone, without a delay
+    # beside it: `unexplained` before 2026-11-29 (the third plant's s336080_65, +-12 %).
+    d = diagnose(_recording([], 42, {}, all_late_ms=15.0, displacement=1.10), M)
+    rep = build_report(d, M)
+    assert rep["verdict"] == "none"
+    t = rep["timing"]
+    assert t["verdict_without_check"] == "unexplained" and t["retimed"]["gain_share"] >= 0.95
+    (term,) = t["tolerance_terms"]
+    assert (term["term"], term["signal"]) == ("pump_setting", "displacement")
+    # The simulator's +10 %, read within 2 % (the calibrated valve gain and volumes take a
+    # little of it).
+    assert term["coefficient"] == pytest.approx(10.0, abs=2.0)
+    assert "a tolerance" in t["decided_by"] and "not a fault" in t["decided_by"]
