@@ -86,13 +86,6 @@ def check_split(cal: Calibrated, scores: Scores, paired: Paired, judged: Judged,
     if sp.some_late:
         fitted = _fitted(S.compared(prep), cal, scores)
         d, out["sensor_lag_on_late"] = _sensor_on(sp, fitted, cal, scores, paired, d)
-        if not out["sensor_lag_on_late"]["signals"] and _within_shared(sp):
-            # A correlation peak apart, no reading late by its fitted delay: the readings
-            # and the rod share the recording's delay, and stage 7b weighs an unexplained
-            # gap against the re-timed simulator as where none stands out (the third
-            # plant's healthy s336080_63, +-12 %: PA's peak 10 ms after the rod's, its
-            # fitted delay 3 ms).
-            _retimed_once(out, cal, scores, paired)
     elif sp.shared and (sp.reference == "rod" or not _ripple_late(judged, cal, scores, out)):
         # A rod as late as the pressures is the acquisition; without it, readings following
         # the ripple later than the shared delay makes them may be lagged, and the lag stands.
@@ -255,13 +248,11 @@ def _retimed_pred(fitted: dict[str, float], cal: Calibrated, scores: Scores) -> 
 def _chambers_only(sp: delays.Split) -> bool:
     """The late readings are the cylinder chambers alone, the rest sharing a delay of
     ``delays.SHARED_MIN_MS`` to ``delays.SHARED_MAX_MS``."""
-    return set(sp.late) == delays.CHAMBERS and _within_shared(sp)
-
-
-def _within_shared(sp: delays.Split) -> bool:
-    """What the readings not late and the rod share is ``delays.SHARED_MIN_MS`` to
-    ``delays.SHARED_MAX_MS``: the recording's timing."""
-    return sp.shared_ms is not None and delays.SHARED_MIN_MS <= sp.shared_ms <= delays.SHARED_MAX_MS
+    return (
+        set(sp.late) == delays.CHAMBERS
+        and sp.shared_ms is not None
+        and delays.SHARED_MIN_MS <= sp.shared_ms <= delays.SHARED_MAX_MS
+    )
 
 
 def _retimed_once(out: dict, cal: Calibrated, scores: Scores, paired: Paired):
@@ -356,13 +347,6 @@ def _lines_evidence(t: dict, verdict: str) -> str:
     return f"{head}: the readings late alike, as a sensor lag makes them"
 
 
-#: What stage 7b found of an unexplained gap it calls ``none``.
-_REST = (
-    "no term but a reading's delay or a tolerance the calibration does not fit explains the "
-    "rest: the recording's timing and the base mismatch, not a fault"
-)
-
-
 def evidence(t: dict, verdict: str) -> str:
     """One line: what the readings' timing showed and what it decided."""
     if "deadband" in t:
@@ -371,17 +355,10 @@ def evidence(t: dict, verdict: str) -> str:
         return _lines_evidence(t, verdict)
     ref = "the rod" if t["reference"] == "rod" else "the readings' median"
     if "sensor_lag_on_late" in t and not t["sensor_lag_on_late"]["signals"]:
-        head = (
+        return (
             f"{', '.join(t['late_signals'])} read later than {ref} by the correlation peak, "
             "not by the delay fitted on the calibration part: no reading is late"
         )
-        if "retimed" in t and verdict == "none" and t["verdict_without_check"] == "unexplained":
-            r = t["retimed"]
-            head += (
-                f"; each reading re-timed by its fitted delay, {r['heldout_reduction']:.0%} of "
-                f"the held-out gap goes and {_REST}"
-            )
-        return head
     if "sensor_lag_on_late" in t:
         s = t["sensor_lag_on_late"]
         on = ", ".join(s["signals"])
@@ -407,7 +384,11 @@ def evidence(t: dict, verdict: str) -> str:
         head += f", {r['heldout_reduction']:.0%} of the held-out gap goes"
         before = t["verdict_without_check"]
         if verdict == "none" and before == "unexplained":
-            return f"{head} and {_REST}"
+            return (
+                f"{head} and no term but a reading's delay or a tolerance the calibration does "
+                "not fit explains the rest: the recording's timing and the base mismatch, not a "
+                "fault"
+            )
         if verdict != before:
             return (
                 f"{head}, and {before} does not clearly beat that: a delay the whole "
