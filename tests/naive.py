@@ -467,21 +467,31 @@ def near_stop(
     return np.array(out, dtype=np.int64)
 
 
-def flow_statistic(spool_pct, rod_mm, qp_lpm, ok, a, b, lo_mm, hi_mm, scale, count_n):
+def flow_statistic(
+    spool_pct, rod_mm, qp_lpm, e, a, b, lo_mm, hi_mm, scale, count_n, beyond_c=None, oil=None
+):
     """The flow-continuity statistic F from its definition, each sample's test re-read from
     the raw series (no rings, no running counts).
 
-    A sample is valid when ``ok`` and its SpoolCmd, RodPos and QP are finite; an invalid one
-    gives NaN.  Sample i counts when samples i-20..i are all valid, SpoolCmd < -20 % on
-    i-10..i, v = (x[i] - x[i-10]) / 0.1 < -10 mm/s, |v - (x[i-10] - x[i-20]) / 0.1| < 15 mm/s
-    and x[i], x[i-10] are both more than 25 mm inside (lo, hi).  Its excess is the mean QP
-    over i-9..i less a + b |v|.  F = max(0, mean of the last ``count_n`` counted excesses)
-    / scale, NaN until ``count_n`` have counted; a valid sample that does not count keeps
-    the F of the last that did."""
+    A sample is judged when every residual of ``e`` (samples, outputs) is finite, or when
+    ``beyond_c`` (the envelope gated it for its oil alone: that oil, NaN elsewhere) lies in
+    ``oil`` (F's own range, lo..hi degC, both ends in).  A sample is valid when judged and
+    its SpoolCmd, RodPos and QP are finite; an invalid one gives NaN.  Sample i counts when
+    samples i-20..i are all valid, SpoolCmd < -20 % on i-10..i, v = (x[i] - x[i-10]) / 0.1
+    < -10 mm/s, |v - (x[i-10] - x[i-20]) / 0.1| < 15 mm/s and x[i], x[i-10] are both more
+    than 25 mm inside (lo, hi).  Its excess is the mean QP over i-9..i less a + b |v|.
+    F = max(0, mean of the last ``count_n`` counted excesses) / scale, NaN until ``count_n``
+    have counted; a valid sample that does not count keeps the F of the last that did."""
     spool, rod, qp = (np.asarray(x, dtype=float) for x in (spool_pct, rod_mm, qp_lpm))
     n = len(spool)
+    warm = [math.nan] * n if beyond_c is None else list(beyond_c)
+    judged = [
+        all(math.isfinite(x) for x in e[i])
+        or (oil is not None and math.isfinite(warm[i]) and oil[0] <= warm[i] <= oil[1])
+        for i in range(n)
+    ]
     valid = [
-        bool(ok[i]) and all(math.isfinite(x) for x in (spool[i], rod[i], qp[i])) for i in range(n)
+        judged[i] and all(math.isfinite(x) for x in (spool[i], rod[i], qp[i])) for i in range(n)
     ]
     excesses: list[float] = []
     last = math.nan

@@ -12,9 +12,11 @@ from monitor.detection.alarm import AlarmConfig, AlarmMachine, State
 from monitor.errors import InputFileError
 from monitor.io.recording import Recording
 from monitor.model.flow import Flow, FlowModel, FlowWindow, flow_series
+from monitor.model.flow_oil import OilTrend
 from monitor.model.statistic import HeldOut, Statistic, naming_series
 from monitor.model.threshold import ThresholdRule
 from monitor.training.statistics import own_data
+from monitor.training.support import support_line
 
 
 def _lowering(
@@ -56,17 +58,34 @@ def _messy(seed: int, n: int = 3000) -> tuple[np.ndarray, ...]:
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_series_and_live_window_match_the_definition(seed: int) -> None:
+    """Offline, live and the twin agree sample by sample, with the judged samples decided in
+    the kernel: residuals with NaN rows (gated), and some of those gated for their oil alone,
+    inside F's own oil range (40..55 degC, ends in) or beyond it."""
     spool, rod, qp, ok = _messy(seed)
-    flow = FlowModel(40, 200, 0.3, 0.105, 0.0, 500.0, 0.7)
+    n = len(spool)
+    rng = np.random.default_rng(100 + seed)
+    e = rng.normal(0.0, 1.0, (n, 2))
+    e[~ok, rng.integers(0, 2, int((~ok).sum()))] = np.nan
+    gated = np.repeat(rng.random(n // 50) < 0.3, 50)[:n]  # whole stretches gated
+    e[gated, 0] = np.nan
+    warm = np.repeat(rng.choice([45.0, 55.0, 58.0, np.nan], n // 50), 50)[:n]
+    beyond = np.where(gated, warm, np.nan)
+    flow = FlowModel(40, 200, 0.3, 0.105, 0.0, 500.0, 0.7, oil_lo_c=40.0, oil_hi_c=55.0)
     rec = _rec({"SpoolCmd": spool, "RodPos": rod, "QP": qp})
-    got = flow_series(rec, ok, flow)
-    want = flow_statistic(spool, rod, qp, ok, 0.3, 0.105, 0.0, 500.0, 0.7, 40)
+    got = flow_series(rec, e, flow, beyond)
+    want = flow_statistic(spool, rod, qp, e, 0.3, 0.105, 0.0, 500.0, 0.7, 40, beyond, (40.0, 55.0))
     assert np.array_equal(np.isnan(got), np.isnan(want))
     assert np.isfinite(want).sum() > 1000 and len(np.unique(want[np.isfinite(want)])) > 50
     np.testing.assert_allclose(got[np.isfinite(want)], want[np.isfinite(want)], rtol=1e-9)
+    # The warm stretches inside F's range are judged, those beyond it are not.
+    assert np.isfinite(got[gated & (warm <= 55.0)]).any()
+    assert not np.isfinite(got[gated & ~(warm <= 55.0)]).any()
     window = FlowWindow(flow)
-    live = [window.push(bool(k), s, x, q) for k, s, x, q in zip(ok, spool, rod, qp, strict=True)]
+    live = [window.push(e[i], beyond[i], spool[i], rod[i], qp[i]) for i in range(n)]
     np.testing.assert_array_equal(np.asarray(live), got)
+    # Without an oil range of its own (a model file from before it) F judges where J does.
+    old = FlowModel(40, 200, 0.3, 0.105, 0.0, 500.0, 0.7)
+    np.testing.assert_array_equal(flow_series(rec, e, old, beyond), flow_series(rec, e, old))
 
 
 def test_a_known_leak_gives_its_mean_in_standard_errors() -> None:
@@ -78,26 +97,33 @@ def test_a_known_leak_gives_its_mean_in_standard_errors() -> None:
     a, b, leak, v = 0.4, 0.12, 0.6, 20.0
     cols = _lowering(600, v, a + b * v + leak, start_mm=480.05)
     flow = FlowModel(100, 500, a, b, 0.0, 500.0, 0.15)
-    f = flow_series(_rec(cols), np.ones(600, dtype=bool), flow)
+    judged = np.zeros((600, 0))  # no residuals: every sample judged
+    f = flow_series(_rec(cols), judged, flow)
     assert np.all(np.isnan(f[:135]))
     np.testing.assert_allclose(f[135:], leak / 0.15, rtol=1e-9)
     # A flow short of the line is no leak: F is 0, not negative.
     cols["QP"] = np.full(600, a + b * v - 0.6)
-    assert np.nanmax(flow_series(_rec(cols), np.ones(600, dtype=bool), flow)) == 0.0
+    assert np.nanmax(flow_series(_rec(cols), judged, flow)) == 0.0
 
 
-def _commissioning(seed: int, leak: float = 0.0) -> Recording:
+def _commissioning(seed: int, leak: float = 0.0, oil_lpm_per_c: float = 0.0) -> Recording:
     """24 lowerings of 1.5 s at 60-180 mm/s from 480 mm, each raised back, QP = 0.5 + 0.1 |v|
-    (+ ``leak`` while lowering) with a flow meter's noise of 0.2 L/min."""
+    (+ ``leak`` while lowering) with a flow meter's noise of 0.2 L/min; the oil warms from 30
+    to 45 degC over the run, and while lowering QP grows by ``oil_lpm_per_c`` per degC above
+    37.5 (a leakage thinner oil raises)."""
     rng = np.random.default_rng(seed)
     parts = []
     for speed in rng.uniform(60.0, 180.0, 24):
         down = _lowering(150, speed, 0.5 + 0.1 * speed + leak, start_mm=480.0)
         up = _lowering(150, -speed, 0.5 + 0.1 * speed, start_mm=float(down["RodPos"][-1]))
         up["SpoolCmd"][:] = 50.0
+        down["Lowering"], up["Lowering"] = np.ones(150), np.zeros(150)
         parts += [down, up]
     cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    lowering = cols.pop("Lowering") == 1.0
+    cols["OilTemp"] = np.linspace(30.0, 45.0, len(cols["QP"]))
     cols["QP"] = cols["QP"] + rng.normal(0.0, 0.2, len(cols["QP"]))
+    cols["QP"][lowering] += oil_lpm_per_c * (cols["OilTemp"][lowering] - 37.5)
     return _rec(cols)
 
 
@@ -128,6 +154,34 @@ def test_fit_learns_the_line_and_a_leak_stands_out() -> None:
     worn = _commissioning(3, leak=0.5)
     f = stat.series(np.zeros((len(worn), 0)), worn)
     assert np.nanmax(f) == pytest.approx(0.5 / p.scale, rel=0.15)
+
+
+def test_its_own_oil_range_from_commissioning_s_oil_trend() -> None:
+    """The oil range F judges beyond the envelope: a trend by construction is found (one
+    point per lowering), and the range ends where the trend, taken two standard errors
+    steeper, has risen by a quarter of the threshold (f0 x scale, L/min), or one span (15
+    degC) beyond the oil the lowerings saw; a falling trend cannot raise a false alarm of a
+    one-sided F, so only the span ends it on that side.  The arithmetic of the rule by hand:
+    mean 38, allowance 0.04 L/min, slope 0.002 +- 0.001 -> 0.04 / 0.004 = 10 degC warmer."""
+    trend = OilTrend(30, 38.0, 30.0, 45.0, 0.002, 0.001)
+    assert trend.range_c(0.04) == pytest.approx((15.0, 48.0))
+    assert OilTrend(30, 38.0, 30.0, 45.0, -0.01, 0.001).range_c(0.04) == pytest.approx(
+        (38.0 - 0.04 / 0.012, 60.0)
+    )
+    assert OilTrend(2, 38.0, 30.0, 45.0, np.nan, np.nan).range_c(0.04) == (30.0, 45.0)
+    steep = _fit(_commissioning(1, oil_lpm_per_c=0.03))
+    t = steep._oil
+    assert t.lowerings == 24 and t.slope_lpm_per_c == pytest.approx(0.03, rel=0.2)
+    p = steep.params_
+    allowance = 0.25 * p.f0 * p.scale
+    assert p.oil_hi_c == pytest.approx(
+        t.mean_c + allowance / (t.slope_lpm_per_c + 2 * t.se_lpm_per_c)
+    )
+    assert t.hi_c < 45.0 < p.oil_hi_c + 5.0  # the envelope's own margin reaches further
+    flat = _fit(_commissioning(1))
+    assert flat.params_.oil_hi_c > steep.params_.oil_hi_c
+    assert "own oil range" in flat.support_["oil_range"]
+    assert "lowerings" in support_line(flat)
 
 
 def test_off_with_its_reason_without_rodpos_or_lowering() -> None:
@@ -165,7 +219,11 @@ def test_an_alarm_f_raises_is_named_piston_wear() -> None:
 def test_live_ticker_gives_the_offline_f_and_events_named_piston_wear(model) -> None:
     """The live ticker's F equals the offline series sample by sample; with F ruling the
     level (a line of zero flow: every lowering's whole QP is excess) both paths raise the
-    same alarm and name it piston_wear."""
+    same alarm and name it piston_wear.  The recording's last 15 s run 10 degC above the
+    envelope's oil (its trained range plus the 5 degC margin): J is not judged there, F is
+    (its own range reaches that oil) and sets the level alone, and the summary counts those
+    seconds as judged beyond the oil; a warm recording F alone judged and found quiet is not
+    judged (F looks for piston wear only); with F's range short of that oil nobody judges."""
     import dataclasses
 
     from live_support import assert_same_events, rows_of
@@ -173,26 +231,54 @@ def test_live_ticker_gives_the_offline_f_and_events_named_piston_wear(model) -> 
     from monitor.config.settings import load_config
     from monitor.detection.offline import detect
     from monitor.detection.ticker import Ticker, event
+    from monitor.io.recording import Recording
     from monitor.sim.cycles import make_cycle
     from monitor.sim.machine import load_machine
     from monitor.sim.simulate import simulate
 
     cfg = load_config()
     rec = simulate(make_cycle("boom", 40.0, 6), load_machine(), seed=6)
-    flow = FlowModel(200, 1000, 0.0, 0.0, -1e3, 1e3, 1.0, 4.0)
+    warm_c = model.envelope.range_of("OilTemp")[1] + cfg.gating.validity.margin_c + 10.0
+    oil = rec["OilTemp"].copy()
+    oil[rec.t >= 25.0] = warm_c
+    rec = Recording(rec.t, {**rec.columns, "OilTemp": oil}, rec.source, rec.meta)
+    flow = FlowModel(200, 1000, 0.0, 0.0, -1e3, 1e3, 1.0, 4.0, 0.0, warm_c + 1.0)
     m = dataclasses.replace(model, statistics={**model.statistics, "flow": flow})
     det = detect(m, rec, cfg.alarm, cfg.horizon)
     assert det.summary["alarm"] and det.summary["fault"] == "piston_wear"
     ticker = Ticker(m, cfg.alarm, cfg.horizon)
-    fs, events = np.empty(len(rec)), []
+    fs, levels, events = np.empty(len(rec)), np.empty(len(rec)), []
     for i, row in enumerate(rows_of(rec)):
         tick = ticker.tick(row)
-        fs[i] = ticker.value("F")
+        fs[i], levels[i] = ticker.value("F"), tick.level
         if tick.changed:
             events.append(event(tick, ticker.fault, ticker.eps0, rec.meta.get("start_time_s")))
     assert np.array_equal(np.isnan(fs), np.isnan(det.series["F"]))
     ok = np.isfinite(det.series["F"])
     assert ok.sum() > 500
     np.testing.assert_allclose(fs[ok], det.series["F"][ok], rtol=1e-9)
+    np.testing.assert_array_equal(np.isnan(levels), np.isnan(det.level))
     assert_same_events(events, det)
     assert {e["fault"] for e in events if e["state"] == "fault"} == {"piston_wear"}
+    assert not np.isfinite(det.series["J"][rec.t >= 25.0]).any()
+    # The jump of the oil is believed after the gate's confirmation; from then on F alone.
+    warm = (rec.t >= 25.0) & ok & np.isfinite(det.level)
+    assert warm.sum() > 1000
+    np.testing.assert_allclose(det.level[warm], det.series["F"][warm] / 4.0, rtol=1e-12)
+    alone = np.isfinite(det.level) & ~np.isfinite(det.series["J"])
+    running = np.isin(det.state, (State.NORMAL, State.FAULT))
+    assert det.summary["judged_beyond_oil_s"] == pytest.approx((alone & running).sum() * 0.01)
+    assert det.summary["judged_beyond_oil_s"] > 5.0
+    # Warm throughout and F quiet (a threshold it never reaches): judged by F alone, for
+    # piston wear only, so not judged, and the summary says how long F judged it.
+    hot = Recording(rec.t, {**rec.columns, "OilTemp": np.full(len(rec), warm_c)})
+    quiet = dataclasses.replace(flow, f0=1e9)
+    m = dataclasses.replace(model, statistics={**model.statistics, "flow": quiet})
+    s = detect(m, hot, cfg.alarm, cfg.horizon).summary
+    assert (s["verdict"], s["judged_s"]) == ("not_judged", 0.0) and s["judged_beyond_oil_s"] > 15
+    assert f"F alone judged {s['judged_beyond_oil_s']:.1f} s" in s["not_judged_why"]
+    short = dataclasses.replace(flow, oil_hi_c=warm_c - 1.0)
+    m = dataclasses.replace(model, statistics={**model.statistics, "flow": short})
+    cold = detect(m, rec, cfg.alarm, cfg.horizon)
+    assert not np.isfinite(cold.level[rec.t >= 25.0]).any()
+    assert cold.summary["judged_beyond_oil_s"] == 0.0

@@ -190,4 +190,9 @@ def _result_line(s: dict[str, Any]) -> str:
         line += f"; {message} frames rejected: " + ", ".join(f"{n} {r}" for r, n in reasons.items())
     if s["out_of_range_samples"]:
         line += f"; {s['out_of_range_s']:.1f} s outside the trained range"
+    if s.get("judged_beyond_oil_s"):
+        line += (
+            f", of it {s['judged_beyond_oil_s']:.1f} s on warmer oil judged by F alone (piston "
+            "wear only)"
+        )
     return line

@@ -16,6 +16,8 @@ yet confirmed), a model input is missing, a sensor finding is active, or (with
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -63,13 +65,14 @@ class GateSeries:
     and column, 0/-1 for none; ``STALE`` on EngineSpeed for a silent source), ``oor``
     (index into ``Validity.signals`` of the signal out of the trained range in normal
     operation, -1 for none); ``computed`` the operating state the readings show before its
-    confirmation (None: the same as ``op_state``)."""
+    confirmation (None: the same as ``op_state``); ``oil_c`` the believed OilTemp."""
 
     op_state: np.ndarray
     check: np.ndarray
     sensor: np.ndarray
     oor: np.ndarray
     computed: np.ndarray | None = None
+    oil_c: np.ndarray | None = None  # the believed OilTemp, degC (None: not kept)
 
 
 def status_keys(op_state: int, oor_signal: str | None, check: int, sensor: int) -> dict[str, Any]:
@@ -175,6 +178,11 @@ class Gate:
         self.check = 0
         self.sensor = -1
         self.oor = -1
+        self.oil_c = math.nan  # the believed OilTemp of the last row
+        # The envelope's OilTemp among its signals (-1: none); the last of them, so an
+        # ``oor`` naming it names nothing else out of range (``Validity.series``: the first).
+        names = self.validity.signals
+        self._oil_index = names.index("OilTemp") if names and names[-1] == "OilTemp" else -1
 
     def carry_over(self, old: Gate) -> None:
         """A reload: keep what the rows so far have built up (operating state, plausibility
@@ -210,7 +218,7 @@ class Gate:
         sensor[silent] = self._engine_col
         oor = self.validity.series(self.validity_values(rec, oil))
         oor[(ops != OpState.NORMAL) | (computed != OpState.NORMAL)] = -1
-        return GateSeries(ops, check, sensor, oor, computed)
+        return GateSeries(ops, check, sensor, oor, computed, oil)
 
     def validity_values(self, rec: Recording, oil_c: np.ndarray | None = None) -> np.ndarray:
         """The validity signals' values per sample (``oil_c``: OilTemp to use instead)."""
@@ -234,6 +242,17 @@ class Gate:
             mask |= g.oor >= 0
         return mask
 
+    def beyond(self, g: GateSeries, inputs_ok: np.ndarray) -> np.ndarray:
+        """Per sample, the believed OilTemp (degC) where the sample is gated for its OilTemp
+        beyond the envelope and for nothing else, NaN elsewhere: where a statistic with an
+        oil range of its own (``Statistic.beyond_oil``) may judge what J does not."""
+        n = len(g.oor)
+        k = self._oil_index
+        if k < 0 or not self.gate_oor or g.oil_c is None:
+            return np.full(n, np.nan)
+        alone = (g.oor == k) & ~self.gated(dataclasses.replace(g, oor=np.full(n, -1)), inputs_ok)
+        return np.where(alone, g.oil_c, np.nan)
+
     # -- live -----------------------------------------------------------------------------
 
     def step(self, row: np.ndarray) -> None:
@@ -255,15 +274,25 @@ class Gate:
         normal = op is OpState.NORMAL and self.computed is OpState.NORMAL
         self.oor = self.validity.check(ext, lay.val_idx) if normal else -1
         self.op_state = op
+        self.oil_c = oil
 
     def gated_now(self, inputs_ok: bool) -> bool:
+        return self._gated_but_for_range(inputs_ok) or (self.gate_oor and self.oor >= 0)
+
+    def _gated_but_for_range(self, inputs_ok: bool) -> bool:
         return (
             self.op_state is not OpState.NORMAL
             or self.computed is not OpState.NORMAL
             or not inputs_ok
             or self.check != 0
-            or (self.gate_oor and self.oor >= 0)
         )
+
+    def beyond_now(self, inputs_ok: bool) -> float:
+        """``beyond`` for the last row: its believed OilTemp (degC) when it is gated for
+        that alone, else NaN."""
+        if self.oor < 0 or self.oor != self._oil_index or not self.gate_oor:
+            return math.nan
+        return math.nan if self._gated_but_for_range(inputs_ok) else self.oil_c
 
     def oor_name(self, oor: int) -> str | None:
         return self.validity.signals[oor] if oor >= 0 else None

@@ -136,11 +136,13 @@ def detect(
     y_hat, e = residual_series(model, rec, gated, horizon, exact)
     e[gated] = np.nan
     stats = active(model)  # J first: the level rests on it
-    series = {s.name: s.series(e, rec) for s in stats}
+    beyond_c = gate.beyond(g, ~missing.any(axis=1))  # gated for the oil alone: its oil
+    series = {s.name: s.series_beyond(e, rec, beyond_c) for s in stats}
     # The alarm machine compares the level with 1: each statistic against its threshold.
     pairs = [(series[s.name], s.threshold_) for s in stats]
-    level = level_series(pairs)
-    named = naming_series(pairs, [s.names for s in stats])
+    beyond, wide = np.isfinite(beyond_c), [s.beyond_oil for s in stats]
+    level = level_series(pairs, beyond, wide)
+    named = naming_series(pairs, [s.names for s in stats], beyond, wide)
     decider = Decider(alarm, 1.0, make_isolator(model), model.window_n, reference)
     run = _decide_all(decider, model, rec, gate, g, e, series["J"], level, missing, named)
     summary = detection_summary(

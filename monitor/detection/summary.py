@@ -14,7 +14,7 @@ from monitor.detection.gating import Gate, GateSeries
 from monitor.detection.opstate import OpState
 from monitor.detection.outofrange import describe, out_of_range_values
 from monitor.detection.plausibility import finding
-from monitor.detection.verdict import verdict
+from monitor.detection.verdict import judged_mask, verdict
 from monitor.io.recording import Recording
 from monitor.model.machinecard import COMMISSION
 from monitor.model.modelfile import MonitorModel
@@ -63,6 +63,7 @@ def detection_summary(
     summary["out_of_range_values"] = out_of_range_values(
         gate.validity_values(rec), g.oor, gate.validity
     )
+    summary["judged_beyond_oil_s"] = beyond_oil_seconds(states, series["J"], level, period)
     summary["verdict"], summary["judged_s"], summary["not_judged_why"] = verdict(
         summary,
         states,
@@ -81,6 +82,16 @@ def detection_summary(
     names = tuple(map(source_signal, model.spec.variables))
     summary["sensor_checks"] += stale_checks(rec, states, g.check, missing, names)
     return summary
+
+
+def beyond_oil_seconds(
+    states: np.ndarray, j: np.ndarray, level: np.ndarray, period_s: float
+) -> float:
+    """Seconds judged where J was not: oil beyond the envelope, judged by the statistics
+    with an oil range of their own alone (``Statistic.beyond_oil``: F); not in ``judged_s``
+    (``monitor.detection.verdict``)."""
+    alone = judged_mask(states, level) & ~np.isfinite(j)
+    return round(float(alone.sum()) * period_s, 3)
 
 
 def on_stop_seconds(

@@ -13,6 +13,7 @@ per row.  Nothing is allocated per tick beyond numpy scalars.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -138,29 +139,46 @@ class _Residual:
 
 class _Family:
     """The statistics of the family (J first: the level rests on it), each with its window
-    over the rows; the level is their largest ratio value / threshold."""
+    over the rows; the level is their largest ratio value / threshold (beyond the envelope's
+    oil, where J is not judged, the members judging there set it alone: ``level_series``)."""
 
     def __init__(self, model: MonitorModel, columns: tuple[str, ...]) -> None:
         nout = len(model.spec.outputs)
         self.stats = active(model)
-        self.steps = tuple(s.window(columns, nout).step for s in self.stats)
+        windows = [s.window(columns, nout) for s in self.stats]
+        self.steps = tuple(w.step for w in windows)
+        # Members judging beyond the envelope's oil (``Statistic.beyond_oil``): their step.
+        self.beyond: dict[int, Callable[[np.ndarray, np.ndarray, float], float]] = {
+            k: w.step_beyond  # type: ignore[attr-defined]
+            for k, (s, w) in enumerate(zip(self.stats, windows, strict=True))
+            if s.beyond_oil
+        }
         self.thresholds = tuple(s.threshold_ for s in self.stats)
         self.index = {s.name: k for k, s in enumerate(self.stats)}
         self.values = [math.nan] * len(self.stats)  # each statistic at the last tick
         self.names = tuple(s.names for s in self.stats)
         self.named = ""  # the fault the statistic setting the level names (naming_series)
 
-    def step(self, e: np.ndarray, row: np.ndarray) -> tuple[float, float]:
-        """(J, level) of this row."""
+    def step(
+        self, e: np.ndarray, row: np.ndarray, beyond_c: float = math.nan
+    ) -> tuple[float, float]:
+        """(J, level) of this row; ``beyond_c``: its OilTemp (degC) where the envelope gated
+        it for that alone, NaN elsewhere."""
         values, steps, thresholds = self.values, self.steps, self.thresholds
         j = steps[0](e, row)
         values[0] = j
         level = j / thresholds[0]
         named = self.names[0]
         for k in range(1, len(steps)):
-            v = steps[k](e, row)
+            wide = self.beyond.get(k)
+            v = steps[k](e, row) if wide is None else wide(e, row, beyond_c)
             values[k] = v
-            raised = raise_level(level, v, thresholds[k])
+            thr = thresholds[k]
+            if wide and level != level and beyond_c == beyond_c and v == v and thr == thr:
+                level = v / thr  # beyond the envelope's oil: this member alone
+                named = self.names[k]
+                continue
+            raised = raise_level(level, v, thr)
             if raised > level:  # False with NaN: as ``naming_series``
                 named = self.names[k]
             level = raised
@@ -236,7 +254,7 @@ class Ticker:
         engine = float(row[inp.engine_col])
         gate.step(row)
         e = self._residual.step(inp.z, gate.gated_now(inputs_ok))
-        j, level = self._family.step(e, row)
+        j, level = self._family.step(e, row, gate.beyond_now(inputs_ok))
         spool = float(row[inp.spool_col]) if inp.spool_col >= 0 else 0.0
         d = self.decider.decide(
             level,

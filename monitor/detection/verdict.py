@@ -19,7 +19,11 @@ are sensor faults because the pump shows a working machine (``opstate.silent_sou
 log recorded without HYD_Commands supports no verdict, whereas the samples say what the
 daemon would have said on the bus.
 
-Data that was never judged is never reported healthy.
+Data that was never judged is never reported healthy.  Beyond the envelope's oil, where J is
+not judged, the flow-continuity statistic F may judge alone (``Statistic.beyond_oil``): it may
+raise an alarm there (``fault``), but it looks for piston wear only, so the seconds it judged
+(the summary's ``judged_beyond_oil_s``) are not in ``judged_s`` and never make a recording
+``healthy``; a ``not_judged`` recording says how long F judged it and that it found none.
 """
 
 from __future__ import annotations
@@ -66,11 +70,14 @@ def verdict(
         return "not_judged", judged_s, withheld["reason"]
     if judged.any():
         return "healthy", judged_s, None
-    return (
-        "not_judged",
-        judged_s,
-        _why(states, op_state, oor, inputs_ok, engine_rpm, window_n, period_s, oor_named),
-    )
+    why = _why(states, op_state, oor, inputs_ok, engine_rpm, window_n, period_s, oor_named)
+    alone = summary.get("judged_beyond_oil_s") or 0.0
+    if alone > 0:
+        why += (
+            f"; F alone judged {alone:.1f} s on oil beyond the trained range: no piston wear "
+            "(it looks for nothing else)"
+        )
+    return "not_judged", judged_s, why
 
 
 def _why(

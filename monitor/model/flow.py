@@ -31,7 +31,12 @@ rod side's area) are fitted by least squares on the counted samples of every nor
 recording given to training: the line is the machine's geometry, two numbers from
 thousands of samples.  F is judged once ``count_n`` samples have counted and keeps its
 value between lowerings (the evidence stands until new lowering moves it); a sample with a
-NaN residual (gated) returns NaN and restarts the runs above, not the window.
+NaN residual (gated) returns NaN and restarts the runs above, not the window.  A sample the
+model's envelope gated for its OilTemp alone is judged too when that oil lies in F's own oil
+range (``oil_lo_c``..``oil_hi_c``, ``monitor.model.flow_oil``: commissioning's lowerings show
+how little continuity moves with the oil); there J is not judged and F sets the level alone.
+The kernel decides which samples it judges (``_judged``) from the residuals and that oil, the
+same test offline and per tick.
 
 Its threshold f0 comes from the statistic's own held-out values, the line cross-fitted over
 the normal recordings (60 s blocks dealt to ``FOLDS`` folds, each judged by the line fitted
@@ -50,6 +55,7 @@ together).  One step kernel (``_push``) serves the live ticker and the batch ser
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -60,6 +66,7 @@ from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.jit import jit
 from monitor.model.filecheck import MAX_WINDOW_N, check_number, check_whole
+from monitor.model.flow_oil import OIL_SHARE, oil_trend
 from monitor.model.residual import resum_interval
 from monitor.model.statistic import HeldOut, Statistic, column, register, signal
 from monitor.model.threshold import ThresholdRule
@@ -103,6 +110,11 @@ class FlowModel:
     hi_mm: float
     scale: float  # L/min: the standard error of a window's mean on the held-out data
     f0: float = float("nan")  # threshold; NaN: F is computed but never alarms
+    #: F's own oil range (degC, ``oil_range``): a sample the envelope gates for its OilTemp
+    #: alone is judged by F when its oil lies in it.  NaN (model files before it): F judges
+    #: only where J does.
+    oil_lo_c: float = float("nan")
+    oil_hi_c: float = float("nan")
 
     def __post_init__(self) -> None:
         if not 1 <= self.count_n <= MAX_WINDOW_N or not 1 <= self.window_n <= MAX_WINDOW_N:
@@ -114,6 +126,8 @@ class FlowModel:
             raise ConfigError(f"flow line and stroke must be finite, lo < hi: {numbers}")
         if not self.scale > 0 or not np.isfinite(self.scale):
             raise ConfigError(f"flow scale must be a positive number, got {self.scale}")
+        if self.oil_lo_c > self.oil_hi_c:
+            raise ConfigError(f"flow oil range {self.oil_lo_c}..{self.oil_hi_c} degC is empty")
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -125,6 +139,8 @@ class FlowModel:
             "hi_mm": float(self.hi_mm),
             "scale": float(self.scale),
             "f0": float(self.f0),
+            "oil_lo_c": float(self.oil_lo_c),
+            "oil_hi_c": float(self.oil_hi_c),
         }
 
     @classmethod
@@ -138,6 +154,8 @@ class FlowModel:
             float(d["hi_mm"]),
             float(d["scale"]),
             float(d["f0"]),
+            float(d.get("oil_lo_c", np.nan)),
+            float(d.get("oil_hi_c", np.nan)),
         )
 
 
@@ -187,11 +205,42 @@ def _feature(ring_x, ring_q, state, fstate, spool, rod, qp, ok, lo, hi):  # prag
 
 
 @jit(aot=True)
+def _judged(e, beyond_c, oil_lo, oil_hi):  # pragma: no cover - numba
+    """F judges a sample where J does (every residual finite), and where the envelope gated
+    it for its OilTemp alone (``beyond_c``, that oil in degC; NaN: not so gated) with the
+    oil inside F's own range."""
+    if beyond_c >= oil_lo and beyond_c <= oil_hi:  # False with a NaN
+        return True
+    missing = 0
+    for o in range(e.shape[0]):
+        missing += np.isnan(e[o])
+    return missing == 0
+
+
+@jit(aot=True)
 def _push(
-    ring_x, ring_q, ring_w, state, fstate, spool, rod, qp, ok, a, b, lo, hi, scale, resum_every
+    ring_x,
+    ring_q,
+    ring_w,
+    state,
+    fstate,
+    e,
+    beyond_c,
+    spool,
+    rod,
+    qp,
+    a,
+    b,
+    lo,
+    hi,
+    oil_lo,
+    oil_hi,
+    scale,
+    resum_every,
 ):  # pragma: no cover - numba
-    """One sample; returns F (NaN: a gated or incomplete sample, or fewer than ``count_n``
-    counted yet)."""
+    """One sample (its residuals ``e`` and ``beyond_c``: see ``_judged``); returns F (NaN: a
+    sample not judged or incomplete, or fewer than ``count_n`` counted yet)."""
+    ok = _judged(e, beyond_c, oil_lo, oil_hi)
     if not ok or np.isnan(spool) or np.isnan(rod) or np.isnan(qp):
         state[_VALID] = 0  # the runs start again; the window stays
         state[_LOW] = 0
@@ -233,7 +282,24 @@ def _fresh(count_n: int) -> tuple[np.ndarray, ...]:
 
 @jit(aot=True)
 def _series(
-    spool, rod, qp, ok, a, b, lo, hi, scale, ring_x, ring_q, ring_w, state, fstate, resum_every
+    e,
+    beyond_c,
+    spool,
+    rod,
+    qp,
+    a,
+    b,
+    lo,
+    hi,
+    oil_lo,
+    oil_hi,
+    scale,
+    ring_x,
+    ring_q,
+    ring_w,
+    state,
+    fstate,
+    resum_every,
 ):  # pragma: no cover - numba
     n = spool.shape[0]
     out = np.empty(n)
@@ -244,14 +310,17 @@ def _series(
             ring_w,
             state,
             fstate,
+            e[i],
+            beyond_c[i],
             spool[i],
             rod[i],
             qp[i],
-            ok[i],
             a[i],
             b[i],
             lo,
             hi,
+            oil_lo,
+            oil_hi,
             scale,
             resum_every,
         )
@@ -272,14 +341,11 @@ def _features(spool, rod, qp, ok, lo, hi, ring_x, ring_q, state, fstate):  # pra
     return counted, speed, qmean
 
 
-def _arrays(rec: Recording, ok: np.ndarray) -> tuple[np.ndarray, ...]:
+def _arrays(rec: Recording) -> tuple[np.ndarray, ...]:
     return (
         np.ascontiguousarray(signal(rec, "SpoolCmd", 0.0), dtype=np.float64),
         np.ascontiguousarray(signal(rec, ROD_POS.name, np.nan), dtype=np.float64),
         np.ascontiguousarray(signal(rec, "QP", np.nan), dtype=np.float64),
-        # Boolean, as the ticker's ``push`` passes it: one compiled signature per kernel
-        # (the controller's ahead-of-time module takes exactly one).
-        np.ascontiguousarray(ok, dtype=np.bool_),
     )
 
 
@@ -289,17 +355,29 @@ def lowering_features(
     """Per sample of a recording (``ok``: judged): counted (0/1), lowering speed (mm/s) and
     mean QP over the speed's span (L/min), NaN where not counted."""
     ring_x, ring_q, _, state, fstate = _fresh(1)
-    return _features(*_arrays(rec, ok), lo_mm, hi_mm, ring_x, ring_q, state, fstate)
+    # Boolean, as ``_push`` passes it: one compiled signature per kernel (the controller's
+    # ahead-of-time module takes exactly one).
+    judged = np.ascontiguousarray(ok, dtype=np.bool_)
+    return _features(*_arrays(rec), judged, lo_mm, hi_mm, ring_x, ring_q, state, fstate)
+
+
+def judged_only(ok: np.ndarray) -> np.ndarray:
+    """Residuals (samples, 1) that say ``ok`` and nothing else: 0 where judged, NaN where
+    not (training's running samples, the fit's own held-out data)."""
+    return np.where(np.asarray(ok, dtype=bool), 0.0, np.nan)[:, None]
 
 
 def flow_series(
     rec: Recording,
-    ok: np.ndarray,
+    e: np.ndarray,
     flow: FlowModel,
+    beyond_c: np.ndarray | None = None,
     a_lpm: np.ndarray | None = None,
     b_lpm_per_mm_s: np.ndarray | None = None,
 ) -> np.ndarray:
-    """F at every sample of a recording (``ok``: judged samples); ``a_lpm``/``b_lpm_per_mm_s``
+    """F at every sample of a recording: judged where its residuals ``e`` (samples, outputs)
+    are finite, and where ``beyond_c`` (the envelope gated the sample for its OilTemp alone:
+    that oil, degC; NaN elsewhere) lies in F's own oil range; ``a_lpm``/``b_lpm_per_mm_s``
     per sample (a cross-fitted line) instead of the model's."""
     n = len(rec)
     a = np.full(n, flow.a_lpm) if a_lpm is None else np.ascontiguousarray(a_lpm, np.float64)
@@ -308,13 +386,18 @@ def flow_series(
         if b_lpm_per_mm_s is None
         else np.ascontiguousarray(b_lpm_per_mm_s, np.float64)
     )
+    beyond = np.full(n, np.nan) if beyond_c is None else np.ascontiguousarray(beyond_c, np.float64)
     rings = _fresh(flow.count_n)
     return _series(
-        *_arrays(rec, ok),
+        np.ascontiguousarray(e, dtype=np.float64),
+        beyond,
+        *_arrays(rec),
         a,
         b,
         flow.lo_mm,
         flow.hi_mm,
+        flow.oil_lo_c,
+        flow.oil_hi_c,
         flow.scale,
         *rings,
         resum_interval(flow.count_n),
@@ -344,28 +427,40 @@ class FlowWindow:
         self._rings = _fresh(flow.count_n)
         self._resum = resum_interval(flow.count_n)
 
-    def push(self, ok: bool, spool_pct: float, rod_mm: float, qp_lpm: float) -> float:
-        """One sample: judged (``ok``), SpoolCmd (%), RodPos (mm), QP (L/min); returns F."""
+    def push(
+        self, e: np.ndarray, beyond_c: float, spool_pct: float, rod_mm: float, qp_lpm: float
+    ) -> float:
+        """One sample: its residuals ``e`` (float64, outputs), ``beyond_c`` (its OilTemp,
+        degC, where the envelope gated it for that alone; NaN elsewhere), SpoolCmd (%),
+        RodPos (mm), QP (L/min); returns F."""
         f = self.flow
         value = _push(
             *self._rings,
+            e,
+            beyond_c,
             spool_pct,
             rod_mm,
             qp_lpm,
-            ok,
             f.a_lpm,
             f.b_lpm_per_mm_s,
             f.lo_mm,
             f.hi_mm,
+            f.oil_lo_c,
+            f.oil_hi_c,
             f.scale,
             self._resum,
         )
         return float(value)
 
     def step(self, e: np.ndarray, row: np.ndarray) -> float:
-        """One sampler row: judged where every residual is finite."""
+        """One sampler row, judged where every residual is finite."""
+        return self.step_beyond(e, row, np.nan)
+
+    def step_beyond(self, e: np.ndarray, row: np.ndarray, beyond_c: float) -> float:
+        """One sampler row, also judged where the envelope gated it for its OilTemp alone
+        (``beyond_c``, degC) inside F's own oil range."""
         s, x, q = (float(row[c]) if c >= 0 else np.nan for c in self._cols)
-        return self.push(bool(np.isfinite(e).all()), s, x, q)
+        return self.push(e, beyond_c, s, x, q)
 
 
 @register
@@ -385,6 +480,9 @@ class Flow(Statistic):
     #: not on the largest of its few windows: one session and one window will do.
     min_sessions = 1
     min_windows = 1
+    #: Continuity moves with the oil only through the leakage: F judges warm oil the model's
+    #: envelope leaves out, on its own range (``monitor.model.flow_oil``).
+    beyond_oil = True
 
     def __init__(self, count_n: int = 2000) -> None:
         self.count_n = count_n
@@ -430,8 +528,10 @@ class Flow(Statistic):
         )
         unit = FlowModel(self.count_n, span, a, b, lo, hi, 1.0)
         self._held = [
-            flow_series(r, k, unit, fa, fb) for r, k, (fa, fb) in zip(recs, ok, folds, strict=True)
+            flow_series(r, judged_only(k), unit, None, fa, fb)
+            for r, k, (fa, fb) in zip(recs, ok, folds, strict=True)
         ]
+        self._oil = oil_trend(recs, feats, a, b)
         top = max((float(np.nanmax(p)) for p in self._held if np.isfinite(p).any()), default=0.0)
         standard_error = float(np.std(excess)) / np.sqrt(self.count_n / ROD_SPEED_SPAN)
         self._notes = {
@@ -449,7 +549,11 @@ class Flow(Statistic):
         parts = [p / self.params_.scale for p in self._held]
         _, threshold = rule.eps0(np.concatenate(parts), block=self.window_n)
         self.params_ = self.with_threshold(max(threshold, MIN_SCORE))
+        allowance_lpm = OIL_SHARE * self.params_.f0 * self.params_.scale
+        oil_lo, oil_hi = self._oil.range_c(allowance_lpm)
+        self.params_ = dataclasses.replace(self.params_, oil_lo_c=oil_lo, oil_hi_c=oil_hi)
         self.support_ = self.support(held, parts)
+        self.support_["oil_range"] = self._oil.said(allowance_lpm, oil_lo, oil_hi)
         if threshold < MIN_SCORE:
             self.support_["floor"] = (
                 f"f0 {threshold:.3g} -> {MIN_SCORE:g} standard errors of a window's mean "
@@ -458,9 +562,14 @@ class Flow(Statistic):
         return self
 
     def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
+        return self.series_beyond(e, rec, None)
+
+    def series_beyond(
+        self, e: np.ndarray, rec: Recording, beyond_c: np.ndarray | None
+    ) -> np.ndarray:
         if not rec.has(ROD_POS.name):
             return np.full(len(rec), np.nan)
-        return flow_series(rec, np.isfinite(e).all(axis=1), self.params_)
+        return flow_series(rec, e, self.params_, beyond_c)
 
     def window(self, columns: Sequence[str], n_out: int) -> FlowWindow:
         return FlowWindow(
@@ -487,13 +596,14 @@ class Flow(Statistic):
             },
         )
         ok = np.ones(n, dtype=bool)
-        flow_series(rec, ok, flow)
+        flow_series(rec, judged_only(ok), flow)
         lowering_features(rec, ok, flow.lo_mm, flow.hi_mm)
-        FlowWindow(flow).push(True, -50.0, 250.0, 10.0)
-        # The step's inner kernel, called here as ``_push`` calls it, so that it has a
-        # signature of its own to be compiled ahead of time with.
+        FlowWindow(flow).push(np.zeros(1), np.nan, -50.0, 250.0, 10.0)
+        # The step's inner kernels, called here as ``_push`` calls them, so that they have
+        # signatures of their own to be compiled ahead of time with.
         ring_x, ring_q, _, state, fstate = _fresh(1)
         _feature(ring_x, ring_q, state, fstate, -50.0, 250.0, 10.0, True, 0.0, 500.0)
+        _judged(np.zeros(1), np.nan, 0.0, 1.0)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FlowModel:
@@ -505,6 +615,10 @@ class Flow(Statistic):
             check_number(section, key, -1e9, strict=False)
         check_number(section, "scale", 0.0, strict=True)
         check_whole(section, "count_n", 1, MAX_WINDOW_N, "flow.")
+        for key in ("oil_lo_c", "oil_hi_c"):  # NaN: none (F judges where J does)
+            v = section.get(key, np.nan)
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ValueError(f"header flow.{key} must be a number, got {str(v)[:40]}")
 
 
 def _all(feats: Sequence[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, np.ndarray]:

@@ -45,7 +45,8 @@ _REGISTRY: dict[str, type[Statistic]] = {}
 
 
 class Window(Protocol):
-    """A statistic kept up to date one 100 Hz row at a time, allocating nothing per tick."""
+    """A statistic kept up to date one 100 Hz row at a time, allocating nothing per tick (a
+    member with ``Statistic.beyond_oil`` has ``step_beyond(e, row, beyond_c)`` besides)."""
 
     def step(self, e: np.ndarray, row: np.ndarray) -> float:
         """One row's residuals ``e`` (z-units, outputs) and sampler row ``[t, *columns]``;
@@ -90,38 +91,57 @@ def raise_level(level: float, value: float, threshold: float) -> float:
     return level
 
 
-def level_series(pairs: Sequence[tuple[np.ndarray, float]]) -> np.ndarray:
+def level_series(
+    pairs: Sequence[tuple[np.ndarray, float]],
+    beyond: np.ndarray | None = None,
+    wide: Sequence[bool] = (),
+) -> np.ndarray:
     """What the alarm compares with 1: the first pair's ratio (J / eps0) raised to each
     other's value / threshold where both are finite; NaN while the first is (its window
-    warms up or pauses).  A NaN threshold never alarms."""
-    first, threshold = pairs[0]
-    level = np.asarray(first, dtype=np.float64) / threshold
-    with np.errstate(invalid="ignore"):
-        for series, thr in pairs[1:]:
-            if thr != thr:
-                continue
-            both = np.isfinite(level) & np.isfinite(series)
-            level = np.where(both, np.maximum(level, series / thr), level)
-    return level
+    warms up or pauses), except where ``beyond`` (per sample: the envelope gated it for its
+    OilTemp alone) a member that judges there (``wide``, one flag per pair:
+    ``Statistic.beyond_oil``) has a finite ratio: the largest such ratio.  A NaN threshold
+    never alarms."""
+    return _raise(pairs, beyond, wide)[0]
 
 
-def naming_series(pairs: Sequence[tuple[np.ndarray, float]], names: Sequence[str]) -> np.ndarray:
+def naming_series(
+    pairs: Sequence[tuple[np.ndarray, float]],
+    names: Sequence[str],
+    beyond: np.ndarray | None = None,
+    wide: Sequence[bool] = (),
+) -> np.ndarray:
     """Per sample, the fault named by the member whose ratio sets the level (``names``, one
     per pair, "" for a member that names none), as :func:`level_series` raises it: a later
-    member takes over only where its ratio is finite and above the level so far."""
+    member takes over only where its ratio is finite and above the level so far (or where
+    the level is NaN beyond the envelope and the member judges there)."""
+    return _raise(pairs, beyond, wide, names)[1]
+
+
+def _raise(
+    pairs: Sequence[tuple[np.ndarray, float]],
+    beyond: np.ndarray | None,
+    wide: Sequence[bool],
+    names: Sequence[str] = (),
+) -> tuple[np.ndarray, np.ndarray]:
     first, threshold = pairs[0]
     level = np.asarray(first, dtype=np.float64) / threshold
-    out = np.full(level.shape, names[0], dtype=object)
+    out = np.full(level.shape, names[0] if names else "", dtype=object)
+    past = np.zeros(level.shape, dtype=bool) if beyond is None else np.asarray(beyond, bool)
+    flags = list(wide) or [False] * len(pairs)
     with np.errstate(invalid="ignore"):
-        for (series, thr), name in zip(pairs[1:], names[1:], strict=True):
+        for k in range(1, len(pairs)):
+            series, thr = pairs[k]
             if thr != thr:
                 continue
             ratio = np.asarray(series, dtype=np.float64) / thr
-            both = np.isfinite(level) & np.isfinite(ratio)
-            takes = both & (ratio > level)
-            out[takes] = name
-            level = np.where(both, np.maximum(level, ratio), level)
-    return out
+            finite = np.isfinite(ratio)
+            both = np.isfinite(level) & finite
+            alone = past & ~np.isfinite(level) & finite if flags[k] else np.zeros_like(both)
+            if names:
+                out[(both & (ratio > level)) | alone] = names[k]
+            level = np.where(both, np.maximum(level, ratio), np.where(alone, ratio, level))
+    return level, out
 
 
 def register(cls: type[Statistic]) -> type[Statistic]:
@@ -185,12 +205,24 @@ class Statistic(ABC):
     #: rule, ``monitor.training.support``).
     min_sessions: ClassVar[int] = 0
     min_windows: ClassVar[int] = 0
+    #: It judges samples the model's envelope gates for their OilTemp alone, on an oil
+    #: range of its own (:meth:`series_beyond`; its window's ``step_beyond``); there, where
+    #: J is not judged, it sets the level alone.  False: it judges where J does.
+    beyond_oil: ClassVar[bool] = False
     params_: Any
 
     # -- a member's own maths ------------------------------------------------------------
     @abstractmethod
     def series(self, e: np.ndarray, rec: Recording) -> np.ndarray:
         """The statistic at every sample of a recording's residuals (samples, outputs)."""
+
+    def series_beyond(
+        self, e: np.ndarray, rec: Recording, beyond_c: np.ndarray | None
+    ) -> np.ndarray:
+        """The series as the detector takes it: ``beyond_c`` per sample the OilTemp (degC)
+        where the envelope gated the sample for it alone, NaN elsewhere; a member that
+        judges there (``beyond_oil``) uses it, the others are :meth:`series`."""
+        return self.series(e, rec)
 
     @abstractmethod
     def window(self, columns: Sequence[str], n_out: int) -> Window:

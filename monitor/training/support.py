@@ -208,4 +208,5 @@ def support_line(stat: Statistic) -> str:
         + f": {sup.get('windows_above', 0)} above it, false alarms "
         + (f"< {upper:.3g}/h (95 %)" if upper is not None else "not bounded")
         + (f"; the other half's peak {moved['ratio']:.2g} x" if moved.get("checked") else "")
+        + (f"; {sup['oil_range']}" if sup.get("oil_range") else "")
     )
