@@ -122,7 +122,8 @@ def oil_trend(
     spread = float(np.sum((x - x.mean()) ** 2))
     if n < 3 or not spread > 0:
         return OilTrend(n, float(x.mean()), lo, hi, np.nan, np.nan)
-    slope = float(np.sum((x - x.mean()) * (y - y.mean())) / spread)
-    rest = y - y.mean() - slope * (x - x.mean())
-    se = float(np.sqrt(np.sum(rest**2) / (n - 2) / spread))
-    return OilTrend(n, float(x.mean()), lo, hi, slope, se)
+    # Imported here: training only; scipy costs the daemon's start-up.
+    from scipy.stats import linregress
+
+    fit = linregress(x, y)  # least squares; stderr: the slope's standard error
+    return OilTrend(n, float(x.mean()), lo, hi, float(fit.slope), float(fit.stderr))
