@@ -33,6 +33,7 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.jit import jit
+from monitor.model.fields import fields_from_dict, fields_to_dict
 from monitor.model.residual import resum_interval
 from monitor.model.statistic import (
     HeldOut,
@@ -90,26 +91,16 @@ class BiasModel:
                 "1 <= min_count <= window"
             )
         s = np.asarray(self.scale, dtype=np.float64)
-        if s.ndim != 2 or s.shape[0] != N_BIAS_REGIMES or not np.all(s > 0):
-            raise ConfigError(f"bias scale must be ({N_BIAS_REGIMES}, outputs) and positive")
+        if s.ndim != 2 or s.shape[0] != N_BIAS_REGIMES or not np.all(np.isfinite(s) & (s > 0)):
+            raise ConfigError(f"bias scale must be ({N_BIAS_REGIMES}, outputs), finite, positive")
         object.__setattr__(self, "scale", np.ascontiguousarray(s))
 
     def to_dict(self) -> dict[str, object]:
-        return {
-            "window_n": int(self.window_n),
-            "min_count": int(self.min_count),
-            "scale": [[float(v) for v in row] for row in self.scale],
-            "b0": float(self.b0),
-        }
+        return fields_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> BiasModel:
-        return cls(
-            int(d["window_n"]),
-            int(d["min_count"]),
-            np.asarray(d["scale"], dtype=np.float64),
-            float(d["b0"]),
-        )
+        return fields_from_dict(cls, d)
 
 
 def fit_scale(residuals: list[np.ndarray], regimes: list[np.ndarray]) -> np.ndarray:

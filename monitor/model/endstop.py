@@ -32,6 +32,7 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.jit import jit
 from monitor.model.bias import HOLD_PCT
+from monitor.model.fields import fields_from_dict, fields_to_dict
 from monitor.model.filecheck import MAX_WINDOW_N, check_number
 from monitor.signals import SAMPLE_PERIOD_S
 
@@ -67,24 +68,12 @@ class StrokeModel:
                 f"stall samples {self.n_stall} must satisfy 0 <= margin < 0.5, flow > 0, n >= 1"
             )
 
-    def to_dict(self) -> dict[str, float | int]:
-        return {
-            "volume_up_l": float(self.volume_up_l),
-            "volume_down_l": float(self.volume_down_l),
-            "margin": float(self.margin),
-            "q_stall_lpm": float(self.q_stall_lpm),
-            "n_stall": int(self.n_stall),
-        }
+    def to_dict(self) -> dict[str, object]:
+        return fields_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> StrokeModel:
-        return cls(
-            float(d["volume_up_l"]),
-            float(d["volume_down_l"]),
-            float(d["margin"]),
-            float(d["q_stall_lpm"]),
-            int(d["n_stall"]),
-        )
+        return fields_from_dict(cls, d)
 
 
 # State vector of the step kernel: the interval and the stall count.

@@ -65,6 +65,7 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.jit import jit
+from monitor.model.fields import fields_from_dict, fields_to_dict
 from monitor.model.filecheck import MAX_WINDOW_N, check_number, check_whole
 from monitor.model.flow_oil import OIL_SHARE, oil_trend
 from monitor.model.residual import resum_interval
@@ -130,33 +131,11 @@ class FlowModel:
             raise ConfigError(f"flow oil range {self.oil_lo_c}..{self.oil_hi_c} degC is empty")
 
     def to_dict(self) -> dict[str, object]:
-        return {
-            "count_n": int(self.count_n),
-            "window_n": int(self.window_n),
-            "a_lpm": float(self.a_lpm),
-            "b_lpm_per_mm_s": float(self.b_lpm_per_mm_s),
-            "lo_mm": float(self.lo_mm),
-            "hi_mm": float(self.hi_mm),
-            "scale": float(self.scale),
-            "f0": float(self.f0),
-            "oil_lo_c": float(self.oil_lo_c),
-            "oil_hi_c": float(self.oil_hi_c),
-        }
+        return fields_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> FlowModel:
-        return cls(
-            int(d["count_n"]),
-            int(d["window_n"]),
-            float(d["a_lpm"]),
-            float(d["b_lpm_per_mm_s"]),
-            float(d["lo_mm"]),
-            float(d["hi_mm"]),
-            float(d["scale"]),
-            float(d["f0"]),
-            float(d.get("oil_lo_c", np.nan)),
-            float(d.get("oil_hi_c", np.nan)),
-        )
+        return fields_from_dict(cls, d)
 
 
 # Integer state of the step kernel.

@@ -52,6 +52,7 @@ from monitor.model.endstop import (
     fit_stroke,
     near_stop_series,
 )
+from monitor.model.fields import fields_from_dict, fields_to_dict
 from monitor.model.filecheck import MAX_WINDOW_N, check_whole
 from monitor.model.residual import largest_finite, resum_interval
 from monitor.model.statistic import HeldOut, Statistic, column, register, signal
@@ -102,34 +103,17 @@ class HoldModel:
         if not outs or min(outs) < 0:
             raise ConfigError(f"hold outputs must be output indices, got {outs}")
         s = np.asarray(self.scale, dtype=np.float64)
-        if s.shape != (len(outs),) or not np.all(s > 0):
+        if s.shape != (len(outs),) or not np.all(np.isfinite(s) & (s > 0)):
             raise ConfigError(f"hold scale must be {len(outs)} positive numbers, got {s}")
         object.__setattr__(self, "outputs", outs)
         object.__setattr__(self, "scale", np.ascontiguousarray(s))
 
     def to_dict(self) -> dict[str, object]:
-        return {
-            "window_n": int(self.window_n),
-            "min_count": int(self.min_count),
-            "settle_n": int(self.settle_n),
-            "outputs": list(self.outputs),
-            "scale": [float(v) for v in self.scale],
-            "h0": float(self.h0),
-            **({} if self.stroke is None else {"stroke": self.stroke.to_dict()}),
-        }
+        return fields_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> HoldModel:
-        stroke = d.get("stroke")
-        return cls(
-            int(d["window_n"]),
-            int(d["min_count"]),
-            int(d["settle_n"]),
-            tuple(int(o) for o in d["outputs"]),
-            np.asarray(d["scale"], dtype=np.float64),
-            float(d["h0"]),
-            None if stroke is None else StrokeModel.from_dict(stroke),
-        )
+        return fields_from_dict(cls, d)
 
 
 # State vector layout of the step kernel.

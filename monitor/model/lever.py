@@ -43,7 +43,7 @@ Measured in docs/benchmarks.md ("Stroke limits on the whole machine").
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -51,6 +51,7 @@ import numpy as np
 from monitor.errors import ConfigError, InputFileError
 from monitor.io.recording import Recording
 from monitor.jit import jit
+from monitor.model.fields import OMIT_AT_DEFAULT, fields_from_dict, fields_to_dict
 from monitor.model.residual import largest_finite, resum_interval
 from monitor.model.statistic import HeldOut, Statistic, column, register, signal
 from monitor.signals import ROD_SPEED
@@ -93,7 +94,7 @@ class LeverModel:
     l0: float = float("nan")  # threshold; NaN: L is computed but never alarms
     #: 0: |mean| counts (PP: either way); 1: only a positive mean, the output measured
     #: below its prediction (QP: a section delivering less than the lever asks).
-    sign: int = 0
+    sign: int = field(default=0, metadata=OMIT_AT_DEFAULT)  # two-sided files as before
 
     def __post_init__(self) -> None:
         if self.window_n < 2 or not 1 <= self.min_count <= self.window_n or self.output < 0:
@@ -109,28 +110,11 @@ class LeverModel:
         object.__setattr__(self, "scale", np.ascontiguousarray(s))
 
     def to_dict(self) -> dict[str, object]:
-        out: dict[str, object] = {
-            "window_n": int(self.window_n),
-            "min_count": int(self.min_count),
-            "output": int(self.output),
-            # null, not JSON's non-standard Infinity: a direction left out
-            "scale": [float(v) if np.isfinite(v) else None for v in self.scale],
-            "l0": float(self.l0),
-        }
-        if self.sign:  # files of a two-sided L stay as they were
-            out["sign"] = int(self.sign)
-        return out
+        return fields_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> LeverModel:
-        return cls(
-            int(d["window_n"]),
-            int(d["min_count"]),
-            int(d["output"]),
-            np.array([np.inf if v is None else v for v in d["scale"]], dtype=np.float64),
-            float(d["l0"]),
-            int(d.get("sign", 0)),
-        )
+        return fields_from_dict(cls, d)
 
 
 # State vector layout of the step kernel.
