@@ -205,3 +205,46 @@ def test_seeds_give_the_same_plan_and_different_seeds_differ():
     assert len(machines) == 6 and len(commissioned) == 5
     wear = [x[3].severity for x in fleet if x[2] == "wear"]
     assert max(wear) == pytest.approx(0.6) and min(wear) == 0.0
+
+
+def test_a_fleet_row_with_an_empty_error_column_is_no_error(tmp_path):
+    pd = pytest.importorskip("pandas")
+    from benchmarks.detect_blind import report
+
+    key = {
+        "files": [
+            {"path": "fleet/M01/commissioning/c.csv", "kind": "commissioning", "machine": "M01"},
+            {
+                "path": "fleet/M01/logs/a.csv",
+                "kind": "normal",
+                "machine": "M01",
+                "fault": None,
+                "severity": 0.0,
+            },
+            {
+                "path": "fleet/M01/logs/b.csv",
+                "kind": "normal",
+                "machine": "M01",
+                "fault": None,
+                "severity": 0.0,
+            },
+        ]
+    }
+    rows = [
+        {
+            "log": f"M01/logs/{n}.csv",
+            "machine": "M01",
+            "verdict": v,
+            "alarm": False,
+            "fault": None,
+            "sensor_fault": False,
+            "error": e,
+        }
+        for n, v, e in (("a", "healthy", None), ("b", "error", "unreadable"))
+    ]
+    pd.DataFrame(rows).to_parquet(tmp_path / "one.parquet")
+    pd.DataFrame(rows[:1]).to_parquet(tmp_path / "none.parquet")  # an all-empty column
+    both = report.fleet_summary(pd.read_parquet(tmp_path / "one.parquet"), key, 0)
+    assert both["healthy_commissioned"]["errors"] == 1
+    clean = report.fleet_summary(pd.read_parquet(tmp_path / "none.parquet"), key, 0)
+    assert clean["healthy_commissioned"]["errors"] == 0

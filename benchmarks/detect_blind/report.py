@@ -36,7 +36,8 @@ def fleet_summary(df, key: dict, exit_code: int) -> dict:
                 "sensor_fault": bool(r["sensor_fault"]),
                 "model": r.get("model"),
                 "max_j_ratio": r.get("max_j_ratio"),
-                "error": r.get("error"),
+                # An all-empty parquet column reads back as NaN, not None: no error.
+                "error": r["error"] if isinstance(r.get("error"), str) else None,
             }
         )
     healthy = [r for r in rows if r["kind"] == "normal" and r["commissioned"]]
